@@ -1,0 +1,76 @@
+//! What every execution backend offers: the stages over host streams, and a whole frame that
+//! keeps the streams on the backend between stages.
+
+use crate::error::Result;
+use crate::scene::Scene;
+use crate::stream::{HitStream, RayStream};
+use raywave_shared::GenerateParams;
+
+/// Time one stage took on a backend.
+#[derive(Clone, Debug, PartialEq)]
+pub struct StageTiming {
+    /// Stage name (`generate`, `trace`, …).
+    pub stage: &'static str,
+    /// Seconds: GPU timestamps on Vulkan, wall clock of the parallel loop on the CPU.
+    pub seconds: f64,
+}
+
+/// The result of one frame: the streams the last stage produced and the time of each stage.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct FrameOutput {
+    /// The generated rays (read back for visualisation and tests).
+    pub rays: RayStream,
+    /// The closest hit of each ray.
+    pub hits: HitStream,
+    /// Per-stage timings in execution order.
+    pub timings: Vec<StageTiming>,
+}
+
+/// An execution backend: the CPU executor or a Vulkan device.
+pub trait Backend {
+    /// Human-readable name, e.g. `cpu (2 threads)` or `vulkan:0 llvmpipe (…)`.
+    fn name(&self) -> String;
+
+    /// Checks that a `width × height` image fits this backend's limits.
+    fn check_image_size(&self, width: u32, height: u32) -> Result<()>;
+
+    /// Builds the acceleration structures for `scene`; later `trace` calls run against it.
+    fn load_scene(&mut self, scene: &Scene) -> Result<()>;
+
+    /// Runs the generate stage.
+    fn generate(&mut self, params: &GenerateParams) -> Result<(RayStream, StageTiming)>;
+
+    /// Runs the trace stage on `rays` against the loaded scene.
+    fn trace(&mut self, rays: &RayStream) -> Result<(HitStream, StageTiming)>;
+
+    /// Runs generate → trace as one frame, keeping the ray stream on the backend in between.
+    fn render(&mut self, params: &GenerateParams) -> Result<FrameOutput>;
+}
+
+/// Checks the size rules every backend shares: both sides ≥ 1 and the pixel count within `max_pixels`.
+pub(crate) fn check_image_size_common(
+    width: u32,
+    height: u32,
+    max_pixels: u64,
+    backend: &str,
+) -> Result<()> {
+    let reason = if width == 0 || height == 0 {
+        Some("width and height must be at least 1".to_owned())
+    } else if u64::from(width) * u64::from(height) > max_pixels {
+        Some(format!(
+            "{} pixels exceed the limit of {max_pixels}",
+            u64::from(width) * u64::from(height)
+        ))
+    } else {
+        None
+    };
+    match reason {
+        Some(reason) => Err(crate::Error::ImageSize {
+            width,
+            height,
+            backend: backend.to_owned(),
+            reason,
+        }),
+        None => Ok(()),
+    }
+}

@@ -1,0 +1,21 @@
+//! raywave's host: scenes, the CPU executor, the Vulkan backend and what runs a frame.
+//!
+//! Nothing here re-implements kernel math: the CPU backend calls `raywave-kernels` directly and
+//! the Vulkan backend runs the same functions compiled to SPIR-V.
+
+pub mod backend;
+pub mod cpu;
+pub mod device;
+pub mod error;
+pub mod frame;
+pub mod scene;
+pub mod stream;
+pub mod visualize;
+#[cfg(feature = "vulkan")]
+pub mod vulkan;
+
+pub use backend::{Backend, FrameOutput, StageTiming};
+pub use device::{open_backend, BackendOptions, DeviceChoice};
+pub use error::{Error, Result};
+pub use scene::Scene;
+pub use stream::{HitStream, RayStream};

@@ -1,0 +1,206 @@
+//! The Cornell box, from the measurements published by the Cornell University Program of Computer
+//! Graphics ("Cornell Box Data", https://www.graphics.cornell.edu/online/box/data.html).
+//!
+//! Coordinates there are millimetres; we convert to metres. Reflectances are the published spectra
+//! reduced to approximate linear sRGB. The light is lowered 0.1 mm below the ceiling (as most
+//! renderers of the data do) so the two coplanar surfaces do not fight for the same hits.
+
+use super::{Camera, Mesh};
+use glam::Vec3;
+
+/// Millimetres to scene units (metres).
+const MM: f32 = 0.001;
+
+/// A quad given by four corners in millimetres (published order), as two triangles.
+fn quad(name: &str, corners: [[f32; 3]; 4], albedo: Vec3, emission: Vec3) -> Mesh {
+    Mesh {
+        name: name.to_owned(),
+        positions: corners.iter().map(|c| Vec3::from_array(*c) * MM).collect(),
+        triangles: vec![[0, 1, 2], [0, 2, 3]],
+        albedo,
+        emission,
+    }
+}
+
+/// A box given by its five published faces (top and four sides) in millimetres, merged into one mesh.
+fn block(name: &str, faces: [[[f32; 3]; 4]; 5], albedo: Vec3) -> Mesh {
+    let mut mesh = Mesh {
+        name: name.to_owned(),
+        positions: vec![],
+        triangles: vec![],
+        albedo,
+        emission: Vec3::ZERO,
+    };
+    for face in faces {
+        let q = quad(name, face, albedo, Vec3::ZERO);
+        let base = mesh.positions.len() as u32;
+        mesh.positions.extend(q.positions);
+        mesh.triangles
+            .extend(q.triangles.iter().map(|t| t.map(|i| i + base)));
+    }
+    mesh
+}
+
+/// Approximate linear-sRGB reflectances of the published white, red and green paints.
+const WHITE: Vec3 = Vec3::new(0.725, 0.71, 0.68);
+const RED: Vec3 = Vec3::new(0.63, 0.065, 0.05);
+const GREEN: Vec3 = Vec3::new(0.14, 0.45, 0.091);
+
+/// The published light's radiance reduced to linear sRGB (the spectrum peaks near 18.4 at 700 nm).
+const LIGHT: Vec3 = Vec3::new(17.0, 12.0, 4.0);
+
+/// The eight meshes of the box: floor, ceiling, back wall, right (green) and left (red) walls, the
+/// short and tall blocks, and the light.
+pub fn meshes() -> Vec<Mesh> {
+    vec![
+        quad(
+            "floor",
+            [
+                [552.8, 0.0, 0.0],
+                [0.0, 0.0, 0.0],
+                [0.0, 0.0, 559.2],
+                [549.6, 0.0, 559.2],
+            ],
+            WHITE,
+            Vec3::ZERO,
+        ),
+        quad(
+            "ceiling",
+            [
+                [556.0, 548.8, 0.0],
+                [556.0, 548.8, 559.2],
+                [0.0, 548.8, 559.2],
+                [0.0, 548.8, 0.0],
+            ],
+            WHITE,
+            Vec3::ZERO,
+        ),
+        quad(
+            "back wall",
+            [
+                [549.6, 0.0, 559.2],
+                [0.0, 0.0, 559.2],
+                [0.0, 548.8, 559.2],
+                [556.0, 548.8, 559.2],
+            ],
+            WHITE,
+            Vec3::ZERO,
+        ),
+        quad(
+            "right wall",
+            [
+                [0.0, 0.0, 559.2],
+                [0.0, 0.0, 0.0],
+                [0.0, 548.8, 0.0],
+                [0.0, 548.8, 559.2],
+            ],
+            GREEN,
+            Vec3::ZERO,
+        ),
+        quad(
+            "left wall",
+            [
+                [552.8, 0.0, 0.0],
+                [549.6, 0.0, 559.2],
+                [556.0, 548.8, 559.2],
+                [556.0, 548.8, 0.0],
+            ],
+            RED,
+            Vec3::ZERO,
+        ),
+        block(
+            "short block",
+            [
+                [
+                    [130.0, 165.0, 65.0],
+                    [82.0, 165.0, 225.0],
+                    [240.0, 165.0, 272.0],
+                    [290.0, 165.0, 114.0],
+                ],
+                [
+                    [290.0, 0.0, 114.0],
+                    [290.0, 165.0, 114.0],
+                    [240.0, 165.0, 272.0],
+                    [240.0, 0.0, 272.0],
+                ],
+                [
+                    [130.0, 0.0, 65.0],
+                    [130.0, 165.0, 65.0],
+                    [290.0, 165.0, 114.0],
+                    [290.0, 0.0, 114.0],
+                ],
+                [
+                    [82.0, 0.0, 225.0],
+                    [82.0, 165.0, 225.0],
+                    [130.0, 165.0, 65.0],
+                    [130.0, 0.0, 65.0],
+                ],
+                [
+                    [240.0, 0.0, 272.0],
+                    [240.0, 165.0, 272.0],
+                    [82.0, 165.0, 225.0],
+                    [82.0, 0.0, 225.0],
+                ],
+            ],
+            WHITE,
+        ),
+        block(
+            "tall block",
+            [
+                [
+                    [423.0, 330.0, 247.0],
+                    [265.0, 330.0, 296.0],
+                    [314.0, 330.0, 456.0],
+                    [472.0, 330.0, 406.0],
+                ],
+                [
+                    [423.0, 0.0, 247.0],
+                    [423.0, 330.0, 247.0],
+                    [472.0, 330.0, 406.0],
+                    [472.0, 0.0, 406.0],
+                ],
+                [
+                    [472.0, 0.0, 406.0],
+                    [472.0, 330.0, 406.0],
+                    [314.0, 330.0, 456.0],
+                    [314.0, 0.0, 456.0],
+                ],
+                [
+                    [314.0, 0.0, 456.0],
+                    [314.0, 330.0, 456.0],
+                    [265.0, 330.0, 296.0],
+                    [265.0, 0.0, 296.0],
+                ],
+                [
+                    [265.0, 0.0, 296.0],
+                    [265.0, 330.0, 296.0],
+                    [423.0, 330.0, 247.0],
+                    [423.0, 0.0, 247.0],
+                ],
+            ],
+            WHITE,
+        ),
+        quad(
+            "light",
+            [
+                [343.0, 548.7, 227.0],
+                [343.0, 548.7, 332.0],
+                [213.0, 548.7, 332.0],
+                [213.0, 548.7, 227.0],
+            ],
+            Vec3::ONE,
+            LIGHT,
+        ),
+    ]
+}
+
+/// The published camera: at (278, 273, −800) mm looking along +z, 35 mm focal length on a
+/// 25 mm × 25 mm film, i.e. a vertical field of view of 2·atan(12.5 / 35) ≈ 39.31°.
+pub fn camera() -> Camera {
+    Camera {
+        position: Vec3::new(278.0, 273.0, -800.0) * MM,
+        look_at: Vec3::new(278.0, 273.0, 0.0) * MM,
+        up: Vec3::Y,
+        vertical_fov_degrees: 2.0 * (12.5f32 / 35.0).atan().to_degrees(),
+    }
+}

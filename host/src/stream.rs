@@ -1,0 +1,81 @@
+//! Host-side SoA streams: one `Vec` per field, in the layout of [`raywave_shared::stream`].
+
+use glam::{Vec2, Vec4};
+use raywave_shared::stream::{HIT_STREAM_BYTES_PER_RAY, RAY_STREAM_BYTES_PER_RAY};
+
+/// The ray stream: what generate writes and trace reads.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct RayStream {
+    /// xyz origin, w = tmin.
+    pub origin: Vec<Vec4>,
+    /// xyz direction, w = tmax.
+    pub direction: Vec<Vec4>,
+    /// Linear pixel index of each ray.
+    pub pixel: Vec<u32>,
+}
+
+impl RayStream {
+    /// A zero-filled stream of `len` rays.
+    pub fn zeroed(len: usize) -> Self {
+        Self {
+            origin: vec![Vec4::ZERO; len],
+            direction: vec![Vec4::ZERO; len],
+            pixel: vec![0; len],
+        }
+    }
+
+    /// Number of rays.
+    pub fn len(&self) -> usize {
+        self.pixel.len()
+    }
+
+    /// Whether the stream holds no rays.
+    pub fn is_empty(&self) -> bool {
+        self.pixel.is_empty()
+    }
+
+    /// Bytes the stream occupies.
+    pub fn bytes(&self) -> u64 {
+        self.len() as u64 * u64::from(RAY_STREAM_BYTES_PER_RAY)
+    }
+}
+
+/// The hit stream: what trace writes, one record per ray.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct HitStream {
+    /// Ray parameter of the closest hit; 0 on a miss.
+    pub t: Vec<f32>,
+    /// Triangle index within the instance's mesh, or `NO_HIT`.
+    pub primitive: Vec<u32>,
+    /// Instance (mesh) index, or `NO_HIT`.
+    pub instance: Vec<u32>,
+    /// Weights of vertices 1 and 2.
+    pub barycentrics: Vec<Vec2>,
+}
+
+impl HitStream {
+    /// A zero-filled stream of `len` records.
+    pub fn zeroed(len: usize) -> Self {
+        Self {
+            t: vec![0.0; len],
+            primitive: vec![0; len],
+            instance: vec![0; len],
+            barycentrics: vec![Vec2::ZERO; len],
+        }
+    }
+
+    /// Number of records.
+    pub fn len(&self) -> usize {
+        self.t.len()
+    }
+
+    /// Whether the stream holds no records.
+    pub fn is_empty(&self) -> bool {
+        self.t.is_empty()
+    }
+
+    /// Bytes the stream occupies.
+    pub fn bytes(&self) -> u64 {
+        self.len() as u64 * u64::from(HIT_STREAM_BYTES_PER_RAY)
+    }
+}

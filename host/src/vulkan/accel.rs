@@ -1,0 +1,243 @@
+//! Bottom- and top-level acceleration structures for ray query: one BLAS per mesh and one TLAS
+//! instance per mesh, so the instance id a ray query reports is the mesh index and the primitive
+//! id is the triangle index within that mesh — the same ids the CPU backend reports.
+
+use super::buffer::{submit_and_wait, GpuBuffer};
+use super::context::{vk_error, Core};
+use crate::error::{Error, Result};
+use crate::scene::Scene;
+use ash::vk;
+use gpu_allocator::MemoryLocation;
+use std::sync::Arc;
+
+/// An acceleration structure with the buffer that stores it; destroyed on drop.
+pub(crate) struct AccelerationStructure {
+    core: Arc<Core>,
+    pub handle: vk::AccelerationStructureKHR,
+    pub address: u64,
+    _storage: GpuBuffer,
+}
+
+impl Drop for AccelerationStructure {
+    fn drop(&mut self) {
+        if let Some(accel) = &self.core.acceleration_structure {
+            // SAFETY: the device is idle after every submission, so no command uses it.
+            unsafe { accel.destroy_acceleration_structure(self.handle, None) };
+        }
+    }
+}
+
+/// A scene's acceleration structures, ready to bind.
+pub(crate) struct SceneAccel {
+    pub tlas: AccelerationStructure,
+    _blases: Vec<AccelerationStructure>,
+}
+
+const INPUT_USAGE: vk::BufferUsageFlags = vk::BufferUsageFlags::from_raw(
+    vk::BufferUsageFlags::ACCELERATION_STRUCTURE_BUILD_INPUT_READ_ONLY_KHR.as_raw()
+        | vk::BufferUsageFlags::SHADER_DEVICE_ADDRESS.as_raw(),
+);
+
+/// One pending build: its geometry description, primitive count and destination.
+struct Build<'a> {
+    geometry: [vk::AccelerationStructureGeometryKHR<'a>; 1],
+    primitive_count: u32,
+    level: vk::AccelerationStructureTypeKHR,
+}
+
+fn build_info<'a>(build: &'a Build<'a>) -> vk::AccelerationStructureBuildGeometryInfoKHR<'a> {
+    vk::AccelerationStructureBuildGeometryInfoKHR::default()
+        .ty(build.level)
+        .flags(vk::BuildAccelerationStructureFlagsKHR::PREFER_FAST_TRACE)
+        .mode(vk::BuildAccelerationStructureModeKHR::BUILD)
+        .geometries(&build.geometry)
+}
+
+/// Allocates and builds the acceleration structures of `builds` (all of one level) in one
+/// submission.
+fn build_all(core: &Arc<Core>, builds: &[Build<'_>]) -> Result<Vec<AccelerationStructure>> {
+    let accel = core
+        .acceleration_structure
+        .as_ref()
+        .ok_or_else(|| Error::MissingFeatures {
+            device: core.info.name.clone(),
+            stage: "trace".into(),
+            missing: vec!["VK_KHR_acceleration_structure".into()],
+        })?;
+    let mut structures = Vec::with_capacity(builds.len());
+    let mut scratch_offsets = Vec::with_capacity(builds.len());
+    let mut scratch_total = 0u64;
+    for build in builds {
+        let info = build_info(build);
+        let mut sizes = vk::AccelerationStructureBuildSizesInfoKHR::default();
+        // SAFETY: `info` describes valid geometry; only sizes are queried.
+        unsafe {
+            accel.get_acceleration_structure_build_sizes(
+                vk::AccelerationStructureBuildTypeKHR::DEVICE,
+                &info,
+                &[build.primitive_count],
+                &mut sizes,
+            )
+        };
+        let storage = GpuBuffer::new(
+            core,
+            sizes.acceleration_structure_size,
+            vk::BufferUsageFlags::ACCELERATION_STRUCTURE_STORAGE_KHR
+                | vk::BufferUsageFlags::SHADER_DEVICE_ADDRESS,
+            MemoryLocation::GpuOnly,
+            "acceleration structure",
+        )?;
+        let create = vk::AccelerationStructureCreateInfoKHR::default()
+            .buffer(storage.buffer)
+            .size(sizes.acceleration_structure_size)
+            .ty(build.level);
+        // SAFETY: `storage` is large enough and outlives the structure (owned by it).
+        let handle = unsafe { accel.create_acceleration_structure(&create, None) }
+            .map_err(vk_error("vkCreateAccelerationStructureKHR"))?;
+        // SAFETY: `handle` is a live acceleration structure.
+        let address = unsafe {
+            accel.get_acceleration_structure_device_address(
+                &vk::AccelerationStructureDeviceAddressInfoKHR::default()
+                    .acceleration_structure(handle),
+            )
+        };
+        structures.push(AccelerationStructure {
+            core: core.clone(),
+            handle,
+            address,
+            _storage: storage,
+        });
+        scratch_offsets.push(scratch_total);
+        scratch_total += sizes
+            .build_scratch_size
+            .next_multiple_of(core.scratch_alignment);
+    }
+    let scratch = GpuBuffer::new(
+        core,
+        scratch_total + core.scratch_alignment,
+        vk::BufferUsageFlags::STORAGE_BUFFER | vk::BufferUsageFlags::SHADER_DEVICE_ADDRESS,
+        MemoryLocation::GpuOnly,
+        "acceleration structure scratch",
+    )?;
+    let scratch_base = scratch.address.next_multiple_of(core.scratch_alignment);
+    let infos: Vec<_> = builds
+        .iter()
+        .zip(&structures)
+        .zip(&scratch_offsets)
+        .map(|((build, structure), offset)| {
+            build_info(build)
+                .dst_acceleration_structure(structure.handle)
+                .scratch_data(vk::DeviceOrHostAddressKHR {
+                    device_address: scratch_base + offset,
+                })
+        })
+        .collect();
+    let ranges: Vec<[vk::AccelerationStructureBuildRangeInfoKHR; 1]> = builds
+        .iter()
+        .map(|b| {
+            [vk::AccelerationStructureBuildRangeInfoKHR::default()
+                .primitive_count(b.primitive_count)]
+        })
+        .collect();
+    let range_refs: Vec<&[vk::AccelerationStructureBuildRangeInfoKHR]> =
+        ranges.iter().map(|r| r.as_slice()).collect();
+    submit_and_wait(core, |cmd| {
+        // SAFETY: all referenced buffers and structures are alive until the wait completes.
+        unsafe { accel.cmd_build_acceleration_structures(cmd, &infos, &range_refs) };
+    })?;
+    drop(scratch);
+    Ok(structures)
+}
+
+/// Builds one BLAS per mesh and a TLAS over them (identity transforms, instance i = mesh i).
+pub(crate) fn build_scene(core: &Arc<Core>, scene: &Scene) -> Result<SceneAccel> {
+    let meshes = scene.meshes();
+    let mut inputs = Vec::with_capacity(meshes.len());
+    for mesh in meshes {
+        let vertices: Vec<[f32; 3]> = mesh.positions.iter().map(|p| p.to_array()).collect();
+        let indices: Vec<u32> = mesh.triangles.iter().flatten().copied().collect();
+        let vertex_buffer = GpuBuffer::with_data(core, &vertices, INPUT_USAGE, "blas vertices")?;
+        let index_buffer = GpuBuffer::with_data(core, &indices, INPUT_USAGE, "blas indices")?;
+        inputs.push((
+            vertex_buffer,
+            index_buffer,
+            mesh.positions.len() as u32,
+            mesh.triangles.len() as u32,
+        ));
+    }
+    let blas_builds: Vec<Build> = inputs
+        .iter()
+        .map(|(vertices, indices, vertex_count, triangle_count)| {
+            let triangles = vk::AccelerationStructureGeometryTrianglesDataKHR::default()
+                .vertex_format(vk::Format::R32G32B32_SFLOAT)
+                .vertex_data(vk::DeviceOrHostAddressConstKHR {
+                    device_address: vertices.address,
+                })
+                .vertex_stride(12)
+                .max_vertex(vertex_count.saturating_sub(1))
+                .index_type(vk::IndexType::UINT32)
+                .index_data(vk::DeviceOrHostAddressConstKHR {
+                    device_address: indices.address,
+                });
+            Build {
+                geometry: [vk::AccelerationStructureGeometryKHR::default()
+                    .geometry_type(vk::GeometryTypeKHR::TRIANGLES)
+                    .geometry(vk::AccelerationStructureGeometryDataKHR { triangles })
+                    .flags(vk::GeometryFlagsKHR::OPAQUE)],
+                primitive_count: *triangle_count,
+                level: vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL,
+            }
+        })
+        .collect();
+    let blases = build_all(core, &blas_builds)?;
+    drop(inputs);
+
+    let identity = vk::TransformMatrixKHR {
+        matrix: [1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0],
+    };
+    let instances: Vec<vk::AccelerationStructureInstanceKHR> = blases
+        .iter()
+        .enumerate()
+        .map(|(i, blas)| vk::AccelerationStructureInstanceKHR {
+            transform: identity,
+            instance_custom_index_and_mask: vk::Packed24_8::new(i as u32, 0xff),
+            instance_shader_binding_table_record_offset_and_flags: vk::Packed24_8::new(
+                0,
+                vk::GeometryInstanceFlagsKHR::TRIANGLE_FACING_CULL_DISABLE.as_raw() as u8,
+            ),
+            acceleration_structure_reference: vk::AccelerationStructureReferenceKHR {
+                device_handle: blas.address,
+            },
+        })
+        .collect();
+    // SAFETY: `AccelerationStructureInstanceKHR` is a plain #[repr(C)] struct of 64 bytes with no
+    // padding; viewing it as bytes is sound.
+    let instance_bytes = unsafe {
+        std::slice::from_raw_parts(
+            instances.as_ptr().cast::<u8>(),
+            std::mem::size_of_val(instances.as_slice()),
+        )
+    };
+    let instance_buffer =
+        GpuBuffer::with_data(core, instance_bytes, INPUT_USAGE, "tlas instances")?;
+    let tlas_build = Build {
+        geometry: [vk::AccelerationStructureGeometryKHR::default()
+            .geometry_type(vk::GeometryTypeKHR::INSTANCES)
+            .geometry(vk::AccelerationStructureGeometryDataKHR {
+                instances: vk::AccelerationStructureGeometryInstancesDataKHR::default()
+                    .array_of_pointers(false)
+                    .data(vk::DeviceOrHostAddressConstKHR {
+                        device_address: instance_buffer.address,
+                    }),
+            })
+            .flags(vk::GeometryFlagsKHR::OPAQUE)],
+        primitive_count: instances.len() as u32,
+        level: vk::AccelerationStructureTypeKHR::TOP_LEVEL,
+    };
+    let tlas = build_all(core, std::slice::from_ref(&tlas_build))?.remove(0);
+    drop(instance_buffer);
+    Ok(SceneAccel {
+        tlas,
+        _blases: blases,
+    })
+}

@@ -1,0 +1,288 @@
+//! The Vulkan backend: the generate and trace stages as compute dispatches over device-resident
+//! SoA streams.
+
+use super::accel::{build_scene, SceneAccel};
+use super::buffer::GpuBuffer;
+use super::context::{open, ContextOptions, Core, DeviceInfo};
+use super::kernel::{dispatch_grid, ComputeKernel, Resource};
+use crate::backend::{check_image_size_common, Backend, FrameOutput, StageTiming};
+use crate::error::{Error, Result};
+use crate::scene::Scene;
+use crate::stream::{HitStream, RayStream};
+use ash::vk;
+use bytemuck::Pod;
+use glam::{Vec2, Vec4};
+use gpu_allocator::MemoryLocation;
+use raywave_shared::{bindings, GenerateParams, TraceParams};
+use std::sync::Arc;
+
+/// Storage buffers of the streams: read and written by shaders, mapped for upload and readback.
+const STREAM_USAGE: vk::BufferUsageFlags = vk::BufferUsageFlags::STORAGE_BUFFER;
+
+/// The ray stream on the device.
+struct DeviceRays {
+    origin: GpuBuffer,
+    direction: GpuBuffer,
+    pixel: GpuBuffer,
+    len: u32,
+}
+
+/// The hit stream on the device.
+struct DeviceHits {
+    t: GpuBuffer,
+    primitive: GpuBuffer,
+    instance: GpuBuffer,
+    barycentrics: GpuBuffer,
+    len: u32,
+}
+
+fn stream_buffer<T: Pod>(core: &Arc<Core>, len: u32, name: &str) -> Result<GpuBuffer> {
+    GpuBuffer::new(
+        core,
+        u64::from(len) * std::mem::size_of::<T>() as u64,
+        STREAM_USAGE,
+        MemoryLocation::GpuToCpu,
+        name,
+    )
+}
+
+impl DeviceRays {
+    fn new(core: &Arc<Core>, len: u32) -> Result<Self> {
+        Ok(Self {
+            origin: stream_buffer::<Vec4>(core, len, "ray origin")?,
+            direction: stream_buffer::<Vec4>(core, len, "ray direction")?,
+            pixel: stream_buffer::<u32>(core, len, "ray pixel")?,
+            len,
+        })
+    }
+
+    fn upload(core: &Arc<Core>, rays: &RayStream) -> Result<Self> {
+        Ok(Self {
+            origin: GpuBuffer::with_data(core, &rays.origin, STREAM_USAGE, "ray origin")?,
+            direction: GpuBuffer::with_data(core, &rays.direction, STREAM_USAGE, "ray direction")?,
+            pixel: GpuBuffer::with_data(core, &rays.pixel, STREAM_USAGE, "ray pixel")?,
+            len: stream_len(rays.len())?,
+        })
+    }
+
+    fn read(&self) -> Result<RayStream> {
+        let n = self.len as usize;
+        Ok(RayStream {
+            origin: self.origin.read(n)?,
+            direction: self.direction.read(n)?,
+            pixel: self.pixel.read(n)?,
+        })
+    }
+}
+
+impl DeviceHits {
+    fn new(core: &Arc<Core>, len: u32) -> Result<Self> {
+        Ok(Self {
+            t: stream_buffer::<f32>(core, len, "hit t")?,
+            primitive: stream_buffer::<u32>(core, len, "hit primitive")?,
+            instance: stream_buffer::<u32>(core, len, "hit instance")?,
+            barycentrics: stream_buffer::<Vec2>(core, len, "hit barycentrics")?,
+            len,
+        })
+    }
+
+    fn read(&self) -> Result<HitStream> {
+        let n = self.len as usize;
+        Ok(HitStream {
+            t: self.t.read(n)?,
+            primitive: self.primitive.read(n)?,
+            instance: self.instance.read(n)?,
+            barycentrics: self.barycentrics.read(n)?,
+        })
+    }
+}
+
+fn stream_len(len: usize) -> Result<u32> {
+    u32::try_from(len).map_err(|_| Error::InvalidParameter {
+        name: "rays",
+        reason: format!("{len} rays exceed the 32-bit stream index"),
+    })
+}
+
+/// A Vulkan device running raywave's stages.
+pub struct VulkanBackend {
+    generate: ComputeKernel,
+    /// Present when the device supports ray query.
+    trace: Option<ComputeKernel>,
+    scene: Option<SceneAccel>,
+    core: Arc<Core>,
+}
+
+impl VulkanBackend {
+    /// Opens Vulkan device `index` and builds its pipelines.
+    pub fn open(index: usize, options: &ContextOptions) -> Result<Self> {
+        let core = open(index, options)?;
+        let storage = vk::DescriptorType::STORAGE_BUFFER;
+        let generate = ComputeKernel::new(
+            &core,
+            "entry::generate",
+            &[
+                (bindings::generate::RAY_ORIGIN, storage),
+                (bindings::generate::RAY_DIRECTION, storage),
+                (bindings::generate::RAY_PIXEL, storage),
+            ],
+            std::mem::size_of::<GenerateParams>() as u32,
+        )?;
+        let trace = if core.info.missing_for_ray_query().is_empty() {
+            Some(ComputeKernel::new(
+                &core,
+                "entry::trace_ray_query",
+                &[
+                    (
+                        bindings::trace::TLAS,
+                        vk::DescriptorType::ACCELERATION_STRUCTURE_KHR,
+                    ),
+                    (bindings::trace::RAY_ORIGIN, storage),
+                    (bindings::trace::RAY_DIRECTION, storage),
+                    (bindings::trace::HIT_T, storage),
+                    (bindings::trace::HIT_PRIMITIVE, storage),
+                    (bindings::trace::HIT_INSTANCE, storage),
+                    (bindings::trace::HIT_BARYCENTRICS, storage),
+                ],
+                std::mem::size_of::<TraceParams>() as u32,
+            )?)
+        } else {
+            None
+        };
+        Ok(Self {
+            generate,
+            trace,
+            scene: None,
+            core,
+        })
+    }
+
+    /// The device's name and features.
+    pub fn info(&self) -> &DeviceInfo {
+        &self.core.info
+    }
+
+    /// Validation-layer messages of warning or error severity received so far (empty unless
+    /// opened with validation, and empty when all is well).
+    pub fn validation_messages(&self) -> Vec<String> {
+        self.core.validation_messages()
+    }
+
+    /// Largest stream this device can hold in one storage buffer and cover with one dispatch.
+    fn max_rays(&self) -> u64 {
+        let by_buffer = u64::from(self.core.limits.max_storage_buffer_range)
+            / std::mem::size_of::<Vec4>() as u64;
+        let by_grid = u64::from(self.core.limits.max_compute_work_group_count[0])
+            * u64::from(self.core.limits.max_compute_work_group_count[1])
+            * u64::from(bindings::WORKGROUP_SIZE);
+        by_buffer.min(by_grid).min(u64::from(u32::MAX))
+    }
+
+    fn trace_kernel(&self) -> Result<&ComputeKernel> {
+        self.trace.as_ref().ok_or_else(|| Error::MissingFeatures {
+            device: self.core.info.name.clone(),
+            stage: "trace (ray query)".into(),
+            missing: self.core.info.missing_for_ray_query(),
+        })
+    }
+
+    fn generate_on_device(&self, params: &GenerateParams) -> Result<(DeviceRays, StageTiming)> {
+        self.check_image_size(params.width, params.height)?;
+        let rays = DeviceRays::new(&self.core, params.ray_count())?;
+        let seconds = self.generate.dispatch(
+            &[
+                Resource::Buffer(&rays.origin),
+                Resource::Buffer(&rays.direction),
+                Resource::Buffer(&rays.pixel),
+            ],
+            bytemuck::bytes_of(params),
+            rays.len,
+        )?;
+        Ok((
+            rays,
+            StageTiming {
+                stage: "generate",
+                seconds,
+            },
+        ))
+    }
+
+    fn trace_on_device(&self, rays: &DeviceRays) -> Result<(DeviceHits, StageTiming)> {
+        let kernel = self.trace_kernel()?;
+        let scene = self.scene.as_ref().ok_or(Error::InvalidParameter {
+            name: "scene",
+            reason: "trace needs a loaded scene".into(),
+        })?;
+        if dispatch_grid(&self.core.limits, rays.len).is_none()
+            || u64::from(rays.len) > self.max_rays()
+        {
+            return Err(Error::InvalidParameter {
+                name: "rays",
+                reason: format!("{} rays exceed the device's limits", rays.len),
+            });
+        }
+        let hits = DeviceHits::new(&self.core, rays.len)?;
+        let params = TraceParams {
+            ray_count: rays.len,
+            padding: [0; 3],
+        };
+        let seconds = kernel.dispatch(
+            &[
+                Resource::AccelerationStructure(scene.tlas.handle),
+                Resource::Buffer(&rays.origin),
+                Resource::Buffer(&rays.direction),
+                Resource::Buffer(&hits.t),
+                Resource::Buffer(&hits.primitive),
+                Resource::Buffer(&hits.instance),
+                Resource::Buffer(&hits.barycentrics),
+            ],
+            bytemuck::bytes_of(&params),
+            rays.len,
+        )?;
+        Ok((
+            hits,
+            StageTiming {
+                stage: "trace",
+                seconds,
+            },
+        ))
+    }
+}
+
+impl Backend for VulkanBackend {
+    fn name(&self) -> String {
+        format!("vulkan:{} {}", self.core.info.index, self.core.info.name)
+    }
+
+    fn check_image_size(&self, width: u32, height: u32) -> Result<()> {
+        check_image_size_common(width, height, self.max_rays(), &self.name())
+    }
+
+    fn load_scene(&mut self, scene: &Scene) -> Result<()> {
+        self.trace_kernel()?;
+        self.scene = None;
+        self.scene = Some(build_scene(&self.core, scene)?);
+        Ok(())
+    }
+
+    fn generate(&mut self, params: &GenerateParams) -> Result<(RayStream, StageTiming)> {
+        let (rays, timing) = self.generate_on_device(params)?;
+        Ok((rays.read()?, timing))
+    }
+
+    fn trace(&mut self, rays: &RayStream) -> Result<(HitStream, StageTiming)> {
+        let device_rays = DeviceRays::upload(&self.core, rays)?;
+        let (hits, timing) = self.trace_on_device(&device_rays)?;
+        Ok((hits.read()?, timing))
+    }
+
+    fn render(&mut self, params: &GenerateParams) -> Result<FrameOutput> {
+        let (rays, generate_time) = self.generate_on_device(params)?;
+        let (hits, trace_time) = self.trace_on_device(&rays)?;
+        Ok(FrameOutput {
+            rays: rays.read()?,
+            hits: hits.read()?,
+            timings: vec![generate_time, trace_time],
+        })
+    }
+}

@@ -1,0 +1,230 @@
+//! Buffers and one-shot command submission.
+
+use super::context::{vk_error, Core};
+use crate::error::{Error, Result};
+use ash::vk;
+use bytemuck::Pod;
+use gpu_allocator::vulkan::{Allocation, AllocationCreateDesc, AllocationScheme};
+use gpu_allocator::MemoryLocation;
+use std::sync::Arc;
+
+/// A Vulkan buffer with its memory; freed on drop.
+pub(crate) struct GpuBuffer {
+    core: Arc<Core>,
+    pub buffer: vk::Buffer,
+    allocation: Option<Allocation>,
+    /// Device address, or 0 when the buffer was created without `SHADER_DEVICE_ADDRESS`.
+    pub address: u64,
+}
+
+impl Drop for GpuBuffer {
+    fn drop(&mut self) {
+        if let (Some(allocation), Ok(mut allocator)) =
+            (self.allocation.take(), self.core.allocator.lock())
+        {
+            let _ = allocator.free(allocation);
+        }
+        // SAFETY: the device is idle after every submission, so no command uses the buffer.
+        unsafe { self.core.device.destroy_buffer(self.buffer, None) };
+    }
+}
+
+impl GpuBuffer {
+    /// Creates a buffer of `size` bytes (at least 4, since Vulkan forbids empty buffers).
+    pub fn new(
+        core: &Arc<Core>,
+        size: u64,
+        usage: vk::BufferUsageFlags,
+        location: MemoryLocation,
+        name: &str,
+    ) -> Result<Self> {
+        let size = size.max(4);
+        let wants_address = usage.contains(vk::BufferUsageFlags::SHADER_DEVICE_ADDRESS);
+        let info = vk::BufferCreateInfo::default()
+            .size(size)
+            .usage(usage)
+            .sharing_mode(vk::SharingMode::EXCLUSIVE);
+        // SAFETY: valid create info; the buffer is destroyed in Drop.
+        let buffer = unsafe { core.device.create_buffer(&info, None) }
+            .map_err(vk_error("vkCreateBuffer"))?;
+        // Constructed now so any failure below frees the buffer through Drop.
+        let mut this = Self {
+            core: core.clone(),
+            buffer,
+            allocation: None,
+            address: 0,
+        };
+        // SAFETY: `buffer` is a live buffer of this device.
+        let requirements = unsafe { core.device.get_buffer_memory_requirements(buffer) };
+        let allocation = core
+            .allocator
+            .lock()
+            .map_err(|_| Error::Vulkan {
+                call: "gpu_allocator",
+                result: "allocator lock poisoned".into(),
+            })?
+            .allocate(&AllocationCreateDesc {
+                name,
+                requirements,
+                location,
+                linear: true,
+                allocation_scheme: AllocationScheme::GpuAllocatorManaged,
+            })
+            .map_err(|e| Error::Vulkan {
+                call: "gpu_allocator::allocate",
+                result: e.to_string(),
+            })?;
+        // SAFETY: the allocation satisfies `requirements` and is not bound elsewhere.
+        unsafe {
+            core.device
+                .bind_buffer_memory(buffer, allocation.memory(), allocation.offset())
+        }
+        .map_err(vk_error("vkBindBufferMemory"))?;
+        this.allocation = Some(allocation);
+        if wants_address {
+            // SAFETY: the buffer was created with SHADER_DEVICE_ADDRESS and has memory bound.
+            this.address = unsafe {
+                core.device.get_buffer_device_address(
+                    &vk::BufferDeviceAddressInfo::default().buffer(buffer),
+                )
+            };
+        }
+        Ok(this)
+    }
+
+    /// Creates a host-visible buffer holding `data`.
+    pub fn with_data<T: Pod>(
+        core: &Arc<Core>,
+        data: &[T],
+        usage: vk::BufferUsageFlags,
+        name: &str,
+    ) -> Result<Self> {
+        let bytes: &[u8] = bytemuck::cast_slice(data);
+        let mut buffer = Self::new(
+            core,
+            bytes.len() as u64,
+            usage,
+            MemoryLocation::CpuToGpu,
+            name,
+        )?;
+        buffer.mapped_mut()?[..bytes.len()].copy_from_slice(bytes);
+        Ok(buffer)
+    }
+
+    fn mapped_mut(&mut self) -> Result<&mut [u8]> {
+        self.allocation
+            .as_mut()
+            .and_then(|a| a.mapped_slice_mut())
+            .ok_or(Error::Vulkan {
+                call: "vkMapMemory",
+                result: "buffer memory is not host-visible".into(),
+            })
+    }
+
+    /// Copies the first `count` elements out of a host-visible buffer.
+    pub fn read<T: Pod>(&self, count: usize) -> Result<Vec<T>> {
+        let bytes = self
+            .allocation
+            .as_ref()
+            .and_then(|a| a.mapped_slice())
+            .ok_or(Error::Vulkan {
+                call: "vkMapMemory",
+                result: "buffer memory is not host-visible".into(),
+            })?;
+        let len = count * std::mem::size_of::<T>();
+        Ok(bytemuck::pod_collect_to_vec(&bytes[..len]))
+    }
+}
+
+/// Records commands with `record`, submits them and waits for completion.
+pub(crate) fn submit_and_wait(core: &Core, record: impl FnOnce(vk::CommandBuffer)) -> Result<()> {
+    let device = &core.device;
+    // SAFETY: the pool, command buffer and fence are created, used and destroyed within this call,
+    // and the wait guarantees the GPU is done with them before destruction.
+    unsafe {
+        let pool = device
+            .create_command_pool(
+                &vk::CommandPoolCreateInfo::default()
+                    .queue_family_index(core.queue_family)
+                    .flags(vk::CommandPoolCreateFlags::TRANSIENT),
+                None,
+            )
+            .map_err(vk_error("vkCreateCommandPool"))?;
+        let result = (|| {
+            let cmd = device
+                .allocate_command_buffers(
+                    &vk::CommandBufferAllocateInfo::default()
+                        .command_pool(pool)
+                        .level(vk::CommandBufferLevel::PRIMARY)
+                        .command_buffer_count(1),
+                )
+                .map_err(vk_error("vkAllocateCommandBuffers"))?[0];
+            device
+                .begin_command_buffer(
+                    cmd,
+                    &vk::CommandBufferBeginInfo::default()
+                        .flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT),
+                )
+                .map_err(vk_error("vkBeginCommandBuffer"))?;
+            // Make every earlier submission's writes visible to this one's shaders and builds.
+            global_barrier(
+                core,
+                cmd,
+                vk::PipelineStageFlags::ALL_COMMANDS,
+                vk::PipelineStageFlags::ALL_COMMANDS,
+            );
+            record(cmd);
+            // And this one's writes visible to the host for readback.
+            global_barrier(
+                core,
+                cmd,
+                vk::PipelineStageFlags::ALL_COMMANDS,
+                vk::PipelineStageFlags::HOST,
+            );
+            device
+                .end_command_buffer(cmd)
+                .map_err(vk_error("vkEndCommandBuffer"))?;
+            let fence = device
+                .create_fence(&vk::FenceCreateInfo::default(), None)
+                .map_err(vk_error("vkCreateFence"))?;
+            let cmds = [cmd];
+            let submit = [vk::SubmitInfo::default().command_buffers(&cmds)];
+            let waited = device
+                .queue_submit(core.queue, &submit, fence)
+                .map_err(vk_error("vkQueueSubmit"))
+                .and_then(|_| {
+                    device
+                        .wait_for_fences(&[fence], true, u64::MAX)
+                        .map_err(vk_error("vkWaitForFences"))
+                });
+            device.destroy_fence(fence, None);
+            waited
+        })();
+        device.destroy_command_pool(pool, None);
+        result
+    }
+}
+
+/// A full memory barrier between `src` and `dst` stages covering all reads and writes.
+pub(crate) fn global_barrier(
+    core: &Core,
+    cmd: vk::CommandBuffer,
+    src: vk::PipelineStageFlags,
+    dst: vk::PipelineStageFlags,
+) {
+    let barrier = [vk::MemoryBarrier::default()
+        .src_access_mask(vk::AccessFlags::MEMORY_WRITE)
+        .dst_access_mask(vk::AccessFlags::MEMORY_READ | vk::AccessFlags::MEMORY_WRITE)];
+    // SAFETY: `cmd` is in the recording state.
+    unsafe {
+        core.device.cmd_pipeline_barrier(
+            cmd,
+            src,
+            dst,
+            vk::DependencyFlags::empty(),
+            &barrier,
+            &[],
+            &[],
+        )
+    };
+}

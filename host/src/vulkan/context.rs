@@ -1,0 +1,467 @@
+//! The Vulkan instance and device: loading, validation-message capture, device enumeration with
+//! ray-tracing feature detection, and device creation.
+
+use crate::error::{Error, Result};
+use ash::vk;
+use gpu_allocator::vulkan::{Allocator, AllocatorCreateDesc};
+use std::ffi::{c_void, CStr};
+use std::mem::ManuallyDrop;
+use std::sync::{Arc, Mutex};
+
+/// Name of the Khronos validation layer.
+const VALIDATION_LAYER: &CStr = c"VK_LAYER_KHRONOS_validation";
+
+/// Converts a failed Vulkan call into [`Error::Vulkan`].
+pub(crate) fn vk_error(call: &'static str) -> impl Fn(vk::Result) -> Error {
+    move |result| Error::Vulkan {
+        call,
+        result: format!("{result:?}"),
+    }
+}
+
+/// What one Vulkan device offers raywave.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct DeviceInfo {
+    /// Index in `vkEnumeratePhysicalDevices` order, as used by `--device vulkan:N`.
+    pub index: usize,
+    /// `deviceName`.
+    pub name: String,
+    /// Device type (discrete GPU, integrated GPU, CPU, …).
+    pub device_type: String,
+    /// Supported Vulkan version, `major.minor.patch`.
+    pub api_version: String,
+    /// `VK_KHR_ray_query` with its `rayQuery` feature.
+    pub ray_query: bool,
+    /// `VK_KHR_acceleration_structure` with its `accelerationStructure` feature.
+    pub acceleration_structure: bool,
+    /// `VK_KHR_ray_tracing_pipeline` with its `rayTracingPipeline` feature.
+    pub ray_tracing_pipeline: bool,
+    /// The Vulkan 1.2 `bufferDeviceAddress` feature.
+    pub buffer_device_address: bool,
+    /// The Vulkan 1.2 `vulkanMemoryModel` feature: every rust-gpu module uses the Vulkan memory
+    /// model, so no kernel runs without it.
+    pub vulkan_memory_model: bool,
+    /// Whether compute queues support timestamps (`timestampComputeAndGraphics`).
+    pub timestamps: bool,
+}
+
+impl DeviceInfo {
+    /// What the ray-query trace stage needs and this device lacks (empty when it can run).
+    pub fn missing_for_ray_query(&self) -> Vec<String> {
+        let mut missing = Vec::new();
+        let mut need = |ok: bool, what: &str| {
+            if !ok {
+                missing.push(what.to_owned());
+            }
+        };
+        need(
+            self.acceleration_structure,
+            "VK_KHR_acceleration_structure (accelerationStructure)",
+        );
+        need(self.ray_query, "VK_KHR_ray_query (rayQuery)");
+        need(self.buffer_device_address, "bufferDeviceAddress");
+        missing
+    }
+}
+
+/// How to open a Vulkan device.
+#[derive(Clone, Debug, Default)]
+pub struct ContextOptions {
+    /// Enable `VK_LAYER_KHRONOS_validation` and capture its warnings and errors. Fails with
+    /// [`Error::VulkanUnavailable`] if the layer is not installed.
+    pub validation: bool,
+}
+
+/// Instance-level state shared by every object created from it; destroyed last.
+pub(crate) struct Core {
+    _entry: ash::Entry,
+    pub instance: ash::Instance,
+    debug: Option<(ash::ext::debug_utils::Instance, vk::DebugUtilsMessengerEXT)>,
+    /// Validation messages of warning or error severity, in arrival order.
+    messages: Arc<Mutex<Vec<String>>>,
+    pub device: ash::Device,
+    pub queue: vk::Queue,
+    pub queue_family: u32,
+    pub allocator: ManuallyDrop<Mutex<Allocator>>,
+    pub acceleration_structure: Option<ash::khr::acceleration_structure::Device>,
+    pub info: DeviceInfo,
+    pub limits: vk::PhysicalDeviceLimits,
+    /// `minAccelerationStructureScratchOffsetAlignment`, bytes.
+    pub scratch_alignment: u64,
+}
+
+impl Drop for Core {
+    fn drop(&mut self) {
+        // SAFETY: every object created from this device holds an `Arc<Core>`, so none is alive now.
+        unsafe {
+            let _ = self.device.device_wait_idle();
+            ManuallyDrop::drop(&mut self.allocator);
+            self.device.destroy_device(None);
+            if let Some((utils, messenger)) = self.debug.take() {
+                utils.destroy_debug_utils_messenger(messenger, None);
+            }
+            self.instance.destroy_instance(None);
+        }
+    }
+}
+
+impl Core {
+    /// Validation messages (warning or error severity) received so far.
+    pub fn validation_messages(&self) -> Vec<String> {
+        self.messages.lock().map(|m| m.clone()).unwrap_or_default()
+    }
+}
+
+unsafe extern "system" fn debug_callback(
+    severity: vk::DebugUtilsMessageSeverityFlagsEXT,
+    _types: vk::DebugUtilsMessageTypeFlagsEXT,
+    data: *const vk::DebugUtilsMessengerCallbackDataEXT<'_>,
+    user_data: *mut c_void,
+) -> vk::Bool32 {
+    // SAFETY: the loader passes a valid callback-data pointer; `user_data` is the
+    // `Mutex<Vec<String>>` owned by the `Core` that registered this messenger and outlives it.
+    let (text, sink) = unsafe {
+        let text = (*data)
+            .message_as_c_str()
+            .map(|m| m.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        (text, &*(user_data as *const Mutex<Vec<String>>))
+    };
+    let line = format!("[vulkan {severity:?}] {text}");
+    eprintln!("{line}");
+    if let Ok(mut messages) = sink.lock() {
+        messages.push(line);
+    }
+    vk::FALSE
+}
+
+fn load_entry() -> Result<ash::Entry> {
+    // SAFETY: loading the system Vulkan loader library; no Vulkan call is in flight.
+    unsafe { ash::Entry::load() }.map_err(|e| Error::VulkanUnavailable {
+        reason: format!("cannot load the Vulkan loader: {e}"),
+    })
+}
+
+fn create_instance(
+    entry: &ash::Entry,
+    validation: bool,
+    messenger_info: Option<&mut vk::DebugUtilsMessengerCreateInfoEXT>,
+) -> Result<ash::Instance> {
+    let app = vk::ApplicationInfo::default()
+        .application_name(c"raywave")
+        .engine_name(c"raywave")
+        .api_version(vk::API_VERSION_1_2);
+    let layers = if validation {
+        vec![VALIDATION_LAYER.as_ptr()]
+    } else {
+        vec![]
+    };
+    let extensions = if validation {
+        vec![ash::ext::debug_utils::NAME.as_ptr()]
+    } else {
+        vec![]
+    };
+    let mut info = vk::InstanceCreateInfo::default()
+        .application_info(&app)
+        .enabled_layer_names(&layers)
+        .enabled_extension_names(&extensions);
+    if let Some(m) = messenger_info {
+        info = info.push_next(m);
+    }
+    // SAFETY: all pointers in `info` borrow locals that outlive the call.
+    unsafe { entry.create_instance(&info, None) }.map_err(|e| match e {
+        vk::Result::ERROR_INCOMPATIBLE_DRIVER => Error::VulkanUnavailable {
+            reason: "no Vulkan 1.2 driver is installed".into(),
+        },
+        other => vk_error("vkCreateInstance")(other),
+    })
+}
+
+fn physical_devices(instance: &ash::Instance) -> Result<Vec<vk::PhysicalDevice>> {
+    // SAFETY: `instance` is a live instance.
+    unsafe { instance.enumerate_physical_devices() }.map_err(vk_error("vkEnumeratePhysicalDevices"))
+}
+
+fn has_extension(available: &[vk::ExtensionProperties], name: &CStr) -> bool {
+    available
+        .iter()
+        .any(|e| e.extension_name_as_c_str() == Ok(name))
+}
+
+/// Reads the properties and ray-tracing features of one physical device.
+fn describe(
+    instance: &ash::Instance,
+    physical: vk::PhysicalDevice,
+    index: usize,
+) -> Result<DeviceInfo> {
+    // SAFETY: `physical` was enumerated from `instance`; the feature chain borrows locals.
+    unsafe {
+        let props = instance.get_physical_device_properties(physical);
+        let exts = instance
+            .enumerate_device_extension_properties(physical)
+            .map_err(vk_error("vkEnumerateDeviceExtensionProperties"))?;
+        let has_as = has_extension(&exts, ash::khr::acceleration_structure::NAME)
+            && has_extension(&exts, ash::khr::deferred_host_operations::NAME);
+        let has_rq = has_extension(&exts, ash::khr::ray_query::NAME);
+        let has_rtp = has_extension(&exts, ash::khr::ray_tracing_pipeline::NAME);
+        let api_1_2 = props.api_version >= vk::API_VERSION_1_2;
+        let mut v12 = vk::PhysicalDeviceVulkan12Features::default();
+        let mut as_features = vk::PhysicalDeviceAccelerationStructureFeaturesKHR::default();
+        let mut rq_features = vk::PhysicalDeviceRayQueryFeaturesKHR::default();
+        let mut rtp_features = vk::PhysicalDeviceRayTracingPipelineFeaturesKHR::default();
+        let mut features = vk::PhysicalDeviceFeatures2::default();
+        if api_1_2 {
+            features = features.push_next(&mut v12);
+        }
+        if has_as {
+            features = features.push_next(&mut as_features);
+        }
+        if has_rq {
+            features = features.push_next(&mut rq_features);
+        }
+        if has_rtp {
+            features = features.push_next(&mut rtp_features);
+        }
+        instance.get_physical_device_features2(physical, &mut features);
+        let v = props.api_version;
+        Ok(DeviceInfo {
+            index,
+            name: props
+                .device_name_as_c_str()
+                .map(|n| n.to_string_lossy().into_owned())
+                .unwrap_or_default(),
+            device_type: format!("{:?}", props.device_type),
+            api_version: format!(
+                "{}.{}.{}",
+                vk::api_version_major(v),
+                vk::api_version_minor(v),
+                vk::api_version_patch(v)
+            ),
+            ray_query: has_rq && rq_features.ray_query == vk::TRUE,
+            acceleration_structure: has_as && as_features.acceleration_structure == vk::TRUE,
+            ray_tracing_pipeline: has_rtp && rtp_features.ray_tracing_pipeline == vk::TRUE,
+            buffer_device_address: api_1_2 && v12.buffer_device_address == vk::TRUE,
+            vulkan_memory_model: api_1_2 && v12.vulkan_memory_model == vk::TRUE,
+            timestamps: props.limits.timestamp_compute_and_graphics == vk::TRUE,
+        })
+    }
+}
+
+/// Lists every Vulkan device with the features raywave cares about. An absent Vulkan loader or
+/// driver is an [`Error::VulkanUnavailable`].
+pub fn enumerate_devices() -> Result<Vec<DeviceInfo>> {
+    let entry = load_entry()?;
+    let instance = create_instance(&entry, false, None)?;
+    let result = physical_devices(&instance).and_then(|devices| {
+        devices
+            .iter()
+            .enumerate()
+            .map(|(i, &pd)| describe(&instance, pd, i))
+            .collect()
+    });
+    // SAFETY: nothing was created from this instance.
+    unsafe { instance.destroy_instance(None) };
+    result
+}
+
+/// Opens Vulkan device `index` (as listed by [`enumerate_devices`]).
+pub(crate) fn open(index: usize, options: &ContextOptions) -> Result<Arc<Core>> {
+    let entry = load_entry()?;
+    if options.validation {
+        // SAFETY: plain query on a loaded entry.
+        let layers = unsafe { entry.enumerate_instance_layer_properties() }
+            .map_err(vk_error("vkEnumerateInstanceLayerProperties"))?;
+        if !layers
+            .iter()
+            .any(|l| l.layer_name_as_c_str() == Ok(VALIDATION_LAYER))
+        {
+            return Err(Error::VulkanUnavailable {
+                reason: "validation requested but VK_LAYER_KHRONOS_validation is not installed"
+                    .into(),
+            });
+        }
+    }
+    let messages = Arc::new(Mutex::new(Vec::new()));
+    let mut messenger_info = vk::DebugUtilsMessengerCreateInfoEXT::default()
+        .message_severity(
+            vk::DebugUtilsMessageSeverityFlagsEXT::WARNING
+                | vk::DebugUtilsMessageSeverityFlagsEXT::ERROR,
+        )
+        .message_type(
+            vk::DebugUtilsMessageTypeFlagsEXT::GENERAL
+                | vk::DebugUtilsMessageTypeFlagsEXT::VALIDATION
+                | vk::DebugUtilsMessageTypeFlagsEXT::PERFORMANCE,
+        )
+        .pfn_user_callback(Some(debug_callback))
+        .user_data(Arc::as_ptr(&messages) as *mut c_void);
+    let instance = create_instance(
+        &entry,
+        options.validation,
+        options.validation.then_some(&mut messenger_info),
+    )?;
+    // From here on, every failure path destroys what was created before it.
+    let debug = if options.validation {
+        let utils = ash::ext::debug_utils::Instance::new(&entry, &instance);
+        // SAFETY: `messenger_info` is valid and its user data outlives the messenger (owned by Core).
+        match unsafe { utils.create_debug_utils_messenger(&messenger_info, None) } {
+            Ok(m) => Some((utils, m)),
+            Err(e) => {
+                // SAFETY: nothing else was created from the instance.
+                unsafe { instance.destroy_instance(None) };
+                return Err(vk_error("vkCreateDebugUtilsMessengerEXT")(e));
+            }
+        }
+    } else {
+        None
+    };
+    let destroy_instance =
+        |instance: &ash::Instance,
+         debug: &Option<(ash::ext::debug_utils::Instance, vk::DebugUtilsMessengerEXT)>| {
+            // SAFETY: no device was created (or it was destroyed) from this instance.
+            unsafe {
+                if let Some((utils, m)) = debug {
+                    utils.destroy_debug_utils_messenger(*m, None);
+                }
+                instance.destroy_instance(None);
+            }
+        };
+    let physical = match physical_devices(&instance) {
+        Ok(list) if index < list.len() => list[index],
+        Ok(list) => {
+            destroy_instance(&instance, &debug);
+            return Err(Error::DeviceChoice {
+                requested: format!("vulkan:{index}"),
+                reason: format!(
+                    "there are {} Vulkan devices (indices 0..{})",
+                    list.len(),
+                    list.len()
+                ),
+            });
+        }
+        Err(e) => {
+            destroy_instance(&instance, &debug);
+            return Err(e);
+        }
+    };
+    match create_device(&instance, physical, index) {
+        Ok((device, queue_family, info, limits, scratch_alignment)) => {
+            // SAFETY: queue family `queue_family` with one queue was requested at device creation.
+            let queue = unsafe { device.get_device_queue(queue_family, 0) };
+            let allocator = Allocator::new(&AllocatorCreateDesc {
+                instance: instance.clone(),
+                device: device.clone(),
+                physical_device: physical,
+                debug_settings: Default::default(),
+                buffer_device_address: info.buffer_device_address,
+                allocation_sizes: Default::default(),
+            });
+            let allocator = match allocator {
+                Ok(a) => a,
+                Err(e) => {
+                    // SAFETY: nothing was created from the device.
+                    unsafe { device.destroy_device(None) };
+                    destroy_instance(&instance, &debug);
+                    return Err(Error::Vulkan {
+                        call: "gpu_allocator::Allocator::new",
+                        result: e.to_string(),
+                    });
+                }
+            };
+            let acceleration_structure = info
+                .acceleration_structure
+                .then(|| ash::khr::acceleration_structure::Device::new(&instance, &device));
+            Ok(Arc::new(Core {
+                _entry: entry,
+                instance,
+                debug,
+                messages,
+                device,
+                queue,
+                queue_family,
+                allocator: ManuallyDrop::new(Mutex::new(allocator)),
+                acceleration_structure,
+                info,
+                limits,
+                scratch_alignment,
+            }))
+        }
+        Err(e) => {
+            destroy_instance(&instance, &debug);
+            Err(e)
+        }
+    }
+}
+
+type CreatedDevice = (ash::Device, u32, DeviceInfo, vk::PhysicalDeviceLimits, u64);
+
+fn create_device(
+    instance: &ash::Instance,
+    physical: vk::PhysicalDevice,
+    index: usize,
+) -> Result<CreatedDevice> {
+    let info = describe(instance, physical, index)?;
+    // SAFETY: `physical` belongs to `instance`.
+    let api_version = unsafe { instance.get_physical_device_properties(physical) }.api_version;
+    if api_version < vk::API_VERSION_1_2 || !info.vulkan_memory_model {
+        return Err(Error::MissingFeatures {
+            device: info.name.clone(),
+            stage: "any kernel".into(),
+            missing: vec!["Vulkan 1.2 with vulkanMemoryModel".into()],
+        });
+    }
+    // SAFETY: `physical` belongs to `instance`; all create-info pointers borrow locals.
+    unsafe {
+        let families = instance.get_physical_device_queue_family_properties(physical);
+        let queue_family = families
+            .iter()
+            .position(|f| f.queue_flags.contains(vk::QueueFlags::COMPUTE))
+            .ok_or_else(|| Error::MissingFeatures {
+                device: info.name.clone(),
+                stage: "compute".into(),
+                missing: vec!["a compute queue".into()],
+            })? as u32;
+        let priorities = [1.0];
+        let queues = [vk::DeviceQueueCreateInfo::default()
+            .queue_family_index(queue_family)
+            .queue_priorities(&priorities)];
+        let mut extensions = vec![];
+        if info.acceleration_structure {
+            extensions.push(ash::khr::acceleration_structure::NAME.as_ptr());
+            extensions.push(ash::khr::deferred_host_operations::NAME.as_ptr());
+        }
+        if info.ray_query {
+            extensions.push(ash::khr::ray_query::NAME.as_ptr());
+        }
+        let mut v12 = vk::PhysicalDeviceVulkan12Features::default()
+            .buffer_device_address(info.buffer_device_address)
+            .vulkan_memory_model(true);
+        let mut as_features = vk::PhysicalDeviceAccelerationStructureFeaturesKHR::default()
+            .acceleration_structure(true);
+        let mut rq_features = vk::PhysicalDeviceRayQueryFeaturesKHR::default().ray_query(true);
+        let mut create = vk::DeviceCreateInfo::default()
+            .queue_create_infos(&queues)
+            .enabled_extension_names(&extensions)
+            .push_next(&mut v12);
+        if info.acceleration_structure {
+            create = create.push_next(&mut as_features);
+        }
+        if info.ray_query {
+            create = create.push_next(&mut rq_features);
+        }
+        let device = instance
+            .create_device(physical, &create, None)
+            .map_err(vk_error("vkCreateDevice"))?;
+        let limits = instance.get_physical_device_properties(physical).limits;
+        let mut as_props = vk::PhysicalDeviceAccelerationStructurePropertiesKHR::default();
+        if info.acceleration_structure {
+            let mut props2 = vk::PhysicalDeviceProperties2::default().push_next(&mut as_props);
+            instance.get_physical_device_properties2(physical, &mut props2);
+        }
+        let scratch_alignment = u64::from(
+            as_props
+                .min_acceleration_structure_scratch_offset_alignment
+                .max(1),
+        );
+        Ok((device, queue_family, info, limits, scratch_alignment))
+    }
+}

@@ -1,0 +1,13 @@
+//! The Vulkan backend (feature `vulkan`): an ash context with validation capture, buffers through
+//! gpu-allocator, BLAS/TLAS builds, compute pipelines from the embedded SPIR-V, and dispatch with
+//! GPU timestamps.
+
+mod accel;
+mod backend;
+mod buffer;
+mod context;
+mod kernel;
+pub mod spirv;
+
+pub use backend::VulkanBackend;
+pub use context::{enumerate_devices, ContextOptions, DeviceInfo};

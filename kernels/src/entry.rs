@@ -1,0 +1,82 @@
+//! `#[spirv(compute)]` entry points: thin wrappers that turn an invocation id into a stream index,
+//! call the stage function and store its result. Binding numbers repeat
+//! [`raywave_shared::bindings`] (attributes need literals); `threads(64)` is
+//! [`raywave_shared::bindings::WORKGROUP_SIZE`].
+
+use glam::{UVec3, Vec4};
+use raywave_shared::bindings::WORKGROUP_SIZE;
+use raywave_shared::GenerateParams;
+use spirv_std::spirv;
+
+/// The stream index of an invocation in a 2-D grid of 1-D workgroups: rows of
+/// `num_workgroups.x · WORKGROUP_SIZE` invocations. The host spreads large streams over y because
+/// `maxComputeWorkGroupCount[0]` may be as small as 65 535.
+pub fn stream_index(global_id: UVec3, num_workgroups: UVec3) -> u32 {
+    global_id.y * num_workgroups.x * WORKGROUP_SIZE + global_id.x
+}
+
+/// Entry point of the generate stage.
+#[spirv(compute(threads(64)))]
+pub fn generate(
+    #[spirv(global_invocation_id)] global_id: UVec3,
+    #[spirv(num_workgroups)] num_workgroups: UVec3,
+    #[spirv(push_constant)] params: &GenerateParams,
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 0)] ray_origin: &mut [Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 1)] ray_direction: &mut [Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 2)] ray_pixel: &mut [u32],
+) {
+    let i = stream_index(global_id, num_workgroups);
+    if i < params.ray_count() {
+        let ray = crate::generate::generate_ray(i, params);
+        ray_origin[i as usize] = ray.origin;
+        ray_direction[i as usize] = ray.direction;
+        ray_pixel[i as usize] = ray.pixel;
+    }
+}
+
+/// Entry point of the trace stage with `VK_KHR_ray_query`; only in the SPIR-V build with the
+/// `ray-query` feature (and the `RayQueryKHR` capability), so other modules never declare it.
+#[cfg(all(target_arch = "spirv", feature = "ray-query"))]
+#[spirv(compute(threads(64)))]
+#[allow(clippy::too_many_arguments)]
+pub fn trace_ray_query(
+    #[spirv(global_invocation_id)] global_id: UVec3,
+    #[spirv(num_workgroups)] num_workgroups: UVec3,
+    #[spirv(push_constant)] params: &raywave_shared::TraceParams,
+    #[spirv(descriptor_set = 0, binding = 0)] tlas: &spirv_std::ray_tracing::AccelerationStructure,
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 1)] ray_origin: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 2)] ray_direction: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 3)] hit_t: &mut [f32],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 4)] hit_primitive: &mut [u32],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 5)] hit_instance: &mut [u32],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 6)] hit_barycentrics: &mut [glam::Vec2],
+) {
+    let i = stream_index(global_id, num_workgroups) as usize;
+    if i < params.ray_count as usize {
+        let scene = crate::trace::ray_query::RayQueryScene { tlas };
+        let hit = crate::trace::trace_closest(ray_origin[i], ray_direction[i], &scene);
+        hit_t[i] = hit.t;
+        hit_primitive[i] = hit.primitive;
+        hit_instance[i] = hit.instance;
+        hit_barycentrics[i] = hit.barycentrics;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn stream_index_is_row_major_over_the_dispatch_grid() {
+        let groups = UVec3::new(3, 2, 1);
+        assert_eq!(stream_index(UVec3::new(5, 0, 0), groups), 5);
+        assert_eq!(
+            stream_index(UVec3::new(0, 1, 0), groups),
+            3 * WORKGROUP_SIZE
+        );
+        assert_eq!(
+            stream_index(UVec3::new(7, 1, 0), groups),
+            3 * WORKGROUP_SIZE + 7
+        );
+    }
+}

@@ -1,0 +1,155 @@
+//! The trace stage: closest hit of every ray in the ray stream.
+//!
+//! The stage is written against [`ClosestHitQuery`], so one function serves every backend: the
+//! CPU executor implements the query over obvhs's CWBVH with [`crate::triangle`]'s watertight
+//! test; the SPIR-V build implements it with `VK_KHR_ray_query` ([`ray_query`]).
+
+#[cfg(all(target_arch = "spirv", feature = "ray-query"))]
+pub mod ray_query;
+
+use glam::{Vec2, Vec3, Vec4, Vec4Swizzles};
+use raywave_shared::stream::NO_HIT;
+
+/// A ray read from the ray stream.
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub struct Ray {
+    /// Origin in scene units.
+    pub origin: Vec3,
+    /// Direction; any non-zero length.
+    pub direction: Vec3,
+    /// Start of the valid interval (≥ 0).
+    pub tmin: f32,
+    /// End of the valid interval (≥ `tmin`, finite).
+    pub tmax: f32,
+}
+
+impl Ray {
+    /// Unpacks the stream layout (origin.w = tmin, direction.w = tmax).
+    pub fn from_stream(origin: Vec4, direction: Vec4) -> Self {
+        Self {
+            origin: origin.xyz(),
+            direction: direction.xyz(),
+            tmin: origin.w,
+            tmax: direction.w,
+        }
+    }
+
+    /// Whether the ray can be traced: all components finite, a non-zero direction and
+    /// `0 ≤ tmin ≤ tmax`. Vulkan leaves other rays undefined, so the stage never passes them on.
+    pub fn is_traceable(&self) -> bool {
+        self.origin.is_finite()
+            && self.direction.is_finite()
+            && self.direction != Vec3::ZERO
+            && self.tmin.is_finite()
+            && self.tmax.is_finite()
+            && self.tmin >= 0.0
+            && self.tmin <= self.tmax
+    }
+}
+
+/// The closest hit of one ray, as the trace stage writes it into the hit stream.
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub struct Hit {
+    /// Ray parameter of the hit; 0 on a miss.
+    pub t: f32,
+    /// Triangle index within the instance's mesh; [`NO_HIT`] on a miss.
+    pub primitive: u32,
+    /// Instance index; [`NO_HIT`] on a miss.
+    pub instance: u32,
+    /// Weights of vertices 1 and 2; zero on a miss.
+    pub barycentrics: Vec2,
+}
+
+impl Hit {
+    /// The record of a ray that hit nothing.
+    pub const MISS: Hit = Hit {
+        t: 0.0,
+        primitive: NO_HIT,
+        instance: NO_HIT,
+        barycentrics: Vec2::ZERO,
+    };
+
+    /// Whether the ray hit anything.
+    pub fn is_hit(&self) -> bool {
+        self.primitive != NO_HIT
+    }
+}
+
+/// A closest-hit query against the scene: implemented by each trace backend.
+pub trait ClosestHitQuery {
+    /// The closest hit of a traceable ray (see [`Ray::is_traceable`]) with `t ∈ [tmin, tmax]`,
+    /// both faces of every triangle counted, or [`Hit::MISS`].
+    fn closest_hit(&self, ray: &Ray) -> Hit;
+}
+
+/// The trace stage for one invocation: reads the ray at its stream fields and returns its closest
+/// hit. Rays that are not traceable (NaN, Inf, zero direction, bad interval) miss, and a hit whose
+/// values are not finite is written as a miss, so no NaN or Inf leaves the stage.
+pub fn trace_closest<Q: ClosestHitQuery>(origin: Vec4, direction: Vec4, query: &Q) -> Hit {
+    let ray = Ray::from_stream(origin, direction);
+    if !ray.is_traceable() {
+        return Hit::MISS;
+    }
+    let hit = query.closest_hit(&ray);
+    if hit.t.is_finite() && hit.barycentrics.is_finite() {
+        hit
+    } else {
+        Hit::MISS
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A query that returns a fixed record, to test the stage's boundary handling on its own.
+    struct Fixed(Hit);
+    impl ClosestHitQuery for Fixed {
+        fn closest_hit(&self, _ray: &Ray) -> Hit {
+            self.0
+        }
+    }
+
+    const HIT: Hit = Hit {
+        t: 2.0,
+        primitive: 3,
+        instance: 1,
+        barycentrics: Vec2::new(0.25, 0.5),
+    };
+
+    #[test]
+    fn traceable_rays_reach_the_query() {
+        let h = trace_closest(
+            Vec4::new(0.0, 0.0, 0.0, 0.0),
+            Vec4::new(0.0, 0.0, 1.0, 10.0),
+            &Fixed(HIT),
+        );
+        assert_eq!(h, HIT);
+    }
+
+    #[test]
+    fn untraceable_rays_miss() {
+        let ok_origin = Vec4::ZERO;
+        let ok_dir = Vec4::new(0.0, 0.0, 1.0, 10.0);
+        let cases = [
+            (Vec4::new(f32::NAN, 0.0, 0.0, 0.0), ok_dir),
+            (Vec4::new(f32::INFINITY, 0.0, 0.0, 0.0), ok_dir),
+            (ok_origin, Vec4::new(0.0, 0.0, 0.0, 10.0)),
+            (ok_origin, Vec4::new(0.0, 0.0, 1.0, f32::INFINITY)),
+            (Vec4::new(0.0, 0.0, 0.0, -1.0), ok_dir),
+            (Vec4::new(0.0, 0.0, 0.0, 11.0), ok_dir),
+        ];
+        for (o, d) in cases {
+            assert_eq!(trace_closest(o, d, &Fixed(HIT)), Hit::MISS, "{o} {d}");
+        }
+    }
+
+    #[test]
+    fn non_finite_hits_are_sanitized_to_misses() {
+        let bad = Hit { t: f32::NAN, ..HIT };
+        assert_eq!(
+            trace_closest(Vec4::ZERO, Vec4::new(0.0, 0.0, 1.0, 10.0), &Fixed(bad)),
+            Hit::MISS
+        );
+    }
+}

@@ -1,0 +1,217 @@
+//! Ray–triangle intersection: the watertight test of Woop, Benthin & Wald, "Watertight
+//! Ray/Triangle Intersection", JCGT 2(1), 2013.
+//!
+//! The ray is sheared so it runs along +z from the origin; the 2-D edge functions of the projected
+//! triangle are then evaluated with the same operands for both triangles sharing an edge, so a ray
+//! through an edge or vertex hits at least one of them. An edge function that is exactly 0 counts as
+//! inside, which keeps the test watertight without the paper's f64 fallback (that fallback only
+//! breaks ties consistently; SPIR-V cannot assume `Float64`). Both faces are hit, matching Vulkan
+//! ray query without culling flags.
+
+use glam::{Vec2, Vec3};
+
+/// The component of `v` along `axis` (0 = x, 1 = y, otherwise z), written as a branch so it
+/// compiles to SPIR-V without dynamic vector indexing.
+pub fn component(v: Vec3, axis: u32) -> f32 {
+    match axis {
+        0 => v.x,
+        1 => v.y,
+        _ => v.z,
+    }
+}
+
+/// A hit on one triangle.
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub struct TriangleHit {
+    /// Ray parameter of the hit, in `[tmin, tmax]`.
+    pub t: f32,
+    /// Barycentric weights of vertices 1 and 2 (Vulkan's convention): the hit point is
+    /// `(1 − u − v)·v0 + u·v1 + v·v2`.
+    pub barycentrics: Vec2,
+}
+
+/// A ray prepared for the watertight test: the per-ray shear and axis permutation, computed once
+/// and reused for every triangle the ray meets.
+#[derive(Copy, Clone, Debug)]
+pub struct WatertightRay {
+    origin: Vec3,
+    /// Axis permutation: `kz` is the dominant axis of the direction, `kx`, `ky` the others, swapped
+    /// when the direction along `kz` is negative to keep the triangle winding.
+    kx: u32,
+    ky: u32,
+    kz: u32,
+    /// Shear constants (S_x, S_y, S_z) of the paper.
+    shear: Vec3,
+}
+
+impl WatertightRay {
+    /// Prepares a ray. `direction` need not be unit length but must be non-zero and finite.
+    pub fn new(origin: Vec3, direction: Vec3) -> Self {
+        let abs = direction.abs();
+        let kz = if abs.x > abs.y {
+            if abs.x > abs.z {
+                0
+            } else {
+                2
+            }
+        } else if abs.y > abs.z {
+            1
+        } else {
+            2
+        };
+        let mut kx = if kz == 2 { 0 } else { kz + 1 };
+        let mut ky = if kx == 2 { 0 } else { kx + 1 };
+        let dz = component(direction, kz);
+        if dz < 0.0 {
+            core::mem::swap(&mut kx, &mut ky);
+        }
+        let shear = Vec3::new(
+            component(direction, kx) / dz,
+            component(direction, ky) / dz,
+            1.0 / dz,
+        );
+        Self {
+            origin,
+            kx,
+            ky,
+            kz,
+            shear,
+        }
+    }
+
+    /// Intersects the triangle `(v0, v1, v2)`; returns the hit if its parameter lies in
+    /// `[tmin, tmax]` (both inclusive, as Vulkan's ray query) and the triangle is not degenerate as
+    /// seen from the ray.
+    pub fn intersect(
+        &self,
+        v0: Vec3,
+        v1: Vec3,
+        v2: Vec3,
+        tmin: f32,
+        tmax: f32,
+    ) -> Option<TriangleHit> {
+        let a = v0 - self.origin;
+        let b = v1 - self.origin;
+        let c = v2 - self.origin;
+        let (az, bz, cz) = (
+            component(a, self.kz),
+            component(b, self.kz),
+            component(c, self.kz),
+        );
+        let ax = component(a, self.kx) - self.shear.x * az;
+        let ay = component(a, self.ky) - self.shear.y * az;
+        let bx = component(b, self.kx) - self.shear.x * bz;
+        let by = component(b, self.ky) - self.shear.y * bz;
+        let cx = component(c, self.kx) - self.shear.x * cz;
+        let cy = component(c, self.ky) - self.shear.y * cz;
+
+        // Scaled barycentrics: edge functions opposite v0, v1, v2.
+        let u = cx * by - cy * bx;
+        let v = ax * cy - ay * cx;
+        let w = bx * ay - by * ax;
+        let outside = (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0);
+        let det = u + v + w;
+        if outside || det == 0.0 {
+            return None;
+        }
+
+        let t_scaled = u * self.shear.z * az + v * self.shear.z * bz + w * self.shear.z * cz;
+        // Compare t·|det| against the range without dividing, sign-corrected for back faces.
+        let det_abs = det.abs();
+        let t_scaled_abs = if det < 0.0 { -t_scaled } else { t_scaled };
+        if t_scaled_abs < tmin * det_abs || t_scaled_abs > tmax * det_abs {
+            return None;
+        }
+        let rcp_det = 1.0 / det;
+        Some(TriangleHit {
+            t: t_scaled * rcp_det,
+            barycentrics: Vec2::new(v * rcp_det, w * rcp_det),
+        })
+    }
+}
+
+/// Unit geometric normal of triangle `(v0, v1, v2)` by the right-hand rule (counter-clockwise
+/// winding faces the viewer). Returns zero for a degenerate triangle rather than NaN.
+pub fn geometric_normal(v0: Vec3, v1: Vec3, v2: Vec3) -> Vec3 {
+    (v1 - v0).cross(v2 - v0).normalize_or_zero()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const V0: Vec3 = Vec3::new(0.0, 0.0, 0.0);
+    const V1: Vec3 = Vec3::new(1.0, 0.0, 0.0);
+    const V2: Vec3 = Vec3::new(0.0, 1.0, 0.0);
+
+    fn hit(origin: Vec3, dir: Vec3) -> Option<TriangleHit> {
+        WatertightRay::new(origin, dir).intersect(V0, V1, V2, 0.0, 1e30)
+    }
+
+    #[test]
+    fn hits_inside_with_vulkan_barycentrics() {
+        let h = hit(Vec3::new(0.25, 0.5, 2.0), Vec3::NEG_Z).unwrap();
+        assert!((h.t - 2.0).abs() < 1e-6);
+        assert!((h.barycentrics - Vec2::new(0.25, 0.5)).abs().max_element() < 1e-6);
+    }
+
+    #[test]
+    fn hits_both_faces() {
+        let front = hit(Vec3::new(0.2, 0.2, 1.0), Vec3::NEG_Z).unwrap();
+        let back = hit(Vec3::new(0.2, 0.2, -1.0), Vec3::Z).unwrap();
+        assert_eq!(front.barycentrics, back.barycentrics);
+        assert!((front.t - 1.0).abs() < 1e-6 && (back.t - 1.0).abs() < 1e-6);
+    }
+
+    #[test]
+    fn misses_outside_and_outside_the_range() {
+        assert!(hit(Vec3::new(0.8, 0.8, 1.0), Vec3::NEG_Z).is_none());
+        assert!(
+            hit(Vec3::new(0.2, 0.2, 1.0), Vec3::Z).is_none(),
+            "behind the origin"
+        );
+        let r = WatertightRay::new(Vec3::new(0.2, 0.2, 1.0), Vec3::NEG_Z);
+        assert!(r.intersect(V0, V1, V2, 0.0, 0.5).is_none(), "beyond tmax");
+        assert!(r.intersect(V0, V1, V2, 1.5, 9.0).is_none(), "before tmin");
+        assert!(
+            r.intersect(V0, V1, V2, 1.0, 1.0).is_some(),
+            "range is inclusive"
+        );
+    }
+
+    #[test]
+    fn rays_through_a_shared_edge_hit_one_of_the_two_triangles() {
+        // Two triangles sharing the diagonal (1,0)-(0,1) of the unit square.
+        let v3 = Vec3::new(1.0, 1.0, 0.0);
+        let mut leaks = 0;
+        for i in 0..=1000 {
+            let s = i as f32 / 1000.0;
+            let origin = Vec3::new(1.0 - s, s, 3.0) + Vec3::new(0.3, -0.7, 0.0);
+            let dir = Vec3::new(1.0 - s, s, 0.0) - origin;
+            let r = WatertightRay::new(origin, dir);
+            let first = r.intersect(V0, V1, V2, 0.0, 1e30);
+            let second = r.intersect(V1, v3, V2, 0.0, 1e30);
+            leaks += u32::from(first.is_none() && second.is_none());
+        }
+        assert_eq!(leaks, 0);
+    }
+
+    #[test]
+    fn axis_aligned_and_negative_zero_directions_work() {
+        for dir in [
+            Vec3::NEG_Z,
+            Vec3::new(-0.0, 0.0, -1.0),
+            Vec3::new(0.0, -0.0, -1.0),
+        ] {
+            assert!(hit(Vec3::new(0.1, 0.1, 1.0), dir).is_some(), "{dir}");
+        }
+        // A ray in the triangle's plane sees a degenerate (zero-area) triangle.
+        assert!(hit(Vec3::new(-1.0, 0.2, 0.0), Vec3::X).is_none());
+    }
+
+    #[test]
+    fn degenerate_normal_is_zero_not_nan() {
+        assert_eq!(geometric_normal(V0, V1, V1), Vec3::ZERO);
+        assert_eq!(geometric_normal(V0, V1, V2), Vec3::Z);
+    }
+}

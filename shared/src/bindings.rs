@@ -1,0 +1,39 @@
+//! Descriptor binding numbers and workgroup sizes, shared by the host's descriptor layouts and the
+//! kernels' entry points.
+//!
+//! All stages use descriptor set 0 and one storage buffer per stream field. SPIR-V entry-point
+//! attributes need literal numbers, so the kernels repeat these values in their
+//! `#[spirv(binding = N)]` attributes; the Vulkan validation layers (on in every test) reject a
+//! pipeline whose layout disagrees with its shader, and the parity tests catch two swapped buffers.
+
+/// Threads per workgroup of every 1-D compute stage (generate, trace). 64 fills a wave on AMD and
+/// two warps on NVIDIA.
+pub const WORKGROUP_SIZE: u32 = 64;
+
+/// Bindings of the generate stage (set 0).
+pub mod generate {
+    /// Output: ray origins (`Vec4`, w = tmin).
+    pub const RAY_ORIGIN: u32 = 0;
+    /// Output: ray directions (`Vec4`, w = tmax).
+    pub const RAY_DIRECTION: u32 = 1;
+    /// Output: pixel index of each ray (`u32`).
+    pub const RAY_PIXEL: u32 = 2;
+}
+
+/// Bindings of the trace stage (set 0).
+pub mod trace {
+    /// Input: the top-level acceleration structure.
+    pub const TLAS: u32 = 0;
+    /// Input: ray origins (`Vec4`, w = tmin).
+    pub const RAY_ORIGIN: u32 = 1;
+    /// Input: ray directions (`Vec4`, w = tmax).
+    pub const RAY_DIRECTION: u32 = 2;
+    /// Output: hit distance (`f32`).
+    pub const HIT_T: u32 = 3;
+    /// Output: primitive index within the instance's mesh (`u32`).
+    pub const HIT_PRIMITIVE: u32 = 4;
+    /// Output: instance index (`u32`).
+    pub const HIT_INSTANCE: u32 = 5;
+    /// Output: barycentrics of vertices 1 and 2 (`Vec2`).
+    pub const HIT_BARYCENTRICS: u32 = 6;
+}

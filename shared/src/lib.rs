@@ -1,0 +1,15 @@
+//! The contract between the raywave host and its kernels.
+//!
+//! Everything that crosses the host/GPU boundary is defined here exactly once: push-constant
+//! parameter blocks (`#[repr(C)]`, [`bytemuck::Pod`], with compile-time size and alignment checks),
+//! the element types of the SoA streams, and the descriptor binding numbers. The kernels use these
+//! types unchanged on the CPU and in SPIR-V; the host uses them to fill buffers.
+#![no_std]
+
+pub mod bindings;
+pub mod generate;
+pub mod stream;
+pub mod trace;
+
+pub use generate::GenerateParams;
+pub use trace::TraceParams;

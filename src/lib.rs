@@ -1,0 +1,12 @@
+//! raywave: data-oriented wavefront ray-tracing kernels that run the same math on the CPU and on
+//! Vulkan devices (SPIR-V built with rust-gpu).
+//!
+//! This facade re-exports the three layers — [`shared`] (the host/kernel contract), [`kernels`]
+//! (the stages as plain `no_std` functions) and the host (scenes, CPU executor, Vulkan backend) —
+//! and adds [`render`], the whole-frame job behind `raywave render`.
+
+pub mod render;
+
+pub use raywave_host::*;
+pub use raywave_kernels as kernels;
+pub use raywave_shared as shared;

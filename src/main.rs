@@ -1,0 +1,168 @@
+//! The `raywave` command-line tool.
+
+use clap::{Parser, Subcommand};
+use raywave::render::{render, RenderOptions};
+use raywave::{BackendOptions, DeviceChoice};
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+/// Wavefront ray-tracing kernels on the CPU and on Vulkan.
+#[derive(Parser)]
+#[command(name = "raywave", version, about)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// List the CPU backend and every Vulkan device with the ray-tracing features it offers.
+    Devices {
+        /// Print one JSON object instead of a table.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Render a scene through generate → trace and write a normal/depth view as PNG.
+    Render {
+        /// `builtin:cornell` or a path to a Wavefront OBJ file.
+        #[arg(long, default_value = "builtin:cornell")]
+        scene: String,
+        /// `auto` (Vulkan if usable, else CPU), `cpu`, `vulkan` or `vulkan:N`.
+        #[arg(long, default_value = "auto")]
+        device: String,
+        /// Image width in pixels.
+        #[arg(long, default_value_t = 512)]
+        width: u32,
+        /// Image height in pixels.
+        #[arg(long, default_value_t = 512)]
+        height: u32,
+        /// Seed of the sub-pixel jitter.
+        #[arg(long, default_value_t = 0)]
+        seed: u32,
+        /// Enable the Vulkan validation layers (must be installed).
+        #[arg(long)]
+        validate: bool,
+        /// Output PNG file.
+        #[arg(long)]
+        out: PathBuf,
+    },
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Devices { json } => devices(json),
+        Command::Render {
+            scene,
+            device,
+            width,
+            height,
+            seed,
+            validate,
+            out,
+        } => device
+            .parse::<DeviceChoice>()
+            .and_then(|device| {
+                let options = RenderOptions {
+                    scene,
+                    device,
+                    width,
+                    height,
+                    seed,
+                    out,
+                    backend: BackendOptions {
+                        validation: validate,
+                    },
+                };
+                render(&options).map(|report| (options, report))
+            })
+            .map(|(options, report)| {
+                println!("backend  {}", report.backend);
+                println!(
+                    "scene    {} ({} triangles)",
+                    options.scene, report.triangles
+                );
+                println!(
+                    "image    {}×{} → {} ({} of {} rays hit)",
+                    options.width,
+                    options.height,
+                    options.out.display(),
+                    report.hits,
+                    options.width * options.height
+                );
+                for t in &report.timings {
+                    println!("stage    {:<9} {:>10.3} ms", t.stage, t.seconds * 1e3);
+                }
+            }),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+#[cfg(feature = "vulkan")]
+fn vulkan_devices() -> Result<Vec<serde_json::Value>, String> {
+    raywave::vulkan::enumerate_devices()
+        .map_err(|e| e.to_string())
+        .map(|list| {
+            list.into_iter()
+            .map(|d| {
+                serde_json::json!({
+                    "backend": "vulkan", "index": d.index, "name": d.name, "type": d.device_type,
+                    "api_version": d.api_version, "ray_query": d.ray_query,
+                    "acceleration_structure": d.acceleration_structure,
+                    "ray_tracing_pipeline": d.ray_tracing_pipeline,
+                    "buffer_device_address": d.buffer_device_address, "timestamps": d.timestamps,
+                    "can_trace": d.missing_for_ray_query().is_empty(),
+                })
+            })
+            .collect()
+        })
+}
+
+#[cfg(not(feature = "vulkan"))]
+fn vulkan_devices() -> Result<Vec<serde_json::Value>, String> {
+    Err("built without the `vulkan` feature".into())
+}
+
+fn devices(json: bool) -> raywave::Result<()> {
+    let threads = std::thread::available_parallelism()
+        .map(|n| n.get())
+        .unwrap_or(1);
+    let vulkan = vulkan_devices();
+    if json {
+        let value = serde_json::json!({
+            "cpu": { "backend": "cpu", "threads": threads },
+            "vulkan": vulkan.as_ref().ok(),
+            "vulkan_error": vulkan.as_ref().err(),
+        });
+        println!("{value}");
+        return Ok(());
+    }
+    println!("cpu        {threads} threads (rayon)");
+    match vulkan {
+        Ok(list) if list.is_empty() => println!("vulkan     no devices"),
+        Ok(list) => {
+            for d in list {
+                let flag = |k: &str| {
+                    if d[k].as_bool() == Some(true) {
+                        "yes"
+                    } else {
+                        "no"
+                    }
+                };
+                println!(
+                    "vulkan:{:<3} {} ({}, Vulkan {})  ray_query={} acceleration_structure={} ray_tracing_pipeline={} buffer_device_address={}",
+                    d["index"], d["name"].as_str().unwrap_or("?"), d["type"].as_str().unwrap_or("?"), d["api_version"].as_str().unwrap_or("?"),
+                    flag("ray_query"), flag("acceleration_structure"), flag("ray_tracing_pipeline"), flag("buffer_device_address"),
+                );
+            }
+        }
+        Err(e) => println!("vulkan     unavailable: {e}"),
+    }
+    Ok(())
+}

@@ -1,0 +1,69 @@
+//! The `raywave render` job: scene → generate → trace on a chosen backend → image file.
+
+use crate::{open_backend, BackendOptions, DeviceChoice, Result, Scene, StageTiming};
+use raywave_host::frame::generate_params;
+use raywave_host::visualize::{normal_depth_image, PendingOutput};
+use std::path::PathBuf;
+
+/// What to render and where.
+#[derive(Clone, Debug)]
+pub struct RenderOptions {
+    /// `builtin:NAME` or a scene file path.
+    pub scene: String,
+    /// Which backend runs the stages.
+    pub device: DeviceChoice,
+    /// Image width in pixels.
+    pub width: u32,
+    /// Image height in pixels.
+    pub height: u32,
+    /// Seed of the pixel jitter.
+    pub seed: u32,
+    /// Output PNG path.
+    pub out: PathBuf,
+    /// Backend options (validation layers).
+    pub backend: BackendOptions,
+}
+
+/// What a render did.
+#[derive(Clone, Debug)]
+pub struct RenderReport {
+    /// The backend that ran the stages.
+    pub backend: String,
+    /// Triangles in the scene.
+    pub triangles: usize,
+    /// Per-stage times.
+    pub timings: Vec<StageTiming>,
+    /// Rays that hit geometry.
+    pub hits: usize,
+}
+
+/// Renders the normal/depth view of `options.scene` into `options.out`. Every input is checked
+/// before work starts and the output file appears only when complete.
+pub fn render(options: &RenderOptions) -> Result<RenderReport> {
+    let scene = Scene::load(&options.scene)?;
+    let output = PendingOutput::create(&options.out)?;
+    let mut backend = open_backend(options.device, &options.backend)?;
+    backend.check_image_size(options.width, options.height)?;
+    backend.load_scene(&scene)?;
+    let params = generate_params(&scene, options.width, options.height, 0, options.seed);
+    let frame = backend.render(&params)?;
+    let image = normal_depth_image(
+        &scene,
+        &frame.rays,
+        &frame.hits,
+        options.width,
+        options.height,
+    );
+    output.finish_png(&image)?;
+    Ok(RenderReport {
+        backend: backend.name(),
+        triangles: scene.triangle_count(),
+        hits: frame
+            .hits
+            .primitive
+            .iter()
+            .filter(|&&p| p != crate::shared::stream::NO_HIT)
+            .count(),
+        timings: frame.timings,
+    })
+}

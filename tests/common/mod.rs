@@ -1,0 +1,81 @@
+//! Helpers shared by the integration tests: every Vulkan device opened with validation on, the
+//! CI rule for missing devices, and tolerance checks.
+#![allow(dead_code)] // each test binary uses a different subset
+
+use raywave::Scene;
+
+/// True when running under CI (`CI=true`), where a missing Vulkan device or validation layer is a
+/// failure rather than a skip.
+pub fn in_ci() -> bool {
+    std::env::var("CI").is_ok_and(|v| v == "true" || v == "1")
+}
+
+/// Reports that the GPU part of `test` cannot run: a loud SKIP locally, a failure under CI.
+pub fn skip_or_fail(test: &str, reason: &str) {
+    assert!(
+        !in_ci(),
+        "{test}: {reason} (CI=true requires a Vulkan device)"
+    );
+    eprintln!("\n*** SKIP {test}: {reason} ***\n");
+}
+
+/// The built-in Cornell box.
+pub fn cornell() -> Scene {
+    Scene::load("builtin:cornell").expect("built-in scene loads")
+}
+
+/// Whether `a` and `b` agree within `rel` relative to `scale` (the magnitude the quantity is
+/// measured against, e.g. the length of the vector it belongs to), with `rel · scale` as the
+/// absolute floor for values near zero.
+pub fn close(a: f32, b: f32, rel: f32, scale: f32) -> bool {
+    (a - b).abs() <= rel * scale.max(a.abs()).max(b.abs())
+}
+
+#[cfg(feature = "vulkan")]
+pub mod vulkan {
+    use raywave::vulkan::{enumerate_devices, ContextOptions, DeviceInfo, VulkanBackend};
+
+    /// Opens every Vulkan device with validation layers on. Without devices this SKIPs loudly
+    /// (fails under CI). Validation is required under CI; elsewhere it is used when installed.
+    pub fn every_device(test: &str) -> Vec<VulkanBackend> {
+        let devices = match enumerate_devices() {
+            Ok(d) if !d.is_empty() => d,
+            Ok(_) => {
+                super::skip_or_fail(test, "no Vulkan device");
+                return vec![];
+            }
+            Err(e) => {
+                super::skip_or_fail(test, &format!("{e}"));
+                return vec![];
+            }
+        };
+        devices.iter().map(|d| open(d)).collect()
+    }
+
+    fn open(info: &DeviceInfo) -> VulkanBackend {
+        match VulkanBackend::open(info.index, &ContextOptions { validation: true }) {
+            Ok(b) => b,
+            Err(e) if !super::in_ci() && e.to_string().contains("VK_LAYER_KHRONOS_validation") => {
+                eprintln!(
+                    "*** validation layer missing: testing {} without it ***",
+                    info.name
+                );
+                VulkanBackend::open(info.index, &ContextOptions { validation: false })
+                    .expect("device opens")
+            }
+            Err(e) => panic!("cannot open {}: {e}", info.name),
+        }
+    }
+
+    /// Fails if the device's validation layers reported any warning or error.
+    pub fn assert_clean(backend: &VulkanBackend) {
+        let messages = backend.validation_messages();
+        assert!(
+            messages.is_empty(),
+            "{} validation messages on {}:\n{}",
+            messages.len(),
+            backend.info().name,
+            messages.join("\n")
+        );
+    }
+}
