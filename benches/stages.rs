@@ -1,1 +1,59 @@
-fn main() {}
+//! Criterion micro-benchmarks of the stages on the built-in Cornell box: the CPU executor and,
+//! when a Vulkan device with ray query is present, the Vulkan backend (per call, including upload,
+//! dispatch and readback; the GPU-only time is what `raywave render` prints per stage).
+
+use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
+use raywave::cpu::{self, CpuScene};
+use raywave::frame::generate_params;
+use raywave::{open_backend, Backend, BackendOptions, DeviceChoice, Scene};
+use std::hint::black_box;
+
+/// Image sizes benchmarked: a small tile and a 512² frame.
+const SIZES: [(u32, u32); 2] = [(64, 64), (512, 512)];
+
+fn stages(c: &mut Criterion) {
+    let scene = Scene::load("builtin:cornell").expect("built-in scene");
+    let cpu_scene = CpuScene::build(&scene);
+    let mut vulkan = open_backend(DeviceChoice::Vulkan(None), &BackendOptions::default()).ok();
+    match vulkan.as_mut() {
+        Some(v) => v.load_scene(&scene).expect("acceleration structures build"),
+        None => eprintln!("no Vulkan device with ray query: benchmarking the CPU backend only"),
+    }
+
+    let mut group = c.benchmark_group("generate");
+    for (w, h) in SIZES {
+        let params = generate_params(&scene, w, h, 0, 1);
+        group.throughput(Throughput::Elements(u64::from(w * h)));
+        group.bench_with_input(BenchmarkId::new("cpu", w * h), &params, |b, p| {
+            b.iter(|| cpu::generate(black_box(p)))
+        });
+        if let Some(v) = vulkan.as_mut() {
+            group.bench_with_input(BenchmarkId::new("vulkan", w * h), &params, |b, p| {
+                b.iter(|| v.generate(black_box(p)).expect("generate"))
+            });
+        }
+    }
+    group.finish();
+
+    let mut group = c.benchmark_group("trace_primary");
+    for (w, h) in SIZES {
+        let rays = cpu::generate(&generate_params(&scene, w, h, 0, 1));
+        group.throughput(Throughput::Elements(rays.len() as u64));
+        group.bench_with_input(BenchmarkId::new("cpu", rays.len()), &rays, |b, r| {
+            b.iter(|| cpu::trace(&cpu_scene, black_box(r)))
+        });
+        if let Some(v) = vulkan.as_mut() {
+            group.bench_with_input(BenchmarkId::new("vulkan", rays.len()), &rays, |b, r| {
+                b.iter(|| v.trace(black_box(r)).expect("trace"))
+            });
+        }
+    }
+    group.finish();
+}
+
+criterion_group! {
+    name = benches;
+    config = Criterion::default().sample_size(20);
+    targets = stages
+}
+criterion_main!(benches);

@@ -118,3 +118,70 @@ impl Backend for CpuBackend {
         })
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::{Vec3, Vec4};
+    use raywave_shared::stream::NO_HIT;
+
+    /// Mesh indices of the built-in Cornell box (see `scene::cornell::meshes`).
+    const FLOOR: u32 = 0;
+    const TALL_BLOCK: u32 = 6;
+    const LIGHT: u32 = 7;
+
+    fn trace_one(origin: Vec3, direction: Vec3) -> (f32, u32) {
+        let scene = Scene::load("builtin:cornell").unwrap();
+        let mut rays = RayStream::zeroed(1);
+        rays.origin[0] = origin.extend(0.0);
+        rays.direction[0] = direction.extend(10.0);
+        let hits = trace(&CpuScene::build(&scene), &rays);
+        (hits.t[0], hits.instance[0])
+    }
+
+    #[test]
+    fn camera_axis_hits_the_tall_block_front_face() {
+        // At x = 278 mm the tall block's front edge runs from (265, 296) to (423, 247) mm, so the
+        // camera axis meets it at z = 296 − 49·13/158 mm; the camera is at z = −800 mm.
+        let (t, instance) = trace_one(Vec3::new(0.278, 0.273, -0.8), Vec3::Z);
+        assert_eq!(instance, TALL_BLOCK);
+        let expected = 0.8 + (0.296 - 0.049 * 13.0 / 158.0);
+        assert!((t - expected).abs() < 1e-6, "t = {t}, expected {expected}");
+    }
+
+    #[test]
+    fn vertical_rays_hit_floor_and_light() {
+        let (t, instance) = trace_one(Vec3::new(0.278, 0.5, 0.28), Vec3::NEG_Y);
+        assert_eq!((instance, (t - 0.5).abs() < 1e-6), (FLOOR, true), "t = {t}");
+        let (t, instance) = trace_one(Vec3::new(0.278, 0.3, 0.28), Vec3::Y);
+        assert_eq!(
+            (instance, (t - 0.2487).abs() < 1e-6),
+            (LIGHT, true),
+            "t = {t}"
+        );
+    }
+
+    #[test]
+    fn rays_out_of_the_open_front_miss() {
+        let (t, instance) = trace_one(Vec3::new(0.278, 0.273, 0.2), Vec3::NEG_Z);
+        assert_eq!((t, instance), (0.0, NO_HIT));
+    }
+
+    #[test]
+    fn stages_cover_the_whole_image_and_keep_outputs_finite() {
+        let scene = Scene::load("builtin:cornell").unwrap();
+        let mut backend = CpuBackend::new();
+        backend.load_scene(&scene).unwrap();
+        let params = crate::frame::generate_params(&scene, 33, 17, 0, 4);
+        let frame = backend.render(&params).unwrap();
+        assert_eq!(frame.rays.pixel, (0..33 * 17).collect::<Vec<u32>>());
+        assert!(frame.hits.t.iter().all(|t| t.is_finite()));
+        assert!(frame.hits.barycentrics.iter().all(|b| b.is_finite()));
+        assert!(frame.rays.direction.iter().all(|d: &Vec4| d.is_finite()));
+    }
+
+    #[test]
+    fn trace_without_a_scene_is_an_error() {
+        assert!(CpuBackend::new().trace(&RayStream::zeroed(1)).is_err());
+    }
+}
