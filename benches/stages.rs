@@ -5,7 +5,7 @@
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use raywave::cpu::{self, CpuScene};
 use raywave::frame::generate_params;
-use raywave::{open_backend, Backend, BackendOptions, DeviceChoice, Scene};
+use raywave::{open_backend, BackendOptions, DeviceChoice, Scene};
 use std::hint::black_box;
 
 /// Image sizes benchmarked: a small tile and a 512² frame.

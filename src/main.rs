@@ -90,6 +90,7 @@ fn main() -> ExitCode {
                     report.hits,
                     options.width * options.height
                 );
+                println!("streams  {} bytes/pixel", report.stream_bytes_per_pixel);
                 for t in &report.timings {
                     println!("stage    {:<9} {:>10.3} ms", t.stage, t.seconds * 1e3);
                 }

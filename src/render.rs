@@ -35,6 +35,8 @@ pub struct RenderReport {
     pub timings: Vec<StageTiming>,
     /// Rays that hit geometry.
     pub hits: usize,
+    /// Bytes of SoA streams the frame used per pixel (ray stream + hit stream).
+    pub stream_bytes_per_pixel: u64,
 }
 
 /// Renders the normal/depth view of `options.scene` into `options.out`. Every input is checked
@@ -64,6 +66,8 @@ pub fn render(options: &RenderOptions) -> Result<RenderReport> {
             .iter()
             .filter(|&&p| p != crate::shared::stream::NO_HIT)
             .count(),
+        stream_bytes_per_pixel: (frame.rays.bytes() + frame.hits.bytes())
+            / u64::from(options.width * options.height),
         timings: frame.timings,
     })
 }

@@ -2,7 +2,6 @@
 //! stage needs.
 
 use crate::scene::Scene;
-use glam::Vec4;
 use raywave_shared::GenerateParams;
 
 /// Generate-stage parameters for `scene`'s camera at `width × height` (both ≥ 1), sample
@@ -39,15 +38,6 @@ pub fn generate_params(
         tmax: 2.0 * far.max(f32::MIN_POSITIVE),
         padding: [0; 2],
     }
-}
-
-/// Generate parameters as a `Vec4`-free summary, for logs.
-pub fn describe(params: &GenerateParams) -> String {
-    let o: Vec4 = params.origin;
-    format!(
-        "{}×{} rays from ({:.3}, {:.3}, {:.3}), tmax {:.3}",
-        params.width, params.height, o.x, o.y, o.z, params.tmax
-    )
 }
 
 #[cfg(test)]

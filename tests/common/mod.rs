@@ -49,7 +49,7 @@ pub mod vulkan {
                 return vec![];
             }
         };
-        devices.iter().map(|d| open(d)).collect()
+        devices.iter().map(open).collect()
     }
 
     fn open(info: &DeviceInfo) -> VulkanBackend {

@@ -158,10 +158,8 @@ impl Scene {
         let c = &self.camera;
         let fov_ok = c.vertical_fov_degrees > 0.0 && c.vertical_fov_degrees < 180.0;
         let view = c.look_at - c.position;
-        if !(c.position.is_finite() && c.look_at.is_finite() && c.up.is_finite())
-            || !fov_ok
-            || view.cross(c.up) == Vec3::ZERO
-        {
+        let finite = c.position.is_finite() && c.look_at.is_finite() && c.up.is_finite();
+        if !(finite && fov_ok) || view.cross(c.up) == Vec3::ZERO {
             return Err(Error::InvalidParameter {
                 name: "camera",
                 reason: format!("{}: degenerate camera {c:?}", self.name),

@@ -300,8 +300,10 @@ mod tests {
 
     #[test]
     fn grid_spills_into_y_only_past_the_x_limit() {
-        let mut limits = vk::PhysicalDeviceLimits::default();
-        limits.max_compute_work_group_count = [100, 10, 1];
+        let limits = vk::PhysicalDeviceLimits {
+            max_compute_work_group_count: [100, 10, 1],
+            ..Default::default()
+        };
         assert_eq!(dispatch_grid(&limits, 0), Some((0, 0)));
         assert_eq!(dispatch_grid(&limits, 1), Some((1, 1)));
         assert_eq!(dispatch_grid(&limits, 64 * 100), Some((100, 1)));
