@@ -13,7 +13,7 @@ const SIZES: [(u32, u32); 2] = [(64, 64), (512, 512)];
 
 fn stages(c: &mut Criterion) {
     let scene = Scene::load("builtin:cornell").expect("built-in scene");
-    let cpu_scene = CpuScene::build(&scene);
+    let cpu_scene = CpuScene::build(&scene).expect("BVH builds");
     let mut vulkan = open_backend(DeviceChoice::Vulkan(None), &BackendOptions::default()).ok();
     match vulkan.as_mut() {
         Some(v) => v.load_scene(&scene).expect("acceleration structures build"),
@@ -24,9 +24,7 @@ fn stages(c: &mut Criterion) {
     for (w, h) in SIZES {
         let params = generate_params(&scene, w, h, 0, 1);
         group.throughput(Throughput::Elements(u64::from(w * h)));
-        group.bench_with_input(BenchmarkId::new("cpu", w * h), &params, |b, p| {
-            b.iter(|| cpu::generate(black_box(p)))
-        });
+        group.bench_with_input(BenchmarkId::new("cpu", w * h), &params, |b, p| b.iter(|| cpu::generate(black_box(p))));
         if let Some(v) = vulkan.as_mut() {
             group.bench_with_input(BenchmarkId::new("vulkan", w * h), &params, |b, p| {
                 b.iter(|| v.generate(black_box(p)).expect("generate"))

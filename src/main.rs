@@ -2,7 +2,7 @@
 
 use clap::{Parser, Subcommand};
 use raywave::render::{render, RenderOptions};
-use raywave::{BackendOptions, DeviceChoice};
+use raywave::{BackendOptions, DeviceChoice, TraceMethod};
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -23,78 +23,43 @@ enum Command {
         json: bool,
     },
     /// Render a scene through generate → trace and write a normal/depth view as PNG.
-    Render {
-        /// `builtin:cornell` or a path to a Wavefront OBJ file.
-        #[arg(long, default_value = "builtin:cornell")]
-        scene: String,
-        /// `auto` (Vulkan if usable, else CPU), `cpu`, `vulkan` or `vulkan:N`.
-        #[arg(long, default_value = "auto")]
-        device: String,
-        /// Image width in pixels.
-        #[arg(long, default_value_t = 512)]
-        width: u32,
-        /// Image height in pixels.
-        #[arg(long, default_value_t = 512)]
-        height: u32,
-        /// Seed of the sub-pixel jitter.
-        #[arg(long, default_value_t = 0)]
-        seed: u32,
-        /// Enable the Vulkan validation layers (must be installed).
-        #[arg(long)]
-        validate: bool,
-        /// Output PNG file.
-        #[arg(long)]
-        out: PathBuf,
-    },
+    Render(RenderArgs),
+}
+
+#[derive(clap::Args)]
+struct RenderArgs {
+    /// `builtin:cornell` or a path to a Wavefront OBJ file.
+    #[arg(long, default_value = "builtin:cornell")]
+    scene: String,
+    /// `auto` (Vulkan if usable, else CPU), `cpu`, `vulkan` or `vulkan:N`.
+    #[arg(long, default_value = "auto")]
+    device: String,
+    /// Trace method: `sw` (CWBVH traversal in the kernels) or `rayquery`; default: ray query where
+    /// the device has it, else software.
+    #[arg(long)]
+    trace: Option<String>,
+    /// Image width in pixels.
+    #[arg(long, default_value_t = 512)]
+    width: u32,
+    /// Image height in pixels.
+    #[arg(long, default_value_t = 512)]
+    height: u32,
+    /// Seed of the sub-pixel jitter.
+    #[arg(long, default_value_t = 0)]
+    seed: u32,
+    /// Enable the Vulkan validation layers (must be installed).
+    #[arg(long)]
+    validate: bool,
+    /// Output PNG file.
+    #[arg(long)]
+    out: PathBuf,
 }
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Devices { json } => devices(json),
-        Command::Render {
-            scene,
-            device,
-            width,
-            height,
-            seed,
-            validate,
-            out,
-        } => device
-            .parse::<DeviceChoice>()
-            .and_then(|device| {
-                let options = RenderOptions {
-                    scene,
-                    device,
-                    width,
-                    height,
-                    seed,
-                    out,
-                    backend: BackendOptions {
-                        validation: validate,
-                    },
-                };
-                render(&options).map(|report| (options, report))
-            })
-            .map(|(options, report)| {
-                println!("backend  {}", report.backend);
-                println!(
-                    "scene    {} ({} triangles)",
-                    options.scene, report.triangles
-                );
-                println!(
-                    "image    {}×{} → {} ({} of {} rays hit)",
-                    options.width,
-                    options.height,
-                    options.out.display(),
-                    report.hits,
-                    options.width * options.height
-                );
-                println!("streams  {} bytes/pixel", report.stream_bytes_per_pixel);
-                for t in &report.timings {
-                    println!("stage    {:<9} {:>10.3} ms", t.stage, t.seconds * 1e3);
-                }
-            }),
+        Command::Render(args) => render_command(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -105,12 +70,40 @@ fn main() -> ExitCode {
     }
 }
 
+fn render_command(args: RenderArgs) -> raywave::Result<()> {
+    let device = args.device.parse::<DeviceChoice>()?;
+    let trace = args.trace.as_deref().map(str::parse::<TraceMethod>).transpose()?;
+    let options = RenderOptions {
+        scene: args.scene,
+        device,
+        width: args.width,
+        height: args.height,
+        seed: args.seed,
+        out: args.out,
+        backend: BackendOptions { validation: args.validate, trace },
+    };
+    let report = render(&options)?;
+    println!("backend  {}", report.backend);
+    println!("scene    {} ({} triangles)", options.scene, report.triangles);
+    let rays = u64::from(options.width) * u64::from(options.height);
+    println!(
+        "image    {}×{} → {} ({} of {rays} rays hit)",
+        options.width,
+        options.height,
+        options.out.display(),
+        report.hits
+    );
+    println!("streams  {} bytes/pixel", report.stream_bytes_per_pixel);
+    for t in &report.timings {
+        println!("stage    {:<9} {:>10.3} ms", t.stage, t.seconds * 1e3);
+    }
+    Ok(())
+}
+
 #[cfg(feature = "vulkan")]
 fn vulkan_devices() -> Result<Vec<serde_json::Value>, String> {
-    raywave::vulkan::enumerate_devices()
-        .map_err(|e| e.to_string())
-        .map(|list| {
-            list.into_iter()
+    raywave::vulkan::enumerate_devices().map_err(|e| e.to_string()).map(|list| {
+        list.into_iter()
             .map(|d| {
                 serde_json::json!({
                     "backend": "vulkan", "index": d.index, "name": d.name, "type": d.device_type,
@@ -122,7 +115,7 @@ fn vulkan_devices() -> Result<Vec<serde_json::Value>, String> {
                 })
             })
             .collect()
-        })
+    })
 }
 
 #[cfg(not(feature = "vulkan"))]
@@ -131,9 +124,7 @@ fn vulkan_devices() -> Result<Vec<serde_json::Value>, String> {
 }
 
 fn devices(json: bool) -> raywave::Result<()> {
-    let threads = std::thread::available_parallelism()
-        .map(|n| n.get())
-        .unwrap_or(1);
+    let threads = std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1);
     let vulkan = vulkan_devices();
     if json {
         let value = serde_json::json!({

@@ -49,25 +49,13 @@ pub fn render(options: &RenderOptions) -> Result<RenderReport> {
     backend.load_scene(&scene)?;
     let params = generate_params(&scene, options.width, options.height, 0, options.seed);
     let frame = backend.render(&params)?;
-    let image = normal_depth_image(
-        &scene,
-        &frame.rays,
-        &frame.hits,
-        options.width,
-        options.height,
-    );
+    let image = normal_depth_image(&scene, &frame.rays, &frame.hits, options.width, options.height);
     output.finish_png(&image)?;
     Ok(RenderReport {
         backend: backend.name(),
         triangles: scene.triangle_count(),
-        hits: frame
-            .hits
-            .primitive
-            .iter()
-            .filter(|&&p| p != crate::shared::stream::NO_HIT)
-            .count(),
-        stream_bytes_per_pixel: (frame.rays.bytes() + frame.hits.bytes())
-            / u64::from(options.width * options.height),
+        hits: frame.hits.primitive.iter().filter(|&&p| p != crate::shared::stream::NO_HIT).count(),
+        stream_bytes_per_pixel: (frame.rays.bytes() + frame.hits.bytes()) / u64::from(options.width * options.height),
         timings: frame.timings,
     })
 }

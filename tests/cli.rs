@@ -7,10 +7,7 @@ use std::path::Path;
 use std::process::{Command, Output};
 
 fn raywave(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_raywave"))
-        .args(args)
-        .output()
-        .expect("raywave runs")
+    Command::new(env!("CARGO_BIN_EXE_raywave")).args(args).output().expect("raywave runs")
 }
 
 fn stderr(out: &Output) -> String {
@@ -44,18 +41,10 @@ fn devices_lists_a_vulkan_device_with_ray_query() {
     let value: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     let devices = value["vulkan"].as_array().cloned().unwrap_or_default();
     if devices.is_empty() {
-        common::skip_or_fail(
-            "devices",
-            &format!("no Vulkan device listed: {}", value["vulkan_error"]),
-        );
+        common::skip_or_fail("devices", &format!("no Vulkan device listed: {}", value["vulkan_error"]));
         return;
     }
-    assert!(
-        devices
-            .iter()
-            .any(|d| d["ray_query"] == true && d["can_trace"] == true),
-        "{value}"
-    );
+    assert!(devices.iter().any(|d| d["ray_query"] == true && d["can_trace"] == true), "{value}");
 }
 
 #[test]
@@ -64,16 +53,10 @@ fn cpu_render_writes_a_png_and_reports_stages() {
     let (out, path) = render(dir.path(), "cpu.png", &["--device", "cpu"]);
     assert!(out.status.success(), "{}", stderr(&out));
     let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        stdout.contains("generate") && stdout.contains("trace"),
-        "{stdout}"
-    );
+    assert!(stdout.contains("generate") && stdout.contains("trace"), "{stdout}");
     let image = image::open(&path).unwrap().to_rgb8();
     assert_eq!(image.dimensions(), (96, 64));
-    assert!(
-        image.pixels().filter(|p| p.0 != [0, 0, 0]).count() > 96 * 64 / 2,
-        "most pixels see the box"
-    );
+    assert!(image.pixels().filter(|p| p.0 != [0, 0, 0]).count() > 96 * 64 / 2, "most pixels see the box");
 }
 
 #[cfg(feature = "vulkan")]
@@ -88,24 +71,14 @@ fn vulkan_and_cpu_renders_agree() {
         return;
     }
     assert!(vk.status.success(), "{}", stderr(&vk));
-    assert!(
-        !stderr(&vk).contains("[vulkan"),
-        "validation messages: {}",
-        stderr(&vk)
-    );
+    assert!(!stderr(&vk).contains("[vulkan"), "validation messages: {}", stderr(&vk));
     let a = image::open(cpu_path).unwrap().to_rgb8();
     let b = image::open(vk_path).unwrap().to_rgb8();
     // The parity tolerance (≥ 99.99 % same primitive, t within 1e-5) allows a pixel in 10 000 to
     // differ; at 6 144 pixels that is none, and shading differences stay within one 8-bit step.
-    let differing = a
-        .pixels()
-        .zip(b.pixels())
-        .filter(|(p, q)| p.0.iter().zip(q.0).any(|(x, y)| x.abs_diff(y) > 1))
-        .count();
-    assert_eq!(
-        differing, 0,
-        "{differing} pixels differ by more than one step"
-    );
+    let differing =
+        a.pixels().zip(b.pixels()).filter(|(p, q)| p.0.iter().zip(q.0).any(|(x, y)| x.abs_diff(y) > 1)).count();
+    assert_eq!(differing, 0, "{differing} pixels differ by more than one step");
 }
 
 /// Runs a render expected to fail; checks the message mentions `needle` and no file appeared.
@@ -114,17 +87,10 @@ fn assert_rejected(extra: &[&str], needle: &str) {
     let (out, path) = render(dir.path(), "out.png", extra);
     assert!(!out.status.success(), "{extra:?} should fail");
     let message = stderr(&out);
-    assert!(
-        message.contains(needle),
-        "{extra:?}: expected {needle:?} in {message:?}"
-    );
+    assert!(message.contains(needle), "{extra:?}: expected {needle:?} in {message:?}");
     assert!(!message.contains("panicked"), "{message}");
     assert!(!path.exists(), "{extra:?} left an output file");
-    assert_eq!(
-        std::fs::read_dir(dir.path()).unwrap().count(),
-        0,
-        "{extra:?} left a temporary file"
-    );
+    assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0, "{extra:?} left a temporary file");
 }
 
 #[test]
@@ -137,37 +103,18 @@ fn bad_input_is_a_typed_error_without_output() {
     let empty = dir.path().join("empty.obj");
     std::fs::write(&empty, "# no geometry\n").unwrap();
 
-    assert_rejected(
-        &["--device", "cpu", "--scene", nan.to_str().unwrap()],
-        "non-finite position",
-    );
-    assert_rejected(
-        &["--device", "cpu", "--scene", flat.to_str().unwrap()],
-        "zero area",
-    );
-    assert_rejected(
-        &["--device", "cpu", "--scene", empty.to_str().unwrap()],
-        "no triangles",
-    );
-    assert_rejected(
-        &["--device", "cpu", "--scene", "/no/such/scene.obj"],
-        "/no/such/scene.obj",
-    );
+    assert_rejected(&["--device", "cpu", "--scene", nan.to_str().unwrap()], "non-finite position");
+    assert_rejected(&["--device", "cpu", "--scene", flat.to_str().unwrap()], "zero area");
+    assert_rejected(&["--device", "cpu", "--scene", empty.to_str().unwrap()], "no triangles");
+    assert_rejected(&["--device", "cpu", "--scene", "/no/such/scene.obj"], "/no/such/scene.obj");
     assert_rejected(&["--device", "cpu", "--scene", "builtin:teapot"], "teapot");
     assert_rejected(&["--device", "cpu", "--width", "0"], "at least 1");
-    assert_rejected(
-        &["--device", "cpu", "--width", "100000", "--height", "100000"],
-        "exceed the limit",
-    );
+    assert_rejected(&["--device", "cpu", "--width", "100000", "--height", "100000"], "exceed the limit");
     #[cfg(feature = "vulkan")]
     assert_rejected(&["--device", "vulkan:99"], "vulkan:99");
     assert_rejected(&["--device", "gpu"], "expected auto, cpu, vulkan");
 
     let out = raywave(&["render", "--device", "cpu", "--out", "/no/such/dir/out.png"]);
     assert!(!out.status.success());
-    assert!(
-        stderr(&out).contains("cannot write output /no/such/dir/out.png"),
-        "{}",
-        stderr(&out)
-    );
+    assert!(stderr(&out).contains("cannot write output /no/such/dir/out.png"), "{}", stderr(&out));
 }

@@ -26,26 +26,15 @@ fn generate_matches_cpu_on_every_vulkan_device() {
             let (rays, timing) = device.generate(&params).expect("generate runs");
             assert!(timing.seconds >= 0.0);
             assert_eq!(rays.len(), expected.len());
-            assert_eq!(
-                rays.pixel, expected.pixel,
-                "pixel indices must be identical"
-            );
+            assert_eq!(rays.pixel, expected.pixel, "pixel indices must be identical");
             for i in 0..rays.len() {
                 let (o, e) = (rays.origin[i], expected.origin[i]);
                 let (d, f) = (rays.direction[i], expected.direction[i]);
                 let o_scale = e.xyz().length();
                 for k in 0..4 {
+                    assert!(close(o[k], e[k], REL_TOLERANCE, o_scale), "ray {i} origin {o} vs {e}");
                     assert!(
-                        close(o[k], e[k], REL_TOLERANCE, o_scale),
-                        "ray {i} origin {o} vs {e}"
-                    );
-                    assert!(
-                        close(
-                            d[k],
-                            f[k],
-                            REL_TOLERANCE,
-                            if k < 3 { 1.0 } else { f.w.abs() }
-                        ),
+                        close(d[k], f[k], REL_TOLERANCE, if k < 3 { 1.0 } else { f.w.abs() }),
                         "ray {i} direction {d} vs {f}"
                     );
                 }

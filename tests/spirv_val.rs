@@ -9,32 +9,17 @@ use std::process::Command;
 
 #[test]
 fn every_module_passes_spirv_val() {
-    assert!(
-        MODULES.len() >= 2,
-        "expected the generate and trace modules, got {}",
-        MODULES.len()
-    );
+    assert!(MODULES.len() >= 2, "expected the generate and trace modules, got {}", MODULES.len());
     if Command::new("spirv-val").arg("--version").output().is_err() {
-        common::skip_or_fail(
-            "spirv-val",
-            "spirv-val (Debian package spirv-tools) is not installed",
-        );
+        common::skip_or_fail("spirv-val", "spirv-val (Debian package spirv-tools) is not installed");
         return;
     }
     let dir = tempfile::tempdir().unwrap();
     for (entry, bytes) in MODULES {
         let path = dir.path().join(format!("{}.spv", entry.replace("::", "-")));
         std::fs::write(&path, bytes).unwrap();
-        let out = Command::new("spirv-val")
-            .args(["--target-env", "vulkan1.2"])
-            .arg(&path)
-            .output()
-            .unwrap();
-        assert!(
-            out.status.success(),
-            "{entry} fails spirv-val:\n{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
+        let out = Command::new("spirv-val").args(["--target-env", "vulkan1.2"]).arg(&path).output().unwrap();
+        assert!(out.status.success(), "{entry} fails spirv-val:\n{}", String::from_utf8_lossy(&out.stderr));
     }
 }
 
@@ -43,15 +28,8 @@ fn only_ray_query_kernels_declare_ray_query() {
     // OpCapability RayQueryKHR is instruction word (2 << 16 | 17) followed by capability 4472.
     let ray_query_capability = [(2u32 << 16) | 17, 4472];
     for (entry, bytes) in MODULES {
-        let words: Vec<u32> = bytes
-            .chunks_exact(4)
-            .map(|w| u32::from_le_bytes([w[0], w[1], w[2], w[3]]))
-            .collect();
+        let words: Vec<u32> = bytes.chunks_exact(4).map(|w| u32::from_le_bytes([w[0], w[1], w[2], w[3]])).collect();
         let declares = words.windows(2).any(|w| w == ray_query_capability);
-        assert_eq!(
-            declares,
-            entry.contains("ray_query"),
-            "{entry}: RayQueryKHR declared = {declares}"
-        );
+        assert_eq!(declares, entry.contains("ray_query"), "{entry}: RayQueryKHR declared = {declares}");
     }
 }

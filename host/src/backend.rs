@@ -48,29 +48,16 @@ pub trait Backend {
 }
 
 /// Checks the size rules every backend shares: both sides ≥ 1 and the pixel count within `max_pixels`.
-pub(crate) fn check_image_size_common(
-    width: u32,
-    height: u32,
-    max_pixels: u64,
-    backend: &str,
-) -> Result<()> {
+pub(crate) fn check_image_size_common(width: u32, height: u32, max_pixels: u64, backend: &str) -> Result<()> {
     let reason = if width == 0 || height == 0 {
         Some("width and height must be at least 1".to_owned())
     } else if u64::from(width) * u64::from(height) > max_pixels {
-        Some(format!(
-            "{} pixels exceed the limit of {max_pixels}",
-            u64::from(width) * u64::from(height)
-        ))
+        Some(format!("{} pixels exceed the limit of {max_pixels}", u64::from(width) * u64::from(height)))
     } else {
         None
     };
     match reason {
-        Some(reason) => Err(crate::Error::ImageSize {
-            width,
-            height,
-            backend: backend.to_owned(),
-            reason,
-        }),
+        Some(reason) => Err(crate::Error::ImageSize { width, height, backend: backend.to_owned(), reason }),
         None => Ok(()),
     }
 }

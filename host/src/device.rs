@@ -1,4 +1,5 @@
-//! Choosing a backend from a user's device string: `auto`, `cpu`, `vulkan` or `vulkan:N`.
+//! Choosing a backend from a user's device string (`auto`, `cpu`, `vulkan` or `vulkan:N`) and trace
+//! method (`sw` or `rayquery`).
 
 use crate::backend::Backend;
 use crate::cpu::CpuBackend;
@@ -8,11 +9,11 @@ use std::str::FromStr;
 /// Which backend to run on.
 #[derive(Copy, Clone, Debug, PartialEq, Eq)]
 pub enum DeviceChoice {
-    /// The best Vulkan device that can run every stage, else the CPU.
+    /// The best usable Vulkan device, else the CPU.
     Auto,
     /// The CPU executor.
     Cpu,
-    /// A Vulkan device: the best one that can run every stage, or the one at this index.
+    /// A Vulkan device: the best usable one, or the one at this index.
     Vulkan(Option<usize>),
 }
 
@@ -20,21 +21,48 @@ impl FromStr for DeviceChoice {
     type Err = Error;
 
     fn from_str(s: &str) -> Result<Self> {
-        let bad = |reason: &str| Error::DeviceChoice {
-            requested: s.to_owned(),
-            reason: reason.to_owned(),
-        };
+        let bad = |reason: &str| Error::DeviceChoice { requested: s.to_owned(), reason: reason.to_owned() };
         match s {
             "auto" => Ok(Self::Auto),
             "cpu" => Ok(Self::Cpu),
             "vulkan" => Ok(Self::Vulkan(None)),
             _ => match s.strip_prefix("vulkan:") {
-                Some(n) => n
-                    .parse()
-                    .map(|i| Self::Vulkan(Some(i)))
-                    .map_err(|_| bad("expected vulkan:N with N a device index")),
+                Some(n) => {
+                    n.parse().map(|i| Self::Vulkan(Some(i))).map_err(|_| bad("expected vulkan:N with N a device index"))
+                }
                 None => Err(bad("expected auto, cpu, vulkan or vulkan:N")),
             },
+        }
+    }
+}
+
+/// How the trace stage finds hits.
+#[derive(Copy, Clone, Debug, PartialEq, Eq)]
+pub enum TraceMethod {
+    /// Software traversal of the CWBVH by the kernels (CPU, and Vulkan compute on any device).
+    Software,
+    /// `VK_KHR_ray_query` against a BLAS/TLAS (Vulkan devices that expose it).
+    RayQuery,
+}
+
+impl TraceMethod {
+    /// The name used on the command line and in reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Software => "sw",
+            Self::RayQuery => "rayquery",
+        }
+    }
+}
+
+impl FromStr for TraceMethod {
+    type Err = Error;
+
+    fn from_str(s: &str) -> Result<Self> {
+        match s {
+            "sw" => Ok(Self::Software),
+            "rayquery" => Ok(Self::RayQuery),
+            _ => Err(Error::InvalidParameter { name: "trace", reason: format!("{s:?}: expected sw or rayquery") }),
         }
     }
 }
@@ -44,16 +72,26 @@ impl FromStr for DeviceChoice {
 pub struct BackendOptions {
     /// Enable the Vulkan validation layers (required to be installed) and record their messages.
     pub validation: bool,
+    /// The trace method; `None` picks the best the backend has (ray query where available).
+    pub trace: Option<TraceMethod>,
 }
 
-/// Opens the backend `choice` names. `Auto` falls back to the CPU when no Vulkan device can run
-/// every stage; an explicit Vulkan choice that cannot be honoured is an error.
+/// Opens the backend `choice` names. `Auto` falls back to the CPU when no Vulkan device can be
+/// opened; an explicit Vulkan choice that cannot be honoured, or a trace method the backend lacks,
+/// is an error.
 pub fn open_backend(choice: DeviceChoice, options: &BackendOptions) -> Result<Box<dyn Backend>> {
-    match choice {
-        DeviceChoice::Cpu => Ok(Box::new(CpuBackend::new())),
-        DeviceChoice::Auto => {
-            Ok(open_vulkan(None, options).unwrap_or_else(|_| Box::new(CpuBackend::new())))
+    let cpu = || -> Result<Box<dyn Backend>> {
+        match options.trace {
+            None | Some(TraceMethod::Software) => Ok(Box::new(CpuBackend::new())),
+            Some(other) => Err(Error::InvalidParameter {
+                name: "trace",
+                reason: format!("the CPU backend traces in software only, not with {}", other.name()),
+            }),
         }
+    };
+    match choice {
+        DeviceChoice::Cpu => cpu(),
+        DeviceChoice::Auto => open_vulkan(None, options).or_else(|_| cpu()),
         DeviceChoice::Vulkan(index) => open_vulkan(index, options),
     }
 }
@@ -65,23 +103,18 @@ fn open_vulkan(index: Option<usize>, options: &BackendOptions) -> Result<Box<dyn
         Some(i) => i,
         None => best_vulkan_device(&enumerate_devices()?)?,
     };
-    Ok(Box::new(VulkanBackend::open(
-        index,
-        &ContextOptions {
-            validation: options.validation,
-        },
-    )?))
+    let context = ContextOptions { validation: options.validation };
+    Ok(Box::new(VulkanBackend::open(index, &context, options.trace)?))
 }
 
 #[cfg(not(feature = "vulkan"))]
 fn open_vulkan(_index: Option<usize>, _options: &BackendOptions) -> Result<Box<dyn Backend>> {
-    Err(Error::VulkanUnavailable {
-        reason: "raywave was built without the `vulkan` feature".into(),
-    })
+    Err(Error::VulkanUnavailable { reason: "raywave was built without the `vulkan` feature".into() })
 }
 
-/// The index of the device to use by default: among those that can run every stage, a discrete
-/// GPU before an integrated one before anything else, ties broken by enumeration order.
+/// The index of the device to use by default: a discrete GPU before an integrated one before
+/// anything else, ties broken by enumeration order. Every Vulkan 1.2 device with
+/// `vulkanMemoryModel` runs every stage (tracing in software where ray query is missing).
 #[cfg(feature = "vulkan")]
 pub fn best_vulkan_device(devices: &[crate::vulkan::DeviceInfo]) -> Result<usize> {
     let rank = |t: &str| match t {
@@ -92,14 +125,11 @@ pub fn best_vulkan_device(devices: &[crate::vulkan::DeviceInfo]) -> Result<usize
     };
     devices
         .iter()
-        .filter(|d| d.missing_for_ray_query().is_empty())
+        .filter(|d| d.vulkan_memory_model)
         .min_by_key(|d| (rank(&d.device_type), d.index))
         .map(|d| d.index)
         .ok_or_else(|| Error::VulkanUnavailable {
-            reason: format!(
-                "none of the {} Vulkan devices supports ray query with acceleration structures",
-                devices.len()
-            ),
+            reason: format!("none of the {} Vulkan devices offers Vulkan 1.2 with vulkanMemoryModel", devices.len()),
         })
 }
 
@@ -111,19 +141,20 @@ mod tests {
     fn parses_device_strings() {
         assert_eq!("auto".parse::<DeviceChoice>().unwrap(), DeviceChoice::Auto);
         assert_eq!("cpu".parse::<DeviceChoice>().unwrap(), DeviceChoice::Cpu);
-        assert_eq!(
-            "vulkan".parse::<DeviceChoice>().unwrap(),
-            DeviceChoice::Vulkan(None)
-        );
-        assert_eq!(
-            "vulkan:3".parse::<DeviceChoice>().unwrap(),
-            DeviceChoice::Vulkan(Some(3))
-        );
+        assert_eq!("vulkan".parse::<DeviceChoice>().unwrap(), DeviceChoice::Vulkan(None));
+        assert_eq!("vulkan:3".parse::<DeviceChoice>().unwrap(), DeviceChoice::Vulkan(Some(3)));
         for bad in ["gpu", "vulkan:", "vulkan:x", "vulkan:-1", ""] {
-            assert!(
-                matches!(bad.parse::<DeviceChoice>(), Err(Error::DeviceChoice { .. })),
-                "{bad}"
-            );
+            assert!(matches!(bad.parse::<DeviceChoice>(), Err(Error::DeviceChoice { .. })), "{bad}");
         }
+    }
+
+    #[test]
+    fn parses_trace_methods_and_rejects_hardware_methods_on_the_cpu() {
+        assert_eq!("sw".parse::<TraceMethod>().unwrap(), TraceMethod::Software);
+        assert_eq!("rayquery".parse::<TraceMethod>().unwrap(), TraceMethod::RayQuery);
+        assert!("rtx".parse::<TraceMethod>().is_err());
+        let options = BackendOptions { validation: false, trace: Some(TraceMethod::RayQuery) };
+        let result = open_backend(DeviceChoice::Cpu, &options);
+        assert!(matches!(result, Err(Error::InvalidParameter { name: "trace", .. })));
     }
 }

@@ -15,7 +15,7 @@ pub mod visualize;
 pub mod vulkan;
 
 pub use backend::{Backend, FrameOutput, StageTiming};
-pub use device::{open_backend, BackendOptions, DeviceChoice};
+pub use device::{open_backend, BackendOptions, DeviceChoice, TraceMethod};
 pub use error::{Error, Result};
 pub use scene::Scene;
 pub use stream::{HitStream, RayStream};

@@ -17,11 +17,7 @@ pub struct RayStream {
 impl RayStream {
     /// A zero-filled stream of `len` rays.
     pub fn zeroed(len: usize) -> Self {
-        Self {
-            origin: vec![Vec4::ZERO; len],
-            direction: vec![Vec4::ZERO; len],
-            pixel: vec![0; len],
-        }
+        Self { origin: vec![Vec4::ZERO; len], direction: vec![Vec4::ZERO; len], pixel: vec![0; len] }
     }
 
     /// Number of rays.
@@ -56,12 +52,7 @@ pub struct HitStream {
 impl HitStream {
     /// A zero-filled stream of `len` records.
     pub fn zeroed(len: usize) -> Self {
-        Self {
-            t: vec![0.0; len],
-            primitive: vec![0; len],
-            instance: vec![0; len],
-            barycentrics: vec![Vec2::ZERO; len],
-        }
+        Self { t: vec![0.0; len], primitive: vec![0; len], instance: vec![0; len], barycentrics: vec![Vec2::ZERO; len] }
     }
 
     /// Number of records.

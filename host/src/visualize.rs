@@ -11,13 +11,7 @@ use std::path::Path;
 
 /// The normal/depth view: each hit pixel shows its face-forward geometric normal mapped to colour
 /// (`0.5 + 0.5·n`), darkened with distance so depth edges read; misses are black.
-pub fn normal_depth_image(
-    scene: &Scene,
-    rays: &RayStream,
-    hits: &HitStream,
-    width: u32,
-    height: u32,
-) -> RgbImage {
+pub fn normal_depth_image(scene: &Scene, rays: &RayStream, hits: &HitStream, width: u32, height: u32) -> RgbImage {
     let mut image = RgbImage::new(width, height);
     let t_max = hits.t.iter().copied().fold(f32::MIN_POSITIVE, f32::max);
     for i in 0..hits.len() {
@@ -25,8 +19,7 @@ pub fn normal_depth_image(
             continue;
         }
         let mesh = &scene.meshes()[hits.instance[i] as usize];
-        let [a, b, c] =
-            mesh.triangles[hits.primitive[i] as usize].map(|v| mesh.positions[v as usize]);
+        let [a, b, c] = mesh.triangles[hits.primitive[i] as usize].map(|v| mesh.positions[v as usize]);
         let mut n = geometric_normal(a, b, c);
         let view = rays.direction[i].xyz();
         if n.dot(view) > 0.0 {
@@ -35,9 +28,7 @@ pub fn normal_depth_image(
         let depth_shade = 1.0 - 0.6 * (hits.t[i] / t_max);
         let colour = (Vec3::splat(0.5) + 0.5 * n) * depth_shade;
         let pixel = rays.pixel[i];
-        let rgb = colour
-            .to_array()
-            .map(|c| (c.clamp(0.0, 1.0) * 255.0 + 0.5) as u8);
+        let rgb = colour.to_array().map(|c| (c.clamp(0.0, 1.0) * 255.0 + 0.5) as u8);
         image.put_pixel(pixel % width, pixel / width, image::Rgb(rgb));
     }
     image
@@ -60,24 +51,12 @@ impl PendingOutput {
             Some(p) if !p.as_os_str().is_empty() => p,
             _ => Path::new("."),
         };
-        let output_error = |source| Error::Output {
-            path: path.to_owned(),
-            source,
-        };
+        let output_error = |source| Error::Output { path: path.to_owned(), source };
         if path.is_dir() {
-            return Err(output_error(std::io::Error::new(
-                std::io::ErrorKind::IsADirectory,
-                "is a directory",
-            )));
+            return Err(output_error(std::io::Error::new(std::io::ErrorKind::IsADirectory, "is a directory")));
         }
-        let temp = tempfile::Builder::new()
-            .prefix(".raywave-")
-            .tempfile_in(dir)
-            .map_err(output_error)?;
-        Ok(Self {
-            path: path.to_owned(),
-            temp,
-        })
+        let temp = tempfile::Builder::new().prefix(".raywave-").tempfile_in(dir).map_err(output_error)?;
+        Ok(Self { path: path.to_owned(), temp })
     }
 
     /// Encodes `image` as PNG and moves it into place.
@@ -85,25 +64,17 @@ impl PendingOutput {
         let mut encoded = std::io::Cursor::new(Vec::new());
         image
             .write_to(&mut encoded, image::ImageFormat::Png)
-            .map_err(|e| Error::Encode {
-                path: self.path.clone(),
-                message: e.to_string(),
-            })?;
+            .map_err(|e| Error::Encode { path: self.path.clone(), message: e.to_string() })?;
         self.finish(encoded.get_ref())
     }
 
     /// Writes `bytes` and moves the file into place.
     pub fn finish(mut self, bytes: &[u8]) -> Result<()> {
         let path = self.path.clone();
-        let output_error = |source| Error::Output {
-            path: path.clone(),
-            source,
-        };
+        let output_error = |source| Error::Output { path: path.clone(), source };
         self.temp.write_all(bytes).map_err(output_error)?;
         self.temp.as_file().sync_all().map_err(output_error)?;
-        self.temp
-            .persist(&self.path)
-            .map_err(|e| output_error(e.error))?;
+        self.temp.persist(&self.path).map_err(|e| output_error(e.error))?;
         Ok(())
     }
 }
@@ -114,15 +85,10 @@ mod tests {
 
     #[test]
     fn unwritable_output_fails_before_work_and_leaves_nothing() {
-        let err = PendingOutput::create(Path::new("/nonexistent-dir/out.png"))
-            .err()
-            .unwrap();
+        let err = PendingOutput::create(Path::new("/nonexistent-dir/out.png")).err().unwrap();
         assert!(matches!(err, Error::Output { .. }), "{err}");
         let dir = tempfile::tempdir().unwrap();
-        assert!(
-            PendingOutput::create(dir.path()).is_err(),
-            "a directory is not a file"
-        );
+        assert!(PendingOutput::create(dir.path()).is_err(), "a directory is not a file");
     }
 
     #[test]

@@ -34,6 +34,34 @@ pub fn generate(
     }
 }
 
+/// Entry point of the trace stage with software CWBVH traversal: needs no ray-tracing extension.
+#[spirv(compute(threads(64)))]
+#[allow(clippy::too_many_arguments)]
+pub fn trace_cwbvh(
+    #[spirv(global_invocation_id)] global_id: UVec3,
+    #[spirv(num_workgroups)] num_workgroups: UVec3,
+    #[spirv(push_constant)] params: &raywave_shared::TraceParams,
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 0)] nodes: &[raywave_shared::bvh::CwBvhNode],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 1)] ray_origin: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 2)] ray_direction: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 3)] hit_t: &mut [f32],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 4)] hit_primitive: &mut [u32],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 5)] hit_instance: &mut [u32],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 6)] hit_barycentrics: &mut [glam::Vec2],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 7)] vertices: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 8)] ids: &[glam::UVec2],
+) {
+    let i = stream_index(global_id, num_workgroups) as usize;
+    if i < params.ray_count as usize {
+        let scene = crate::trace::cwbvh::CwBvhScene { nodes, vertices, ids };
+        let hit = crate::trace::trace_closest(ray_origin[i], ray_direction[i], &scene);
+        hit_t[i] = hit.t;
+        hit_primitive[i] = hit.primitive;
+        hit_instance[i] = hit.instance;
+        hit_barycentrics[i] = hit.barycentrics;
+    }
+}
+
 /// Entry point of the trace stage with `VK_KHR_ray_query`; only in the SPIR-V build with the
 /// `ray-query` feature (and the `RayQueryKHR` capability), so other modules never declare it.
 #[cfg(all(target_arch = "spirv", feature = "ray-query"))]
@@ -70,13 +98,7 @@ mod tests {
     fn stream_index_is_row_major_over_the_dispatch_grid() {
         let groups = UVec3::new(3, 2, 1);
         assert_eq!(stream_index(UVec3::new(5, 0, 0), groups), 5);
-        assert_eq!(
-            stream_index(UVec3::new(0, 1, 0), groups),
-            3 * WORKGROUP_SIZE
-        );
-        assert_eq!(
-            stream_index(UVec3::new(7, 1, 0), groups),
-            3 * WORKGROUP_SIZE + 7
-        );
+        assert_eq!(stream_index(UVec3::new(0, 1, 0), groups), 3 * WORKGROUP_SIZE);
+        assert_eq!(stream_index(UVec3::new(7, 1, 0), groups), 3 * WORKGROUP_SIZE + 7);
     }
 }

@@ -31,8 +31,7 @@ pub fn generate_ray(ray_index: u32, params: &GenerateParams) -> CameraRay {
     let jitter = pixel_jitter(ray_index, params);
     let ndc_x = (x as f32 + jitter.x) / params.width as f32 * 2.0 - 1.0;
     let ndc_y = 1.0 - (y as f32 + jitter.y) / params.height as f32 * 2.0;
-    let direction: Vec3 =
-        (params.forward.xyz() + ndc_x * params.right.xyz() + ndc_y * params.up.xyz()).normalize();
+    let direction: Vec3 = (params.forward.xyz() + ndc_x * params.right.xyz() + ndc_y * params.up.xyz()).normalize();
     CameraRay {
         origin: params.origin.xyz().extend(params.tmin),
         direction: direction.extend(params.tmax),
@@ -97,10 +96,7 @@ mod tests {
     #[test]
     fn jitter_depends_on_sample_and_seed() {
         let a = params(4, 4);
-        let b = GenerateParams {
-            sample_index: 1,
-            ..a
-        };
+        let b = GenerateParams { sample_index: 1, ..a };
         let c = GenerateParams { seed: 10, ..a };
         assert_ne!(pixel_jitter(3, &a), pixel_jitter(3, &b));
         assert_ne!(pixel_jitter(3, &a), pixel_jitter(3, &c));

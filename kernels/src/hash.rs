@@ -48,22 +48,11 @@ mod tests {
     fn pcg3d_is_deterministic_and_mixes_every_input() {
         let base = pcg3d(UVec3::new(1, 2, 3));
         assert_eq!(base, pcg3d(UVec3::new(1, 2, 3)));
-        for changed in [
-            UVec3::new(2, 2, 3),
-            UVec3::new(1, 3, 3),
-            UVec3::new(1, 2, 4),
-        ] {
+        for changed in [UVec3::new(2, 2, 3), UVec3::new(1, 3, 3), UVec3::new(1, 2, 4)] {
             let other = pcg3d(changed);
             // A one-bit input change flips about half of the 96 output bits.
-            let flipped = (base ^ other)
-                .to_array()
-                .iter()
-                .map(|w| w.count_ones())
-                .sum::<u32>();
-            assert!(
-                (30..=66).contains(&flipped),
-                "{changed}: {flipped} bits flipped"
-            );
+            let flipped = (base ^ other).to_array().iter().map(|w| w.count_ones()).sum::<u32>();
+            assert!((30..=66).contains(&flipped), "{changed}: {flipped} bits flipped");
         }
     }
 
@@ -78,10 +67,7 @@ mod tests {
             counts[(u * BINS as f32) as usize] += 1;
         }
         let expected = DRAWS as f32 / BINS as f32;
-        let chi2: f32 = counts
-            .iter()
-            .map(|&c| (c as f32 - expected).powi(2) / expected)
-            .sum();
+        let chi2: f32 = counts.iter().map(|&c| (c as f32 - expected).powi(2) / expected).sum();
         assert!(chi2 < 110.0, "chi-square {chi2}");
     }
 }

@@ -5,10 +5,7 @@
 //! dispatch covers, and the [`entry`] module wraps them as `#[spirv(compute)]` entry points for the
 //! SPIR-V build, so CPU tests and CPU–GPU parity tests exercise the very same math.
 #![no_std]
-#![cfg_attr(
-    all(target_arch = "spirv", feature = "ray-query"),
-    feature(asm_experimental_arch)
-)]
+#![cfg_attr(all(target_arch = "spirv", feature = "ray-query"), feature(asm_experimental_arch))]
 
 #[cfg(test)]
 extern crate std;
@@ -16,6 +13,7 @@ extern crate std;
 pub mod entry;
 pub mod generate;
 pub mod hash;
+pub mod offset;
 pub mod trace;
 pub mod triangle;
 

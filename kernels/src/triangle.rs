@@ -65,39 +65,18 @@ impl WatertightRay {
         if dz < 0.0 {
             core::mem::swap(&mut kx, &mut ky);
         }
-        let shear = Vec3::new(
-            component(direction, kx) / dz,
-            component(direction, ky) / dz,
-            1.0 / dz,
-        );
-        Self {
-            origin,
-            kx,
-            ky,
-            kz,
-            shear,
-        }
+        let shear = Vec3::new(component(direction, kx) / dz, component(direction, ky) / dz, 1.0 / dz);
+        Self { origin, kx, ky, kz, shear }
     }
 
     /// Intersects the triangle `(v0, v1, v2)`; returns the hit if its parameter lies in
     /// `[tmin, tmax]` (both inclusive, as Vulkan's ray query) and the triangle is not degenerate as
     /// seen from the ray.
-    pub fn intersect(
-        &self,
-        v0: Vec3,
-        v1: Vec3,
-        v2: Vec3,
-        tmin: f32,
-        tmax: f32,
-    ) -> Option<TriangleHit> {
+    pub fn intersect(&self, v0: Vec3, v1: Vec3, v2: Vec3, tmin: f32, tmax: f32) -> Option<TriangleHit> {
         let a = v0 - self.origin;
         let b = v1 - self.origin;
         let c = v2 - self.origin;
-        let (az, bz, cz) = (
-            component(a, self.kz),
-            component(b, self.kz),
-            component(c, self.kz),
-        );
+        let (az, bz, cz) = (component(a, self.kz), component(b, self.kz), component(c, self.kz));
         let ax = component(a, self.kx) - self.shear.x * az;
         let ay = component(a, self.ky) - self.shear.y * az;
         let bx = component(b, self.kx) - self.shear.x * bz;
@@ -123,10 +102,7 @@ impl WatertightRay {
             return None;
         }
         let rcp_det = 1.0 / det;
-        Some(TriangleHit {
-            t: t_scaled * rcp_det,
-            barycentrics: Vec2::new(v * rcp_det, w * rcp_det),
-        })
+        Some(TriangleHit { t: t_scaled * rcp_det, barycentrics: Vec2::new(v * rcp_det, w * rcp_det) })
     }
 }
 
@@ -166,17 +142,11 @@ mod tests {
     #[test]
     fn misses_outside_and_outside_the_range() {
         assert!(hit(Vec3::new(0.8, 0.8, 1.0), Vec3::NEG_Z).is_none());
-        assert!(
-            hit(Vec3::new(0.2, 0.2, 1.0), Vec3::Z).is_none(),
-            "behind the origin"
-        );
+        assert!(hit(Vec3::new(0.2, 0.2, 1.0), Vec3::Z).is_none(), "behind the origin");
         let r = WatertightRay::new(Vec3::new(0.2, 0.2, 1.0), Vec3::NEG_Z);
         assert!(r.intersect(V0, V1, V2, 0.0, 0.5).is_none(), "beyond tmax");
         assert!(r.intersect(V0, V1, V2, 1.5, 9.0).is_none(), "before tmin");
-        assert!(
-            r.intersect(V0, V1, V2, 1.0, 1.0).is_some(),
-            "range is inclusive"
-        );
+        assert!(r.intersect(V0, V1, V2, 1.0, 1.0).is_some(), "range is inclusive");
     }
 
     #[test]
@@ -198,11 +168,7 @@ mod tests {
 
     #[test]
     fn axis_aligned_and_negative_zero_directions_work() {
-        for dir in [
-            Vec3::NEG_Z,
-            Vec3::new(-0.0, 0.0, -1.0),
-            Vec3::new(0.0, -0.0, -1.0),
-        ] {
+        for dir in [Vec3::NEG_Z, Vec3::new(-0.0, 0.0, -1.0), Vec3::new(0.0, -0.0, -1.0)] {
             assert!(hit(Vec3::new(0.1, 0.1, 1.0), dir).is_some(), "{dir}");
         }
         // A ray in the triangle's plane sees a degenerate (zero-area) triangle.

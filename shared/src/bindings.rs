@@ -20,10 +20,13 @@ pub mod generate {
     pub const RAY_PIXEL: u32 = 2;
 }
 
-/// Bindings of the trace stage (set 0).
+/// Bindings of the trace stage (set 0). Binding 0 holds the scene: the TLAS for ray query, the
+/// CWBVH nodes for software traversal; the streams are the same for every trace backend.
 pub mod trace {
-    /// Input: the top-level acceleration structure.
+    /// Input, ray query: the top-level acceleration structure.
     pub const TLAS: u32 = 0;
+    /// Input, software traversal: CWBVH nodes (`CwBvhNode`).
+    pub const NODES: u32 = 0;
     /// Input: ray origins (`Vec4`, w = tmin).
     pub const RAY_ORIGIN: u32 = 1;
     /// Input: ray directions (`Vec4`, w = tmax).
@@ -36,4 +39,8 @@ pub mod trace {
     pub const HIT_INSTANCE: u32 = 5;
     /// Output: barycentrics of vertices 1 and 2 (`Vec2`).
     pub const HIT_BARYCENTRICS: u32 = 6;
+    /// Input, software traversal: triangle vertices in BVH order (`Vec4`, three per triangle).
+    pub const TRIANGLE_VERTICES: u32 = 7;
+    /// Input, software traversal: (instance, primitive) per triangle in BVH order (`UVec2`).
+    pub const TRIANGLE_IDS: u32 = 8;
 }

@@ -7,6 +7,7 @@
 #![no_std]
 
 pub mod bindings;
+pub mod bvh;
 pub mod generate;
 pub mod stream;
 pub mod trace;

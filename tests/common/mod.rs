@@ -12,10 +12,7 @@ pub fn in_ci() -> bool {
 
 /// Reports that the GPU part of `test` cannot run: a loud SKIP locally, a failure under CI.
 pub fn skip_or_fail(test: &str, reason: &str) {
-    assert!(
-        !in_ci(),
-        "{test}: {reason} (CI=true requires a Vulkan device)"
-    );
+    assert!(!in_ci(), "{test}: {reason} (CI=true requires a Vulkan device)");
     eprintln!("\n*** SKIP {test}: {reason} ***\n");
 }
 
@@ -34,9 +31,11 @@ pub fn close(a: f32, b: f32, rel: f32, scale: f32) -> bool {
 #[cfg(feature = "vulkan")]
 pub mod vulkan {
     use raywave::vulkan::{enumerate_devices, ContextOptions, DeviceInfo, VulkanBackend};
+    use raywave::TraceMethod;
 
-    /// Opens every Vulkan device with validation layers on. Without devices this SKIPs loudly
-    /// (fails under CI). Validation is required under CI; elsewhere it is used when installed.
+    /// Opens every Vulkan device once per trace method it supports (software everywhere, ray
+    /// query where exposed), with validation layers on. Without devices this SKIPs loudly (fails
+    /// under CI). Validation is required under CI; elsewhere it is used when installed.
     pub fn every_device(test: &str) -> Vec<VulkanBackend> {
         let devices = match enumerate_devices() {
             Ok(d) if !d.is_empty() => d,
@@ -49,21 +48,25 @@ pub mod vulkan {
                 return vec![];
             }
         };
-        devices.iter().map(open).collect()
+        let mut backends = Vec::new();
+        for device in &devices {
+            backends.push(open(device, TraceMethod::Software));
+            if device.missing_for_ray_query().is_empty() {
+                backends.push(open(device, TraceMethod::RayQuery));
+            }
+        }
+        backends
     }
 
-    fn open(info: &DeviceInfo) -> VulkanBackend {
-        match VulkanBackend::open(info.index, &ContextOptions { validation: true }) {
+    fn open(info: &DeviceInfo, trace: TraceMethod) -> VulkanBackend {
+        match VulkanBackend::open(info.index, &ContextOptions { validation: true }, Some(trace)) {
             Ok(b) => b,
             Err(e) if !super::in_ci() && e.to_string().contains("VK_LAYER_KHRONOS_validation") => {
-                eprintln!(
-                    "*** validation layer missing: testing {} without it ***",
-                    info.name
-                );
-                VulkanBackend::open(info.index, &ContextOptions { validation: false })
+                eprintln!("*** validation layer missing: testing {} without it ***", info.name);
+                VulkanBackend::open(info.index, &ContextOptions { validation: false }, Some(trace))
                     .expect("device opens")
             }
-            Err(e) => panic!("cannot open {}: {e}", info.name),
+            Err(e) => panic!("cannot open {} with {}: {e}", info.name, trace.name()),
         }
     }
 

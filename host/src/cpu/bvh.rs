@@ -1,86 +1,163 @@
-//! The CPU trace scene: obvhs's compressed wide BVH (CWBVH) over all triangles, traversed by
-//! obvhs and intersected with the kernels' watertight test.
+//! The software-traced scene: obvhs builds a compressed wide BVH8 over all triangles; its nodes are
+//! reinterpreted (byte-identical) as [`CwBvhNode`]s and traversed by the kernels' own traversal,
+//! the same code the Vulkan software trace runs.
 
+use crate::error::{Error, Result};
 use crate::scene::Scene;
-use glam::{Vec3, Vec3A};
+use glam::{UVec2, Vec3A, Vec4};
 use obvhs::cwbvh::{builder::build_cwbvh_from_tris, CwBvh};
 use obvhs::ray::{Ray as BvhRay, RayHit};
 use obvhs::triangle::Triangle;
 use obvhs::BvhBuildParams;
+use raywave_kernels::trace::cwbvh::{CwBvhScene, STACK_SIZE};
 use raywave_kernels::trace::{ClosestHitQuery, Hit, Ray};
 use raywave_kernels::triangle::WatertightRay;
-use std::time::Duration;
+use raywave_shared::bvh::CwBvhNode;
+use std::time::{Duration, Instant};
 
-/// A scene prepared for CPU tracing. Triangles are stored in BVH leaf order for locality, each
-/// with the (instance, primitive) ids a Vulkan TLAS/BLAS pair would report for it.
+/// A scene prepared for software tracing: CWBVH nodes, triangle vertices in BVH leaf order (three
+/// `Vec4` each) and the (instance, primitive) ids a Vulkan TLAS/BLAS pair would report.
 pub struct CpuScene {
-    bvh: CwBvh,
-    /// Triangle vertices in BVH order.
-    triangles: Vec<[Vec3; 3]>,
-    /// Instance (mesh) index of each triangle, in BVH order.
-    instance: Vec<u32>,
-    /// Triangle index within its mesh, in BVH order.
-    primitive: Vec<u32>,
+    nodes: Vec<CwBvhNode>,
+    vertices: Vec<Vec4>,
+    ids: Vec<UVec2>,
+    /// obvhs's own BVH, kept for the benchmark that compares against obvhs's traversal.
+    obvhs: CwBvh,
+    build_time: Duration,
 }
 
 impl CpuScene {
-    /// Builds the CWBVH (obvhs's "medium" preset, its default quality/build-time trade-off).
-    pub fn build(scene: &Scene) -> Self {
+    /// Builds the CWBVH with obvhs's "medium" preset (its default quality/build-time trade-off).
+    /// Fails if the tree is deeper than the kernels' traversal stack.
+    pub fn build(scene: &Scene) -> Result<Self> {
+        let start = Instant::now();
         let mut flat = Vec::with_capacity(scene.triangle_count());
         let mut ids = Vec::with_capacity(scene.triangle_count());
         for (mesh_index, mesh) in scene.meshes().iter().enumerate() {
             for (triangle_index, t) in mesh.triangles.iter().enumerate() {
-                flat.push(t.map(|i| mesh.positions[i as usize]));
-                ids.push((mesh_index as u32, triangle_index as u32));
+                let [a, b, c] = t.map(|i| Vec3A::from(mesh.positions[i as usize]));
+                flat.push(Triangle { v0: a, v1: b, v2: c });
+                ids.push(UVec2::new(mesh_index as u32, triangle_index as u32));
             }
         }
-        let obvhs_triangles: Vec<Triangle> = flat
+        let mut core_time = Duration::ZERO;
+        let obvhs = build_cwbvh_from_tris(&flat, BvhBuildParams::medium_build(), &mut core_time);
+        let nodes: Vec<CwBvhNode> = bytemuck::cast_slice(&obvhs.nodes).to_vec();
+        let depth = tree_depth(&nodes);
+        if depth >= STACK_SIZE as u32 {
+            return Err(Error::SceneTooLarge {
+                scene: scene.name().to_owned(),
+                what: format!("BVH depth {depth} (traversal stack holds {STACK_SIZE})"),
+            });
+        }
+        let order = &obvhs.primitive_indices;
+        let vertices = order
             .iter()
-            .map(|[a, b, c]| Triangle {
-                v0: Vec3A::from(*a),
-                v1: Vec3A::from(*b),
-                v2: Vec3A::from(*c),
+            .flat_map(|&i| {
+                let t = flat[i as usize];
+                [t.v0, t.v1, t.v2].map(|v| v.extend(0.0))
             })
             .collect();
-        let mut build_time = Duration::ZERO;
-        let bvh = build_cwbvh_from_tris(
-            &obvhs_triangles,
-            BvhBuildParams::medium_build(),
-            &mut build_time,
-        );
-        let order = &bvh.primitive_indices;
-        Self {
-            triangles: order.iter().map(|&i| flat[i as usize]).collect(),
-            instance: order.iter().map(|&i| ids[i as usize].0).collect(),
-            primitive: order.iter().map(|&i| ids[i as usize].1).collect(),
-            bvh,
-        }
+        let ids = order.iter().map(|&i| ids[i as usize]).collect();
+        Ok(Self { nodes, vertices, ids, obvhs, build_time: start.elapsed() })
     }
-}
 
-impl ClosestHitQuery for CpuScene {
-    fn closest_hit(&self, ray: &Ray) -> Hit {
+    /// The scene as the trace kernels read it.
+    pub fn view(&self) -> CwBvhScene<'_> {
+        CwBvhScene { nodes: &self.nodes, vertices: &self.vertices, ids: &self.ids }
+    }
+
+    /// BVH nodes, for upload to a device.
+    pub fn nodes(&self) -> &[CwBvhNode] {
+        &self.nodes
+    }
+
+    /// Triangle vertices in BVH order (three per triangle), for upload to a device.
+    pub fn vertices(&self) -> &[Vec4] {
+        &self.vertices
+    }
+
+    /// (instance, primitive) per triangle in BVH order, for upload to a device.
+    pub fn ids(&self) -> &[UVec2] {
+        &self.ids
+    }
+
+    /// Wall-clock time of the whole build (flattening, obvhs build, conversion).
+    pub fn build_time(&self) -> Duration {
+        self.build_time
+    }
+
+    /// Bytes of nodes plus triangle data, divided by the triangle count.
+    pub fn bytes_per_triangle(&self) -> f64 {
+        let bytes = std::mem::size_of_val(self.nodes.as_slice())
+            + std::mem::size_of_val(self.vertices.as_slice())
+            + std::mem::size_of_val(self.ids.as_slice());
+        bytes as f64 / self.ids.len().max(1) as f64
+    }
+
+    /// Closest hit through obvhs's own `CwBvh::ray_traverse` with the same watertight triangle
+    /// test: the reference the benchmarks compare the kernel traversal against.
+    pub fn obvhs_closest_hit(&self, ray: &Ray) -> Hit {
         let watertight = WatertightRay::new(ray.origin, ray.direction);
         let bvh_ray = BvhRay::new(ray.origin.into(), ray.direction.into(), ray.tmin, ray.tmax);
         let mut best = Hit::MISS;
         let mut best_t = ray.tmax;
         let mut obvhs_hit = RayHit::none();
-        self.bvh.ray_traverse(bvh_ray, &mut obvhs_hit, |_, slot| {
-            let [v0, v1, v2] = self.triangles[slot];
-            match watertight.intersect(v0, v1, v2, ray.tmin, best_t) {
+        self.obvhs.ray_traverse(bvh_ray, &mut obvhs_hit, |_, slot| {
+            let v = &self.vertices[slot * 3..slot * 3 + 3];
+            match watertight.intersect(v[0].truncate(), v[1].truncate(), v[2].truncate(), ray.tmin, best_t) {
                 Some(h) if !best.is_hit() || h.t < best_t => {
                     best_t = h.t;
-                    best = Hit {
-                        t: h.t,
-                        primitive: self.primitive[slot],
-                        instance: self.instance[slot],
-                        barycentrics: h.barycentrics,
-                    };
+                    let id = self.ids[slot];
+                    best = Hit { t: h.t, primitive: id.y, instance: id.x, barycentrics: h.barycentrics };
                     h.t
                 }
                 _ => f32::INFINITY,
             }
         });
         best
+    }
+}
+
+impl ClosestHitQuery for CpuScene {
+    fn closest_hit(&self, ray: &Ray) -> Hit {
+        self.view().closest_hit(ray)
+    }
+}
+
+/// Depth of the tree (root = 1): the longest chain of internal children.
+fn tree_depth(nodes: &[CwBvhNode]) -> u32 {
+    let mut deepest = 0;
+    let mut pending = vec![(0u32, 1u32)];
+    while let Some((index, depth)) = pending.pop() {
+        deepest = deepest.max(depth);
+        let node = &nodes[index as usize];
+        let internal_children = (node.exponents_and_imask >> 24).count_ones();
+        pending.extend((0..internal_children).map(|k| (node.child_base + k, depth + 1)));
+    }
+    deepest
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn shared_node_layout_is_obvhs_layout() {
+        let scene = Scene::load("builtin:cornell").unwrap();
+        let cpu = CpuScene::build(&scene).unwrap();
+        let original = &cpu.obvhs.nodes[0];
+        let shared = &cpu.nodes[0];
+        assert_eq!(shared.origin, original.p.to_array());
+        assert_eq!(
+            shared.exponents_and_imask.to_le_bytes(),
+            [original.e[0], original.e[1], original.e[2], original.imask]
+        );
+        assert_eq!(shared.child_base, original.child_base_idx);
+        assert_eq!(shared.primitive_base, original.primitive_base_idx);
+        assert_eq!(bytemuck::bytes_of(&shared.child_meta), &original.child_meta);
+        assert_eq!(&bytemuck::bytes_of(&shared.child_bounds)[8..16], &original.child_max_x);
+        assert_eq!(&bytemuck::bytes_of(&shared.child_bounds)[40..48], &original.child_max_z);
+        assert!(tree_depth(&cpu.nodes) >= 1);
     }
 }

@@ -31,57 +31,41 @@ impl CpuBackend {
 
     /// The loaded scene, or an error naming the stage that needs it.
     fn scene(&self) -> Result<&CpuScene> {
-        self.scene.as_ref().ok_or(Error::InvalidParameter {
-            name: "scene",
-            reason: "trace needs a loaded scene".into(),
-        })
+        self.scene
+            .as_ref()
+            .ok_or(Error::InvalidParameter { name: "scene", reason: "trace needs a loaded scene".into() })
     }
 }
 
 /// Runs the generate stage over `0..params.ray_count()`.
 pub fn generate(params: &GenerateParams) -> RayStream {
     let mut rays = RayStream::zeroed(params.ray_count() as usize);
-    (&mut rays.origin, &mut rays.direction, &mut rays.pixel)
-        .into_par_iter()
-        .enumerate()
-        .for_each(|(i, (origin, direction, pixel))| {
+    (&mut rays.origin, &mut rays.direction, &mut rays.pixel).into_par_iter().enumerate().for_each(
+        |(i, (origin, direction, pixel))| {
             let ray = generate_ray(i as u32, params);
             (*origin, *direction, *pixel) = (ray.origin, ray.direction, ray.pixel);
-        });
+        },
+    );
     rays
 }
 
 /// Runs the trace stage over every ray of `rays`.
 pub fn trace(scene: &CpuScene, rays: &RayStream) -> HitStream {
     let mut hits = HitStream::zeroed(rays.len());
-    (
-        &mut hits.t,
-        &mut hits.primitive,
-        &mut hits.instance,
-        &mut hits.barycentrics,
-    )
+    (&mut hits.t, &mut hits.primitive, &mut hits.instance, &mut hits.barycentrics)
         .into_par_iter()
         .zip((&rays.origin, &rays.direction).into_par_iter())
-        .for_each(
-            |((t, primitive, instance, barycentrics), (origin, direction))| {
-                let hit = trace_closest(*origin, *direction, scene);
-                (*t, *primitive, *instance, *barycentrics) =
-                    (hit.t, hit.primitive, hit.instance, hit.barycentrics);
-            },
-        );
+        .for_each(|((t, primitive, instance, barycentrics), (origin, direction))| {
+            let hit = trace_closest(*origin, *direction, scene);
+            (*t, *primitive, *instance, *barycentrics) = (hit.t, hit.primitive, hit.instance, hit.barycentrics);
+        });
     hits
 }
 
 fn timed<T>(stage: &'static str, f: impl FnOnce() -> T) -> (T, StageTiming) {
     let start = Instant::now();
     let value = f();
-    (
-        value,
-        StageTiming {
-            stage,
-            seconds: start.elapsed().as_secs_f64(),
-        },
-    )
+    (value, StageTiming { stage, seconds: start.elapsed().as_secs_f64() })
 }
 
 impl Backend for CpuBackend {
@@ -94,7 +78,7 @@ impl Backend for CpuBackend {
     }
 
     fn load_scene(&mut self, scene: &Scene) -> Result<()> {
-        self.scene = Some(CpuScene::build(scene));
+        self.scene = Some(CpuScene::build(scene)?);
         Ok(())
     }
 
@@ -111,11 +95,7 @@ impl Backend for CpuBackend {
     fn render(&mut self, params: &GenerateParams) -> Result<FrameOutput> {
         let (rays, generate_time) = self.generate(params)?;
         let (hits, trace_time) = self.trace(&rays)?;
-        Ok(FrameOutput {
-            rays,
-            hits,
-            timings: vec![generate_time, trace_time],
-        })
+        Ok(FrameOutput { rays, hits, timings: vec![generate_time, trace_time] })
     }
 }
 
@@ -135,7 +115,7 @@ mod tests {
         let mut rays = RayStream::zeroed(1);
         rays.origin[0] = origin.extend(0.0);
         rays.direction[0] = direction.extend(10.0);
-        let hits = trace(&CpuScene::build(&scene), &rays);
+        let hits = trace(&CpuScene::build(&scene).unwrap(), &rays);
         (hits.t[0], hits.instance[0])
     }
 
@@ -154,11 +134,7 @@ mod tests {
         let (t, instance) = trace_one(Vec3::new(0.278, 0.5, 0.28), Vec3::NEG_Y);
         assert_eq!((instance, (t - 0.5).abs() < 1e-6), (FLOOR, true), "t = {t}");
         let (t, instance) = trace_one(Vec3::new(0.278, 0.3, 0.28), Vec3::Y);
-        assert_eq!(
-            (instance, (t - 0.2487).abs() < 1e-6),
-            (LIGHT, true),
-            "t = {t}"
-        );
+        assert_eq!((instance, (t - 0.2487).abs() < 1e-6), (LIGHT, true), "t = {t}");
     }
 
     #[test]

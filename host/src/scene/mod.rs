@@ -2,6 +2,7 @@
 
 mod cornell;
 mod obj;
+pub mod procedural;
 
 use crate::error::{Error, Result};
 use glam::Vec3;
@@ -44,18 +45,26 @@ pub struct Scene {
     camera: Camera,
 }
 
-/// Names of the built-in scenes, usable as `builtin:NAME`.
-pub const BUILTIN_SCENES: &[&str] = &["cornell"];
+/// Names of the built-in scenes, usable as `builtin:NAME`: the Cornell box, a field of 64
+/// icospheres (1.3 M triangles) and a hairball of 200 000 thin random triangles.
+pub const BUILTIN_SCENES: &[&str] = &["cornell", "spheres", "hairball"];
 
 impl Scene {
     /// Loads a scene: `builtin:NAME` for a built-in scene, otherwise a path to a Wavefront OBJ file.
     pub fn load(spec: &str) -> Result<Scene> {
         match spec.strip_prefix("builtin:") {
             Some("cornell") => Scene::new("builtin:cornell", cornell::meshes(), cornell::camera()),
-            Some(name) => Err(Error::UnknownBuiltinScene {
-                name: name.to_owned(),
-                available: BUILTIN_SCENES.join(", "),
-            }),
+            Some("spheres") => {
+                let (meshes, camera) = procedural::sphere_field(4, 5);
+                Scene::new("builtin:spheres", meshes, camera)
+            }
+            Some("hairball") => {
+                let (meshes, camera) = procedural::hairball(200_000, 1);
+                Scene::new("builtin:hairball", meshes, camera)
+            }
+            Some(name) => {
+                Err(Error::UnknownBuiltinScene { name: name.to_owned(), available: BUILTIN_SCENES.join(", ") })
+            }
             None => obj::load(Path::new(spec)),
         }
     }
@@ -63,11 +72,7 @@ impl Scene {
     /// Builds a scene from meshes and a camera after validating every vertex and triangle.
     /// `name` identifies the scene in error messages (a file path or `builtin:NAME`).
     pub fn new(name: &str, meshes: Vec<Mesh>, camera: Camera) -> Result<Scene> {
-        let scene = Scene {
-            name: name.to_owned(),
-            meshes,
-            camera,
-        };
+        let scene = Scene { name: name.to_owned(), meshes, camera };
         scene.validate()?;
         Ok(scene)
     }
@@ -110,21 +115,11 @@ impl Scene {
         if self.triangle_count() == 0 {
             return Err(Error::EmptyScene { scene: scene() });
         }
-        if u32::try_from(self.triangle_count()).is_err()
-            || u32::try_from(self.meshes.len()).is_err()
-        {
-            return Err(Error::SceneTooLarge {
-                scene: scene(),
-                what: "the triangle count".into(),
-            });
+        if u32::try_from(self.triangle_count()).is_err() || u32::try_from(self.meshes.len()).is_err() {
+            return Err(Error::SceneTooLarge { scene: scene(), what: "the triangle count".into() });
         }
         for mesh in &self.meshes {
-            if let Some((vertex, p)) = mesh
-                .positions
-                .iter()
-                .enumerate()
-                .find(|(_, p)| !p.is_finite())
-            {
+            if let Some((vertex, p)) = mesh.positions.iter().enumerate().find(|(_, p)| !p.is_finite()) {
                 return Err(Error::NonFiniteVertex {
                     scene: scene(),
                     mesh: mesh.name.clone(),
@@ -133,10 +128,7 @@ impl Scene {
                 });
             }
             for (triangle, indices) in mesh.triangles.iter().enumerate() {
-                if let Some(&index) = indices
-                    .iter()
-                    .find(|&&i| i as usize >= mesh.positions.len())
-                {
+                if let Some(&index) = indices.iter().find(|&&i| i as usize >= mesh.positions.len()) {
                     return Err(Error::IndexOutOfRange {
                         scene: scene(),
                         mesh: mesh.name.clone(),
@@ -147,11 +139,7 @@ impl Scene {
                 }
                 let [a, b, c] = indices.map(|i| mesh.positions[i as usize]);
                 if (b - a).cross(c - a) == Vec3::ZERO {
-                    return Err(Error::DegenerateTriangle {
-                        scene: scene(),
-                        mesh: mesh.name.clone(),
-                        triangle,
-                    });
+                    return Err(Error::DegenerateTriangle { scene: scene(), mesh: mesh.name.clone(), triangle });
                 }
             }
         }
@@ -174,13 +162,7 @@ mod tests {
     use super::*;
 
     fn triangle_mesh(positions: Vec<Vec3>, triangles: Vec<[u32; 3]>) -> Mesh {
-        Mesh {
-            name: "m".into(),
-            positions,
-            triangles,
-            albedo: Vec3::ONE,
-            emission: Vec3::ZERO,
-        }
+        Mesh { name: "m".into(), positions, triangles, albedo: Vec3::ONE, emission: Vec3::ZERO }
     }
 
     fn unit_triangle() -> Vec<Vec3> {
@@ -201,18 +183,12 @@ mod tests {
     #[test]
     fn unknown_builtin_is_named() {
         let err = Scene::load("builtin:nope").unwrap_err();
-        assert!(
-            matches!(err, Error::UnknownBuiltinScene { ref name, .. } if name == "nope"),
-            "{err}"
-        );
+        assert!(matches!(err, Error::UnknownBuiltinScene { ref name, .. } if name == "nope"), "{err}");
     }
 
     #[test]
     fn empty_scene_is_rejected() {
-        assert!(matches!(
-            scene_with(triangle_mesh(vec![], vec![])),
-            Err(Error::EmptyScene { .. })
-        ));
+        assert!(matches!(scene_with(triangle_mesh(vec![], vec![])), Err(Error::EmptyScene { .. })));
     }
 
     #[test]
@@ -221,33 +197,16 @@ mod tests {
             let mut p = unit_triangle();
             p[2].y = bad;
             let err = scene_with(triangle_mesh(p, vec![[0, 1, 2]])).unwrap_err();
-            assert!(
-                matches!(err, Error::NonFiniteVertex { vertex: 2, .. }),
-                "{err}"
-            );
+            assert!(matches!(err, Error::NonFiniteVertex { vertex: 2, .. }), "{err}");
         }
     }
 
     #[test]
     fn zero_area_and_out_of_range_triangles_are_rejected() {
-        let err =
-            scene_with(triangle_mesh(unit_triangle(), vec![[0, 1, 2], [0, 1, 1]])).unwrap_err();
-        assert!(
-            matches!(err, Error::DegenerateTriangle { triangle: 1, .. }),
-            "{err}"
-        );
+        let err = scene_with(triangle_mesh(unit_triangle(), vec![[0, 1, 2], [0, 1, 1]])).unwrap_err();
+        assert!(matches!(err, Error::DegenerateTriangle { triangle: 1, .. }), "{err}");
         let err = scene_with(triangle_mesh(unit_triangle(), vec![[0, 1, 3]])).unwrap_err();
-        assert!(
-            matches!(
-                err,
-                Error::IndexOutOfRange {
-                    index: 3,
-                    vertex_count: 3,
-                    ..
-                }
-            ),
-            "{err}"
-        );
+        assert!(matches!(err, Error::IndexOutOfRange { index: 3, vertex_count: 3, .. }), "{err}");
     }
 
     #[test]

@@ -11,36 +11,16 @@ const DEFAULT_ALBEDO: Vec3 = Vec3::splat(0.7);
 
 /// Loads and validates an OBJ file.
 pub fn load(path: &Path) -> Result<Scene> {
-    let options = tobj::LoadOptions {
-        triangulate: true,
-        single_index: true,
-        ..Default::default()
-    };
-    let (models, _materials) = tobj::load_obj(path, &options).map_err(|e| Error::SceneLoad {
-        path: path.to_owned(),
-        message: e.to_string(),
-    })?;
+    let options = tobj::LoadOptions { triangulate: true, single_index: true, ..Default::default() };
+    let (models, _materials) = tobj::load_obj(path, &options)
+        .map_err(|e| Error::SceneLoad { path: path.to_owned(), message: e.to_string() })?;
     let meshes: Vec<Mesh> = models
         .into_iter()
         .enumerate()
         .map(|(i, model)| Mesh {
-            name: if model.name.is_empty() {
-                format!("mesh {i}")
-            } else {
-                model.name
-            },
-            positions: model
-                .mesh
-                .positions
-                .chunks_exact(3)
-                .map(|p| Vec3::new(p[0], p[1], p[2]))
-                .collect(),
-            triangles: model
-                .mesh
-                .indices
-                .chunks_exact(3)
-                .map(|t| [t[0], t[1], t[2]])
-                .collect(),
+            name: if model.name.is_empty() { format!("mesh {i}") } else { model.name },
+            positions: model.mesh.positions.chunks_exact(3).map(|p| Vec3::new(p[0], p[1], p[2])).collect(),
+            triangles: model.mesh.indices.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect(),
             albedo: DEFAULT_ALBEDO,
             emission: Vec3::ZERO,
         })
@@ -53,31 +33,18 @@ pub fn load(path: &Path) -> Result<Scene> {
 /// A camera on the +z side of the bounds' centre that sees the whole bounding sphere with a 45°
 /// vertical field of view. Non-finite bounds are left for validation to report.
 fn framing_camera(meshes: &[Mesh]) -> Camera {
-    let (lo, hi) = meshes.iter().flat_map(|m| m.positions.iter()).fold(
-        (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)),
-        |(lo, hi), p| (lo.min(*p), hi.max(*p)),
-    );
+    let (lo, hi) = meshes
+        .iter()
+        .flat_map(|m| m.positions.iter())
+        .fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(lo, hi), p| (lo.min(*p), hi.max(*p)));
     let centre = (lo + hi) * 0.5;
     let radius = ((hi - lo).length() * 0.5).max(1e-3);
     let fov = 45.0f32;
     let distance = radius / (fov.to_radians() * 0.5).sin();
     let position = centre + Vec3::Z * distance;
-    let position = if position.is_finite() {
-        position
-    } else {
-        Vec3::Z
-    };
-    let centre = if centre.is_finite() {
-        centre
-    } else {
-        Vec3::ZERO
-    };
-    Camera {
-        position,
-        look_at: centre,
-        up: Vec3::Y,
-        vertical_fov_degrees: fov,
-    }
+    let position = if position.is_finite() { position } else { Vec3::Z };
+    let centre = if centre.is_finite() { centre } else { Vec3::ZERO };
+    Camera { position, look_at: centre, up: Vec3::Y, vertical_fov_degrees: fov }
 }
 
 #[cfg(test)]
@@ -110,15 +77,9 @@ mod tests {
     fn nan_vertex_and_zero_area_faces_are_rejected() {
         let f = obj_file("v 0 0 0\nv 1 0 0\nv nan 1 0\nf 1 2 3\n");
         let err = load(f.path()).unwrap_err();
-        assert!(
-            matches!(err, Error::NonFiniteVertex { vertex: 2, .. }),
-            "{err}"
-        );
+        assert!(matches!(err, Error::NonFiniteVertex { vertex: 2, .. }), "{err}");
         let f = obj_file("v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n");
-        assert!(matches!(
-            load(f.path()).unwrap_err(),
-            Error::DegenerateTriangle { triangle: 0, .. }
-        ));
+        assert!(matches!(load(f.path()).unwrap_err(), Error::DegenerateTriangle { triangle: 0, .. }));
     }
 
     #[test]
@@ -126,9 +87,6 @@ mod tests {
         let f = obj_file("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n");
         assert!(load(f.path()).is_err());
         let f = obj_file("# nothing here\n");
-        assert!(matches!(
-            load(f.path()).unwrap_err(),
-            Error::EmptyScene { .. }
-        ));
+        assert!(matches!(load(f.path()).unwrap_err(), Error::EmptyScene { .. }));
     }
 }

@@ -56,14 +56,11 @@ fn build_info<'a>(build: &'a Build<'a>) -> vk::AccelerationStructureBuildGeometr
 /// Allocates and builds the acceleration structures of `builds` (all of one level) in one
 /// submission.
 fn build_all(core: &Arc<Core>, builds: &[Build<'_>]) -> Result<Vec<AccelerationStructure>> {
-    let accel = core
-        .acceleration_structure
-        .as_ref()
-        .ok_or_else(|| Error::MissingFeatures {
-            device: core.info.name.clone(),
-            stage: "trace".into(),
-            missing: vec!["VK_KHR_acceleration_structure".into()],
-        })?;
+    let accel = core.acceleration_structure.as_ref().ok_or_else(|| Error::MissingFeatures {
+        device: core.info.name.clone(),
+        stage: "trace".into(),
+        missing: vec!["VK_KHR_acceleration_structure".into()],
+    })?;
     let mut structures = Vec::with_capacity(builds.len());
     let mut scratch_offsets = Vec::with_capacity(builds.len());
     let mut scratch_total = 0u64;
@@ -82,8 +79,7 @@ fn build_all(core: &Arc<Core>, builds: &[Build<'_>]) -> Result<Vec<AccelerationS
         let storage = GpuBuffer::new(
             core,
             sizes.acceleration_structure_size,
-            vk::BufferUsageFlags::ACCELERATION_STRUCTURE_STORAGE_KHR
-                | vk::BufferUsageFlags::SHADER_DEVICE_ADDRESS,
+            vk::BufferUsageFlags::ACCELERATION_STRUCTURE_STORAGE_KHR | vk::BufferUsageFlags::SHADER_DEVICE_ADDRESS,
             MemoryLocation::GpuOnly,
             "acceleration structure",
         )?;
@@ -97,20 +93,12 @@ fn build_all(core: &Arc<Core>, builds: &[Build<'_>]) -> Result<Vec<AccelerationS
         // SAFETY: `handle` is a live acceleration structure.
         let address = unsafe {
             accel.get_acceleration_structure_device_address(
-                &vk::AccelerationStructureDeviceAddressInfoKHR::default()
-                    .acceleration_structure(handle),
+                &vk::AccelerationStructureDeviceAddressInfoKHR::default().acceleration_structure(handle),
             )
         };
-        structures.push(AccelerationStructure {
-            core: core.clone(),
-            handle,
-            address,
-            _storage: storage,
-        });
+        structures.push(AccelerationStructure { core: core.clone(), handle, address, _storage: storage });
         scratch_offsets.push(scratch_total);
-        scratch_total += sizes
-            .build_scratch_size
-            .next_multiple_of(core.scratch_alignment);
+        scratch_total += sizes.build_scratch_size.next_multiple_of(core.scratch_alignment);
     }
     let scratch = GpuBuffer::new(
         core,
@@ -127,20 +115,14 @@ fn build_all(core: &Arc<Core>, builds: &[Build<'_>]) -> Result<Vec<AccelerationS
         .map(|((build, structure), offset)| {
             build_info(build)
                 .dst_acceleration_structure(structure.handle)
-                .scratch_data(vk::DeviceOrHostAddressKHR {
-                    device_address: scratch_base + offset,
-                })
+                .scratch_data(vk::DeviceOrHostAddressKHR { device_address: scratch_base + offset })
         })
         .collect();
     let ranges: Vec<[vk::AccelerationStructureBuildRangeInfoKHR; 1]> = builds
         .iter()
-        .map(|b| {
-            [vk::AccelerationStructureBuildRangeInfoKHR::default()
-                .primitive_count(b.primitive_count)]
-        })
+        .map(|b| [vk::AccelerationStructureBuildRangeInfoKHR::default().primitive_count(b.primitive_count)])
         .collect();
-    let range_refs: Vec<&[vk::AccelerationStructureBuildRangeInfoKHR]> =
-        ranges.iter().map(|r| r.as_slice()).collect();
+    let range_refs: Vec<&[vk::AccelerationStructureBuildRangeInfoKHR]> = ranges.iter().map(|r| r.as_slice()).collect();
     submit_and_wait(core, |cmd| {
         // SAFETY: all referenced buffers and structures are alive until the wait completes.
         unsafe { accel.cmd_build_acceleration_structures(cmd, &infos, &range_refs) };
@@ -158,27 +140,18 @@ pub(crate) fn build_scene(core: &Arc<Core>, scene: &Scene) -> Result<SceneAccel>
         let indices: Vec<u32> = mesh.triangles.iter().flatten().copied().collect();
         let vertex_buffer = GpuBuffer::with_data(core, &vertices, INPUT_USAGE, "blas vertices")?;
         let index_buffer = GpuBuffer::with_data(core, &indices, INPUT_USAGE, "blas indices")?;
-        inputs.push((
-            vertex_buffer,
-            index_buffer,
-            mesh.positions.len() as u32,
-            mesh.triangles.len() as u32,
-        ));
+        inputs.push((vertex_buffer, index_buffer, mesh.positions.len() as u32, mesh.triangles.len() as u32));
     }
     let blas_builds: Vec<Build> = inputs
         .iter()
         .map(|(vertices, indices, vertex_count, triangle_count)| {
             let triangles = vk::AccelerationStructureGeometryTrianglesDataKHR::default()
                 .vertex_format(vk::Format::R32G32B32_SFLOAT)
-                .vertex_data(vk::DeviceOrHostAddressConstKHR {
-                    device_address: vertices.address,
-                })
+                .vertex_data(vk::DeviceOrHostAddressConstKHR { device_address: vertices.address })
                 .vertex_stride(12)
                 .max_vertex(vertex_count.saturating_sub(1))
                 .index_type(vk::IndexType::UINT32)
-                .index_data(vk::DeviceOrHostAddressConstKHR {
-                    device_address: indices.address,
-                });
+                .index_data(vk::DeviceOrHostAddressConstKHR { device_address: indices.address });
             Build {
                 geometry: [vk::AccelerationStructureGeometryKHR::default()
                     .geometry_type(vk::GeometryTypeKHR::TRIANGLES)
@@ -192,9 +165,7 @@ pub(crate) fn build_scene(core: &Arc<Core>, scene: &Scene) -> Result<SceneAccel>
     let blases = build_all(core, &blas_builds)?;
     drop(inputs);
 
-    let identity = vk::TransformMatrixKHR {
-        matrix: [1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0],
-    };
+    let identity = vk::TransformMatrixKHR { matrix: [1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0] };
     let instances: Vec<vk::AccelerationStructureInstanceKHR> = blases
         .iter()
         .enumerate()
@@ -205,30 +176,22 @@ pub(crate) fn build_scene(core: &Arc<Core>, scene: &Scene) -> Result<SceneAccel>
                 0,
                 vk::GeometryInstanceFlagsKHR::TRIANGLE_FACING_CULL_DISABLE.as_raw() as u8,
             ),
-            acceleration_structure_reference: vk::AccelerationStructureReferenceKHR {
-                device_handle: blas.address,
-            },
+            acceleration_structure_reference: vk::AccelerationStructureReferenceKHR { device_handle: blas.address },
         })
         .collect();
     // SAFETY: `AccelerationStructureInstanceKHR` is a plain #[repr(C)] struct of 64 bytes with no
     // padding; viewing it as bytes is sound.
     let instance_bytes = unsafe {
-        std::slice::from_raw_parts(
-            instances.as_ptr().cast::<u8>(),
-            std::mem::size_of_val(instances.as_slice()),
-        )
+        std::slice::from_raw_parts(instances.as_ptr().cast::<u8>(), std::mem::size_of_val(instances.as_slice()))
     };
-    let instance_buffer =
-        GpuBuffer::with_data(core, instance_bytes, INPUT_USAGE, "tlas instances")?;
+    let instance_buffer = GpuBuffer::with_data(core, instance_bytes, INPUT_USAGE, "tlas instances")?;
     let tlas_build = Build {
         geometry: [vk::AccelerationStructureGeometryKHR::default()
             .geometry_type(vk::GeometryTypeKHR::INSTANCES)
             .geometry(vk::AccelerationStructureGeometryDataKHR {
                 instances: vk::AccelerationStructureGeometryInstancesDataKHR::default()
                     .array_of_pointers(false)
-                    .data(vk::DeviceOrHostAddressConstKHR {
-                        device_address: instance_buffer.address,
-                    }),
+                    .data(vk::DeviceOrHostAddressConstKHR { device_address: instance_buffer.address }),
             })
             .flags(vk::GeometryFlagsKHR::OPAQUE)],
         primitive_count: instances.len() as u32,
@@ -236,8 +199,5 @@ pub(crate) fn build_scene(core: &Arc<Core>, scene: &Scene) -> Result<SceneAccel>
     };
     let tlas = build_all(core, std::slice::from_ref(&tlas_build))?.remove(0);
     drop(instance_buffer);
-    Ok(SceneAccel {
-        tlas,
-        _blases: blases,
-    })
+    Ok(SceneAccel { tlas, _blases: blases })
 }

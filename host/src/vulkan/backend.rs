@@ -6,6 +6,8 @@ use super::buffer::GpuBuffer;
 use super::context::{open, ContextOptions, Core, DeviceInfo};
 use super::kernel::{dispatch_grid, ComputeKernel, Resource};
 use crate::backend::{check_image_size_common, Backend, FrameOutput, StageTiming};
+use crate::cpu::CpuScene;
+use crate::device::TraceMethod;
 use crate::error::{Error, Result};
 use crate::scene::Scene;
 use crate::stream::{HitStream, RayStream};
@@ -37,13 +39,7 @@ struct DeviceHits {
 }
 
 fn stream_buffer<T: Pod>(core: &Arc<Core>, len: u32, name: &str) -> Result<GpuBuffer> {
-    GpuBuffer::new(
-        core,
-        u64::from(len) * std::mem::size_of::<T>() as u64,
-        STREAM_USAGE,
-        MemoryLocation::GpuToCpu,
-        name,
-    )
+    GpuBuffer::new(core, u64::from(len) * std::mem::size_of::<T>() as u64, STREAM_USAGE, MemoryLocation::GpuToCpu, name)
 }
 
 impl DeviceRays {
@@ -67,11 +63,7 @@ impl DeviceRays {
 
     fn read(&self) -> Result<RayStream> {
         let n = self.len as usize;
-        Ok(RayStream {
-            origin: self.origin.read(n)?,
-            direction: self.direction.read(n)?,
-            pixel: self.pixel.read(n)?,
-        })
+        Ok(RayStream { origin: self.origin.read(n)?, direction: self.direction.read(n)?, pixel: self.pixel.read(n)? })
     }
 }
 
@@ -104,19 +96,62 @@ fn stream_len(len: usize) -> Result<u32> {
     })
 }
 
+/// The scene as the chosen trace method reads it on the device.
+enum DeviceScene {
+    /// CWBVH nodes and triangles for the software traversal kernel.
+    Software { nodes: GpuBuffer, vertices: GpuBuffer, ids: GpuBuffer },
+    /// BLAS/TLAS for ray query.
+    RayQuery(SceneAccel),
+}
+
 /// A Vulkan device running raywave's stages.
 pub struct VulkanBackend {
     generate: ComputeKernel,
-    /// Present when the device supports ray query.
-    trace: Option<ComputeKernel>,
-    scene: Option<SceneAccel>,
+    trace: ComputeKernel,
+    trace_method: TraceMethod,
+    scene: Option<DeviceScene>,
     core: Arc<Core>,
 }
 
+/// Descriptor layout of the trace kernel for `method` (binding numbers from `raywave_shared`).
+fn trace_bindings(method: TraceMethod) -> Vec<(u32, vk::DescriptorType)> {
+    let storage = vk::DescriptorType::STORAGE_BUFFER;
+    let scene = match method {
+        TraceMethod::Software => (bindings::trace::NODES, storage),
+        TraceMethod::RayQuery => (bindings::trace::TLAS, vk::DescriptorType::ACCELERATION_STRUCTURE_KHR),
+    };
+    let mut layout = vec![
+        scene,
+        (bindings::trace::RAY_ORIGIN, storage),
+        (bindings::trace::RAY_DIRECTION, storage),
+        (bindings::trace::HIT_T, storage),
+        (bindings::trace::HIT_PRIMITIVE, storage),
+        (bindings::trace::HIT_INSTANCE, storage),
+        (bindings::trace::HIT_BARYCENTRICS, storage),
+    ];
+    if method == TraceMethod::Software {
+        layout.push((bindings::trace::TRIANGLE_VERTICES, storage));
+        layout.push((bindings::trace::TRIANGLE_IDS, storage));
+    }
+    layout
+}
+
 impl VulkanBackend {
-    /// Opens Vulkan device `index` and builds its pipelines.
-    pub fn open(index: usize, options: &ContextOptions) -> Result<Self> {
+    /// Opens Vulkan device `index` and builds its pipelines. `trace` picks the trace method;
+    /// `None` takes ray query where the device has it and software traversal elsewhere. A method
+    /// the device lacks is [`Error::MissingFeatures`].
+    pub fn open(index: usize, options: &ContextOptions, trace: Option<TraceMethod>) -> Result<Self> {
         let core = open(index, options)?;
+        let ray_query_missing = core.info.missing_for_ray_query();
+        let trace_method =
+            trace.unwrap_or(if ray_query_missing.is_empty() { TraceMethod::RayQuery } else { TraceMethod::Software });
+        if trace_method == TraceMethod::RayQuery && !ray_query_missing.is_empty() {
+            return Err(Error::MissingFeatures {
+                device: core.info.name.clone(),
+                stage: "trace (rayquery)".into(),
+                missing: ray_query_missing,
+            });
+        }
         let storage = vk::DescriptorType::STORAGE_BUFFER;
         let generate = ComputeKernel::new(
             &core,
@@ -128,38 +163,23 @@ impl VulkanBackend {
             ],
             std::mem::size_of::<GenerateParams>() as u32,
         )?;
-        let trace = if core.info.missing_for_ray_query().is_empty() {
-            Some(ComputeKernel::new(
-                &core,
-                "entry::trace_ray_query",
-                &[
-                    (
-                        bindings::trace::TLAS,
-                        vk::DescriptorType::ACCELERATION_STRUCTURE_KHR,
-                    ),
-                    (bindings::trace::RAY_ORIGIN, storage),
-                    (bindings::trace::RAY_DIRECTION, storage),
-                    (bindings::trace::HIT_T, storage),
-                    (bindings::trace::HIT_PRIMITIVE, storage),
-                    (bindings::trace::HIT_INSTANCE, storage),
-                    (bindings::trace::HIT_BARYCENTRICS, storage),
-                ],
-                std::mem::size_of::<TraceParams>() as u32,
-            )?)
-        } else {
-            None
+        let entry = match trace_method {
+            TraceMethod::Software => "entry::trace_cwbvh",
+            TraceMethod::RayQuery => "entry::trace_ray_query",
         };
-        Ok(Self {
-            generate,
-            trace,
-            scene: None,
-            core,
-        })
+        let trace =
+            ComputeKernel::new(&core, entry, &trace_bindings(trace_method), std::mem::size_of::<TraceParams>() as u32)?;
+        Ok(Self { generate, trace, trace_method, scene: None, core })
     }
 
     /// The device's name and features.
     pub fn info(&self) -> &DeviceInfo {
         &self.core.info
+    }
+
+    /// The trace method this backend runs.
+    pub fn trace_method(&self) -> TraceMethod {
+        self.trace_method
     }
 
     /// Validation-layer messages of warning or error severity received so far (empty unless
@@ -170,88 +190,62 @@ impl VulkanBackend {
 
     /// Largest stream this device can hold in one storage buffer and cover with one dispatch.
     fn max_rays(&self) -> u64 {
-        let by_buffer = u64::from(self.core.limits.max_storage_buffer_range)
-            / std::mem::size_of::<Vec4>() as u64;
+        let by_buffer = u64::from(self.core.limits.max_storage_buffer_range) / std::mem::size_of::<Vec4>() as u64;
         let by_grid = u64::from(self.core.limits.max_compute_work_group_count[0])
             * u64::from(self.core.limits.max_compute_work_group_count[1])
             * u64::from(bindings::WORKGROUP_SIZE);
         by_buffer.min(by_grid).min(u64::from(u32::MAX))
     }
 
-    fn trace_kernel(&self) -> Result<&ComputeKernel> {
-        self.trace.as_ref().ok_or_else(|| Error::MissingFeatures {
-            device: self.core.info.name.clone(),
-            stage: "trace (ray query)".into(),
-            missing: self.core.info.missing_for_ray_query(),
-        })
-    }
-
     fn generate_on_device(&self, params: &GenerateParams) -> Result<(DeviceRays, StageTiming)> {
         self.check_image_size(params.width, params.height)?;
         let rays = DeviceRays::new(&self.core, params.ray_count())?;
         let seconds = self.generate.dispatch(
-            &[
-                Resource::Buffer(&rays.origin),
-                Resource::Buffer(&rays.direction),
-                Resource::Buffer(&rays.pixel),
-            ],
+            &[Resource::Buffer(&rays.origin), Resource::Buffer(&rays.direction), Resource::Buffer(&rays.pixel)],
             bytemuck::bytes_of(params),
             rays.len,
         )?;
-        Ok((
-            rays,
-            StageTiming {
-                stage: "generate",
-                seconds,
-            },
-        ))
+        Ok((rays, StageTiming { stage: "generate", seconds }))
     }
 
     fn trace_on_device(&self, rays: &DeviceRays) -> Result<(DeviceHits, StageTiming)> {
-        let kernel = self.trace_kernel()?;
-        let scene = self.scene.as_ref().ok_or(Error::InvalidParameter {
-            name: "scene",
-            reason: "trace needs a loaded scene".into(),
-        })?;
-        if dispatch_grid(&self.core.limits, rays.len).is_none()
-            || u64::from(rays.len) > self.max_rays()
-        {
+        let scene = self
+            .scene
+            .as_ref()
+            .ok_or(Error::InvalidParameter { name: "scene", reason: "trace needs a loaded scene".into() })?;
+        if dispatch_grid(&self.core.limits, rays.len).is_none() || u64::from(rays.len) > self.max_rays() {
             return Err(Error::InvalidParameter {
                 name: "rays",
                 reason: format!("{} rays exceed the device's limits", rays.len),
             });
         }
         let hits = DeviceHits::new(&self.core, rays.len)?;
-        let params = TraceParams {
-            ray_count: rays.len,
-            padding: [0; 3],
+        let params = TraceParams { ray_count: rays.len, padding: [0; 3] };
+        let streams = [
+            Resource::Buffer(&rays.origin),
+            Resource::Buffer(&rays.direction),
+            Resource::Buffer(&hits.t),
+            Resource::Buffer(&hits.primitive),
+            Resource::Buffer(&hits.instance),
+            Resource::Buffer(&hits.barycentrics),
+        ];
+        let resources: Vec<Resource> = match scene {
+            DeviceScene::RayQuery(accel) => {
+                std::iter::once(Resource::AccelerationStructure(accel.tlas.handle)).chain(streams).collect()
+            }
+            DeviceScene::Software { nodes, vertices, ids } => std::iter::once(Resource::Buffer(nodes))
+                .chain(streams)
+                .chain([Resource::Buffer(vertices), Resource::Buffer(ids)])
+                .collect(),
         };
-        let seconds = kernel.dispatch(
-            &[
-                Resource::AccelerationStructure(scene.tlas.handle),
-                Resource::Buffer(&rays.origin),
-                Resource::Buffer(&rays.direction),
-                Resource::Buffer(&hits.t),
-                Resource::Buffer(&hits.primitive),
-                Resource::Buffer(&hits.instance),
-                Resource::Buffer(&hits.barycentrics),
-            ],
-            bytemuck::bytes_of(&params),
-            rays.len,
-        )?;
-        Ok((
-            hits,
-            StageTiming {
-                stage: "trace",
-                seconds,
-            },
-        ))
+        let seconds = self.trace.dispatch(&resources, bytemuck::bytes_of(&params), rays.len)?;
+        Ok((hits, StageTiming { stage: "trace", seconds }))
     }
 }
 
 impl Backend for VulkanBackend {
     fn name(&self) -> String {
-        format!("vulkan:{} {}", self.core.info.index, self.core.info.name)
+        format!("vulkan:{} {} (trace: {})", self.core.info.index, self.core.info.name, self.trace_method.name())
     }
 
     fn check_image_size(&self, width: u32, height: u32) -> Result<()> {
@@ -259,9 +253,18 @@ impl Backend for VulkanBackend {
     }
 
     fn load_scene(&mut self, scene: &Scene) -> Result<()> {
-        self.trace_kernel()?;
         self.scene = None;
-        self.scene = Some(build_scene(&self.core, scene)?);
+        self.scene = Some(match self.trace_method {
+            TraceMethod::RayQuery => DeviceScene::RayQuery(build_scene(&self.core, scene)?),
+            TraceMethod::Software => {
+                let cpu = CpuScene::build(scene)?;
+                DeviceScene::Software {
+                    nodes: GpuBuffer::with_data(&self.core, cpu.nodes(), STREAM_USAGE, "cwbvh nodes")?,
+                    vertices: GpuBuffer::with_data(&self.core, cpu.vertices(), STREAM_USAGE, "cwbvh vertices")?,
+                    ids: GpuBuffer::with_data(&self.core, cpu.ids(), STREAM_USAGE, "cwbvh triangle ids")?,
+                }
+            }
+        });
         Ok(())
     }
 
@@ -279,10 +282,6 @@ impl Backend for VulkanBackend {
     fn render(&mut self, params: &GenerateParams) -> Result<FrameOutput> {
         let (rays, generate_time) = self.generate_on_device(params)?;
         let (hits, trace_time) = self.trace_on_device(&rays)?;
-        Ok(FrameOutput {
-            rays: rays.read()?,
-            hits: hits.read()?,
-            timings: vec![generate_time, trace_time],
-        })
+        Ok(FrameOutput { rays: rays.read()?, hits: hits.read()?, timings: vec![generate_time, trace_time] })
     }
 }

@@ -19,9 +19,7 @@ pub(crate) struct GpuBuffer {
 
 impl Drop for GpuBuffer {
     fn drop(&mut self) {
-        if let (Some(allocation), Ok(mut allocator)) =
-            (self.allocation.take(), self.core.allocator.lock())
-        {
+        if let (Some(allocation), Ok(mut allocator)) = (self.allocation.take(), self.core.allocator.lock()) {
             let _ = allocator.free(allocation);
         }
         // SAFETY: the device is idle after every submission, so no command uses the buffer.
@@ -40,29 +38,17 @@ impl GpuBuffer {
     ) -> Result<Self> {
         let size = size.max(4);
         let wants_address = usage.contains(vk::BufferUsageFlags::SHADER_DEVICE_ADDRESS);
-        let info = vk::BufferCreateInfo::default()
-            .size(size)
-            .usage(usage)
-            .sharing_mode(vk::SharingMode::EXCLUSIVE);
+        let info = vk::BufferCreateInfo::default().size(size).usage(usage).sharing_mode(vk::SharingMode::EXCLUSIVE);
         // SAFETY: valid create info; the buffer is destroyed in Drop.
-        let buffer = unsafe { core.device.create_buffer(&info, None) }
-            .map_err(vk_error("vkCreateBuffer"))?;
+        let buffer = unsafe { core.device.create_buffer(&info, None) }.map_err(vk_error("vkCreateBuffer"))?;
         // Constructed now so any failure below frees the buffer through Drop.
-        let mut this = Self {
-            core: core.clone(),
-            buffer,
-            allocation: None,
-            address: 0,
-        };
+        let mut this = Self { core: core.clone(), buffer, allocation: None, address: 0 };
         // SAFETY: `buffer` is a live buffer of this device.
         let requirements = unsafe { core.device.get_buffer_memory_requirements(buffer) };
         let allocation = core
             .allocator
             .lock()
-            .map_err(|_| Error::Vulkan {
-                call: "gpu_allocator",
-                result: "allocator lock poisoned".into(),
-            })?
+            .map_err(|_| Error::Vulkan { call: "gpu_allocator", result: "allocator lock poisoned".into() })?
             .allocate(&AllocationCreateDesc {
                 name,
                 requirements,
@@ -70,43 +56,24 @@ impl GpuBuffer {
                 linear: true,
                 allocation_scheme: AllocationScheme::GpuAllocatorManaged,
             })
-            .map_err(|e| Error::Vulkan {
-                call: "gpu_allocator::allocate",
-                result: e.to_string(),
-            })?;
+            .map_err(|e| Error::Vulkan { call: "gpu_allocator::allocate", result: e.to_string() })?;
         // SAFETY: the allocation satisfies `requirements` and is not bound elsewhere.
-        unsafe {
-            core.device
-                .bind_buffer_memory(buffer, allocation.memory(), allocation.offset())
-        }
-        .map_err(vk_error("vkBindBufferMemory"))?;
+        unsafe { core.device.bind_buffer_memory(buffer, allocation.memory(), allocation.offset()) }
+            .map_err(vk_error("vkBindBufferMemory"))?;
         this.allocation = Some(allocation);
         if wants_address {
             // SAFETY: the buffer was created with SHADER_DEVICE_ADDRESS and has memory bound.
             this.address = unsafe {
-                core.device.get_buffer_device_address(
-                    &vk::BufferDeviceAddressInfo::default().buffer(buffer),
-                )
+                core.device.get_buffer_device_address(&vk::BufferDeviceAddressInfo::default().buffer(buffer))
             };
         }
         Ok(this)
     }
 
     /// Creates a host-visible buffer holding `data`.
-    pub fn with_data<T: Pod>(
-        core: &Arc<Core>,
-        data: &[T],
-        usage: vk::BufferUsageFlags,
-        name: &str,
-    ) -> Result<Self> {
+    pub fn with_data<T: Pod>(core: &Arc<Core>, data: &[T], usage: vk::BufferUsageFlags, name: &str) -> Result<Self> {
         let bytes: &[u8] = bytemuck::cast_slice(data);
-        let mut buffer = Self::new(
-            core,
-            bytes.len() as u64,
-            usage,
-            MemoryLocation::CpuToGpu,
-            name,
-        )?;
+        let mut buffer = Self::new(core, bytes.len() as u64, usage, MemoryLocation::CpuToGpu, name)?;
         buffer.mapped_mut()?[..bytes.len()].copy_from_slice(bytes);
         Ok(buffer)
     }
@@ -115,10 +82,7 @@ impl GpuBuffer {
         self.allocation
             .as_mut()
             .and_then(|a| a.mapped_slice_mut())
-            .ok_or(Error::Vulkan {
-                call: "vkMapMemory",
-                result: "buffer memory is not host-visible".into(),
-            })
+            .ok_or(Error::Vulkan { call: "vkMapMemory", result: "buffer memory is not host-visible".into() })
     }
 
     /// Copies the first `count` elements out of a host-visible buffer.
@@ -127,10 +91,7 @@ impl GpuBuffer {
             .allocation
             .as_ref()
             .and_then(|a| a.mapped_slice())
-            .ok_or(Error::Vulkan {
-                call: "vkMapMemory",
-                result: "buffer memory is not host-visible".into(),
-            })?;
+            .ok_or(Error::Vulkan { call: "vkMapMemory", result: "buffer memory is not host-visible".into() })?;
         let len = count * std::mem::size_of::<T>();
         Ok(bytemuck::pod_collect_to_vec(&bytes[..len]))
     }
@@ -162,41 +123,23 @@ pub(crate) fn submit_and_wait(core: &Core, record: impl FnOnce(vk::CommandBuffer
             device
                 .begin_command_buffer(
                     cmd,
-                    &vk::CommandBufferBeginInfo::default()
-                        .flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT),
+                    &vk::CommandBufferBeginInfo::default().flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT),
                 )
                 .map_err(vk_error("vkBeginCommandBuffer"))?;
             // Make every earlier submission's writes visible to this one's shaders and builds.
-            global_barrier(
-                core,
-                cmd,
-                vk::PipelineStageFlags::ALL_COMMANDS,
-                vk::PipelineStageFlags::ALL_COMMANDS,
-            );
+            global_barrier(core, cmd, vk::PipelineStageFlags::ALL_COMMANDS, vk::PipelineStageFlags::ALL_COMMANDS);
             record(cmd);
             // And this one's writes visible to the host for readback.
-            global_barrier(
-                core,
-                cmd,
-                vk::PipelineStageFlags::ALL_COMMANDS,
-                vk::PipelineStageFlags::HOST,
-            );
-            device
-                .end_command_buffer(cmd)
-                .map_err(vk_error("vkEndCommandBuffer"))?;
-            let fence = device
-                .create_fence(&vk::FenceCreateInfo::default(), None)
-                .map_err(vk_error("vkCreateFence"))?;
+            global_barrier(core, cmd, vk::PipelineStageFlags::ALL_COMMANDS, vk::PipelineStageFlags::HOST);
+            device.end_command_buffer(cmd).map_err(vk_error("vkEndCommandBuffer"))?;
+            let fence =
+                device.create_fence(&vk::FenceCreateInfo::default(), None).map_err(vk_error("vkCreateFence"))?;
             let cmds = [cmd];
             let submit = [vk::SubmitInfo::default().command_buffers(&cmds)];
             let waited = device
                 .queue_submit(core.queue, &submit, fence)
                 .map_err(vk_error("vkQueueSubmit"))
-                .and_then(|_| {
-                    device
-                        .wait_for_fences(&[fence], true, u64::MAX)
-                        .map_err(vk_error("vkWaitForFences"))
-                });
+                .and_then(|_| device.wait_for_fences(&[fence], true, u64::MAX).map_err(vk_error("vkWaitForFences")));
             device.destroy_fence(fence, None);
             waited
         })();
@@ -216,15 +159,5 @@ pub(crate) fn global_barrier(
         .src_access_mask(vk::AccessFlags::MEMORY_WRITE)
         .dst_access_mask(vk::AccessFlags::MEMORY_READ | vk::AccessFlags::MEMORY_WRITE)];
     // SAFETY: `cmd` is in the recording state.
-    unsafe {
-        core.device.cmd_pipeline_barrier(
-            cmd,
-            src,
-            dst,
-            vk::DependencyFlags::empty(),
-            &barrier,
-            &[],
-            &[],
-        )
-    };
+    unsafe { core.device.cmd_pipeline_barrier(cmd, src, dst, vk::DependencyFlags::empty(), &barrier, &[], &[]) };
 }

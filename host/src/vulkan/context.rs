@@ -13,10 +13,7 @@ const VALIDATION_LAYER: &CStr = c"VK_LAYER_KHRONOS_validation";
 
 /// Converts a failed Vulkan call into [`Error::Vulkan`].
 pub(crate) fn vk_error(call: &'static str) -> impl Fn(vk::Result) -> Error {
-    move |result| Error::Vulkan {
-        call,
-        result: format!("{result:?}"),
-    }
+    move |result| Error::Vulkan { call, result: format!("{result:?}") }
 }
 
 /// What one Vulkan device offers raywave.
@@ -54,10 +51,7 @@ impl DeviceInfo {
                 missing.push(what.to_owned());
             }
         };
-        need(
-            self.acceleration_structure,
-            "VK_KHR_acceleration_structure (accelerationStructure)",
-        );
+        need(self.acceleration_structure, "VK_KHR_acceleration_structure (accelerationStructure)");
         need(self.ray_query, "VK_KHR_ray_query (rayQuery)");
         need(self.buffer_device_address, "bufferDeviceAddress");
         missing
@@ -121,10 +115,7 @@ unsafe extern "system" fn debug_callback(
     // SAFETY: the loader passes a valid callback-data pointer; `user_data` is the
     // `Mutex<Vec<String>>` owned by the `Core` that registered this messenger and outlives it.
     let (text, sink) = unsafe {
-        let text = (*data)
-            .message_as_c_str()
-            .map(|m| m.to_string_lossy().into_owned())
-            .unwrap_or_default();
+        let text = (*data).message_as_c_str().map(|m| m.to_string_lossy().into_owned()).unwrap_or_default();
         (text, &*(user_data as *const Mutex<Vec<String>>))
     };
     let line = format!("[vulkan {severity:?}] {text}");
@@ -137,9 +128,8 @@ unsafe extern "system" fn debug_callback(
 
 fn load_entry() -> Result<ash::Entry> {
     // SAFETY: loading the system Vulkan loader library; no Vulkan call is in flight.
-    unsafe { ash::Entry::load() }.map_err(|e| Error::VulkanUnavailable {
-        reason: format!("cannot load the Vulkan loader: {e}"),
-    })
+    unsafe { ash::Entry::load() }
+        .map_err(|e| Error::VulkanUnavailable { reason: format!("cannot load the Vulkan loader: {e}") })
 }
 
 fn create_instance(
@@ -151,16 +141,8 @@ fn create_instance(
         .application_name(c"raywave")
         .engine_name(c"raywave")
         .api_version(vk::API_VERSION_1_2);
-    let layers = if validation {
-        vec![VALIDATION_LAYER.as_ptr()]
-    } else {
-        vec![]
-    };
-    let extensions = if validation {
-        vec![ash::ext::debug_utils::NAME.as_ptr()]
-    } else {
-        vec![]
-    };
+    let layers = if validation { vec![VALIDATION_LAYER.as_ptr()] } else { vec![] };
+    let extensions = if validation { vec![ash::ext::debug_utils::NAME.as_ptr()] } else { vec![] };
     let mut info = vk::InstanceCreateInfo::default()
         .application_info(&app)
         .enabled_layer_names(&layers)
@@ -170,9 +152,9 @@ fn create_instance(
     }
     // SAFETY: all pointers in `info` borrow locals that outlive the call.
     unsafe { entry.create_instance(&info, None) }.map_err(|e| match e {
-        vk::Result::ERROR_INCOMPATIBLE_DRIVER => Error::VulkanUnavailable {
-            reason: "no Vulkan 1.2 driver is installed".into(),
-        },
+        vk::Result::ERROR_INCOMPATIBLE_DRIVER => {
+            Error::VulkanUnavailable { reason: "no Vulkan 1.2 driver is installed".into() }
+        }
         other => vk_error("vkCreateInstance")(other),
     })
 }
@@ -183,17 +165,11 @@ fn physical_devices(instance: &ash::Instance) -> Result<Vec<vk::PhysicalDevice>>
 }
 
 fn has_extension(available: &[vk::ExtensionProperties], name: &CStr) -> bool {
-    available
-        .iter()
-        .any(|e| e.extension_name_as_c_str() == Ok(name))
+    available.iter().any(|e| e.extension_name_as_c_str() == Ok(name))
 }
 
 /// Reads the properties and ray-tracing features of one physical device.
-fn describe(
-    instance: &ash::Instance,
-    physical: vk::PhysicalDevice,
-    index: usize,
-) -> Result<DeviceInfo> {
+fn describe(instance: &ash::Instance, physical: vk::PhysicalDevice, index: usize) -> Result<DeviceInfo> {
     // SAFETY: `physical` was enumerated from `instance`; the feature chain borrows locals.
     unsafe {
         let props = instance.get_physical_device_properties(physical);
@@ -226,10 +202,7 @@ fn describe(
         let v = props.api_version;
         Ok(DeviceInfo {
             index,
-            name: props
-                .device_name_as_c_str()
-                .map(|n| n.to_string_lossy().into_owned())
-                .unwrap_or_default(),
+            name: props.device_name_as_c_str().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default(),
             device_type: format!("{:?}", props.device_type),
             api_version: format!(
                 "{}.{}.{}",
@@ -252,13 +225,8 @@ fn describe(
 pub fn enumerate_devices() -> Result<Vec<DeviceInfo>> {
     let entry = load_entry()?;
     let instance = create_instance(&entry, false, None)?;
-    let result = physical_devices(&instance).and_then(|devices| {
-        devices
-            .iter()
-            .enumerate()
-            .map(|(i, &pd)| describe(&instance, pd, i))
-            .collect()
-    });
+    let result = physical_devices(&instance)
+        .and_then(|devices| devices.iter().enumerate().map(|(i, &pd)| describe(&instance, pd, i)).collect());
     // SAFETY: nothing was created from this instance.
     unsafe { instance.destroy_instance(None) };
     result
@@ -271,22 +239,15 @@ pub(crate) fn open(index: usize, options: &ContextOptions) -> Result<Arc<Core>> 
         // SAFETY: plain query on a loaded entry.
         let layers = unsafe { entry.enumerate_instance_layer_properties() }
             .map_err(vk_error("vkEnumerateInstanceLayerProperties"))?;
-        if !layers
-            .iter()
-            .any(|l| l.layer_name_as_c_str() == Ok(VALIDATION_LAYER))
-        {
+        if !layers.iter().any(|l| l.layer_name_as_c_str() == Ok(VALIDATION_LAYER)) {
             return Err(Error::VulkanUnavailable {
-                reason: "validation requested but VK_LAYER_KHRONOS_validation is not installed"
-                    .into(),
+                reason: "validation requested but VK_LAYER_KHRONOS_validation is not installed".into(),
             });
         }
     }
     let messages = Arc::new(Mutex::new(Vec::new()));
     let mut messenger_info = vk::DebugUtilsMessengerCreateInfoEXT::default()
-        .message_severity(
-            vk::DebugUtilsMessageSeverityFlagsEXT::WARNING
-                | vk::DebugUtilsMessageSeverityFlagsEXT::ERROR,
-        )
+        .message_severity(vk::DebugUtilsMessageSeverityFlagsEXT::WARNING | vk::DebugUtilsMessageSeverityFlagsEXT::ERROR)
         .message_type(
             vk::DebugUtilsMessageTypeFlagsEXT::GENERAL
                 | vk::DebugUtilsMessageTypeFlagsEXT::VALIDATION
@@ -294,11 +255,7 @@ pub(crate) fn open(index: usize, options: &ContextOptions) -> Result<Arc<Core>> 
         )
         .pfn_user_callback(Some(debug_callback))
         .user_data(Arc::as_ptr(&messages) as *mut c_void);
-    let instance = create_instance(
-        &entry,
-        options.validation,
-        options.validation.then_some(&mut messenger_info),
-    )?;
+    let instance = create_instance(&entry, options.validation, options.validation.then_some(&mut messenger_info))?;
     // From here on, every failure path destroys what was created before it.
     let debug = if options.validation {
         let utils = ash::ext::debug_utils::Instance::new(&entry, &instance);
@@ -315,8 +272,7 @@ pub(crate) fn open(index: usize, options: &ContextOptions) -> Result<Arc<Core>> 
         None
     };
     let destroy_instance =
-        |instance: &ash::Instance,
-         debug: &Option<(ash::ext::debug_utils::Instance, vk::DebugUtilsMessengerEXT)>| {
+        |instance: &ash::Instance, debug: &Option<(ash::ext::debug_utils::Instance, vk::DebugUtilsMessengerEXT)>| {
             // SAFETY: no device was created (or it was destroyed) from this instance.
             unsafe {
                 if let Some((utils, m)) = debug {
@@ -331,11 +287,7 @@ pub(crate) fn open(index: usize, options: &ContextOptions) -> Result<Arc<Core>> 
             destroy_instance(&instance, &debug);
             return Err(Error::DeviceChoice {
                 requested: format!("vulkan:{index}"),
-                reason: format!(
-                    "there are {} Vulkan devices (indices 0..{})",
-                    list.len(),
-                    list.len()
-                ),
+                reason: format!("there are {} Vulkan devices (indices 0..{})", list.len(), list.len()),
             });
         }
         Err(e) => {
@@ -361,15 +313,11 @@ pub(crate) fn open(index: usize, options: &ContextOptions) -> Result<Arc<Core>> 
                     // SAFETY: nothing was created from the device.
                     unsafe { device.destroy_device(None) };
                     destroy_instance(&instance, &debug);
-                    return Err(Error::Vulkan {
-                        call: "gpu_allocator::Allocator::new",
-                        result: e.to_string(),
-                    });
+                    return Err(Error::Vulkan { call: "gpu_allocator::Allocator::new", result: e.to_string() });
                 }
             };
-            let acceleration_structure = info
-                .acceleration_structure
-                .then(|| ash::khr::acceleration_structure::Device::new(&instance, &device));
+            let acceleration_structure =
+                info.acceleration_structure.then(|| ash::khr::acceleration_structure::Device::new(&instance, &device));
             Ok(Arc::new(Core {
                 _entry: entry,
                 instance,
@@ -394,11 +342,7 @@ pub(crate) fn open(index: usize, options: &ContextOptions) -> Result<Arc<Core>> 
 
 type CreatedDevice = (ash::Device, u32, DeviceInfo, vk::PhysicalDeviceLimits, u64);
 
-fn create_device(
-    instance: &ash::Instance,
-    physical: vk::PhysicalDevice,
-    index: usize,
-) -> Result<CreatedDevice> {
+fn create_device(instance: &ash::Instance, physical: vk::PhysicalDevice, index: usize) -> Result<CreatedDevice> {
     let info = describe(instance, physical, index)?;
     // SAFETY: `physical` belongs to `instance`.
     let api_version = unsafe { instance.get_physical_device_properties(physical) }.api_version;
@@ -412,18 +356,17 @@ fn create_device(
     // SAFETY: `physical` belongs to `instance`; all create-info pointers borrow locals.
     unsafe {
         let families = instance.get_physical_device_queue_family_properties(physical);
-        let queue_family = families
-            .iter()
-            .position(|f| f.queue_flags.contains(vk::QueueFlags::COMPUTE))
-            .ok_or_else(|| Error::MissingFeatures {
-                device: info.name.clone(),
-                stage: "compute".into(),
-                missing: vec!["a compute queue".into()],
+        let queue_family =
+            families.iter().position(|f| f.queue_flags.contains(vk::QueueFlags::COMPUTE)).ok_or_else(|| {
+                Error::MissingFeatures {
+                    device: info.name.clone(),
+                    stage: "compute".into(),
+                    missing: vec!["a compute queue".into()],
+                }
             })? as u32;
         let priorities = [1.0];
-        let queues = [vk::DeviceQueueCreateInfo::default()
-            .queue_family_index(queue_family)
-            .queue_priorities(&priorities)];
+        let queues =
+            [vk::DeviceQueueCreateInfo::default().queue_family_index(queue_family).queue_priorities(&priorities)];
         let mut extensions = vec![];
         if info.acceleration_structure {
             extensions.push(ash::khr::acceleration_structure::NAME.as_ptr());
@@ -435,8 +378,8 @@ fn create_device(
         let mut v12 = vk::PhysicalDeviceVulkan12Features::default()
             .buffer_device_address(info.buffer_device_address)
             .vulkan_memory_model(true);
-        let mut as_features = vk::PhysicalDeviceAccelerationStructureFeaturesKHR::default()
-            .acceleration_structure(true);
+        let mut as_features =
+            vk::PhysicalDeviceAccelerationStructureFeaturesKHR::default().acceleration_structure(true);
         let mut rq_features = vk::PhysicalDeviceRayQueryFeaturesKHR::default().ray_query(true);
         let mut create = vk::DeviceCreateInfo::default()
             .queue_create_infos(&queues)
@@ -448,20 +391,14 @@ fn create_device(
         if info.ray_query {
             create = create.push_next(&mut rq_features);
         }
-        let device = instance
-            .create_device(physical, &create, None)
-            .map_err(vk_error("vkCreateDevice"))?;
+        let device = instance.create_device(physical, &create, None).map_err(vk_error("vkCreateDevice"))?;
         let limits = instance.get_physical_device_properties(physical).limits;
         let mut as_props = vk::PhysicalDeviceAccelerationStructurePropertiesKHR::default();
         if info.acceleration_structure {
             let mut props2 = vk::PhysicalDeviceProperties2::default().push_next(&mut as_props);
             instance.get_physical_device_properties2(physical, &mut props2);
         }
-        let scratch_alignment = u64::from(
-            as_props
-                .min_acceleration_structure_scratch_offset_alignment
-                .max(1),
-        );
+        let scratch_alignment = u64::from(as_props.min_acceleration_structure_scratch_offset_alignment.max(1));
         Ok((device, queue_family, info, limits, scratch_alignment))
     }
 }

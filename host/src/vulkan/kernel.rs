@@ -54,11 +54,8 @@ impl ComputeKernel {
         push_constant_bytes: u32,
     ) -> Result<Self> {
         let spirv = super::spirv::module(entry)?;
-        let code =
-            ash::util::read_spv(&mut std::io::Cursor::new(spirv)).map_err(|e| Error::Vulkan {
-                call: "read_spv",
-                result: format!("{entry}: {e}"),
-            })?;
+        let code = ash::util::read_spv(&mut std::io::Cursor::new(spirv))
+            .map_err(|e| Error::Vulkan { call: "read_spv", result: format!("{entry}: {e}") })?;
         let d = &core.device;
         // Every object below is stored in `kernel` as soon as it exists, so Drop cleans up on error.
         let mut kernel = Self {
@@ -92,9 +89,8 @@ impl ComputeKernel {
                 )
                 .map_err(vk_error("vkCreateDescriptorSetLayout"))?;
             let set_layouts = [kernel.set_layout];
-            let push_ranges = [vk::PushConstantRange::default()
-                .stage_flags(vk::ShaderStageFlags::COMPUTE)
-                .size(push_constant_bytes)];
+            let push_ranges =
+                [vk::PushConstantRange::default().stage_flags(vk::ShaderStageFlags::COMPUTE).size(push_constant_bytes)];
             kernel.pipeline_layout = d
                 .create_pipeline_layout(
                     &vk::PipelineLayoutCreateInfo::default()
@@ -106,19 +102,15 @@ impl ComputeKernel {
             let module = d
                 .create_shader_module(&vk::ShaderModuleCreateInfo::default().code(&code), None)
                 .map_err(vk_error("vkCreateShaderModule"))?;
-            let name = std::ffi::CString::new(entry).map_err(|_| Error::InvalidParameter {
-                name: "entry",
-                reason: entry.into(),
-            })?;
+            let name = std::ffi::CString::new(entry)
+                .map_err(|_| Error::InvalidParameter { name: "entry", reason: entry.into() })?;
             let stage = vk::PipelineShaderStageCreateInfo::default()
                 .stage(vk::ShaderStageFlags::COMPUTE)
                 .module(module)
                 .name(&name);
             let created = d.create_compute_pipelines(
                 vk::PipelineCache::null(),
-                &[vk::ComputePipelineCreateInfo::default()
-                    .stage(stage)
-                    .layout(kernel.pipeline_layout)],
+                &[vk::ComputePipelineCreateInfo::default().stage(stage).layout(kernel.pipeline_layout)],
                 None,
             );
             d.destroy_shader_module(module, None);
@@ -128,17 +120,12 @@ impl ComputeKernel {
             for &(_, ty) in bindings {
                 match pool_sizes.iter_mut().find(|s| s.ty == ty) {
                     Some(s) => s.descriptor_count += 1,
-                    None => pool_sizes.push(vk::DescriptorPoolSize {
-                        ty,
-                        descriptor_count: 1,
-                    }),
+                    None => pool_sizes.push(vk::DescriptorPoolSize { ty, descriptor_count: 1 }),
                 }
             }
             kernel.descriptor_pool = d
                 .create_descriptor_pool(
-                    &vk::DescriptorPoolCreateInfo::default()
-                        .max_sets(1)
-                        .pool_sizes(&pool_sizes),
+                    &vk::DescriptorPoolCreateInfo::default().max_sets(1).pool_sizes(&pool_sizes),
                     None,
                 )
                 .map_err(vk_error("vkCreateDescriptorPool"))?;
@@ -151,9 +138,7 @@ impl ComputeKernel {
                 .map_err(vk_error("vkAllocateDescriptorSets"))?[0];
             kernel.query_pool = d
                 .create_query_pool(
-                    &vk::QueryPoolCreateInfo::default()
-                        .query_type(vk::QueryType::TIMESTAMP)
-                        .query_count(2),
+                    &vk::QueryPoolCreateInfo::default().query_type(vk::QueryType::TIMESTAMP).query_count(2),
                     None,
                 )
                 .map_err(vk_error("vkCreateQueryPool"))?;
@@ -164,12 +149,7 @@ impl ComputeKernel {
     /// Binds `resources` (one per binding, in the order given at creation), pushes `push`, runs
     /// `invocations` invocations and waits. Returns the dispatch's duration in seconds, from GPU
     /// timestamps where the device has them, else from the host clock around the submission.
-    pub fn dispatch(
-        &self,
-        resources: &[Resource<'_>],
-        push: &[u8],
-        invocations: u32,
-    ) -> Result<f64> {
+    pub fn dispatch(&self, resources: &[Resource<'_>], push: &[u8], invocations: u32) -> Result<f64> {
         if resources.len() != self.bindings.len() {
             return Err(Error::InvalidParameter {
                 name: "resources",
@@ -177,19 +157,15 @@ impl ComputeKernel {
             });
         }
         let (groups_x, groups_y) =
-            dispatch_grid(&self.core.limits, invocations).ok_or_else(|| {
-                Error::InvalidParameter {
-                    name: "invocations",
-                    reason: format!("{invocations} exceed the device's dispatch limits"),
-                }
+            dispatch_grid(&self.core.limits, invocations).ok_or_else(|| Error::InvalidParameter {
+                name: "invocations",
+                reason: format!("{invocations} exceed the device's dispatch limits"),
             })?;
         let d = &self.core.device;
         let buffer_infos: Vec<[vk::DescriptorBufferInfo; 1]> = resources
             .iter()
             .map(|r| match r {
-                Resource::Buffer(b) => [vk::DescriptorBufferInfo::default()
-                    .buffer(b.buffer)
-                    .range(vk::WHOLE_SIZE)],
+                Resource::Buffer(b) => [vk::DescriptorBufferInfo::default().buffer(b.buffer).range(vk::WHOLE_SIZE)],
                 Resource::AccelerationStructure(_) => [vk::DescriptorBufferInfo::default()],
             })
             .collect();
@@ -202,9 +178,7 @@ impl ComputeKernel {
             .collect();
         let mut accel_writes: Vec<vk::WriteDescriptorSetAccelerationStructureKHR> = accels
             .iter()
-            .map(|a| {
-                vk::WriteDescriptorSetAccelerationStructureKHR::default().acceleration_structures(a)
-            })
+            .map(|a| vk::WriteDescriptorSetAccelerationStructureKHR::default().acceleration_structures(a))
             .collect();
         let writes: Vec<vk::WriteDescriptorSet> = resources
             .iter()
@@ -217,9 +191,7 @@ impl ComputeKernel {
                     .descriptor_type(ty);
                 match resource {
                     Resource::Buffer(_) => write.buffer_info(buffer_info),
-                    Resource::AccelerationStructure(_) => {
-                        write.descriptor_count(1).push_next(accel_write)
-                    }
+                    Resource::AccelerationStructure(_) => write.descriptor_count(1).push_next(accel_write),
                 }
             })
             .collect();
@@ -241,22 +213,11 @@ impl ComputeKernel {
                     &[self.descriptor_set],
                     &[],
                 );
-                d.cmd_push_constants(
-                    cmd,
-                    self.pipeline_layout,
-                    vk::ShaderStageFlags::COMPUTE,
-                    0,
-                    push,
-                );
+                d.cmd_push_constants(cmd, self.pipeline_layout, vk::ShaderStageFlags::COMPUTE, 0, push);
                 if groups_x > 0 {
                     d.cmd_dispatch(cmd, groups_x, groups_y, 1);
                 }
-                d.cmd_write_timestamp(
-                    cmd,
-                    vk::PipelineStageFlags::BOTTOM_OF_PIPE,
-                    self.query_pool,
-                    1,
-                );
+                d.cmd_write_timestamp(cmd, vk::PipelineStageFlags::BOTTOM_OF_PIPE, self.query_pool, 1);
             }
         })?;
         let host_seconds = start.elapsed().as_secs_f64();
@@ -281,10 +242,7 @@ impl ComputeKernel {
 
 /// Workgroup grid `(x, y)` covering `invocations` with rows of at most
 /// `maxComputeWorkGroupCount[0]` workgroups, or `None` if even that exceeds the y limit.
-pub(crate) fn dispatch_grid(
-    limits: &vk::PhysicalDeviceLimits,
-    invocations: u32,
-) -> Option<(u32, u32)> {
+pub(crate) fn dispatch_grid(limits: &vk::PhysicalDeviceLimits, invocations: u32) -> Option<(u32, u32)> {
     let groups = invocations.div_ceil(WORKGROUP_SIZE);
     if groups == 0 {
         return Some((0, 0));
@@ -300,10 +258,7 @@ mod tests {
 
     #[test]
     fn grid_spills_into_y_only_past_the_x_limit() {
-        let limits = vk::PhysicalDeviceLimits {
-            max_compute_work_group_count: [100, 10, 1],
-            ..Default::default()
-        };
+        let limits = vk::PhysicalDeviceLimits { max_compute_work_group_count: [100, 10, 1], ..Default::default() };
         assert_eq!(dispatch_grid(&limits, 0), Some((0, 0)));
         assert_eq!(dispatch_grid(&limits, 1), Some((1, 1)));
         assert_eq!(dispatch_grid(&limits, 64 * 100), Some((100, 1)));

@@ -10,8 +10,5 @@ pub fn module(entry: &str) -> Result<&'static [u8]> {
         .iter()
         .find(|(name, _)| *name == entry)
         .map(|(_, bytes)| *bytes)
-        .ok_or_else(|| Error::Vulkan {
-            call: "embedded SPIR-V",
-            result: format!("no module for entry point {entry}"),
-        })
+        .ok_or_else(|| Error::Vulkan { call: "embedded SPIR-V", result: format!("no module for entry point {entry}") })
 }

@@ -4,6 +4,7 @@
 //! CPU executor implements the query over obvhs's CWBVH with [`crate::triangle`]'s watertight
 //! test; the SPIR-V build implements it with `VK_KHR_ray_query` ([`ray_query`]).
 
+pub mod cwbvh;
 #[cfg(all(target_arch = "spirv", feature = "ray-query"))]
 pub mod ray_query;
 
@@ -26,12 +27,7 @@ pub struct Ray {
 impl Ray {
     /// Unpacks the stream layout (origin.w = tmin, direction.w = tmax).
     pub fn from_stream(origin: Vec4, direction: Vec4) -> Self {
-        Self {
-            origin: origin.xyz(),
-            direction: direction.xyz(),
-            tmin: origin.w,
-            tmax: direction.w,
-        }
+        Self { origin: origin.xyz(), direction: direction.xyz(), tmin: origin.w, tmax: direction.w }
     }
 
     /// Whether the ray can be traced: all components finite, a non-zero direction and
@@ -62,12 +58,7 @@ pub struct Hit {
 
 impl Hit {
     /// The record of a ray that hit nothing.
-    pub const MISS: Hit = Hit {
-        t: 0.0,
-        primitive: NO_HIT,
-        instance: NO_HIT,
-        barycentrics: Vec2::ZERO,
-    };
+    pub const MISS: Hit = Hit { t: 0.0, primitive: NO_HIT, instance: NO_HIT, barycentrics: Vec2::ZERO };
 
     /// Whether the ray hit anything.
     pub fn is_hit(&self) -> bool {
@@ -110,20 +101,11 @@ mod tests {
         }
     }
 
-    const HIT: Hit = Hit {
-        t: 2.0,
-        primitive: 3,
-        instance: 1,
-        barycentrics: Vec2::new(0.25, 0.5),
-    };
+    const HIT: Hit = Hit { t: 2.0, primitive: 3, instance: 1, barycentrics: Vec2::new(0.25, 0.5) };
 
     #[test]
     fn traceable_rays_reach_the_query() {
-        let h = trace_closest(
-            Vec4::new(0.0, 0.0, 0.0, 0.0),
-            Vec4::new(0.0, 0.0, 1.0, 10.0),
-            &Fixed(HIT),
-        );
+        let h = trace_closest(Vec4::new(0.0, 0.0, 0.0, 0.0), Vec4::new(0.0, 0.0, 1.0, 10.0), &Fixed(HIT));
         assert_eq!(h, HIT);
     }
 
@@ -147,9 +129,6 @@ mod tests {
     #[test]
     fn non_finite_hits_are_sanitized_to_misses() {
         let bad = Hit { t: f32::NAN, ..HIT };
-        assert_eq!(
-            trace_closest(Vec4::ZERO, Vec4::new(0.0, 0.0, 1.0, 10.0), &Fixed(bad)),
-            Hit::MISS
-        );
+        assert_eq!(trace_closest(Vec4::ZERO, Vec4::new(0.0, 0.0, 1.0, 10.0), &Fixed(bad)), Hit::MISS);
     }
 }

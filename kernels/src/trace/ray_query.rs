@@ -17,15 +17,7 @@ impl ClosestHitQuery for RayQueryScene<'_> {
         // SAFETY: `tlas` is a valid acceleration structure bound by the host, and the ray has been
         // checked by `Ray::is_traceable`, as `OpRayQueryInitializeKHR` requires.
         unsafe {
-            query.initialize(
-                self.tlas,
-                RayFlags::OPAQUE,
-                0xff,
-                ray.origin,
-                ray.tmin,
-                ray.direction,
-                ray.tmax,
-            );
+            query.initialize(self.tlas, RayFlags::OPAQUE, 0xff, ray.origin, ray.tmin, ray.direction, ray.tmax);
             while query.proceed() {}
             match query.get_committed_intersection_type() {
                 CommittedIntersection::Triangle => Hit {

@@ -1,0 +1,168 @@
+//! Procedural scenes for tests and benchmarks: closed icospheres, a field of spheres with over a
+//! million triangles, and a "hairball" of thin random triangles for incoherent traversal.
+
+use super::{Camera, Mesh};
+use glam::{UVec3, Vec3};
+use raywave_kernels::hash::{pcg3d, unit_float};
+use std::collections::HashMap;
+
+/// A closed icosphere: the icosahedron subdivided `subdivisions` times (20·4ⁿ triangles), vertices
+/// pushed onto the sphere. Shared edges use shared vertices, so the mesh is watertight.
+pub fn icosphere(name: &str, centre: Vec3, radius: f32, subdivisions: u32, albedo: Vec3) -> Mesh {
+    // The icosahedron's 12 vertices are the cyclic permutations of (0, ±1, ±φ).
+    let phi = (1.0 + 5f32.sqrt()) * 0.5;
+    let mut unit: Vec<Vec3> = [
+        (-1.0, phi, 0.0),
+        (1.0, phi, 0.0),
+        (-1.0, -phi, 0.0),
+        (1.0, -phi, 0.0),
+        (0.0, -1.0, phi),
+        (0.0, 1.0, phi),
+        (0.0, -1.0, -phi),
+        (0.0, 1.0, -phi),
+        (phi, 0.0, -1.0),
+        (phi, 0.0, 1.0),
+        (-phi, 0.0, -1.0),
+        (-phi, 0.0, 1.0),
+    ]
+    .iter()
+    .map(|&(x, y, z)| Vec3::new(x, y, z).normalize())
+    .collect();
+    let mut triangles: Vec<[u32; 3]> = vec![
+        [0, 11, 5],
+        [0, 5, 1],
+        [0, 1, 7],
+        [0, 7, 10],
+        [0, 10, 11],
+        [1, 5, 9],
+        [5, 11, 4],
+        [11, 10, 2],
+        [10, 7, 6],
+        [7, 1, 8],
+        [3, 9, 4],
+        [3, 4, 2],
+        [3, 2, 6],
+        [3, 6, 8],
+        [3, 8, 9],
+        [4, 9, 5],
+        [2, 4, 11],
+        [6, 2, 10],
+        [8, 6, 7],
+        [9, 8, 1],
+    ];
+    for _ in 0..subdivisions {
+        let mut midpoints: HashMap<(u32, u32), u32> = HashMap::new();
+        let mut midpoint = |a: u32, b: u32, unit: &mut Vec<Vec3>| {
+            *midpoints.entry((a.min(b), a.max(b))).or_insert_with(|| {
+                unit.push(((unit[a as usize] + unit[b as usize]) * 0.5).normalize());
+                unit.len() as u32 - 1
+            })
+        };
+        triangles = triangles
+            .iter()
+            .flat_map(|&[a, b, c]| {
+                let ab = midpoint(a, b, &mut unit);
+                let bc = midpoint(b, c, &mut unit);
+                let ca = midpoint(c, a, &mut unit);
+                [[a, ab, ca], [b, bc, ab], [c, ca, bc], [ab, bc, ca]]
+            })
+            .collect();
+    }
+    Mesh {
+        name: name.to_owned(),
+        positions: unit.iter().map(|&p| centre + p * radius).collect(),
+        triangles,
+        albedo,
+        emission: Vec3::ZERO,
+    }
+}
+
+/// `per_axis³` icospheres of `subdivisions` levels on a unit-spaced grid, radius 0.4, with a camera
+/// looking at the block from a corner. `per_axis = 4, subdivisions = 5` gives 1 310 720 triangles.
+pub fn sphere_field(per_axis: u32, subdivisions: u32) -> (Vec<Mesh>, Camera) {
+    let mut meshes = Vec::new();
+    for x in 0..per_axis {
+        for y in 0..per_axis {
+            for z in 0..per_axis {
+                let centre = Vec3::new(x as f32, y as f32, z as f32);
+                let albedo =
+                    Vec3::new(0.3 + 0.15 * x as f32, 0.3 + 0.15 * y as f32, 0.3 + 0.15 * z as f32).min(Vec3::ONE);
+                meshes.push(icosphere(&format!("sphere {x},{y},{z}"), centre, 0.4, subdivisions, albedo));
+            }
+        }
+    }
+    let extent = per_axis as f32 - 1.0;
+    let camera = Camera {
+        position: Vec3::new(-1.5, extent * 0.5 + 1.0, -2.5),
+        look_at: Vec3::splat(extent * 0.5),
+        up: Vec3::Y,
+        vertical_fov_degrees: 50.0,
+    };
+    (meshes, camera)
+}
+
+/// `count` thin random triangles ("hairs", 0.3 long and 0.002 wide, arbitrary orientation) in the
+/// unit cube, seeded by `seed`, and a camera outside the cube: the incoherent-traversal stress case.
+pub fn hairball(count: u32, seed: u32) -> (Vec<Mesh>, Camera) {
+    let random3 = |i: u32, stream: u32| {
+        let h = pcg3d(UVec3::new(i, stream, seed));
+        Vec3::new(unit_float(h.x), unit_float(h.y), unit_float(h.z))
+    };
+    let mut positions = Vec::with_capacity(count as usize * 3);
+    for i in 0..count {
+        let root = random3(i, 0);
+        let along = (random3(i, 1) * 2.0 - 1.0).normalize_or(Vec3::X);
+        let side = along.any_orthonormal_vector();
+        positions.extend([root, root + along * 0.3, root + side * 0.002]);
+    }
+    let triangles = (0..count).map(|i| [3 * i, 3 * i + 1, 3 * i + 2]).collect();
+    let mesh = Mesh { name: "hairball".into(), positions, triangles, albedo: Vec3::splat(0.6), emission: Vec3::ZERO };
+    let camera = Camera {
+        position: Vec3::new(0.5, 0.5, -1.6),
+        look_at: Vec3::splat(0.5),
+        up: Vec3::Y,
+        vertical_fov_degrees: 45.0,
+    };
+    (vec![mesh], camera)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn icosphere_is_closed_and_on_the_sphere() {
+        let mesh = icosphere("s", Vec3::new(1.0, 2.0, 3.0), 2.0, 3, Vec3::ONE);
+        assert_eq!(mesh.triangles.len(), 20 * 4usize.pow(3));
+        // Euler: V − E + F = 2 for a closed genus-0 mesh with E = 3F/2.
+        let f = mesh.triangles.len();
+        assert_eq!(mesh.positions.len() + f - 3 * f / 2, 2);
+        for p in &mesh.positions {
+            assert!(((*p - Vec3::new(1.0, 2.0, 3.0)).length() - 2.0).abs() < 1e-5);
+        }
+        // Every edge is shared by exactly two triangles.
+        let mut edges: HashMap<(u32, u32), u32> = HashMap::new();
+        for t in &mesh.triangles {
+            for (a, b) in [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])] {
+                *edges.entry((a.min(b), a.max(b))).or_default() += 1;
+            }
+        }
+        assert!(edges.values().all(|&n| n == 2));
+    }
+
+    #[test]
+    fn sphere_field_reaches_a_million_triangles() {
+        let (meshes, _) = sphere_field(4, 5);
+        let triangles: usize = meshes.iter().map(|m| m.triangles.len()).sum();
+        assert_eq!(triangles, 64 * 20 * 1024);
+        assert!(triangles >= 1_000_000);
+    }
+
+    #[test]
+    fn hairball_is_deterministic_and_inside_its_box() {
+        let (a, _) = hairball(1000, 7);
+        let (b, _) = hairball(1000, 7);
+        assert_eq!(a, b);
+        assert!(a[0].positions.iter().all(|p| p.cmpge(Vec3::splat(-0.31)).all() && p.cmple(Vec3::splat(1.31)).all()));
+    }
+}

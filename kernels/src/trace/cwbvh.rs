@@ -1,0 +1,192 @@
+//! Software closest-hit traversal of a compressed wide BVH8 (Ylitie, Karras & Laine, HPG 2017),
+//! written once for the CPU and SPIR-V: no recursion, a fixed-size stack, `u32` indices.
+//!
+//! Node groups `(first child, hit bits 24–31 | imask bits 0–7)` and triangle groups
+//! `(first triangle, hit bits 0–23)` drive the traversal: a node test turns the eight quantised
+//! child boxes into one 32-bit hit mask, whose high byte lists internal children in front-to-back
+//! order for the ray's octant and whose low 24 bits list the triangles of hit leaves.
+
+use super::{ClosestHitQuery, Hit, Ray};
+use crate::triangle::WatertightRay;
+use glam::{UVec2, Vec3, Vec4, Vec4Swizzles};
+use raywave_shared::bvh::CwBvhNode;
+
+/// Traversal stack depth. obvhs's CWBVH builder keeps trees shallower than 32 levels (its
+/// validation asserts it); a node group is pushed at most once per level.
+pub const STACK_SIZE: usize = 32;
+
+/// Slack on the far side of every box test: 1 + 2·γ(3) with γ(n) = n·ε/(1 − n·ε), ε = 2⁻²⁴, so
+/// rounding in the three-operation slab computation never culls a box the ray really enters
+/// (Ize, "Robust BVH Ray Traversal", JCGT 2(2), 2013; pbrt-v4 `Bounds3::IntersectP`).
+const FAR_SLACK: f32 = 1.0 + 2.0 * (3.0 * f32::EPSILON * 0.5) / (1.0 - 3.0 * f32::EPSILON * 0.5);
+
+/// Smallest direction magnitude used when inverting a direction: zero (and ±0) components become
+/// ±1e-30 so slab distances stay finite (no `0 · ∞` NaN) for axis-aligned rays.
+const MIN_DIRECTION: f32 = 1e-30;
+
+/// The scene as the software trace stage reads it: node and triangle buffers built by the host.
+pub struct CwBvhScene<'a> {
+    /// BVH nodes; node 0 is the root.
+    pub nodes: &'a [CwBvhNode],
+    /// Triangle vertices in BVH leaf order, three per triangle (w unused).
+    pub vertices: &'a [Vec4],
+    /// (instance, primitive) of each triangle, in BVH leaf order.
+    pub ids: &'a [UVec2],
+}
+
+/// Byte `index` (0–7) of an 8-byte field stored as two little-endian words.
+fn byte8(words: [u32; 2], index: u32) -> u32 {
+    let word = if index < 4 { words[0] } else { words[1] };
+    (word >> ((index & 3) * 8)) & 0xff
+}
+
+/// Plane `index` (0–7) of child-bounds array `array` (0 = min x … 5 = max z) in grid cells,
+/// moved one cell outwards. The expansion keeps every triangle strictly inside its child box, so a
+/// ray parallel to an axis that lies exactly on a box plane (zero-length slab, `(q − o)·1/d = 0`)
+/// still enters the box; it costs about 1 % larger boxes.
+fn bound(node: &CwBvhNode, array: u32, index: u32) -> f32 {
+    let word = node.child_bounds[(array * 2 + index / 4) as usize];
+    let q = ((word >> ((index & 3) * 8)) & 0xff) as f32;
+    if array & 1 == 1 {
+        q + 1.0
+    } else {
+        q - 1.0
+    }
+}
+
+/// Index of the highest set bit of a non-zero word.
+fn highest_bit(bits: u32) -> u32 {
+    31 - bits.leading_zeros()
+}
+
+/// A ray prepared for box tests.
+struct BoxRay {
+    origin: Vec3,
+    inv_direction: Vec3,
+    /// Per axis: 1 when the direction is negative (near plane = max plane).
+    negative: [u32; 3],
+    /// The ray's octant, inverted, as obvhs orders children: bit 2 = x ≥ 0, bit 1 = y ≥ 0, bit 0 = z ≥ 0.
+    octant_inv: u32,
+}
+
+impl BoxRay {
+    fn new(ray: &Ray) -> Self {
+        let d = ray.direction;
+        let safe = |c: f32| if c.abs() < MIN_DIRECTION { MIN_DIRECTION.copysign(c) } else { c };
+        let inv_direction = Vec3::new(1.0 / safe(d.x), 1.0 / safe(d.y), 1.0 / safe(d.z));
+        let negative =
+            [u32::from(inv_direction.x < 0.0), u32::from(inv_direction.y < 0.0), u32::from(inv_direction.z < 0.0)];
+        let octant_inv = ((1 - negative[0]) << 2) | ((1 - negative[1]) << 1) | (1 - negative[2]);
+        Self { origin: ray.origin, inv_direction, negative, octant_inv }
+    }
+
+    /// The hit mask of `node`'s children for this ray within `[tmin, tmax]`.
+    fn intersect(&self, node: &CwBvhNode, tmin: f32, tmax: f32) -> u32 {
+        let e = node.exponents_and_imask;
+        let cell = Vec3::new(
+            f32::from_bits((e & 0xff) << 23),
+            f32::from_bits(((e >> 8) & 0xff) << 23),
+            f32::from_bits(((e >> 16) & 0xff) << 23),
+        );
+        // Slab distance of quantised plane q on an axis: (origin + q·cell − ray origin) / d.
+        let scale = cell * self.inv_direction;
+        let offset = (Vec3::from_array(node.origin) - self.origin) * self.inv_direction;
+        let mut hits = 0;
+        let mut child = 0;
+        while child < 8 {
+            let meta = byte8(node.child_meta, child);
+            if meta != 0 {
+                let near = Vec3::new(
+                    bound(node, self.negative[0], child),
+                    bound(node, 2 + self.negative[1], child),
+                    bound(node, 4 + self.negative[2], child),
+                );
+                let far = Vec3::new(
+                    bound(node, 1 - self.negative[0], child),
+                    bound(node, 3 - self.negative[1], child),
+                    bound(node, 5 - self.negative[2], child),
+                );
+                let t_near = (near * scale + offset).max_element().max(tmin);
+                let t_far = (far * scale + offset).min_element().min(tmax) * FAR_SLACK;
+                if t_near <= t_far {
+                    let is_internal = meta & 0x18 == 0x18;
+                    // Internal children land in bits 24–31, permuted by octant into traversal order.
+                    let bit = if is_internal { (meta & 0x1f) ^ self.octant_inv } else { meta & 0x1f };
+                    hits |= (meta >> 5) << bit;
+                }
+            }
+            child += 1;
+        }
+        hits
+    }
+}
+
+impl CwBvhScene<'_> {
+    fn triangle_hit(&self, ray: &WatertightRay, index: u32, tmin: f32, tmax: f32) -> Option<(f32, glam::Vec2)> {
+        let base = (index * 3) as usize;
+        let v0 = self.vertices[base].xyz();
+        let v1 = self.vertices[base + 1].xyz();
+        let v2 = self.vertices[base + 2].xyz();
+        ray.intersect(v0, v1, v2, tmin, tmax).map(|h| (h.t, h.barycentrics))
+    }
+}
+
+impl ClosestHitQuery for CwBvhScene<'_> {
+    fn closest_hit(&self, ray: &Ray) -> Hit {
+        let box_ray = BoxRay::new(ray);
+        let tri_ray = WatertightRay::new(ray.origin, ray.direction);
+        let mut stack = [UVec2::ZERO; STACK_SIZE];
+        let mut stack_len = 0usize;
+        // Start with a group whose only internal hit is the root (node 0 = first child of group 0).
+        let mut node_group = UVec2::new(0, 0x8000_0000);
+        let mut triangle_group = UVec2::ZERO;
+        let mut best_t = ray.tmax;
+        let mut best_index = u32::MAX;
+        let mut best_barycentrics = glam::Vec2::ZERO;
+        loop {
+            if node_group.y & 0xff00_0000 != 0 {
+                let bit = highest_bit(node_group.y & 0xff00_0000);
+                let imask = node_group.y;
+                node_group.y &= !(1u32 << bit);
+                if node_group.y & 0xff00_0000 != 0 && stack_len < STACK_SIZE {
+                    stack[stack_len] = node_group;
+                    stack_len += 1;
+                }
+                let slot = (bit - 24) ^ box_ray.octant_inv;
+                let child = node_group.x + (imask & 0xff & !(0xffff_ffffu32 << slot)).count_ones();
+                let node = &self.nodes[child as usize];
+                let hits = box_ray.intersect(node, ray.tmin, best_t);
+                node_group = UVec2::new(node.child_base, (hits & 0xff00_0000) | (node.exponents_and_imask >> 24));
+                triangle_group = UVec2::new(node.primitive_base, hits & 0x00ff_ffff);
+            } else {
+                // Groups are only pushed with internal hits left, so this is reached only if the
+                // root group was exhausted; nothing remains to expand.
+                node_group = UVec2::ZERO;
+            }
+            while triangle_group.y != 0 {
+                let bit = highest_bit(triangle_group.y);
+                triangle_group.y &= !(1u32 << bit);
+                let index = triangle_group.x + bit;
+                if let Some((t, barycentrics)) = self.triangle_hit(&tri_ray, index, ray.tmin, best_t) {
+                    if best_index == u32::MAX || t < best_t {
+                        best_t = t;
+                        best_index = index;
+                        best_barycentrics = barycentrics;
+                    }
+                }
+            }
+            if node_group.y & 0xff00_0000 == 0 {
+                if stack_len == 0 {
+                    break;
+                }
+                stack_len -= 1;
+                node_group = stack[stack_len];
+            }
+        }
+        if best_index == u32::MAX {
+            return Hit::MISS;
+        }
+        let id = self.ids[best_index as usize];
+        Hit { t: best_t, primitive: id.y, instance: id.x, barycentrics: best_barycentrics }
+    }
+}
