@@ -3,8 +3,10 @@
 //!
 //! This facade re-exports the three layers — [`shared`] (the host/kernel contract), [`kernels`]
 //! (the stages as plain `no_std` functions) and the host (scenes, CPU executor, Vulkan backend) —
-//! and adds [`render`], the whole-frame job behind `raywave render`.
+//! and adds [`render`], the whole-frame job behind `raywave render`, and [`bench`], the trace
+//! benchmark behind `raywave bench trace`.
 
+pub mod bench;
 pub mod render;
 
 pub use raywave_host::*;

@@ -1,6 +1,7 @@
 //! The `raywave` command-line tool.
 
 use clap::{Parser, Subcommand};
+use raywave::bench::{bench_trace, TraceBenchOptions};
 use raywave::render::{render, RenderOptions};
 use raywave::{BackendOptions, DeviceChoice, TraceMethod};
 use std::path::PathBuf;
@@ -24,6 +25,39 @@ enum Command {
     },
     /// Render a scene through generate → trace and write a normal/depth view as PNG.
     Render(RenderArgs),
+    /// Measure stage throughput.
+    Bench {
+        #[command(subcommand)]
+        stage: BenchStage,
+    },
+}
+
+#[derive(Subcommand)]
+enum BenchStage {
+    /// Trace throughput of raywave (CPU and each Vulkan method) and obvhs on the same rays.
+    Trace(TraceBenchArgs),
+}
+
+#[derive(clap::Args)]
+struct TraceBenchArgs {
+    /// `builtin:cornell`, `builtin:spheres` (1.3 M triangles), `builtin:hairball` or an OBJ file.
+    #[arg(long, default_value = "builtin:spheres")]
+    scene: String,
+    /// CPU threads; default: 1 and all cores.
+    #[arg(long)]
+    threads: Option<usize>,
+    /// Primary rays per side (resolution² camera rays; shadow and diffuse rays start at their hits).
+    #[arg(long, default_value_t = 512)]
+    resolution: u32,
+    /// Timed repetitions per measurement (the median is reported).
+    #[arg(long, default_value_t = 3)]
+    repeats: u32,
+    /// Skip the Vulkan trace methods.
+    #[arg(long)]
+    no_vulkan: bool,
+    /// Print one JSON object per line instead of a table.
+    #[arg(long)]
+    json: bool,
 }
 
 #[derive(clap::Args)]
@@ -60,6 +94,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Devices { json } => devices(json),
         Command::Render(args) => render_command(args),
+        Command::Bench { stage: BenchStage::Trace(args) } => bench_trace_command(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -68,6 +103,20 @@ fn main() -> ExitCode {
             ExitCode::FAILURE
         }
     }
+}
+
+fn bench_trace_command(args: TraceBenchArgs) -> raywave::Result<()> {
+    let cores = std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1);
+    let mut threads = args.threads.map_or_else(|| vec![1, cores], |n| vec![n]);
+    threads.dedup();
+    let options = TraceBenchOptions {
+        scene: args.scene,
+        threads,
+        resolution: args.resolution,
+        repeats: args.repeats,
+        vulkan: !args.no_vulkan,
+    };
+    bench_trace(&options, |line| println!("{}", if args.json { line.json() } else { line.row() }))
 }
 
 fn render_command(args: RenderArgs) -> raywave::Result<()> {

@@ -10,7 +10,7 @@ use obvhs::ray::{Ray as BvhRay, RayHit};
 use obvhs::triangle::Triangle;
 use obvhs::BvhBuildParams;
 use raywave_kernels::trace::cwbvh::{CwBvhScene, STACK_SIZE};
-use raywave_kernels::trace::{ClosestHitQuery, Hit, Ray};
+use raywave_kernels::trace::{ClosestHitQuery, Hit, OcclusionQuery, Ray};
 use raywave_kernels::triangle::WatertightRay;
 use raywave_shared::bvh::CwBvhNode;
 use std::time::{Duration, Instant};
@@ -119,9 +119,30 @@ impl CpuScene {
     }
 }
 
+impl CpuScene {
+    /// Occlusion through obvhs's own early-exit `CwBvh::ray_traverse_miss`, with the same
+    /// watertight test: the reference the benchmarks compare the kernel traversal against.
+    pub fn obvhs_occluded(&self, ray: &Ray) -> bool {
+        let watertight = WatertightRay::new(ray.origin, ray.direction);
+        let bvh_ray = BvhRay::new(ray.origin.into(), ray.direction.into(), ray.tmin, ray.tmax);
+        !self.obvhs.ray_traverse_miss(bvh_ray, |_, slot| {
+            let v = &self.vertices[slot * 3..slot * 3 + 3];
+            watertight
+                .intersect(v[0].truncate(), v[1].truncate(), v[2].truncate(), ray.tmin, ray.tmax)
+                .map_or(f32::INFINITY, |h| h.t)
+        })
+    }
+}
+
 impl ClosestHitQuery for CpuScene {
     fn closest_hit(&self, ray: &Ray) -> Hit {
         self.view().closest_hit(ray)
+    }
+}
+
+impl OcclusionQuery for CpuScene {
+    fn occluded(&self, ray: &Ray) -> bool {
+        self.view().occluded(ray)
     }
 }
 

@@ -10,7 +10,10 @@ use crate::error::{Error, Result};
 use crate::scene::Scene;
 use crate::stream::{HitStream, RayStream};
 use rayon::prelude::*;
-use raywave_kernels::{generate::generate_ray, trace::trace_closest};
+use raywave_kernels::{
+    generate::generate_ray,
+    trace::{trace_closest, trace_occluded},
+};
 use raywave_shared::GenerateParams;
 use std::time::Instant;
 
@@ -60,6 +63,15 @@ pub fn trace(scene: &CpuScene, rays: &RayStream) -> HitStream {
             (*t, *primitive, *instance, *barycentrics) = (hit.t, hit.primitive, hit.instance, hit.barycentrics);
         });
     hits
+}
+
+/// Runs the occlusion variant of the trace stage (shadow rays) over every ray of `rays`: 1 where
+/// the ray is blocked within its interval, 0 where it is not.
+pub fn trace_occlusion(scene: &CpuScene, rays: &RayStream) -> Vec<u32> {
+    (&rays.origin, &rays.direction)
+        .into_par_iter()
+        .map(|(origin, direction)| u32::from(trace_occluded(*origin, *direction, scene)))
+        .collect()
 }
 
 fn timed<T>(stage: &'static str, f: impl FnOnce() -> T) -> (T, StageTiming) {

@@ -101,8 +101,9 @@ pub fn sphere_field(per_axis: u32, subdivisions: u32) -> (Vec<Mesh>, Camera) {
     (meshes, camera)
 }
 
-/// `count` thin random triangles ("hairs", 0.3 long and 0.002 wide, arbitrary orientation) in the
-/// unit cube, seeded by `seed`, and a camera outside the cube: the incoherent-traversal stress case.
+/// `count` thin random triangles ("hairs", 0.05 long and 0.001 wide, arbitrary orientation) in the
+/// unit cube, seeded by `seed`, and a camera outside the cube: the incoherent-traversal stress case
+/// (thin, overlapping, randomly oriented boxes).
 pub fn hairball(count: u32, seed: u32) -> (Vec<Mesh>, Camera) {
     let random3 = |i: u32, stream: u32| {
         let h = pcg3d(UVec3::new(i, stream, seed));
@@ -113,7 +114,7 @@ pub fn hairball(count: u32, seed: u32) -> (Vec<Mesh>, Camera) {
         let root = random3(i, 0);
         let along = (random3(i, 1) * 2.0 - 1.0).normalize_or(Vec3::X);
         let side = along.any_orthonormal_vector();
-        positions.extend([root, root + along * 0.3, root + side * 0.002]);
+        positions.extend([root, root + along * 0.05, root + side * 0.001]);
     }
     let triangles = (0..count).map(|i| [3 * i, 3 * i + 1, 3 * i + 2]).collect();
     let mesh = Mesh { name: "hairball".into(), positions, triangles, albedo: Vec3::splat(0.6), emission: Vec3::ZERO };
@@ -163,6 +164,6 @@ mod tests {
         let (a, _) = hairball(1000, 7);
         let (b, _) = hairball(1000, 7);
         assert_eq!(a, b);
-        assert!(a[0].positions.iter().all(|p| p.cmpge(Vec3::splat(-0.31)).all() && p.cmple(Vec3::splat(1.31)).all()));
+        assert!(a[0].positions.iter().all(|p| p.cmpge(Vec3::splat(-0.06)).all() && p.cmple(Vec3::splat(1.06)).all()));
     }
 }

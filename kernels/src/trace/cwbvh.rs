@@ -6,7 +6,7 @@
 //! child boxes into one 32-bit hit mask, whose high byte lists internal children in front-to-back
 //! order for the ray's octant and whose low 24 bits list the triangles of hit leaves.
 
-use super::{ClosestHitQuery, Hit, Ray};
+use super::{ClosestHitQuery, Hit, OcclusionQuery, Ray};
 use crate::triangle::WatertightRay;
 use glam::{UVec2, Vec3, Vec4, Vec4Swizzles};
 use raywave_shared::bvh::CwBvhNode;
@@ -40,17 +40,37 @@ fn byte8(words: [u32; 2], index: u32) -> u32 {
     (word >> ((index & 3) * 8)) & 0xff
 }
 
-/// Plane `index` (0–7) of child-bounds array `array` (0 = min x … 5 = max z) in grid cells,
-/// moved one cell outwards. The expansion keeps every triangle strictly inside its child box, so a
-/// ray parallel to an axis that lies exactly on a box plane (zero-length slab, `(q − o)·1/d = 0`)
-/// still enters the box; it costs about 1 % larger boxes.
-fn bound(node: &CwBvhNode, array: u32, index: u32) -> f32 {
-    let word = node.child_bounds[(array * 2 + index / 4) as usize];
-    let q = ((word >> ((index & 3) * 8)) & 0xff) as f32;
+/// Planes of four children (word `half` of child-bounds array `array`: 0 = min x … 5 = max z) in
+/// grid cells, moved one cell outwards. The expansion keeps every triangle strictly inside its
+/// child box, so a ray parallel to an axis that lies exactly on a box plane (zero-length slab,
+/// `(q − o)·1/d = 0`) still enters the box; it costs about 1 % larger boxes.
+fn planes(node: &CwBvhNode, array: u32, half: u32) -> Vec4 {
+    let q = unpack_bytes(node.child_bounds[(array * 2 + half) as usize]);
     if array & 1 == 1 {
-        q + 1.0
+        q + Vec4::ONE
     } else {
-        q - 1.0
+        q - Vec4::ONE
+    }
+}
+
+/// The four bytes of `w`, low byte first, as exact floats in [0, 255].
+#[cfg(not(all(target_arch = "x86_64", target_feature = "sse2")))]
+fn unpack_bytes(w: u32) -> Vec4 {
+    Vec4::new((w & 0xff) as f32, ((w >> 8) & 0xff) as f32, ((w >> 16) & 0xff) as f32, (w >> 24) as f32)
+}
+
+/// The four bytes of `w`, low byte first, as exact floats in [0, 255]: the same values as the
+/// portable version, widened in SSE registers (bytes → 16 → 32-bit lanes → floats).
+#[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
+fn unpack_bytes(w: u32) -> Vec4 {
+    use core::arch::x86_64::{
+        _mm_cvtepi32_ps, _mm_cvtsi32_si128, _mm_setzero_si128, _mm_unpacklo_epi16, _mm_unpacklo_epi8,
+    };
+    // SAFETY: these are SSE2 intrinsics, and SSE2 is enabled for this target (see the cfg).
+    unsafe {
+        let zero = _mm_setzero_si128();
+        let lanes = _mm_unpacklo_epi16(_mm_unpacklo_epi8(_mm_cvtsi32_si128(w as i32), zero), zero);
+        Vec4::from(_mm_cvtepi32_ps(lanes))
     }
 }
 
@@ -80,7 +100,8 @@ impl BoxRay {
         Self { origin: ray.origin, inv_direction, negative, octant_inv }
     }
 
-    /// The hit mask of `node`'s children for this ray within `[tmin, tmax]`.
+    /// The hit mask of `node`'s children for this ray within `[tmin, tmax]`. Four children are
+    /// tested at once as `Vec4` lanes (SSE on the CPU, vector instructions in SPIR-V).
     fn intersect(&self, node: &CwBvhNode, tmin: f32, tmax: f32) -> u32 {
         let e = node.exponents_and_imask;
         let cell = Vec3::new(
@@ -92,30 +113,29 @@ impl BoxRay {
         let scale = cell * self.inv_direction;
         let offset = (Vec3::from_array(node.origin) - self.origin) * self.inv_direction;
         let mut hits = 0;
-        let mut child = 0;
-        while child < 8 {
-            let meta = byte8(node.child_meta, child);
-            if meta != 0 {
-                let near = Vec3::new(
-                    bound(node, self.negative[0], child),
-                    bound(node, 2 + self.negative[1], child),
-                    bound(node, 4 + self.negative[2], child),
-                );
-                let far = Vec3::new(
-                    bound(node, 1 - self.negative[0], child),
-                    bound(node, 3 - self.negative[1], child),
-                    bound(node, 5 - self.negative[2], child),
-                );
-                let t_near = (near * scale + offset).max_element().max(tmin);
-                let t_far = (far * scale + offset).min_element().min(tmax) * FAR_SLACK;
-                if t_near <= t_far {
-                    let is_internal = meta & 0x18 == 0x18;
-                    // Internal children land in bits 24–31, permuted by octant into traversal order.
-                    let bit = if is_internal { (meta & 0x1f) ^ self.octant_inv } else { meta & 0x1f };
-                    hits |= (meta >> 5) << bit;
-                }
+        let mut half = 0;
+        while half < 2 {
+            let slab = |axis: u32, near: bool| {
+                // Near plane: the min plane for a positive direction, the max plane otherwise.
+                let max_plane = u32::from(near) ^ (1 - self.negative[axis as usize]);
+                let scale = [scale.x, scale.y, scale.z][axis as usize];
+                let offset = [offset.x, offset.y, offset.z][axis as usize];
+                planes(node, axis * 2 + max_plane, half) * scale + Vec4::splat(offset)
+            };
+            let t_near = slab(0, true).max(slab(1, true)).max(slab(2, true)).max(Vec4::splat(tmin));
+            let t_far = slab(0, false).min(slab(1, false)).min(slab(2, false)).min(Vec4::splat(tmax)) * FAR_SLACK;
+            let mut lanes = t_near.cmple(t_far).bitmask();
+            while lanes != 0 {
+                let child = half * 4 + lanes.trailing_zeros();
+                lanes &= lanes - 1;
+                let meta = byte8(node.child_meta, child);
+                let is_internal = meta & 0x18 == 0x18;
+                // Internal children land in bits 24–31, permuted by octant into traversal order;
+                // leaves set their triangle count (unary, top 3 bits) at their triangle offset.
+                let bit = if is_internal { (meta & 0x1f) ^ self.octant_inv } else { meta & 0x1f };
+                hits |= (meta >> 5) << bit;
             }
-            child += 1;
+            half += 1;
         }
         hits
     }
@@ -131,8 +151,28 @@ impl CwBvhScene<'_> {
     }
 }
 
-impl ClosestHitQuery for CwBvhScene<'_> {
-    fn closest_hit(&self, ray: &Ray) -> Hit {
+/// The closest (or, for any-hit queries, the first found) triangle a traversal reports.
+struct Found {
+    /// Triangle index in BVH order, `u32::MAX` for none.
+    index: u32,
+    t: f32,
+    barycentrics: glam::Vec2,
+    stats: TraversalStats,
+}
+
+/// Work one traversal did: for tests (early exit) and benchmark diagnostics.
+#[derive(Copy, Clone, Debug, Default, PartialEq, Eq)]
+pub struct TraversalStats {
+    /// Nodes whose eight child boxes were tested.
+    pub nodes: u32,
+    /// Ray–triangle tests.
+    pub triangles: u32,
+}
+
+impl CwBvhScene<'_> {
+    /// Walks the tree front to back. With `any_hit` it returns at the first triangle hit in
+    /// `[tmin, tmax]` (occlusion), otherwise it shrinks `tmax` to each closer hit (closest hit).
+    fn traverse(&self, ray: &Ray, any_hit: bool) -> Found {
         let box_ray = BoxRay::new(ray);
         let tri_ray = WatertightRay::new(ray.origin, ray.direction);
         let mut stack = [UVec2::ZERO; STACK_SIZE];
@@ -140,9 +180,8 @@ impl ClosestHitQuery for CwBvhScene<'_> {
         // Start with a group whose only internal hit is the root (node 0 = first child of group 0).
         let mut node_group = UVec2::new(0, 0x8000_0000);
         let mut triangle_group = UVec2::ZERO;
-        let mut best_t = ray.tmax;
-        let mut best_index = u32::MAX;
-        let mut best_barycentrics = glam::Vec2::ZERO;
+        let mut found =
+            Found { index: u32::MAX, t: ray.tmax, barycentrics: glam::Vec2::ZERO, stats: TraversalStats::default() };
         loop {
             if node_group.y & 0xff00_0000 != 0 {
                 let bit = highest_bit(node_group.y & 0xff00_0000);
@@ -155,7 +194,8 @@ impl ClosestHitQuery for CwBvhScene<'_> {
                 let slot = (bit - 24) ^ box_ray.octant_inv;
                 let child = node_group.x + (imask & 0xff & !(0xffff_ffffu32 << slot)).count_ones();
                 let node = &self.nodes[child as usize];
-                let hits = box_ray.intersect(node, ray.tmin, best_t);
+                let hits = box_ray.intersect(node, ray.tmin, found.t);
+                found.stats.nodes += 1;
                 node_group = UVec2::new(node.child_base, (hits & 0xff00_0000) | (node.exponents_and_imask >> 24));
                 triangle_group = UVec2::new(node.primitive_base, hits & 0x00ff_ffff);
             } else {
@@ -167,26 +207,64 @@ impl ClosestHitQuery for CwBvhScene<'_> {
                 let bit = highest_bit(triangle_group.y);
                 triangle_group.y &= !(1u32 << bit);
                 let index = triangle_group.x + bit;
-                if let Some((t, barycentrics)) = self.triangle_hit(&tri_ray, index, ray.tmin, best_t) {
-                    if best_index == u32::MAX || t < best_t {
-                        best_t = t;
-                        best_index = index;
-                        best_barycentrics = barycentrics;
+                found.stats.triangles += 1;
+                if let Some((t, barycentrics)) = self.triangle_hit(&tri_ray, index, ray.tmin, found.t) {
+                    if found.index == u32::MAX || t < found.t {
+                        (found.index, found.t, found.barycentrics) = (index, t, barycentrics);
+                        if any_hit {
+                            return found;
+                        }
                     }
                 }
             }
             if node_group.y & 0xff00_0000 == 0 {
                 if stack_len == 0 {
-                    break;
+                    return found;
                 }
                 stack_len -= 1;
                 node_group = stack[stack_len];
             }
         }
-        if best_index == u32::MAX {
+    }
+}
+
+impl CwBvhScene<'_> {
+    /// The work a closest-hit (`any_hit = false`) or occlusion (`any_hit = true`) query does for
+    /// `ray`.
+    pub fn traversal_stats(&self, ray: &Ray, any_hit: bool) -> TraversalStats {
+        self.traverse(ray, any_hit).stats
+    }
+}
+
+impl ClosestHitQuery for CwBvhScene<'_> {
+    fn closest_hit(&self, ray: &Ray) -> Hit {
+        let found = self.traverse(ray, false);
+        if found.index == u32::MAX {
             return Hit::MISS;
         }
-        let id = self.ids[best_index as usize];
-        Hit { t: best_t, primitive: id.y, instance: id.x, barycentrics: best_barycentrics }
+        let id = self.ids[found.index as usize];
+        Hit { t: found.t, primitive: id.y, instance: id.x, barycentrics: found.barycentrics }
+    }
+}
+
+impl OcclusionQuery for CwBvhScene<'_> {
+    fn occluded(&self, ray: &Ray) -> bool {
+        self.traverse(ray, true).index != u32::MAX
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn byte_unpacking_is_exact_and_low_byte_first() {
+        assert_eq!(unpack_bytes(0x04_03_02_01), Vec4::new(1.0, 2.0, 3.0, 4.0));
+        assert_eq!(unpack_bytes(0xff_00_80_7f), Vec4::new(127.0, 128.0, 0.0, 255.0));
+        for w in [0u32, u32::MAX, 0x1234_5678, 0x8000_0001] {
+            let portable =
+                Vec4::new((w & 0xff) as f32, ((w >> 8) & 0xff) as f32, ((w >> 16) & 0xff) as f32, (w >> 24) as f32);
+            assert_eq!(unpack_bytes(w), portable, "{w:#x}");
+        }
     }
 }

@@ -73,6 +73,20 @@ pub trait ClosestHitQuery {
     fn closest_hit(&self, ray: &Ray) -> Hit;
 }
 
+/// An any-hit (occlusion) query against the scene: implemented by each trace backend.
+pub trait OcclusionQuery {
+    /// Whether any triangle is hit with `t ∈ [tmin, tmax]`, both faces counted. Implementations
+    /// stop at the first hit found.
+    fn occluded(&self, ray: &Ray) -> bool;
+}
+
+/// The occlusion variant of the trace stage for one invocation (shadow rays): whether the ray is
+/// blocked within its interval. Rays that are not traceable report "not occluded", like a miss.
+pub fn trace_occluded<Q: OcclusionQuery>(origin: Vec4, direction: Vec4, query: &Q) -> bool {
+    let ray = Ray::from_stream(origin, direction);
+    ray.is_traceable() && query.occluded(&ray)
+}
+
 /// The trace stage for one invocation: reads the ray at its stream fields and returns its closest
 /// hit. Rays that are not traceable (NaN, Inf, zero direction, bad interval) miss, and a hit whose
 /// values are not finite is written as a miss, so no NaN or Inf leaves the stage.

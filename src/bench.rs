@@ -1,0 +1,279 @@
+//! `raywave bench trace`: trace throughput of every implementation on the same rays and the same
+//! BVH input triangles — raywave's kernel traversal on the CPU, obvhs's own traversal, and each
+//! Vulkan trace method — for primary, shadow (occlusion) and diffuse (incoherent) rays.
+
+use crate::cpu::{self, CpuScene};
+use crate::frame::generate_params;
+use crate::kernels::hash::{pcg3d, unit_float};
+use crate::kernels::offset::offset_ray_origin;
+use crate::kernels::trace::{trace_closest, trace_occluded, Ray};
+use crate::kernels::triangle::geometric_normal;
+use crate::shared::stream::NO_HIT;
+use crate::{Error, RayStream, Result, Scene};
+use glam::{UVec3, Vec3, Vec4Swizzles};
+use rayon::prelude::*;
+use std::time::Instant;
+
+/// What to measure.
+#[derive(Clone, Debug)]
+pub struct TraceBenchOptions {
+    /// `builtin:NAME` or a scene file.
+    pub scene: String,
+    /// CPU thread counts to measure (each ≥ 1).
+    pub threads: Vec<usize>,
+    /// Camera rays per side: `resolution²` primary rays.
+    pub resolution: u32,
+    /// Timed repetitions per measurement; the median is reported.
+    pub repeats: u32,
+    /// Also measure every Vulkan trace method of the best Vulkan device, if there is one.
+    pub vulkan: bool,
+}
+
+/// One measurement, printed as one JSON line.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct Measurement {
+    /// Always `trace` (or `bvh_build` for the build line).
+    pub stage: &'static str,
+    /// `raywave-cpu`, `obvhs`, `raywave-vk-sw`, `raywave-vk-rayquery`.
+    #[serde(rename = "impl")]
+    pub implementation: String,
+    /// `primary`, `shadow` or `diffuse`.
+    pub kind: &'static str,
+    /// CPU threads (1 for Vulkan: the host thread that submits).
+    pub threads: usize,
+    /// Rays traced per repetition.
+    pub rays: usize,
+    /// Median seconds per repetition (Vulkan: GPU timestamps of the dispatch).
+    pub seconds: f64,
+    /// Millions of rays per second.
+    pub mrays_per_s: f64,
+}
+
+/// The BVH build line: build time and memory per triangle.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct BuildMeasurement {
+    /// Always `bvh_build`.
+    pub stage: &'static str,
+    /// Builder and preset.
+    #[serde(rename = "impl")]
+    pub implementation: &'static str,
+    /// Triangles in the scene.
+    pub triangles: usize,
+    /// Wall-clock build seconds (all threads).
+    pub seconds: f64,
+    /// BVH nodes + triangle vertices + ids, bytes per triangle.
+    pub bytes_per_triangle: f64,
+}
+
+/// The three ray sets of one scene.
+struct RaySets {
+    primary: RayStream,
+    shadow: RayStream,
+    diffuse: RayStream,
+}
+
+/// Primary camera rays; from each primary hit, a shadow ray to a point light above the scene and a
+/// cosine-distributed diffuse ray, both from the offset hit point.
+fn ray_sets(scene: &Scene, cpu_scene: &CpuScene, resolution: u32) -> RaySets {
+    let primary = cpu::generate(&generate_params(scene, resolution, resolution, 0, 7));
+    let hits = cpu::trace(cpu_scene, &primary);
+    let (lo, hi) = scene.bounds();
+    let light = Vec3::new((lo.x + hi.x) * 0.5, hi.y + (hi - lo).length() * 0.25, (lo.z + hi.z) * 0.5);
+    let mut shadow = RayStream::default();
+    let mut diffuse = RayStream::default();
+    for i in 0..primary.len() {
+        if hits.primitive[i] == NO_HIT {
+            continue;
+        }
+        let mesh = &scene.meshes()[hits.instance[i] as usize];
+        let [a, b, c] = mesh.triangles[hits.primitive[i] as usize].map(|v| mesh.positions[v as usize]);
+        let bary = hits.barycentrics[i];
+        let p = a * (1.0 - bary.x - bary.y) + b * bary.x + c * bary.y;
+        let view = primary.direction[i].xyz();
+        let mut n = geometric_normal(a, b, c);
+        if n.dot(view) > 0.0 {
+            n = -n;
+        }
+        let origin = offset_ray_origin(p, n);
+        let to_light = light - origin;
+        shadow.origin.push(origin.extend(0.0));
+        shadow.direction.push(to_light.normalize().extend(to_light.length() * (1.0 - 1e-4)));
+        shadow.pixel.push(primary.pixel[i]);
+        let h = pcg3d(UVec3::new(i as u32, 0, 99));
+        let (u1, u2) = (unit_float(h.x), unit_float(h.y));
+        let (r, phi) = (u1.sqrt(), std::f32::consts::TAU * u2);
+        let (t, s) = (n.any_orthonormal_vector(), n.cross(n.any_orthonormal_vector()));
+        let d = t * (r * phi.cos()) + s * (r * phi.sin()) + n * (1.0 - u1).max(0.0).sqrt();
+        diffuse.origin.push(origin.extend(0.0));
+        diffuse.direction.push(d.normalize_or(n).extend(primary.direction[i].w));
+        diffuse.pixel.push(primary.pixel[i]);
+    }
+    RaySets { primary, shadow, diffuse }
+}
+
+/// Median of `repeats` timings of `run`.
+fn median_seconds(repeats: u32, mut run: impl FnMut() -> f64) -> f64 {
+    let mut times: Vec<f64> = (0..repeats.max(1)).map(|_| run()).collect();
+    times.sort_by(f64::total_cmp);
+    times[times.len() / 2]
+}
+
+fn wall(f: impl FnOnce()) -> f64 {
+    let start = Instant::now();
+    f();
+    start.elapsed().as_secs_f64()
+}
+
+fn measurement(implementation: &str, kind: &'static str, threads: usize, rays: usize, seconds: f64) -> Measurement {
+    Measurement {
+        stage: "trace",
+        implementation: implementation.to_owned(),
+        kind,
+        threads,
+        rays,
+        seconds,
+        mrays_per_s: rays as f64 / seconds.max(1e-12) / 1e6,
+    }
+}
+
+/// Runs the trace benchmark; `emit` receives each measurement as soon as it is taken.
+pub fn bench_trace(options: &TraceBenchOptions, mut emit: impl FnMut(&dyn BenchLine)) -> Result<()> {
+    if options.threads.contains(&0) {
+        return Err(Error::InvalidParameter { name: "threads", reason: "thread counts must be at least 1".into() });
+    }
+    let scene = Scene::load(&options.scene)?;
+    let cpu_scene = CpuScene::build(&scene)?;
+    emit(&BuildMeasurement {
+        stage: "bvh_build",
+        implementation: "obvhs-cwbvh-medium",
+        triangles: scene.triangle_count(),
+        seconds: cpu_scene.build_time().as_secs_f64(),
+        bytes_per_triangle: cpu_scene.bytes_per_triangle(),
+    });
+    let sets = ray_sets(&scene, &cpu_scene, options.resolution);
+    let kinds: [(&'static str, &RayStream); 3] =
+        [("primary", &sets.primary), ("shadow", &sets.shadow), ("diffuse", &sets.diffuse)];
+    for &threads in &options.threads {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .map_err(|e| Error::InvalidParameter { name: "threads", reason: e.to_string() })?;
+        for (kind, rays) in kinds {
+            let shadow = kind == "shadow";
+            let raywave = median_seconds(options.repeats, || {
+                pool.install(|| {
+                    wall(|| {
+                        if shadow {
+                            let n = rays
+                                .origin
+                                .par_iter()
+                                .zip(&rays.direction)
+                                .filter(|(o, d)| trace_occluded(**o, **d, &cpu_scene))
+                                .count();
+                            std::hint::black_box(n);
+                        } else {
+                            let n = rays
+                                .origin
+                                .par_iter()
+                                .zip(&rays.direction)
+                                .map(|(o, d)| trace_closest(*o, *d, &cpu_scene).t)
+                                .sum::<f32>();
+                            std::hint::black_box(n);
+                        }
+                    })
+                })
+            });
+            emit(&measurement("raywave-cpu", kind, threads, rays.len(), raywave));
+            let obvhs = median_seconds(options.repeats, || {
+                pool.install(|| {
+                    wall(|| {
+                        let rays_iter =
+                            rays.origin.par_iter().zip(&rays.direction).map(|(o, d)| Ray::from_stream(*o, *d));
+                        if shadow {
+                            std::hint::black_box(rays_iter.filter(|r| cpu_scene.obvhs_occluded(r)).count());
+                        } else {
+                            std::hint::black_box(rays_iter.map(|r| cpu_scene.obvhs_closest_hit(&r).t).sum::<f32>());
+                        }
+                    })
+                })
+            });
+            emit(&measurement("obvhs", kind, threads, rays.len(), obvhs));
+        }
+    }
+    #[cfg(feature = "vulkan")]
+    if options.vulkan {
+        bench_vulkan(options, &scene, &kinds, &mut emit)?;
+    }
+    Ok(())
+}
+
+/// Vulkan trace methods of the best device, closest-hit kinds only (the Vulkan occlusion kernels
+/// come with the shade stage).
+#[cfg(feature = "vulkan")]
+fn bench_vulkan(
+    options: &TraceBenchOptions,
+    scene: &Scene,
+    kinds: &[(&'static str, &RayStream); 3],
+    emit: &mut impl FnMut(&dyn BenchLine),
+) -> Result<()> {
+    use crate::vulkan::{enumerate_devices, ContextOptions, VulkanBackend};
+    use crate::{Backend, TraceMethod};
+    let Ok(devices) = enumerate_devices() else { return Ok(()) };
+    let Ok(index) = crate::device::best_vulkan_device(&devices) else { return Ok(()) };
+    let methods: &[TraceMethod] = if devices[index].missing_for_ray_query().is_empty() {
+        &[TraceMethod::Software, TraceMethod::RayQuery]
+    } else {
+        &[TraceMethod::Software]
+    };
+    for &method in methods {
+        let mut backend = VulkanBackend::open(index, &ContextOptions::default(), Some(method))?;
+        backend.load_scene(scene)?;
+        for &(kind, rays) in kinds.iter().filter(|(k, _)| *k != "shadow") {
+            let mut failure = None;
+            let seconds = median_seconds(options.repeats, || match backend.trace(rays) {
+                Ok((_, timing)) => timing.seconds,
+                Err(e) => {
+                    failure = Some(e);
+                    f64::NAN
+                }
+            });
+            if let Some(e) = failure {
+                return Err(e);
+            }
+            emit(&measurement(&format!("raywave-vk-{}", method.name()), kind, 1, rays.len(), seconds));
+        }
+    }
+    Ok(())
+}
+
+/// A line the benchmark emits, printable as JSON or as a table row.
+pub trait BenchLine {
+    /// The line as one JSON object.
+    fn json(&self) -> String;
+    /// The line as a human-readable table row.
+    fn row(&self) -> String;
+}
+
+impl BenchLine for Measurement {
+    fn json(&self) -> String {
+        serde_json::to_string(self).unwrap_or_default()
+    }
+    fn row(&self) -> String {
+        format!(
+            "{:<20} {:<8} {:>2} threads {:>9} rays {:>9.4} s {:>8.2} Mrays/s",
+            self.implementation, self.kind, self.threads, self.rays, self.seconds, self.mrays_per_s
+        )
+    }
+}
+
+impl BenchLine for BuildMeasurement {
+    fn json(&self) -> String {
+        serde_json::to_string(self).unwrap_or_default()
+    }
+    fn row(&self) -> String {
+        format!(
+            "{:<20} {} triangles built in {:.3} s, {:.1} bytes/triangle",
+            self.implementation, self.triangles, self.seconds, self.bytes_per_triangle
+        )
+    }
+}
