@@ -62,7 +62,7 @@ struct TraceBenchArgs {
 
 #[derive(clap::Args)]
 struct RenderArgs {
-    /// `builtin:cornell` or a path to a Wavefront OBJ file.
+    /// `builtin:cornell|spheres|hairball` or a Wavefront OBJ / glTF 2.0 (.gltf, .glb) file.
     #[arg(long, default_value = "builtin:cornell")]
     scene: String,
     /// `auto` (Vulkan if usable, else CPU), `cpu`, `vulkan` or `vulkan:N`.
@@ -133,7 +133,10 @@ fn render_command(args: RenderArgs) -> raywave::Result<()> {
     };
     let report = render(&options)?;
     println!("backend  {}", report.backend);
-    println!("scene    {} ({} triangles)", options.scene, report.triangles);
+    println!(
+        "scene    {} ({} triangles, {} zero-area dropped)",
+        options.scene, report.triangles, report.dropped_degenerate
+    );
     let rays = u64::from(options.width) * u64::from(options.height);
     println!(
         "image    {}×{} → {} ({} of {rays} rays hit)",

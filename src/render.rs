@@ -31,6 +31,8 @@ pub struct RenderReport {
     pub backend: String,
     /// Triangles in the scene.
     pub triangles: usize,
+    /// Zero-area triangles dropped while loading the scene.
+    pub dropped_degenerate: usize,
     /// Per-stage times.
     pub timings: Vec<StageTiming>,
     /// Rays that hit geometry.
@@ -54,6 +56,7 @@ pub fn render(options: &RenderOptions) -> Result<RenderReport> {
     Ok(RenderReport {
         backend: backend.name(),
         triangles: scene.triangle_count(),
+        dropped_degenerate: scene.dropped_degenerate(),
         hits: frame.hits.primitive.iter().filter(|&&p| p != crate::shared::stream::NO_HIT).count(),
         stream_bytes_per_pixel: (frame.rays.bytes() + frame.hits.bytes()) / u64::from(options.width * options.height),
         timings: frame.timings,

@@ -81,6 +81,18 @@ fn vulkan_and_cpu_renders_agree() {
     assert_eq!(differing, 0, "{differing} pixels differ by more than one step");
 }
 
+#[test]
+fn renders_a_gltf_scene_and_reports_dropped_triangles() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/tetrahedron.gltf");
+    let (out, path) = render(dir.path(), "tetra.png", &["--device", "cpu", "--scene", scene]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(stdout.contains("(4 triangles, 1 zero-area dropped)"), "{stdout}");
+    let image = image::open(&path).unwrap().to_rgb8();
+    assert!(image.pixels().any(|p| p.0 != [0, 0, 0]), "the tetrahedron is in view of the file's camera");
+}
+
 /// Runs a render expected to fail; checks the message mentions `needle` and no file appeared.
 fn assert_rejected(extra: &[&str], needle: &str) {
     let dir = tempfile::tempdir().unwrap();
@@ -104,7 +116,7 @@ fn bad_input_is_a_typed_error_without_output() {
     std::fs::write(&empty, "# no geometry\n").unwrap();
 
     assert_rejected(&["--device", "cpu", "--scene", nan.to_str().unwrap()], "non-finite position");
-    assert_rejected(&["--device", "cpu", "--scene", flat.to_str().unwrap()], "zero area");
+    assert_rejected(&["--device", "cpu", "--scene", flat.to_str().unwrap()], "zero-area triangles dropped");
     assert_rejected(&["--device", "cpu", "--scene", empty.to_str().unwrap()], "no triangles");
     assert_rejected(&["--device", "cpu", "--scene", "/no/such/scene.obj"], "/no/such/scene.obj");
     assert_rejected(&["--device", "cpu", "--scene", "builtin:teapot"], "teapot");

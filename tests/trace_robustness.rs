@@ -195,8 +195,7 @@ fn axis_aligned_grazing_tiny_and_huge_cases() {
             Vec3::new(-1.0, 1.0, 0.0),
         ],
         triangles: vec![[0, 1, 2], [0, 2, 3]],
-        albedo: Vec3::ONE,
-        emission: Vec3::ZERO,
+        material: raywave::scene::Material::diffuse(Vec3::ONE),
     };
     let tiny = Mesh {
         name: "tiny".into(),

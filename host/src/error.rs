@@ -26,11 +26,15 @@ pub enum Error {
         /// Comma-separated list of the built-in scene names.
         available: String,
     },
-    /// The scene has no triangles at all.
-    #[error("scene {scene}: contains no triangles")]
+    /// The scene has no triangle of non-zero area.
+    #[error(
+        "scene {scene}: contains no triangles of non-zero area ({dropped_degenerate} zero-area triangles dropped)"
+    )]
     EmptyScene {
         /// The scene (file path or built-in name).
         scene: String,
+        /// Zero-area triangles that were dropped.
+        dropped_degenerate: usize,
     },
     /// A vertex position is NaN or infinite.
     #[error("scene {scene}: mesh {mesh:?} vertex {vertex} has a non-finite position {position}")]
@@ -43,16 +47,6 @@ pub enum Error {
         vertex: usize,
         /// The offending position, as text.
         position: String,
-    },
-    /// A triangle has zero area.
-    #[error("scene {scene}: mesh {mesh:?} triangle {triangle} has zero area")]
-    DegenerateTriangle {
-        /// The scene (file path or built-in name).
-        scene: String,
-        /// The mesh's name.
-        mesh: String,
-        /// Index of the triangle within the mesh.
-        triangle: usize,
     },
     /// A triangle refers to a vertex that does not exist.
     #[error("scene {scene}: mesh {mesh:?} triangle {triangle} uses vertex {index} but the mesh has {vertex_count}")]

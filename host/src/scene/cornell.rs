@@ -5,28 +5,27 @@
 //! reduced to approximate linear sRGB. The light is lowered 0.1 mm below the ceiling (as most
 //! renderers of the data do) so the two coplanar surfaces do not fight for the same hits.
 
-use super::{Camera, Mesh};
+use super::{Camera, Material, Mesh};
 use glam::Vec3;
 
 /// Millimetres to scene units (metres).
 const MM: f32 = 0.001;
 
 /// A quad given by four corners in millimetres (published order), as two triangles.
-fn quad(name: &str, corners: [[f32; 3]; 4], albedo: Vec3, emission: Vec3) -> Mesh {
+fn quad(name: &str, corners: [[f32; 3]; 4], material: Material) -> Mesh {
     Mesh {
         name: name.to_owned(),
         positions: corners.iter().map(|c| Vec3::from_array(*c) * MM).collect(),
         triangles: vec![[0, 1, 2], [0, 2, 3]],
-        albedo,
-        emission,
+        material,
     }
 }
 
 /// A box given by its five published faces (top and four sides) in millimetres, merged into one mesh.
-fn block(name: &str, faces: [[[f32; 3]; 4]; 5], albedo: Vec3) -> Mesh {
-    let mut mesh = Mesh { name: name.to_owned(), positions: vec![], triangles: vec![], albedo, emission: Vec3::ZERO };
+fn block(name: &str, faces: [[[f32; 3]; 4]; 5], material: Material) -> Mesh {
+    let mut mesh = Mesh { name: name.to_owned(), positions: vec![], triangles: vec![], material };
     for face in faces {
-        let q = quad(name, face, albedo, Vec3::ZERO);
+        let q = quad(name, face, material);
         let base = mesh.positions.len() as u32;
         mesh.positions.extend(q.positions);
         mesh.triangles.extend(q.triangles.iter().map(|t| t.map(|i| i + base)));
@@ -46,30 +45,30 @@ const LIGHT: Vec3 = Vec3::new(17.0, 12.0, 4.0);
 /// short and tall blocks, and the light.
 pub fn meshes() -> Vec<Mesh> {
     vec![
-        quad("floor", [[552.8, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 559.2], [549.6, 0.0, 559.2]], WHITE, Vec3::ZERO),
+        quad(
+            "floor",
+            [[552.8, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 559.2], [549.6, 0.0, 559.2]],
+            Material::diffuse(WHITE),
+        ),
         quad(
             "ceiling",
             [[556.0, 548.8, 0.0], [556.0, 548.8, 559.2], [0.0, 548.8, 559.2], [0.0, 548.8, 0.0]],
-            WHITE,
-            Vec3::ZERO,
+            Material::diffuse(WHITE),
         ),
         quad(
             "back wall",
             [[549.6, 0.0, 559.2], [0.0, 0.0, 559.2], [0.0, 548.8, 559.2], [556.0, 548.8, 559.2]],
-            WHITE,
-            Vec3::ZERO,
+            Material::diffuse(WHITE),
         ),
         quad(
             "right wall",
             [[0.0, 0.0, 559.2], [0.0, 0.0, 0.0], [0.0, 548.8, 0.0], [0.0, 548.8, 559.2]],
-            GREEN,
-            Vec3::ZERO,
+            Material::diffuse(GREEN),
         ),
         quad(
             "left wall",
             [[552.8, 0.0, 0.0], [549.6, 0.0, 559.2], [556.0, 548.8, 559.2], [556.0, 548.8, 0.0]],
-            RED,
-            Vec3::ZERO,
+            Material::diffuse(RED),
         ),
         block(
             "short block",
@@ -80,7 +79,7 @@ pub fn meshes() -> Vec<Mesh> {
                 [[82.0, 0.0, 225.0], [82.0, 165.0, 225.0], [130.0, 165.0, 65.0], [130.0, 0.0, 65.0]],
                 [[240.0, 0.0, 272.0], [240.0, 165.0, 272.0], [82.0, 165.0, 225.0], [82.0, 0.0, 225.0]],
             ],
-            WHITE,
+            Material::diffuse(WHITE),
         ),
         block(
             "tall block",
@@ -91,13 +90,12 @@ pub fn meshes() -> Vec<Mesh> {
                 [[314.0, 0.0, 456.0], [314.0, 330.0, 456.0], [265.0, 330.0, 296.0], [265.0, 0.0, 296.0]],
                 [[265.0, 0.0, 296.0], [265.0, 330.0, 296.0], [423.0, 330.0, 247.0], [423.0, 0.0, 247.0]],
             ],
-            WHITE,
+            Material::diffuse(WHITE),
         ),
         quad(
             "light",
             [[343.0, 548.7, 227.0], [343.0, 548.7, 332.0], [213.0, 548.7, 332.0], [213.0, 548.7, 227.0]],
-            Vec3::ONE,
-            LIGHT,
+            Material { emission: LIGHT, ..Material::diffuse(Vec3::ONE) },
         ),
     ]
 }

@@ -1,6 +1,7 @@
 //! Scenes: triangle meshes with a camera, validated before any stage sees them.
 
 mod cornell;
+mod gltf;
 mod obj;
 pub mod procedural;
 
@@ -17,10 +18,28 @@ pub struct Mesh {
     pub positions: Vec<Vec3>,
     /// Triangles as vertex-index triples, counter-clockwise seen from the front.
     pub triangles: Vec<[u32; 3]>,
-    /// Diffuse reflectance (linear RGB, each in [0, 1]).
-    pub albedo: Vec3,
-    /// Emitted radiance (linear RGB, W·sr⁻¹·m⁻²-like units; zero for non-emitters).
+    /// The surface's material.
+    pub material: Material,
+}
+
+/// A metallic-roughness material (the glTF 2.0 model).
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub struct Material {
+    /// Base colour (linear RGB, each in [0, 1]): diffuse albedo for dielectrics, F0 for metals.
+    pub base_color: Vec3,
+    /// Perceptual roughness in [0, 1].
+    pub roughness: f32,
+    /// Metalness in [0, 1].
+    pub metallic: f32,
+    /// Emitted radiance (linear RGB; zero for non-emitters).
     pub emission: Vec3,
+}
+
+impl Material {
+    /// A rough, non-metallic, non-emissive surface of the given albedo.
+    pub const fn diffuse(albedo: Vec3) -> Self {
+        Self { base_color: albedo, roughness: 1.0, metallic: 0.0, emission: Vec3::ZERO }
+    }
 }
 
 /// A pinhole camera.
@@ -43,6 +62,7 @@ pub struct Scene {
     name: String,
     meshes: Vec<Mesh>,
     camera: Camera,
+    dropped_degenerate: usize,
 }
 
 /// Names of the built-in scenes, usable as `builtin:NAME`: the Cornell box, a field of 64
@@ -50,7 +70,8 @@ pub struct Scene {
 pub const BUILTIN_SCENES: &[&str] = &["cornell", "spheres", "hairball"];
 
 impl Scene {
-    /// Loads a scene: `builtin:NAME` for a built-in scene, otherwise a path to a Wavefront OBJ file.
+    /// Loads a scene: `builtin:NAME` for a built-in scene, otherwise a path to a Wavefront OBJ
+    /// (`.obj`) or glTF 2.0 (`.gltf`, `.glb`) file.
     pub fn load(spec: &str) -> Result<Scene> {
         match spec.strip_prefix("builtin:") {
             Some("cornell") => Scene::new("builtin:cornell", cornell::meshes(), cornell::camera()),
@@ -65,16 +86,45 @@ impl Scene {
             Some(name) => {
                 Err(Error::UnknownBuiltinScene { name: name.to_owned(), available: BUILTIN_SCENES.join(", ") })
             }
-            None => obj::load(Path::new(spec)),
+            None => {
+                let path = Path::new(spec);
+                match path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).as_deref() {
+                    Some("obj") => obj::load(path),
+                    Some("gltf" | "glb") => gltf::load(path),
+                    _ => Err(Error::SceneLoad {
+                        path: path.to_owned(),
+                        message: "unsupported scene format (expected .obj, .gltf or .glb)".into(),
+                    }),
+                }
+            }
         }
     }
 
     /// Builds a scene from meshes and a camera after validating every vertex and triangle.
-    /// `name` identifies the scene in error messages (a file path or `builtin:NAME`).
-    pub fn new(name: &str, meshes: Vec<Mesh>, camera: Camera) -> Result<Scene> {
-        let scene = Scene { name: name.to_owned(), meshes, camera };
+    /// `name` identifies the scene in error messages (a file path or `builtin:NAME`). Zero-area
+    /// triangles are dropped and counted ([`Scene::dropped_degenerate`]), and meshes left empty
+    /// are removed; a non-finite vertex, an out-of-range index, a degenerate camera or a scene
+    /// without any triangle of non-zero area is an error.
+    pub fn new(name: &str, mut meshes: Vec<Mesh>, camera: Camera) -> Result<Scene> {
+        check_indices_and_vertices(name, &meshes)?;
+        let before: usize = meshes.iter().map(|m| m.triangles.len()).sum();
+        for mesh in &mut meshes {
+            let positions = &mesh.positions;
+            mesh.triangles.retain(|t| {
+                let [a, b, c] = t.map(|i| positions[i as usize]);
+                (b - a).cross(c - a) != Vec3::ZERO
+            });
+        }
+        meshes.retain(|m| !m.triangles.is_empty());
+        let scene = Scene { name: name.to_owned(), meshes, camera, dropped_degenerate: 0 };
+        let scene = Scene { dropped_degenerate: before - scene.triangle_count(), ..scene };
         scene.validate()?;
         Ok(scene)
+    }
+
+    /// Zero-area triangles removed when the scene was built.
+    pub fn dropped_degenerate(&self) -> usize {
+        self.dropped_degenerate
     }
 
     /// The scene's name (file path or `builtin:NAME`).
@@ -111,43 +161,16 @@ impl Scene {
     }
 
     fn validate(&self) -> Result<()> {
-        let scene = || self.name.clone();
         if self.triangle_count() == 0 {
-            return Err(Error::EmptyScene { scene: scene() });
+            return Err(Error::EmptyScene { scene: self.name.clone(), dropped_degenerate: self.dropped_degenerate });
         }
         if u32::try_from(self.triangle_count()).is_err() || u32::try_from(self.meshes.len()).is_err() {
-            return Err(Error::SceneTooLarge { scene: scene(), what: "the triangle count".into() });
-        }
-        for mesh in &self.meshes {
-            if let Some((vertex, p)) = mesh.positions.iter().enumerate().find(|(_, p)| !p.is_finite()) {
-                return Err(Error::NonFiniteVertex {
-                    scene: scene(),
-                    mesh: mesh.name.clone(),
-                    vertex,
-                    position: p.to_string(),
-                });
-            }
-            for (triangle, indices) in mesh.triangles.iter().enumerate() {
-                if let Some(&index) = indices.iter().find(|&&i| i as usize >= mesh.positions.len()) {
-                    return Err(Error::IndexOutOfRange {
-                        scene: scene(),
-                        mesh: mesh.name.clone(),
-                        triangle,
-                        index,
-                        vertex_count: mesh.positions.len(),
-                    });
-                }
-                let [a, b, c] = indices.map(|i| mesh.positions[i as usize]);
-                if (b - a).cross(c - a) == Vec3::ZERO {
-                    return Err(Error::DegenerateTriangle { scene: scene(), mesh: mesh.name.clone(), triangle });
-                }
-            }
+            return Err(Error::SceneTooLarge { scene: self.name.clone(), what: "the triangle count".into() });
         }
         let c = &self.camera;
         let fov_ok = c.vertical_fov_degrees > 0.0 && c.vertical_fov_degrees < 180.0;
-        let view = c.look_at - c.position;
         let finite = c.position.is_finite() && c.look_at.is_finite() && c.up.is_finite();
-        if !(finite && fov_ok) || view.cross(c.up) == Vec3::ZERO {
+        if !(finite && fov_ok) || (c.look_at - c.position).cross(c.up) == Vec3::ZERO {
             return Err(Error::InvalidParameter {
                 name: "camera",
                 reason: format!("{}: degenerate camera {c:?}", self.name),
@@ -157,12 +180,55 @@ impl Scene {
     }
 }
 
+/// Checks every vertex is finite and every index is in range, naming the first offender.
+fn check_indices_and_vertices(scene: &str, meshes: &[Mesh]) -> Result<()> {
+    for mesh in meshes {
+        if let Some((vertex, p)) = mesh.positions.iter().enumerate().find(|(_, p)| !p.is_finite()) {
+            return Err(Error::NonFiniteVertex {
+                scene: scene.to_owned(),
+                mesh: mesh.name.clone(),
+                vertex,
+                position: p.to_string(),
+            });
+        }
+        for (triangle, indices) in mesh.triangles.iter().enumerate() {
+            if let Some(&index) = indices.iter().find(|&&i| i as usize >= mesh.positions.len()) {
+                return Err(Error::IndexOutOfRange {
+                    scene: scene.to_owned(),
+                    mesh: mesh.name.clone(),
+                    triangle,
+                    index,
+                    vertex_count: mesh.positions.len(),
+                });
+            }
+        }
+    }
+    Ok(())
+}
+
+/// A camera on the +z side of the bounds' centre that sees the whole bounding sphere with a 45°
+/// vertical field of view. Non-finite bounds are left for validation to report.
+pub(crate) fn framing_camera(meshes: &[Mesh]) -> Camera {
+    let (lo, hi) = meshes
+        .iter()
+        .flat_map(|m| m.positions.iter())
+        .fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(lo, hi), p| (lo.min(*p), hi.max(*p)));
+    let centre = (lo + hi) * 0.5;
+    let radius = ((hi - lo).length() * 0.5).max(1e-3);
+    let fov = 45.0f32;
+    let distance = radius / (fov.to_radians() * 0.5).sin();
+    let position = centre + Vec3::Z * distance;
+    let position = if position.is_finite() { position } else { Vec3::Z };
+    let centre = if centre.is_finite() { centre } else { Vec3::ZERO };
+    Camera { position, look_at: centre, up: Vec3::Y, vertical_fov_degrees: fov }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
 
     fn triangle_mesh(positions: Vec<Vec3>, triangles: Vec<[u32; 3]>) -> Mesh {
-        Mesh { name: "m".into(), positions, triangles, albedo: Vec3::ONE, emission: Vec3::ZERO }
+        Mesh { name: "m".into(), positions, triangles, material: Material::diffuse(Vec3::ONE) }
     }
 
     fn unit_triangle() -> Vec<Vec3> {
@@ -188,7 +254,10 @@ mod tests {
 
     #[test]
     fn empty_scene_is_rejected() {
-        assert!(matches!(scene_with(triangle_mesh(vec![], vec![])), Err(Error::EmptyScene { .. })));
+        assert!(matches!(
+            scene_with(triangle_mesh(vec![], vec![])),
+            Err(Error::EmptyScene { dropped_degenerate: 0, .. })
+        ));
     }
 
     #[test]
@@ -202,9 +271,11 @@ mod tests {
     }
 
     #[test]
-    fn zero_area_and_out_of_range_triangles_are_rejected() {
-        let err = scene_with(triangle_mesh(unit_triangle(), vec![[0, 1, 2], [0, 1, 1]])).unwrap_err();
-        assert!(matches!(err, Error::DegenerateTriangle { triangle: 1, .. }), "{err}");
+    fn zero_area_triangles_are_dropped_and_counted_and_out_of_range_ones_rejected() {
+        let scene = scene_with(triangle_mesh(unit_triangle(), vec![[0, 1, 2], [0, 1, 1], [2, 2, 2]])).unwrap();
+        assert_eq!((scene.triangle_count(), scene.dropped_degenerate()), (1, 2));
+        let err = scene_with(triangle_mesh(unit_triangle(), vec![[0, 1, 1]])).unwrap_err();
+        assert!(matches!(err, Error::EmptyScene { dropped_degenerate: 1, .. }), "{err}");
         let err = scene_with(triangle_mesh(unit_triangle(), vec![[0, 1, 3]])).unwrap_err();
         assert!(matches!(err, Error::IndexOutOfRange { index: 3, vertex_count: 3, .. }), "{err}");
     }

@@ -1,7 +1,7 @@
 //! Wavefront OBJ scenes (through the `tobj` crate): every OBJ model becomes a mesh, materials are
 //! ignored for now (grey albedo), and the camera frames the scene's bounds.
 
-use super::{Camera, Mesh, Scene};
+use super::{framing_camera, Material, Mesh, Scene};
 use crate::error::{Error, Result};
 use glam::Vec3;
 use std::path::Path;
@@ -21,30 +21,12 @@ pub fn load(path: &Path) -> Result<Scene> {
             name: if model.name.is_empty() { format!("mesh {i}") } else { model.name },
             positions: model.mesh.positions.chunks_exact(3).map(|p| Vec3::new(p[0], p[1], p[2])).collect(),
             triangles: model.mesh.indices.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect(),
-            albedo: DEFAULT_ALBEDO,
-            emission: Vec3::ZERO,
+            material: Material::diffuse(DEFAULT_ALBEDO),
         })
         .collect();
     let name = path.display().to_string();
     let camera = framing_camera(&meshes);
     Scene::new(&name, meshes, camera)
-}
-
-/// A camera on the +z side of the bounds' centre that sees the whole bounding sphere with a 45°
-/// vertical field of view. Non-finite bounds are left for validation to report.
-fn framing_camera(meshes: &[Mesh]) -> Camera {
-    let (lo, hi) = meshes
-        .iter()
-        .flat_map(|m| m.positions.iter())
-        .fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(lo, hi), p| (lo.min(*p), hi.max(*p)));
-    let centre = (lo + hi) * 0.5;
-    let radius = ((hi - lo).length() * 0.5).max(1e-3);
-    let fov = 45.0f32;
-    let distance = radius / (fov.to_radians() * 0.5).sin();
-    let position = centre + Vec3::Z * distance;
-    let position = if position.is_finite() { position } else { Vec3::Z };
-    let centre = if centre.is_finite() { centre } else { Vec3::ZERO };
-    Camera { position, look_at: centre, up: Vec3::Y, vertical_fov_degrees: fov }
 }
 
 #[cfg(test)]
@@ -79,7 +61,7 @@ mod tests {
         let err = load(f.path()).unwrap_err();
         assert!(matches!(err, Error::NonFiniteVertex { vertex: 2, .. }), "{err}");
         let f = obj_file("v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n");
-        assert!(matches!(load(f.path()).unwrap_err(), Error::DegenerateTriangle { triangle: 0, .. }));
+        assert!(matches!(load(f.path()).unwrap_err(), Error::EmptyScene { dropped_degenerate: 1, .. }));
     }
 
     #[test]

@@ -1,7 +1,7 @@
 //! Procedural scenes for tests and benchmarks: closed icospheres, a field of spheres with over a
 //! million triangles, and a "hairball" of thin random triangles for incoherent traversal.
 
-use super::{Camera, Mesh};
+use super::{Camera, Material, Mesh};
 use glam::{UVec3, Vec3};
 use raywave_kernels::hash::{pcg3d, unit_float};
 use std::collections::HashMap;
@@ -72,8 +72,7 @@ pub fn icosphere(name: &str, centre: Vec3, radius: f32, subdivisions: u32, albed
         name: name.to_owned(),
         positions: unit.iter().map(|&p| centre + p * radius).collect(),
         triangles,
-        albedo,
-        emission: Vec3::ZERO,
+        material: Material::diffuse(albedo),
     }
 }
 
@@ -117,7 +116,7 @@ pub fn hairball(count: u32, seed: u32) -> (Vec<Mesh>, Camera) {
         positions.extend([root, root + along * 0.05, root + side * 0.001]);
     }
     let triangles = (0..count).map(|i| [3 * i, 3 * i + 1, 3 * i + 2]).collect();
-    let mesh = Mesh { name: "hairball".into(), positions, triangles, albedo: Vec3::splat(0.6), emission: Vec3::ZERO };
+    let mesh = Mesh { name: "hairball".into(), positions, triangles, material: Material::diffuse(Vec3::splat(0.6)) };
     let camera = Camera {
         position: Vec3::new(0.5, 0.5, -1.6),
         look_at: Vec3::splat(0.5),
