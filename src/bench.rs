@@ -27,6 +27,8 @@ pub struct TraceBenchOptions {
     pub repeats: u32,
     /// Also measure every Vulkan trace method of the best Vulkan device, if there is one.
     pub vulkan: bool,
+    /// obvhs build preset of the BVH that raywave and obvhs both traverse.
+    pub bvh: crate::cpu::BvhQuality,
 }
 
 /// One measurement, printed as one JSON line.
@@ -34,7 +36,7 @@ pub struct TraceBenchOptions {
 pub struct Measurement {
     /// Always `trace` (or `bvh_build` for the build line).
     pub stage: &'static str,
-    /// `raywave-cpu`, `obvhs`, `raywave-vk-sw`, `raywave-vk-rayquery`.
+    /// `raywave-cpu`, `obvhs`, `embree`, `raywave-vk-sw`, `raywave-vk-rayquery`.
     #[serde(rename = "impl")]
     pub implementation: String,
     /// `primary`, `shadow` or `diffuse`.
@@ -56,12 +58,13 @@ pub struct BuildMeasurement {
     pub stage: &'static str,
     /// Builder and preset.
     #[serde(rename = "impl")]
-    pub implementation: &'static str,
+    pub implementation: String,
     /// Triangles in the scene.
     pub triangles: usize,
     /// Wall-clock build seconds (all threads).
     pub seconds: f64,
-    /// BVH nodes + triangle vertices + ids, bytes per triangle.
+    /// BVH nodes + triangle vertices + ids, bytes per triangle (NaN, printed as null, where the
+    /// library does not report its memory).
     pub bytes_per_triangle: f64,
 }
 
@@ -142,14 +145,27 @@ pub fn bench_trace(options: &TraceBenchOptions, mut emit: impl FnMut(&dyn BenchL
         return Err(Error::InvalidParameter { name: "threads", reason: "thread counts must be at least 1".into() });
     }
     let scene = Scene::load(&options.scene)?;
-    let cpu_scene = CpuScene::build(&scene)?;
+    let cpu_scene = CpuScene::build_with(&scene, options.bvh)?;
     emit(&BuildMeasurement {
         stage: "bvh_build",
-        implementation: "obvhs-cwbvh-medium",
+        implementation: format!("obvhs-cwbvh-{}", options.bvh.name()),
         triangles: scene.triangle_count(),
         seconds: cpu_scene.build_time().as_secs_f64(),
         bytes_per_triangle: cpu_scene.bytes_per_triangle(),
     });
+    #[cfg(feature = "embree")]
+    let embree = {
+        let start = Instant::now();
+        let embree = crate::embree::EmbreeScene::build(&scene)?;
+        emit(&BuildMeasurement {
+            stage: "bvh_build",
+            implementation: "embree-high".into(),
+            triangles: scene.triangle_count(),
+            seconds: start.elapsed().as_secs_f64(),
+            bytes_per_triangle: f64::NAN,
+        });
+        embree
+    };
     let sets = ray_sets(&scene, &cpu_scene, options.resolution);
     let kinds: [(&'static str, &RayStream); 3] =
         [("primary", &sets.primary), ("shadow", &sets.shadow), ("diffuse", &sets.diffuse)];
@@ -198,6 +214,23 @@ pub fn bench_trace(options: &TraceBenchOptions, mut emit: impl FnMut(&dyn BenchL
                 })
             });
             emit(&measurement("obvhs", kind, threads, rays.len(), obvhs));
+            #[cfg(feature = "embree")]
+            {
+                let seconds = median_seconds(options.repeats, || {
+                    pool.install(|| {
+                        wall(|| {
+                            let rays_iter =
+                                rays.origin.par_iter().zip(&rays.direction).map(|(o, d)| Ray::from_stream(*o, *d));
+                            if shadow {
+                                std::hint::black_box(rays_iter.filter(|r| embree.occluded(r)).count());
+                            } else {
+                                std::hint::black_box(rays_iter.map(|r| embree.closest_hit(&r).t).sum::<f32>());
+                            }
+                        })
+                    })
+                });
+                emit(&measurement("embree", kind, threads, rays.len(), seconds));
+            }
         }
     }
     #[cfg(feature = "vulkan")]

@@ -7,6 +7,8 @@
 //! benchmark behind `raywave bench trace`.
 
 pub mod bench;
+#[cfg(feature = "embree")]
+pub mod embree;
 pub mod render;
 
 pub use raywave_host::*;

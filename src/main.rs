@@ -55,6 +55,9 @@ struct TraceBenchArgs {
     /// Skip the Vulkan trace methods.
     #[arg(long)]
     no_vulkan: bool,
+    /// obvhs build preset of the BVH: fast, medium or slow.
+    #[arg(long, default_value = "medium")]
+    bvh: String,
     /// Print one JSON object per line instead of a table.
     #[arg(long)]
     json: bool,
@@ -115,6 +118,7 @@ fn bench_trace_command(args: TraceBenchArgs) -> raywave::Result<()> {
         resolution: args.resolution,
         repeats: args.repeats,
         vulkan: !args.no_vulkan,
+        bvh: args.bvh.parse()?,
     };
     bench_trace(&options, |line| println!("{}", if args.json { line.json() } else { line.row() }))
 }

@@ -8,7 +8,7 @@
 //! breaks ties consistently; SPIR-V cannot assume `Float64`). Both faces are hit, matching Vulkan
 //! ray query without culling flags.
 
-use glam::{Vec2, Vec3};
+use glam::{Vec2, Vec3, Vec3A};
 
 /// The component of `v` along `axis` (0 = x, 1 = y, otherwise z), written as a branch so it
 /// compiles to SPIR-V without dynamic vector indexing.
@@ -30,18 +30,28 @@ pub struct TriangleHit {
     pub barycentrics: Vec2,
 }
 
-/// A ray prepared for the watertight test: the per-ray shear and axis permutation, computed once
-/// and reused for every triangle the ray meets.
+/// A ray prepared for the watertight test: the paper's axis permutation and shear, computed once
+/// per ray and reused for every triangle it meets.
+///
+/// The permutation and shear are folded into one 3×3 matrix whose rows are
+/// `e_kx − S_x·e_kz`, `e_ky − S_y·e_kz` and `S_z·e_kz`: every entry is 1, 0, −S_x, −S_y or S_z,
+/// so `M·(v − o)` (SIMD columns on the CPU) rounds exactly like the paper's scalar
+/// `A[kx] − S_x·A[kz]` — one rounded product and one rounded sum per component, the other terms
+/// exact — without branching on the axis indices per triangle.
 #[derive(Copy, Clone, Debug)]
 pub struct WatertightRay {
-    origin: Vec3,
-    /// Axis permutation: `kz` is the dominant axis of the direction, `kx`, `ky` the others, swapped
-    /// when the direction along `kz` is negative to keep the triangle winding.
-    kx: u32,
-    ky: u32,
-    kz: u32,
-    /// Shear constants (S_x, S_y, S_z) of the paper.
-    shear: Vec3,
+    origin: Vec3A,
+    /// Columns of the shear matrix.
+    columns: [Vec3A; 3],
+}
+
+/// Unit vector along `axis` (0 = x, 1 = y, otherwise z).
+fn unit(axis: u32) -> Vec3A {
+    match axis {
+        0 => Vec3A::X,
+        1 => Vec3A::Y,
+        _ => Vec3A::Z,
+    }
 }
 
 impl WatertightRay {
@@ -62,39 +72,51 @@ impl WatertightRay {
         let mut kx = if kz == 2 { 0 } else { kz + 1 };
         let mut ky = if kx == 2 { 0 } else { kx + 1 };
         let dz = component(direction, kz);
+        // Swap to keep the winding when the dominant direction component is negative.
         if dz < 0.0 {
             core::mem::swap(&mut kx, &mut ky);
         }
-        let shear = Vec3::new(component(direction, kx) / dz, component(direction, ky) / dz, 1.0 / dz);
-        Self { origin, kx, ky, kz, shear }
+        let (sx, sy, sz) = (component(direction, kx) / dz, component(direction, ky) / dz, 1.0 / dz);
+        let rows = [unit(kx) - sx * unit(kz), unit(ky) - sy * unit(kz), sz * unit(kz)];
+        let columns = [
+            Vec3A::new(rows[0].x, rows[1].x, rows[2].x),
+            Vec3A::new(rows[0].y, rows[1].y, rows[2].y),
+            Vec3A::new(rows[0].z, rows[1].z, rows[2].z),
+        ];
+        Self { origin: Vec3A::from(origin), columns }
+    }
+
+    /// A vertex in the ray's sheared frame: (x, y) on the plane the ray pierces at the origin,
+    /// z the scaled distance along the ray.
+    fn transform(&self, v: Vec3A) -> Vec3A {
+        let d = v - self.origin;
+        self.columns[0] * d.x + self.columns[1] * d.y + self.columns[2] * d.z
     }
 
     /// Intersects the triangle `(v0, v1, v2)`; returns the hit if its parameter lies in
     /// `[tmin, tmax]` (both inclusive, as Vulkan's ray query) and the triangle is not degenerate as
     /// seen from the ray.
     pub fn intersect(&self, v0: Vec3, v1: Vec3, v2: Vec3, tmin: f32, tmax: f32) -> Option<TriangleHit> {
-        let a = v0 - self.origin;
-        let b = v1 - self.origin;
-        let c = v2 - self.origin;
-        let (az, bz, cz) = (component(a, self.kz), component(b, self.kz), component(c, self.kz));
-        let ax = component(a, self.kx) - self.shear.x * az;
-        let ay = component(a, self.ky) - self.shear.y * az;
-        let bx = component(b, self.kx) - self.shear.x * bz;
-        let by = component(b, self.ky) - self.shear.y * bz;
-        let cx = component(c, self.kx) - self.shear.x * cz;
-        let cy = component(c, self.ky) - self.shear.y * cz;
+        self.intersect_a(Vec3A::from(v0), Vec3A::from(v1), Vec3A::from(v2), tmin, tmax)
+    }
+
+    /// [`intersect`](Self::intersect) on SIMD-aligned vertices.
+    pub fn intersect_a(&self, v0: Vec3A, v1: Vec3A, v2: Vec3A, tmin: f32, tmax: f32) -> Option<TriangleHit> {
+        let a = self.transform(v0);
+        let b = self.transform(v1);
+        let c = self.transform(v2);
 
         // Scaled barycentrics: edge functions opposite v0, v1, v2.
-        let u = cx * by - cy * bx;
-        let v = ax * cy - ay * cx;
-        let w = bx * ay - by * ax;
+        let u = c.x * b.y - c.y * b.x;
+        let v = a.x * c.y - a.y * c.x;
+        let w = b.x * a.y - b.y * a.x;
         let outside = (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0);
         let det = u + v + w;
         if outside || det == 0.0 {
             return None;
         }
 
-        let t_scaled = u * self.shear.z * az + v * self.shear.z * bz + w * self.shear.z * cz;
+        let t_scaled = u * a.z + v * b.z + w * c.z;
         // Compare t·|det| against the range without dividing, sign-corrected for back faces.
         let det_abs = det.abs();
         let t_scaled_abs = if det < 0.0 { -t_scaled } else { t_scaled };

@@ -15,6 +15,50 @@ use raywave_kernels::triangle::WatertightRay;
 use raywave_shared::bvh::CwBvhNode;
 use std::time::{Duration, Instant};
 
+/// obvhs's CWBVH build presets (`BvhBuildParams`), from fastest build to best trees.
+#[derive(Copy, Clone, Debug, PartialEq, Eq, Default)]
+pub enum BvhQuality {
+    /// `fast_build`: low PLOC search distance, little reinsertion.
+    Fast,
+    /// `medium_build`: obvhs's "about Embree's build time" preset.
+    #[default]
+    Medium,
+    /// `slow_build`: high search distance, more reinsertion, pre-splitting of large triangles.
+    Slow,
+}
+
+impl BvhQuality {
+    /// The preset's name on the command line and in reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Fast => "fast",
+            Self::Medium => "medium",
+            Self::Slow => "slow",
+        }
+    }
+
+    fn params(self) -> BvhBuildParams {
+        match self {
+            Self::Fast => BvhBuildParams::fast_build(),
+            Self::Medium => BvhBuildParams::medium_build(),
+            Self::Slow => BvhBuildParams::slow_build(),
+        }
+    }
+}
+
+impl std::str::FromStr for BvhQuality {
+    type Err = Error;
+
+    fn from_str(s: &str) -> Result<Self> {
+        match s {
+            "fast" => Ok(Self::Fast),
+            "medium" => Ok(Self::Medium),
+            "slow" => Ok(Self::Slow),
+            _ => Err(Error::InvalidParameter { name: "bvh", reason: format!("{s:?}: expected fast, medium or slow") }),
+        }
+    }
+}
+
 /// A scene prepared for software tracing: CWBVH nodes, triangle vertices in BVH leaf order (three
 /// `Vec4` each) and the (instance, primitive) ids a Vulkan TLAS/BLAS pair would report.
 pub struct CpuScene {
@@ -27,9 +71,15 @@ pub struct CpuScene {
 }
 
 impl CpuScene {
-    /// Builds the CWBVH with obvhs's "medium" preset (its default quality/build-time trade-off).
-    /// Fails if the tree is deeper than the kernels' traversal stack.
+    /// Builds the CWBVH with the default preset ([`BvhQuality::default`]). Fails if the tree is
+    /// deeper than the kernels' traversal stack.
     pub fn build(scene: &Scene) -> Result<Self> {
+        Self::build_with(scene, BvhQuality::default())
+    }
+
+    /// Builds the CWBVH with obvhs preset `quality`. Spatial splits (the slow preset) may reference
+    /// a triangle from several leaves; it is then stored once per reference.
+    pub fn build_with(scene: &Scene, quality: BvhQuality) -> Result<Self> {
         let start = Instant::now();
         let mut flat = Vec::with_capacity(scene.triangle_count());
         let mut ids = Vec::with_capacity(scene.triangle_count());
@@ -41,7 +91,7 @@ impl CpuScene {
             }
         }
         let mut core_time = Duration::ZERO;
-        let obvhs = build_cwbvh_from_tris(&flat, BvhBuildParams::medium_build(), &mut core_time);
+        let obvhs = build_cwbvh_from_tris(&flat, quality.params(), &mut core_time);
         let nodes: Vec<CwBvhNode> = bytemuck::cast_slice(&obvhs.nodes).to_vec();
         let depth = tree_depth(&nodes);
         if depth >= STACK_SIZE as u32 {

@@ -3,7 +3,7 @@
 
 mod bvh;
 
-pub use bvh::CpuScene;
+pub use bvh::{BvhQuality, CpuScene};
 
 use crate::backend::{check_image_size_common, Backend, FrameOutput, StageTiming};
 use crate::error::{Error, Result};

@@ -8,7 +8,7 @@
 
 use super::{ClosestHitQuery, Hit, OcclusionQuery, Ray};
 use crate::triangle::WatertightRay;
-use glam::{UVec2, Vec3, Vec4, Vec4Swizzles};
+use glam::{UVec2, Vec3, Vec3A, Vec4};
 use raywave_shared::bvh::CwBvhNode;
 
 /// Traversal stack depth. obvhs's CWBVH builder keeps trees shallower than 32 levels (its
@@ -144,10 +144,10 @@ impl BoxRay {
 impl CwBvhScene<'_> {
     fn triangle_hit(&self, ray: &WatertightRay, index: u32, tmin: f32, tmax: f32) -> Option<(f32, glam::Vec2)> {
         let base = (index * 3) as usize;
-        let v0 = self.vertices[base].xyz();
-        let v1 = self.vertices[base + 1].xyz();
-        let v2 = self.vertices[base + 2].xyz();
-        ray.intersect(v0, v1, v2, tmin, tmax).map(|h| (h.t, h.barycentrics))
+        let v0 = Vec3A::from_vec4(self.vertices[base]);
+        let v1 = Vec3A::from_vec4(self.vertices[base + 1]);
+        let v2 = Vec3A::from_vec4(self.vertices[base + 2]);
+        ray.intersect_a(v0, v1, v2, tmin, tmax).map(|h| (h.t, h.barycentrics))
     }
 }
 
