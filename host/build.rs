@@ -33,7 +33,8 @@ mod spirv {
     }
 
     /// Kernels that need no ray-tracing capability come from `base`, so they run on every Vulkan
-    /// 1.2 device; entry points behind the kernels' `ray-query` feature come from `ray-query`.
+    /// 1.2 device; entry points behind the kernels' `ray-query` and `ray-tracing` features come from
+    /// the variant that enables them.
     const VARIANTS: &[Variant] = &[
         Variant { name: "base", capabilities: &[], extensions: &[], features: &[] },
         Variant {
@@ -41,6 +42,12 @@ mod spirv {
             capabilities: &[Capability::RayQueryKHR],
             extensions: &["SPV_KHR_ray_query"],
             features: &["ray-query"],
+        },
+        Variant {
+            name: "ray-tracing",
+            capabilities: &[Capability::RayTracingKHR],
+            extensions: &["SPV_KHR_ray_tracing"],
+            features: &["ray-tracing"],
         },
     ];
 

@@ -36,7 +36,7 @@ pub struct TraceBenchOptions {
 pub struct Measurement {
     /// Always `trace` (or `bvh_build` for the build line).
     pub stage: &'static str,
-    /// `raywave-cpu`, `obvhs`, `embree`, `raywave-vk-sw`, `raywave-vk-rayquery`.
+    /// `raywave-cpu`, `obvhs`, `embree`, `raywave-vk-sw`, `raywave-vk-rayquery`, `raywave-vk-rtpipe`.
     #[serde(rename = "impl")]
     pub implementation: String,
     /// `primary`, `shadow` or `diffuse`.
@@ -253,12 +253,14 @@ fn bench_vulkan(
     use crate::{Backend, TraceMethod};
     let Ok(devices) = enumerate_devices() else { return Ok(()) };
     let Ok(index) = crate::device::best_vulkan_device(&devices) else { return Ok(()) };
-    let methods: &[TraceMethod] = if devices[index].missing_for_ray_query().is_empty() {
-        &[TraceMethod::Software, TraceMethod::RayQuery]
-    } else {
-        &[TraceMethod::Software]
-    };
-    for &method in methods {
+    let device = &devices[index];
+    let methods = [
+        (TraceMethod::Software, true),
+        (TraceMethod::RayQuery, device.missing_for_ray_query().is_empty()),
+        (TraceMethod::RtPipeline, device.missing_for_rt_pipeline().is_empty()),
+    ];
+    let methods: Vec<TraceMethod> = methods.iter().filter(|(_, available)| *available).map(|(m, _)| *m).collect();
+    for method in methods {
         let mut backend = VulkanBackend::open(index, &ContextOptions::default(), Some(method))?;
         backend.load_scene(scene)?;
         for &(kind, rays) in kinds.iter().filter(|(k, _)| *k != "shadow") {

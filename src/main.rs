@@ -71,8 +71,8 @@ struct RenderArgs {
     /// `auto` (Vulkan if usable, else CPU), `cpu`, `vulkan` or `vulkan:N`.
     #[arg(long, default_value = "auto")]
     device: String,
-    /// Trace method: `sw` (CWBVH traversal in the kernels) or `rayquery`; default: ray query where
-    /// the device has it, else software.
+    /// Trace method: `sw` (CWBVH traversal in the kernels), `rayquery` or `rtpipe` (ray-tracing
+    /// pipeline); default: ray query, else the ray-tracing pipeline, else software.
     #[arg(long)]
     trace: Option<String>,
     /// Image width in pixels.

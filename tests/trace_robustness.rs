@@ -68,7 +68,7 @@ fn trace_on_vulkan(test: &str, scene: &Scene, rays: &RayStream) -> Vec<Traced> {
             device.load_scene(scene).expect("scene loads");
             let (hits, _) = device.trace(rays).expect("trace runs");
             common::vulkan::assert_clean(&device);
-            let driver_intersection = device.trace_method() == raywave::TraceMethod::RayQuery;
+            let driver_intersection = device.trace_method() != raywave::TraceMethod::Software;
             Traced { backend: device.name(), driver_intersection, hits }
         })
         .collect()

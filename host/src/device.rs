@@ -1,5 +1,5 @@
 //! Choosing a backend from a user's device string (`auto`, `cpu`, `vulkan` or `vulkan:N`) and trace
-//! method (`sw` or `rayquery`).
+//! method (`sw`, `rayquery` or `rtpipe`).
 
 use crate::backend::Backend;
 use crate::cpu::CpuBackend;
@@ -43,6 +43,9 @@ pub enum TraceMethod {
     Software,
     /// `VK_KHR_ray_query` against a BLAS/TLAS (Vulkan devices that expose it).
     RayQuery,
+    /// A `VK_KHR_ray_tracing_pipeline` raygen shader against a BLAS/TLAS (devices with
+    /// ray-tracing pipelines but no ray query, e.g. NVIDIA data-center GPUs).
+    RtPipeline,
 }
 
 impl TraceMethod {
@@ -51,6 +54,7 @@ impl TraceMethod {
         match self {
             Self::Software => "sw",
             Self::RayQuery => "rayquery",
+            Self::RtPipeline => "rtpipe",
         }
     }
 }
@@ -62,7 +66,11 @@ impl FromStr for TraceMethod {
         match s {
             "sw" => Ok(Self::Software),
             "rayquery" => Ok(Self::RayQuery),
-            _ => Err(Error::InvalidParameter { name: "trace", reason: format!("{s:?}: expected sw or rayquery") }),
+            "rtpipe" => Ok(Self::RtPipeline),
+            _ => Err(Error::InvalidParameter {
+                name: "trace",
+                reason: format!("{s:?}: expected sw, rayquery or rtpipe"),
+            }),
         }
     }
 }
@@ -72,7 +80,8 @@ impl FromStr for TraceMethod {
 pub struct BackendOptions {
     /// Enable the Vulkan validation layers (required to be installed) and record their messages.
     pub validation: bool,
-    /// The trace method; `None` picks the best the backend has (ray query where available).
+    /// The trace method; `None` picks the best the backend has (ray query, else the ray-tracing
+    /// pipeline, else software traversal).
     pub trace: Option<TraceMethod>,
 }
 
@@ -152,6 +161,7 @@ mod tests {
     fn parses_trace_methods_and_rejects_hardware_methods_on_the_cpu() {
         assert_eq!("sw".parse::<TraceMethod>().unwrap(), TraceMethod::Software);
         assert_eq!("rayquery".parse::<TraceMethod>().unwrap(), TraceMethod::RayQuery);
+        assert_eq!("rtpipe".parse::<TraceMethod>().unwrap(), TraceMethod::RtPipeline);
         assert!("rtx".parse::<TraceMethod>().is_err());
         let options = BackendOptions { validation: false, trace: Some(TraceMethod::RayQuery) };
         let result = open_backend(DeviceChoice::Cpu, &options);

@@ -102,3 +102,75 @@ mod tests {
         assert_eq!(stream_index(UVec3::new(7, 1, 0), groups), 3 * WORKGROUP_SIZE + 7);
     }
 }
+
+/// Ray generation shader of the trace stage for `VK_KHR_ray_tracing_pipeline` (GPUs without ray
+/// query): one launch per ray over a 2-D launch grid, the same stream bindings as
+/// `trace_ray_query`, the closest hit found by the fixed-function traversal.
+#[cfg(all(target_arch = "spirv", feature = "ray-tracing"))]
+#[spirv(ray_generation)]
+#[allow(clippy::too_many_arguments)]
+pub fn trace_raygen(
+    #[spirv(launch_id)] launch_id: UVec3,
+    #[spirv(launch_size)] launch_size: UVec3,
+    #[spirv(push_constant)] params: &raywave_shared::TraceParams,
+    #[spirv(descriptor_set = 0, binding = 0)] tlas: &spirv_std::ray_tracing::AccelerationStructure,
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 1)] ray_origin: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 2)] ray_direction: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 3)] hit_t: &mut [f32],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 4)] hit_primitive: &mut [u32],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 5)] hit_instance: &mut [u32],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 6)] hit_barycentrics: &mut [glam::Vec2],
+    #[spirv(ray_payload)] payload: &mut crate::trace::Hit,
+) {
+    use crate::trace::{sanitize, Hit, Ray};
+    let i = (launch_id.y * launch_size.x + launch_id.x) as usize;
+    if i < params.ray_count as usize {
+        let ray = Ray::from_stream(ray_origin[i], ray_direction[i]);
+        let hit = if ray.is_traceable() {
+            *payload = Hit::MISS;
+            // SAFETY: `tlas` is a valid acceleration structure bound by the host, the ray is
+            // traceable, and `payload` lives in the ray-payload storage class.
+            unsafe {
+                tlas.trace_ray(
+                    spirv_std::ray_tracing::RayFlags::OPAQUE,
+                    0xff,
+                    0,
+                    0,
+                    0,
+                    ray.origin,
+                    ray.tmin,
+                    ray.direction,
+                    ray.tmax,
+                    payload,
+                );
+            }
+            sanitize(*payload)
+        } else {
+            Hit::MISS
+        };
+        hit_t[i] = hit.t;
+        hit_primitive[i] = hit.primitive;
+        hit_instance[i] = hit.instance;
+        hit_barycentrics[i] = hit.barycentrics;
+    }
+}
+
+/// Miss shader of the ray-tracing-pipeline trace: the ray hit nothing.
+#[cfg(all(target_arch = "spirv", feature = "ray-tracing"))]
+#[spirv(miss)]
+pub fn trace_miss(#[spirv(incoming_ray_payload)] payload: &mut crate::trace::Hit) {
+    *payload = crate::trace::Hit::MISS;
+}
+
+/// Closest-hit shader of the ray-tracing-pipeline trace: records t, ids and barycentrics.
+#[cfg(all(target_arch = "spirv", feature = "ray-tracing"))]
+#[spirv(closest_hit)]
+pub fn trace_closest_hit(
+    #[spirv(incoming_ray_payload)] payload: &mut crate::trace::Hit,
+    #[spirv(hit_attribute)] barycentrics: &mut glam::Vec2,
+    #[spirv(ray_tmax)] t: f32,
+    #[spirv(primitive_id)] primitive: u32,
+    #[spirv(instance_id)] instance: u32,
+) {
+    *payload = crate::trace::Hit { t, primitive, instance, barycentrics: *barycentrics };
+}

@@ -34,7 +34,7 @@ pub mod vulkan {
     use raywave::TraceMethod;
 
     /// Opens every Vulkan device once per trace method it supports (software everywhere, ray
-    /// query where exposed), with validation layers on. Without devices this SKIPs loudly (fails
+    /// query and the ray-tracing pipeline where exposed), with validation layers on. Without devices this SKIPs loudly (fails
     /// under CI). Validation is required under CI; elsewhere it is used when installed.
     pub fn every_device(test: &str) -> Vec<VulkanBackend> {
         let devices = match enumerate_devices() {
@@ -53,6 +53,9 @@ pub mod vulkan {
             backends.push(open(device, TraceMethod::Software));
             if device.missing_for_ray_query().is_empty() {
                 backends.push(open(device, TraceMethod::RayQuery));
+            }
+            if device.missing_for_rt_pipeline().is_empty() {
+                backends.push(open(device, TraceMethod::RtPipeline));
             }
         }
         backends

@@ -4,7 +4,9 @@
 use super::accel::{build_scene, SceneAccel};
 use super::buffer::GpuBuffer;
 use super::context::{open, ContextOptions, Core, DeviceInfo};
-use super::kernel::{dispatch_grid, ComputeKernel, Resource};
+use super::kernel::{dispatch_grid, ComputeKernel};
+use super::pass::Resource;
+use super::rt_pipeline::RtPipelineKernel;
 use crate::backend::{check_image_size_common, Backend, FrameOutput, StageTiming};
 use crate::cpu::CpuScene;
 use crate::device::TraceMethod;
@@ -100,14 +102,21 @@ fn stream_len(len: usize) -> Result<u32> {
 enum DeviceScene {
     /// CWBVH nodes and triangles for the software traversal kernel.
     Software { nodes: GpuBuffer, vertices: GpuBuffer, ids: GpuBuffer },
-    /// BLAS/TLAS for ray query.
-    RayQuery(SceneAccel),
+    /// BLAS/TLAS for ray query and the ray-tracing pipeline.
+    Accelerated(SceneAccel),
+}
+
+/// The trace stage's pipeline: a compute kernel (software traversal, ray query) or a
+/// ray-tracing pipeline.
+enum TraceKernel {
+    Compute(ComputeKernel),
+    RtPipeline(RtPipelineKernel),
 }
 
 /// A Vulkan device running raywave's stages.
 pub struct VulkanBackend {
     generate: ComputeKernel,
-    trace: ComputeKernel,
+    trace: TraceKernel,
     trace_method: TraceMethod,
     scene: Option<DeviceScene>,
     core: Arc<Core>,
@@ -118,7 +127,9 @@ fn trace_bindings(method: TraceMethod) -> Vec<(u32, vk::DescriptorType)> {
     let storage = vk::DescriptorType::STORAGE_BUFFER;
     let scene = match method {
         TraceMethod::Software => (bindings::trace::NODES, storage),
-        TraceMethod::RayQuery => (bindings::trace::TLAS, vk::DescriptorType::ACCELERATION_STRUCTURE_KHR),
+        TraceMethod::RayQuery | TraceMethod::RtPipeline => {
+            (bindings::trace::TLAS, vk::DescriptorType::ACCELERATION_STRUCTURE_KHR)
+        }
     };
     let mut layout = vec![
         scene,
@@ -138,18 +149,26 @@ fn trace_bindings(method: TraceMethod) -> Vec<(u32, vk::DescriptorType)> {
 
 impl VulkanBackend {
     /// Opens Vulkan device `index` and builds its pipelines. `trace` picks the trace method;
-    /// `None` takes ray query where the device has it and software traversal elsewhere. A method
-    /// the device lacks is [`Error::MissingFeatures`].
+    /// `None` takes ray query where the device has it, else the ray-tracing pipeline, else
+    /// software traversal. A method the device lacks is [`Error::MissingFeatures`].
     pub fn open(index: usize, options: &ContextOptions, trace: Option<TraceMethod>) -> Result<Self> {
         let core = open(index, options)?;
-        let ray_query_missing = core.info.missing_for_ray_query();
-        let trace_method =
-            trace.unwrap_or(if ray_query_missing.is_empty() { TraceMethod::RayQuery } else { TraceMethod::Software });
-        if trace_method == TraceMethod::RayQuery && !ray_query_missing.is_empty() {
+        let missing = |method: TraceMethod| match method {
+            TraceMethod::Software => Vec::new(),
+            TraceMethod::RayQuery => core.info.missing_for_ray_query(),
+            TraceMethod::RtPipeline => core.info.missing_for_rt_pipeline(),
+        };
+        let trace_method = trace.unwrap_or_else(|| {
+            [TraceMethod::RayQuery, TraceMethod::RtPipeline]
+                .into_iter()
+                .find(|&m| missing(m).is_empty())
+                .unwrap_or(TraceMethod::Software)
+        });
+        if !missing(trace_method).is_empty() {
             return Err(Error::MissingFeatures {
                 device: core.info.name.clone(),
-                stage: "trace (rayquery)".into(),
-                missing: ray_query_missing,
+                stage: format!("trace ({})", trace_method.name()),
+                missing: missing(trace_method),
             });
         }
         let storage = vk::DescriptorType::STORAGE_BUFFER;
@@ -163,12 +182,17 @@ impl VulkanBackend {
             ],
             std::mem::size_of::<GenerateParams>() as u32,
         )?;
-        let entry = match trace_method {
-            TraceMethod::Software => "entry::trace_cwbvh",
-            TraceMethod::RayQuery => "entry::trace_ray_query",
+        let push = std::mem::size_of::<TraceParams>() as u32;
+        let layout = trace_bindings(trace_method);
+        let trace = match trace_method {
+            TraceMethod::Software => {
+                TraceKernel::Compute(ComputeKernel::new(&core, "entry::trace_cwbvh", &layout, push)?)
+            }
+            TraceMethod::RayQuery => {
+                TraceKernel::Compute(ComputeKernel::new(&core, "entry::trace_ray_query", &layout, push)?)
+            }
+            TraceMethod::RtPipeline => TraceKernel::RtPipeline(RtPipelineKernel::new(&core, &layout, push)?),
         };
-        let trace =
-            ComputeKernel::new(&core, entry, &trace_bindings(trace_method), std::mem::size_of::<TraceParams>() as u32)?;
         Ok(Self { generate, trace, trace_method, scene: None, core })
     }
 
@@ -230,7 +254,7 @@ impl VulkanBackend {
             Resource::Buffer(&hits.barycentrics),
         ];
         let resources: Vec<Resource> = match scene {
-            DeviceScene::RayQuery(accel) => {
+            DeviceScene::Accelerated(accel) => {
                 std::iter::once(Resource::AccelerationStructure(accel.tlas.handle)).chain(streams).collect()
             }
             DeviceScene::Software { nodes, vertices, ids } => std::iter::once(Resource::Buffer(nodes))
@@ -238,7 +262,11 @@ impl VulkanBackend {
                 .chain([Resource::Buffer(vertices), Resource::Buffer(ids)])
                 .collect(),
         };
-        let seconds = self.trace.dispatch(&resources, bytemuck::bytes_of(&params), rays.len)?;
+        let push = bytemuck::bytes_of(&params);
+        let seconds = match &self.trace {
+            TraceKernel::Compute(kernel) => kernel.dispatch(&resources, push, rays.len)?,
+            TraceKernel::RtPipeline(kernel) => kernel.trace(&resources, push, rays.len)?,
+        };
         Ok((hits, StageTiming { stage: "trace", seconds }))
     }
 }
@@ -255,7 +283,9 @@ impl Backend for VulkanBackend {
     fn load_scene(&mut self, scene: &Scene) -> Result<()> {
         self.scene = None;
         self.scene = Some(match self.trace_method {
-            TraceMethod::RayQuery => DeviceScene::RayQuery(build_scene(&self.core, scene)?),
+            TraceMethod::RayQuery | TraceMethod::RtPipeline => {
+                DeviceScene::Accelerated(build_scene(&self.core, scene)?)
+            }
             TraceMethod::Software => {
                 let cpu = CpuScene::build(scene)?;
                 DeviceScene::Software {

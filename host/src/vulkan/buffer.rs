@@ -78,6 +78,20 @@ impl GpuBuffer {
         Ok(buffer)
     }
 
+    /// Copies `bytes` into a host-visible buffer at byte `offset`.
+    pub fn write_bytes(&mut self, offset: usize, bytes: &[u8]) -> Result<()> {
+        let mapped = self.mapped_mut()?;
+        let end = offset + bytes.len();
+        if end > mapped.len() {
+            return Err(Error::InvalidParameter {
+                name: "offset",
+                reason: format!("write to {end} past {}", mapped.len()),
+            });
+        }
+        mapped[offset..end].copy_from_slice(bytes);
+        Ok(())
+    }
+
     fn mapped_mut(&mut self) -> Result<&mut [u8]> {
         self.allocation
             .as_mut()

@@ -56,6 +56,25 @@ impl DeviceInfo {
         need(self.buffer_device_address, "bufferDeviceAddress");
         missing
     }
+
+    /// What the ray-tracing-pipeline trace stage needs and this device lacks (empty when it can run).
+    pub fn missing_for_rt_pipeline(&self) -> Vec<String> {
+        let mut missing = self.missing_for_ray_query();
+        missing.retain(|m| !m.starts_with("VK_KHR_ray_query"));
+        if !self.ray_tracing_pipeline {
+            missing.push("VK_KHR_ray_tracing_pipeline (rayTracingPipeline)".to_owned());
+        }
+        missing
+    }
+}
+
+/// Shader-binding-table sizes of `VK_KHR_ray_tracing_pipeline`, bytes.
+#[derive(Copy, Clone, Debug, Default)]
+pub(crate) struct RtPipelineProperties {
+    pub handle_size: u32,
+    pub handle_alignment: u32,
+    pub base_alignment: u32,
+    pub max_dispatch_invocations: u32,
 }
 
 /// How to open a Vulkan device.
@@ -78,6 +97,8 @@ pub(crate) struct Core {
     pub queue_family: u32,
     pub allocator: ManuallyDrop<Mutex<Allocator>>,
     pub acceleration_structure: Option<ash::khr::acceleration_structure::Device>,
+    pub ray_tracing_pipeline: Option<ash::khr::ray_tracing_pipeline::Device>,
+    pub rt_properties: RtPipelineProperties,
     pub info: DeviceInfo,
     pub limits: vk::PhysicalDeviceLimits,
     /// `minAccelerationStructureScratchOffsetAlignment`, bytes.
@@ -296,7 +317,7 @@ pub(crate) fn open(index: usize, options: &ContextOptions) -> Result<Arc<Core>> 
         }
     };
     match create_device(&instance, physical, index) {
-        Ok((device, queue_family, info, limits, scratch_alignment)) => {
+        Ok((device, queue_family, info, limits, scratch_alignment, rt_properties)) => {
             // SAFETY: queue family `queue_family` with one queue was requested at device creation.
             let queue = unsafe { device.get_device_queue(queue_family, 0) };
             let allocator = Allocator::new(&AllocatorCreateDesc {
@@ -318,6 +339,10 @@ pub(crate) fn open(index: usize, options: &ContextOptions) -> Result<Arc<Core>> 
             };
             let acceleration_structure =
                 info.acceleration_structure.then(|| ash::khr::acceleration_structure::Device::new(&instance, &device));
+            let ray_tracing_pipeline = info
+                .missing_for_rt_pipeline()
+                .is_empty()
+                .then(|| ash::khr::ray_tracing_pipeline::Device::new(&instance, &device));
             Ok(Arc::new(Core {
                 _entry: entry,
                 instance,
@@ -328,6 +353,8 @@ pub(crate) fn open(index: usize, options: &ContextOptions) -> Result<Arc<Core>> 
                 queue_family,
                 allocator: ManuallyDrop::new(Mutex::new(allocator)),
                 acceleration_structure,
+                ray_tracing_pipeline,
+                rt_properties,
                 info,
                 limits,
                 scratch_alignment,
@@ -340,7 +367,7 @@ pub(crate) fn open(index: usize, options: &ContextOptions) -> Result<Arc<Core>> 
     }
 }
 
-type CreatedDevice = (ash::Device, u32, DeviceInfo, vk::PhysicalDeviceLimits, u64);
+type CreatedDevice = (ash::Device, u32, DeviceInfo, vk::PhysicalDeviceLimits, u64, RtPipelineProperties);
 
 fn create_device(instance: &ash::Instance, physical: vk::PhysicalDevice, index: usize) -> Result<CreatedDevice> {
     let info = describe(instance, physical, index)?;
@@ -375,12 +402,17 @@ fn create_device(instance: &ash::Instance, physical: vk::PhysicalDevice, index: 
         if info.ray_query {
             extensions.push(ash::khr::ray_query::NAME.as_ptr());
         }
+        let rt_pipeline = info.missing_for_rt_pipeline().is_empty();
+        if rt_pipeline {
+            extensions.push(ash::khr::ray_tracing_pipeline::NAME.as_ptr());
+        }
         let mut v12 = vk::PhysicalDeviceVulkan12Features::default()
             .buffer_device_address(info.buffer_device_address)
             .vulkan_memory_model(true);
         let mut as_features =
             vk::PhysicalDeviceAccelerationStructureFeaturesKHR::default().acceleration_structure(true);
         let mut rq_features = vk::PhysicalDeviceRayQueryFeaturesKHR::default().ray_query(true);
+        let mut rtp_features = vk::PhysicalDeviceRayTracingPipelineFeaturesKHR::default().ray_tracing_pipeline(true);
         let mut create = vk::DeviceCreateInfo::default()
             .queue_create_infos(&queues)
             .enabled_extension_names(&extensions)
@@ -391,6 +423,9 @@ fn create_device(instance: &ash::Instance, physical: vk::PhysicalDevice, index: 
         if info.ray_query {
             create = create.push_next(&mut rq_features);
         }
+        if rt_pipeline {
+            create = create.push_next(&mut rtp_features);
+        }
         let device = instance.create_device(physical, &create, None).map_err(vk_error("vkCreateDevice"))?;
         let limits = instance.get_physical_device_properties(physical).limits;
         let mut as_props = vk::PhysicalDeviceAccelerationStructurePropertiesKHR::default();
@@ -399,6 +434,18 @@ fn create_device(instance: &ash::Instance, physical: vk::PhysicalDevice, index: 
             instance.get_physical_device_properties2(physical, &mut props2);
         }
         let scratch_alignment = u64::from(as_props.min_acceleration_structure_scratch_offset_alignment.max(1));
-        Ok((device, queue_family, info, limits, scratch_alignment))
+        let mut rt_properties = RtPipelineProperties::default();
+        if rt_pipeline {
+            let mut rtp_props = vk::PhysicalDeviceRayTracingPipelinePropertiesKHR::default();
+            let mut props2 = vk::PhysicalDeviceProperties2::default().push_next(&mut rtp_props);
+            instance.get_physical_device_properties2(physical, &mut props2);
+            rt_properties = RtPipelineProperties {
+                handle_size: rtp_props.shader_group_handle_size,
+                handle_alignment: rtp_props.shader_group_handle_alignment,
+                base_alignment: rtp_props.shader_group_base_alignment,
+                max_dispatch_invocations: rtp_props.max_ray_dispatch_invocation_count,
+            };
+        }
+        Ok((device, queue_family, info, limits, scratch_alignment, rt_properties))
     }
 }

@@ -7,6 +7,8 @@ mod backend;
 mod buffer;
 mod context;
 mod kernel;
+mod pass;
+mod rt_pipeline;
 pub mod spirv;
 
 pub use backend::VulkanBackend;

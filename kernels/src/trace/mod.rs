@@ -95,7 +95,11 @@ pub fn trace_closest<Q: ClosestHitQuery>(origin: Vec4, direction: Vec4, query: &
     if !ray.is_traceable() {
         return Hit::MISS;
     }
-    let hit = query.closest_hit(&ray);
+    sanitize(query.closest_hit(&ray))
+}
+
+/// A hit as it may leave the stage: one whose values are not all finite becomes a miss.
+pub fn sanitize(hit: Hit) -> Hit {
     if hit.t.is_finite() && hit.barycentrics.is_finite() {
         hit
     } else {

@@ -1,0 +1,225 @@
+//! What every raywave pipeline shares, compute or ray tracing: descriptor set 0 laid out from the
+//! shared binding numbers, a push-constant range, and a timestamped one-shot submission.
+
+use super::buffer::{submit_and_wait, GpuBuffer};
+use super::context::{vk_error, Core};
+use crate::error::{Error, Result};
+use ash::vk;
+use std::sync::Arc;
+use std::time::Instant;
+
+/// A resource bound to one binding of a pass's descriptor set.
+pub(crate) enum Resource<'a> {
+    /// A storage buffer.
+    Buffer(&'a GpuBuffer),
+    /// A top-level acceleration structure.
+    AccelerationStructure(vk::AccelerationStructureKHR),
+}
+
+/// A pipeline with its layout, descriptor set and timestamp queries; destroyed on drop.
+pub(crate) struct Pass {
+    pub core: Arc<Core>,
+    /// Entry point(s), for error messages.
+    pub name: &'static str,
+    bind_point: vk::PipelineBindPoint,
+    stages: vk::ShaderStageFlags,
+    set_layout: vk::DescriptorSetLayout,
+    pub pipeline_layout: vk::PipelineLayout,
+    /// Set by the pipeline kind after creation; null until then.
+    pub pipeline: vk::Pipeline,
+    descriptor_pool: vk::DescriptorPool,
+    descriptor_set: vk::DescriptorSet,
+    query_pool: vk::QueryPool,
+    bindings: Vec<(u32, vk::DescriptorType)>,
+}
+
+impl Drop for Pass {
+    fn drop(&mut self) {
+        // SAFETY: the device is idle after every submission; these objects are owned by `self`
+        // (null handles are ignored by the destroy calls).
+        unsafe {
+            let d = &self.core.device;
+            d.destroy_query_pool(self.query_pool, None);
+            d.destroy_descriptor_pool(self.descriptor_pool, None);
+            d.destroy_pipeline(self.pipeline, None);
+            d.destroy_pipeline_layout(self.pipeline_layout, None);
+            d.destroy_descriptor_set_layout(self.set_layout, None);
+        }
+    }
+}
+
+impl Pass {
+    /// Creates the layout objects for descriptor set 0 = `bindings`, visible to `stages`, and
+    /// `push_constant_bytes` of push constants. The caller then creates `pipeline`.
+    pub fn new(
+        core: &Arc<Core>,
+        name: &'static str,
+        bind_point: vk::PipelineBindPoint,
+        stages: vk::ShaderStageFlags,
+        bindings: &[(u32, vk::DescriptorType)],
+        push_constant_bytes: u32,
+    ) -> Result<Self> {
+        let d = &core.device;
+        // Every object is stored in `pass` as soon as it exists, so Drop cleans up on error.
+        let mut pass = Self {
+            core: core.clone(),
+            name,
+            bind_point,
+            stages,
+            set_layout: vk::DescriptorSetLayout::null(),
+            pipeline_layout: vk::PipelineLayout::null(),
+            pipeline: vk::Pipeline::null(),
+            descriptor_pool: vk::DescriptorPool::null(),
+            descriptor_set: vk::DescriptorSet::null(),
+            query_pool: vk::QueryPool::null(),
+            bindings: bindings.to_vec(),
+        };
+        let layout_bindings: Vec<_> = bindings
+            .iter()
+            .map(|&(binding, ty)| {
+                vk::DescriptorSetLayoutBinding::default()
+                    .binding(binding)
+                    .descriptor_type(ty)
+                    .descriptor_count(1)
+                    .stage_flags(stages)
+            })
+            .collect();
+        let mut pool_sizes: Vec<vk::DescriptorPoolSize> = Vec::new();
+        for &(_, ty) in bindings {
+            match pool_sizes.iter_mut().find(|s| s.ty == ty) {
+                Some(s) => s.descriptor_count += 1,
+                None => pool_sizes.push(vk::DescriptorPoolSize { ty, descriptor_count: 1 }),
+            }
+        }
+        // SAFETY: all create infos borrow locals that outlive the calls; created objects are
+        // recorded in `pass` and destroyed by its Drop.
+        unsafe {
+            pass.set_layout = d
+                .create_descriptor_set_layout(
+                    &vk::DescriptorSetLayoutCreateInfo::default().bindings(&layout_bindings),
+                    None,
+                )
+                .map_err(vk_error("vkCreateDescriptorSetLayout"))?;
+            let set_layouts = [pass.set_layout];
+            let push_ranges = [vk::PushConstantRange::default().stage_flags(stages).size(push_constant_bytes)];
+            pass.pipeline_layout = d
+                .create_pipeline_layout(
+                    &vk::PipelineLayoutCreateInfo::default()
+                        .set_layouts(&set_layouts)
+                        .push_constant_ranges(&push_ranges),
+                    None,
+                )
+                .map_err(vk_error("vkCreatePipelineLayout"))?;
+            pass.descriptor_pool = d
+                .create_descriptor_pool(
+                    &vk::DescriptorPoolCreateInfo::default().max_sets(1).pool_sizes(&pool_sizes),
+                    None,
+                )
+                .map_err(vk_error("vkCreateDescriptorPool"))?;
+            pass.descriptor_set = d
+                .allocate_descriptor_sets(
+                    &vk::DescriptorSetAllocateInfo::default()
+                        .descriptor_pool(pass.descriptor_pool)
+                        .set_layouts(&set_layouts),
+                )
+                .map_err(vk_error("vkAllocateDescriptorSets"))?[0];
+            pass.query_pool = d
+                .create_query_pool(
+                    &vk::QueryPoolCreateInfo::default().query_type(vk::QueryType::TIMESTAMP).query_count(2),
+                    None,
+                )
+                .map_err(vk_error("vkCreateQueryPool"))?;
+        }
+        Ok(pass)
+    }
+
+    /// A shader module from the embedded SPIR-V of `entry`; the caller destroys it.
+    pub fn shader_module(&self, entry: &str) -> Result<vk::ShaderModule> {
+        let spirv = super::spirv::module(entry)?;
+        let code = ash::util::read_spv(&mut std::io::Cursor::new(spirv))
+            .map_err(|e| Error::Vulkan { call: "read_spv", result: format!("{entry}: {e}") })?;
+        // SAFETY: `code` is a valid SPIR-V word stream that outlives the call.
+        unsafe { self.core.device.create_shader_module(&vk::ShaderModuleCreateInfo::default().code(&code), None) }
+            .map_err(vk_error("vkCreateShaderModule"))
+    }
+
+    /// Binds `resources` (one per binding, in creation order), pushes `push`, records `work`
+    /// between two timestamps, submits and waits. Returns the work's duration in seconds, from GPU
+    /// timestamps where the device has them, else from the host clock around the submission.
+    pub fn run(&self, resources: &[Resource<'_>], push: &[u8], work: impl FnOnce(vk::CommandBuffer)) -> Result<f64> {
+        if resources.len() != self.bindings.len() {
+            return Err(Error::InvalidParameter {
+                name: "resources",
+                reason: format!("{} takes {} bindings", self.name, self.bindings.len()),
+            });
+        }
+        let d = &self.core.device;
+        let buffer_infos: Vec<[vk::DescriptorBufferInfo; 1]> = resources
+            .iter()
+            .map(|r| match r {
+                Resource::Buffer(b) => [vk::DescriptorBufferInfo::default().buffer(b.buffer).range(vk::WHOLE_SIZE)],
+                Resource::AccelerationStructure(_) => [vk::DescriptorBufferInfo::default()],
+            })
+            .collect();
+        let accels: Vec<[vk::AccelerationStructureKHR; 1]> = resources
+            .iter()
+            .map(|r| match r {
+                Resource::AccelerationStructure(a) => [*a],
+                Resource::Buffer(_) => [vk::AccelerationStructureKHR::null()],
+            })
+            .collect();
+        let mut accel_writes: Vec<vk::WriteDescriptorSetAccelerationStructureKHR> = accels
+            .iter()
+            .map(|a| vk::WriteDescriptorSetAccelerationStructureKHR::default().acceleration_structures(a))
+            .collect();
+        let writes: Vec<vk::WriteDescriptorSet> = resources
+            .iter()
+            .zip(&self.bindings)
+            .zip(buffer_infos.iter().zip(accel_writes.iter_mut()))
+            .map(|((resource, &(binding, ty)), (buffer_info, accel_write))| {
+                let write = vk::WriteDescriptorSet::default()
+                    .dst_set(self.descriptor_set)
+                    .dst_binding(binding)
+                    .descriptor_type(ty);
+                match resource {
+                    Resource::Buffer(_) => write.buffer_info(buffer_info),
+                    Resource::AccelerationStructure(_) => write.descriptor_count(1).push_next(accel_write),
+                }
+            })
+            .collect();
+        // SAFETY: the set is not in use (every run waits for completion) and the writes reference
+        // live resources.
+        unsafe { d.update_descriptor_sets(&writes, &[]) };
+        let start = Instant::now();
+        submit_and_wait(&self.core, |cmd| {
+            // SAFETY: `cmd` is recording; pipeline, layout, set and query pool are live.
+            unsafe {
+                d.cmd_reset_query_pool(cmd, self.query_pool, 0, 2);
+                d.cmd_write_timestamp(cmd, vk::PipelineStageFlags::TOP_OF_PIPE, self.query_pool, 0);
+                d.cmd_bind_pipeline(cmd, self.bind_point, self.pipeline);
+                d.cmd_bind_descriptor_sets(cmd, self.bind_point, self.pipeline_layout, 0, &[self.descriptor_set], &[]);
+                d.cmd_push_constants(cmd, self.pipeline_layout, self.stages, 0, push);
+            }
+            work(cmd);
+            // SAFETY: as above.
+            unsafe { d.cmd_write_timestamp(cmd, vk::PipelineStageFlags::BOTTOM_OF_PIPE, self.query_pool, 1) };
+        })?;
+        let host_seconds = start.elapsed().as_secs_f64();
+        if !self.core.info.timestamps {
+            return Ok(host_seconds);
+        }
+        let mut stamps = [0u64; 2];
+        // SAFETY: both queries were written by the completed submission.
+        unsafe {
+            d.get_query_pool_results(
+                self.query_pool,
+                0,
+                &mut stamps,
+                vk::QueryResultFlags::TYPE_64 | vk::QueryResultFlags::WAIT,
+            )
+        }
+        .map_err(vk_error("vkGetQueryPoolResults"))?;
+        let ticks = stamps[1].wrapping_sub(stamps[0]);
+        Ok(ticks as f64 * f64::from(self.core.limits.timestamp_period) * 1e-9)
+    }
+}

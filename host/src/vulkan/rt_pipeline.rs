@@ -1,0 +1,160 @@
+//! The trace stage through `VK_KHR_ray_tracing_pipeline`, for GPUs that expose ray-tracing
+//! pipelines but not ray query (e.g. NVIDIA's data-center parts): a raygen shader reads the ray
+//! stream, one miss and one triangle hit group fill the payload, the shader binding table holds
+//! the three group handles.
+
+use super::buffer::GpuBuffer;
+use super::context::{vk_error, Core};
+use super::pass::{Pass, Resource};
+use crate::error::{Error, Result};
+use ash::vk;
+use gpu_allocator::MemoryLocation;
+use std::sync::Arc;
+
+/// Entry points of the three shader groups, in group order: raygen, miss, closest hit.
+const ENTRIES: [&str; 3] = ["entry::trace_raygen", "entry::trace_miss", "entry::trace_closest_hit"];
+
+/// Widest launch row: rays are laid out as rows of this many launches (a 2-D launch).
+const LAUNCH_WIDTH: u32 = 4096;
+
+/// A ray-tracing pipeline with its shader binding table.
+pub(crate) struct RtPipelineKernel {
+    pass: Pass,
+    _sbt: GpuBuffer,
+    raygen: vk::StridedDeviceAddressRegionKHR,
+    miss: vk::StridedDeviceAddressRegionKHR,
+    hit: vk::StridedDeviceAddressRegionKHR,
+}
+
+impl RtPipelineKernel {
+    /// Builds the pipeline (descriptor set 0 = `bindings`, `push_constant_bytes` of push
+    /// constants, both visible to the raygen shader) and its shader binding table.
+    pub fn new(core: &Arc<Core>, bindings: &[(u32, vk::DescriptorType)], push_constant_bytes: u32) -> Result<Self> {
+        let loader = core.ray_tracing_pipeline.as_ref().ok_or_else(|| Error::MissingFeatures {
+            device: core.info.name.clone(),
+            stage: "trace (rtpipe)".into(),
+            missing: core.info.missing_for_rt_pipeline(),
+        })?;
+        let stages = vk::ShaderStageFlags::RAYGEN_KHR;
+        let mut pass = Pass::new(
+            core,
+            "entry::trace_raygen",
+            vk::PipelineBindPoint::RAY_TRACING_KHR,
+            stages,
+            bindings,
+            push_constant_bytes,
+        )?;
+        let kinds =
+            [vk::ShaderStageFlags::RAYGEN_KHR, vk::ShaderStageFlags::MISS_KHR, vk::ShaderStageFlags::CLOSEST_HIT_KHR];
+        let mut modules = Vec::new();
+        for entry in ENTRIES {
+            match pass.shader_module(entry) {
+                Ok(m) => modules.push(m),
+                Err(e) => {
+                    destroy_modules(core, &modules);
+                    return Err(e);
+                }
+            }
+        }
+        let names: Vec<std::ffi::CString> =
+            ENTRIES.iter().map(|e| std::ffi::CString::new(*e).expect("entry names have no NUL")).collect();
+        let stage_infos: Vec<_> = (0..3)
+            .map(|i| vk::PipelineShaderStageCreateInfo::default().stage(kinds[i]).module(modules[i]).name(&names[i]))
+            .collect();
+        let general = |shader: u32| {
+            vk::RayTracingShaderGroupCreateInfoKHR::default()
+                .ty(vk::RayTracingShaderGroupTypeKHR::GENERAL)
+                .general_shader(shader)
+                .closest_hit_shader(vk::SHADER_UNUSED_KHR)
+                .any_hit_shader(vk::SHADER_UNUSED_KHR)
+                .intersection_shader(vk::SHADER_UNUSED_KHR)
+        };
+        let groups = [
+            general(0),
+            general(1),
+            vk::RayTracingShaderGroupCreateInfoKHR::default()
+                .ty(vk::RayTracingShaderGroupTypeKHR::TRIANGLES_HIT_GROUP)
+                .general_shader(vk::SHADER_UNUSED_KHR)
+                .closest_hit_shader(2)
+                .any_hit_shader(vk::SHADER_UNUSED_KHR)
+                .intersection_shader(vk::SHADER_UNUSED_KHR),
+        ];
+        let info = vk::RayTracingPipelineCreateInfoKHR::default()
+            .stages(&stage_infos)
+            .groups(&groups)
+            .max_pipeline_ray_recursion_depth(1)
+            .layout(pass.pipeline_layout);
+        // SAFETY: the create info borrows live locals; the modules are destroyed after creation.
+        let created = unsafe {
+            loader.create_ray_tracing_pipelines(
+                vk::DeferredOperationKHR::null(),
+                vk::PipelineCache::null(),
+                &[info],
+                None,
+            )
+        };
+        destroy_modules(core, &modules);
+        pass.pipeline = created.map_err(|(_, e)| vk_error("vkCreateRayTracingPipelinesKHR")(e))?[0];
+
+        // Shader binding table: one record per group, each region starting on the base alignment.
+        let props = core.rt_properties;
+        let handle_size = props.handle_size as usize;
+        // SAFETY: the pipeline has 3 groups; the data size is 3 handles.
+        let handles = unsafe { loader.get_ray_tracing_shader_group_handles(pass.pipeline, 0, 3, 3 * handle_size) }
+            .map_err(vk_error("vkGetRayTracingShaderGroupHandlesKHR"))?;
+        let stride = u64::from(props.handle_size.next_multiple_of(props.handle_alignment.max(1)));
+        let region = stride.next_multiple_of(u64::from(props.base_alignment.max(1)));
+        let alignment = u64::from(props.base_alignment.max(1));
+        let mut sbt = GpuBuffer::new(
+            core,
+            3 * region + alignment,
+            vk::BufferUsageFlags::SHADER_BINDING_TABLE_KHR | vk::BufferUsageFlags::SHADER_DEVICE_ADDRESS,
+            MemoryLocation::CpuToGpu,
+            "shader binding table",
+        )?;
+        let base = sbt.address.next_multiple_of(alignment);
+        for group in 0..3usize {
+            let at = (base - sbt.address + group as u64 * region) as usize;
+            sbt.write_bytes(at, &handles[group * handle_size..(group + 1) * handle_size])?;
+        }
+        let record = |group: u64, size: u64| {
+            vk::StridedDeviceAddressRegionKHR::default().device_address(base + group * region).stride(stride).size(size)
+        };
+        Ok(Self { raygen: record(0, stride), miss: record(1, stride), hit: record(2, stride), _sbt: sbt, pass })
+    }
+
+    /// Traces `rays` rays (raygen launch `LAUNCH_WIDTH` wide) and waits; returns seconds.
+    pub fn trace(&self, resources: &[Resource<'_>], push: &[u8], rays: u32) -> Result<f64> {
+        let core = &self.pass.core;
+        if rays > core.rt_properties.max_dispatch_invocations {
+            return Err(Error::InvalidParameter {
+                name: "rays",
+                reason: format!(
+                    "{rays} exceed maxRayDispatchInvocationCount {}",
+                    core.rt_properties.max_dispatch_invocations
+                ),
+            });
+        }
+        let loader = core.ray_tracing_pipeline.as_ref().ok_or_else(|| Error::MissingFeatures {
+            device: core.info.name.clone(),
+            stage: "trace (rtpipe)".into(),
+            missing: core.info.missing_for_rt_pipeline(),
+        })?;
+        let (width, height) = (rays.min(LAUNCH_WIDTH), rays.div_ceil(LAUNCH_WIDTH));
+        let callable = vk::StridedDeviceAddressRegionKHR::default();
+        self.pass.run(resources, push, |cmd| {
+            if rays > 0 {
+                // SAFETY: `cmd` is recording with this pass's pipeline and set bound; the SBT
+                // regions point into the live table buffer.
+                unsafe { loader.cmd_trace_rays(cmd, &self.raygen, &self.miss, &self.hit, &callable, width, height, 1) };
+            }
+        })
+    }
+}
+
+fn destroy_modules(core: &Core, modules: &[vk::ShaderModule]) {
+    for &m in modules {
+        // SAFETY: the modules are no longer referenced by any pipeline creation in flight.
+        unsafe { core.device.destroy_shader_module(m, None) };
+    }
+}
