@@ -240,8 +240,8 @@ pub fn bench_trace(options: &TraceBenchOptions, mut emit: impl FnMut(&dyn BenchL
     Ok(())
 }
 
-/// Vulkan trace methods of the best device, closest-hit kinds only (the Vulkan occlusion kernels
-/// come with the shade stage).
+/// Every Vulkan trace method of the best device: closest hit for primary and diffuse rays,
+/// occlusion for shadow rays.
 #[cfg(feature = "vulkan")]
 fn bench_vulkan(
     options: &TraceBenchOptions,
@@ -263,13 +263,20 @@ fn bench_vulkan(
     for method in methods {
         let mut backend = VulkanBackend::open(index, &ContextOptions::default(), Some(method))?;
         backend.load_scene(scene)?;
-        for &(kind, rays) in kinds.iter().filter(|(k, _)| *k != "shadow") {
+        for &(kind, rays) in kinds {
             let mut failure = None;
-            let seconds = median_seconds(options.repeats, || match backend.trace(rays) {
-                Ok((_, timing)) => timing.seconds,
-                Err(e) => {
-                    failure = Some(e);
-                    f64::NAN
+            let seconds = median_seconds(options.repeats, || {
+                let timing = if kind == "shadow" {
+                    backend.trace_occlusion(rays).map(|(_, t)| t)
+                } else {
+                    backend.trace(rays).map(|(_, t)| t)
+                };
+                match timing {
+                    Ok(timing) => timing.seconds,
+                    Err(e) => {
+                        failure = Some(e);
+                        f64::NAN
+                    }
                 }
             });
             if let Some(e) = failure {

@@ -177,3 +177,29 @@ fn trace_matches_cpu_on_incoherent_scenes() {
         }
     }
 }
+
+#[test]
+fn occlusion_matches_cpu_on_every_vulkan_device() {
+    let (meshes, camera) = raywave::scene::procedural::hairball(50_000, 6);
+    let scene = Scene::new("hairball", meshes, camera).unwrap();
+    let mut rays = incoherent_rays(&scene, 100_000);
+    // Shorter intervals than the scene, so both blocked and free rays are common.
+    for d in &mut rays.direction {
+        d.w = 1.0;
+    }
+    let cpu_scene = CpuScene::build(&scene).unwrap();
+    let expected = cpu::trace_occlusion(&cpu_scene, &rays);
+    let blocked = expected.iter().filter(|&&o| o == 1).count();
+    assert!(blocked > rays.len() / 10 && blocked < rays.len() * 9 / 10, "a mix of blocked and free rays ({blocked})");
+    for mut device in vulkan::every_device("occlusion parity") {
+        device.load_scene(&scene).unwrap();
+        let (occluded, timing) = device.trace_occlusion(&rays).unwrap();
+        assert_eq!(timing.stage, "occlusion");
+        assert!(occluded.iter().all(|&o| o <= 1));
+        let agree = occluded.iter().zip(&expected).filter(|(a, b)| a == b).count();
+        let agreement = agree as f64 / rays.len() as f64;
+        eprintln!("{} occlusion: {agreement:.6} of {} rays agree", device.name(), rays.len());
+        assert!(agreement >= MIN_AGREEMENT, "{}: {agreement}", device.name());
+        vulkan::assert_clean(&device);
+    }
+}

@@ -43,6 +43,10 @@ pub trait Backend {
     /// Runs the trace stage on `rays` against the loaded scene.
     fn trace(&mut self, rays: &RayStream) -> Result<(HitStream, StageTiming)>;
 
+    /// Runs the occlusion variant of the trace stage on `rays`: 1 per ray blocked within its
+    /// interval, 0 otherwise (shadow rays).
+    fn trace_occlusion(&mut self, rays: &RayStream) -> Result<(Vec<u32>, StageTiming)>;
+
     /// Runs generate → trace as one frame, keeping the ray stream on the backend in between.
     fn render(&mut self, params: &GenerateParams) -> Result<FrameOutput>;
 }

@@ -90,19 +90,6 @@ pub fn trace_ray_query(
     }
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn stream_index_is_row_major_over_the_dispatch_grid() {
-        let groups = UVec3::new(3, 2, 1);
-        assert_eq!(stream_index(UVec3::new(5, 0, 0), groups), 5);
-        assert_eq!(stream_index(UVec3::new(0, 1, 0), groups), 3 * WORKGROUP_SIZE);
-        assert_eq!(stream_index(UVec3::new(7, 1, 0), groups), 3 * WORKGROUP_SIZE + 7);
-    }
-}
-
 /// Ray generation shader of the trace stage for `VK_KHR_ray_tracing_pipeline` (GPUs without ray
 /// query): one launch per ray over a 2-D launch grid, the same stream bindings as
 /// `trace_ray_query`, the closest hit found by the fixed-function traversal.
@@ -173,4 +160,97 @@ pub fn trace_closest_hit(
     #[spirv(instance_id)] instance: u32,
 ) {
     *payload = crate::trace::Hit { t, primitive, instance, barycentrics: *barycentrics };
+}
+
+/// Entry point of the occlusion (any-hit) trace with software CWBVH traversal: 1 per blocked ray.
+#[spirv(compute(threads(64)))]
+#[allow(clippy::too_many_arguments)]
+pub fn occlusion_cwbvh(
+    #[spirv(global_invocation_id)] global_id: UVec3,
+    #[spirv(num_workgroups)] num_workgroups: UVec3,
+    #[spirv(push_constant)] params: &raywave_shared::TraceParams,
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 0)] nodes: &[raywave_shared::bvh::CwBvhNode],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 1)] ray_origin: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 2)] ray_direction: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 3)] occluded: &mut [u32],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 7)] vertices: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 8)] ids: &[glam::UVec2],
+) {
+    let i = stream_index(global_id, num_workgroups) as usize;
+    if i < params.ray_count as usize {
+        let scene = crate::trace::cwbvh::CwBvhScene { nodes, vertices, ids };
+        occluded[i] = u32::from(crate::trace::trace_occluded(ray_origin[i], ray_direction[i], &scene));
+    }
+}
+
+/// Entry point of the occlusion (any-hit) trace with `VK_KHR_ray_query`.
+#[cfg(all(target_arch = "spirv", feature = "ray-query"))]
+#[spirv(compute(threads(64)))]
+pub fn occlusion_ray_query(
+    #[spirv(global_invocation_id)] global_id: UVec3,
+    #[spirv(num_workgroups)] num_workgroups: UVec3,
+    #[spirv(push_constant)] params: &raywave_shared::TraceParams,
+    #[spirv(descriptor_set = 0, binding = 0)] tlas: &spirv_std::ray_tracing::AccelerationStructure,
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 1)] ray_origin: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 2)] ray_direction: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 3)] occluded: &mut [u32],
+) {
+    let i = stream_index(global_id, num_workgroups) as usize;
+    if i < params.ray_count as usize {
+        let scene = crate::trace::ray_query::RayQueryScene { tlas };
+        occluded[i] = u32::from(crate::trace::trace_occluded(ray_origin[i], ray_direction[i], &scene));
+    }
+}
+
+/// Ray generation shader of the occlusion trace for `VK_KHR_ray_tracing_pipeline`: the payload
+/// starts at 1 (blocked), the traversal stops at the first hit without a closest-hit shader, and
+/// [`occlusion_miss`] clears it.
+#[cfg(all(target_arch = "spirv", feature = "ray-tracing"))]
+#[spirv(ray_generation)]
+#[allow(clippy::too_many_arguments)]
+pub fn occlusion_raygen(
+    #[spirv(launch_id)] launch_id: UVec3,
+    #[spirv(launch_size)] launch_size: UVec3,
+    #[spirv(push_constant)] params: &raywave_shared::TraceParams,
+    #[spirv(descriptor_set = 0, binding = 0)] tlas: &spirv_std::ray_tracing::AccelerationStructure,
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 1)] ray_origin: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 2)] ray_direction: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 3)] occluded: &mut [u32],
+    #[spirv(ray_payload)] payload: &mut u32,
+) {
+    use spirv_std::ray_tracing::RayFlags;
+    let i = (launch_id.y * launch_size.x + launch_id.x) as usize;
+    if i < params.ray_count as usize {
+        let ray = crate::trace::Ray::from_stream(ray_origin[i], ray_direction[i]);
+        *payload = 0;
+        if ray.is_traceable() {
+            *payload = 1;
+            let flags = RayFlags::OPAQUE | RayFlags::TERMINATE_ON_FIRST_HIT | RayFlags::SKIP_CLOSEST_HIT_SHADER;
+            // SAFETY: as in `trace_raygen`.
+            unsafe {
+                tlas.trace_ray(flags, 0xff, 0, 0, 0, ray.origin, ray.tmin, ray.direction, ray.tmax, payload);
+            }
+        }
+        occluded[i] = *payload;
+    }
+}
+
+/// Miss shader of the occlusion trace: the ray reached its end unblocked.
+#[cfg(all(target_arch = "spirv", feature = "ray-tracing"))]
+#[spirv(miss)]
+pub fn occlusion_miss(#[spirv(incoming_ray_payload)] payload: &mut u32) {
+    *payload = 0;
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn stream_index_is_row_major_over_the_dispatch_grid() {
+        let groups = UVec3::new(3, 2, 1);
+        assert_eq!(stream_index(UVec3::new(5, 0, 0), groups), 5);
+        assert_eq!(stream_index(UVec3::new(0, 1, 0), groups), 3 * WORKGROUP_SIZE);
+        assert_eq!(stream_index(UVec3::new(7, 1, 0), groups), 3 * WORKGROUP_SIZE + 7);
+    }
 }

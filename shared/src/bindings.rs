@@ -20,6 +20,13 @@ pub mod generate {
     pub const RAY_PIXEL: u32 = 2;
 }
 
+/// Bindings of the occlusion variant of the trace stage (set 0): the scene and ray bindings of
+/// [`trace`], and one `u32` per ray (1 = blocked) in place of the hit stream.
+pub mod occlusion {
+    /// Output: 1 where the ray is blocked within its interval, 0 where it is not (`u32`).
+    pub const OCCLUDED: u32 = 3;
+}
+
 /// Bindings of the trace stage (set 0). Binding 0 holds the scene: the TLAS for ray query, the
 /// CWBVH nodes for software traversal; the streams are the same for every trace backend.
 pub mod trace {

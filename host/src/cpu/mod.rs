@@ -104,6 +104,11 @@ impl Backend for CpuBackend {
         Ok(timed("trace", || trace(scene, rays)))
     }
 
+    fn trace_occlusion(&mut self, rays: &RayStream) -> Result<(Vec<u32>, StageTiming)> {
+        let scene = self.scene()?;
+        Ok(timed("occlusion", || trace_occlusion(scene, rays)))
+    }
+
     fn render(&mut self, params: &GenerateParams) -> Result<FrameOutput> {
         let (rays, generate_time) = self.generate(params)?;
         let (hits, trace_time) = self.trace(&rays)?;

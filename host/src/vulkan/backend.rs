@@ -6,7 +6,7 @@ use super::buffer::GpuBuffer;
 use super::context::{open, ContextOptions, Core, DeviceInfo};
 use super::kernel::{dispatch_grid, ComputeKernel};
 use super::pass::Resource;
-use super::rt_pipeline::RtPipelineKernel;
+use super::rt_pipeline::{RtPipelineKernel, CLOSEST_HIT_SHADERS, OCCLUSION_SHADERS};
 use crate::backend::{check_image_size_common, Backend, FrameOutput, StageTiming};
 use crate::cpu::CpuScene;
 use crate::device::TraceMethod;
@@ -117,13 +117,16 @@ enum TraceKernel {
 pub struct VulkanBackend {
     generate: ComputeKernel,
     trace: TraceKernel,
+    occlusion: TraceKernel,
     trace_method: TraceMethod,
     scene: Option<DeviceScene>,
     core: Arc<Core>,
 }
 
-/// Descriptor layout of the trace kernel for `method` (binding numbers from `raywave_shared`).
-fn trace_bindings(method: TraceMethod) -> Vec<(u32, vk::DescriptorType)> {
+/// Descriptor layout of a trace kernel for `method` writing `outputs` (binding numbers from
+/// `raywave_shared`): the scene at binding 0, the rays, the outputs, and for software traversal
+/// the triangle buffers. [`VulkanBackend::run_trace_kernel`] binds resources in this order.
+fn trace_bindings(method: TraceMethod, outputs: &[u32]) -> Vec<(u32, vk::DescriptorType)> {
     let storage = vk::DescriptorType::STORAGE_BUFFER;
     let scene = match method {
         TraceMethod::Software => (bindings::trace::NODES, storage),
@@ -131,21 +134,25 @@ fn trace_bindings(method: TraceMethod) -> Vec<(u32, vk::DescriptorType)> {
             (bindings::trace::TLAS, vk::DescriptorType::ACCELERATION_STRUCTURE_KHR)
         }
     };
-    let mut layout = vec![
-        scene,
-        (bindings::trace::RAY_ORIGIN, storage),
-        (bindings::trace::RAY_DIRECTION, storage),
-        (bindings::trace::HIT_T, storage),
-        (bindings::trace::HIT_PRIMITIVE, storage),
-        (bindings::trace::HIT_INSTANCE, storage),
-        (bindings::trace::HIT_BARYCENTRICS, storage),
-    ];
+    let mut layout = vec![scene, (bindings::trace::RAY_ORIGIN, storage), (bindings::trace::RAY_DIRECTION, storage)];
+    layout.extend(outputs.iter().map(|&binding| (binding, storage)));
     if method == TraceMethod::Software {
         layout.push((bindings::trace::TRIANGLE_VERTICES, storage));
         layout.push((bindings::trace::TRIANGLE_IDS, storage));
     }
     layout
 }
+
+/// Output bindings of the closest-hit trace.
+const HIT_OUTPUTS: [u32; 4] = [
+    bindings::trace::HIT_T,
+    bindings::trace::HIT_PRIMITIVE,
+    bindings::trace::HIT_INSTANCE,
+    bindings::trace::HIT_BARYCENTRICS,
+];
+
+/// Output binding of the occlusion trace.
+const OCCLUSION_OUTPUTS: [u32; 1] = [bindings::occlusion::OCCLUDED];
 
 impl VulkanBackend {
     /// Opens Vulkan device `index` and builds its pipelines. `trace` picks the trace method;
@@ -183,17 +190,27 @@ impl VulkanBackend {
             std::mem::size_of::<GenerateParams>() as u32,
         )?;
         let push = std::mem::size_of::<TraceParams>() as u32;
-        let layout = trace_bindings(trace_method);
-        let trace = match trace_method {
-            TraceMethod::Software => {
-                TraceKernel::Compute(ComputeKernel::new(&core, "entry::trace_cwbvh", &layout, push)?)
-            }
-            TraceMethod::RayQuery => {
-                TraceKernel::Compute(ComputeKernel::new(&core, "entry::trace_ray_query", &layout, push)?)
-            }
-            TraceMethod::RtPipeline => TraceKernel::RtPipeline(RtPipelineKernel::new(&core, &layout, push)?),
+        let hit_layout = trace_bindings(trace_method, &HIT_OUTPUTS);
+        let occlusion_layout = trace_bindings(trace_method, &OCCLUSION_OUTPUTS);
+        let compute = |entry, layout: &[(u32, vk::DescriptorType)]| -> Result<TraceKernel> {
+            Ok(TraceKernel::Compute(ComputeKernel::new(&core, entry, layout, push)?))
         };
-        Ok(Self { generate, trace, trace_method, scene: None, core })
+        let rt = |shaders, layout: &[(u32, vk::DescriptorType)]| -> Result<TraceKernel> {
+            Ok(TraceKernel::RtPipeline(RtPipelineKernel::new(&core, shaders, layout, push)?))
+        };
+        let (trace, occlusion) = match trace_method {
+            TraceMethod::Software => {
+                (compute("entry::trace_cwbvh", &hit_layout)?, compute("entry::occlusion_cwbvh", &occlusion_layout)?)
+            }
+            TraceMethod::RayQuery => (
+                compute("entry::trace_ray_query", &hit_layout)?,
+                compute("entry::occlusion_ray_query", &occlusion_layout)?,
+            ),
+            TraceMethod::RtPipeline => {
+                (rt(&CLOSEST_HIT_SHADERS, &hit_layout)?, rt(&OCCLUSION_SHADERS, &occlusion_layout)?)
+            }
+        };
+        Ok(Self { generate, trace, occlusion, trace_method, scene: None, core })
     }
 
     /// The device's name and features.
@@ -232,7 +249,9 @@ impl VulkanBackend {
         Ok((rays, StageTiming { stage: "generate", seconds }))
     }
 
-    fn trace_on_device(&self, rays: &DeviceRays) -> Result<(DeviceHits, StageTiming)> {
+    /// Runs `kernel` over `rays` with `outputs` bound after the rays (layout of
+    /// [`trace_bindings`]); returns its duration in seconds.
+    fn run_trace_kernel(&self, kernel: &TraceKernel, rays: &DeviceRays, outputs: &[&GpuBuffer]) -> Result<f64> {
         let scene = self
             .scene
             .as_ref()
@@ -243,30 +262,30 @@ impl VulkanBackend {
                 reason: format!("{} rays exceed the device's limits", rays.len),
             });
         }
-        let hits = DeviceHits::new(&self.core, rays.len)?;
-        let params = TraceParams { ray_count: rays.len, padding: [0; 3] };
-        let streams = [
-            Resource::Buffer(&rays.origin),
-            Resource::Buffer(&rays.direction),
-            Resource::Buffer(&hits.t),
-            Resource::Buffer(&hits.primitive),
-            Resource::Buffer(&hits.instance),
-            Resource::Buffer(&hits.barycentrics),
-        ];
-        let resources: Vec<Resource> = match scene {
-            DeviceScene::Accelerated(accel) => {
-                std::iter::once(Resource::AccelerationStructure(accel.tlas.handle)).chain(streams).collect()
+        let (scene_resource, triangles) = match scene {
+            DeviceScene::Accelerated(accel) => (Resource::AccelerationStructure(accel.tlas.handle), vec![]),
+            DeviceScene::Software { nodes, vertices, ids } => {
+                (Resource::Buffer(nodes), vec![Resource::Buffer(vertices), Resource::Buffer(ids)])
             }
-            DeviceScene::Software { nodes, vertices, ids } => std::iter::once(Resource::Buffer(nodes))
-                .chain(streams)
-                .chain([Resource::Buffer(vertices), Resource::Buffer(ids)])
-                .collect(),
         };
+        let resources: Vec<Resource> =
+            [scene_resource, Resource::Buffer(&rays.origin), Resource::Buffer(&rays.direction)]
+                .into_iter()
+                .chain(outputs.iter().map(|b| Resource::Buffer(b)))
+                .chain(triangles)
+                .collect();
+        let params = TraceParams { ray_count: rays.len, padding: [0; 3] };
         let push = bytemuck::bytes_of(&params);
-        let seconds = match &self.trace {
-            TraceKernel::Compute(kernel) => kernel.dispatch(&resources, push, rays.len)?,
-            TraceKernel::RtPipeline(kernel) => kernel.trace(&resources, push, rays.len)?,
-        };
+        match kernel {
+            TraceKernel::Compute(kernel) => kernel.dispatch(&resources, push, rays.len),
+            TraceKernel::RtPipeline(kernel) => kernel.trace(&resources, push, rays.len),
+        }
+    }
+
+    fn trace_on_device(&self, rays: &DeviceRays) -> Result<(DeviceHits, StageTiming)> {
+        let hits = DeviceHits::new(&self.core, rays.len)?;
+        let seconds =
+            self.run_trace_kernel(&self.trace, rays, &[&hits.t, &hits.primitive, &hits.instance, &hits.barycentrics])?;
         Ok((hits, StageTiming { stage: "trace", seconds }))
     }
 }
@@ -307,6 +326,13 @@ impl Backend for VulkanBackend {
         let device_rays = DeviceRays::upload(&self.core, rays)?;
         let (hits, timing) = self.trace_on_device(&device_rays)?;
         Ok((hits.read()?, timing))
+    }
+
+    fn trace_occlusion(&mut self, rays: &RayStream) -> Result<(Vec<u32>, StageTiming)> {
+        let device_rays = DeviceRays::upload(&self.core, rays)?;
+        let occluded = stream_buffer::<u32>(&self.core, device_rays.len, "occluded")?;
+        let seconds = self.run_trace_kernel(&self.occlusion, &device_rays, &[&occluded])?;
+        Ok((occluded.read(rays.len())?, StageTiming { stage: "occlusion", seconds }))
     }
 
     fn render(&mut self, params: &GenerateParams) -> Result<FrameOutput> {

@@ -11,8 +11,24 @@ use ash::vk;
 use gpu_allocator::MemoryLocation;
 use std::sync::Arc;
 
-/// Entry points of the three shader groups, in group order: raygen, miss, closest hit.
-const ENTRIES: [&str; 3] = ["entry::trace_raygen", "entry::trace_miss", "entry::trace_closest_hit"];
+/// The shaders of one ray-tracing pipeline: groups are raygen, miss and a triangle hit group
+/// (whose closest-hit shader may be absent, as for occlusion rays).
+pub(crate) struct RtShaders {
+    pub raygen: &'static std::ffi::CStr,
+    pub miss: &'static std::ffi::CStr,
+    pub closest_hit: Option<&'static std::ffi::CStr>,
+}
+
+/// The closest-hit trace: records the hit in the payload.
+pub(crate) const CLOSEST_HIT_SHADERS: RtShaders = RtShaders {
+    raygen: c"entry::trace_raygen",
+    miss: c"entry::trace_miss",
+    closest_hit: Some(c"entry::trace_closest_hit"),
+};
+
+/// The occlusion trace: stops at the first hit, only the miss shader runs.
+pub(crate) const OCCLUSION_SHADERS: RtShaders =
+    RtShaders { raygen: c"entry::occlusion_raygen", miss: c"entry::occlusion_miss", closest_hit: None };
 
 /// Widest launch row: rays are laid out as rows of this many launches (a 2-D launch).
 const LAUNCH_WIDTH: u32 = 4096;
@@ -29,26 +45,30 @@ pub(crate) struct RtPipelineKernel {
 impl RtPipelineKernel {
     /// Builds the pipeline (descriptor set 0 = `bindings`, `push_constant_bytes` of push
     /// constants, both visible to the raygen shader) and its shader binding table.
-    pub fn new(core: &Arc<Core>, bindings: &[(u32, vk::DescriptorType)], push_constant_bytes: u32) -> Result<Self> {
+    pub fn new(
+        core: &Arc<Core>,
+        shaders: &RtShaders,
+        bindings: &[(u32, vk::DescriptorType)],
+        push_constant_bytes: u32,
+    ) -> Result<Self> {
         let loader = core.ray_tracing_pipeline.as_ref().ok_or_else(|| Error::MissingFeatures {
             device: core.info.name.clone(),
             stage: "trace (rtpipe)".into(),
             missing: core.info.missing_for_rt_pipeline(),
         })?;
         let stages = vk::ShaderStageFlags::RAYGEN_KHR;
-        let mut pass = Pass::new(
-            core,
-            "entry::trace_raygen",
-            vk::PipelineBindPoint::RAY_TRACING_KHR,
-            stages,
-            bindings,
-            push_constant_bytes,
-        )?;
-        let kinds =
-            [vk::ShaderStageFlags::RAYGEN_KHR, vk::ShaderStageFlags::MISS_KHR, vk::ShaderStageFlags::CLOSEST_HIT_KHR];
+        let name = if shaders.closest_hit.is_some() { "trace_raygen" } else { "occlusion_raygen" };
+        let mut pass =
+            Pass::new(core, name, vk::PipelineBindPoint::RAY_TRACING_KHR, stages, bindings, push_constant_bytes)?;
+        let mut entries =
+            vec![(vk::ShaderStageFlags::RAYGEN_KHR, shaders.raygen), (vk::ShaderStageFlags::MISS_KHR, shaders.miss)];
+        if let Some(closest_hit) = shaders.closest_hit {
+            entries.push((vk::ShaderStageFlags::CLOSEST_HIT_KHR, closest_hit));
+        }
         let mut modules = Vec::new();
-        for entry in ENTRIES {
-            match pass.shader_module(entry) {
+        for (_, entry) in &entries {
+            // The names are ASCII literals, so `to_string_lossy` is exact.
+            match pass.shader_module(&entry.to_string_lossy()) {
                 Ok(m) => modules.push(m),
                 Err(e) => {
                     destroy_modules(core, &modules);
@@ -56,10 +76,12 @@ impl RtPipelineKernel {
                 }
             }
         }
-        let names: Vec<std::ffi::CString> =
-            ENTRIES.iter().map(|e| std::ffi::CString::new(*e).expect("entry names have no NUL")).collect();
-        let stage_infos: Vec<_> = (0..3)
-            .map(|i| vk::PipelineShaderStageCreateInfo::default().stage(kinds[i]).module(modules[i]).name(&names[i]))
+        let stage_infos: Vec<_> = entries
+            .iter()
+            .zip(&modules)
+            .map(|(&(kind, name), &module)| {
+                vk::PipelineShaderStageCreateInfo::default().stage(kind).module(module).name(name)
+            })
             .collect();
         let general = |shader: u32| {
             vk::RayTracingShaderGroupCreateInfoKHR::default()
@@ -75,7 +97,7 @@ impl RtPipelineKernel {
             vk::RayTracingShaderGroupCreateInfoKHR::default()
                 .ty(vk::RayTracingShaderGroupTypeKHR::TRIANGLES_HIT_GROUP)
                 .general_shader(vk::SHADER_UNUSED_KHR)
-                .closest_hit_shader(2)
+                .closest_hit_shader(if shaders.closest_hit.is_some() { 2 } else { vk::SHADER_UNUSED_KHR })
                 .any_hit_shader(vk::SHADER_UNUSED_KHR)
                 .intersection_shader(vk::SHADER_UNUSED_KHR),
         ];

@@ -1,6 +1,6 @@
 //! [`ClosestHitQuery`] through `VK_KHR_ray_query` (SPIR-V only).
 
-use super::{ClosestHitQuery, Hit, Ray};
+use super::{ClosestHitQuery, Hit, OcclusionQuery, Ray};
 use spirv_std::ray_query;
 use spirv_std::ray_tracing::{AccelerationStructure, CommittedIntersection, RayFlags, RayQuery};
 
@@ -28,6 +28,26 @@ impl ClosestHitQuery for RayQueryScene<'_> {
                 },
                 _ => Hit::MISS,
             }
+        }
+    }
+}
+
+impl OcclusionQuery for RayQueryScene<'_> {
+    fn occluded(&self, ray: &Ray) -> bool {
+        ray_query!(let mut query);
+        // SAFETY: as in `closest_hit`.
+        unsafe {
+            query.initialize(
+                self.tlas,
+                RayFlags::OPAQUE | RayFlags::TERMINATE_ON_FIRST_HIT,
+                0xff,
+                ray.origin,
+                ray.tmin,
+                ray.direction,
+                ray.tmax,
+            );
+            while query.proceed() {}
+            !matches!(query.get_committed_intersection_type(), CommittedIntersection::None)
         }
     }
 }
