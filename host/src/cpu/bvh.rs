@@ -15,13 +15,17 @@ use raywave_kernels::triangle::WatertightRay;
 use raywave_shared::bvh::CwBvhNode;
 use std::time::{Duration, Instant};
 
-/// obvhs's CWBVH build presets (`BvhBuildParams`), from fastest build to best trees.
+/// obvhs's CWBVH build presets (`BvhBuildParams`). The default, `Fast`, was chosen by
+/// `raywave bench trace --bvh …` on the 2-core CI machine: it built fastest and traced as fast or
+/// faster than the others (sphere field, 2 threads, primary/shadow/diffuse Mrays/s: fast
+/// 2.90/3.32/2.24, medium 2.62/3.19/2.18, slow 2.36/3.37/2.01; hairball: fast 0.91/0.59/0.46,
+/// medium 0.86/0.53/0.45, slow 0.91/0.59/0.45).
 #[derive(Copy, Clone, Debug, PartialEq, Eq, Default)]
 pub enum BvhQuality {
     /// `fast_build`: low PLOC search distance, little reinsertion.
+    #[default]
     Fast,
     /// `medium_build`: obvhs's "about Embree's build time" preset.
-    #[default]
     Medium,
     /// `slow_build`: high search distance, more reinsertion, pre-splitting of large triangles.
     Slow,
