@@ -10,7 +10,7 @@ use crate::kernels::trace::{trace_closest, trace_occluded, Ray};
 use crate::kernels::triangle::geometric_normal;
 use crate::shared::stream::NO_HIT;
 use crate::{Error, RayStream, Result, Scene};
-use glam::{UVec3, Vec3, Vec4Swizzles};
+use glam::{UVec3, Vec3, Vec4, Vec4Swizzles};
 use rayon::prelude::*;
 use std::time::Instant;
 
@@ -127,6 +127,61 @@ fn wall(f: impl FnOnce()) -> f64 {
     start.elapsed().as_secs_f64()
 }
 
+/// A CPU tracer under measurement: closest hit and occlusion of one stream ray.
+trait CpuTracer: Sync {
+    /// Closest-hit distance (0 on a miss).
+    fn closest_t(&self, origin: Vec4, direction: Vec4) -> f32;
+    /// Whether the ray is blocked.
+    fn occluded(&self, origin: Vec4, direction: Vec4) -> bool;
+}
+
+/// raywave's kernel traversal through the trace stage functions.
+struct RaywaveCpu<'a>(&'a CpuScene);
+
+impl CpuTracer for RaywaveCpu<'_> {
+    fn closest_t(&self, origin: Vec4, direction: Vec4) -> f32 {
+        trace_closest(origin, direction, self.0).t
+    }
+    fn occluded(&self, origin: Vec4, direction: Vec4) -> bool {
+        trace_occluded(origin, direction, self.0)
+    }
+}
+
+/// obvhs's own traversal of the same tree with the same triangle test.
+struct ObvhsReference<'a>(&'a CpuScene);
+
+impl CpuTracer for ObvhsReference<'_> {
+    fn closest_t(&self, origin: Vec4, direction: Vec4) -> f32 {
+        self.0.obvhs_closest_hit(&Ray::from_stream(origin, direction)).t
+    }
+    fn occluded(&self, origin: Vec4, direction: Vec4) -> bool {
+        self.0.obvhs_occluded(&Ray::from_stream(origin, direction))
+    }
+}
+
+#[cfg(feature = "embree")]
+impl CpuTracer for crate::embree::EmbreeScene {
+    fn closest_t(&self, origin: Vec4, direction: Vec4) -> f32 {
+        self.closest_hit(&Ray::from_stream(origin, direction)).t
+    }
+    fn occluded(&self, origin: Vec4, direction: Vec4) -> bool {
+        crate::embree::EmbreeScene::occluded(self, &Ray::from_stream(origin, direction))
+    }
+}
+
+/// Wall-clock seconds for `tracer` to trace all of `rays` in parallel (in the current rayon pool):
+/// occlusion for shadow rays, closest hit otherwise.
+fn time_cpu(tracer: &dyn CpuTracer, kind: &str, rays: &RayStream) -> f64 {
+    let pairs = || rays.origin.par_iter().zip(&rays.direction);
+    wall(|| {
+        if kind == "shadow" {
+            std::hint::black_box(pairs().filter(|(o, d)| tracer.occluded(**o, **d)).count());
+        } else {
+            std::hint::black_box(pairs().map(|(o, d)| tracer.closest_t(*o, *d)).sum::<f32>());
+        }
+    })
+}
+
 fn measurement(implementation: &str, kind: &'static str, threads: usize, rays: usize, seconds: f64) -> Measurement {
     Measurement {
         stage: "trace",
@@ -175,62 +230,13 @@ pub fn bench_trace(options: &TraceBenchOptions, mut emit: impl FnMut(&dyn BenchL
             .build()
             .map_err(|e| Error::InvalidParameter { name: "threads", reason: e.to_string() })?;
         for (kind, rays) in kinds {
-            let shadow = kind == "shadow";
-            let raywave = median_seconds(options.repeats, || {
-                pool.install(|| {
-                    wall(|| {
-                        if shadow {
-                            let n = rays
-                                .origin
-                                .par_iter()
-                                .zip(&rays.direction)
-                                .filter(|(o, d)| trace_occluded(**o, **d, &cpu_scene))
-                                .count();
-                            std::hint::black_box(n);
-                        } else {
-                            let n = rays
-                                .origin
-                                .par_iter()
-                                .zip(&rays.direction)
-                                .map(|(o, d)| trace_closest(*o, *d, &cpu_scene).t)
-                                .sum::<f32>();
-                            std::hint::black_box(n);
-                        }
-                    })
-                })
-            });
-            emit(&measurement("raywave-cpu", kind, threads, rays.len(), raywave));
-            let obvhs = median_seconds(options.repeats, || {
-                pool.install(|| {
-                    wall(|| {
-                        let rays_iter =
-                            rays.origin.par_iter().zip(&rays.direction).map(|(o, d)| Ray::from_stream(*o, *d));
-                        if shadow {
-                            std::hint::black_box(rays_iter.filter(|r| cpu_scene.obvhs_occluded(r)).count());
-                        } else {
-                            std::hint::black_box(rays_iter.map(|r| cpu_scene.obvhs_closest_hit(&r).t).sum::<f32>());
-                        }
-                    })
-                })
-            });
-            emit(&measurement("obvhs", kind, threads, rays.len(), obvhs));
+            let time = |tracer: &dyn CpuTracer| {
+                median_seconds(options.repeats, || pool.install(|| time_cpu(tracer, kind, rays)))
+            };
+            emit(&measurement("raywave-cpu", kind, threads, rays.len(), time(&RaywaveCpu(&cpu_scene))));
+            emit(&measurement("obvhs", kind, threads, rays.len(), time(&ObvhsReference(&cpu_scene))));
             #[cfg(feature = "embree")]
-            {
-                let seconds = median_seconds(options.repeats, || {
-                    pool.install(|| {
-                        wall(|| {
-                            let rays_iter =
-                                rays.origin.par_iter().zip(&rays.direction).map(|(o, d)| Ray::from_stream(*o, *d));
-                            if shadow {
-                                std::hint::black_box(rays_iter.filter(|r| embree.occluded(r)).count());
-                            } else {
-                                std::hint::black_box(rays_iter.map(|r| embree.closest_hit(&r).t).sum::<f32>());
-                            }
-                        })
-                    })
-                });
-                emit(&measurement("embree", kind, threads, rays.len(), seconds));
-            }
+            emit(&measurement("embree", kind, threads, rays.len(), time(&embree)));
         }
     }
     #[cfg(feature = "vulkan")]

@@ -15,6 +15,21 @@ pub fn stream_index(global_id: UVec3, num_workgroups: UVec3) -> u32 {
     global_id.y * num_workgroups.x * WORKGROUP_SIZE + global_id.x
 }
 
+/// Writes `hit` into the four hit-stream fields at index `i`.
+fn store_hit(
+    i: usize,
+    hit: crate::trace::Hit,
+    hit_t: &mut [f32],
+    hit_primitive: &mut [u32],
+    hit_instance: &mut [u32],
+    hit_barycentrics: &mut [glam::Vec2],
+) {
+    hit_t[i] = hit.t;
+    hit_primitive[i] = hit.primitive;
+    hit_instance[i] = hit.instance;
+    hit_barycentrics[i] = hit.barycentrics;
+}
+
 /// Entry point of the generate stage.
 #[spirv(compute(threads(64)))]
 pub fn generate(
@@ -55,10 +70,7 @@ pub fn trace_cwbvh(
     if i < params.ray_count as usize {
         let scene = crate::trace::cwbvh::CwBvhScene { nodes, vertices, ids };
         let hit = crate::trace::trace_closest(ray_origin[i], ray_direction[i], &scene);
-        hit_t[i] = hit.t;
-        hit_primitive[i] = hit.primitive;
-        hit_instance[i] = hit.instance;
-        hit_barycentrics[i] = hit.barycentrics;
+        store_hit(i, hit, hit_t, hit_primitive, hit_instance, hit_barycentrics);
     }
 }
 
@@ -83,10 +95,7 @@ pub fn trace_ray_query(
     if i < params.ray_count as usize {
         let scene = crate::trace::ray_query::RayQueryScene { tlas };
         let hit = crate::trace::trace_closest(ray_origin[i], ray_direction[i], &scene);
-        hit_t[i] = hit.t;
-        hit_primitive[i] = hit.primitive;
-        hit_instance[i] = hit.instance;
-        hit_barycentrics[i] = hit.barycentrics;
+        store_hit(i, hit, hit_t, hit_primitive, hit_instance, hit_barycentrics);
     }
 }
 
@@ -135,10 +144,7 @@ pub fn trace_raygen(
         } else {
             Hit::MISS
         };
-        hit_t[i] = hit.t;
-        hit_primitive[i] = hit.primitive;
-        hit_instance[i] = hit.instance;
-        hit_barycentrics[i] = hit.barycentrics;
+        store_hit(i, hit, hit_t, hit_primitive, hit_instance, hit_barycentrics);
     }
 }
 
