@@ -9,7 +9,8 @@ mod common;
 use common::{close, cornell, vulkan};
 use glam::Vec4Swizzles;
 use raywave::cpu;
-use raywave::frame::generate_params;
+use raywave::frame::{generate_params_with, sampler_params};
+use raywave::shared::sampling::sampler_kind;
 use raywave::Backend;
 
 /// Documented float tolerance of the generate stage, relative.
@@ -18,11 +19,18 @@ const REL_TOLERANCE: f32 = 2e-6;
 #[test]
 fn generate_matches_cpu_on_every_vulkan_device() {
     let scene = cornell();
-    // Odd sizes leave a partial workgroup and a partial dispatch row.
-    for (width, height, sample, seed) in [(333, 211, 0, 1), (64, 1, 5, 77), (1, 1, 0, 0)] {
-        let params = generate_params(&scene, width, height, sample, seed);
+    let mut devices = vulkan::each_device("generate parity");
+    // Odd sizes leave a partial workgroup and a partial dispatch row; every sampler, with and
+    // without a thin lens.
+    let cases = [(333, 211, 0, 1, 0.0), (64, 1, 5, 77, 0.05), (1, 1, 0, 0, 0.0), (40, 30, 3, 5, 0.02)];
+    for ((width, height, sample, seed, lens_radius), kind) in
+        cases.into_iter().flat_map(|c| (0..sampler_kind::COUNT).map(move |k| (c, k)))
+    {
+        let sampler = sampler_params(kind, seed, width, height, 8);
+        let mut params = generate_params_with(&scene, width, height, sample, sampler);
+        params.lens_radius = lens_radius;
         let expected = cpu::generate(&params);
-        for mut device in vulkan::every_device("generate parity") {
+        for device in &mut devices {
             let (rays, timing) = device.generate(&params).expect("generate runs");
             assert!(timing.seconds >= 0.0);
             assert_eq!(rays.len(), expected.len());
@@ -39,7 +47,7 @@ fn generate_matches_cpu_on_every_vulkan_device() {
                     );
                 }
             }
-            vulkan::assert_clean(&device);
+            vulkan::assert_clean(device);
         }
     }
 }

@@ -4,7 +4,8 @@
 use crate::error::Result;
 use crate::scene::Scene;
 use crate::stream::{HitStream, RayStream};
-use raywave_shared::GenerateParams;
+use glam::{UVec2, Vec4};
+use raywave_shared::{GenerateParams, SamplerProbeParams, WarpParams};
 
 /// Time one stage took on a backend.
 #[derive(Clone, Debug, PartialEq)]
@@ -49,6 +50,44 @@ pub trait Backend {
 
     /// Runs generate → trace as one frame, keeping the ray stream on the backend in between.
     fn render(&mut self, params: &GenerateParams) -> Result<FrameOutput>;
+
+    /// Runs the sampler probe: the raw bits of every sample `params` covers, in invocation order
+    /// (bit-identical on every backend).
+    fn sampler_probe(&mut self, params: &SamplerProbeParams) -> Result<Vec<UVec2>>;
+
+    /// Runs the warp probe: `params.count` warped directions (xyz) with their pdfs (w).
+    fn warp_probe(&mut self, params: &WarpParams) -> Result<Vec<Vec4>>;
+}
+
+/// Largest probe (samples of the sampler or warp probe) any backend runs: 2²⁴ samples.
+pub const MAX_PROBE_SAMPLES: u64 = 1 << 24;
+
+/// Number of samples the sampler probe `params` covers, checked against [`MAX_PROBE_SAMPLES`] and
+/// the sampler's own index space.
+pub fn sampler_probe_len(params: &SamplerProbeParams) -> Result<u32> {
+    let count = (u64::from(params.width) * u64::from(params.height)).checked_shl(params.sampler.spp_log2);
+    match count {
+        Some(count) if count <= MAX_PROBE_SAMPLES && params.sampler.spp_log2 < 32 => Ok(count as u32),
+        _ => Err(crate::error::Error::InvalidParameter {
+            name: "sampler probe",
+            reason: format!(
+                "{}×{} pixels at 2^{} samples exceed {MAX_PROBE_SAMPLES} samples",
+                params.width, params.height, params.sampler.spp_log2
+            ),
+        }),
+    }
+}
+
+/// Number of samples the warp probe `params` covers, checked against [`MAX_PROBE_SAMPLES`].
+pub fn warp_probe_len(params: &WarpParams) -> Result<u32> {
+    if u64::from(params.count) <= MAX_PROBE_SAMPLES {
+        Ok(params.count)
+    } else {
+        Err(crate::error::Error::InvalidParameter {
+            name: "warp probe",
+            reason: format!("{} samples exceed {MAX_PROBE_SAMPLES}", params.count),
+        })
+    }
 }
 
 /// Checks the size rules every backend shares: both sides ≥ 1 and the pixel count within `max_pixels`.

@@ -2,12 +2,50 @@
 //! stage needs.
 
 use crate::scene::Scene;
+use raywave_shared::sampling::{sampler_kind, SamplerParams};
 use raywave_shared::GenerateParams;
 
-/// Generate-stage parameters for `scene`'s camera at `width × height` (both ≥ 1), sample
-/// `sample_index` with jitter seed `seed`. `tmax` covers the whole scene: twice the distance from
-/// the camera to the farthest corner of the scene bounds, so it is finite and never clips geometry.
+/// Names of the sampler kinds on the command line, indexed by their [`sampler_kind`] value.
+pub const SAMPLER_NAMES: [&str; sampler_kind::COUNT as usize] = ["zsobol", "sobol", "random"];
+
+/// Parses a sampler name (`zsobol`, `sobol` or `random`) into its [`sampler_kind`] value.
+pub fn parse_sampler_kind(name: &str) -> crate::error::Result<u32> {
+    SAMPLER_NAMES.iter().position(|&n| n == name).map(|k| k as u32).ok_or_else(|| {
+        crate::error::Error::InvalidParameter {
+            name: "sampler",
+            reason: format!("unknown sampler `{name}` (expected one of {})", SAMPLER_NAMES.join(", ")),
+        }
+    })
+}
+
+/// The sampler `kind` (one of [`sampler_kind`]) with `seed` for a `width × height` frame of
+/// `samples_per_pixel` samples: the Morton-ordered sample space of `ZSOBOL` covers the image's
+/// power-of-two square and the sample count rounded up to a power of two (Sobol' nets want
+/// power-of-two counts [sampling-denoise.md §1.2, §1.5]).
+pub fn sampler_params(kind: u32, seed: u32, width: u32, height: u32, samples_per_pixel: u32) -> SamplerParams {
+    let log2_ceil = |n: u32| n.max(1).next_power_of_two().trailing_zeros();
+    SamplerParams { kind, seed, spp_log2: log2_ceil(samples_per_pixel), resolution_log2: log2_ceil(width.max(height)) }
+}
+
+/// Generate-stage parameters for `scene`'s pinhole camera at `width × height` (both ≥ 1), sample
+/// `sample_index` of one, drawn by the default blue-noise sampler (`ZSOBOL`) with `seed`. See
+/// [`generate_params_with`].
 pub fn generate_params(scene: &Scene, width: u32, height: u32, sample_index: u32, seed: u32) -> GenerateParams {
+    let sampler = sampler_params(sampler_kind::ZSOBOL, seed, width, height, 1);
+    generate_params_with(scene, width, height, sample_index, sampler)
+}
+
+/// Generate-stage parameters for `scene`'s camera at `width × height` (both ≥ 1), sample
+/// `sample_index` drawn by `sampler`; a pinhole camera focused on the camera's look-at point
+/// (set `lens_radius` for depth of field). `tmax` covers the whole scene: twice the distance from
+/// the camera to the farthest corner of the scene bounds, so it is finite and never clips geometry.
+pub fn generate_params_with(
+    scene: &Scene,
+    width: u32,
+    height: u32,
+    sample_index: u32,
+    sampler: SamplerParams,
+) -> GenerateParams {
     let camera = scene.camera();
     let forward = (camera.look_at - camera.position).normalize();
     let right = forward.cross(camera.up).normalize();
@@ -24,10 +62,12 @@ pub fn generate_params(scene: &Scene, width: u32, height: u32, sample_index: u32
         width,
         height,
         sample_index,
-        seed,
         tmin: 0.0,
         tmax: 2.0 * far.max(f32::MIN_POSITIVE),
-        padding: [0; 2],
+        lens_radius: 0.0,
+        focus_distance: (camera.look_at - camera.position).length().max(f32::MIN_POSITIVE),
+        padding: 0,
+        sampler,
     }
 }
 

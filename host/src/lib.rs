@@ -8,7 +8,9 @@ pub mod cpu;
 pub mod device;
 pub mod error;
 pub mod frame;
+pub mod lights;
 pub mod scene;
+pub mod stats;
 pub mod stream;
 pub mod visualize;
 #[cfg(feature = "vulkan")]

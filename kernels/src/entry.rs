@@ -49,6 +49,34 @@ pub fn generate(
     }
 }
 
+/// Entry point of the sampler probe: raw sampler bits, compared bit-exact with the CPU.
+#[spirv(compute(threads(64)))]
+pub fn sampler_probe(
+    #[spirv(global_invocation_id)] global_id: UVec3,
+    #[spirv(num_workgroups)] num_workgroups: UVec3,
+    #[spirv(push_constant)] params: &raywave_shared::SamplerProbeParams,
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 0)] bits: &mut [glam::UVec2],
+) {
+    let i = stream_index(global_id, num_workgroups);
+    if i < params.sample_count() {
+        bits[i as usize] = crate::sampling::probe::sampler_probe(i, params);
+    }
+}
+
+/// Entry point of the warp probe: warped directions and their pdfs.
+#[spirv(compute(threads(64)))]
+pub fn warp_probe(
+    #[spirv(global_invocation_id)] global_id: UVec3,
+    #[spirv(num_workgroups)] num_workgroups: UVec3,
+    #[spirv(push_constant)] params: &raywave_shared::WarpParams,
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 0)] samples: &mut [Vec4],
+) {
+    let i = stream_index(global_id, num_workgroups);
+    if i < params.count {
+        samples[i as usize] = crate::sampling::probe::warp_probe(i, params);
+    }
+}
+
 /// Entry point of the trace stage with software CWBVH traversal: needs no ray-tracing extension.
 #[spirv(compute(threads(64)))]
 #[allow(clippy::too_many_arguments)]

@@ -1,7 +1,8 @@
-//! The generate stage: one pinhole-camera ray per pixel, jittered within the pixel.
+//! The generate stage: one camera ray per pixel, placed by the sampler within the pixel and, for a
+//! thin-lens camera, on the aperture.
 
-use crate::hash::{pcg3d, unit_float};
-use glam::{UVec3, Vec2, Vec3, Vec4, Vec4Swizzles};
+use crate::sampling::{dims, sampler, warp};
+use glam::{UVec2, Vec2, Vec3, Vec4, Vec4Swizzles};
 use raywave_shared::GenerateParams;
 
 /// One generated ray, as the generate stage writes it into the ray stream.
@@ -15,33 +16,47 @@ pub struct CameraRay {
     pub pixel: u32,
 }
 
-/// Sub-pixel jitter of ray `ray_index` in `[0, 1 − 2⁻²⁴]²`, a pure function of
-/// (ray index, sample index, seed). The low-discrepancy sampler replaces this in a later stage of
-/// the project; this hash keeps every backend bit-identical meanwhile.
+/// The pixel `(x, y)` of ray `ray_index` (row-major from the top-left pixel).
+pub fn ray_pixel(ray_index: u32, params: &GenerateParams) -> UVec2 {
+    let width = params.width.max(1);
+    UVec2::new(ray_index % width, ray_index / width)
+}
+
+/// Sub-pixel position of ray `ray_index` in `[0, 1 − 2⁻²⁴]²`: slot
+/// [`dims::PIXEL_JITTER`] of the frame's sampler.
 pub fn pixel_jitter(ray_index: u32, params: &GenerateParams) -> Vec2 {
-    let bits = pcg3d(UVec3::new(ray_index, params.sample_index, params.seed));
-    Vec2::new(unit_float(bits.x), unit_float(bits.y))
+    sampler::sample_2d(&params.sampler, ray_pixel(ray_index, params), params.sample_index, dims::PIXEL_JITTER)
 }
 
 /// The generate stage for one invocation: the camera ray through pixel `ray_index`
-/// (`< width · height`, row-major from the top-left pixel) at its jittered sub-pixel position.
+/// (`< width · height`) at its sampled sub-pixel position. With `lens_radius > 0` the origin is a
+/// sampled point on the aperture (concentric disk, slot [`dims::LENS`]) and the ray passes through
+/// the point the pinhole ray reaches on the plane in focus, so that plane stays sharp.
 pub fn generate_ray(ray_index: u32, params: &GenerateParams) -> CameraRay {
-    let x = ray_index % params.width;
-    let y = ray_index / params.width;
+    let pixel = ray_pixel(ray_index, params);
     let jitter = pixel_jitter(ray_index, params);
-    let ndc_x = (x as f32 + jitter.x) / params.width as f32 * 2.0 - 1.0;
-    let ndc_y = 1.0 - (y as f32 + jitter.y) / params.height as f32 * 2.0;
-    let direction: Vec3 = (params.forward.xyz() + ndc_x * params.right.xyz() + ndc_y * params.up.xyz()).normalize();
-    CameraRay {
-        origin: params.origin.xyz().extend(params.tmin),
-        direction: direction.extend(params.tmax),
-        pixel: ray_index,
+    let ndc_x = (pixel.x as f32 + jitter.x) / params.width as f32 * 2.0 - 1.0;
+    let ndc_y = 1.0 - (pixel.y as f32 + jitter.y) / params.height as f32 * 2.0;
+    // `forward` is unit and `right`, `up` are orthogonal to it, so this direction's component
+    // along the view axis is exactly 1 and `focus_distance · pinhole` lies on the focal plane.
+    let pinhole: Vec3 = params.forward.xyz() + ndc_x * params.right.xyz() + ndc_y * params.up.xyz();
+    let mut origin = params.origin.xyz();
+    let mut direction = pinhole.normalize();
+    if params.lens_radius > 0.0 {
+        let lens =
+            warp::sample_concentric_disk(sampler::sample_2d(&params.sampler, pixel, params.sample_index, dims::LENS))
+                * params.lens_radius;
+        let focus = origin + pinhole * params.focus_distance;
+        origin += lens.x * params.right.xyz().normalize() + lens.y * params.up.xyz().normalize();
+        direction = (focus - origin).normalize();
     }
+    CameraRay { origin: origin.extend(params.tmin), direction: direction.extend(params.tmax), pixel: ray_index }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use raywave_shared::sampling::{sampler_kind, SamplerParams};
 
     fn params(width: u32, height: u32) -> GenerateParams {
         GenerateParams {
@@ -52,10 +67,12 @@ mod tests {
             width,
             height,
             sample_index: 0,
-            seed: 9,
             tmin: 0.0,
             tmax: 100.0,
-            padding: [0; 2],
+            lens_radius: 0.0,
+            focus_distance: 1.0,
+            padding: 0,
+            sampler: SamplerParams { kind: sampler_kind::ZSOBOL, seed: 9, spp_log2: 2, resolution_log2: 3 },
         }
     }
 
@@ -73,15 +90,21 @@ mod tests {
 
     #[test]
     fn each_ray_stays_inside_its_pixel_footprint() {
-        let p = params(8, 4);
-        for i in 0..p.ray_count() {
-            let d = generate_ray(i, &p).direction.xyz();
-            // Project back onto the image plane at distance 1 and recover the pixel coordinates.
-            let plane = d / d.z;
-            let px = (plane.x / 0.5 + 1.0) * 0.5 * 8.0;
-            let py = (1.0 - plane.y / 0.25) * 0.5 * 4.0;
-            assert_eq!(px.floor() as u32, i % 8, "ray {i} x {px}");
-            assert_eq!(py.floor() as u32, i / 8, "ray {i} y {py}");
+        for kind in 0..sampler_kind::COUNT {
+            for sample_index in 0..4 {
+                let mut p = params(8, 4);
+                p.sampler.kind = kind;
+                p.sample_index = sample_index;
+                for i in 0..p.ray_count() {
+                    let d = generate_ray(i, &p).direction.xyz();
+                    // Project back onto the image plane at distance 1 and recover the pixel.
+                    let plane = d / d.z;
+                    let px = (plane.x / 0.5 + 1.0) * 0.5 * 8.0;
+                    let py = (1.0 - plane.y / 0.25) * 0.5 * 4.0;
+                    assert_eq!(px.floor() as u32, i % 8, "kind {kind} ray {i} x {px}");
+                    assert_eq!(py.floor() as u32, i / 8, "kind {kind} ray {i} y {py}");
+                }
+            }
         }
     }
 
@@ -97,8 +120,35 @@ mod tests {
     fn jitter_depends_on_sample_and_seed() {
         let a = params(4, 4);
         let b = GenerateParams { sample_index: 1, ..a };
-        let c = GenerateParams { seed: 10, ..a };
+        let mut c = a;
+        c.sampler.seed = 10;
         assert_ne!(pixel_jitter(3, &a), pixel_jitter(3, &b));
         assert_ne!(pixel_jitter(3, &a), pixel_jitter(3, &c));
+    }
+
+    #[test]
+    fn thin_lens_rays_start_on_the_aperture_and_meet_on_the_focal_plane() {
+        let mut p = params(4, 4);
+        p.lens_radius = 0.1;
+        p.focus_distance = 5.0;
+        for i in 0..p.ray_count() {
+            let pinhole = generate_ray(i, &GenerateParams { lens_radius: 0.0, ..p });
+            let mut focus_points = std::vec::Vec::new();
+            for sample_index in 0..4 {
+                let ray = generate_ray(i, &GenerateParams { sample_index, ..p });
+                let offset = ray.origin.xyz() - p.origin.xyz();
+                assert!(offset.length() <= 0.1 + 1e-6 && offset.z.abs() < 1e-6, "origin off the lens");
+                let d = ray.direction.xyz();
+                assert!((d.length() - 1.0).abs() < 1e-5);
+                // Where the ray crosses the focal plane z = 3 + 5.
+                let t = (8.0 - ray.origin.z) / d.z;
+                focus_points.push(ray.origin.xyz() + t * d);
+            }
+            // The pinhole ray (same jitter for sample 0 only) and every lens ray of one jitter
+            // meet the focal plane at their pinhole point: check sample 0 against the pinhole.
+            let d = pinhole.direction.xyz();
+            let expected = pinhole.origin.xyz() + (5.0 / d.z) * d;
+            assert!((focus_points[0] - expected).length() < 1e-4, "{:?} vs {expected:?}", focus_points[0]);
+        }
     }
 }

@@ -14,6 +14,7 @@ pub mod entry;
 pub mod generate;
 pub mod hash;
 pub mod offset;
+pub mod sampling;
 pub mod trace;
 pub mod triangle;
 

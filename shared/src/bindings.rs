@@ -51,3 +51,11 @@ pub mod trace {
     /// Input, software traversal: (instance, primitive) per triangle in BVH order (`UVec2`).
     pub const TRIANGLE_IDS: u32 = 8;
 }
+
+/// Bindings of the sampling probes (set 0), which expose the sampler and the warps as streams for
+/// the CPU–SPIR-V parity tests.
+pub mod probe {
+    /// Output: the sampler probe's raw bits (`UVec2`) or the warp probe's samples (`Vec4`, xyz
+    /// direction, w pdf).
+    pub const SAMPLES: u32 = 0;
+}

@@ -1,9 +1,11 @@
 //! Parameters of the generate stage (camera rays).
 
+use crate::sampling::SamplerParams;
 use bytemuck::{Pod, Zeroable};
 use glam::Vec4;
 
-/// Push constants of the generate stage: a pinhole camera and the image it covers.
+/// Push constants of the generate stage: a pinhole or thin-lens camera, the image it covers and
+/// the sampler that places the rays.
 ///
 /// The camera basis is pre-scaled on the host so the kernel needs no trigonometry: a pixel at
 /// normalised device coordinates `(x, y)` in `[-1, 1]²` (y up) looks along
@@ -25,17 +27,22 @@ pub struct GenerateParams {
     pub height: u32,
     /// Index of the sample within the pixel (0 for the first sample of a frame).
     pub sample_index: u32,
-    /// Seed of the counter-based jitter hash; different seeds give independent jitter.
-    pub seed: u32,
     /// Ray `tmin` in scene units (≥ 0).
     pub tmin: f32,
     /// Ray `tmax` in scene units (finite, > `tmin`).
     pub tmax: f32,
+    /// Thin-lens aperture radius in scene units; 0 is a pinhole camera.
+    pub lens_radius: f32,
+    /// Distance along the view direction of the plane in focus, in scene units (> 0; only read
+    /// when `lens_radius` > 0).
+    pub focus_distance: f32,
     /// Explicit padding to a 16-byte multiple; always 0.
-    pub padding: [u32; 2],
+    pub padding: u32,
+    /// The sampler of the pixel jitter and lens positions (slots `PIXEL_JITTER` and `LENS`).
+    pub sampler: SamplerParams,
 }
 
-const _: () = assert!(core::mem::size_of::<GenerateParams>() == 96);
+const _: () = assert!(core::mem::size_of::<GenerateParams>() == 112);
 const _: () = assert!(core::mem::align_of::<GenerateParams>() == 16);
 
 impl GenerateParams {

@@ -9,8 +9,13 @@
 pub mod bindings;
 pub mod bvh;
 pub mod generate;
+pub mod light;
+pub mod sampling;
 pub mod stream;
 pub mod trace;
 
 pub use generate::GenerateParams;
+pub use light::Light;
+pub use light::{LightBounds, LightBvhNode};
+pub use sampling::{SamplerParams, SamplerProbeParams, WarpParams};
 pub use trace::TraceParams;

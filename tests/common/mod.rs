@@ -4,6 +4,8 @@
 
 use raywave::Scene;
 
+pub mod warp_cases;
+
 /// True when running under CI (`CI=true`), where a missing Vulkan device or validation layer is a
 /// failure rather than a skip.
 pub fn in_ci() -> bool {
@@ -37,19 +39,8 @@ pub mod vulkan {
     /// query and the ray-tracing pipeline where exposed), with validation layers on. Without devices this SKIPs loudly (fails
     /// under CI). Validation is required under CI; elsewhere it is used when installed.
     pub fn every_device(test: &str) -> Vec<VulkanBackend> {
-        let devices = match enumerate_devices() {
-            Ok(d) if !d.is_empty() => d,
-            Ok(_) => {
-                super::skip_or_fail(test, "no Vulkan device");
-                return vec![];
-            }
-            Err(e) => {
-                super::skip_or_fail(test, &format!("{e}"));
-                return vec![];
-            }
-        };
         let mut backends = Vec::new();
-        for device in &devices {
+        for device in &devices(test) {
             backends.push(open(device, TraceMethod::Software));
             if device.missing_for_ray_query().is_empty() {
                 backends.push(open(device, TraceMethod::RayQuery));
@@ -59,6 +50,27 @@ pub mod vulkan {
             }
         }
         backends
+    }
+
+    /// Opens every Vulkan device once (software trace), with validation layers on, for stages
+    /// that do not trace. SKIPs loudly without devices (fails under CI).
+    pub fn each_device(test: &str) -> Vec<VulkanBackend> {
+        devices(test).iter().map(|device| open(device, TraceMethod::Software)).collect()
+    }
+
+    /// Every Vulkan device; none (after a loud SKIP, or a failure under CI) if there are none.
+    fn devices(test: &str) -> Vec<DeviceInfo> {
+        match enumerate_devices() {
+            Ok(d) if !d.is_empty() => d,
+            Ok(_) => {
+                super::skip_or_fail(test, "no Vulkan device");
+                vec![]
+            }
+            Err(e) => {
+                super::skip_or_fail(test, &format!("{e}"));
+                vec![]
+            }
+        }
     }
 
     fn open(info: &DeviceInfo, trace: TraceMethod) -> VulkanBackend {

@@ -5,16 +5,18 @@ mod bvh;
 
 pub use bvh::{BvhQuality, CpuScene};
 
-use crate::backend::{check_image_size_common, Backend, FrameOutput, StageTiming};
+use crate::backend::{check_image_size_common, sampler_probe_len, warp_probe_len, Backend, FrameOutput, StageTiming};
 use crate::error::{Error, Result};
 use crate::scene::Scene;
 use crate::stream::{HitStream, RayStream};
+use glam::{UVec2, Vec4};
 use rayon::prelude::*;
+use raywave_kernels::sampling::probe;
 use raywave_kernels::{
     generate::generate_ray,
     trace::{trace_closest, trace_occluded},
 };
-use raywave_shared::GenerateParams;
+use raywave_shared::{GenerateParams, SamplerProbeParams, WarpParams};
 use std::time::Instant;
 
 /// Largest image the CPU backend accepts: 2²⁶ pixels (≈ 3.8 GB of ray and hit streams).
@@ -113,6 +115,16 @@ impl Backend for CpuBackend {
         let (rays, generate_time) = self.generate(params)?;
         let (hits, trace_time) = self.trace(&rays)?;
         Ok(FrameOutput { rays, hits, timings: vec![generate_time, trace_time] })
+    }
+
+    fn sampler_probe(&mut self, params: &SamplerProbeParams) -> Result<Vec<UVec2>> {
+        let count = sampler_probe_len(params)?;
+        Ok((0..count).into_par_iter().map(|i| probe::sampler_probe(i, params)).collect())
+    }
+
+    fn warp_probe(&mut self, params: &WarpParams) -> Result<Vec<Vec4>> {
+        let count = warp_probe_len(params)?;
+        Ok((0..count).into_par_iter().map(|i| probe::warp_probe(i, params)).collect())
     }
 }
 

@@ -7,7 +7,7 @@ use super::context::{open, ContextOptions, Core, DeviceInfo};
 use super::kernel::{dispatch_grid, ComputeKernel};
 use super::pass::Resource;
 use super::rt_pipeline::{RtPipelineKernel, CLOSEST_HIT_SHADERS, OCCLUSION_SHADERS};
-use crate::backend::{check_image_size_common, Backend, FrameOutput, StageTiming};
+use crate::backend::{check_image_size_common, sampler_probe_len, warp_probe_len, Backend, FrameOutput, StageTiming};
 use crate::cpu::CpuScene;
 use crate::device::TraceMethod;
 use crate::error::{Error, Result};
@@ -15,9 +15,9 @@ use crate::scene::Scene;
 use crate::stream::{HitStream, RayStream};
 use ash::vk;
 use bytemuck::Pod;
-use glam::{Vec2, Vec4};
+use glam::{UVec2, Vec2, Vec4};
 use gpu_allocator::MemoryLocation;
-use raywave_shared::{bindings, GenerateParams, TraceParams};
+use raywave_shared::{bindings, GenerateParams, SamplerProbeParams, TraceParams, WarpParams};
 use std::sync::Arc;
 
 /// Storage buffers of the streams: read and written by shaders, mapped for upload and readback.
@@ -116,6 +116,8 @@ enum TraceKernel {
 /// A Vulkan device running raywave's stages.
 pub struct VulkanBackend {
     generate: ComputeKernel,
+    sampler_probe: ComputeKernel,
+    warp_probe: ComputeKernel,
     trace: TraceKernel,
     occlusion: TraceKernel,
     trace_method: TraceMethod,
@@ -189,6 +191,15 @@ impl VulkanBackend {
             ],
             std::mem::size_of::<GenerateParams>() as u32,
         )?;
+        let probe_layout = [(bindings::probe::SAMPLES, storage)];
+        let sampler_probe = ComputeKernel::new(
+            &core,
+            "entry::sampler_probe",
+            &probe_layout,
+            std::mem::size_of::<SamplerProbeParams>() as u32,
+        )?;
+        let warp_probe =
+            ComputeKernel::new(&core, "entry::warp_probe", &probe_layout, std::mem::size_of::<WarpParams>() as u32)?;
         let push = std::mem::size_of::<TraceParams>() as u32;
         let hit_layout = trace_bindings(trace_method, &HIT_OUTPUTS);
         let occlusion_layout = trace_bindings(trace_method, &OCCLUSION_OUTPUTS);
@@ -210,7 +221,7 @@ impl VulkanBackend {
                 (rt(&CLOSEST_HIT_SHADERS, &hit_layout)?, rt(&OCCLUSION_SHADERS, &occlusion_layout)?)
             }
         };
-        Ok(Self { generate, trace, occlusion, trace_method, scene: None, core })
+        Ok(Self { generate, sampler_probe, warp_probe, trace, occlusion, trace_method, scene: None, core })
     }
 
     /// The device's name and features.
@@ -339,5 +350,19 @@ impl Backend for VulkanBackend {
         let (rays, generate_time) = self.generate_on_device(params)?;
         let (hits, trace_time) = self.trace_on_device(&rays)?;
         Ok(FrameOutput { rays: rays.read()?, hits: hits.read()?, timings: vec![generate_time, trace_time] })
+    }
+
+    fn sampler_probe(&mut self, params: &SamplerProbeParams) -> Result<Vec<UVec2>> {
+        let count = sampler_probe_len(params)?;
+        let samples = stream_buffer::<UVec2>(&self.core, count.max(1), "sampler probe")?;
+        self.sampler_probe.dispatch(&[Resource::Buffer(&samples)], bytemuck::bytes_of(params), count)?;
+        samples.read(count as usize)
+    }
+
+    fn warp_probe(&mut self, params: &WarpParams) -> Result<Vec<Vec4>> {
+        let count = warp_probe_len(params)?;
+        let samples = stream_buffer::<Vec4>(&self.core, count.max(1), "warp probe")?;
+        self.warp_probe.dispatch(&[Resource::Buffer(&samples)], bytemuck::bytes_of(params), count)?;
+        samples.read(count as usize)
     }
 }

@@ -1,0 +1,922 @@
+//! Light selection: choosing one light among many, uniformly or in proportion to a conservative
+//! bound of its contribution, with the probability of every choice available for MIS.
+//!
+//! The bound is the light importance of Conty Estevez & Kulla, "Importance Sampling of Many Lights
+//! with Adaptive Tree Splitting" (HPG 2018), as pbrt-v4 implements it in `LightBounds::Importance`
+//! (lights.cpp:107-160): `Φ · cos θ' / d²` with `θ' = max(0, θw − θo − θb)` and, at a surface, the
+//! factor `cos(max(0, θi − θb))` (see [`importance`]). It is zero only where no point of the light
+//! can emit towards the point, or where the whole light lies below the surface, so a light that
+//! contributes is never given probability 0.
+//!
+//! Three ways to choose, each a pure function with a matching pmf function:
+//!
+//! - [`select_uniform`] / [`uniform_pmf`]: `1/N`.
+//! - [`select_importance`] / [`importance_pmf`]: a linear scan over the lights, `pmf = I_k / Σ I`.
+//!   Cost: about 1.5·N importance evaluations per choice, exact per-light importance. When every
+//!   importance is zero (all lights behind the surface, or all of zero power) it falls back to the
+//!   uniform choice, so it returns a light whenever there is one; that light contributes nothing
+//!   there, which keeps the estimator unbiased.
+//! - [`select_bvh`] / [`bvh_pmf`]: stochastic descent of a light BVH built by the host
+//!   (`raywave_host::lights::LightBvh`), for many lights. At each interior node both children's
+//!   importance is evaluated and the first child is taken with probability `I₀ / (I₀ + I₁)`
+//!   (`1/2` when both are zero); the sample is rescaled to be reused at the next level and the
+//!   branch probabilities multiply into the pmf. Cost: 2 importance evaluations per level.
+//!
+//! [`LightSet`] picks between the scan and the BVH for a scene (the host decides whether a scene
+//! gets a BVH).
+//!
+//! **BVH layout** ([`LightBvhNode`], 80 bytes): depth-first in one array, node 0 the root. An
+//! interior node's first child is the next node, its second child is `child_or_light`; a leaf holds
+//! one light, `child_or_light`. The host builder keeps leaves at depth ≤ [`MAX_BVH_DEPTH`] = 32.
+//! **Trails**: `trails[light]` is the path from the root to that light's leaf, one bit per level,
+//! bit `d` (from the least significant) for the edge leaving depth `d`: 0 = first child, 1 = second.
+//! [`bvh_pmf`] follows the trail and checks that the leaf it reaches holds the light; lights left
+//! out of the BVH (zero power) reach another light's leaf and so get pmf 0.
+//!
+//! Precision: a branch probability below 2⁻²⁴ relative to its sibling rounds the sibling's
+//! probability to 1, and each level rescales the 24-bit sample, so a subtree with pmf ≲ 2⁻²⁴ can
+//! get pmf 0 (pbrt-v4 behaves the same); such a subtree contributes at most ≈ 2⁻²⁴ of the total
+//! bound. [`bvh_pmf`] is exactly the product [`select_bvh`] forms, so MIS weights stay consistent.
+//!
+//! All functions are `no_std`, loop-bounded, allocation- and panic-free, and return finite values:
+//! importances are clamped to `[0,` [`MAX_IMPORTANCE`]`]` so that sums over up to 2³² lights stay
+//! finite, and NaN inputs give importance 0.
+
+use glam::Vec3;
+use raywave_shared::light::{light_kind, Light, LightBounds, LightBvhNode};
+use spirv_std::num_traits::Float;
+
+use crate::hash::ONE_MINUS_EPSILON;
+
+/// Rec. 709 luminance weights of linear RGB (ITU-R BT.709, `Y = 0.2126 R + 0.7152 G + 0.0722 B`).
+pub const LUMINANCE: Vec3 = Vec3::new(0.2126, 0.7152, 0.0722);
+
+/// Upper clamp of [`importance`]: 2³² · 10²⁸ ≈ 4.3·10³⁷ stays below `f32::MAX` ≈ 3.4·10³⁸, so
+/// a sum over any number of lights the `u32` indices allow is finite.
+pub const MAX_IMPORTANCE: f32 = 1e28;
+
+/// Deepest leaf of a light BVH: the 32 bits of a trail.
+pub const MAX_BVH_DEPTH: u32 = 32;
+
+/// Light index of [`LightChoice::NONE`].
+pub const NO_LIGHT: u32 = u32::MAX;
+
+/// One chosen light and the probability of having chosen it.
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub struct LightChoice {
+    /// Index into the light list, or [`NO_LIGHT`].
+    pub index: u32,
+    /// Probability of choosing `index` (discrete pmf); 0 for [`LightChoice::NONE`].
+    pub pmf: f32,
+}
+
+impl LightChoice {
+    /// No light: the list is empty (or the BVH malformed).
+    pub const NONE: LightChoice = LightChoice { index: NO_LIGHT, pmf: 0.0 };
+
+    /// Whether a light was chosen (`pmf > 0`).
+    pub fn is_valid(&self) -> bool {
+        self.index != NO_LIGHT && self.pmf > 0.0
+    }
+}
+
+/// `sqrt(max(0, x))`.
+fn safe_sqrt(x: f32) -> f32 {
+    Float::sqrt(x.max(0.0))
+}
+
+/// `sin θ` from `cos θ` for θ ∈ [0, π].
+fn sin_from_cos(cos: f32) -> f32 {
+    safe_sqrt(1.0 - cos * cos)
+}
+
+/// `cos(max(0, θa − θb))` from the sines and cosines of θa, θb ∈ [0, π] (pbrt-v4 `cosSubClamped`).
+fn cos_sub_clamped(sin_a: f32, cos_a: f32, sin_b: f32, cos_b: f32) -> f32 {
+    if cos_a > cos_b {
+        1.0
+    } else {
+        cos_a * cos_b + sin_a * sin_b
+    }
+}
+
+/// `sin(max(0, θa − θb))` from the sines and cosines of θa, θb ∈ [0, π] (pbrt-v4 `sinSubClamped`).
+fn sin_sub_clamped(sin_a: f32, cos_a: f32, sin_b: f32, cos_b: f32) -> f32 {
+    if cos_a > cos_b {
+        0.0
+    } else {
+        sin_a * cos_b - cos_a * sin_b
+    }
+}
+
+/// A sample clamped to `[0, 1 − 2⁻²⁴]`; NaN becomes 0.
+fn clamp_sample(u: f32) -> f32 {
+    if u >= 0.0 {
+        u.min(ONE_MINUS_EPSILON)
+    } else {
+        0.0
+    }
+}
+
+/// Rec. 709 luminance of linear RGB, clamped to ≥ 0 (NaN → 0).
+pub fn luminance(rgb: Vec3) -> f32 {
+    let y = LUMINANCE.dot(rgb);
+    if y > 0.0 {
+        y
+    } else {
+        0.0
+    }
+}
+
+/// Bounds of one light: its box, its power and its normal cone.
+///
+/// Power is the emitted flux of a diffuse emitter with the luminance of the RGB radiance:
+/// `Φ = π · A · Y(L)`, with `A = 4πr²` for a sphere and `A = |edge_u × edge_v|` for a quad,
+/// doubled for a two-sided quad. Cones: a sphere emits in every direction (`θo = π`, axis +z); a
+/// quad's normals are all `normalize(edge_u × edge_v)` (`θo = 0`), and a two-sided quad keeps that
+/// cone with `two_sided = 1`, which [`importance`] mirrors (pbrt-v4's choice: tighter than
+/// widening the cone to `θo = π`). Diffuse emitters emit within `θe = π/2` of their normal.
+/// An unknown kind or a degenerate light gets `Φ = 0`.
+pub fn light_bounds(light: &Light) -> LightBounds {
+    let radiance = luminance(light.radiance.truncate());
+    let origin = light.position.truncate();
+    let mut bounds = LightBounds {
+        min: origin.extend(0.0),
+        max: origin.extend(0.0),
+        axis: Vec3::Z.extend(0.0),
+        phi: 0.0,
+        cos_theta_o: -1.0,
+        cos_theta_e: 0.0,
+        two_sided: 0,
+    };
+    if light.kind == light_kind::SPHERE {
+        let r = light.position.w.abs();
+        let area = 4.0 * core::f32::consts::PI * r * r;
+        bounds.min = (origin - Vec3::splat(r)).extend(0.0);
+        bounds.max = (origin + Vec3::splat(r)).extend(0.0);
+        bounds.phi = core::f32::consts::PI * area * radiance;
+    } else if light.kind == light_kind::QUAD {
+        let eu = light.edge_u.truncate();
+        let ev = light.edge_v.truncate();
+        let normal = eu.cross(ev);
+        let area = normal.length();
+        let sides = if light.two_sided != 0 { 2.0 } else { 1.0 };
+        let corners = [origin + eu, origin + ev, origin + eu + ev];
+        let mut lo = origin;
+        let mut hi = origin;
+        let mut i = 0;
+        while i < 3 {
+            lo = lo.min(corners[i]);
+            hi = hi.max(corners[i]);
+            i += 1;
+        }
+        bounds.min = lo.extend(0.0);
+        bounds.max = hi.extend(0.0);
+        if area > 0.0 {
+            bounds.axis = (normal / area).extend(0.0);
+        }
+        bounds.phi = core::f32::consts::PI * area * radiance * sides;
+        bounds.cos_theta_o = 1.0;
+        bounds.two_sided = (light.two_sided != 0) as u32;
+    }
+    if bounds.phi.is_nan() || bounds.phi <= 0.0 {
+        bounds.phi = 0.0;
+    }
+    bounds
+}
+
+/// Conservative importance of the lights inside `bounds` for the point `p` with surface normal
+/// `n` (Conty Estevez & Kulla 2018; pbrt-v4 `LightBounds::Importance`).
+///
+/// With `pc` the box centre, `d² = max(|p − pc|², |diagonal|/2)` (pbrt clamps with the diagonal's
+/// length, not its square), `θw` the angle between the cone axis and `p − pc` (its absolute cosine
+/// for two-sided bounds), `θb` the half-angle of the cone from `p` around the box's bounding sphere
+/// (`θb = π` when `p` is inside that sphere), `θ' = max(0, θw − θo − θb)`:
+/// `I = Φ · cos θ' / d²`, and 0 when `cos θ' ≤ cos θe`.
+///
+/// At a surface (`n ≠ 0`; need not be normalised) it is multiplied by `cos(max(0, θi − θb))`, θi
+/// the angle between `n` and `pc − p`, and clamped to ≥ 0: lights entirely below the surface get 0.
+/// This uses the signed cosine, unlike pbrt-v4's `AbsDot` (which keeps lights behind the surface
+/// for transmission): pass the normal on the side where light is wanted, or `n = 0` (a medium
+/// point, or a transmissive surface) for no surface factor.
+///
+/// Finite and in `[0, MAX_IMPORTANCE]` for every input; 0 for NaN inputs and zero power.
+pub fn importance(bounds: &LightBounds, p: Vec3, n: Vec3) -> f32 {
+    let phi = bounds.phi;
+    if phi.is_nan() || phi <= 0.0 {
+        return 0.0;
+    }
+    let lo = bounds.min.truncate();
+    let hi = bounds.max.truncate();
+    let center = (lo + hi) * 0.5;
+    let radius = (hi - center).length();
+    let to_p = p - center;
+    let dist2 = to_p.length_squared();
+    if !dist2.is_finite() {
+        // p is NaN or infinite.
+        return 0.0;
+    }
+    let d2 = dist2.max((hi - lo).length() * 0.5).max(f32::MIN_POSITIVE);
+
+    let mut cos_theta_p = 1.0;
+    let mut cos_theta_pi = 1.0;
+    // Inside the bounding sphere every direction may reach the lights: both factors are 1.
+    if dist2 > radius * radius {
+        let wi = to_p / Float::sqrt(dist2);
+        let sin2_b = (radius * radius / dist2).min(1.0);
+        let cos_b = safe_sqrt(1.0 - sin2_b);
+        let sin_b = safe_sqrt(sin2_b);
+
+        let mut cos_w = bounds.axis.truncate().dot(wi);
+        if bounds.two_sided != 0 {
+            cos_w = cos_w.abs();
+        }
+        let cos_w = cos_w.clamp(-1.0, 1.0);
+        let sin_w = sin_from_cos(cos_w);
+        let cos_o = bounds.cos_theta_o.clamp(-1.0, 1.0);
+        let sin_o = sin_from_cos(cos_o);
+        let cos_x = cos_sub_clamped(sin_w, cos_w, sin_o, cos_o);
+        let sin_x = sin_sub_clamped(sin_w, cos_w, sin_o, cos_o);
+        cos_theta_p = cos_sub_clamped(sin_x, cos_x, sin_b, cos_b);
+        if cos_theta_p <= bounds.cos_theta_e {
+            return 0.0;
+        }
+
+        let n_len2 = n.length_squared();
+        if n_len2 > 0.0 {
+            let cos_i = (-n.dot(wi) / Float::sqrt(n_len2)).clamp(-1.0, 1.0);
+            let sin_i = sin_from_cos(cos_i);
+            cos_theta_pi = cos_sub_clamped(sin_i, cos_i, sin_b, cos_b);
+        }
+    }
+    let value = phi * cos_theta_p * cos_theta_pi / d2;
+    if value > 0.0 {
+        value.min(MAX_IMPORTANCE)
+    } else {
+        0.0
+    }
+}
+
+/// Uniform choice among `count` lights: index `⌊u·count⌋`, pmf `1/count`; [`LightChoice::NONE`]
+/// when `count` is 0.
+pub fn select_uniform(count: u32, u: f32) -> LightChoice {
+    if count == 0 {
+        return LightChoice::NONE;
+    }
+    let index = ((clamp_sample(u) * count as f32) as u32).min(count - 1);
+    LightChoice { index, pmf: 1.0 / count as f32 }
+}
+
+/// Pmf of [`select_uniform`]: `1/count` for a valid index, else 0.
+pub fn uniform_pmf(count: u32, index: u32) -> f32 {
+    if index < count {
+        1.0 / count as f32
+    } else {
+        0.0
+    }
+}
+
+/// Σ importance of the first `count` lights, in index order (the order [`scan_select`] repeats).
+fn total_importance(lights: &[Light], count: u32, p: Vec3, n: Vec3) -> f32 {
+    let mut total = 0.0;
+    let mut i = 0;
+    while i < count {
+        total += importance(&light_bounds(&lights[i as usize]), p, n);
+        i += 1;
+    }
+    total
+}
+
+/// [`select_importance`] over the first `count` lights (`count ≤ lights.len()`).
+fn scan_select(lights: &[Light], count: u32, p: Vec3, n: Vec3, u: f32) -> LightChoice {
+    if count == 0 {
+        return LightChoice::NONE;
+    }
+    let total = total_importance(lights, count, p, n);
+    if total.is_nan() || total <= 0.0 {
+        return select_uniform(count, u);
+    }
+    let target = clamp_sample(u) * total;
+    let mut running = 0.0;
+    let mut last = LightChoice::NONE;
+    let mut i = 0;
+    while i < count {
+        let weight = importance(&light_bounds(&lights[i as usize]), p, n);
+        if weight > 0.0 {
+            last = LightChoice { index: i, pmf: weight / total };
+            running += weight;
+            if target < running {
+                return last;
+            }
+        }
+        i += 1;
+    }
+    // `u·total` rounded up to `total`: the last light with non-zero importance.
+    last
+}
+
+/// [`importance_pmf`] over the first `count` lights (`count ≤ lights.len()`).
+fn scan_pmf(lights: &[Light], count: u32, p: Vec3, n: Vec3, index: u32) -> f32 {
+    if index >= count {
+        return 0.0;
+    }
+    let total = total_importance(lights, count, p, n);
+    if total.is_nan() || total <= 0.0 {
+        return uniform_pmf(count, index);
+    }
+    importance(&light_bounds(&lights[index as usize]), p, n) / total
+}
+
+/// Chooses a light with probability proportional to its [`importance`] at `p` (normal `n`, or 0)
+/// by a linear scan: the total, then the inverse CDF at `u`. Falls back to [`select_uniform`] when
+/// every importance is 0. [`LightChoice::NONE`] for an empty list.
+pub fn select_importance(lights: &[Light], p: Vec3, n: Vec3, u: f32) -> LightChoice {
+    scan_select(lights, lights.len() as u32, p, n, u)
+}
+
+/// Probability that [`select_importance`] chooses light `index` at `p`, `n`: `I_index / Σ I`, or
+/// `1/N` in the all-zero fallback; 0 for an index out of range.
+pub fn importance_pmf(lights: &[Light], p: Vec3, n: Vec3, index: u32) -> f32 {
+    scan_pmf(lights, lights.len() as u32, p, n, index)
+}
+
+/// Probability of taking the first child of interior node `node` (children `first`, `second`):
+/// `I₀ / (I₀ + I₁)`, or 1/2 when both importances are 0.
+fn first_child_probability(nodes: &[LightBvhNode], first: u32, second: u32, p: Vec3, n: Vec3) -> f32 {
+    let i0 = importance(&nodes[first as usize].bounds, p, n);
+    let i1 = importance(&nodes[second as usize].bounds, p, n);
+    let sum = i0 + i1;
+    if sum > 0.0 {
+        i0 / sum
+    } else {
+        0.5
+    }
+}
+
+/// [`select_bvh`] over the first `count` nodes (`count ≤ nodes.len()`).
+fn bvh_select(nodes: &[LightBvhNode], count: u32, p: Vec3, n: Vec3, u: f32) -> LightChoice {
+    if count == 0 {
+        return LightChoice::NONE;
+    }
+    let mut u = clamp_sample(u);
+    let mut node = 0u32;
+    let mut pmf = 1.0f32;
+    let mut depth = 0u32;
+    while depth <= MAX_BVH_DEPTH {
+        let current = nodes[node as usize];
+        if current.is_leaf != 0 {
+            return LightChoice { index: current.child_or_light, pmf };
+        }
+        let first = node + 1;
+        let second = current.child_or_light;
+        if depth == MAX_BVH_DEPTH || first >= count || second >= count {
+            break;
+        }
+        let p_first = first_child_probability(nodes, first, second, p, n);
+        if u < p_first {
+            u = (u / p_first).min(ONE_MINUS_EPSILON);
+            pmf *= p_first;
+            node = first;
+        } else {
+            u = ((u - p_first) / (1.0 - p_first)).min(ONE_MINUS_EPSILON);
+            pmf *= 1.0 - p_first;
+            node = second;
+        }
+        depth += 1;
+    }
+    // A malformed tree: deeper than 32 levels or a child index out of range.
+    LightChoice::NONE
+}
+
+/// [`bvh_pmf`] over the first `count` nodes (`count ≤ nodes.len()`).
+fn bvh_light_pmf(nodes: &[LightBvhNode], count: u32, trails: &[u32], p: Vec3, n: Vec3, light: u32) -> f32 {
+    if count == 0 || light as usize >= trails.len() {
+        return 0.0;
+    }
+    let trail = trails[light as usize];
+    let mut node = 0u32;
+    let mut pmf = 1.0f32;
+    let mut depth = 0u32;
+    while depth <= MAX_BVH_DEPTH {
+        let current = nodes[node as usize];
+        if current.is_leaf != 0 {
+            return if current.child_or_light == light { pmf } else { 0.0 };
+        }
+        let first = node + 1;
+        let second = current.child_or_light;
+        if depth == MAX_BVH_DEPTH || first >= count || second >= count {
+            break;
+        }
+        let p_first = first_child_probability(nodes, first, second, p, n);
+        if (trail >> depth) & 1 == 0 {
+            pmf *= p_first;
+            node = first;
+        } else {
+            pmf *= 1.0 - p_first;
+            node = second;
+        }
+        depth += 1;
+    }
+    0.0
+}
+
+/// Chooses a light by stochastic descent of the light BVH `nodes` (layout in the module docs):
+/// at each interior node the first child with probability `I₀/(I₀ + I₁)` (1/2 if both are 0),
+/// `u` rescaled to `[0, 1)` for the next level, the pmf the product of the branch probabilities.
+/// [`LightChoice::NONE`] for an empty or malformed tree. A one-node tree returns its light with
+/// pmf 1. With 24-bit samples, the decisions below depth ≈ 20 reuse few remaining bits.
+pub fn select_bvh(nodes: &[LightBvhNode], p: Vec3, n: Vec3, u: f32) -> LightChoice {
+    bvh_select(nodes, nodes.len() as u32, p, n, u)
+}
+
+/// Probability that [`select_bvh`] chooses `light` at `p`, `n`: the product of the branch
+/// probabilities along `trails[light]`, bit-identical to the pmf [`select_bvh`] returns for it;
+/// 0 when the trail does not end at that light's leaf (a light left out of the BVH) or `light` is
+/// out of range of `trails`.
+pub fn bvh_pmf(nodes: &[LightBvhNode], trails: &[u32], p: Vec3, n: Vec3, light: u32) -> f32 {
+    bvh_light_pmf(nodes, nodes.len() as u32, trails, p, n, light)
+}
+
+/// A scene's lights as light selection reads them: the light list and, for scenes with many
+/// lights, their BVH. The counts, not the slice lengths, say what is valid, because a GPU binding
+/// cannot be empty (an unused buffer holds one dummy element).
+#[derive(Copy, Clone)]
+pub struct LightSet<'a> {
+    /// The lights.
+    pub lights: &'a [Light],
+    /// Light BVH nodes (node 0 the root); ignored when `node_count` is 0.
+    pub nodes: &'a [LightBvhNode],
+    /// Per light, its trail in the BVH; ignored when `node_count` is 0.
+    pub trails: &'a [u32],
+    /// Number of valid lights in `lights`.
+    pub light_count: u32,
+    /// Number of valid nodes in `nodes`: 0 selects the linear importance scan.
+    pub node_count: u32,
+}
+
+impl<'a> LightSet<'a> {
+    /// A light set whose counts are the slice lengths (an empty `nodes` means no BVH).
+    pub fn new(lights: &'a [Light], nodes: &'a [LightBvhNode], trails: &'a [u32]) -> Self {
+        LightSet { lights, nodes, trails, light_count: lights.len() as u32, node_count: nodes.len() as u32 }
+    }
+
+    fn light_count(&self) -> u32 {
+        self.light_count.min(self.lights.len() as u32)
+    }
+
+    fn node_count(&self) -> u32 {
+        self.node_count.min(self.nodes.len() as u32)
+    }
+
+    /// Chooses a light for `p`, `n` with sample `u`: by the BVH when there is one, else by the
+    /// linear importance scan. [`LightChoice::NONE`] when there is no light to choose.
+    pub fn select(&self, p: Vec3, n: Vec3, u: f32) -> LightChoice {
+        let lights = self.light_count();
+        if lights == 0 {
+            return LightChoice::NONE;
+        }
+        let nodes = self.node_count();
+        if nodes > 0 {
+            let choice = bvh_select(self.nodes, nodes, p, n, u);
+            if choice.index < lights {
+                choice
+            } else {
+                LightChoice::NONE
+            }
+        } else {
+            scan_select(self.lights, lights, p, n, u)
+        }
+    }
+
+    /// Probability that [`LightSet::select`] chooses light `index` at `p`, `n`.
+    pub fn pmf(&self, p: Vec3, n: Vec3, index: u32) -> f32 {
+        let lights = self.light_count();
+        if index >= lights {
+            return 0.0;
+        }
+        let nodes = self.node_count();
+        if nodes > 0 {
+            bvh_light_pmf(self.nodes, nodes, self.trails, p, n, index)
+        } else {
+            scan_pmf(self.lights, lights, p, n, index)
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::hash::{pcg3d, unit_float};
+    use glam::{UVec3, Vec4};
+    use std::vec::Vec;
+
+    fn sphere(center: Vec3, radius: f32, radiance: Vec3) -> Light {
+        Light {
+            position: center.extend(radius),
+            edge_u: Vec4::ZERO,
+            edge_v: Vec4::ZERO,
+            radiance: radiance.extend(0.0),
+            kind: light_kind::SPHERE,
+            two_sided: 0,
+            padding: [0; 2],
+        }
+    }
+
+    fn quad(corner: Vec3, eu: Vec3, ev: Vec3, radiance: Vec3, two_sided: bool) -> Light {
+        Light {
+            position: corner.extend(0.0),
+            edge_u: eu.extend(0.0),
+            edge_v: ev.extend(0.0),
+            radiance: radiance.extend(0.0),
+            kind: light_kind::QUAD,
+            two_sided: two_sided as u32,
+            padding: [0; 2],
+        }
+    }
+
+    /// Deterministic random floats in [0, 1) from a counter.
+    struct Rng {
+        seed: u32,
+        counter: u32,
+    }
+
+    impl Rng {
+        fn new(seed: u32) -> Self {
+            Rng { seed, counter: 0 }
+        }
+        fn next(&mut self) -> f32 {
+            self.counter += 1;
+            unit_float(pcg3d(UVec3::new(self.counter, self.seed, 0x11_6475)).x)
+        }
+        fn range(&mut self, lo: f32, hi: f32) -> f32 {
+            lo + (hi - lo) * self.next()
+        }
+        fn vec(&mut self, lo: f32, hi: f32) -> Vec3 {
+            Vec3::new(self.range(lo, hi), self.range(lo, hi), self.range(lo, hi))
+        }
+        fn unit(&mut self) -> Vec3 {
+            loop {
+                let v = self.vec(-1.0, 1.0);
+                if v.length_squared() > 1e-3 && v.length_squared() <= 1.0 {
+                    return v.normalize();
+                }
+            }
+        }
+    }
+
+    fn random_light(rng: &mut Rng) -> Light {
+        let radiance = Vec3::new(rng.range(0.1, 5.0), rng.range(0.1, 5.0), rng.range(0.1, 5.0));
+        let kind = rng.next();
+        if kind < 0.34 {
+            sphere(rng.vec(-3.0, 3.0), rng.range(0.05, 1.0), radiance)
+        } else {
+            let eu = rng.unit() * rng.range(0.1, 2.0);
+            let ev = eu.cross(rng.unit()).normalize_or_zero() * rng.range(0.1, 2.0);
+            quad(rng.vec(-3.0, 3.0), eu, ev, radiance, kind > 0.67)
+        }
+    }
+
+    /// Points on the light with their outward unit normal (quads: front normal).
+    fn light_points(light: &Light, rng: &mut Rng, count: usize) -> Vec<(Vec3, Vec3)> {
+        (0..count)
+            .map(|_| {
+                if light.kind == light_kind::SPHERE {
+                    let d = rng.unit();
+                    (light.position.truncate() + d * light.position.w, d)
+                } else {
+                    let (a, b) = (rng.next(), rng.next());
+                    let normal = light.edge_u.truncate().cross(light.edge_v.truncate()).normalize();
+                    (light.position.truncate() + a * light.edge_u.truncate() + b * light.edge_v.truncate(), normal)
+                }
+            })
+            .collect()
+    }
+
+    /// Whether some sampled point of `light` sends light to `p` with cosines above `margin` at the
+    /// emitter and (for `n ≠ 0`) at the receiver: a clearly positive unoccluded contribution.
+    fn contributes(light: &Light, points: &[(Vec3, Vec3)], p: Vec3, n: Vec3, margin: f32) -> bool {
+        points.iter().any(|&(x, nx)| {
+            let w = (p - x).normalize_or_zero();
+            let emit = if light.kind == light_kind::QUAD && light.two_sided != 0 { nx.dot(w).abs() } else { nx.dot(w) };
+            emit > margin && (n == Vec3::ZERO || n.dot(-w) > margin)
+        })
+    }
+
+    #[test]
+    fn bounds_of_a_sphere_and_quads() {
+        let s = light_bounds(&sphere(Vec3::new(1.0, 2.0, 3.0), 0.5, Vec3::ONE));
+        assert_eq!(s.min.truncate(), Vec3::new(0.5, 1.5, 2.5));
+        assert_eq!(s.max.truncate(), Vec3::new(1.5, 2.5, 3.5));
+        let area = 4.0 * core::f32::consts::PI * 0.25;
+        assert!((s.phi - core::f32::consts::PI * area).abs() < 1e-5 * s.phi, "{}", s.phi);
+        assert_eq!((s.cos_theta_o, s.cos_theta_e, s.two_sided), (-1.0, 0.0, 0));
+
+        let eu = Vec3::new(2.0, 0.0, 0.0);
+        let ev = Vec3::new(0.0, 3.0, 0.0);
+        let green = Vec3::new(0.0, 1.0, 0.0);
+        let q = light_bounds(&quad(Vec3::new(-1.0, -1.0, 4.0), eu, ev, green, false));
+        assert_eq!(q.min.truncate(), Vec3::new(-1.0, -1.0, 4.0));
+        assert_eq!(q.max.truncate(), Vec3::new(1.0, 2.0, 4.0));
+        assert_eq!(q.axis.truncate(), Vec3::Z);
+        assert!((q.phi - core::f32::consts::PI * 6.0 * 0.7152).abs() < 1e-5);
+        assert_eq!((q.cos_theta_o, q.cos_theta_e, q.two_sided), (1.0, 0.0, 0));
+        let q2 = light_bounds(&quad(Vec3::new(-1.0, -1.0, 4.0), eu, ev, green, true));
+        assert_eq!((q2.phi, q2.two_sided), (2.0 * q.phi, 1));
+
+        // Degenerate and unknown lights have zero power.
+        assert_eq!(light_bounds(&sphere(Vec3::ZERO, 0.0, Vec3::ONE)).phi, 0.0);
+        assert_eq!(light_bounds(&quad(Vec3::ZERO, eu, eu, Vec3::ONE, false)).phi, 0.0);
+        let mut unknown = sphere(Vec3::ZERO, 1.0, Vec3::ONE);
+        unknown.kind = 7;
+        assert_eq!(light_bounds(&unknown).phi, 0.0);
+        assert_eq!(light_bounds(&sphere(Vec3::ZERO, 1.0, Vec3::NAN)).phi, 0.0);
+    }
+
+    #[test]
+    fn importance_is_conservative() {
+        // A light that clearly contributes (cosines > 1e-4 at both ends for some sampled point)
+        // never gets importance 0; count both outcomes so the test is known to exercise them.
+        let mut rng = Rng::new(1);
+        let (mut contributing, mut culled) = (0, 0);
+        for case in 0..20_000 {
+            let light = random_light(&mut rng);
+            let p = rng.vec(-5.0, 5.0);
+            let n = if case % 5 == 0 { Vec3::ZERO } else { rng.unit() };
+            let points = light_points(&light, &mut rng, 48);
+            let value = importance(&light_bounds(&light), p, n);
+            assert!(value.is_finite() && value >= 0.0);
+            if contributes(&light, &points, p, n, 1e-4) {
+                contributing += 1;
+                assert!(value > 0.0, "case {case}: {light:?} at p={p} n={n} contributes but has importance 0");
+            } else if value == 0.0 {
+                culled += 1;
+            }
+        }
+        assert!(contributing > 8_000 && culled > 1_000, "contributing {contributing}, culled {culled}");
+    }
+
+    #[test]
+    fn importance_falls_off_with_distance_and_angle() {
+        let light = light_bounds(&quad(Vec3::new(-0.5, -0.5, 0.0), Vec3::X, Vec3::Y, Vec3::ONE, false));
+        let near = importance(&light, Vec3::new(0.0, 0.0, 2.0), Vec3::ZERO);
+        let far = importance(&light, Vec3::new(0.0, 0.0, 20.0), Vec3::ZERO);
+        assert!(near > 50.0 * far, "{near} vs {far}");
+        // Behind a one-sided quad: nothing; two-sided: as in front.
+        assert_eq!(importance(&light, Vec3::new(0.0, 0.0, -2.0), Vec3::ZERO), 0.0);
+        let two = light_bounds(&quad(Vec3::new(-0.5, -0.5, 0.0), Vec3::X, Vec3::Y, Vec3::ONE, true));
+        assert_eq!(
+            importance(&two, Vec3::new(0.0, 0.0, -2.0), Vec3::ZERO),
+            importance(&two, Vec3::new(0.0, 0.0, 2.0), Vec3::ZERO)
+        );
+        // A surface facing away from the light: nothing; facing it: the unsurfaced value.
+        assert_eq!(importance(&light, Vec3::new(0.0, 0.0, 2.0), Vec3::Z), 0.0);
+        assert_eq!(importance(&light, Vec3::new(0.0, 0.0, 2.0), -Vec3::Z), near);
+        // An unnormalised normal gives the same value as the normalised one.
+        let slanted = Vec3::new(1.0, 0.0, -1.0);
+        let p = Vec3::new(0.0, 0.0, 2.0);
+        assert!(
+            (importance(&light, p, slanted * 7.0) - importance(&light, p, slanted.normalize())).abs() < 1e-5 * near
+        );
+    }
+
+    #[test]
+    fn importance_hard_cases_are_finite() {
+        let s = light_bounds(&sphere(Vec3::new(1.0, 1.0, 1.0), 0.5, Vec3::ONE));
+        let q = light_bounds(&quad(Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::ONE, false));
+        // p at the sphere's centre, on its surface; p on the quad, on its plane outside it.
+        for (b, p) in [
+            (s, Vec3::ONE),
+            (s, Vec3::new(1.5, 1.0, 1.0)),
+            (q, Vec3::new(0.5, 0.5, 0.0)),
+            (q, Vec3::new(0.0, 0.0, 0.0)),
+            (q, Vec3::new(3.0, 0.5, 0.0)),
+        ] {
+            for n in [Vec3::ZERO, Vec3::Z, -Vec3::Z, Vec3::X] {
+                let value = importance(&b, p, n);
+                assert!(value.is_finite() && value >= 0.0, "{p} {n}: {value}");
+            }
+            assert!(importance(&b, p, Vec3::ZERO) > 0.0, "{p}");
+        }
+        // Zero-size bounds with power, at their own point; zero power; NaN and infinite inputs.
+        let mut point = s;
+        point.min = point.max;
+        assert!(importance(&point, point.max.truncate(), Vec3::ZERO).is_finite());
+        assert!(importance(&point, point.max.truncate() + Vec3::X, Vec3::X).is_finite());
+        let mut dark = s;
+        dark.phi = 0.0;
+        assert_eq!(importance(&dark, Vec3::ZERO, Vec3::ZERO), 0.0);
+        assert_eq!(importance(&s, Vec3::NAN, Vec3::ZERO), 0.0);
+        assert_eq!(importance(&s, Vec3::INFINITY, Vec3::ZERO), 0.0);
+        assert!(importance(&s, Vec3::ZERO, Vec3::NAN) > 0.0);
+        let mut huge = s;
+        huge.phi = f32::MAX;
+        assert_eq!(importance(&huge, Vec3::ONE, Vec3::ZERO), MAX_IMPORTANCE);
+    }
+
+    #[test]
+    fn uniform_selection() {
+        assert_eq!(select_uniform(0, 0.5), LightChoice::NONE);
+        assert!(!LightChoice::NONE.is_valid());
+        assert_eq!(select_uniform(4, 0.0), LightChoice { index: 0, pmf: 0.25 });
+        assert_eq!(select_uniform(4, 0.99), LightChoice { index: 3, pmf: 0.25 });
+        assert_eq!(select_uniform(4, 1.0).index, 3);
+        assert_eq!(select_uniform(4, f32::NAN).index, 0);
+        assert!(select_uniform(u32::MAX, ONE_MINUS_EPSILON).index < u32::MAX);
+        assert_eq!((uniform_pmf(4, 3), uniform_pmf(4, 4)), (0.25, 0.0));
+    }
+
+    fn random_lights(seed: u32, count: usize) -> Vec<Light> {
+        let mut rng = Rng::new(seed);
+        (0..count).map(|_| random_light(&mut rng)).collect()
+    }
+
+    #[test]
+    fn importance_pmfs_sum_to_one_and_match_selection() {
+        let lights = random_lights(2, 7);
+        let mut rng = Rng::new(3);
+        for case in 0..2_000 {
+            let p = rng.vec(-5.0, 5.0);
+            let n = if case % 4 == 0 { Vec3::ZERO } else { rng.unit() };
+            let sum: f32 = (0..7).map(|k| importance_pmf(&lights, p, n, k)).sum();
+            assert!((sum - 1.0).abs() < 1e-5, "case {case}: sum {sum}");
+            let choice = select_importance(&lights, p, n, rng.next());
+            assert!(choice.is_valid());
+            assert_eq!(choice.pmf, importance_pmf(&lights, p, n, choice.index));
+            assert_eq!(importance_pmf(&lights, p, n, 7), 0.0);
+        }
+        assert_eq!(select_importance(&[], Vec3::ZERO, Vec3::ZERO, 0.5), LightChoice::NONE);
+        assert_eq!(importance_pmf(&[], Vec3::ZERO, Vec3::ZERO, 0), 0.0);
+    }
+
+    #[test]
+    fn importance_selection_frequencies_match_the_pmf() {
+        // Six lights of which all are visible from p: chi-square with 5 dof; 20.515 is its 0.999
+        // quantile. 10⁵ draws from pcg3d at a fixed seed.
+        let lights = [
+            sphere(Vec3::new(0.0, 3.0, 0.0), 0.3, Vec3::ONE),
+            sphere(Vec3::new(2.0, 2.0, 0.0), 0.5, Vec3::new(2.0, 1.0, 0.5)),
+            sphere(Vec3::new(-4.0, 1.0, 1.0), 1.0, Vec3::ONE),
+            quad(Vec3::new(-1.0, 4.0, -1.0), Vec3::X, Vec3::Z, Vec3::splat(3.0), false),
+            quad(Vec3::new(3.0, 1.0, 3.0), Vec3::X * 0.5, Vec3::Y * 0.5, Vec3::ONE, true),
+            sphere(Vec3::new(0.0, 8.0, 0.0), 2.0, Vec3::splat(0.5)),
+        ];
+        let (p, n) = (Vec3::new(0.2, 0.0, 0.1), Vec3::Y);
+        let pmfs: Vec<f32> = (0..6).map(|k| importance_pmf(&lights, p, n, k)).collect();
+        assert!(pmfs.iter().all(|&q| q > 0.004), "{pmfs:?}");
+        const DRAWS: u32 = 100_000;
+        let mut counts = [0u32; 6];
+        for i in 0..DRAWS {
+            let choice = select_importance(&lights, p, n, unit_float(pcg3d(UVec3::new(i, 17, 4)).x));
+            counts[choice.index as usize] += 1;
+        }
+        let chi2: f32 = (0..6)
+            .map(|k| {
+                let expected = pmfs[k] * DRAWS as f32;
+                (counts[k] as f32 - expected).powi(2) / expected
+            })
+            .sum();
+        assert!(chi2 < 20.515, "chi-square {chi2}, counts {counts:?}, pmfs {pmfs:?}");
+    }
+
+    #[test]
+    fn selection_hard_cases() {
+        // All lights behind the surface: every importance is 0, so the scan falls back to uniform.
+        let lights = [
+            sphere(Vec3::new(0.0, -3.0, 0.0), 0.5, Vec3::ONE),
+            quad(Vec3::new(-1.0, -2.0, -1.0), Vec3::X, Vec3::Z, Vec3::ONE, true),
+            sphere(Vec3::new(2.0, -5.0, 1.0), 1.0, Vec3::ONE),
+        ];
+        let (p, n) = (Vec3::ZERO, Vec3::Y);
+        for k in 0..3 {
+            assert_eq!(importance(&light_bounds(&lights[k]), p, n), 0.0);
+            assert_eq!(importance_pmf(&lights, p, n, k as u32), 1.0 / 3.0);
+        }
+        assert_eq!(select_importance(&lights, p, n, 0.5), LightChoice { index: 1, pmf: 1.0 / 3.0 });
+        // The same lights without a surface: all selectable.
+        assert!((0..3).all(|k| importance_pmf(&lights, p, Vec3::ZERO, k) > 0.0));
+
+        // All-zero radiance: uniform.
+        let dark = [sphere(Vec3::ZERO, 1.0, Vec3::ZERO), sphere(Vec3::X, 1.0, Vec3::ZERO)];
+        assert_eq!(select_importance(&dark, Vec3::Y * 3.0, Vec3::ZERO, 0.7), LightChoice { index: 1, pmf: 0.5 });
+
+        // p at a sphere's centre and on a quad: that light dominates, nothing is NaN.
+        let lights = [
+            sphere(Vec3::ZERO, 0.5, Vec3::ONE),
+            quad(Vec3::new(5.0, 0.0, 0.0), Vec3::Y, Vec3::Z, Vec3::ONE, false),
+            sphere(Vec3::new(-5.0, 0.0, 0.0), 0.5, Vec3::ONE),
+        ];
+        for (p, dominant) in [(Vec3::ZERO, 0), (Vec3::new(5.0, 0.5, 0.5), 1)] {
+            for n in [Vec3::ZERO, Vec3::X, -Vec3::X] {
+                let pmfs: Vec<f32> = (0..3).map(|k| importance_pmf(&lights, p, n, k)).collect();
+                assert!(pmfs.iter().all(|q| q.is_finite()), "{pmfs:?}");
+                assert!((pmfs.iter().sum::<f32>() - 1.0).abs() < 1e-5);
+                assert!(pmfs[dominant] > 0.5, "{p} {n}: {pmfs:?}");
+            }
+        }
+
+        // Coincident lights share the probability equally.
+        let same = [sphere(Vec3::ONE, 0.5, Vec3::ONE); 4];
+        for p in [Vec3::ZERO, Vec3::ONE] {
+            assert!((0..4).all(|k| importance_pmf(&same, p, Vec3::ZERO, k) == 0.25));
+            let counts = (0..1000).fold([0u32; 4], |mut c, i| {
+                c[select_importance(&same, p, Vec3::ZERO, i as f32 / 1000.0).index as usize] += 1;
+                c
+            });
+            assert!(counts.iter().all(|&c| (240..=260).contains(&c)), "{counts:?}");
+        }
+    }
+
+    /// A hand-built tree over three lights: root → (leaf 0, interior → (leaf 1, leaf 2)).
+    fn three_light_tree(lights: &[Light; 3]) -> ([LightBvhNode; 5], [u32; 3]) {
+        let leaf = |k: u32| LightBvhNode {
+            bounds: light_bounds(&lights[k as usize]),
+            child_or_light: k,
+            is_leaf: 1,
+            padding: [0; 2],
+        };
+        let union = |a: &LightBounds, b: &LightBounds| LightBounds {
+            min: a.min.min(b.min),
+            max: a.max.max(b.max),
+            axis: Vec3::Z.extend(0.0),
+            phi: a.phi + b.phi,
+            cos_theta_o: -1.0,
+            cos_theta_e: 0.0,
+            two_sided: 0,
+        };
+        let inner = union(&leaf(1).bounds, &leaf(2).bounds);
+        let root = union(&leaf(0).bounds, &inner);
+        let interior = |bounds, second| LightBvhNode { bounds, child_or_light: second, is_leaf: 0, padding: [0; 2] };
+        ([interior(root, 2), leaf(0), interior(inner, 4), leaf(1), leaf(2)], [0b0, 0b01, 0b11])
+    }
+
+    #[test]
+    fn bvh_pmf_matches_selection() {
+        let lights = [
+            sphere(Vec3::new(0.0, 3.0, 0.0), 0.3, Vec3::ONE),
+            sphere(Vec3::new(4.0, 2.0, 0.0), 0.5, Vec3::ONE),
+            quad(Vec3::new(4.0, 4.0, -1.0), Vec3::X, Vec3::Z, Vec3::splat(3.0), true),
+        ];
+        let (nodes, trails) = three_light_tree(&lights);
+        let mut rng = Rng::new(9);
+        for case in 0..2_000 {
+            let p = rng.vec(-6.0, 6.0);
+            let n = if case % 3 == 0 { Vec3::ZERO } else { rng.unit() };
+            let sum: f32 = (0..3).map(|k| bvh_pmf(&nodes, &trails, p, n, k)).sum();
+            assert!((sum - 1.0).abs() < 1e-5, "sum {sum}");
+            let choice = select_bvh(&nodes, p, n, rng.next());
+            assert!(choice.is_valid());
+            assert_eq!(choice.pmf, bvh_pmf(&nodes, &trails, p, n, choice.index));
+            let set = LightSet::new(&lights, &nodes, &trails);
+            assert_eq!(set.pmf(p, n, choice.index), choice.pmf);
+        }
+        assert_eq!(bvh_pmf(&nodes, &trails, Vec3::ZERO, Vec3::ZERO, 3), 0.0);
+        // A light whose trail leads elsewhere (left out of the tree) has pmf 0.
+        assert_eq!(bvh_pmf(&nodes, &[0, 0, 0], Vec3::ZERO, Vec3::ZERO, 2), 0.0);
+    }
+
+    #[test]
+    fn empty_single_and_malformed_trees() {
+        let light = sphere(Vec3::ZERO, 1.0, Vec3::ONE);
+        assert_eq!(select_bvh(&[], Vec3::ZERO, Vec3::ZERO, 0.5), LightChoice::NONE);
+        assert_eq!(bvh_pmf(&[], &[], Vec3::ZERO, Vec3::ZERO, 0), 0.0);
+        let single = [LightBvhNode { bounds: light_bounds(&light), child_or_light: 0, is_leaf: 1, padding: [0; 2] }];
+        assert_eq!(select_bvh(&single, Vec3::X * 3.0, Vec3::X, 0.3), LightChoice { index: 0, pmf: 1.0 });
+        assert_eq!(bvh_pmf(&single, &[0], Vec3::X * 3.0, Vec3::X, 0), 1.0);
+        // A child index out of range, and a cycle deeper than 32 levels: no light, no panic.
+        let mut broken = single;
+        broken[0].is_leaf = 0;
+        broken[0].child_or_light = 9;
+        assert_eq!(select_bvh(&broken, Vec3::ZERO, Vec3::ZERO, 0.3), LightChoice::NONE);
+        assert_eq!(bvh_pmf(&broken, &[0], Vec3::ZERO, Vec3::ZERO, 0), 0.0);
+        let cycle = [LightBvhNode { bounds: light_bounds(&light), child_or_light: 0, is_leaf: 0, padding: [0; 2] }; 2];
+        assert_eq!(select_bvh(&cycle, Vec3::X, Vec3::ZERO, 0.9), LightChoice::NONE);
+        assert_eq!(bvh_pmf(&cycle, &[u32::MAX], Vec3::X, Vec3::ZERO, 0), 0.0);
+    }
+
+    #[test]
+    fn light_set_dispatches_and_honours_counts() {
+        let lights = [
+            sphere(Vec3::new(0.0, 3.0, 0.0), 0.3, Vec3::ONE),
+            sphere(Vec3::new(4.0, 2.0, 0.0), 0.5, Vec3::ONE),
+            quad(Vec3::new(4.0, 4.0, -1.0), Vec3::X, Vec3::Z, Vec3::splat(3.0), true),
+        ];
+        let (nodes, trails) = three_light_tree(&lights);
+        let (p, n) = (Vec3::new(1.0, 0.0, 0.5), Vec3::Y);
+        let linear = LightSet::new(&lights, &[], &[]);
+        let tree = LightSet::new(&lights, &nodes, &trails);
+        for k in 0..3 {
+            assert_eq!(linear.pmf(p, n, k), importance_pmf(&lights, p, n, k));
+            assert_eq!(tree.pmf(p, n, k), bvh_pmf(&nodes, &trails, p, n, k));
+        }
+        assert_eq!(linear.select(p, n, 0.4), select_importance(&lights, p, n, 0.4));
+        assert_eq!(tree.select(p, n, 0.4), select_bvh(&nodes, p, n, 0.4));
+        // Dummy one-element buffers with zero counts: no light, and the scan, respectively.
+        let none = LightSet { light_count: 0, ..tree };
+        assert_eq!(none.select(p, n, 0.4), LightChoice::NONE);
+        assert_eq!(none.pmf(p, n, 0), 0.0);
+        let no_tree = LightSet { node_count: 0, ..tree };
+        assert_eq!(no_tree.select(p, n, 0.4), linear.select(p, n, 0.4));
+        let two = LightSet { light_count: 2, node_count: 0, ..tree };
+        assert!(((0..3).map(|k| two.pmf(p, n, k)).sum::<f32>() - 1.0).abs() < 1e-6);
+        assert_eq!(two.pmf(p, n, 2), 0.0);
+    }
+}

@@ -1,0 +1,296 @@
+//! The samplers: `(pixel, sample index, dimension) →` a 2-D point in `[0, 1−2⁻²⁴]²`.
+//!
+//! A *dimension* here is a 2-D slot (see [`super::dims`]): each call returns two numbers, and a
+//! 1-D request takes the slot's first. Every sampler is a pure function of its arguments, so any
+//! stage can draw any slot of any sample with no state carried between dispatches.
+//!
+//! - `ZSOBOL` (default): one Owen-scrambled Sobol' sequence over the whole image, indexed by the
+//!   pixel's Morton code with the sample index below it, its base-4 digits randomly permuted
+//!   level by level (Ahmed & Wonka 2020, "Screen-space blue-noise diffusion of Monte Carlo sampling
+//!   error via hierarchical ordering of pixels"; pbrt-v4's `ZSobolSampler` [sampling-denoise.md
+//!   §1.2]). Neighbouring pixels receive complementary, stratified samples, so the error of a
+//!   1-spp image is blue noise.
+//! - `SOBOL`: per pixel, the Sobol' (0,2)-sequence with a hash-based Owen scramble of the values
+//!   and a nested-uniform shuffle of the index (Burley 2020), seeded per pixel and per dimension:
+//!   each pixel's samples are stratified, pixels are independent.
+//! - `INDEPENDENT`: pcg3d counter hashing, uniform and independent (the baseline).
+//!
+//! Both Sobol' samplers pad to more dimensions with an independent shuffle and scramble per slot,
+//! so every slot's first `2^k` samples of a pixel form a (0,k,2)-net.
+
+use super::owen::{hash_combine, mix_bits, nested_uniform_scramble};
+use super::sobol::{sobol_dimension_0, sobol_dimension_1};
+use crate::hash::{pcg3d, unit_float};
+use glam::{UVec2, UVec3, Vec2};
+use raywave_shared::sampling::{sampler_kind, SamplerParams};
+
+/// Raw 32-bit fractions of slot `dimension` of sample `sample_index` at `pixel`; the top 24 bits
+/// become the float sample. Bit-identical on every backend (the parity tests compare these).
+pub fn sample_bits(params: &SamplerParams, pixel: UVec2, sample_index: u32, dimension: u32) -> UVec2 {
+    if params.kind == sampler_kind::SOBOL {
+        shuffled_sobol_bits(params.seed, pixel, sample_index, dimension)
+    } else if params.kind == sampler_kind::INDEPENDENT {
+        independent_bits(params.seed, pixel, sample_index, dimension)
+    } else {
+        zsobol_bits(params, pixel, sample_index, dimension)
+    }
+}
+
+/// Slot `dimension` of sample `sample_index` at `pixel` as a point in `[0, 1−2⁻²⁴]²`.
+pub fn sample_2d(params: &SamplerParams, pixel: UVec2, sample_index: u32, dimension: u32) -> Vec2 {
+    let bits = sample_bits(params, pixel, sample_index, dimension);
+    Vec2::new(unit_float(bits.x), unit_float(bits.y))
+}
+
+/// The first number of slot `dimension`, in `[0, 1−2⁻²⁴]`.
+pub fn sample_1d(params: &SamplerParams, pixel: UVec2, sample_index: u32, dimension: u32) -> f32 {
+    unit_float(sample_bits(params, pixel, sample_index, dimension).x)
+}
+
+/// Point `index` of the Sobol' (0,2)-sequence with both coordinates Owen-scrambled by seeds
+/// derived from `seed`.
+fn scrambled_sobol_2d(index: u32, seed: u32) -> UVec2 {
+    UVec2::new(
+        nested_uniform_scramble(sobol_dimension_0(index), hash_combine(seed, 1)),
+        nested_uniform_scramble(sobol_dimension_1(index), hash_combine(seed, 2)),
+    )
+}
+
+/// Burley's shuffled, scrambled Sobol': independent per (pixel, dimension).
+fn shuffled_sobol_bits(seed: u32, pixel: UVec2, sample_index: u32, dimension: u32) -> UVec2 {
+    let pixel_seed = pcg3d(UVec3::new(pixel.x, pixel.y, seed)).x;
+    let slot_seed = hash_combine(pixel_seed, dimension);
+    let shuffled = nested_uniform_scramble(sample_index, hash_combine(slot_seed, 0));
+    scrambled_sobol_2d(shuffled, slot_seed)
+}
+
+/// Independent uniform bits: pcg3d of the pixel and seed, then of (that, sample, dimension). For a
+/// fixed pixel the second input is injective in (sample, dimension).
+fn independent_bits(seed: u32, pixel: UVec2, sample_index: u32, dimension: u32) -> UVec2 {
+    let pixel_hash = pcg3d(UVec3::new(pixel.x, pixel.y, seed));
+    let bits = pcg3d(UVec3::new(pixel_hash.x ^ sample_index, pixel_hash.y ^ dimension, pixel_hash.z));
+    UVec2::new(bits.x, bits.y)
+}
+
+/// Interleaves the low 16 bits of `x` (even bits) and `y` (odd bits).
+pub fn morton_encode(pixel: UVec2) -> u32 {
+    spread_bits(pixel.x) | (spread_bits(pixel.y) << 1)
+}
+
+/// Spreads the low 16 bits of `v` to the even bit positions.
+fn spread_bits(v: u32) -> u32 {
+    let mut x = v & 0x0000_ffff;
+    x = (x | (x << 8)) & 0x00ff_00ff;
+    x = (x | (x << 4)) & 0x0f0f_0f0f;
+    x = (x | (x << 2)) & 0x3333_3333;
+    x = (x | (x << 1)) & 0x5555_5555;
+    x
+}
+
+/// Entry `digit` (0..4) of permutation `p` (0..24) of `{0, 1, 2, 3}`, decoded from `p`'s Lehmer
+/// code `(p / 6, (p / 2) mod 3, p mod 2)` with bit arithmetic (no table for SPIR-V to index).
+pub fn permute_base4_digit(p: u32, digit: u32) -> u32 {
+    let mut unused = 0b1111u32;
+    let mut chosen = 0u32;
+    let mut position = 0u32;
+    while position <= digit && position < 4 {
+        let mut skip = if position == 0 {
+            p / 6
+        } else if position == 1 {
+            (p / 2) % 3
+        } else if position == 2 {
+            p % 2
+        } else {
+            0
+        };
+        let mut candidates = unused;
+        while skip > 0 {
+            candidates &= candidates.wrapping_sub(1);
+            skip -= 1;
+        }
+        chosen = candidates.trailing_zeros() & 3;
+        unused &= !(1u32 << chosen);
+        position += 1;
+    }
+    chosen
+}
+
+/// The ZSobol index of `(pixel, sample_index)`: the Morton code with the sample index below it,
+/// its base-4 digits permuted from the most significant down, each by a permutation chosen by a
+/// hash of the digits above it, the dimension and the seed. When the samples per pixel are a power
+/// of 2 but not of 4, the lowest bit is flipped by a hash of the bits above it instead.
+pub fn zsobol_index(params: &SamplerParams, pixel: UVec2, sample_index: u32, dimension: u32) -> u32 {
+    let spp_log2 = params.spp_log2.min(31);
+    let morton = (morton_encode(pixel) << spp_log2) | sample_index;
+    let odd = spp_log2 & 1;
+    let digits = params.resolution_log2.min(16) + spp_log2.div_ceil(2);
+    let salt = hash_combine(params.seed, dimension);
+    let mut index = 0u32;
+    let mut i = digits;
+    while i > odd {
+        i -= 1;
+        let shift = 2 * i - odd;
+        if shift < 32 {
+            let digit = (morton >> shift) & 3;
+            let higher = if shift + 2 < 32 { morton >> (shift + 2) } else { 0 };
+            let p = (mix_bits(higher ^ salt) >> 24) % 24;
+            index |= permute_base4_digit(p, digit) << shift;
+        }
+    }
+    if odd == 1 {
+        index |= (morton & 1) ^ (mix_bits((morton >> 1) ^ salt) & 1);
+    }
+    index
+}
+
+/// ZSobol: the scrambled Sobol' point at the permuted Morton index; the scramble depends on the
+/// dimension and seed only, so the image shares one sequence.
+fn zsobol_bits(params: &SamplerParams, pixel: UVec2, sample_index: u32, dimension: u32) -> UVec2 {
+    let index = zsobol_index(params, pixel, sample_index, dimension);
+    scrambled_sobol_2d(index, hash_combine(mix_bits(params.seed), dimension))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::hash::ONE_MINUS_EPSILON;
+
+    fn params(kind: u32, spp_log2: u32) -> SamplerParams {
+        SamplerParams { kind, seed: 7, spp_log2, resolution_log2: 5 }
+    }
+
+    /// Asserts that the first `2^m` samples of (pixel, dimension) form a (0,m,2)-net.
+    fn assert_net(p: &SamplerParams, pixel: UVec2, dimension: u32, m: u32) {
+        for row_bits in 0..=m {
+            let col_bits = m - row_bits;
+            let mut seen = std::vec![false; 1 << m];
+            for i in 0..(1u32 << m) {
+                let b = sample_bits(p, pixel, i, dimension);
+                let x = if col_bits == 0 { 0 } else { b.x >> (32 - col_bits) };
+                let y = if row_bits == 0 { 0 } else { b.y >> (32 - row_bits) };
+                let cell = ((y << col_bits) | x) as usize;
+                assert!(!seen[cell], "kind {} pixel {pixel} dim {dimension}: 2^{col_bits}x2^{row_bits}", p.kind);
+                seen[cell] = true;
+            }
+        }
+    }
+
+    #[test]
+    fn sobol_samples_of_every_slot_are_nets() {
+        for m in 0..=8 {
+            let p = params(sampler_kind::SOBOL, m);
+            for dimension in [0, 1, 5, 31] {
+                for pixel in [UVec2::new(0, 0), UVec2::new(3, 9), UVec2::new(31, 31)] {
+                    assert_net(&p, pixel, dimension, m);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn zsobol_samples_of_every_pixel_are_nets() {
+        // With 2^m samples per pixel, a pixel's samples are an aligned block of the permuted
+        // Sobol' index space (the digits below the pixel's code), hence a (0,m,2)-net.
+        for m in 0..=8 {
+            let p = params(sampler_kind::ZSOBOL, m);
+            for dimension in [0, 1, 5] {
+                for pixel in [UVec2::new(0, 0), UVec2::new(3, 9), UVec2::new(31, 31)] {
+                    assert_net(&p, pixel, dimension, m);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn zsobol_pixels_of_an_aligned_square_form_a_net_at_one_sample() {
+        // At 1 spp the 2^k × 2^k pixels of an aligned square share one aligned index block:
+        // their samples are jointly stratified, which is what makes the error blue.
+        let p = params(sampler_kind::ZSOBOL, 0);
+        for (origin, k) in [(UVec2::new(0, 0), 2u32), (UVec2::new(8, 4), 2), (UVec2::new(16, 16), 3)] {
+            let m = 2 * k;
+            for row_bits in 0..=m {
+                let col_bits = m - row_bits;
+                let mut seen = std::vec![false; 1 << m];
+                for dy in 0..(1u32 << k) {
+                    for dx in 0..(1u32 << k) {
+                        let b = sample_bits(&p, origin + UVec2::new(dx, dy), 0, 3);
+                        let x = if col_bits == 0 { 0 } else { b.x >> (32 - col_bits) };
+                        let y = if row_bits == 0 { 0 } else { b.y >> (32 - row_bits) };
+                        let cell = ((y << col_bits) | x) as usize;
+                        assert!(!seen[cell], "square at {origin} size {k}: 2^{col_bits}x2^{row_bits}");
+                        seen[cell] = true;
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn permutations_of_four_digits_are_all_distinct() {
+        let mut all = std::collections::BTreeSet::new();
+        for p in 0..24 {
+            let perm: std::vec::Vec<u32> = (0..4).map(|d| permute_base4_digit(p, d)).collect();
+            let mut sorted = perm.clone();
+            sorted.sort();
+            assert_eq!(sorted, [0, 1, 2, 3], "permutation {p}: {perm:?}");
+            all.insert(perm);
+        }
+        assert_eq!(all.len(), 24);
+    }
+
+    #[test]
+    fn zsobol_index_is_a_bijection_on_the_sample_space() {
+        for spp_log2 in [0u32, 1, 2, 3] {
+            let p = SamplerParams { kind: sampler_kind::ZSOBOL, seed: 3, spp_log2, resolution_log2: 3 };
+            let mut seen = std::collections::BTreeSet::new();
+            for y in 0..8 {
+                for x in 0..8 {
+                    for s in 0..(1u32 << spp_log2) {
+                        let index = zsobol_index(&p, UVec2::new(x, y), s, 2);
+                        assert!(index < (64 << spp_log2), "index {index} out of range");
+                        assert!(seen.insert(index), "spp 2^{spp_log2}: duplicate {index}");
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn no_sample_reaches_one_and_extremes_are_finite() {
+        for kind in 0..sampler_kind::COUNT {
+            let p = SamplerParams { kind, seed: u32::MAX, spp_log2: 31, resolution_log2: 16 };
+            for pixel in [UVec2::ZERO, UVec2::splat(u32::MAX), UVec2::new(65_535, 65_535)] {
+                for i in [0u32, 1, u32::MAX] {
+                    for d in [0u32, u32::MAX] {
+                        let u = sample_2d(&p, pixel, i, d);
+                        assert!(u.x <= ONE_MINUS_EPSILON && u.y <= ONE_MINUS_EPSILON && u.min_element() >= 0.0);
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn slots_and_seeds_decorrelate() {
+        // The correlation between two slots (and between two seeds) of the same samples is ~0.
+        for kind in 0..sampler_kind::COUNT {
+            let a = params(kind, 8);
+            let b = SamplerParams { seed: 8, ..a };
+            let n = 4096u32;
+            let mut cross_slot = 0.0f64;
+            let mut cross_seed = 0.0f64;
+            for i in 0..n {
+                let pixel = UVec2::new(i % 16, i / 256);
+                let s = i % 256;
+                let u0 = sample_2d(&a, pixel, s, 0).x as f64 - 0.5;
+                let u1 = sample_2d(&a, pixel, s, 1).x as f64 - 0.5;
+                let v0 = sample_2d(&b, pixel, s, 0).x as f64 - 0.5;
+                cross_slot += u0 * u1;
+                cross_seed += u0 * v0;
+            }
+            // Uniform variance 1/12; σ of the mean product ≈ (1/12)/√n = 0.0013: 5σ.
+            assert!((cross_slot / n as f64).abs() < 0.0065, "kind {kind}: slot correlation");
+            assert!((cross_seed / n as f64).abs() < 0.0065, "kind {kind}: seed correlation");
+        }
+    }
+}

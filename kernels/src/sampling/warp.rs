@@ -1,0 +1,1382 @@
+//! Warps from `[0,1)²` to directions, each with its pdf.
+//!
+//! Every warp comes as a pair: `sample_*` maps a 2-D sample `u` to a direction (or a point on a
+//! light) and `*_pdf` evaluates the density, **with respect to solid angle**, with which that
+//! sampler produces a given direction. The pairs agree to rounding, which is what multiple
+//! importance sampling needs; `tests/warps.rs` checks every pair with a chi-square test.
+//!
+//! Formulas follow pbrt-v4 (`src/pbrt/util/sampling.h/.cpp`, `src/pbrt/shapes.h`,
+//! `src/pbrt/util/scattering.h`) and the papers cited on each function; the numeric facts are
+//! collected in `shared/reference/sampling-denoise.md` §2.
+//!
+//! # Numerics
+//!
+//! No NaN or Inf leaves this module. Every sample is clamped to `[0, 1 − 2⁻²⁴]`
+//! ([`clamp_sample`]), every square root and inverse trigonometric function goes through a safe
+//! helper ([`safe_sqrt`], [`safe_asin`], [`safe_acos`]), and every division is guarded. An input
+//! that admits no density — a zero-solid-angle cone, a light seen exactly edge-on, a point light
+//! in disguise (radius 0), a singular LTC matrix — yields **pdf 0 and a valid unit direction**
+//! (+z, or the direction towards the light where that is defined): callers treat pdf 0 as "no
+//! sample". Clamps are branches on comparisons rather than `f32::max`/`min`, so a NaN input
+//! takes a defined path on GPUs too (SPIR-V `FMax`/`FMin` leave NaN operands undefined).
+//!
+//! Directions are unit vectors; "local frame" means z = surface normal (or cone axis).
+
+// `!(a > b)` is how this module sends NaN down the safe branch; `partial_cmp` would obscure it.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
+use crate::hash::ONE_MINUS_EPSILON;
+use core::f32::consts::{FRAC_PI_2, FRAC_PI_4, PI, TAU};
+use glam::{Mat3, Vec2, Vec3, Vec4, Vec4Swizzles};
+use raywave_shared::sampling::warp_kind;
+use raywave_shared::WarpParams;
+#[cfg(target_arch = "spirv")]
+use spirv_std::num_traits::Float;
+
+/// 1/π: the cosine-hemisphere normalization.
+const INV_PI: f32 = 1.0 / PI;
+/// 1/(2π): the uniform-hemisphere pdf.
+const INV_2PI: f32 = 1.0 / TAU;
+/// 1/(4π): the uniform-sphere pdf.
+const INV_4PI: f32 = 1.0 / (2.0 * TAU);
+
+/// pbrt-v4's small-angle threshold for sphere-light cone sampling, sin²(1.5°) (`Sphere::Sample`,
+/// shapes.h): below it, `1 − cos θmax` is computed by its Taylor expansion `sin²θmax / 2` and
+/// `sin²θ` is sampled directly, because `1 − cos θ` cancels catastrophically in `f32`.
+pub const SPHERE_SMALL_ANGLE_SIN2: f32 = 0.000_685_23;
+
+/// Angular slack (radians) with which the pdf functions of cone-shaped light warps accept a
+/// direction just outside the cone: 4 `f32` ulps of 1. A sampled point on the silhouette of a
+/// sphere light, turned into a direction by `normalize(point − p)`, may round that far outside
+/// the exact cone; the slack keeps `pdf(sample(u))` consistent with the sampler. It widens the
+/// support by 4.8·10⁻⁷ rad, negligible against any cone `f32` directions can resolve.
+pub const CONE_SLACK: f32 = 4.0 * f32::EPSILON;
+
+/// Slack with which the quad pdf functions accept a ray that hits the quad's plane just outside
+/// an edge, relative to the rounding of the hit point: a ray of length `t` meeting the plane at
+/// angle θl hits within `QUAD_EDGE_SLACK · t / |cos θl|` (scene units) of an edge. Sampled points
+/// lie on or inside the edges, but `normalize(point − p)` and the ray–plane intersection of the
+/// pdf round them by a few ulps of `t`, more at grazing angles; 16 ulps keeps `pdf(sample(u))`
+/// consistent while widening the quad by a negligible `~2·10⁻⁶·t/|cos θl|`.
+pub const QUAD_EDGE_SLACK: f32 = 16.0 * f32::EPSILON;
+
+/// Below this solid angle (sr) a quad light is sampled uniformly by area, both by
+/// [`sample_quad_spherical`] and in [`quad_spherical_pdf`]: the spherical-rectangle sampler loses
+/// precision in `f32` (its `sin(au)` is a difference of angles near π), and for such a small
+/// quad area sampling is almost uniform in solid angle anyway. The value is pbrt-v4's threshold
+/// in `SampleSphericalRectangle` (sampling.cpp).
+pub const QUAD_MIN_SPHERICAL_SOLID_ANGLE: f32 = 1.0e-3;
+
+/// Smallest GGX roughness α the GGX functions use; smaller inputs (including 0) are clamped to
+/// it. At α = 10⁻⁴ the lobe is about as narrow as the angular resolution of `f32` unit vectors
+/// near the normal (√(2⁻²⁴) ≈ 2.4·10⁻⁴ rad) and the peak of D is 1/(πα²) ≈ 3.2·10⁷, still finite.
+/// Renderers should switch to a specular (delta) path well before, as pbrt-v4's
+/// `TrowbridgeReitzDistribution::EffectivelySmooth` does below α = 10⁻³.
+pub const GGX_MIN_ALPHA: f32 = 1.0e-4;
+
+/// Largest GGX roughness α; larger inputs are clamped to it (keeps `αx·αy·t²` in range).
+pub const GGX_MAX_ALPHA: f32 = 1.0e4;
+
+/// Smallest cosine of the view direction with the normal that the GGX functions use: views more
+/// grazing than this (or below the horizon) are treated as this grazing. `G1(v)/cos θv` stays
+/// bounded by `2/α` there, so no pdf overflows.
+pub const GGX_MIN_COS_VIEW: f32 = 1.0e-6;
+
+// ---------------------------------------------------------------------------------------------
+// Numeric helpers
+// ---------------------------------------------------------------------------------------------
+
+/// `sqrt(max(0, x))`, with NaN mapped to 0 (pbrt-v4 `SafeSqrt`, math.h). For quantities that
+/// are ≥ 0 mathematically but may round slightly negative, such as `1 − cos²θ`.
+pub fn safe_sqrt(x: f32) -> f32 {
+    if x > 0.0 {
+        x.sqrt()
+    } else {
+        0.0
+    }
+}
+
+/// `x` clamped to `[−1, 1]`, NaN mapped to 0. The argument clamp of [`safe_asin`] and
+/// [`safe_acos`].
+pub fn clamp_unit_interval(x: f32) -> f32 {
+    if x >= 1.0 {
+        1.0
+    } else if x <= -1.0 {
+        -1.0
+    } else if !x.is_nan() {
+        x
+    } else {
+        0.0
+    }
+}
+
+/// `asin` with its argument clamped to `[−1, 1]` (pbrt-v4 `SafeASin`, math.h); result in
+/// `[−π/2, π/2]`.
+pub fn safe_asin(x: f32) -> f32 {
+    clamp_unit_interval(x).asin()
+}
+
+/// `acos` with its argument clamped to `[−1, 1]` (pbrt-v4 `SafeACos`, math.h); result in `[0, π]`.
+pub fn safe_acos(x: f32) -> f32 {
+    clamp_unit_interval(x).acos()
+}
+
+/// One sample component clamped to `[0, 1 − 2⁻²⁴]` ([`ONE_MINUS_EPSILON`]); NaN maps to 0.
+pub fn clamp_sample_1d(x: f32) -> f32 {
+    if x >= ONE_MINUS_EPSILON {
+        ONE_MINUS_EPSILON
+    } else if x > 0.0 {
+        x
+    } else {
+        0.0
+    }
+}
+
+/// A 2-D sample clamped to `[0, 1 − 2⁻²⁴]²`: every warp calls this first, so `u = 1` or a NaN
+/// from a caller cannot push a warp outside its domain.
+pub fn clamp_sample(u: Vec2) -> Vec2 {
+    Vec2::new(clamp_sample_1d(u.x), clamp_sample_1d(u.y))
+}
+
+/// `x` if it is finite, else 0.
+pub fn finite_or_zero(x: f32) -> f32 {
+    if x.is_finite() {
+        x
+    } else {
+        0.0
+    }
+}
+
+/// A pdf made safe to return: finite and ≥ 0, anything else becomes 0.
+pub fn sanitize_pdf(pdf: f32) -> f32 {
+    if pdf.is_finite() && pdf > 0.0 {
+        pdf
+    } else {
+        0.0
+    }
+}
+
+/// The unit vector with polar angle θ (given as sin θ, cos θ) and azimuth φ around +z.
+pub fn spherical_direction(sin_theta: f32, cos_theta: f32, phi: f32) -> Vec3 {
+    let (sin_phi, cos_phi) = phi.sin_cos();
+    Vec3::new(sin_theta * cos_phi, sin_theta * sin_phi, cos_theta)
+}
+
+/// `direction` if it is finite and has a usable length, else +z; paired with a pdf that is zeroed
+/// whenever the direction had to be replaced. The last step of every warp.
+fn sanitize_sample(direction: Vec3, pdf: f32) -> Vec4 {
+    let length_squared = direction.length_squared();
+    if direction.is_finite() && length_squared > 0.5 && length_squared < 2.0 {
+        direction.extend(sanitize_pdf(pdf))
+    } else {
+        Vec4::Z
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Disk, hemisphere, sphere, cone
+// ---------------------------------------------------------------------------------------------
+
+/// Shirley–Chiu concentric map of `[0,1)²` onto the unit disk (P. Shirley and K. Chiu, "A Low
+/// Distortion Map Between Disk and Square", JGT 2(3), 1997; pbrt-v4 `SampleUniformDiskConcentric`,
+/// sampling.h). Uniform in area (pdf 1/π per unit area); maps concentric squares to concentric
+/// circles, so it keeps the stratification of low-discrepancy samples. Result in the closed unit
+/// disk. Also the lens sample of the thin-lens camera.
+pub fn sample_concentric_disk(u: Vec2) -> Vec2 {
+    let u = clamp_sample(u);
+    let offset = 2.0 * u - Vec2::ONE;
+    if offset.x == 0.0 && offset.y == 0.0 {
+        return Vec2::ZERO;
+    }
+    // Each branch divides by the component of larger magnitude, which is non-zero here.
+    let (r, theta) = if offset.x.abs() > offset.y.abs() {
+        (offset.x, FRAC_PI_4 * (offset.y / offset.x))
+    } else {
+        (offset.y, FRAC_PI_2 - FRAC_PI_4 * (offset.x / offset.y))
+    };
+    let (sin_theta, cos_theta) = theta.sin_cos();
+    r * Vec2::new(cos_theta, sin_theta)
+}
+
+/// Uniform direction on the hemisphere around +z: z = u₀, φ = 2πu₁ (pbrt-v4
+/// `SampleUniformHemisphere`, sampling.h). Its pdf is [`uniform_hemisphere_pdf`] = 1/(2π).
+pub fn sample_uniform_hemisphere(u: Vec2) -> Vec3 {
+    let u = clamp_sample(u);
+    let z = u.x;
+    spherical_direction(safe_sqrt(1.0 - z * z), z, TAU * u.y)
+}
+
+/// Solid-angle pdf of [`sample_uniform_hemisphere`]: 1/(2π) for `dir.z ≥ 0`, else 0 (sr⁻¹).
+pub fn uniform_hemisphere_pdf(dir: Vec3) -> f32 {
+    if dir.z >= 0.0 {
+        INV_2PI
+    } else {
+        0.0
+    }
+}
+
+/// Cosine-weighted direction on the hemisphere around +z by Malley's method: a uniform point on
+/// the concentric disk ([`sample_concentric_disk`]) lifted to the hemisphere, z = √(1 − x² − y²)
+/// (pbrt-v4 `SampleCosineHemisphere`, sampling.h). Its pdf is [`cosine_hemisphere_pdf`] = cos θ/π;
+/// points on the rim of the disk (u on the border of the square, e.g. u = 0) give z = 0 and pdf 0.
+pub fn sample_cosine_hemisphere(u: Vec2) -> Vec3 {
+    let d = sample_concentric_disk(u);
+    Vec3::new(d.x, d.y, safe_sqrt(1.0 - d.x * d.x - d.y * d.y))
+}
+
+/// Solid-angle pdf of [`sample_cosine_hemisphere`]: `max(z, 0)/π` (sr⁻¹).
+pub fn cosine_hemisphere_pdf(dir: Vec3) -> f32 {
+    if dir.z > 0.0 {
+        dir.z * INV_PI
+    } else {
+        0.0
+    }
+}
+
+/// Uniform direction on the unit sphere: z = 1 − 2u₀, φ = 2πu₁ (pbrt-v4 `SampleUniformSphere`,
+/// sampling.h). Its pdf is [`uniform_sphere_pdf`].
+pub fn sample_uniform_sphere(u: Vec2) -> Vec3 {
+    let u = clamp_sample(u);
+    let z = 1.0 - 2.0 * u.x;
+    spherical_direction(safe_sqrt(1.0 - z * z), z, TAU * u.y)
+}
+
+/// Solid-angle pdf of [`sample_uniform_sphere`]: 1/(4π) sr⁻¹ for every direction.
+pub fn uniform_sphere_pdf() -> f32 {
+    INV_4PI
+}
+
+/// `cos θmax` of a cone clamped to `[−1, 1]` (NaN → 0) and its `1 − cos θmax`.
+fn cone_extent(cos_theta_max: f32) -> (f32, f32) {
+    let cos_max = clamp_unit_interval(cos_theta_max);
+    (cos_max, 1.0 - cos_max)
+}
+
+/// Uniform direction in the cone of half-angle θmax around +z: `1 − cos θ = u₀·(1 − cos θmax)`,
+/// φ = 2πu₁ (pbrt-v4 `SampleUniformCone`, sampling.h, written with `1 − cos θ` as the variable so
+/// that sin θ = √((1 − cos θ)(1 + cos θ)) keeps full precision in tiny cones). `cos_theta_max` is
+/// clamped to `[−1, 1]`; −1 is the whole sphere. Its pdf is [`uniform_cone_pdf`].
+///
+/// Degenerate cone: for `cos_theta_max = 1` (a cone of zero solid angle — a delta distribution,
+/// which no solid-angle pdf represents) the direction is +z and [`uniform_cone_pdf`] is 0, so
+/// callers see "no sample". Cones of any positive `1 − cos θmax` representable in `f32` (down to
+/// 2⁻²⁴, e.g. `cos θmax = 1 − 10⁻⁷` which rounds to `1 − 2⁻²³`) are sampled normally, with a large
+/// but finite pdf (≈ 1.3·10⁶ sr⁻¹ at `1 − 2⁻²³`).
+pub fn sample_uniform_cone(u: Vec2, cos_theta_max: f32) -> Vec3 {
+    let u = clamp_sample(u);
+    let (_, one_minus_cos_max) = cone_extent(cos_theta_max);
+    let one_minus_cos = u.x * one_minus_cos_max;
+    let sin_theta = safe_sqrt(one_minus_cos * (2.0 - one_minus_cos));
+    spherical_direction(sin_theta, 1.0 - one_minus_cos, TAU * u.y)
+}
+
+/// Solid-angle pdf of [`sample_uniform_cone`]: `1/(2π(1 − cos θmax))` for unit `dir` with
+/// `dir.z ≥ cos θmax`, else 0 (sr⁻¹). 0 for the degenerate cone `cos θmax = 1`.
+pub fn uniform_cone_pdf(dir: Vec3, cos_theta_max: f32) -> f32 {
+    let (cos_max, one_minus_cos_max) = cone_extent(cos_theta_max);
+    if one_minus_cos_max > 0.0 && dir.z >= cos_max {
+        sanitize_pdf(1.0 / (TAU * one_minus_cos_max))
+    } else {
+        0.0
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Lights
+// ---------------------------------------------------------------------------------------------
+
+/// A point sampled on a light, seen from the shading point `p`.
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub struct LightSample {
+    /// Unit direction from `p` towards `point`.
+    pub direction: Vec3,
+    /// Distance from `p` to `point` (scene units, finite, ≥ 0): the `tmax` of the shadow ray.
+    pub distance: f32,
+    /// Density of the sample with respect to solid angle at `p` (sr⁻¹); 0 means "no sample".
+    pub pdf: f32,
+    /// The sampled point on the light's surface (scene units).
+    pub point: Vec3,
+    /// Unit surface normal of the light at `point`: outward for spheres, `normalize(eu × ev)` for
+    /// quads (whichever side `p` is on; the caller decides which side emits).
+    pub normal: Vec3,
+}
+
+impl LightSample {
+    /// The sample that means "no sample": pdf 0, direction +z, zero distance, `point` and `normal`
+    /// as given (sanitized).
+    fn none(point: Vec3, normal: Vec3) -> Self {
+        LightSample {
+            direction: Vec3::Z,
+            distance: 0.0,
+            pdf: 0.0,
+            point: if point.is_finite() { point } else { Vec3::ZERO },
+            normal: if normal.is_finite() { normal } else { Vec3::Z },
+        }
+    }
+
+    /// The sample towards `point` from `p` with pdf `pdf`, or [`LightSample::none`] when any
+    /// part of it is not finite or `point` coincides with `p`.
+    fn towards(p: Vec3, point: Vec3, normal: Vec3, pdf: f32) -> Self {
+        let w = point - p;
+        let distance = w.length();
+        let direction = w / distance;
+        if distance > 0.0 && distance.is_finite() && direction.is_finite() && normal.is_finite() {
+            LightSample { direction, distance, pdf: sanitize_pdf(pdf), point, normal }
+        } else {
+            Self::none(point, normal)
+        }
+    }
+}
+
+/// Sphere light of centre `c` and radius `r` seen from `p`: the pieces of its subtended cone.
+/// `inside` is set when `p` is inside (or on) the sphere; the other fields are then unused.
+struct SphereCone {
+    inside: bool,
+    /// Unit axis from `p` towards `c`.
+    axis: Vec3,
+    /// sin²θmax = r²/|c − p|².
+    sin2_max: f32,
+    /// 1 − cos θmax, with pbrt-v4's small-angle Taylor value below [`SPHERE_SMALL_ANGLE_SIN2`].
+    one_minus_cos_max: f32,
+    small_angle: bool,
+}
+
+fn sphere_cone(p: Vec3, c: Vec3, r: f32) -> SphereCone {
+    let wc = c - p;
+    let dc2 = wc.length_squared();
+    let r2 = r * r;
+    // `!(a > b)` so that NaN inputs take the inside (area-sampling) path, which sanitizes them.
+    if !(dc2 > r2) {
+        return SphereCone { inside: true, axis: Vec3::Z, sin2_max: 1.0, one_minus_cos_max: 1.0, small_angle: false };
+    }
+    let dc = dc2.sqrt();
+    let ratio = r / dc;
+    let sin2_max = ratio * ratio;
+    let small_angle = sin2_max < SPHERE_SMALL_ANGLE_SIN2;
+    let one_minus_cos_max = if small_angle { 0.5 * sin2_max } else { sin2_max / (1.0 + safe_sqrt(1.0 - sin2_max)) };
+    SphereCone { inside: false, axis: wc / dc, sin2_max, one_minus_cos_max, small_angle }
+}
+
+/// Samples the sphere light (centre `c`, radius `r > 0`) as seen from `p` uniformly within the
+/// cone it subtends (pbrt-v4 `Sphere::Sample(ctx, u)`, shapes.h): `1 − cos θ = u₀·(1 − cos θmax)`
+/// (equivalent to pbrt's `cos θ = (cos θmax − 1)u₀ + 1`, written without cancellation), or, when
+/// sin²θmax < [`SPHERE_SMALL_ANGLE_SIN2`], pbrt's small-angle fallback sin²θ = sin²θmax·u₀ with
+/// `1 − cos θmax ≈ sin²θmax/2`. The point on the sphere comes from the angle α at the centre,
+/// `cos α = sin²θ/sin θmax + cos θ·√(1 − sin²θ/sin²θmax)` (pbrt-v4), not from a ray intersection.
+///
+/// pdf = 1/(2π(1 − cos θmax)) sr⁻¹, every sampled direction hits the sphere's visible side.
+/// If `p` is inside or on the sphere, falls back to [`sample_sphere_light_area`] (pbrt-v4 does the
+/// same). Radius 0 (a point light) gives pdf 0. Its pdf is [`sphere_light_cone_pdf`].
+pub fn sample_sphere_light_cone(p: Vec3, c: Vec3, r: f32, u: Vec2) -> LightSample {
+    let u = clamp_sample(u);
+    let r = r.abs();
+    let cone = sphere_cone(p, c, r);
+    if cone.inside {
+        return sample_sphere_light_area(p, c, r, u);
+    }
+    if !(cone.sin2_max > 0.0) {
+        // A point light (or a sphere too small for f32 at this distance): no density.
+        return LightSample::none(c, Vec3::Z);
+    }
+    let (sin2_theta, cos_theta) = if cone.small_angle {
+        let sin2_theta = cone.sin2_max * u.x;
+        (sin2_theta, safe_sqrt(1.0 - sin2_theta))
+    } else {
+        let one_minus_cos = u.x * cone.one_minus_cos_max;
+        (one_minus_cos * (2.0 - one_minus_cos), 1.0 - one_minus_cos)
+    };
+    let sin_max = cone.sin2_max.sqrt();
+    let cos_alpha = sin2_theta / sin_max + cos_theta * safe_sqrt(1.0 - sin2_theta / cone.sin2_max);
+    let cos_alpha = clamp_unit_interval(cos_alpha);
+    let sin_alpha = safe_sqrt(1.0 - cos_alpha * cos_alpha);
+    let (sin_phi, cos_phi) = (TAU * u.y).sin_cos();
+    let (tx, ty) = cone.axis.any_orthonormal_pair();
+    // pbrt-v4: n = Frame::FromZ(axis).FromLocal(−w) with w = SphericalDirection(sin α, cos α, φ).
+    let normal = -(sin_alpha * cos_phi * tx + sin_alpha * sin_phi * ty + cos_alpha * cone.axis);
+    let point = c + r * normal;
+    LightSample::towards(p, point, normal, 1.0 / (TAU * cone.one_minus_cos_max))
+}
+
+/// Solid-angle pdf of [`sample_sphere_light_cone`] for unit `dir` (sr⁻¹):
+/// 1/(2π(1 − cos θmax)) inside the subtended cone (widened by [`CONE_SLACK`]), else 0; with the
+/// same small-angle branch as the sampler. The inside test uses `1 − cos θ = |d × a|²/(1 + d·a)`,
+/// which stays accurate for tiny cones. If `p` is inside the sphere it is
+/// [`sphere_light_area_pdf`], matching the sampler's fallback.
+pub fn sphere_light_cone_pdf(p: Vec3, c: Vec3, r: f32, dir: Vec3) -> f32 {
+    let r = r.abs();
+    let cone = sphere_cone(p, c, r);
+    if cone.inside {
+        return sphere_light_area_pdf(p, c, r, dir);
+    }
+    if !(cone.sin2_max > 0.0) {
+        return 0.0;
+    }
+    let d = dir.normalize_or_zero();
+    let cos_theta = d.dot(cone.axis);
+    if !(cos_theta > 0.0) {
+        return 0.0;
+    }
+    let one_minus_cos = d.cross(cone.axis).length_squared() / (1.0 + cos_theta);
+    if one_minus_cos <= cone.one_minus_cos_max + cone.sin2_max.sqrt() * CONE_SLACK {
+        sanitize_pdf(1.0 / (TAU * cone.one_minus_cos_max))
+    } else {
+        0.0
+    }
+}
+
+/// Samples the sphere light (centre `c`, radius `r`) uniformly by area over its **whole**
+/// surface (pbrt-v4 `Sphere::Sample(u)`), and converts the area pdf 1/(4πr²) to solid angle at
+/// `p`: `pdf = d²/(|cos θl|·4πr²)` with `d` the distance and θl the angle between the light
+/// normal and the direction back to `p`.
+///
+/// Points on the far side (`normal·(p − point) ≤ 0`) are returned too, with `|cos θl|`: they
+/// carry no light (the sphere emits outwards and occludes them) but are legitimate samples of
+/// this strategy. The returned `pdf` is the density of *this point*; the density of the
+/// *direction*, which two points (front and back) can produce, is [`sphere_light_area_pdf`].
+/// A point seen exactly edge-on (`cos θl = 0`) gets pdf 0.
+pub fn sample_sphere_light_area(p: Vec3, c: Vec3, r: f32, u: Vec2) -> LightSample {
+    let r = r.abs();
+    let normal = sample_uniform_sphere(u);
+    let point = c + r * normal;
+    let w = point - p;
+    let d2 = w.length_squared();
+    let d = d2.sqrt();
+    let cos_abs = normal.dot(w).abs();
+    // d²/(|cos|·A) with |cos| = |n·w|/d: d³/(|n·w|·4πr²).
+    let area = 2.0 * TAU * r * r;
+    let pdf = if cos_abs > 0.0 && area > 0.0 { d2 * d / (cos_abs * area) } else { 0.0 };
+    LightSample::towards(p, point, normal, pdf)
+}
+
+/// Solid-angle density (sr⁻¹) with which [`sample_sphere_light_area`] produces the unit
+/// direction `dir` from `p`. A ray from `p` along `dir` meets the sphere at up to two points, and
+/// area sampling can produce the direction through either, so the density is the **sum over the
+/// intersections in front of `p`** of `tᵢ²/(|cos θᵢ|·4πr²)`. Both intersections see the same
+/// `|cos θ| = √disc / r` (disc = r² − (distance from `c` to the ray)²), which gives the closed form
+/// `(t₀² + t₁²)/(4πr·√disc)`. With `p` outside the sphere this integrates to 1 over the directions
+/// that hit the sphere; from inside only the forward intersection counts. A ray that misses or
+/// exactly grazes the sphere gets 0.
+///
+/// Precision: an `f32` direction fixes the ray's distance from `c` only to about
+/// `|c − p|·2⁻²⁴`, so for a sphere far away (`|c − p| ≳ 10³·r`) directions within that distance
+/// of the silhouette may be judged to miss (pdf 0) or get a `|cos θ|` off by a large factor.
+/// Such directions carry almost no light (`cos θ → 0` there); the cone sampler has no such issue.
+pub fn sphere_light_area_pdf(p: Vec3, c: Vec3, r: f32, dir: Vec3) -> f32 {
+    let r = r.abs();
+    let d = dir.normalize_or_zero();
+    let wc = c - p;
+    let b = d.dot(wc);
+    // Discriminant from the perpendicular distance (pbrt-v4's robust quadratic for spheres).
+    let perp = wc - b * d;
+    let disc = r * r - perp.length_squared();
+    if !(disc > 0.0) {
+        return 0.0;
+    }
+    let root = disc.sqrt();
+    let far = b + root;
+    if !(far > 0.0) {
+        return 0.0;
+    }
+    let dc = wc.length();
+    // t₀·t₁ = |wc|² − r², written as a product to keep precision when p is near the surface.
+    let near = (dc - r) * (dc + r) / far;
+    let sum = if near > 0.0 { far * far + near * near } else { far * far };
+    sanitize_pdf(sum / (2.0 * TAU * r * root))
+}
+
+/// Quad light `o + s·eu + t·ev`, `(s, t) ∈ [0,1]²`, relative to `p`: the pieces every quad warp
+/// needs.
+struct QuadGeometry {
+    /// Unnormalized plane normal `eu × ev`; its length is the area.
+    n: Vec3,
+    area: f32,
+    /// `o − p`.
+    po: Vec3,
+}
+
+fn quad_geometry(p: Vec3, o: Vec3, eu: Vec3, ev: Vec3) -> QuadGeometry {
+    let n = eu.cross(ev);
+    QuadGeometry { n, area: n.length(), po: o - p }
+}
+
+/// Solid angle (sr) that the quad `o + s·eu + t·ev`, `(s, t) ∈ [0,1]²`, subtends at `p`, as the
+/// sum of its two spherical triangles by Van Oosterom & Strackee's formula
+/// `Ω = 2·atan2(|a·(b × c)|, 1 + a·b + a·c + b·c)` for unit corner directions (pbrt-v4
+/// `SphericalTriangleArea`, vecmath.h; A. van Oosterom and J. Strackee, "The Solid Angle of a
+/// Plane Triangle", IEEE TBME 30(2), 1983). Unlike pbrt-v4's `g₀ + g₁ + g₂ + g₃ − 2π` (which
+/// needs `f64`), it keeps full relative precision for small quads. Returns 0 for degenerate quads
+/// and for `p` in the quad's plane. Valid for any parallelogram.
+pub fn quad_solid_angle(p: Vec3, o: Vec3, eu: Vec3, ev: Vec3) -> f32 {
+    let g = quad_geometry(p, o, eu, ev);
+    if !(g.area > 0.0) || g.n.dot(g.po) == 0.0 {
+        return 0.0;
+    }
+    let a = g.po.normalize_or_zero();
+    let b = (g.po + eu).normalize_or_zero();
+    let c = (g.po + eu + ev).normalize_or_zero();
+    let d = (g.po + ev).normalize_or_zero();
+    let omega = spherical_triangle_area(a, b, c) + spherical_triangle_area(a, c, d);
+    finite_or_zero(omega)
+}
+
+/// `(sin x, cos x)` for `x` in `[−2π, 2π]` to within a few `f32` ulps, from polynomials only, so
+/// every backend computes the same values: Cody–Waite reduction by π/2 (two-part constant) to
+/// `|r| ≤ π/4`, then Taylor polynomials to r⁹ and r⁸ (truncation below 3·10⁻⁹). Vulkan's built-in
+/// `sin`/`cos` are only bounded to 2⁻¹¹ absolute, which is no relative precision for small results.
+pub fn sin_cos_accurate(x: f32) -> (f32, f32) {
+    // π/2 = FRAC_PI_2 (the f32 nearest, 1.5707963705…) + PI_2_LO.
+    const PI_2_HI: f32 = FRAC_PI_2;
+    const PI_2_LO: f32 = -4.371_139e-8;
+    let k = (x * (2.0 / PI)).round();
+    let r = (x - k * PI_2_HI) - k * PI_2_LO;
+    let r2 = r * r;
+    let sin_r = r * (1.0 + r2 * (-1.0 / 6.0 + r2 * (1.0 / 120.0 + r2 * (-1.0 / 5040.0 + r2 * (1.0 / 362_880.0)))));
+    let cos_r = 1.0 + r2 * (-0.5 + r2 * (1.0 / 24.0 + r2 * (-1.0 / 720.0 + r2 * (1.0 / 40_320.0))));
+    // Quadrant k mod 4 (k may be negative).
+    let quadrant = (k as i32) & 3;
+    if quadrant == 0 {
+        (sin_r, cos_r)
+    } else if quadrant == 1 {
+        (cos_r, -sin_r)
+    } else if quadrant == 2 {
+        (-sin_r, -cos_r)
+    } else {
+        (-cos_r, sin_r)
+    }
+}
+
+/// Solid angle of the spherical triangle with unit corners `a`, `b`, `c` (Van Oosterom &
+/// Strackee; pbrt-v4 `SphericalTriangleArea`), in `[0, 2π]`.
+pub fn spherical_triangle_area(a: Vec3, b: Vec3, c: Vec3) -> f32 {
+    let triple = a.dot(b.cross(c)).abs();
+    2.0 * triple.atan2(1.0 + a.dot(b) + a.dot(c) + b.dot(c))
+}
+
+/// Ray from `p` along unit `d` against the quad: the ray parameter `t` of the hit, or 0 when the
+/// ray misses (beyond [`QUAD_EDGE_SLACK`]), is parallel to the plane or points away.
+fn quad_hit(g: &QuadGeometry, eu: Vec3, ev: Vec3, d: Vec3) -> f32 {
+    let denom = d.dot(g.n);
+    let t = g.po.dot(g.n) / denom;
+    if !(t > 0.0) || !t.is_finite() {
+        return 0.0;
+    }
+    // Hit point relative to o, then its coordinates in the (eu, ev) basis (any parallelogram).
+    let q = t * d - g.po;
+    let n2 = g.n.length_squared();
+    let s = q.cross(ev).dot(g.n) / n2;
+    let v = eu.cross(q).dot(g.n) / n2;
+    // Slack in scene units (see QUAD_EDGE_SLACK), converted to each coordinate.
+    let cos_abs = denom.abs() / g.area;
+    let slack = QUAD_EDGE_SLACK * t / cos_abs;
+    let slack_s = slack / eu.length();
+    let slack_v = slack / ev.length();
+    let inside = s >= -slack_s && s <= 1.0 + slack_s && v >= -slack_v && v <= 1.0 + slack_v;
+    if inside {
+        t
+    } else {
+        0.0
+    }
+}
+
+/// Samples the quad light `o + s·eu + t·ev` uniformly by area, `(s, t) = u`, and converts to
+/// solid angle at `p`: `pdf = d²/(|cos θl|·A)` = `d³/|n·w|` with `n = eu × ev` (|n| = A) and
+/// `w = point − p` (pbrt-v4 area sampling + `Shape::PDF` conversion). Both sides of the quad are
+/// sampled alike; a point seen exactly edge-on gets pdf 0. Its pdf is [`quad_area_pdf`].
+pub fn sample_quad_area(p: Vec3, o: Vec3, eu: Vec3, ev: Vec3, u: Vec2) -> LightSample {
+    let u = clamp_sample(u);
+    let g = quad_geometry(p, o, eu, ev);
+    let normal = g.n / g.area;
+    let w = g.po + u.x * eu + u.y * ev;
+    let d2 = w.length_squared();
+    let n_dot_w = g.n.dot(w).abs();
+    let pdf = if n_dot_w > 0.0 { d2 * d2.sqrt() / n_dot_w } else { 0.0 };
+    LightSample::towards(p, p + w, normal, pdf)
+}
+
+/// Solid-angle pdf of [`sample_quad_area`] for unit `dir` (sr⁻¹): `t²/|dir·n|` where the ray
+/// `p + t·dir` hits the quad (`n = eu × ev`, so this is `d²/(|cos θl|·A)`; edges widened by
+/// [`QUAD_EDGE_SLACK`]), else 0. Either side.
+pub fn quad_area_pdf(p: Vec3, o: Vec3, eu: Vec3, ev: Vec3, dir: Vec3) -> f32 {
+    let g = quad_geometry(p, o, eu, ev);
+    let d = dir.normalize_or_zero();
+    let t = quad_hit(&g, eu, ev, d);
+    if t > 0.0 {
+        sanitize_pdf(t * t / d.dot(g.n).abs())
+    } else {
+        0.0
+    }
+}
+
+/// Samples the quad light `o + s·eu + t·ev` (edges `eu ⟂ ev`) uniformly in the solid angle it
+/// subtends at `p`: C. Ureña, M. Fajardo and A. King, "An Area-Preserving Parametrization for
+/// Spherical Rectangles", EGSR 2013, following pbrt-v4 `SampleSphericalRectangle`
+/// (sampling.cpp) including its clamps: `cu` clamped to `±(1 − 2⁻²⁴)`, `xu` clamped to
+/// `[x₀, x₁]`, and `yv = y₁` unless `hv² < 1 − 10⁻⁶`. Two changes for `f32`: the solid angle comes
+/// from [`quad_solid_angle`] (pbrt sums the four corner angles minus 2π in `f64`), and the first
+/// angle is `au = u₀·Ω − (g₂ + g₃)`, the same value as pbrt's
+/// `u₀(g₀ + g₁ − 2π) + (u₀ − 1)(g₂ + g₃)` without the cancellation.
+///
+/// pdf = 1/Ω sr⁻¹. Special cases, mirrored by [`quad_spherical_pdf`]:
+/// - `p` in the quad's plane or a degenerate quad (Ω = 0): the bilinear point `o + u₀eu + u₁ev`
+///   with pdf 0 (as pbrt-v4).
+/// - Ω < [`QUAD_MIN_SPHERICAL_SOLID_ANGLE`]: uniform area sampling ([`sample_quad_area`]) with
+///   *its* pdf. (pbrt-v4 also returns the bilinear point there but keeps pdf 1/Ω, which is
+///   inconsistent for small quads seen at grazing angles; the area pdf keeps sample and pdf in
+///   agreement.)
+///
+/// The edges must be perpendicular (the method's local frame is built from them); for a general
+/// parallelogram use [`sample_quad_area`] or two spherical triangles.
+pub fn sample_quad_spherical(p: Vec3, o: Vec3, eu: Vec3, ev: Vec3, u: Vec2) -> LightSample {
+    let u = clamp_sample(u);
+    let solid_angle = quad_solid_angle(p, o, eu, ev);
+    let exl = eu.length();
+    let eyl = ev.length();
+    if !(solid_angle > 0.0) || !(exl > 0.0) || !(eyl > 0.0) {
+        let point = o + u.x * eu + u.y * ev;
+        return LightSample::none(point, eu.cross(ev).normalize_or(Vec3::Z));
+    }
+    if solid_angle < QUAD_MIN_SPHERICAL_SOLID_ANGLE {
+        return sample_quad_area(p, o, eu, ev, u);
+    }
+    // Local frame: x along eu, y along ev, z flipped so that the quad lies at z0 < 0.
+    let ex = eu / exl;
+    let ey = ev / eyl;
+    let mut ez = ex.cross(ey);
+    let normal = ez.normalize_or(Vec3::Z);
+    let po = o - p;
+    let x0 = ex.dot(po);
+    let y0 = ey.dot(po);
+    let mut z0 = ez.dot(po);
+    if z0 > 0.0 {
+        ez = -ez;
+        z0 = -z0;
+    }
+    let x1 = x0 + exl;
+    let y1 = y0 + eyl;
+    // Normals of the planes through p and each edge, and the internal angles g₂, g₃ (pbrt's n₁,
+    // g₀ and g₁ are only needed for the solid angle, which comes from `quad_solid_angle`).
+    let v00 = Vec3::new(x0, y0, z0);
+    let v01 = Vec3::new(x0, y1, z0);
+    let v10 = Vec3::new(x1, y0, z0);
+    let v11 = Vec3::new(x1, y1, z0);
+    let n0 = v00.cross(v10).normalize_or_zero();
+    let n2 = v11.cross(v01).normalize_or_zero();
+    let n3 = v01.cross(v00).normalize_or_zero();
+    // Sample cu. The paper's au = u₀·Ω − (g₂ + g₃) lies near −π for small quads, where sin(au) is
+    // tiny and a GPU `sin` (Vulkan bounds it only to 2⁻¹¹ absolute) loses all its digits: on
+    // lavapipe that biased the sampler completely at Ω = 2.5·10⁻³. So e^{i·au} is assembled
+    // without trigonometry on large angles: e^{−i·g} of each internal angle g comes exactly from
+    // its plane normals (cos g = −nᵢ·nⱼ, sin g = |nᵢ × nⱼ|), and e^{i·u₀Ω} from
+    // [`sin_cos_accurate`], the same polynomial on every backend.
+    let b0 = n0.z;
+    let b1 = n2.z;
+    let (cos_g2, sin_g2) = (-n2.dot(n3), n2.cross(n3).length());
+    let (cos_g3, sin_g3) = (-n3.dot(n0), n3.cross(n0).length());
+    let (cos_g, sin_g) = (cos_g2 * cos_g3 - sin_g2 * sin_g3, sin_g2 * cos_g3 + cos_g2 * sin_g3);
+    let (sin_uo, cos_uo) = sin_cos_accurate(u.x * solid_angle);
+    let sin_au = sin_uo * cos_g - cos_uo * sin_g;
+    let cos_au = cos_uo * cos_g + sin_uo * sin_g;
+    let fu = (cos_au * b0 - b1) / sin_au;
+    let cu = (1.0 / (fu * fu + b0 * b0).sqrt()).copysign(fu);
+    let cu = if cu >= ONE_MINUS_EPSILON {
+        ONE_MINUS_EPSILON
+    } else if cu <= -ONE_MINUS_EPSILON {
+        -ONE_MINUS_EPSILON
+    } else if !cu.is_nan() {
+        cu
+    } else {
+        0.0
+    };
+    // xu along the x edge, clamped to the rectangle.
+    let xu = -(cu * z0) / safe_sqrt(1.0 - cu * cu);
+    let xu = if xu >= x1 {
+        x1
+    } else if xu > x0 {
+        xu
+    } else {
+        x0
+    };
+    // yv along the y edge.
+    let dd = (xu * xu + z0 * z0).sqrt();
+    let h0 = y0 / (dd * dd + y0 * y0).sqrt();
+    let h1 = y1 / (dd * dd + y1 * y1).sqrt();
+    let hv = h0 + u.y * (h1 - h0);
+    let hv2 = hv * hv;
+    let yv = if hv2 < 1.0 - 1.0e-6 { hv * dd / (1.0 - hv2).sqrt() } else { y1 };
+    let yv = if yv >= y1 {
+        y1
+    } else if yv > y0 {
+        yv
+    } else {
+        y0
+    };
+    // The point on the quad in its own coordinates (exactly on the plane), and the direction from
+    // the local vector (no cancellation against p).
+    let local = Vec3::new(xu, yv, z0);
+    let distance = local.length();
+    let direction = (xu * ex + yv * ey + z0 * ez) / distance;
+    let point = o + ((xu - x0) / exl) * eu + ((yv - y0) / eyl) * ev;
+    let pdf = 1.0 / solid_angle;
+    if direction.is_finite() && distance > 0.0 && distance.is_finite() && point.is_finite() {
+        LightSample { direction, distance, pdf: sanitize_pdf(pdf), point, normal }
+    } else {
+        LightSample::none(point, normal)
+    }
+}
+
+/// Solid-angle pdf of [`sample_quad_spherical`] for unit `dir` (sr⁻¹): `1/Ω` if the ray from `p`
+/// along `dir` hits the quad (either side; edges widened by [`QUAD_EDGE_SLACK`]), else 0. Mirrors the sampler's special cases: 0 when Ω = 0, [`quad_area_pdf`]
+/// when Ω < [`QUAD_MIN_SPHERICAL_SOLID_ANGLE`].
+pub fn quad_spherical_pdf(p: Vec3, o: Vec3, eu: Vec3, ev: Vec3, dir: Vec3) -> f32 {
+    let solid_angle = quad_solid_angle(p, o, eu, ev);
+    if !(solid_angle > 0.0) || !(eu.length_squared() > 0.0) || !(ev.length_squared() > 0.0) {
+        return 0.0;
+    }
+    if solid_angle < QUAD_MIN_SPHERICAL_SOLID_ANGLE {
+        return quad_area_pdf(p, o, eu, ev, dir);
+    }
+    let g = quad_geometry(p, o, eu, ev);
+    if quad_hit(&g, eu, ev, dir.normalize_or_zero()) > 0.0 {
+        sanitize_pdf(1.0 / solid_angle)
+    } else {
+        0.0
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// GGX (Trowbridge–Reitz) microfacets
+// ---------------------------------------------------------------------------------------------
+
+/// GGX roughness clamped to `[GGX_MIN_ALPHA, GGX_MAX_ALPHA]` per component (NaN → minimum).
+fn ggx_alpha(alpha: Vec2) -> Vec2 {
+    Vec2::new(ggx_alpha_1d(alpha.x), ggx_alpha_1d(alpha.y))
+}
+
+/// One GGX roughness component clamped to `[GGX_MIN_ALPHA, GGX_MAX_ALPHA]` (NaN → minimum).
+fn ggx_alpha_1d(a: f32) -> f32 {
+    if a >= GGX_MAX_ALPHA {
+        GGX_MAX_ALPHA
+    } else if a > GGX_MIN_ALPHA {
+        a
+    } else {
+        GGX_MIN_ALPHA
+    }
+}
+
+/// The view direction as the GGX functions use it: unit, with `z ≥` [`GGX_MIN_COS_VIEW`]
+/// (grazing and below-horizon views are lifted to that grazing angle). Non-finite or zero input
+/// becomes +z.
+fn ggx_view(v: Vec3) -> Vec3 {
+    let v = v.normalize_or(Vec3::Z);
+    if v.z >= GGX_MIN_COS_VIEW {
+        v
+    } else {
+        let t = Vec2::new(v.x, v.y).normalize_or(Vec2::X) * safe_sqrt(1.0 - GGX_MIN_COS_VIEW * GGX_MIN_COS_VIEW);
+        Vec3::new(t.x, t.y, GGX_MIN_COS_VIEW)
+    }
+}
+
+/// Anisotropic GGX / Trowbridge–Reitz normal distribution D(h) for a unit microfacet normal `h`
+/// in the local frame (z = macro-surface normal), roughness `alpha = (αx, αy)` (clamped to
+/// [`GGX_MIN_ALPHA`]…[`GGX_MAX_ALPHA`]): `D = 1/(π αx αy (hx²/αx² + hy²/αy² + hz²)²)` for
+/// `hz > 0`, else 0 (B. Walter et al., "Microfacet Models for Refraction through Rough
+/// Surfaces", EGSR 2007; pbrt-v4 `TrowbridgeReitzDistribution::D`, scattering.h, in the
+/// algebraically equal form without tan²θ). Units: sr⁻¹ of microfacet normals, normalized so that
+/// `∫ D(h) hz dω = 1`.
+pub fn ggx_d(h: Vec3, alpha: Vec2) -> f32 {
+    if !(h.z > 0.0) {
+        return 0.0;
+    }
+    let a = ggx_alpha(alpha);
+    let sx = h.x / a.x;
+    let sy = h.y / a.y;
+    let t = sx * sx + sy * sy + h.z * h.z;
+    sanitize_pdf(1.0 / (PI * a.x * a.y * t * t))
+}
+
+/// `G1(v)/cos θv` for the Smith GGX masking function: `2/(vz + √(vz² + αx²vx² + αy²vy²))`
+/// (from `G1 = 1/(1 + Λ)`, `Λ = (√(1 + α²tan²θ) − 1)/2`). Bounded by `2/α` as vz → 0, so the
+/// pdfs below never divide by a grazing cosine. `v` is expected from [`ggx_view`].
+fn ggx_g1_over_cos(v: Vec3, a: Vec2) -> f32 {
+    let ax = a.x * v.x;
+    let ay = a.y * v.y;
+    2.0 / (v.z + (v.z * v.z + ax * ax + ay * ay).sqrt())
+}
+
+/// Smith masking function G1(v) of anisotropic GGX for a unit direction `v` in the local frame:
+/// `G1 = 1/(1 + Λ(v))`, `Λ = (√(1 + (αx²vx² + αy²vy²)/vz²) − 1)/2` (E. Heitz, "Understanding the
+/// Masking-Shadowing Function in Microfacet-Based BRDFs", JCGT 3(2), 2014; pbrt-v4
+/// `TrowbridgeReitzDistribution::G1`). Dimensionless in `[0, 1]`. The microfacet-side factor
+/// χ⁺(v·h) is not included (the VNDF pdf applies it as `max(0, v·h)`). `v` is lifted to
+/// [`GGX_MIN_COS_VIEW`] like everywhere in the GGX functions.
+pub fn ggx_g1(v: Vec3, alpha: Vec2) -> f32 {
+    let v = ggx_view(v);
+    sanitize_pdf(ggx_g1_over_cos(v, ggx_alpha(alpha)) * v.z)
+}
+
+/// Samples a microfacet normal `h` from the distribution of normals visible from `v`,
+/// `D_v(h) = G1(v)·max(0, v·h)·D(h)/vz`: E. Heitz, "Sampling the GGX Distribution of Visible
+/// Normals", JCGT 7(4), 2018 (the listing of §2 with a polar disk sample, as pbrt-v4
+/// `TrowbridgeReitzDistribution::Sample_wm`). `v` is the unit view direction in the local frame
+/// (z = normal), lifted to [`GGX_MIN_COS_VIEW`] if grazing or below the horizon; `alpha` clamped
+/// to [`GGX_MIN_ALPHA`]…[`GGX_MAX_ALPHA`]. Returns a unit `h` with `hz ≥ 0`; its pdf is
+/// [`ggx_vndf_pdf`].
+pub fn sample_ggx_vndf(v: Vec3, alpha: Vec2, u: Vec2) -> Vec3 {
+    let u = clamp_sample(u);
+    let v = ggx_view(v);
+    let a = ggx_alpha(alpha);
+    // Stretch the view into the hemisphere configuration (α = 1).
+    let vh = Vec3::new(a.x * v.x, a.y * v.y, v.z).normalize_or(Vec3::Z);
+    // Orthonormal basis around vh (T1 = +x when vh is the normal).
+    let lensq = vh.x * vh.x + vh.y * vh.y;
+    let t1 = if lensq > 0.0 { Vec3::new(-vh.y, vh.x, 0.0) / lensq.sqrt() } else { Vec3::X };
+    let t2 = vh.cross(t1);
+    // Uniform point on the disk, warped onto the visible half of the projected hemisphere.
+    let r = u.x.sqrt();
+    let (sin_phi, cos_phi) = (TAU * u.y).sin_cos();
+    let p1 = r * cos_phi;
+    let p2 = r * sin_phi;
+    let s = 0.5 * (1.0 + vh.z);
+    let p2 = (1.0 - s) * safe_sqrt(1.0 - p1 * p1) + s * p2;
+    // Reproject onto the hemisphere, then unstretch.
+    let nh = p1 * t1 + p2 * t2 + safe_sqrt(1.0 - p1 * p1 - p2 * p2) * vh;
+    let nz = if nh.z > 0.0 { nh.z } else { 0.0 };
+    Vec3::new(a.x * nh.x, a.y * nh.y, nz).normalize_or(Vec3::Z)
+}
+
+/// Density of [`sample_ggx_vndf`] over microfacet normals (sr⁻¹):
+/// `D_v(h) = G1(v)·max(0, v·h)·D(h)/vz` (Heitz 2018, eq. 1), for unit `h`; `v` and `alpha` as in
+/// the sampler.
+pub fn ggx_vndf_pdf(v: Vec3, h: Vec3, alpha: Vec2) -> f32 {
+    let v = ggx_view(v);
+    let a = ggx_alpha(alpha);
+    let v_dot_h = v.dot(h);
+    if !(v_dot_h > 0.0) {
+        return 0.0;
+    }
+    sanitize_pdf(ggx_g1_over_cos(v, a) * v_dot_h * ggx_d(h, a))
+}
+
+/// `reflect(−v, h) = 2(v·h)h − v`, normalized (unit for unit inputs; +z if degenerate).
+fn reflect_view(v: Vec3, h: Vec3) -> Vec3 {
+    (2.0 * v.dot(h) * h - v).normalize_or(Vec3::Z)
+}
+
+/// Samples a reflected direction `l = reflect(−v, h)` with `h` from [`sample_ggx_vndf`]: the
+/// importance-sampling half of a GGX specular BRDF (Heitz 2018 §1). `l` may point below the
+/// horizon (`lz < 0`) for rough or grazing configurations; such samples are valid samples of this
+/// warp (the BRDF is zero there, so the caller discards them). Its pdf is
+/// [`ggx_reflection_pdf`].
+pub fn sample_ggx_reflection(v: Vec3, alpha: Vec2, u: Vec2) -> Vec3 {
+    let v = ggx_view(v);
+    reflect_view(v, sample_ggx_vndf(v, alpha, u))
+}
+
+/// Density of `l` under [`sample_ggx_reflection`] (sr⁻¹): `D_v(h)/(4|v·h|)` with
+/// `h = normalize(v + l)` (the reflection Jacobian, Walter et al. 2007 eq. 14), computed as
+/// `G1(v)/vz · D(h)/4` so that no grazing `v·h` is divided by. Directions below the horizon
+/// are *not* zeroed: the pdf integrates to 1 over the whole sphere. 0 for `l = −v`.
+pub fn ggx_reflection_pdf(v: Vec3, l: Vec3, alpha: Vec2) -> f32 {
+    let v = ggx_view(v);
+    let a = ggx_alpha(alpha);
+    let h = (v + l.normalize_or_zero()).normalize_or_zero();
+    if !(v.dot(h) > 0.0) {
+        return 0.0;
+    }
+    sanitize_pdf(0.25 * ggx_g1_over_cos(v, a) * ggx_d(h, a))
+}
+
+// ---------------------------------------------------------------------------------------------
+// Linearly transformed cosines
+// ---------------------------------------------------------------------------------------------
+
+/// `M⁻¹` for [`ltc_pdf`], or the zero matrix when `M` is singular or not finite (then every pdf
+/// is 0). LTC tables (Heitz et al. 2016) usually store `M⁻¹` directly; use this for an `M` built
+/// at run time.
+pub fn ltc_inverse(m: Mat3) -> Mat3 {
+    let det = m.determinant();
+    if !(det.abs() > 0.0) || !det.is_finite() {
+        return Mat3::ZERO;
+    }
+    let inv = m.inverse();
+    if inv.is_finite() {
+        inv
+    } else {
+        Mat3::ZERO
+    }
+}
+
+/// Samples a linearly transformed cosine distribution (E. Heitz, J. Dupuy, S. Hill and
+/// D. Neubelt, "Real-Time Polygonal-Light Shading with Linearly Transformed Cosines", SIGGRAPH
+/// 2016): `ω = normalize(M·ω_o)` with `ω_o` from [`sample_cosine_hemisphere`]. `M` is the 3×3
+/// transform (columns as in glam), in the local frame. Directions may fall below the horizon if
+/// `M` tilts the lobe. Its pdf is [`ltc_pdf`] with `M⁻¹` ([`ltc_inverse`]). A singular `M`
+/// yields +z (and pdf 0 from [`ltc_pdf`]).
+pub fn sample_ltc(m: Mat3, u: Vec2) -> Vec3 {
+    (m * sample_cosine_hemisphere(u)).normalize_or(Vec3::Z)
+}
+
+/// Density of [`sample_ltc`] at unit `dir` (sr⁻¹), given `m_inv = M⁻¹`:
+/// `D_o(ω_o)·|det M⁻¹|/|M⁻¹ω|³` with `ω_o = M⁻¹ω/|M⁻¹ω|` and `D_o(ω_o) = max(0, ω_o.z)/π`
+/// (Heitz et al. 2016, eq. 2), i.e. `max(0, (M⁻¹ω).z)·|det M⁻¹|/(π|M⁻¹ω|⁴)`. Taking `M⁻¹` lets a
+/// shader evaluate it without inverting per call; the zero matrix (singular `M`) gives 0.
+pub fn ltc_pdf(m_inv: Mat3, dir: Vec3) -> f32 {
+    let w = m_inv * dir.normalize_or_zero();
+    if !(w.z > 0.0) {
+        return 0.0;
+    }
+    let l2 = w.length_squared();
+    sanitize_pdf(w.z * m_inv.determinant().abs() * INV_PI / (l2 * l2))
+}
+
+/// The LTC direction and its density computed from the cosine sample itself:
+/// `pdf = (ω_o.z/π)·|Mω_o|³/|det M|` (the same value as [`ltc_pdf`], without `M⁻¹`).
+fn sample_ltc_with_pdf(m: Mat3, u: Vec2) -> Vec4 {
+    let wo = sample_cosine_hemisphere(u);
+    let w = m * wo;
+    let len = w.length();
+    let det = m.determinant().abs();
+    let pdf = if det > 0.0 { wo.z * INV_PI * len * len * len / det } else { 0.0 };
+    sanitize_sample(w / len, pdf)
+}
+
+// ---------------------------------------------------------------------------------------------
+// Dispatcher
+// ---------------------------------------------------------------------------------------------
+
+/// The light sample as a probe result: xyz direction, w pdf.
+fn light_vec4(s: LightSample) -> Vec4 {
+    sanitize_sample(s.direction, s.pdf)
+}
+
+/// Warps `u ∈ [0,1)²` with the warp `params.kind` (one of
+/// [`raywave_shared::sampling::warp_kind`], parameters `a`, `b`, `c` as documented there; the
+/// shading point of the light warps is the origin). Returns xyz = unit direction, w = its
+/// solid-angle pdf (sr⁻¹), equal to [`pdf`]`(params, xyz)` up to rounding. For
+/// `SPHERE_LIGHT_AREA` w is the density of the *direction* ([`sphere_light_area_pdf`], summed over
+/// the front and back points), not of the sampled point. An unknown kind returns `Vec4::ZERO`.
+pub fn sample(params: &WarpParams, u: Vec2) -> Vec4 {
+    let kind = params.kind;
+    let a = params.a;
+    let b = params.b;
+    let c = params.c;
+    if kind == warp_kind::UNIFORM_HEMISPHERE {
+        let d = sample_uniform_hemisphere(u);
+        sanitize_sample(d, uniform_hemisphere_pdf(d))
+    } else if kind == warp_kind::COSINE_HEMISPHERE {
+        let d = sample_cosine_hemisphere(u);
+        sanitize_sample(d, cosine_hemisphere_pdf(d))
+    } else if kind == warp_kind::UNIFORM_SPHERE {
+        sanitize_sample(sample_uniform_sphere(u), uniform_sphere_pdf())
+    } else if kind == warp_kind::UNIFORM_CONE {
+        let d = sample_uniform_cone(u, a.x);
+        sanitize_sample(d, uniform_cone_pdf(d, a.x))
+    } else if kind == warp_kind::SPHERE_LIGHT_CONE {
+        light_vec4(sample_sphere_light_cone(Vec3::ZERO, a.xyz(), a.w, u))
+    } else if kind == warp_kind::SPHERE_LIGHT_AREA {
+        let s = sample_sphere_light_area(Vec3::ZERO, a.xyz(), a.w, u);
+        sanitize_sample(s.direction, sphere_light_area_pdf(Vec3::ZERO, a.xyz(), a.w, s.direction))
+    } else if kind == warp_kind::QUAD_SPHERICAL {
+        light_vec4(sample_quad_spherical(Vec3::ZERO, a.xyz(), b.xyz(), c.xyz(), u))
+    } else if kind == warp_kind::QUAD_AREA {
+        light_vec4(sample_quad_area(Vec3::ZERO, a.xyz(), b.xyz(), c.xyz(), u))
+    } else if kind == warp_kind::GGX_VNDF {
+        // The pdf of l via h = normalize(v + l), as `pdf` computes it: at the rim of the visible
+        // hemisphere (v·h → 0, l → −v) the sampled h cannot be recovered from l in f32, and a pdf
+        // from the sampled h would disagree with `pdf(l)` there (it agrees to ~10⁻⁴ elsewhere).
+        let alpha = Vec2::new(b.x, b.y);
+        let l = sample_ggx_reflection(a.xyz(), alpha, u);
+        sanitize_sample(l, ggx_reflection_pdf(a.xyz(), l, alpha))
+    } else if kind == warp_kind::LTC {
+        sample_ltc_with_pdf(Mat3::from_cols(a.xyz(), b.xyz(), c.xyz()), u)
+    } else {
+        Vec4::ZERO
+    }
+}
+
+/// Solid-angle pdf (sr⁻¹) with which [`sample`] produces the unit direction `direction` for warp
+/// `params.kind`; 0 for directions the warp never produces and for unknown kinds.
+pub fn pdf(params: &WarpParams, direction: Vec3) -> f32 {
+    let kind = params.kind;
+    let a = params.a;
+    let b = params.b;
+    let c = params.c;
+    let pdf = if kind == warp_kind::UNIFORM_HEMISPHERE {
+        uniform_hemisphere_pdf(direction)
+    } else if kind == warp_kind::COSINE_HEMISPHERE {
+        cosine_hemisphere_pdf(direction)
+    } else if kind == warp_kind::UNIFORM_SPHERE {
+        uniform_sphere_pdf()
+    } else if kind == warp_kind::UNIFORM_CONE {
+        uniform_cone_pdf(direction, a.x)
+    } else if kind == warp_kind::SPHERE_LIGHT_CONE {
+        sphere_light_cone_pdf(Vec3::ZERO, a.xyz(), a.w, direction)
+    } else if kind == warp_kind::SPHERE_LIGHT_AREA {
+        sphere_light_area_pdf(Vec3::ZERO, a.xyz(), a.w, direction)
+    } else if kind == warp_kind::QUAD_SPHERICAL {
+        quad_spherical_pdf(Vec3::ZERO, a.xyz(), b.xyz(), c.xyz(), direction)
+    } else if kind == warp_kind::QUAD_AREA {
+        quad_area_pdf(Vec3::ZERO, a.xyz(), b.xyz(), c.xyz(), direction)
+    } else if kind == warp_kind::GGX_VNDF {
+        ggx_reflection_pdf(a.xyz(), direction, Vec2::new(b.x, b.y))
+    } else if kind == warp_kind::LTC {
+        ltc_pdf(ltc_inverse(Mat3::from_cols(a.xyz(), b.xyz(), c.xyz())), direction)
+    } else {
+        0.0
+    };
+    sanitize_pdf(pdf)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::hash::{pcg3d, unit_float};
+    use glam::UVec3;
+    use std::vec::Vec;
+
+    /// Samples that stress the clamps: the corners of the square, `1 − 2⁻²⁴`, and values a careless
+    /// caller might pass (1, negative, NaN, Inf).
+    fn hard_samples() -> Vec<Vec2> {
+        let e = ONE_MINUS_EPSILON;
+        let values = [0.0, e, 0.5, 0.25, 1.0e-7, 1.0, -0.5, 2.0, f32::NAN, f32::INFINITY];
+        let mut out = Vec::new();
+        for &x in &values {
+            for &y in &values {
+                out.push(Vec2::new(x, y));
+            }
+        }
+        out
+    }
+
+    fn random_samples(n: u32, seed: u32) -> Vec<Vec2> {
+        (0..n)
+            .map(|i| {
+                let bits = pcg3d(UVec3::new(i, 0, seed));
+                Vec2::new(unit_float(bits.x), unit_float(bits.y))
+            })
+            .collect()
+    }
+
+    fn params(kind: u32, a: Vec4, b: Vec4, c: Vec4) -> WarpParams {
+        WarpParams {
+            kind,
+            count: 0,
+            padding: [0; 2],
+            sampler: raywave_shared::SamplerParams { kind: 0, seed: 0, spp_log2: 0, resolution_log2: 0 },
+            a,
+            b,
+            c,
+        }
+    }
+
+    fn quad(o: Vec3, eu: Vec3, ev: Vec3, kind: u32) -> WarpParams {
+        params(kind, o.extend(0.0), eu.extend(0.0), ev.extend(0.0))
+    }
+
+    fn ggx(theta_v: f32, alpha: Vec2) -> WarpParams {
+        let v = Vec3::new(theta_v.sin(), 0.0, theta_v.cos());
+        params(warp_kind::GGX_VNDF, v.extend(0.0), alpha.extend(0.0).extend(0.0), Vec4::ZERO)
+    }
+
+    /// Every parameter set of every kind, ordinary and hard.
+    fn all_params() -> Vec<(&'static str, WarpParams)> {
+        let z = Vec4::ZERO;
+        let sphere = |kind, c: Vec3, r: f32| params(kind, c.extend(r), z, z);
+        let mut v = Vec::new();
+        v.push(("uniform hemisphere", params(warp_kind::UNIFORM_HEMISPHERE, z, z, z)));
+        v.push(("cosine hemisphere", params(warp_kind::COSINE_HEMISPHERE, z, z, z)));
+        v.push(("uniform sphere", params(warp_kind::UNIFORM_SPHERE, z, z, z)));
+        for cos_max in [0.9, 0.0, -1.0, 1.0 - 1.0e-7, 1.0, 2.0, f32::NAN] {
+            v.push(("cone", params(warp_kind::UNIFORM_CONE, Vec4::splat(cos_max), z, z)));
+        }
+        for kind in [warp_kind::SPHERE_LIGHT_CONE, warp_kind::SPHERE_LIGHT_AREA] {
+            v.push(("sphere d=3", sphere(kind, Vec3::new(0.0, 0.0, 3.0), 1.0)));
+            v.push(("sphere crossing the horizon", sphere(kind, Vec3::new(2.0, 0.3, 0.4), 1.0)));
+            v.push(("sphere d=1e3", sphere(kind, Vec3::new(600.0, 0.0, 800.0), 1.0)));
+            v.push(("sphere d=1e6", sphere(kind, Vec3::new(0.0, 6.0e5, 8.0e5), 1.0)));
+            v.push(("p inside sphere", sphere(kind, Vec3::new(0.2, 0.1, -0.3), 1.0)));
+            v.push(("p on sphere", sphere(kind, Vec3::new(0.0, 0.0, 1.0), 1.0)));
+            v.push(("point light", sphere(kind, Vec3::new(0.0, 0.0, 1.0), 0.0)));
+            v.push(("sphere at p", sphere(kind, Vec3::ZERO, 0.0)));
+            v.push(("nan sphere", sphere(kind, Vec3::new(f32::NAN, 0.0, 1.0), 1.0)));
+        }
+        for kind in [warp_kind::QUAD_SPHERICAL, warp_kind::QUAD_AREA] {
+            let (x, y) = (Vec3::X, Vec3::Y);
+            v.push(("quad overhead", quad(Vec3::new(-0.5, -0.5, 1.0), x, y, kind)));
+            v.push(("quad crossing the horizon", quad(Vec3::new(-1.0, 2.0, -0.5), 2.0 * x, 1.5 * Vec3::Z, kind)));
+            v.push(("p on quad plane", quad(Vec3::new(-0.5, -0.5, 0.0), x, y, kind)));
+            v.push(("p on quad", quad(Vec3::new(-0.5, -0.5, 0.0), x, y, kind)));
+            v.push(("quad edge-on", quad(Vec3::new(1.0, -0.5, 1.0e-6), x, y, kind)));
+            v.push(("quad almost edge-on", quad(Vec3::new(1.0, -0.5, 1.0e-3), x, y, kind)));
+            v.push(("quad 1e6 away", quad(Vec3::new(-0.5, -0.5, 1.0e6), x, y, kind)));
+            v.push(("huge quad 1e6 away", quad(Vec3::new(-1.0e6, -1.0e6, 1.0e6), 2.0e6 * x, 2.0e6 * y, kind)));
+            v.push(("degenerate quad", quad(Vec3::new(-0.5, -0.5, 1.0), x, Vec3::ZERO, kind)));
+            v.push(("tiny quad", quad(Vec3::new(-0.5e-3, -0.5e-3, 1.0), 1.0e-3 * x, 1.0e-3 * y, kind)));
+        }
+        for theta in [0.0, 1.0, 1.4835, core::f32::consts::FRAC_PI_2, 2.0] {
+            for alpha in [0.0, 1.0e-6, 0.05, 0.3, 1.0, 1.0e5] {
+                v.push(("ggx", ggx(theta, Vec2::splat(alpha))));
+            }
+            v.push(("ggx anisotropic", ggx(theta, Vec2::new(0.01, 0.5))));
+        }
+        let grazing = Vec3::new((1.0f32 - 1.0e-12).sqrt(), 0.0, 1.0e-6);
+        v.push(("ggx v.z = 1e-6", params(warp_kind::GGX_VNDF, grazing.extend(0.0), Vec4::splat(0.3), z)));
+        v.push(("ggx v.z = 1e-6 alpha 0", params(warp_kind::GGX_VNDF, grazing.extend(0.0), z, z)));
+        let m = |c0: Vec3, c1: Vec3, c2: Vec3| params(warp_kind::LTC, c0.extend(0.0), c1.extend(0.0), c2.extend(0.0));
+        v.push(("ltc identity", m(Vec3::X, Vec3::Y, Vec3::Z)));
+        v.push(("ltc skewed", m(Vec3::new(0.5, 0.0, 0.1), Vec3::new(0.0, 0.7, 0.0), Vec3::new(0.2, 0.0, 1.0))));
+        v.push(("ltc singular", m(Vec3::X, Vec3::X, Vec3::Z)));
+        v.push(("ltc zero", m(Vec3::ZERO, Vec3::ZERO, Vec3::ZERO)));
+        v
+    }
+
+    fn assert_finite_sample(name: &str, s: Vec4) {
+        assert!(s.is_finite(), "{name}: {s}");
+        assert!((s.xyz().length() - 1.0).abs() < 1.0e-5, "{name}: |{}| = {}", s.xyz(), s.xyz().length());
+        assert!(s.w >= 0.0, "{name}: pdf {}", s.w);
+    }
+
+    #[test]
+    fn every_output_is_finite_for_hard_inputs() {
+        let mut u = hard_samples();
+        u.extend(random_samples(256, 1));
+        for (name, p) in all_params() {
+            for &ui in &u {
+                let s = sample(&p, ui);
+                assert_finite_sample(name, s);
+                let q = pdf(&p, s.xyz());
+                assert!(q.is_finite() && q >= 0.0, "{name} u={ui}: pdf {q}");
+            }
+            for d in [Vec3::Z, -Vec3::Z, Vec3::X, Vec3::ZERO, Vec3::NAN, Vec3::new(1.0, 1.0, 1.0)] {
+                let q = pdf(&p, d);
+                assert!(q.is_finite() && q >= 0.0, "{name} dir={d}: pdf {q}");
+            }
+        }
+    }
+
+    #[test]
+    fn light_samples_are_finite_for_hard_inputs() {
+        let p = Vec3::new(0.1, -0.2, 0.3);
+        for &u in &hard_samples() {
+            for (c, r) in [(Vec3::new(0.0, 0.0, 3.0), 1.0), (p, 1.0), (p, 0.0), (Vec3::new(1.0e6, 0.0, 0.0), 1.0)] {
+                for s in [sample_sphere_light_cone(p, c, r, u), sample_sphere_light_area(p, c, r, u)] {
+                    assert!(s.direction.is_finite() && (s.direction.length() - 1.0).abs() < 1.0e-5, "{s:?}");
+                    assert!(s.distance.is_finite() && s.distance >= 0.0, "{s:?}");
+                    assert!(s.pdf.is_finite() && s.pdf >= 0.0, "{s:?}");
+                    assert!(s.point.is_finite() && s.normal.is_finite(), "{s:?}");
+                }
+            }
+            let (o, eu, ev) = (Vec3::new(-0.5, -0.5, 0.3), Vec3::X, Vec3::Y);
+            for s in [sample_quad_spherical(p, o, eu, ev, u), sample_quad_area(p, o, eu, ev, u)] {
+                assert!(s.direction.is_finite() && s.distance.is_finite() && s.pdf.is_finite(), "{s:?}");
+                assert!(s.point.is_finite() && (s.normal.length() - 1.0).abs() < 1.0e-5, "{s:?}");
+            }
+        }
+    }
+
+    /// For ordinary inputs every sample has a positive pdf that the pdf function reproduces, and
+    /// for light warps the sampled point lies on the light along the returned direction.
+    #[test]
+    fn sample_and_pdf_agree() {
+        let u = random_samples(4096, 2);
+        let mut failures = 0;
+        for (name, p) in all_params() {
+            let degenerate = name.contains("p on")
+                || name.contains("point light")
+                || name.contains("sphere at p")
+                || name.contains("nan")
+                || name.contains("degenerate")
+                || name.contains("singular")
+                || name.contains("zero")
+                || name.contains("edge-on")
+                || (p.kind == warp_kind::UNIFORM_CONE && !(p.a.x < 1.0));
+            // Beyond what f32 directions resolve: GGX lobes narrower than ~0.01 or seen at
+            // grazing angles (h = normalize(v + l) loses the digits that D depends on), absurd
+            // roughness (l ≈ −v), and directions to the silhouette of a sphere 10³·r away or
+            // more, which cannot tell whether they hit it (see `sphere_light_area_pdf`).
+            let ggx_extreme = p.kind == warp_kind::GGX_VNDF
+                && (p.b.x < 0.01 || p.b.y < 0.01 || p.b.x > 2.0 || p.b.y > 2.0 || p.a.z < 0.05);
+            let far_area = p.kind == warp_kind::SPHERE_LIGHT_AREA && p.a.xyz().length() > 100.0;
+            if degenerate || ggx_extreme || far_area {
+                continue;
+            }
+            let mut bad = 0;
+            for &ui in &u {
+                let s = sample(&p, ui);
+                let q = pdf(&p, s.xyz());
+                if !(s.w > 0.0) || !((q - s.w).abs() <= 1.0e-3 * s.w) {
+                    if bad < 3 {
+                        std::println!("{name} {p:?} u={ui}: sampled pdf {} vs pdf {q}", s.w);
+                    }
+                    bad += 1;
+                }
+            }
+            failures += bad;
+        }
+        assert_eq!(failures, 0);
+    }
+
+    /// Area sampling of a far sphere: the few directions near its silhouette that f32 cannot
+    /// place inside or outside get pdf 0 from the pdf function (and so from `sample`).
+    #[test]
+    fn far_sphere_area_sampling_rarely_loses_samples() {
+        let p = params(warp_kind::SPHERE_LIGHT_AREA, Vec4::new(600.0, 0.0, 800.0, 1.0), Vec4::ZERO, Vec4::ZERO);
+        let u = random_samples(1 << 16, 6);
+        let zero = u.iter().filter(|&&u| sample(&p, u).w == 0.0).count();
+        assert!(zero < u.len() / 100, "{zero} of {} samples with pdf 0", u.len());
+    }
+
+    #[test]
+    fn degenerate_inputs_give_pdf_zero() {
+        let z = Vec4::ZERO;
+        // Zero-solid-angle cone.
+        let cone = params(warp_kind::UNIFORM_CONE, Vec4::ONE, z, z);
+        assert_eq!(sample(&cone, Vec2::splat(0.3)), Vec4::Z);
+        assert_eq!(pdf(&cone, Vec3::Z), 0.0);
+        // Point light.
+        let s = sample_sphere_light_cone(Vec3::ZERO, Vec3::Z, 0.0, Vec2::splat(0.5));
+        assert_eq!(s.pdf, 0.0);
+        // p in the quad's plane.
+        let (o, eu, ev) = (Vec3::new(-0.5, -0.5, 0.0), Vec3::X, Vec3::Y);
+        assert_eq!(quad_solid_angle(Vec3::ZERO, o, eu, ev), 0.0);
+        assert_eq!(sample_quad_spherical(Vec3::ZERO, o, eu, ev, Vec2::splat(0.5)).pdf, 0.0);
+        assert_eq!(quad_spherical_pdf(Vec3::ZERO, o, eu, ev, Vec3::X), 0.0);
+        assert_eq!(quad_area_pdf(Vec3::ZERO, o + Vec3::X, eu, ev, Vec3::X), 0.0);
+        // Singular LTC.
+        assert_eq!(ltc_inverse(Mat3::from_cols(Vec3::X, Vec3::X, Vec3::Z)), Mat3::ZERO);
+        assert_eq!(ltc_pdf(Mat3::ZERO, Vec3::Z), 0.0);
+    }
+
+    #[test]
+    fn concentric_disk_maps_into_the_disk() {
+        assert_eq!(sample_concentric_disk(Vec2::splat(0.5)), Vec2::ZERO);
+        for u in hard_samples().into_iter().chain(random_samples(1000, 3)) {
+            let d = sample_concentric_disk(u);
+            assert!(d.is_finite() && d.length() <= 1.0 + 1.0e-6, "{u} → {d}");
+        }
+        // The border of the square maps to the circle.
+        let d = sample_concentric_disk(Vec2::new(0.0, 0.3));
+        assert!((d.length() - 1.0).abs() < 1.0e-6);
+    }
+
+    #[test]
+    fn simple_pdfs_have_their_closed_forms() {
+        assert!((uniform_hemisphere_pdf(Vec3::X) - 0.5 / PI).abs() < 1.0e-7);
+        assert_eq!(uniform_hemisphere_pdf(-Vec3::Z), 0.0);
+        assert!((cosine_hemisphere_pdf(Vec3::Z) - 1.0 / PI).abs() < 1.0e-7);
+        assert_eq!(cosine_hemisphere_pdf(-Vec3::Z), 0.0);
+        assert!((uniform_sphere_pdf() - 0.25 / PI).abs() < 1.0e-7);
+        assert!((uniform_cone_pdf(Vec3::Z, 0.0) - 0.5 / PI).abs() < 1.0e-7);
+        assert_eq!(uniform_cone_pdf(Vec3::X, 0.5), 0.0);
+        // LTC with M = I is the cosine lobe.
+        for d in [Vec3::Z, Vec3::new(0.6, 0.0, 0.8), Vec3::new(0.0, 0.8, -0.6)] {
+            assert!((ltc_pdf(Mat3::IDENTITY, d) - cosine_hemisphere_pdf(d)).abs() < 1.0e-6);
+        }
+    }
+
+    #[test]
+    fn tiny_cones_stay_inside_and_finite() {
+        let cos_max = 1.0 - 1.0e-7;
+        for u in hard_samples().into_iter().chain(random_samples(1000, 4)) {
+            let d = sample_uniform_cone(u, cos_max);
+            assert!(d.is_finite() && (d.length() - 1.0).abs() < 1.0e-6);
+            assert!(d.z >= cos_max, "{d}");
+            let q = uniform_cone_pdf(d, cos_max);
+            assert!(q.is_finite() && q > 1.0e6, "{q}");
+        }
+    }
+
+    #[test]
+    fn accurate_sin_cos_matches_libm() {
+        for i in -2000..=2000 {
+            let x = i as f32 * (TAU / 2000.0);
+            let (s, c) = sin_cos_accurate(x);
+            let (es, ec) = (f64::from(x).sin(), f64::from(x).cos());
+            assert!((f64::from(s) - es).abs() <= 4.0e-7 && (f64::from(c) - ec).abs() <= 4.0e-7, "{x}: {s} {c}");
+        }
+        for x in [1.0e-30f32, 1.0e-6, 3.0e-3] {
+            let (s, c) = sin_cos_accurate(x);
+            assert!(
+                ((s - x.sin()) / x).abs() <= 2.0 * f32::EPSILON && (c - x.cos()).abs() <= 2.0 * f32::EPSILON,
+                "{x}"
+            );
+        }
+    }
+
+    #[test]
+    fn quad_solid_angle_matches_the_closed_form() {
+        // Rectangle of half-sides a, b centred at distance d: Ω = 4·asin(ab/√((a² + d²)(b² + d²))).
+        for (a, b, d) in [(1.0f32, 1.0, 1.0), (0.5, 2.0, 0.3), (1.0e-3, 1.0e-3, 1.0), (1.0, 1.0, 1.0e3)] {
+            let exact = 4.0 * (a * b / ((a * a + d * d) * (b * b + d * d)).sqrt()).asin();
+            let o = Vec3::new(-a, -b, d);
+            for p in [Vec3::ZERO, Vec3::new(0.0, 0.0, 2.0 * d)] {
+                let omega = quad_solid_angle(p, o, 2.0 * a * Vec3::X, 2.0 * b * Vec3::Y);
+                assert!((omega - exact).abs() <= 1.0e-5 * exact, "{a} {b} {d}: {omega} vs {exact}");
+            }
+        }
+    }
+
+    #[test]
+    fn light_points_lie_on_the_light_along_the_direction() {
+        let p = Vec3::new(0.1, -0.2, 0.3);
+        let (c, r) = (Vec3::new(1.0, 2.0, 3.0), 0.7);
+        let (o, eu, ev) = (Vec3::new(-0.5, 1.0, -0.5), Vec3::new(1.0, 0.0, 0.0), Vec3::new(0.0, 0.6, 0.8));
+        for u in random_samples(1000, 5) {
+            for s in [sample_sphere_light_cone(p, c, r, u), sample_sphere_light_area(p, c, r, u)] {
+                assert!(((s.point - c).length() - r).abs() < 1.0e-5, "{s:?}");
+                assert!((s.normal - (s.point - c) / r).length() < 1.0e-4, "{s:?}");
+                assert!((p + s.distance * s.direction - s.point).length() < 1.0e-5, "{s:?}");
+            }
+            // The cone sampler only produces the visible side.
+            let s = sample_sphere_light_cone(p, c, r, u);
+            assert!(s.normal.dot(p - s.point) >= -1.0e-4, "{s:?}");
+            for s in [sample_quad_spherical(p, o, eu, ev, u), sample_quad_area(p, o, eu, ev, u)] {
+                assert!((s.point - o).dot(eu.cross(ev)).abs() < 1.0e-5, "{s:?}");
+                assert!((p + s.distance * s.direction - s.point).length() < 1.0e-5, "{s:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn ggx_is_finite_at_grazing_views_and_tiny_roughness() {
+        let grazing = Vec3::new((1.0f32 - 1.0e-12).sqrt(), 0.0, 1.0e-6);
+        for alpha in [0.0, 1.0e-6, 1.0e-4, 0.3, 1.0] {
+            let a = Vec2::splat(alpha);
+            for v in [grazing, Vec3::Z, Vec3::new(0.6, 0.0, -0.8)] {
+                for u in hard_samples() {
+                    let h = sample_ggx_vndf(v, a, u);
+                    assert!(h.is_finite() && (h.length() - 1.0).abs() < 1.0e-5 && h.z >= 0.0, "{h}");
+                    let l = sample_ggx_reflection(v, a, u);
+                    assert!(l.is_finite() && (l.length() - 1.0).abs() < 1.0e-5, "{l}");
+                    for q in [ggx_vndf_pdf(v, h, a), ggx_reflection_pdf(v, l, a), ggx_d(h, a), ggx_g1(v, a)] {
+                        assert!(q.is_finite() && q >= 0.0, "α {alpha} v {v}: {q}");
+                    }
+                }
+            }
+        }
+        // D is normalized over projected area: ∫ D(h) h.z dω = 1 (midpoint rule in (cos θ, φ)).
+        for alpha in [Vec2::splat(0.3), Vec2::new(0.2, 0.6), Vec2::ONE] {
+            let (n_theta, n_phi) = (2000, 64);
+            let mut sum = 0.0f64;
+            for i in 0..n_theta {
+                let z = (i as f32 + 0.5) / n_theta as f32;
+                for j in 0..n_phi {
+                    let phi = TAU * (j as f32 + 0.5) / n_phi as f32;
+                    let h = spherical_direction(safe_sqrt(1.0 - z * z), z, phi);
+                    sum += (ggx_d(h, alpha) * z) as f64;
+                }
+            }
+            let integral = sum * (TAU as f64) / (n_theta * n_phi) as f64;
+            assert!((integral - 1.0).abs() < 2.0e-3, "α {alpha}: ∫D cos = {integral}");
+        }
+    }
+
+    #[test]
+    fn safe_helpers_clamp() {
+        assert_eq!(safe_sqrt(-1.0e-9), 0.0);
+        assert_eq!(safe_sqrt(f32::NAN), 0.0);
+        assert_eq!(safe_acos(1.0 + 1.0e-6), 0.0);
+        assert!((safe_asin(-2.0) + FRAC_PI_2).abs() < 1.0e-7);
+        assert_eq!(clamp_sample(Vec2::new(1.0, f32::NAN)), Vec2::new(ONE_MINUS_EPSILON, 0.0));
+    }
+}

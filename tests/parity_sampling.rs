@@ -1,0 +1,124 @@
+//! Parity of the sampling module: the sampler's integer outputs are bit-identical on the CPU and
+//! on every Vulkan device, for every sampler kind, and the warps agree within a documented
+//! tolerance and pass the same statistical checks on each device.
+#![cfg(feature = "vulkan")]
+
+mod common;
+
+use common::vulkan;
+use raywave::cpu::CpuBackend;
+use raywave::shared::sampling::{sampler_kind, SamplerParams};
+use raywave::shared::SamplerProbeParams;
+use raywave::Backend;
+
+/// Whether `points` (raw 32-bit fractions, `2^m` of them) form a (0,m,2)-net: every elementary
+/// interval of area `2^-m` holds exactly one point.
+fn is_net(points: &[glam::UVec2]) -> bool {
+    let m = points.len().trailing_zeros();
+    (0..=m).all(|row_bits| {
+        let col_bits = m - row_bits;
+        let mut seen = vec![false; points.len()];
+        points.iter().all(|p| {
+            let x = if col_bits == 0 { 0 } else { p.x >> (32 - col_bits) };
+            let y = if row_bits == 0 { 0 } else { p.y >> (32 - row_bits) };
+            let cell = ((y << col_bits) | x) as usize;
+            !std::mem::replace(&mut seen[cell], true)
+        })
+    })
+}
+
+/// Asserts elementary-interval stratification of the first `2^k` samples of each pixel, for
+/// both Sobol' samplers, as computed by `backend`.
+fn assert_stratified(backend: &mut dyn Backend) {
+    for kind in [sampler_kind::ZSOBOL, sampler_kind::SOBOL] {
+        for spp_log2 in [0u32, 1, 4, 7, 10] {
+            let params = SamplerProbeParams {
+                sampler: SamplerParams { kind, seed: 99, spp_log2, resolution_log2: 3 },
+                width: 8,
+                height: 4,
+                dimension: 2,
+                padding: 0,
+            };
+            let bits = backend.sampler_probe(&params).expect("probe runs");
+            for (pixel, samples) in bits.chunks(1 << spp_log2).enumerate() {
+                assert!(is_net(samples), "{}: kind {kind} 2^{spp_log2} spp pixel {pixel} not a net", backend.name());
+            }
+        }
+    }
+}
+
+#[test]
+fn every_pixels_sobol_samples_are_stratified_on_every_device() {
+    assert_stratified(&mut CpuBackend::new());
+    for mut device in vulkan::each_device("sampler stratification") {
+        assert_stratified(&mut device);
+        vulkan::assert_clean(&device);
+    }
+}
+
+#[test]
+fn sampler_bits_are_identical_on_every_vulkan_device() {
+    let mut cpu = CpuBackend::new();
+    let mut devices = vulkan::each_device("sampler parity");
+    // Odd image sizes, 1…256 samples per pixel, low and high slots, extreme seeds.
+    let shapes =
+        [(37u32, 23u32, 0u32, 0u32, 1u32), (16, 16, 4, 3, 0xffff_ffff), (5, 3, 8, 31, 12345), (64, 64, 1, 7, 2)];
+    for (width, height, spp_log2, dimension, seed) in shapes {
+        for kind in 0..sampler_kind::COUNT {
+            let resolution_log2 = width.max(height).next_power_of_two().trailing_zeros();
+            let params = SamplerProbeParams {
+                sampler: SamplerParams { kind, seed, spp_log2, resolution_log2 },
+                width,
+                height,
+                dimension,
+                padding: 0,
+            };
+            let expected = cpu.sampler_probe(&params).expect("cpu probe");
+            assert_eq!(expected.len() as u32, params.sample_count());
+            for device in &mut devices {
+                let bits = device.sampler_probe(&params).expect("device probe");
+                let mismatches = bits.iter().zip(&expected).filter(|(a, b)| a != b).count();
+                assert_eq!(mismatches, 0, "kind {kind}, {params:?}: {mismatches} samples differ on {}", device.name());
+                vulkan::assert_clean(device);
+            }
+        }
+    }
+}
+
+/// Documented tolerance of the warp parity: Vulkan lets `sin`, `cos`, `atan2` and friends differ
+/// from the CPU's libm by up to 2⁻¹¹ absolute, so directions agree within 2·10⁻³ (components of a
+/// unit vector) and pdfs within 1 % relative — for all but 10⁻³ of the samples, which may sit on a
+/// pdf discontinuity (the rim of a cone, the edge of a quad) and legitimately flip sides.
+const WARP_DIRECTION_TOLERANCE: f32 = 2.0e-3;
+const WARP_PDF_REL_TOLERANCE: f32 = 1.0e-2;
+const WARP_OUTLIER_FRACTION: f64 = 1.0e-3;
+
+#[test]
+fn every_warp_passes_its_statistical_check_on_every_vulkan_device() {
+    let mut devices = vulkan::each_device("warp parity");
+    for (name, params) in common::warp_cases::warp_cases() {
+        let expected = common::warp_cases::cpu_samples(&params);
+        for device in &mut devices {
+            let samples = device.warp_probe(&params).expect("warp probe runs");
+            assert_eq!(samples.len(), expected.len());
+            let outliers = samples
+                .iter()
+                .zip(&expected)
+                .filter(|(g, c)| {
+                    let direction_off = (g.truncate() - c.truncate()).abs().max_element() > WARP_DIRECTION_TOLERANCE;
+                    let pdf_off = (g.w - c.w).abs() > WARP_PDF_REL_TOLERANCE * c.w.abs().max(1e-6);
+                    direction_off || pdf_off || !g.is_finite()
+                })
+                .count();
+            assert!(
+                outliers as f64 <= WARP_OUTLIER_FRACTION * samples.len() as f64,
+                "{name} on {}: {outliers} samples differ from the CPU",
+                device.name()
+            );
+            if let Err(report) = common::warp_cases::check_warp(&name, &params, &samples) {
+                panic!("{name} on {}:\n{report}", device.name());
+            }
+            vulkan::assert_clean(device);
+        }
+    }
+}
