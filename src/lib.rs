@@ -3,13 +3,15 @@
 //!
 //! This facade re-exports the three layers — [`shared`] (the host/kernel contract), [`kernels`]
 //! (the stages as plain `no_std` functions) and the host (scenes, CPU executor, Vulkan backend) —
-//! and adds [`render`], the whole-frame job behind `raywave render`, and [`bench`], the trace
-//! benchmark behind `raywave bench trace`.
+//! and adds [`render`], the whole-frame job behind `raywave render`, [`bench`], the trace
+//! benchmark behind `raywave bench trace`, and [`report`], the accuracy reports behind
+//! `raywave report`.
 
 pub mod bench;
 #[cfg(feature = "embree")]
 pub mod embree;
 pub mod render;
+pub mod report;
 
 pub use raywave_host::*;
 pub use raywave_kernels as kernels;

@@ -30,6 +30,34 @@ enum Command {
         #[command(subcommand)]
         stage: BenchStage,
     },
+    /// Measure accuracy.
+    Report {
+        #[command(subcommand)]
+        topic: ReportTopic,
+    },
+}
+
+#[derive(Subcommand)]
+enum ReportTopic {
+    /// Seed 002's variance table (importance warps, light selection, Owen-scrambled Sobol') on the
+    /// Cornell box, and the screen-space error spectrum of each sampler.
+    Sampling(SamplingReportArgs),
+}
+
+#[derive(clap::Args)]
+struct SamplingReportArgs {
+    /// Image side in pixels (resolution² shading points).
+    #[arg(long, default_value_t = 64)]
+    resolution: u32,
+    /// Independent repetitions per estimator.
+    #[arg(long, default_value_t = 256)]
+    reps: u32,
+    /// Backend tracing the shadow rays: `cpu` (default), `auto`, `vulkan` or `vulkan:N`.
+    #[arg(long, default_value = "cpu")]
+    device: String,
+    /// Print one JSON object per line instead of a table.
+    #[arg(long)]
+    json: bool,
 }
 
 #[derive(Subcommand)]
@@ -81,9 +109,19 @@ struct RenderArgs {
     /// Image height in pixels.
     #[arg(long, default_value_t = 512)]
     height: u32,
-    /// Seed of the sub-pixel jitter.
+    /// Seed of the sampler.
     #[arg(long, default_value_t = 0)]
     seed: u32,
+    /// Sampler of the pixel and lens positions: `zsobol` (Owen-scrambled Sobol' in Morton order,
+    /// blue-noise error), `sobol` (per-pixel shuffled Owen-scrambled Sobol') or `random`.
+    #[arg(long, default_value = "zsobol")]
+    sampler: String,
+    /// Thin-lens aperture radius in scene units (0: pinhole camera).
+    #[arg(long, default_value_t = 0.0)]
+    aperture: f32,
+    /// Distance of the plane in focus (default: the camera's look-at point).
+    #[arg(long)]
+    focus: Option<f32>,
     /// Enable the Vulkan validation layers (must be installed).
     #[arg(long)]
     validate: bool,
@@ -98,6 +136,7 @@ fn main() -> ExitCode {
         Command::Devices { json } => devices(json),
         Command::Render(args) => render_command(args),
         Command::Bench { stage: BenchStage::Trace(args) } => bench_trace_command(args),
+        Command::Report { topic: ReportTopic::Sampling(args) } => report_sampling_command(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -105,6 +144,15 @@ fn main() -> ExitCode {
             eprintln!("error: {e}");
             ExitCode::FAILURE
         }
+    }
+}
+
+/// Prints one measurement line as soon as it exists; a closed stdout (e.g. piped into `head`)
+/// ends the program quietly instead of panicking.
+fn print_line(line: String) {
+    use std::io::Write;
+    if writeln!(std::io::stdout().lock(), "{line}").is_err() {
+        std::process::exit(0);
     }
 }
 
@@ -120,7 +168,17 @@ fn bench_trace_command(args: TraceBenchArgs) -> raywave::Result<()> {
         vulkan: !args.no_vulkan,
         bvh: args.bvh.parse()?,
     };
-    bench_trace(&options, |line| println!("{}", if args.json { line.json() } else { line.row() }))
+    bench_trace(&options, |line| print_line(if args.json { line.json() } else { line.row() }))
+}
+
+fn report_sampling_command(args: SamplingReportArgs) -> raywave::Result<()> {
+    use raywave::report::sampling::{report_sampling, ReportLine, SamplingReportOptions};
+    let mut backend = raywave::open_backend(args.device.parse()?, &BackendOptions::default())?;
+    let options = SamplingReportOptions { resolution: args.resolution, reps: args.reps };
+    report_sampling(backend.as_mut(), &options, |line| match line {
+        ReportLine::Case(case, result) => print_line(if args.json { result.json() } else { result.row(case) }),
+        ReportLine::Spectrum(spectrum) => print_line(if args.json { spectrum.json() } else { spectrum.row() }),
+    })
 }
 
 fn render_command(args: RenderArgs) -> raywave::Result<()> {
@@ -132,6 +190,9 @@ fn render_command(args: RenderArgs) -> raywave::Result<()> {
         width: args.width,
         height: args.height,
         seed: args.seed,
+        sampler: raywave::frame::parse_sampler_kind(&args.sampler)?,
+        lens_radius: args.aperture,
+        focus_distance: args.focus,
         out: args.out,
         backend: BackendOptions { validation: args.validate, trace },
     };

@@ -125,8 +125,53 @@ fn bad_input_is_a_typed_error_without_output() {
     #[cfg(feature = "vulkan")]
     assert_rejected(&["--device", "vulkan:99"], "vulkan:99");
     assert_rejected(&["--device", "gpu"], "expected auto, cpu, vulkan");
+    assert_rejected(&["--device", "cpu", "--sampler", "halton"], "unknown sampler `halton`");
+    assert_rejected(&["--device", "cpu", "--aperture=-1"], "aperture");
+    assert_rejected(&["--device", "cpu", "--aperture", "0.1", "--focus", "0"], "focus");
 
     let out = raywave(&["render", "--device", "cpu", "--out", "/no/such/dir/out.png"]);
     assert!(!out.status.success());
     assert!(stderr(&out).contains("cannot write output /no/such/dir/out.png"), "{}", stderr(&out));
+}
+
+#[test]
+fn thin_lens_render_with_each_sampler_writes_a_png() {
+    let dir = tempfile::tempdir().unwrap();
+    for sampler in ["zsobol", "sobol", "random"] {
+        let extra = ["--device", "cpu", "--sampler", sampler, "--aperture", "0.02", "--focus", "1.0"];
+        let (out, path) = render(dir.path(), &format!("{sampler}.png"), &extra);
+        assert!(out.status.success(), "{sampler}: {}", stderr(&out));
+        assert!(image::open(&path).is_ok(), "{sampler}: PNG readable");
+    }
+}
+
+#[test]
+fn sampling_report_prints_json_lines_for_every_case_and_spectrum() {
+    let out = raywave(&["report", "sampling", "--json", "--resolution", "8", "--reps", "4"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let lines: Vec<serde_json::Value> = String::from_utf8(out.stdout)
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str(l).expect("each line is JSON"))
+        .collect();
+    let cases: Vec<&str> = lines.iter().filter_map(|l| l["case"].as_str()).collect();
+    assert_eq!(
+        cases,
+        [
+            "ao_cosine_vs_uniform",
+            "sphere_cone_vs_area",
+            "light_importance_vs_uniform",
+            "sobol_vs_random",
+            "error_spectrum",
+            "error_spectrum",
+            "error_spectrum"
+        ]
+    );
+    for line in &lines[..4] {
+        assert!(line["variance_ratio"].as_f64().unwrap().is_finite());
+        assert!(line["published"].as_f64().unwrap() > 1.0);
+        assert_eq!(line["reps"], 4);
+    }
+    let bad = raywave(&["report", "sampling", "--reps", "1"]);
+    assert!(!bad.status.success() && stderr(&bad).contains("reps"), "{}", stderr(&bad));
 }

@@ -1,0 +1,6 @@
+//! `raywave report …`: accuracy measurements with stated repetitions, printed as a table or as
+//! one JSON object per line.
+
+pub mod sampling;
+pub mod scenes;
+pub mod spectrum;

@@ -1,0 +1,503 @@
+//! `raywave report sampling`: seed 002's variance table, reproduced on built-in scenes.
+//!
+//! Each case renders the Cornell box image with two estimators at the talk's sample count, `reps`
+//! times with independent seeds, and compares the per-pixel variance across repetitions, averaged
+//! over the image. Every sample is a whole path segment as the talk's renderer took it: a camera
+//! ray jittered in its pixel by the generate stage, traced, then one shadow (or occlusion) ray from
+//! the hit, all drawn from the estimator's sampler (slots of `kernels::sampling::dims`):
+//!
+//! | case | worse | better | spp | published |
+//! |---|---|---|---|---|
+//! | `ao_cosine_vs_uniform` | uniform hemisphere | cosine-weighted | 4 | 1.74 |
+//! | `sphere_cone_vs_area` | whole-sphere area sampling | subtended cone | 4 | 2.90 |
+//! | `light_importance_vs_uniform` | uniform light choice | importance (power·cos/d²) | 4 | 2.46 |
+//! | `sobol_vs_random` | independent random | Owen-scrambled Sobol' | 16 | ≈2.6 |
+//!
+//! The published ratios are from Pharr 2018 (seed 002). Every worse estimator draws independent
+//! samples, so its variance falls exactly as 1/N and the rays it needs for the better one's error
+//! are `spp · ratio`.
+
+use super::scenes::{self, ShadingPoint};
+use crate::kernels::sampling::{dims, light_select, sampler, warp};
+use crate::shared::sampling::sampler_kind;
+use crate::shared::Light;
+use crate::{Backend, RayStream, Result, Scene};
+use glam::{UVec2, Vec2, Vec3, Vec4};
+use rayon::prelude::*;
+
+/// What to measure.
+#[derive(Clone, Debug)]
+pub struct SamplingReportOptions {
+    /// Image side in pixels: `resolution²` shading points (a power of two keeps the Morton order
+    /// of the blue-noise sampler aligned).
+    pub resolution: u32,
+    /// Independent repetitions per estimator (≥ 2).
+    pub reps: u32,
+}
+
+/// How a shadow ray's direction is chosen.
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub enum Strategy {
+    /// Ambient occlusion within `AO_RADIUS`, uniform hemisphere directions.
+    AoUniform,
+    /// Ambient occlusion within `AO_RADIUS`, cosine-weighted directions.
+    AoCosine,
+    /// Direct light from the sphere lights: choose a light (uniformly or by importance), then a
+    /// point on its whole surface by area, or a direction in its subtended cone.
+    SphereLights {
+        /// Sample the subtended cone (else the whole sphere by area).
+        cone: bool,
+        /// Choose the light by importance (else uniformly).
+        importance: bool,
+    },
+    /// Direct light from one quad light, sampled uniformly by area.
+    QuadArea,
+}
+
+/// One estimator: a strategy fed by a sampler.
+#[derive(Copy, Clone, Debug)]
+pub struct Estimator {
+    /// Short name for the table.
+    pub label: &'static str,
+    /// Direction choice.
+    pub strategy: Strategy,
+    /// One of [`sampler_kind`].
+    pub sampler: u32,
+}
+
+/// One row of seed 002's table.
+#[derive(Copy, Clone, Debug)]
+pub struct Case {
+    /// JSON name.
+    pub name: &'static str,
+    /// The variance ratio the talk reports.
+    pub published: f64,
+    /// Samples (rays) per pixel per estimate.
+    pub spp: u32,
+    /// The estimator expected to have the larger variance.
+    pub worse: Estimator,
+    /// The estimator expected to have the smaller variance.
+    pub better: Estimator,
+}
+
+/// Ambient-occlusion radius in metres (the Cornell box is 0.55 m wide).
+pub const AO_RADIUS: f32 = 0.1;
+
+/// The four cases, in the talk's order.
+pub fn cases() -> [Case; 4] {
+    let independent = sampler_kind::INDEPENDENT;
+    let sphere = |cone, importance| Strategy::SphereLights { cone, importance };
+    [
+        Case {
+            name: "ao_cosine_vs_uniform",
+            published: 1.74,
+            spp: 4,
+            worse: Estimator { label: "uniform", strategy: Strategy::AoUniform, sampler: independent },
+            better: Estimator { label: "cosine", strategy: Strategy::AoCosine, sampler: independent },
+        },
+        Case {
+            name: "sphere_cone_vs_area",
+            published: 2.90,
+            spp: 4,
+            worse: Estimator { label: "whole sphere", strategy: sphere(false, false), sampler: independent },
+            better: Estimator { label: "cone", strategy: sphere(true, false), sampler: independent },
+        },
+        Case {
+            name: "light_importance_vs_uniform",
+            published: 2.46,
+            spp: 4,
+            worse: Estimator { label: "uniform light", strategy: sphere(true, false), sampler: independent },
+            better: Estimator { label: "importance", strategy: sphere(true, true), sampler: independent },
+        },
+        Case {
+            name: "sobol_vs_random",
+            published: 2.6,
+            spp: 16,
+            worse: Estimator { label: "random", strategy: Strategy::QuadArea, sampler: independent },
+            better: Estimator { label: "owen-sobol", strategy: Strategy::QuadArea, sampler: sampler_kind::SOBOL },
+        },
+    ]
+}
+
+/// The measured result of one case.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct CaseResult {
+    /// Case name.
+    pub case: &'static str,
+    /// Image variance of the worse estimator over that of the better one.
+    pub variance_ratio: f64,
+    /// The talk's ratio.
+    pub published: f64,
+    /// Independent repetitions per estimator.
+    pub reps: u32,
+    /// Samples per pixel per estimate.
+    pub spp: u32,
+    /// Mean per-pixel variance of the worse estimator.
+    pub variance_worse: f64,
+    /// Mean per-pixel variance of the better estimator.
+    pub variance_better: f64,
+    /// Rays per pixel the worse estimator needs for the better one's variance (`spp · ratio`,
+    /// exact in expectation because the worse estimator's samples are independent).
+    pub rays_for_equal_error: f64,
+    /// Pixels in the image (the variance is averaged over all of them).
+    pub pixels: usize,
+}
+
+impl CaseResult {
+    /// The JSON line.
+    pub fn json(&self) -> String {
+        serde_json::to_string(self).expect("a case result serializes")
+    }
+
+    /// A human-readable table row.
+    pub fn row(&self, case: &Case) -> String {
+        format!(
+            "{:<28} {:>14} vs {:<12} {:>3} spp  ratio {:>6.2} (published {:.2}, ours/published {:.2})  \
+             {:>5.1} rays for equal error  [{} reps, {} px]",
+            self.case,
+            case.worse.label,
+            case.better.label,
+            self.spp,
+            self.variance_ratio,
+            self.published,
+            self.variance_ratio / self.published,
+            self.rays_for_equal_error,
+            self.reps,
+            self.pixels
+        )
+    }
+}
+
+/// The lights of a strategy's scene.
+fn lights_for(strategy: Strategy) -> Vec<Light> {
+    match strategy {
+        Strategy::AoUniform | Strategy::AoCosine => Vec::new(),
+        Strategy::SphereLights { .. } => scenes::two_sphere_lights(),
+        Strategy::QuadArea => vec![scenes::skinny_quad_light()],
+    }
+}
+
+/// Turns a local direction (z = normal) into world space around `normal`.
+fn to_world(normal: Vec3, local: Vec3) -> Vec3 {
+    let (tangent, bitangent) = normal.any_orthonormal_pair();
+    tangent * local.x + bitangent * local.y + normal * local.z
+}
+
+/// One shadow ray of an estimator: direction, length, and the weight its visibility is
+/// multiplied by (0 when the sample cannot contribute; the ray is then not traced).
+#[derive(Copy, Clone, Debug, Default)]
+pub struct ShadowSample {
+    /// Unit direction.
+    pub direction: Vec3,
+    /// Ray length (to the light sample, or the AO radius).
+    pub tmax: f32,
+    /// Contribution if unoccluded.
+    pub weight: f32,
+}
+
+/// The contribution of a light sample to a diffuse point: `L · (ρ/π) · cos θ / (pdf · pmf)`, zero
+/// if the sample is behind the point or on the light's back side.
+fn light_contribution(point: &ShadingPoint, light: &Light, s: &warp::LightSample, pmf: f32) -> ShadowSample {
+    let cos_surface = point.normal.dot(s.direction);
+    let facing_light = s.normal.dot(-s.direction) > 0.0;
+    if s.pdf <= 0.0 || pmf <= 0.0 || cos_surface <= 0.0 || !facing_light {
+        return ShadowSample::default();
+    }
+    let radiance = light_select::luminance(light.radiance.truncate());
+    let weight = radiance * point.albedo / core::f32::consts::PI * cos_surface / (s.pdf * pmf);
+    ShadowSample { direction: s.direction, tmax: s.distance * (1.0 - 1e-4), weight }
+}
+
+/// The shadow ray of `strategy` at `point` from light-selection number `u_select` and the 2-D
+/// number `u`.
+pub fn shadow_sample(
+    strategy: Strategy,
+    point: &ShadingPoint,
+    lights: &[Light],
+    u_select: f32,
+    u: Vec2,
+) -> ShadowSample {
+    match strategy {
+        Strategy::AoUniform | Strategy::AoCosine => {
+            let (local, weight) = if strategy == Strategy::AoUniform {
+                let d = warp::sample_uniform_hemisphere(u);
+                (d, 2.0 * d.z)
+            } else {
+                (warp::sample_cosine_hemisphere(u), 1.0)
+            };
+            if local.z <= 0.0 {
+                return ShadowSample::default();
+            }
+            ShadowSample { direction: to_world(point.normal, local), tmax: AO_RADIUS, weight }
+        }
+        Strategy::SphereLights { cone, importance } => {
+            let choice = if importance {
+                light_select::select_importance(lights, point.origin, point.normal, u_select)
+            } else {
+                light_select::select_uniform(lights.len() as u32, u_select)
+            };
+            let Some(light) = lights.get(choice.index as usize) else {
+                return ShadowSample::default();
+            };
+            let (centre, radius) = (light.position.truncate(), light.position.w);
+            let s = if cone {
+                warp::sample_sphere_light_cone(point.origin, centre, radius, u)
+            } else {
+                warp::sample_sphere_light_area(point.origin, centre, radius, u)
+            };
+            light_contribution(point, light, &s, choice.pmf)
+        }
+        Strategy::QuadArea => {
+            let light = &lights[0];
+            let (corner, eu, ev) = (light.position.truncate(), light.edge_u.truncate(), light.edge_v.truncate());
+            let s = warp::sample_quad_area(point.origin, corner, eu, ev, u);
+            light_contribution(point, light, &s, 1.0)
+        }
+    }
+}
+
+/// The image of `estimator` with `spp` samples per pixel (row-major `resolution²` pixels, 0 where
+/// every camera ray misses) for repetition seed `seed`, on `backend` holding `scene`.
+pub fn estimate_image(
+    backend: &mut dyn Backend,
+    scene: &Scene,
+    estimator: &Estimator,
+    spp: u32,
+    seed: u32,
+    resolution: u32,
+) -> Result<Vec<f32>> {
+    let lights = lights_for(estimator.strategy);
+    let sampler_params = crate::frame::sampler_params(estimator.sampler, seed, resolution, resolution, spp);
+    let mut image = vec![0.0f32; (resolution * resolution) as usize];
+    for sample_index in 0..spp {
+        let params = crate::frame::generate_params_with(scene, resolution, resolution, sample_index, sampler_params);
+        let (camera_rays, _) = backend.generate(&params)?;
+        let points = scenes::shading_points(scene, backend, &camera_rays)?;
+        let samples: Vec<ShadowSample> = points
+            .par_iter()
+            .map(|point| {
+                let pixel = UVec2::new(point.pixel % resolution, point.pixel / resolution);
+                let u_select = sampler::sample_1d(&sampler_params, pixel, sample_index, dims::SHADE_LIGHT_SELECT);
+                let u = sampler::sample_2d(&sampler_params, pixel, sample_index, dims::SHADE_DIRECTION);
+                shadow_sample(estimator.strategy, point, &lights, u_select, u)
+            })
+            .collect();
+        let mut rays = RayStream::zeroed(samples.len());
+        for (i, (point, s)) in points.iter().zip(&samples).enumerate() {
+            rays.origin[i] = point.origin.extend(0.0);
+            // Samples that cannot contribute get an empty interval; their visibility is unused.
+            rays.direction[i] = if s.weight > 0.0 { s.direction.extend(s.tmax) } else { Vec4::new(0.0, 0.0, 1.0, 0.0) };
+            rays.pixel[i] = point.pixel;
+        }
+        let (occluded, _) = backend.trace_occlusion(&rays)?;
+        for ((point, s), &blocked) in points.iter().zip(&samples).zip(&occluded) {
+            if blocked == 0 {
+                image[point.pixel as usize] += s.weight / spp as f32;
+            }
+        }
+    }
+    Ok(image)
+}
+
+/// Per-pixel mean and variance over repetitions (Welford's update, in f64).
+#[derive(Clone, Debug)]
+pub struct PixelMoments {
+    count: u32,
+    mean: Vec<f64>,
+    m2: Vec<f64>,
+}
+
+impl PixelMoments {
+    /// Empty moments for `pixels` pixels.
+    pub fn new(pixels: usize) -> Self {
+        Self { count: 0, mean: vec![0.0; pixels], m2: vec![0.0; pixels] }
+    }
+
+    /// Adds one repetition's image.
+    pub fn add(&mut self, image: &[f32]) {
+        self.count += 1;
+        let n = f64::from(self.count);
+        for ((mean, m2), &x) in self.mean.iter_mut().zip(&mut self.m2).zip(image) {
+            let delta = f64::from(x) - *mean;
+            *mean += delta / n;
+            *m2 += delta * (f64::from(x) - *mean);
+        }
+    }
+
+    /// Per-pixel means.
+    pub fn mean(&self) -> &[f64] {
+        &self.mean
+    }
+
+    /// Sample variance of each pixel's estimate, averaged over the pixels.
+    pub fn mean_variance(&self) -> f64 {
+        let denominator = f64::from(self.count.saturating_sub(1).max(1));
+        self.m2.iter().sum::<f64>() / denominator / self.m2.len().max(1) as f64
+    }
+}
+
+/// Runs `estimator` for `reps` repetitions (seeds `seed_base + r`) and returns its moments.
+pub fn moments(
+    backend: &mut dyn Backend,
+    scene: &Scene,
+    estimator: &Estimator,
+    spp: u32,
+    options: &SamplingReportOptions,
+    seed_base: u32,
+) -> Result<PixelMoments> {
+    let mut moments = PixelMoments::new((options.resolution * options.resolution) as usize);
+    for rep in 0..options.reps {
+        moments.add(&estimate_image(backend, scene, estimator, spp, seed_base + rep, options.resolution)?);
+    }
+    Ok(moments)
+}
+
+/// One measured case with the better estimator's per-pixel mean (a converged reference for the
+/// spectrum: `reps · spp` samples per pixel).
+pub struct CaseMeasurement {
+    /// The table row.
+    pub result: CaseResult,
+    /// Per-pixel mean of the better estimator over all repetitions.
+    pub reference: Vec<f64>,
+}
+
+/// Measures one case on `backend`, whose loaded scene must be `scene`.
+pub fn measure_case(
+    backend: &mut dyn Backend,
+    scene: &Scene,
+    case: &Case,
+    options: &SamplingReportOptions,
+) -> Result<CaseMeasurement> {
+    let worse = moments(backend, scene, &case.worse, case.spp, options, 0)?.mean_variance();
+    let better_moments = moments(backend, scene, &case.better, case.spp, options, 1 << 20)?;
+    let better = better_moments.mean_variance();
+    let ratio = worse / better.max(f64::MIN_POSITIVE);
+    let result = CaseResult {
+        case: case.name,
+        variance_ratio: ratio,
+        published: case.published,
+        reps: options.reps,
+        spp: case.spp,
+        variance_worse: worse,
+        variance_better: better,
+        rays_for_equal_error: f64::from(case.spp) * ratio,
+        pixels: (options.resolution * options.resolution) as usize,
+    };
+    Ok(CaseMeasurement { result, reference: better_moments.mean().to_vec() })
+}
+
+/// The screen-space error spectrum of one sampler.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct SpectrumResult {
+    /// Always `error_spectrum`.
+    pub case: &'static str,
+    /// `zsobol`, `sobol` or `random`.
+    pub sampler: &'static str,
+    /// Error images averaged.
+    pub images: u32,
+    /// Mean normalised power of rings 1 ..= resolution/8 (white noise ≈ 1, blue noise ≪ 1).
+    pub low_frequency_power: f64,
+    /// Normalised radially averaged power, ring 0 ..= resolution/2 (cycles per image).
+    pub radial_power: Vec<f64>,
+}
+
+impl SpectrumResult {
+    /// The JSON line.
+    pub fn json(&self) -> String {
+        serde_json::to_string(self).expect("a spectrum serializes")
+    }
+
+    /// A human-readable row: the low-frequency power and the spectrum in eight bands.
+    pub fn row(&self) -> String {
+        let bands: Vec<String> = self
+            .radial_power
+            .chunks(self.radial_power.len().div_ceil(8).max(1))
+            .map(|band| format!("{:.2}", band.iter().sum::<f64>() / band.len() as f64))
+            .collect();
+        format!(
+            "error spectrum {:<7} low-frequency power {:.3}  radial bands low→high [{}]  ({} images)",
+            self.sampler,
+            self.low_frequency_power,
+            bands.join(" "),
+            self.images
+        )
+    }
+}
+
+/// Error images averaged per sampler in the spectrum.
+pub const SPECTRUM_IMAGES: u32 = 32;
+
+/// The radially averaged power spectrum of the 1-spp error image (estimate − `reference`) of the
+/// `case.better` strategy under each sampler kind, over [`SPECTRUM_IMAGES`] seeds.
+pub fn error_spectra(
+    backend: &mut dyn Backend,
+    scene: &Scene,
+    case: &Case,
+    measured: &CaseMeasurement,
+    resolution: u32,
+) -> Result<Vec<SpectrumResult>> {
+    let mut results = Vec::new();
+    for kind in 0..sampler_kind::COUNT {
+        let estimator = Estimator { sampler: kind, ..case.better };
+        let mut spectrum = super::spectrum::PowerSpectrum::new(resolution as usize);
+        for seed in 0..SPECTRUM_IMAGES {
+            let estimate = estimate_image(backend, scene, &estimator, 1, seed, resolution)?;
+            let error: Vec<f64> = estimate
+                .iter()
+                .zip(&measured.reference)
+                .map(|(&value, &reference)| f64::from(value) - reference)
+                .collect();
+            spectrum.add(&error);
+        }
+        results.push(SpectrumResult {
+            case: "error_spectrum",
+            sampler: crate::frame::SAMPLER_NAMES[kind as usize],
+            images: SPECTRUM_IMAGES,
+            low_frequency_power: spectrum.low_frequency_power(),
+            radial_power: spectrum.radial_average(),
+        });
+    }
+    Ok(results)
+}
+
+/// One printed line of the report.
+pub enum ReportLine<'a> {
+    /// A row of the variance table.
+    Case(&'a Case, &'a CaseResult),
+    /// An error spectrum.
+    Spectrum(&'a SpectrumResult),
+}
+
+/// Runs the whole report on `backend` (the Cornell box is loaded into it) and hands each line to
+/// `emit` as soon as it is measured.
+pub fn report_sampling(
+    backend: &mut dyn Backend,
+    options: &SamplingReportOptions,
+    mut emit: impl FnMut(ReportLine<'_>),
+) -> Result<()> {
+    validate(options)?;
+    let scene = Scene::load("builtin:cornell")?;
+    backend.load_scene(&scene)?;
+    for case in cases() {
+        let measured = measure_case(backend, &scene, &case, options)?;
+        emit(ReportLine::Case(&case, &measured.result));
+        if case.name == "sobol_vs_random" {
+            for spectrum in error_spectra(backend, &scene, &case, &measured, options.resolution)? {
+                emit(ReportLine::Spectrum(&spectrum));
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Checks the options.
+pub fn validate(options: &SamplingReportOptions) -> Result<()> {
+    let invalid = |name, reason: &str| Err(crate::Error::InvalidParameter { name, reason: reason.into() });
+    if options.reps < 2 {
+        return invalid("reps", "at least 2 repetitions are needed for a variance");
+    }
+    if !(4..=1024).contains(&options.resolution) {
+        return invalid("resolution", "must be within 4..=1024");
+    }
+    Ok(())
+}
