@@ -15,6 +15,7 @@ pub mod generate;
 pub mod hash;
 pub mod offset;
 pub mod sampling;
+pub mod shade;
 pub mod trace;
 pub mod triangle;
 

@@ -1,0 +1,160 @@
+//! The cosine-weighted solid angle (form factor) of a polygon above the horizon: the analytic
+//! core of linearly transformed cosines (Heitz, Dupuy, Hill, Neubelt 2016, "Real-Time
+//! Polygonal-Light Shading with Linearly Transformed Cosines").
+//!
+//! For a polygon with corners `pᵢ` (relative to the shading point, local frame with z = normal),
+//! `∫_P max(0, cos θ)/π dω = 1/(2π) Σ_edges θᵢ · (p̂ᵢ × p̂ᵢ₊₁)·z / |p̂ᵢ × p̂ᵢ₊₁|` after clipping the
+//! polygon to the upper hemisphere (Lambert 1760; Arvo 1995). The edge angle is taken as
+//! `atan2(|a × b|, a·b)`, accurate for both tiny and near-antipodal edges (the `acos` form loses
+//! all digits for short edges), and `θ/sin θ → 1` as the edge vanishes, so no NaN can appear.
+
+#[cfg(target_arch = "spirv")]
+use spirv_std::num_traits::Float;
+
+use core::f32::consts::PI;
+use glam::Vec3;
+
+/// Most corners a quad can have after clipping against one plane.
+pub const MAX_CLIPPED_CORNERS: usize = 5;
+
+/// A convex polygon of up to [`MAX_CLIPPED_CORNERS`] corners.
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub struct ClippedPolygon {
+    /// Corners in order; only the first `count` are meaningful.
+    pub corners: [Vec3; MAX_CLIPPED_CORNERS],
+    /// Number of corners, 0 or 3..=5.
+    pub count: u32,
+}
+
+/// Clips the quad `q` (corners in order) against the half-space `z ≥ 0` (Sutherland–Hodgman).
+/// Corners exactly on the plane are kept; a quad entirely below yields 0 corners.
+pub fn clip_quad_to_horizon(q: [Vec3; 4]) -> ClippedPolygon {
+    let mut out = ClippedPolygon { corners: [Vec3::ZERO; MAX_CLIPPED_CORNERS], count: 0 };
+    let mut k = 0usize;
+    let mut i = 0usize;
+    while i < 4 {
+        let a = q[i];
+        let b = q[(i + 1) % 4];
+        let a_in = a.z >= 0.0;
+        let b_in = b.z >= 0.0;
+        if a_in && k < MAX_CLIPPED_CORNERS {
+            out.corners[k] = a;
+            k += 1;
+        }
+        if a_in != b_in && k < MAX_CLIPPED_CORNERS {
+            // The crossing point of edge a→b with z = 0; a.z ≠ b.z because exactly one is < 0.
+            let t = a.z / (a.z - b.z);
+            let mut crossing = a + t * (b - a);
+            crossing.z = 0.0;
+            out.corners[k] = crossing;
+            k += 1;
+        }
+        i += 1;
+    }
+    out.count = if k >= 3 { k as u32 } else { 0 };
+    out
+}
+
+/// The contribution `θ · (â × b̂)·z / |â × b̂|` of the edge from direction `a` to `b` (unit).
+pub fn edge_integral(a: Vec3, b: Vec3) -> f32 {
+    let cross = a.cross(b);
+    let sin_theta = cross.length();
+    let cos_theta = a.dot(b);
+    let theta = sin_theta.atan2(cos_theta);
+    // θ / sin θ, with its limit 1 for a vanishing edge (sin θ = 0 with θ = 0).
+    let theta_over_sin = if sin_theta > 1.0e-7 { theta / sin_theta } else { 1.0 };
+    cross.z * theta_over_sin
+}
+
+/// The form factor `∫ max(0, cos θ)/π dω` of the quad with corners `q` (relative to the shading
+/// point, z = normal), in `[0, 1]`, for either winding (a light facing away is the caller's
+/// concern). 0 for a quad entirely below the horizon or seen edge-on.
+pub fn quad_form_factor(q: [Vec3; 4]) -> f32 {
+    let polygon = clip_quad_to_horizon(q);
+    let n = polygon.count as usize;
+    if n == 0 {
+        return 0.0;
+    }
+    let mut sum = 0.0f32;
+    let mut i = 0usize;
+    while i < n {
+        let a = polygon.corners[i].normalize_or_zero();
+        let b = polygon.corners[(i + 1) % n].normalize_or_zero();
+        sum += edge_integral(a, b);
+        i += 1;
+    }
+    let form_factor = (sum / (2.0 * PI)).abs();
+    if form_factor.is_finite() {
+        form_factor.min(1.0)
+    } else {
+        0.0
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Monte Carlo (f64, stratified) form factor of the quad `corner + s·u + t·v` from the origin.
+    fn reference(corner: Vec3, u: Vec3, v: Vec3) -> f64 {
+        let n = 1000;
+        let (c, u, v) = (corner.as_dvec3(), u.as_dvec3(), v.as_dvec3());
+        let area = u.cross(v).length();
+        let normal = u.cross(v) / area;
+        let mut sum = 0.0;
+        for i in 0..n {
+            for j in 0..n {
+                let p = c + u * ((i as f64 + 0.5) / n as f64) + v * ((j as f64 + 0.5) / n as f64);
+                let d2 = p.length_squared();
+                let w = p / d2.sqrt();
+                let cos_surface = w.z.max(0.0);
+                let cos_light = normal.dot(-w).abs();
+                sum += cos_surface * cos_light / d2;
+            }
+        }
+        sum * area / (n * n) as f64 / std::f64::consts::PI
+    }
+
+    #[test]
+    fn matches_numerical_integration_above_and_across_the_horizon() {
+        let cases = [
+            (Vec3::new(-0.5, -0.5, 1.0), Vec3::X, Vec3::Y),      // centred overhead
+            (Vec3::new(0.5, -0.3, 0.2), Vec3::X * 2.0, Vec3::Y), // low, off to the side
+            (Vec3::new(-0.5, 1.0, -0.5), Vec3::X, Vec3::Z),      // vertical, crossing the horizon
+            (Vec3::new(-1.0, 2.0, -1.0), Vec3::X * 2.0, Vec3::Z * 0.5), // mostly below the horizon
+        ];
+        for (corner, u, v) in cases {
+            let q = [corner, corner + u, corner + u + v, corner + v];
+            let expected = reference(corner, u, v);
+            let got = f64::from(quad_form_factor(q));
+            assert!((got - expected).abs() <= 2e-3 * expected.max(1e-3), "{corner}: {got} vs {expected}");
+        }
+    }
+
+    #[test]
+    fn limits_and_hard_cases_are_finite() {
+        // A huge quad overhead covers the whole hemisphere: form factor → 1.
+        let big = 1.0e4;
+        let q = [
+            Vec3::new(-big, -big, 1.0),
+            Vec3::new(big, -big, 1.0),
+            Vec3::new(big, big, 1.0),
+            Vec3::new(-big, big, 1.0),
+        ];
+        assert!((quad_form_factor(q) - 1.0).abs() < 1e-3);
+        // Entirely below, edge-on, degenerate, tiny (1e-6 sr), on the shading plane.
+        let below = q.map(|p| Vec3::new(p.x, p.y, -1.0));
+        assert_eq!(quad_form_factor(below), 0.0);
+        let edge_on =
+            [Vec3::new(0.0, -1.0, 1.0), Vec3::new(0.0, 1.0, 1.0), Vec3::new(0.0, 1.0, 2.0), Vec3::new(0.0, -1.0, 2.0)];
+        assert!(quad_form_factor(edge_on).abs() < 1e-6);
+        assert_eq!(quad_form_factor([Vec3::Z; 4]), 0.0);
+        let s = 5.0e-4;
+        let tiny = [Vec3::new(0.0, 0.0, 1.0), Vec3::new(s, 0.0, 1.0), Vec3::new(s, s, 1.0), Vec3::new(0.0, s, 1.0)];
+        let expected = s * s / core::f32::consts::PI; // area·cos·cos/(π d²) with d = 1
+        assert!((quad_form_factor(tiny) - expected).abs() < 0.02 * expected, "{}", quad_form_factor(tiny));
+        let on_plane =
+            [Vec3::new(1.0, 0.0, 0.0), Vec3::new(2.0, 0.0, 0.0), Vec3::new(2.0, 1.0, 0.0), Vec3::new(1.0, 1.0, 0.0)];
+        assert_eq!(quad_form_factor(on_plane), 0.0);
+    }
+}
