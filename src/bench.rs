@@ -6,11 +6,11 @@ use crate::cpu::{self, CpuScene};
 use crate::frame::generate_params;
 use crate::kernels::hash::{pcg3d, unit_float};
 use crate::kernels::offset::offset_ray_origin;
+use crate::kernels::sampling::warp::sample_cosine_hemisphere;
 use crate::kernels::trace::{trace_closest, trace_occluded, Ray};
-use crate::kernels::triangle::geometric_normal;
 use crate::shared::stream::NO_HIT;
 use crate::{Error, RayStream, Result, Scene};
-use glam::{UVec3, Vec3, Vec4, Vec4Swizzles};
+use glam::{UVec3, Vec2, Vec3, Vec4, Vec4Swizzles};
 use rayon::prelude::*;
 use std::time::Instant;
 
@@ -88,25 +88,18 @@ fn ray_sets(scene: &Scene, cpu_scene: &CpuScene, resolution: u32) -> RaySets {
         if hits.primitive[i] == NO_HIT {
             continue;
         }
-        let mesh = &scene.meshes()[hits.instance[i] as usize];
-        let [a, b, c] = mesh.triangles[hits.primitive[i] as usize].map(|v| mesh.positions[v as usize]);
-        let bary = hits.barycentrics[i];
-        let p = a * (1.0 - bary.x - bary.y) + b * bary.x + c * bary.y;
         let view = primary.direction[i].xyz();
-        let mut n = geometric_normal(a, b, c);
-        if n.dot(view) > 0.0 {
-            n = -n;
-        }
+        let surface = scene.hit_surface(hits.instance[i], hits.primitive[i], hits.barycentrics[i], view);
+        let (p, n) = (surface.position, surface.normal);
         let origin = offset_ray_origin(p, n);
         let to_light = light - origin;
         shadow.origin.push(origin.extend(0.0));
         shadow.direction.push(to_light.normalize().extend(to_light.length() * (1.0 - 1e-4)));
         shadow.pixel.push(primary.pixel[i]);
         let h = pcg3d(UVec3::new(i as u32, 0, 99));
-        let (u1, u2) = (unit_float(h.x), unit_float(h.y));
-        let (r, phi) = (u1.sqrt(), std::f32::consts::TAU * u2);
-        let (t, s) = (n.any_orthonormal_vector(), n.cross(n.any_orthonormal_vector()));
-        let d = t * (r * phi.cos()) + s * (r * phi.sin()) + n * (1.0 - u1).max(0.0).sqrt();
+        let local = sample_cosine_hemisphere(Vec2::new(unit_float(h.x), unit_float(h.y)));
+        let (t, s) = n.any_orthonormal_pair();
+        let d = t * local.x + s * local.y + n * local.z;
         diffuse.origin.push(origin.extend(0.0));
         diffuse.direction.push(d.normalize_or(n).extend(primary.direction[i].w));
         diffuse.pixel.push(primary.pixel[i]);

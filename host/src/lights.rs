@@ -460,79 +460,26 @@ fn partition(items: &mut [Item], first: impl Fn(&Item) -> bool) -> usize {
 mod tests {
     use super::*;
     use glam::UVec3;
-    use raywave_kernels::hash::{pcg3d, unit_float};
+    use raywave_kernels::hash::{pcg3d, unit_float, CounterRng};
+    use raywave_kernels::sampling::light_select::uniform_light_point;
     use raywave_kernels::sampling::light_select::{
         bvh_pmf, importance, importance_pmf, select_bvh, LightChoice, LightSet,
     };
 
-    fn sphere(center: Vec3, radius: f32, radiance: Vec3) -> Light {
-        Light {
-            position: center.extend(radius),
-            edge_u: Vec4::ZERO,
-            edge_v: Vec4::ZERO,
-            radiance: radiance.extend(0.0),
-            kind: light_kind::SPHERE,
-            two_sided: 0,
-            padding: [0; 2],
-        }
-    }
-
-    fn quad(corner: Vec3, eu: Vec3, ev: Vec3, radiance: Vec3, two_sided: bool) -> Light {
-        Light {
-            position: corner.extend(0.0),
-            edge_u: eu.extend(0.0),
-            edge_v: ev.extend(0.0),
-            radiance: radiance.extend(0.0),
-            kind: light_kind::QUAD,
-            two_sided: two_sided as u32,
-            padding: [0; 2],
-        }
-    }
-
-    /// Deterministic random floats in [0, 1) from a counter.
-    struct Rng {
-        seed: u32,
-        counter: u32,
-    }
-
-    impl Rng {
-        fn new(seed: u32) -> Self {
-            Rng { seed, counter: 0 }
-        }
-        fn next(&mut self) -> f32 {
-            self.counter += 1;
-            unit_float(pcg3d(UVec3::new(self.counter, self.seed, 0x6c_6967)).x)
-        }
-        fn range(&mut self, lo: f32, hi: f32) -> f32 {
-            lo + (hi - lo) * self.next()
-        }
-        fn vec(&mut self, lo: f32, hi: f32) -> Vec3 {
-            Vec3::new(self.range(lo, hi), self.range(lo, hi), self.range(lo, hi))
-        }
-        fn unit(&mut self) -> Vec3 {
-            loop {
-                let v = self.vec(-1.0, 1.0);
-                if v.length_squared() > 1e-3 && v.length_squared() <= 1.0 {
-                    return v.normalize();
-                }
-            }
-        }
-    }
-
-    fn random_light(rng: &mut Rng, extent: f32) -> Light {
+    fn random_light(rng: &mut CounterRng, extent: f32) -> Light {
         let radiance = Vec3::new(rng.range(0.1, 5.0), rng.range(0.1, 5.0), rng.range(0.1, 5.0));
-        let kind = rng.next();
+        let kind = rng.next_f32();
         if kind < 0.34 {
-            sphere(rng.vec(-extent, extent), rng.range(0.05, 0.5), radiance)
+            Light::sphere(rng.vec3(-extent, extent), rng.range(0.05, 0.5), radiance)
         } else {
-            let eu = rng.unit() * rng.range(0.1, 1.0);
-            let ev = eu.cross(rng.unit()).normalize() * rng.range(0.1, 1.0);
-            quad(rng.vec(-extent, extent), eu, ev, radiance, kind > 0.67)
+            let eu = rng.unit_vec3() * rng.range(0.1, 1.0);
+            let ev = eu.cross(rng.unit_vec3()).normalize() * rng.range(0.1, 1.0);
+            Light::quad(rng.vec3(-extent, extent), eu, ev, radiance, kind > 0.67)
         }
     }
 
     fn random_lights(seed: u32, count: usize, extent: f32) -> Vec<Light> {
-        let mut rng = Rng::new(seed);
+        let mut rng = CounterRng::new(seed);
         (0..count).map(|_| random_light(&mut rng, extent)).collect()
     }
 
@@ -590,19 +537,12 @@ mod tests {
 
     /// Whether some of 32 sampled points of `light` sends light to `p` with cosines above 10⁻⁴ at
     /// the emitter and (for `n ≠ 0`) at the receiver: a clearly positive unoccluded contribution.
-    fn contributes(light: &Light, rng: &mut Rng, p: Vec3, n: Vec3) -> bool {
+    fn contributes(light: &Light, rng: &mut CounterRng, p: Vec3, n: Vec3) -> bool {
         if light.radiance.truncate() == Vec3::ZERO {
             return false;
         }
         (0..32).any(|_| {
-            let (x, nx) = if light.kind == light_kind::SPHERE {
-                let d = rng.unit();
-                (light.position.truncate() + d * light.position.w, d)
-            } else {
-                let (a, b) = (rng.next(), rng.next());
-                let normal = light.edge_u.truncate().cross(light.edge_v.truncate()).normalize();
-                (light.position.truncate() + a * light.edge_u.truncate() + b * light.edge_v.truncate(), normal)
-            };
+            let (x, nx) = uniform_light_point(light, glam::Vec2::new(rng.next_f32(), rng.next_f32()));
             let w = (p - x).normalize_or_zero();
             let emit = if light.two_sided != 0 { nx.dot(w).abs() } else { nx.dot(w) };
             emit > 1e-4 && (n == Vec3::ZERO || n.dot(-w) > 1e-4)
@@ -614,10 +554,10 @@ mod tests {
     /// may still get pmf 0 where it does not contribute: a cluster's bounding sphere does not
     /// contain its children's bounding spheres, only their boxes.)
     fn check_pmfs(bvh: &LightBvh, lights: &[Light], seed: u32, points: usize, extent: f32) {
-        let mut rng = Rng::new(seed);
+        let mut rng = CounterRng::new(seed);
         for case in 0..points {
-            let p = rng.vec(-extent, extent);
-            let n = if case % 4 == 0 { Vec3::ZERO } else { rng.unit() };
+            let p = rng.vec3(-extent, extent);
+            let n = if case % 4 == 0 { Vec3::ZERO } else { rng.unit_vec3() };
             let pmfs: Vec<f32> =
                 (0..lights.len() as u32).map(|k| bvh_pmf(bvh.nodes(), bvh.trails(), p, n, k)).collect();
             let sum: f64 = pmfs.iter().map(|&q| q as f64).sum();
@@ -628,7 +568,7 @@ mod tests {
                 }
             }
             for _ in 0..4 {
-                let choice = select_bvh(bvh.nodes(), p, n, rng.next());
+                let choice = select_bvh(bvh.nodes(), p, n, rng.next_f32());
                 assert!(choice.is_valid());
                 assert_eq!(choice.pmf, pmfs[choice.index as usize]);
             }
@@ -678,8 +618,8 @@ mod tests {
 
     #[test]
     fn lights_rejects_bad_input() {
-        let good = sphere(Vec3::ZERO, 1.0, Vec3::ONE);
-        let q = quad(Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::ONE, false);
+        let good = Light::sphere(Vec3::ZERO, 1.0, Vec3::ONE);
+        let q = Light::quad(Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::ONE, false);
         let mut nan = good;
         nan.position.y = f32::NAN;
         let mut inf_edge = q;
@@ -691,10 +631,10 @@ mod tests {
         let cases: [(Light, &str); 8] = [
             (nan, "light.position"),
             (inf_edge, "light.edge_v"),
-            (sphere(Vec3::ZERO, 1.0, Vec3::new(1.0, -0.5, 1.0)), "light.radiance"),
-            (sphere(Vec3::ZERO, 0.0, Vec3::ONE), "light.position"),
-            (sphere(Vec3::ZERO, -1.0, Vec3::ONE), "light.position"),
-            (quad(Vec3::ZERO, Vec3::X, Vec3::X * 2.0, Vec3::ONE, false), "light.edge_u"),
+            (Light::sphere(Vec3::ZERO, 1.0, Vec3::new(1.0, -0.5, 1.0)), "light.radiance"),
+            (Light::sphere(Vec3::ZERO, 0.0, Vec3::ONE), "light.position"),
+            (Light::sphere(Vec3::ZERO, -1.0, Vec3::ONE), "light.position"),
+            (Light::quad(Vec3::ZERO, Vec3::X, Vec3::X * 2.0, Vec3::ONE, false), "light.edge_u"),
             (kind, "light.kind"),
             (sided, "light.two_sided"),
         ];
@@ -707,14 +647,14 @@ mod tests {
                 other => panic!("{bad:?}: expected an invalid {field}, got {other:?}"),
             }
         }
-        let blinding = sphere(Vec3::ZERO, 1e10, Vec3::splat(1e30));
+        let blinding = Light::sphere(Vec3::ZERO, 1e10, Vec3::splat(1e30));
         assert!(matches!(validate_light(0, &blinding), Err(Error::InvalidParameter { name: "light.radiance", .. })));
         assert!(validate_lights(&[good, q]).is_ok());
     }
 
     #[test]
     fn lights_empty_and_dark_scenes_select_nothing() {
-        for lights in [vec![], vec![sphere(Vec3::ZERO, 1.0, Vec3::ZERO); 3]] {
+        for lights in [vec![], vec![Light::sphere(Vec3::ZERO, 1.0, Vec3::ZERO); 3]] {
             let bvh = LightBvh::build(&lights).unwrap();
             assert!(bvh.is_empty() && bvh.nodes().is_empty());
             assert_eq!(bvh.trails().len(), lights.len());
@@ -784,7 +724,7 @@ mod tests {
         let lights: Vec<Light> = (0..1000)
             .map(|k| {
                 let (x, z) = ((k % 40) as f32, (k / 40) as f32);
-                quad(Vec3::new(x, 3.0, z), Vec3::X * 0.2, Vec3::Z * 0.2, Vec3::splat(10.0), false)
+                Light::quad(Vec3::new(x, 3.0, z), Vec3::X * 0.2, Vec3::Z * 0.2, Vec3::splat(10.0), false)
             })
             .collect();
         let bvh = LightBvh::build(&lights).unwrap();
@@ -816,7 +756,7 @@ mod tests {
         // Lights spaced exponentially with power growing steeply invite unbalanced SAOH splits;
         // with a depth limit of 4 the 16 lights must end up in a perfectly balanced tree.
         let lights: Vec<Light> =
-            (0..16).map(|k| sphere(Vec3::X * 1.5f32.powi(k), 0.1, Vec3::splat(2.0f32.powi(k)))).collect();
+            (0..16).map(|k| Light::sphere(Vec3::X * 1.5f32.powi(k), 0.1, Vec3::splat(2.0f32.powi(k)))).collect();
         let unlimited = LightBvh::build(&lights).unwrap();
         check_structure(&unlimited, &lights, MAX_BVH_DEPTH);
         let bvh = LightBvh::build_with_depth(&lights, 4).unwrap();
@@ -826,7 +766,7 @@ mod tests {
         assert!(LightBvh::build_with_depth(&lights, 3).is_err());
 
         // Coincident lights: halved by count; every light equally likely.
-        let same = vec![quad(Vec3::ZERO, Vec3::X, Vec3::Z, Vec3::ONE, true); 50];
+        let same = vec![Light::quad(Vec3::ZERO, Vec3::X, Vec3::Z, Vec3::ONE, true); 50];
         let bvh = LightBvh::build(&same).unwrap();
         check_structure(&bvh, &same, MAX_BVH_DEPTH);
         assert_eq!(bvh.depth(), 6);
@@ -871,10 +811,10 @@ mod tests {
 
     #[test]
     fn lights_cone_union_contains_both_cones() {
-        let mut rng = Rng::new(21);
+        let mut rng = CounterRng::new(21);
         for _ in 0..2000 {
-            let a = Cone { w: rng.unit().as_dvec3(), cos_theta: rng.range(-1.0, 1.0) as f64 };
-            let b = Cone { w: rng.unit().as_dvec3(), cos_theta: rng.range(-1.0, 1.0) as f64 };
+            let a = Cone { w: rng.unit_vec3().as_dvec3(), cos_theta: rng.range(-1.0, 1.0) as f64 };
+            let b = Cone { w: rng.unit_vec3().as_dvec3(), cos_theta: rng.range(-1.0, 1.0) as f64 };
             let u = cone_union(a, b);
             let theta_u = u.cos_theta.acos();
             for c in [a, b] {

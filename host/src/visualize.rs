@@ -5,7 +5,6 @@ use crate::scene::Scene;
 use crate::stream::{HitStream, RayStream};
 use glam::{Vec3, Vec4Swizzles};
 use image::RgbImage;
-use raywave_kernels::triangle::geometric_normal;
 use std::io::Write;
 use std::path::Path;
 
@@ -18,13 +17,8 @@ pub fn normal_depth_image(scene: &Scene, rays: &RayStream, hits: &HitStream, wid
         if hits.primitive[i] == raywave_shared::stream::NO_HIT {
             continue;
         }
-        let mesh = &scene.meshes()[hits.instance[i] as usize];
-        let [a, b, c] = mesh.triangles[hits.primitive[i] as usize].map(|v| mesh.positions[v as usize]);
-        let mut n = geometric_normal(a, b, c);
         let view = rays.direction[i].xyz();
-        if n.dot(view) > 0.0 {
-            n = -n;
-        }
+        let n = scene.hit_surface(hits.instance[i], hits.primitive[i], hits.barycentrics[i], view).normal;
         let depth_shade = 1.0 - 0.6 * (hits.t[i] / t_max);
         let colour = (Vec3::splat(0.5) + 0.5 * n) * depth_shade;
         let pixel = rays.pixel[i];

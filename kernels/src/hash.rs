@@ -33,6 +33,52 @@ pub fn unit_float(bits: u32) -> f32 {
     (bits >> 8) as f32 * (1.0 / 16_777_216.0)
 }
 
+/// A deterministic stream of uniform floats in `[0, 1 − 2⁻²⁴]`: [`pcg3d`] of a counter and a
+/// seed. For host-side tools and tests that need many reproducible random values; kernels draw
+/// from the samplers instead, which are pure functions of (pixel, sample, dimension). Not part
+/// of the SPIR-V build.
+#[cfg(not(target_arch = "spirv"))]
+#[derive(Clone, Debug)]
+pub struct CounterRng {
+    seed: u32,
+    counter: u32,
+}
+
+#[cfg(not(target_arch = "spirv"))]
+impl CounterRng {
+    /// A stream seeded `seed`; different seeds give independent streams.
+    pub fn new(seed: u32) -> Self {
+        Self { seed, counter: 0 }
+    }
+
+    /// The next float in `[0, 1 − 2⁻²⁴]`.
+    pub fn next_f32(&mut self) -> f32 {
+        self.counter = self.counter.wrapping_add(1);
+        unit_float(pcg3d(UVec3::new(self.counter, self.seed, 0x6c67)).x)
+    }
+
+    /// The next float in `[lo, hi)`.
+    pub fn range(&mut self, lo: f32, hi: f32) -> f32 {
+        lo + (hi - lo) * self.next_f32()
+    }
+
+    /// A vector with each component uniform in `[lo, hi)`.
+    pub fn vec3(&mut self, lo: f32, hi: f32) -> glam::Vec3 {
+        glam::Vec3::new(self.range(lo, hi), self.range(lo, hi), self.range(lo, hi))
+    }
+
+    /// A uniformly distributed unit vector (rejection from the cube).
+    pub fn unit_vec3(&mut self) -> glam::Vec3 {
+        loop {
+            let v = self.vec3(-1.0, 1.0);
+            let len2 = v.length_squared();
+            if len2 > 1e-3 && len2 <= 1.0 {
+                return v / len2.sqrt();
+            }
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -1,7 +1,7 @@
 //! Analytic lights as the kernels read them.
 
 use bytemuck::{Pod, Zeroable};
-use glam::Vec4;
+use glam::{Vec3, Vec4};
 
 /// Light kinds (values of [`Light::kind`]).
 pub mod light_kind {
@@ -33,6 +33,35 @@ pub struct Light {
 }
 
 const _: () = assert!(core::mem::size_of::<Light>() == 80);
+
+impl Light {
+    /// A sphere light at `centre` of `radius` emitting `radiance` (linear RGB, W·sr⁻¹·m⁻²).
+    pub fn sphere(centre: Vec3, radius: f32, radiance: Vec3) -> Self {
+        Self {
+            position: centre.extend(radius),
+            edge_u: Vec4::ZERO,
+            edge_v: Vec4::ZERO,
+            radiance: radiance.extend(0.0),
+            kind: light_kind::SPHERE,
+            two_sided: 0,
+            padding: [0; 2],
+        }
+    }
+
+    /// A parallelogram light `corner + s·edge_u + t·edge_v` (s, t ∈ [0, 1]) emitting `radiance`
+    /// towards `edge_u × edge_v`, or from both faces if `two_sided`.
+    pub fn quad(corner: Vec3, edge_u: Vec3, edge_v: Vec3, radiance: Vec3, two_sided: bool) -> Self {
+        Self {
+            position: corner.extend(0.0),
+            edge_u: edge_u.extend(0.0),
+            edge_v: edge_v.extend(0.0),
+            radiance: radiance.extend(0.0),
+            kind: light_kind::QUAD,
+            two_sided: u32::from(two_sided),
+            padding: [0; 2],
+        }
+    }
+}
 const _: () = assert!(core::mem::align_of::<Light>() == 16);
 
 /// Conservative bounds of the emission of one light or of a cluster of lights, after Conty Estevez

@@ -3,49 +3,30 @@
 
 use crate::kernels::offset::offset_ray_origin;
 use crate::kernels::sampling::light_select::luminance;
-use crate::kernels::triangle::geometric_normal;
-use crate::shared::light::light_kind;
 use crate::shared::stream::NO_HIT;
 use crate::shared::Light;
 use crate::{Backend, RayStream, Result, Scene};
-use glam::{Vec3, Vec4, Vec4Swizzles};
-
-/// A sphere light of radius `radius` (m) at `centre` with white radiance `radiance` (W·sr⁻¹·m⁻²).
-pub fn sphere_light(centre: Vec3, radius: f32, radiance: f32) -> Light {
-    Light {
-        position: centre.extend(radius),
-        edge_u: Vec4::ZERO,
-        edge_v: Vec4::ZERO,
-        radiance: Vec3::splat(radiance).extend(0.0),
-        kind: light_kind::SPHERE,
-        two_sided: 0,
-        padding: [0; 2],
-    }
-}
-
-/// A one-sided quad light emitting towards `edge_u × edge_v`, white radiance `radiance`.
-pub fn quad_light(corner: Vec3, edge_u: Vec3, edge_v: Vec3, radiance: f32) -> Light {
-    Light {
-        position: corner.extend(0.0),
-        edge_u: edge_u.extend(0.0),
-        edge_v: edge_v.extend(0.0),
-        radiance: Vec3::splat(radiance).extend(0.0),
-        kind: light_kind::QUAD,
-        two_sided: 0,
-        padding: [0; 2],
-    }
-}
+use glam::{Vec3, Vec4Swizzles};
 
 /// Seed 002's two-sphere-light scene, rebuilt in the Cornell box: a small bright light low by the
 /// green wall, a larger dimmer one high near the red wall, both casting shadows of the blocks.
 pub fn two_sphere_lights() -> Vec<Light> {
-    vec![sphere_light(Vec3::new(0.07, 0.12, 0.40), 0.035, 60.0), sphere_light(Vec3::new(0.45, 0.42, 0.12), 0.06, 25.0)]
+    vec![
+        Light::sphere(Vec3::new(0.07, 0.12, 0.40), 0.035, Vec3::splat(60.0)),
+        Light::sphere(Vec3::new(0.45, 0.42, 0.12), 0.06, Vec3::splat(25.0)),
+    ]
 }
 
 /// Seed 002's long, skinny area light (a thin triangle over a bunny there; a 0.40 m × 0.02 m
 /// quad under the ceiling here), emitting downwards over the blocks.
 pub fn skinny_quad_light() -> Light {
-    quad_light(Vec3::new(0.08, 0.54, 0.40), Vec3::new(0.40, 0.0, 0.0), Vec3::new(0.0, 0.0, 0.02), 40.0)
+    Light::quad(
+        Vec3::new(0.08, 0.54, 0.40),
+        Vec3::new(0.40, 0.0, 0.0),
+        Vec3::new(0.0, 0.0, 0.02),
+        Vec3::splat(40.0),
+        false,
+    )
 }
 
 /// A surface point seen by a camera ray: where secondary rays start.
@@ -70,19 +51,13 @@ pub fn shading_points(scene: &Scene, backend: &mut dyn Backend, rays: &RayStream
         if hits.primitive[i] == NO_HIT {
             continue;
         }
-        let mesh = &scene.meshes()[hits.instance[i] as usize];
-        let [a, b, c] = mesh.triangles[hits.primitive[i] as usize].map(|v| mesh.positions[v as usize]);
-        let bary = hits.barycentrics[i];
-        let p = a + bary.x * (b - a) + bary.y * (c - a);
-        let mut normal = geometric_normal(a, b, c);
-        if normal.dot(rays.direction[i].xyz()) > 0.0 {
-            normal = -normal;
-        }
+        let surface =
+            scene.hit_surface(hits.instance[i], hits.primitive[i], hits.barycentrics[i], rays.direction[i].xyz());
         points.push(ShadingPoint {
             pixel: rays.pixel[i],
-            origin: offset_ray_origin(p, normal),
-            normal,
-            albedo: luminance(mesh.material.base_color),
+            origin: offset_ray_origin(surface.position, surface.normal),
+            normal: surface.normal,
+            albedo: luminance(surface.material.base_color),
         });
     }
     Ok(points)

@@ -6,7 +6,7 @@ mod obj;
 pub mod procedural;
 
 use crate::error::{Error, Result};
-use glam::Vec3;
+use glam::{Vec2, Vec3};
 use std::path::Path;
 
 /// A triangle mesh, one instance in the acceleration structures.
@@ -53,6 +53,17 @@ pub struct Camera {
     pub up: Vec3,
     /// Full vertical field of view in degrees, in (0, 180).
     pub vertical_fov_degrees: f32,
+}
+
+/// A point where a ray hit a scene's surface (see [`Scene::hit_surface`]).
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub struct SurfaceHit {
+    /// The hit point in scene units.
+    pub position: Vec3,
+    /// Unit geometric normal facing the side the ray came from.
+    pub normal: Vec3,
+    /// The hit mesh's material.
+    pub material: Material,
 }
 
 /// A validated scene: meshes and a camera. Construct it with [`Scene::load`] or
@@ -145,6 +156,20 @@ impl Scene {
     /// Total number of triangles over all meshes.
     pub fn triangle_count(&self) -> usize {
         self.meshes.iter().map(|m| m.triangles.len()).sum()
+    }
+
+    /// The surface of the hit `(instance, primitive, barycentrics)` (as the trace stage reports
+    /// it) seen along `incoming`: the point interpolated from the triangle's vertices — the most
+    /// accurate hit point, which the error-bounded ray offset expects (Wächter & Binder, RTG ch. 6)
+    /// — and the unit geometric normal turned against `incoming`. Indices must come from a hit on
+    /// this scene (panics otherwise, like slice indexing).
+    pub fn hit_surface(&self, instance: u32, primitive: u32, barycentrics: Vec2, incoming: Vec3) -> SurfaceHit {
+        let mesh = &self.meshes[instance as usize];
+        let [a, b, c] = mesh.triangles[primitive as usize].map(|v| mesh.positions[v as usize]);
+        let position = a * (1.0 - barycentrics.x - barycentrics.y) + b * barycentrics.x + c * barycentrics.y;
+        let normal = raywave_kernels::triangle::geometric_normal(a, b, c);
+        let normal = if normal.dot(incoming) > 0.0 { -normal } else { normal };
+        SurfaceHit { position, normal, material: mesh.material }
     }
 
     /// Axis-aligned bounds (min, max) of every vertex used by a triangle.

@@ -42,7 +42,7 @@
 //! importances are clamped to `[0,` [`MAX_IMPORTANCE`]`]` so that sums over up to 2³² lights stay
 //! finite, and NaN inputs give importance 0.
 
-use glam::Vec3;
+use glam::{Vec2, Vec3};
 use raywave_shared::light::{light_kind, Light, LightBounds, LightBvhNode};
 use spirv_std::num_traits::Float;
 
@@ -502,93 +502,43 @@ impl<'a> LightSet<'a> {
     }
 }
 
+/// A point on `light`'s surface, uniform by area, with its outward unit normal (quads: the front
+/// normal `edge_u × edge_v`), from the 2-D sample `u`. Independent of any receiver, it is what a
+/// test oracle or a photon emitter needs.
+pub fn uniform_light_point(light: &Light, u: Vec2) -> (Vec3, Vec3) {
+    let corner = light.position.truncate();
+    if light.kind == light_kind::SPHERE {
+        let d = super::warp::sample_uniform_sphere(u);
+        (corner + d * light.position.w, d)
+    } else {
+        let (eu, ev) = (light.edge_u.truncate(), light.edge_v.truncate());
+        let u = super::warp::clamp_sample(u);
+        (corner + u.x * eu + u.y * ev, eu.cross(ev).normalize_or(Vec3::Z))
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::hash::{pcg3d, unit_float};
-    use glam::{UVec3, Vec4};
+    use crate::hash::{pcg3d, unit_float, CounterRng};
+    use glam::UVec3;
     use std::vec::Vec;
 
-    fn sphere(center: Vec3, radius: f32, radiance: Vec3) -> Light {
-        Light {
-            position: center.extend(radius),
-            edge_u: Vec4::ZERO,
-            edge_v: Vec4::ZERO,
-            radiance: radiance.extend(0.0),
-            kind: light_kind::SPHERE,
-            two_sided: 0,
-            padding: [0; 2],
-        }
-    }
-
-    fn quad(corner: Vec3, eu: Vec3, ev: Vec3, radiance: Vec3, two_sided: bool) -> Light {
-        Light {
-            position: corner.extend(0.0),
-            edge_u: eu.extend(0.0),
-            edge_v: ev.extend(0.0),
-            radiance: radiance.extend(0.0),
-            kind: light_kind::QUAD,
-            two_sided: two_sided as u32,
-            padding: [0; 2],
-        }
-    }
-
-    /// Deterministic random floats in [0, 1) from a counter.
-    struct Rng {
-        seed: u32,
-        counter: u32,
-    }
-
-    impl Rng {
-        fn new(seed: u32) -> Self {
-            Rng { seed, counter: 0 }
-        }
-        fn next(&mut self) -> f32 {
-            self.counter += 1;
-            unit_float(pcg3d(UVec3::new(self.counter, self.seed, 0x11_6475)).x)
-        }
-        fn range(&mut self, lo: f32, hi: f32) -> f32 {
-            lo + (hi - lo) * self.next()
-        }
-        fn vec(&mut self, lo: f32, hi: f32) -> Vec3 {
-            Vec3::new(self.range(lo, hi), self.range(lo, hi), self.range(lo, hi))
-        }
-        fn unit(&mut self) -> Vec3 {
-            loop {
-                let v = self.vec(-1.0, 1.0);
-                if v.length_squared() > 1e-3 && v.length_squared() <= 1.0 {
-                    return v.normalize();
-                }
-            }
-        }
-    }
-
-    fn random_light(rng: &mut Rng) -> Light {
+    fn random_light(rng: &mut CounterRng) -> Light {
         let radiance = Vec3::new(rng.range(0.1, 5.0), rng.range(0.1, 5.0), rng.range(0.1, 5.0));
-        let kind = rng.next();
+        let kind = rng.next_f32();
         if kind < 0.34 {
-            sphere(rng.vec(-3.0, 3.0), rng.range(0.05, 1.0), radiance)
+            Light::sphere(rng.vec3(-3.0, 3.0), rng.range(0.05, 1.0), radiance)
         } else {
-            let eu = rng.unit() * rng.range(0.1, 2.0);
-            let ev = eu.cross(rng.unit()).normalize_or_zero() * rng.range(0.1, 2.0);
-            quad(rng.vec(-3.0, 3.0), eu, ev, radiance, kind > 0.67)
+            let eu = rng.unit_vec3() * rng.range(0.1, 2.0);
+            let ev = eu.cross(rng.unit_vec3()).normalize_or_zero() * rng.range(0.1, 2.0);
+            Light::quad(rng.vec3(-3.0, 3.0), eu, ev, radiance, kind > 0.67)
         }
     }
 
     /// Points on the light with their outward unit normal (quads: front normal).
-    fn light_points(light: &Light, rng: &mut Rng, count: usize) -> Vec<(Vec3, Vec3)> {
-        (0..count)
-            .map(|_| {
-                if light.kind == light_kind::SPHERE {
-                    let d = rng.unit();
-                    (light.position.truncate() + d * light.position.w, d)
-                } else {
-                    let (a, b) = (rng.next(), rng.next());
-                    let normal = light.edge_u.truncate().cross(light.edge_v.truncate()).normalize();
-                    (light.position.truncate() + a * light.edge_u.truncate() + b * light.edge_v.truncate(), normal)
-                }
-            })
-            .collect()
+    fn light_points(light: &Light, rng: &mut CounterRng, count: usize) -> Vec<(Vec3, Vec3)> {
+        (0..count).map(|_| uniform_light_point(light, Vec2::new(rng.next_f32(), rng.next_f32()))).collect()
     }
 
     /// Whether some sampled point of `light` sends light to `p` with cosines above `margin` at the
@@ -603,7 +553,7 @@ mod tests {
 
     #[test]
     fn bounds_of_a_sphere_and_quads() {
-        let s = light_bounds(&sphere(Vec3::new(1.0, 2.0, 3.0), 0.5, Vec3::ONE));
+        let s = light_bounds(&Light::sphere(Vec3::new(1.0, 2.0, 3.0), 0.5, Vec3::ONE));
         assert_eq!(s.min.truncate(), Vec3::new(0.5, 1.5, 2.5));
         assert_eq!(s.max.truncate(), Vec3::new(1.5, 2.5, 3.5));
         let area = 4.0 * core::f32::consts::PI * 0.25;
@@ -613,34 +563,34 @@ mod tests {
         let eu = Vec3::new(2.0, 0.0, 0.0);
         let ev = Vec3::new(0.0, 3.0, 0.0);
         let green = Vec3::new(0.0, 1.0, 0.0);
-        let q = light_bounds(&quad(Vec3::new(-1.0, -1.0, 4.0), eu, ev, green, false));
+        let q = light_bounds(&Light::quad(Vec3::new(-1.0, -1.0, 4.0), eu, ev, green, false));
         assert_eq!(q.min.truncate(), Vec3::new(-1.0, -1.0, 4.0));
         assert_eq!(q.max.truncate(), Vec3::new(1.0, 2.0, 4.0));
         assert_eq!(q.axis.truncate(), Vec3::Z);
         assert!((q.phi - core::f32::consts::PI * 6.0 * 0.7152).abs() < 1e-5);
         assert_eq!((q.cos_theta_o, q.cos_theta_e, q.two_sided), (1.0, 0.0, 0));
-        let q2 = light_bounds(&quad(Vec3::new(-1.0, -1.0, 4.0), eu, ev, green, true));
+        let q2 = light_bounds(&Light::quad(Vec3::new(-1.0, -1.0, 4.0), eu, ev, green, true));
         assert_eq!((q2.phi, q2.two_sided), (2.0 * q.phi, 1));
 
         // Degenerate and unknown lights have zero power.
-        assert_eq!(light_bounds(&sphere(Vec3::ZERO, 0.0, Vec3::ONE)).phi, 0.0);
-        assert_eq!(light_bounds(&quad(Vec3::ZERO, eu, eu, Vec3::ONE, false)).phi, 0.0);
-        let mut unknown = sphere(Vec3::ZERO, 1.0, Vec3::ONE);
+        assert_eq!(light_bounds(&Light::sphere(Vec3::ZERO, 0.0, Vec3::ONE)).phi, 0.0);
+        assert_eq!(light_bounds(&Light::quad(Vec3::ZERO, eu, eu, Vec3::ONE, false)).phi, 0.0);
+        let mut unknown = Light::sphere(Vec3::ZERO, 1.0, Vec3::ONE);
         unknown.kind = 7;
         assert_eq!(light_bounds(&unknown).phi, 0.0);
-        assert_eq!(light_bounds(&sphere(Vec3::ZERO, 1.0, Vec3::NAN)).phi, 0.0);
+        assert_eq!(light_bounds(&Light::sphere(Vec3::ZERO, 1.0, Vec3::NAN)).phi, 0.0);
     }
 
     #[test]
     fn importance_is_conservative() {
         // A light that clearly contributes (cosines > 1e-4 at both ends for some sampled point)
         // never gets importance 0; count both outcomes so the test is known to exercise them.
-        let mut rng = Rng::new(1);
+        let mut rng = CounterRng::new(1);
         let (mut contributing, mut culled) = (0, 0);
         for case in 0..20_000 {
             let light = random_light(&mut rng);
-            let p = rng.vec(-5.0, 5.0);
-            let n = if case % 5 == 0 { Vec3::ZERO } else { rng.unit() };
+            let p = rng.vec3(-5.0, 5.0);
+            let n = if case % 5 == 0 { Vec3::ZERO } else { rng.unit_vec3() };
             let points = light_points(&light, &mut rng, 48);
             let value = importance(&light_bounds(&light), p, n);
             assert!(value.is_finite() && value >= 0.0);
@@ -656,13 +606,13 @@ mod tests {
 
     #[test]
     fn importance_falls_off_with_distance_and_angle() {
-        let light = light_bounds(&quad(Vec3::new(-0.5, -0.5, 0.0), Vec3::X, Vec3::Y, Vec3::ONE, false));
+        let light = light_bounds(&Light::quad(Vec3::new(-0.5, -0.5, 0.0), Vec3::X, Vec3::Y, Vec3::ONE, false));
         let near = importance(&light, Vec3::new(0.0, 0.0, 2.0), Vec3::ZERO);
         let far = importance(&light, Vec3::new(0.0, 0.0, 20.0), Vec3::ZERO);
         assert!(near > 50.0 * far, "{near} vs {far}");
         // Behind a one-sided quad: nothing; two-sided: as in front.
         assert_eq!(importance(&light, Vec3::new(0.0, 0.0, -2.0), Vec3::ZERO), 0.0);
-        let two = light_bounds(&quad(Vec3::new(-0.5, -0.5, 0.0), Vec3::X, Vec3::Y, Vec3::ONE, true));
+        let two = light_bounds(&Light::quad(Vec3::new(-0.5, -0.5, 0.0), Vec3::X, Vec3::Y, Vec3::ONE, true));
         assert_eq!(
             importance(&two, Vec3::new(0.0, 0.0, -2.0), Vec3::ZERO),
             importance(&two, Vec3::new(0.0, 0.0, 2.0), Vec3::ZERO)
@@ -680,8 +630,8 @@ mod tests {
 
     #[test]
     fn importance_hard_cases_are_finite() {
-        let s = light_bounds(&sphere(Vec3::new(1.0, 1.0, 1.0), 0.5, Vec3::ONE));
-        let q = light_bounds(&quad(Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::ONE, false));
+        let s = light_bounds(&Light::sphere(Vec3::new(1.0, 1.0, 1.0), 0.5, Vec3::ONE));
+        let q = light_bounds(&Light::quad(Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::ONE, false));
         // p at the sphere's centre, on its surface; p on the quad, on its plane outside it.
         for (b, p) in [
             (s, Vec3::ONE),
@@ -725,20 +675,20 @@ mod tests {
     }
 
     fn random_lights(seed: u32, count: usize) -> Vec<Light> {
-        let mut rng = Rng::new(seed);
+        let mut rng = CounterRng::new(seed);
         (0..count).map(|_| random_light(&mut rng)).collect()
     }
 
     #[test]
     fn importance_pmfs_sum_to_one_and_match_selection() {
         let lights = random_lights(2, 7);
-        let mut rng = Rng::new(3);
+        let mut rng = CounterRng::new(3);
         for case in 0..2_000 {
-            let p = rng.vec(-5.0, 5.0);
-            let n = if case % 4 == 0 { Vec3::ZERO } else { rng.unit() };
+            let p = rng.vec3(-5.0, 5.0);
+            let n = if case % 4 == 0 { Vec3::ZERO } else { rng.unit_vec3() };
             let sum: f32 = (0..7).map(|k| importance_pmf(&lights, p, n, k)).sum();
             assert!((sum - 1.0).abs() < 1e-5, "case {case}: sum {sum}");
-            let choice = select_importance(&lights, p, n, rng.next());
+            let choice = select_importance(&lights, p, n, rng.next_f32());
             assert!(choice.is_valid());
             assert_eq!(choice.pmf, importance_pmf(&lights, p, n, choice.index));
             assert_eq!(importance_pmf(&lights, p, n, 7), 0.0);
@@ -752,12 +702,12 @@ mod tests {
         // Six lights of which all are visible from p: chi-square with 5 dof; 20.515 is its 0.999
         // quantile. 10⁵ draws from pcg3d at a fixed seed.
         let lights = [
-            sphere(Vec3::new(0.0, 3.0, 0.0), 0.3, Vec3::ONE),
-            sphere(Vec3::new(2.0, 2.0, 0.0), 0.5, Vec3::new(2.0, 1.0, 0.5)),
-            sphere(Vec3::new(-4.0, 1.0, 1.0), 1.0, Vec3::ONE),
-            quad(Vec3::new(-1.0, 4.0, -1.0), Vec3::X, Vec3::Z, Vec3::splat(3.0), false),
-            quad(Vec3::new(3.0, 1.0, 3.0), Vec3::X * 0.5, Vec3::Y * 0.5, Vec3::ONE, true),
-            sphere(Vec3::new(0.0, 8.0, 0.0), 2.0, Vec3::splat(0.5)),
+            Light::sphere(Vec3::new(0.0, 3.0, 0.0), 0.3, Vec3::ONE),
+            Light::sphere(Vec3::new(2.0, 2.0, 0.0), 0.5, Vec3::new(2.0, 1.0, 0.5)),
+            Light::sphere(Vec3::new(-4.0, 1.0, 1.0), 1.0, Vec3::ONE),
+            Light::quad(Vec3::new(-1.0, 4.0, -1.0), Vec3::X, Vec3::Z, Vec3::splat(3.0), false),
+            Light::quad(Vec3::new(3.0, 1.0, 3.0), Vec3::X * 0.5, Vec3::Y * 0.5, Vec3::ONE, true),
+            Light::sphere(Vec3::new(0.0, 8.0, 0.0), 2.0, Vec3::splat(0.5)),
         ];
         let (p, n) = (Vec3::new(0.2, 0.0, 0.1), Vec3::Y);
         let pmfs: Vec<f32> = (0..6).map(|k| importance_pmf(&lights, p, n, k)).collect();
@@ -781,9 +731,9 @@ mod tests {
     fn selection_hard_cases() {
         // All lights behind the surface: every importance is 0, so the scan falls back to uniform.
         let lights = [
-            sphere(Vec3::new(0.0, -3.0, 0.0), 0.5, Vec3::ONE),
-            quad(Vec3::new(-1.0, -2.0, -1.0), Vec3::X, Vec3::Z, Vec3::ONE, true),
-            sphere(Vec3::new(2.0, -5.0, 1.0), 1.0, Vec3::ONE),
+            Light::sphere(Vec3::new(0.0, -3.0, 0.0), 0.5, Vec3::ONE),
+            Light::quad(Vec3::new(-1.0, -2.0, -1.0), Vec3::X, Vec3::Z, Vec3::ONE, true),
+            Light::sphere(Vec3::new(2.0, -5.0, 1.0), 1.0, Vec3::ONE),
         ];
         let (p, n) = (Vec3::ZERO, Vec3::Y);
         for k in 0..3 {
@@ -795,14 +745,14 @@ mod tests {
         assert!((0..3).all(|k| importance_pmf(&lights, p, Vec3::ZERO, k) > 0.0));
 
         // All-zero radiance: uniform.
-        let dark = [sphere(Vec3::ZERO, 1.0, Vec3::ZERO), sphere(Vec3::X, 1.0, Vec3::ZERO)];
+        let dark = [Light::sphere(Vec3::ZERO, 1.0, Vec3::ZERO), Light::sphere(Vec3::X, 1.0, Vec3::ZERO)];
         assert_eq!(select_importance(&dark, Vec3::Y * 3.0, Vec3::ZERO, 0.7), LightChoice { index: 1, pmf: 0.5 });
 
         // p at a sphere's centre and on a quad: that light dominates, nothing is NaN.
         let lights = [
-            sphere(Vec3::ZERO, 0.5, Vec3::ONE),
-            quad(Vec3::new(5.0, 0.0, 0.0), Vec3::Y, Vec3::Z, Vec3::ONE, false),
-            sphere(Vec3::new(-5.0, 0.0, 0.0), 0.5, Vec3::ONE),
+            Light::sphere(Vec3::ZERO, 0.5, Vec3::ONE),
+            Light::quad(Vec3::new(5.0, 0.0, 0.0), Vec3::Y, Vec3::Z, Vec3::ONE, false),
+            Light::sphere(Vec3::new(-5.0, 0.0, 0.0), 0.5, Vec3::ONE),
         ];
         for (p, dominant) in [(Vec3::ZERO, 0), (Vec3::new(5.0, 0.5, 0.5), 1)] {
             for n in [Vec3::ZERO, Vec3::X, -Vec3::X] {
@@ -814,7 +764,7 @@ mod tests {
         }
 
         // Coincident lights share the probability equally.
-        let same = [sphere(Vec3::ONE, 0.5, Vec3::ONE); 4];
+        let same = [Light::sphere(Vec3::ONE, 0.5, Vec3::ONE); 4];
         for p in [Vec3::ZERO, Vec3::ONE] {
             assert!((0..4).all(|k| importance_pmf(&same, p, Vec3::ZERO, k) == 0.25));
             let counts = (0..1000).fold([0u32; 4], |mut c, i| {
@@ -848,21 +798,26 @@ mod tests {
         ([interior(root, 2), leaf(0), interior(inner, 4), leaf(1), leaf(2)], [0b0, 0b01, 0b11])
     }
 
+    /// Two sphere lights and a two-sided quad, the lights of the hand-built three-light tree.
+    fn three_lights() -> [Light; 3] {
+        [
+            Light::sphere(Vec3::new(0.0, 3.0, 0.0), 0.3, Vec3::ONE),
+            Light::sphere(Vec3::new(4.0, 2.0, 0.0), 0.5, Vec3::ONE),
+            Light::quad(Vec3::new(4.0, 4.0, -1.0), Vec3::X, Vec3::Z, Vec3::splat(3.0), true),
+        ]
+    }
+
     #[test]
     fn bvh_pmf_matches_selection() {
-        let lights = [
-            sphere(Vec3::new(0.0, 3.0, 0.0), 0.3, Vec3::ONE),
-            sphere(Vec3::new(4.0, 2.0, 0.0), 0.5, Vec3::ONE),
-            quad(Vec3::new(4.0, 4.0, -1.0), Vec3::X, Vec3::Z, Vec3::splat(3.0), true),
-        ];
+        let lights = three_lights();
         let (nodes, trails) = three_light_tree(&lights);
-        let mut rng = Rng::new(9);
+        let mut rng = CounterRng::new(9);
         for case in 0..2_000 {
-            let p = rng.vec(-6.0, 6.0);
-            let n = if case % 3 == 0 { Vec3::ZERO } else { rng.unit() };
+            let p = rng.vec3(-6.0, 6.0);
+            let n = if case % 3 == 0 { Vec3::ZERO } else { rng.unit_vec3() };
             let sum: f32 = (0..3).map(|k| bvh_pmf(&nodes, &trails, p, n, k)).sum();
             assert!((sum - 1.0).abs() < 1e-5, "sum {sum}");
-            let choice = select_bvh(&nodes, p, n, rng.next());
+            let choice = select_bvh(&nodes, p, n, rng.next_f32());
             assert!(choice.is_valid());
             assert_eq!(choice.pmf, bvh_pmf(&nodes, &trails, p, n, choice.index));
             let set = LightSet::new(&lights, &nodes, &trails);
@@ -875,7 +830,7 @@ mod tests {
 
     #[test]
     fn empty_single_and_malformed_trees() {
-        let light = sphere(Vec3::ZERO, 1.0, Vec3::ONE);
+        let light = Light::sphere(Vec3::ZERO, 1.0, Vec3::ONE);
         assert_eq!(select_bvh(&[], Vec3::ZERO, Vec3::ZERO, 0.5), LightChoice::NONE);
         assert_eq!(bvh_pmf(&[], &[], Vec3::ZERO, Vec3::ZERO, 0), 0.0);
         let single = [LightBvhNode { bounds: light_bounds(&light), child_or_light: 0, is_leaf: 1, padding: [0; 2] }];
@@ -894,11 +849,7 @@ mod tests {
 
     #[test]
     fn light_set_dispatches_and_honours_counts() {
-        let lights = [
-            sphere(Vec3::new(0.0, 3.0, 0.0), 0.3, Vec3::ONE),
-            sphere(Vec3::new(4.0, 2.0, 0.0), 0.5, Vec3::ONE),
-            quad(Vec3::new(4.0, 4.0, -1.0), Vec3::X, Vec3::Z, Vec3::splat(3.0), true),
-        ];
+        let lights = three_lights();
         let (nodes, trails) = three_light_tree(&lights);
         let (p, n) = (Vec3::new(1.0, 0.0, 0.5), Vec3::Y);
         let linear = LightSet::new(&lights, &[], &[]);
