@@ -9,6 +9,7 @@ pub mod device;
 pub mod error;
 pub mod frame;
 pub mod lights;
+pub mod ltc_fit;
 pub mod scene;
 pub mod stats;
 pub mod stream;

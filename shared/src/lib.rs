@@ -10,6 +10,7 @@ pub mod bindings;
 pub mod bvh;
 pub mod generate;
 pub mod light;
+pub mod ltc_table;
 pub mod sampling;
 pub mod stream;
 pub mod trace;

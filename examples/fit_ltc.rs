@@ -1,0 +1,131 @@
+//! Fits the GGX LTC table and writes `shared/src/ltc_table.rs`, or checks the committed table.
+//!
+//! ```text
+//! cargo run --release --no-default-features --example fit_ltc -- --out shared/src/ltc_table.rs
+//! cargo run --release --no-default-features --example fit_ltc -- --check
+//! ```
+//!
+//! The fit itself is `raywave::ltc_fit` (host crate); this binary prints progress and the fit
+//! error per roughness row, and writes the file atomically (a temporary file in the same folder,
+//! then a rename). `--check` re-fits a spread of cells from the committed table's warm starts and
+//! compares them with the committed values; it exits with status 1 if any differs by more than the
+//! stated tolerances.
+
+use clap::Parser;
+use raywave::ltc_fit::{self, FitConfig, CHECK_L1_TOLERANCE, CHECK_VALUE_TOLERANCE, LTC_SIZE};
+use std::io::Write;
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::time::Instant;
+
+#[derive(Parser)]
+#[command(about = "Fit the GGX LTC table (raywave::ltc_fit) or check the committed one")]
+struct Args {
+    /// Where to write the generated Rust source.
+    #[arg(long, default_value = "shared/src/ltc_table.rs")]
+    out: PathBuf,
+    /// Re-fit a sample of cells and compare with the committed table instead of fitting it all.
+    #[arg(long)]
+    check: bool,
+    /// With `--check`: this many more cells, spread over the table, besides the fixed 12.
+    #[arg(long, default_value_t = 0)]
+    extra: usize,
+}
+
+fn main() -> ExitCode {
+    let args = Args::parse();
+    let cfg = FitConfig::default();
+    if args.check {
+        return check(&cfg, args.extra);
+    }
+    eprintln!("fitting {LTC_SIZE}×{LTC_SIZE} LTC cells with {cfg:?}");
+    let start = Instant::now();
+    let table = ltc_fit::fit_table(&cfg, &|rows| {
+        eprintln!("  {rows}/{LTC_SIZE} roughness rows done ({:.1} s)", start.elapsed().as_secs_f64());
+    });
+    let secs = start.elapsed().as_secs_f64();
+    let evals: usize = table.cells.iter().map(|c| c.evals).sum();
+    println!("fit: {secs:.1} s, {evals} objective evaluations");
+    print_errors(&table);
+    let source = ltc_fit::table_source(&table);
+    match write_atomically(&args.out, source.as_bytes()) {
+        Ok(()) => {
+            println!("wrote {}", args.out.display());
+            ExitCode::SUCCESS
+        }
+        Err(e) => {
+            eprintln!("error: cannot write {}: {e}", args.out.display());
+            ExitCode::FAILURE
+        }
+    }
+}
+
+/// Prints the relative L1 error `∫|f·cos − g|/∫f·cos` per roughness row (median and max over θ).
+fn print_errors(table: &ltc_fit::LtcTable) {
+    println!("relative L1 error of the LTC vs the GGX lobe, ∫|f·cos − g| / ∫f·cos, per roughness row:");
+    println!("{:>3} {:>6} {:>9} {:>8} {:>8} {:>8} {:>6}", "row", "r", "alpha", "median", "p90", "max", "at col");
+    for a in 0..LTC_SIZE {
+        let (median, p90, max) = ltc_fit::row_error_stats(table, a);
+        let worst =
+            (0..LTC_SIZE).max_by(|&x, &y| table.cell(a, x).rel_l1_error.total_cmp(&table.cell(a, y).rel_l1_error));
+        println!(
+            "{a:>3} {:>6.3} {:>9.2e} {median:>8.4} {p90:>8.4} {max:>8.4} {:>6}",
+            a as f64 / (LTC_SIZE - 1) as f64,
+            ltc_fit::cell_alpha(a),
+            worst.unwrap_or(0)
+        );
+    }
+    let mut all: Vec<f64> = table.cells.iter().map(|c| c.rel_l1_error).collect();
+    all.sort_by(f64::total_cmp);
+    println!("all cells: median {:.4}, max {:.4}", all[all.len() / 2], all[all.len() - 1]);
+    // Without the most grazing views (cos θ < 0.21, θ > 78°), where GGX lobes are least LTC-like.
+    let mut inner: Vec<f64> = table.cells.iter().filter(|c| c.t <= 56).map(|c| c.rel_l1_error).collect();
+    inner.sort_by(f64::total_cmp);
+    println!(
+        "cells with cos θ ≥ 0.21 (col ≤ 56): median {:.4}, p90 {:.4}, max {:.4}",
+        inner[inner.len() / 2],
+        inner[inner.len() * 9 / 10],
+        inner[inner.len() - 1]
+    );
+}
+
+fn check(cfg: &FitConfig, extra: usize) -> ExitCode {
+    use raywave::shared::ltc_table::{LTC_AMPLITUDE, LTC_MATRIX};
+    let start = Instant::now();
+    let mut cells = ltc_fit::CHECK_CELLS.to_vec();
+    cells.extend(ltc_fit::spread_cells(extra));
+    let checks = ltc_fit::check_cells(&cells, &LTC_MATRIX, &LTC_AMPLITUDE, cfg);
+    println!("{:>3} {:>3} {:>10} {:>10} {:>10} {:>10}", "row", "col", "L1 dist", "d mag", "d fresnel", "d sphere");
+    let mut ok = true;
+    for c in &checks {
+        println!(
+            "{:>3} {:>3} {:>10.2e} {:>10.2e} {:>10.2e} {:>10.2e}",
+            c.refit.a, c.refit.t, c.l1_distance, c.magnitude_diff, c.fresnel_diff, c.sphere_diff
+        );
+        ok &= c.l1_distance <= CHECK_L1_TOLERANCE
+            && c.magnitude_diff <= CHECK_VALUE_TOLERANCE
+            && c.fresnel_diff <= CHECK_VALUE_TOLERANCE
+            && c.sphere_diff <= CHECK_VALUE_TOLERANCE;
+    }
+    println!("checked {} cells in {:.1} s", checks.len(), start.elapsed().as_secs_f64());
+    if ok {
+        println!("committed table matches (L1 ≤ {CHECK_L1_TOLERANCE}, values ≤ {CHECK_VALUE_TOLERANCE:e})");
+        ExitCode::SUCCESS
+    } else {
+        println!("committed table DIFFERS from a re-fit: regenerate it");
+        ExitCode::FAILURE
+    }
+}
+
+/// Writes `bytes` to a temporary file beside `path`, syncs it, then renames it over `path`.
+fn write_atomically(path: &std::path::Path, bytes: &[u8]) -> std::io::Result<()> {
+    let mut tmp = path.as_os_str().to_owned();
+    tmp.push(".tmp");
+    let tmp = PathBuf::from(tmp);
+    {
+        let mut f = std::fs::File::create(&tmp)?;
+        f.write_all(bytes)?;
+        f.sync_all()?;
+    }
+    std::fs::rename(&tmp, path)
+}

@@ -1,0 +1,1276 @@
+//! Our own fit of the linearly transformed cosine (LTC) table for GGX: the generator of
+//! `raywave_shared::ltc_table`.
+//!
+//! LTCs (E. Heitz, J. Dupuy, S. Hill and D. Neubelt, "Real-Time Polygonal-Light Shading with
+//! Linearly Transformed Cosines", SIGGRAPH 2016) approximate the cosine-weighted BRDF lobe
+//! `f(v, l)·cos θ_l` of one view direction by `magnitude · D(l)`, where `D` is a clamped cosine
+//! `D_o(ω_o) = max(0, ω_o.z)/π` warped by a 3×3 matrix `M`: `l = normalize(M ω_o)`. Integrals of
+//! `D` over polygons and spheres have closed forms, which is what the shading stage uses for the
+//! analytic unshadowed term `U` of the ratio estimator.
+//!
+//! The procedure follows the reference fitter (selfshadow/ltc_code `fit/fitLTC.cpp` at HEAD
+//! 31e5e96; see `shared/reference/ddgi-ratio-ltc.md` §3). This is our own implementation, in
+//! `f64`, with these choices:
+//!
+//! * **BRDF.** GGX with height-correlated Smith masking–shadowing
+//!   `G2 = 1/(1 + Λ(v) + Λ(l))`, `Λ(ω) = (√(1 + α² tan² θ_ω) − 1)/2`, and no Fresnel (F = 1):
+//!   `f·cos θ_l = D(h)·G2/(4 cos θ_v)` for `v.z, l.z > 0`, else 0. `α = max(r², MIN_ALPHA)` with
+//!   `r` the perceptual roughness ([`MIN_ALPHA`] = 10⁻⁴, the value of the initial ltc_code release
+//!   and of the kernels' `GGX_MIN_ALPHA`).
+//! * **View.** `v = (sin θ, 0, cos θ)` in the x–z plane, `θ ≤` [`MAX_THETA`] = 1.57 (as ltc_code).
+//! * **BRDF sampling** draws visible normals (Heitz 2018, "Sampling the GGX Distribution of
+//!   Visible Normals") and reflects `v`; its pdf is `G1(v)·D(h)/(4 cos θ_v)`, so the weight
+//!   `f·cos/pdf = G2/G1(v)` lies in `[0, 1]` and the moments below converge fast. (ltc_code samples
+//!   `D(h)·cos θ_h` instead; either works for the MIS error.)
+//! * **Moments** of the lobe, by stratified VNDF sampling ([`FitConfig::moment_samples`]² points):
+//!   `magnitude = ∫ f·cos dl` (the directional albedo with F = 1),
+//!   `fresnel = ∫ f·cos·(1 − v·h)⁵ dl`, and the average direction `∫ f·cos·l dl` (y zeroed,
+//!   normalized). With Schlick's Fresnel `F = F0 + (1 − F0)(1 − v·h)⁵` the specular albedo is
+//!   `E_S(F0) = F0·magnitude + (1 − F0)·fresnel`, exactly as ltc_code's shader uses its
+//!   `ltc_2.xy`.
+//! * **LTC form.** `M = [X Y Z]·K`, `K = [[m11, 0, m13], [0, m22, 0], [0, 0, 1]]` (rows), in the
+//!   frame `Z` = average direction, `X = (Z.z, 0, −Z.x)`, `Y = (0, 1, 0)`; at θ = 0 the lobe is
+//!   rotationally symmetric and the fit is isotropic (`Z = (0,0,1)`, `m22 = m11`, `m13 = 0`).
+//!   Nelder–Mead works on `p = (ln m11, ln m22, m13/m11)` (one parameter, `ln m11`, when
+//!   isotropic): the log keeps `m11, m22 > 0` and gives sharp lobes (`m ~ α`) the same relative
+//!   resolution as rough ones; ltc_code optimizes `(m11, m22, m13)` directly with `m ≥ 10⁻⁷`.
+//! * **Error** (minimized): `Σ |f·cos − g|³/(pdf_ltc + pdf_brdf)` over `n²` LTC-sampled and `n²`
+//!   BRDF-sampled directions (stratified grids, `n =` [`FitConfig::fit_samples`]), divided by `n²`,
+//!   with `g = magnitude·D_ltc`: the one-sample-per-technique MIS (balance heuristic) estimate of
+//!   `∫|f·cos − g|³`, as ltc_code.
+//! * **Order and warm starts** (as ltc_code): roughness from 1 down to 0; at θ = 0 the fit starts
+//!   from the θ = 0 fit of the next rougher row (`m11 = 1` at r = 1); for θ > 0 from the previous
+//!   θ of the same row (its `m11, m22, m13`, in the new cell's frame). The θ = 0 column is
+//!   therefore fitted first, sequentially; then the 64 rows run in parallel (rayon), each
+//!   sequential in θ.
+//! * **Nelder–Mead** ([`nelder_mead`]): initial simplex step 0.05 per parameter, stop when
+//!   `2|f_hi − f_lo| ≤ tol·(|f_hi| + |f_lo|)` or after `max_iters`; then restarted from the best
+//!   point with a fresh simplex until a restart improves by less than `tol` (relative), which
+//!   makes the result depend little on the start.
+//!
+//! # Table layout (what [`table_source`] writes)
+//!
+//! 64 × 64 cells, `index = row·64 + col`:
+//! * `row = a`: perceptual roughness `r = a/63`;
+//! * `col = t`: `x = sqrt(1 − cos θ) = t/63`, i.e. `cos θ = 1 − x²`.
+//!
+//! Cells sit **at** `i/63` (the corners of a bilinear patch, ltc_code's texel centres), so the
+//! run-time lookup is `s = clamp(r, 0, 1)·63`, `u = clamp(sqrt(1 − saturate(n·v)), 0, 1)·63`,
+//! bilinear between `floor` and `floor + 1` (clamped to 62 and 63). On a GPU texture that is
+//! `uv = coord·(63/64) + 0.5/64` with `coord = (r, x)`.
+//!
+//! Per cell, two `Vec4`s:
+//! * `LTC_MATRIX[i] = (m⁻¹₀₀, m⁻¹₂₀, m⁻¹₀₂, m⁻¹₂₂)` — the four non-trivial entries of `M⁻¹`
+//!   (row, column), normalized so that `m⁻¹₁₁ = 1` (the scale of `M` does not change the
+//!   distribution). In glam: `M⁻¹ = Mat3::from_cols(vec3(t.x, 0, t.y), Vec3::Y, vec3(t.z, 0, t.w))`,
+//!   in the frame `x = normalize(v − n(n·v))`, `y = n × x`, `z = n` (the view in the `+x` half).
+//!   ltc_code's `ltc_1`, in the same order.
+//! * `LTC_AMPLITUDE[i] = (magnitude, fresnel, 0, sphere)` — ltc_code's `ltc_2`: the albedo with
+//!   F = 1 and the Schlick term above (specular albedo `F0·x + (1 − F0)·y`); `z` is unused (0);
+//!   `w` is the horizon-clipped sphere form factor for the "clipless" path ([`sphere_form_factor`]),
+//!   which has its **own** coordinates on the same grid: `row ↔ (z_F + 1)/2`, `col ↔ |F|`, where
+//!   `F` is the vector form factor of the (unclipped) light in the LTC's cosine space (with the
+//!   1/2π of the edge integral built in) and `z_F = F.z/|F|`; the form factor is then `|F|·w`.
+//!   Polygons can use horizon clipping instead and ignore `w`.
+
+use glam::{DMat3, DVec3};
+use rayon::prelude::*;
+use std::f64::consts::PI;
+
+/// Version of the fitting procedure; bump it whenever a change alters the fitted values, and
+/// regenerate the table (the generated file records the version it came from).
+pub const FIT_VERSION: u32 = 1;
+
+/// Table resolution per axis.
+pub const LTC_SIZE: usize = 64;
+
+/// Smallest GGX `α` fitted (roughness 0 is clamped to it): ltc_code's initial release and the
+/// kernels' `GGX_MIN_ALPHA`. ltc_code's HEAD uses 10⁻⁵.
+pub const MIN_ALPHA: f64 = 1.0e-4;
+
+/// Largest view angle fitted, in radians: the last column (cos θ = 0) is fitted at θ = 1.57
+/// (cos θ ≈ 8·10⁻⁴), as ltc_code, because the lobe degenerates at exactly grazing views.
+pub const MAX_THETA: f64 = 1.57;
+
+/// The GGX `α` of table row `a` (perceptual roughness `a/63`, squared, clamped to [`MIN_ALPHA`]).
+pub fn cell_alpha(a: usize) -> f64 {
+    let r = a as f64 / (LTC_SIZE - 1) as f64;
+    (r * r).max(MIN_ALPHA)
+}
+
+/// The view direction of table column `t`: `sqrt(1 − cos θ) = t/63`, θ clamped to [`MAX_THETA`];
+/// `v = (sin θ, 0, cos θ)`.
+pub fn cell_view(t: usize) -> DVec3 {
+    let x = t as f64 / (LTC_SIZE - 1) as f64;
+    let theta = (1.0 - x * x).clamp(-1.0, 1.0).acos().min(MAX_THETA);
+    DVec3::new(theta.sin(), 0.0, theta.cos())
+}
+
+/// Index of cell (`a` roughness row, `t` view column) in the flat table.
+pub fn cell_index(a: usize, t: usize) -> usize {
+    a * LTC_SIZE + t
+}
+
+/// Stratified sample `(i + ½)/n, (j + ½)/n` of an `n × n` grid, index `k = j·n + i`.
+fn grid_sample(k: usize, n: usize) -> (f64, f64) {
+    let i = k % n;
+    let j = k / n;
+    ((i as f64 + 0.5) / n as f64, (j as f64 + 0.5) / n as f64)
+}
+
+// ---------------------------------------------------------------------------------------------
+// GGX
+// ---------------------------------------------------------------------------------------------
+
+/// The isotropic GGX microfacet BRDF times the cosine, F = 1, height-correlated Smith masking,
+/// for one view direction `v` (unit, `v.y` may be nonzero, `v.z > 0`).
+#[derive(Copy, Clone, Debug)]
+pub struct Ggx {
+    /// Roughness `α` (not perceptual).
+    pub alpha: f64,
+    /// View direction (unit).
+    pub v: DVec3,
+    lambda_v: f64,
+}
+
+impl Ggx {
+    /// The lobe for roughness `alpha` and unit view `v`.
+    pub fn new(alpha: f64, v: DVec3) -> Self {
+        Self { alpha, v, lambda_v: Self::lambda(alpha, v.z) }
+    }
+
+    /// Smith's `Λ(ω) = (√(1 + α² tan² θ) − 1)/2` for `cos θ = z > 0`, written as
+    /// `ε/(2(1 + √(1 + ε)))` with `ε = α² tan² θ` to avoid cancellation.
+    pub fn lambda(alpha: f64, z: f64) -> f64 {
+        if z >= 1.0 {
+            return 0.0;
+        }
+        let z2 = z * z;
+        let eps = alpha * alpha * (1.0 - z2) / z2;
+        eps / (2.0 * (1.0 + (1.0 + eps).sqrt()))
+    }
+
+    /// Normal distribution `D(h) = α²/(π (h.x² + h.y² + α² h.z²)²)` for a unit `h` with `h.z > 0`
+    /// (the form with `sin² θ_h = h.x² + h.y²` keeps full precision near the normal), else 0.
+    pub fn d(&self, h: DVec3) -> f64 {
+        if h.z <= 0.0 {
+            return 0.0;
+        }
+        let a2 = self.alpha * self.alpha;
+        let q = h.x * h.x + h.y * h.y + a2 * h.z * h.z;
+        a2 / (PI * q * q)
+    }
+
+    /// Masking `G1(v) = 1/(1 + Λ(v))`.
+    pub fn g1_v(&self) -> f64 {
+        1.0 / (1.0 + self.lambda_v)
+    }
+
+    /// `(f·cos θ_l, pdf)` at the unit direction `l`: the BRDF times the cosine (F = 1; 0 below the
+    /// horizon) and the density of [`Ggx::sample`] (visible-normal reflection).
+    pub fn eval_pdf(&self, l: DVec3) -> (f64, f64) {
+        let v = self.v;
+        let sum = v + l;
+        let len2 = sum.length_squared();
+        // l = −v (or a NaN input): no half vector.
+        if len2.is_nan() || len2 <= 0.0 || v.z <= 0.0 {
+            return (0.0, 0.0);
+        }
+        let h = sum / len2.sqrt();
+        if h.z <= 0.0 || v.dot(h) <= 0.0 {
+            return (0.0, 0.0);
+        }
+        let d = self.d(h);
+        let pdf = d * self.g1_v() / (4.0 * v.z);
+        let f = if l.z > 0.0 {
+            let g2 = 1.0 / (1.0 + self.lambda_v + Self::lambda(self.alpha, l.z));
+            d * g2 / (4.0 * v.z)
+        } else {
+            0.0
+        };
+        (f, pdf)
+    }
+
+    /// Samples a visible normal (Heitz 2018) with `u ∈ [0,1)²` and reflects `v` about it. The
+    /// result may lie below the horizon (then `f = 0`); its density is `eval_pdf(l).1`.
+    /// Returns `(l, h)`.
+    pub fn sample(&self, u1: f64, u2: f64) -> (DVec3, DVec3) {
+        let a = self.alpha;
+        let v = self.v;
+        let vh = DVec3::new(a * v.x, a * v.y, v.z).normalize();
+        let lensq = vh.x * vh.x + vh.y * vh.y;
+        let t1 = if lensq > 0.0 { DVec3::new(-vh.y, vh.x, 0.0) / lensq.sqrt() } else { DVec3::X };
+        let t2 = vh.cross(t1);
+        let r = u1.sqrt();
+        let phi = 2.0 * PI * u2;
+        let p1 = r * phi.cos();
+        let s = 0.5 * (1.0 + vh.z);
+        let p2 = (1.0 - s) * (1.0 - p1 * p1).max(0.0).sqrt() + s * r * phi.sin();
+        let nh = p1 * t1 + p2 * t2 + (1.0 - p1 * p1 - p2 * p2).max(0.0).sqrt() * vh;
+        let h = DVec3::new(a * nh.x, a * nh.y, nh.z.max(0.0)).normalize();
+        let l = 2.0 * v.dot(h) * h - v;
+        (l, h)
+    }
+}
+
+/// Moments of one GGX lobe `f·cos` (F = 1).
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub struct LobeMoments {
+    /// `∫ f·cos dl`: directional albedo with F = 1.
+    pub magnitude: f64,
+    /// `∫ f·cos·(1 − v·h)⁵ dl`: the Schlick part, `E_S(F0) = F0·magnitude + (1 − F0)·fresnel`.
+    pub fresnel: f64,
+    /// `∫ f·cos·l dl` with y zeroed, normalized: the frame axis `Z` of the fit.
+    pub average_dir: DVec3,
+}
+
+/// The moments of `ggx` by `n × n` stratified visible-normal samples.
+pub fn lobe_moments(ggx: &Ggx, n: usize) -> LobeMoments {
+    let mut magnitude = 0.0;
+    let mut fresnel = 0.0;
+    let mut avg = DVec3::ZERO;
+    for k in 0..n * n {
+        let (u1, u2) = grid_sample(k, n);
+        let (l, h) = ggx.sample(u1, u2);
+        if l.z <= 0.0 {
+            continue;
+        }
+        // f·cos/pdf = G2/G1(v), computed directly.
+        let g2 = 1.0 / (1.0 + ggx.lambda_v + Ggx::lambda(ggx.alpha, l.z));
+        let w = g2 / ggx.g1_v();
+        magnitude += w;
+        fresnel += w * (1.0 - ggx.v.dot(h).max(0.0)).powi(5);
+        avg += w * l;
+    }
+    let inv = 1.0 / (n * n) as f64;
+    avg.y = 0.0;
+    let average_dir = avg.try_normalize().unwrap_or(DVec3::Z);
+    LobeMoments { magnitude: magnitude * inv, fresnel: fresnel * inv, average_dir }
+}
+
+// ---------------------------------------------------------------------------------------------
+// LTC
+// ---------------------------------------------------------------------------------------------
+
+/// A linearly transformed cosine distribution (normalized: it integrates to 1 over the sphere).
+#[derive(Copy, Clone, Debug)]
+pub struct Ltc {
+    /// The transform `M`.
+    pub m: DMat3,
+    /// `M⁻¹`.
+    pub m_inv: DMat3,
+    /// `|det M|`.
+    pub det: f64,
+}
+
+impl Ltc {
+    /// The LTC of transform `m` (assumed invertible).
+    pub fn new(m: DMat3) -> Self {
+        Self { m, m_inv: m.inverse(), det: m.determinant().abs() }
+    }
+
+    /// The LTC of a stored, normalized inverse `(m⁻¹₀₀, m⁻¹₂₀, m⁻¹₀₂, m⁻¹₂₂)` (one
+    /// `LTC_MATRIX` entry).
+    pub fn from_packed(t: [f32; 4]) -> Self {
+        let t = t.map(f64::from);
+        let m_inv = DMat3::from_cols(DVec3::new(t[0], 0.0, t[1]), DVec3::Y, DVec3::new(t[2], 0.0, t[3]));
+        let m = m_inv.inverse();
+        Self { m, m_inv, det: m.determinant().abs() }
+    }
+
+    /// Density at the unit direction `l`: `max(0, (M⁻¹l).z)·|det M⁻¹|/(π|M⁻¹l|⁴)`.
+    pub fn pdf(&self, l: DVec3) -> f64 {
+        let w = self.m_inv * l;
+        if w.z <= 0.0 {
+            return 0.0;
+        }
+        let l2 = w.length_squared();
+        w.z / (PI * self.det * l2 * l2)
+    }
+
+    /// Maps the unit cosine-distributed `wo` to `(l, pdf(l))`, with the pdf computed from `wo`:
+    /// `(wo.z/π)·|M wo|³/|det M|`.
+    pub fn warp(&self, wo: DVec3) -> (DVec3, f64) {
+        let w = self.m * wo;
+        let len = w.length();
+        (w / len, wo.z / PI * len * len * len / self.det)
+    }
+
+    /// The normalized inverse as stored in `LTC_MATRIX`: `(m⁻¹₀₀, m⁻¹₂₀, m⁻¹₀₂, m⁻¹₂₂)/m⁻¹₁₁`.
+    pub fn packed(&self) -> [f64; 4] {
+        let inv = self.m_inv / self.m_inv.y_axis.y;
+        [inv.x_axis.x, inv.x_axis.z, inv.z_axis.x, inv.z_axis.z]
+    }
+}
+
+/// Cosine-distributed direction for `u ∈ [0,1)²` (the LTC's `D_o`): `r = √u1`, `φ = 2πu2`.
+fn cosine_direction(u1: f64, u2: f64) -> DVec3 {
+    let r = u1.sqrt();
+    let phi = 2.0 * PI * u2;
+    DVec3::new(r * phi.cos(), r * phi.sin(), (1.0 - u1).max(0.0).sqrt())
+}
+
+/// The frame of a cell's fit: `(X, Z)` with `Z` the lobe's average direction, `X = (Z.z, 0, −Z.x)`
+/// (and `Y = (0,1,0)`). Column 0 (θ = 0) uses the identity frame exactly.
+fn cell_frame(t: usize, moments: &LobeMoments) -> (DVec3, DVec3) {
+    if t == 0 {
+        (DVec3::X, DVec3::Z)
+    } else {
+        let z = moments.average_dir;
+        (DVec3::new(z.z, 0.0, -z.x), z)
+    }
+}
+
+/// The transform `M = [X Y Z]·K`, `K = [[m11, 0, m13], [0, m22, 0], [0, 0, 1]]`.
+pub fn ltc_matrix(frame: (DVec3, DVec3), m11: f64, m22: f64, m13: f64) -> DMat3 {
+    let r = DMat3::from_cols(frame.0, DVec3::Y, frame.1);
+    let k = DMat3::from_cols(DVec3::new(m11, 0.0, 0.0), DVec3::new(0.0, m22, 0.0), DVec3::new(m13, 0.0, 1.0));
+    r * k
+}
+
+/// Recovers `(m11, m22, m13)` in `frame` from a stored normalized inverse (the inverse of
+/// [`ltc_matrix`] up to the scale of `M`): `S = [X Y Z]ᵀ·M/s` is `K/m22`.
+pub fn params_from_packed(frame: (DVec3, DVec3), t: [f32; 4]) -> (f64, f64, f64) {
+    let m = Ltc::from_packed(t).m;
+    let s = DMat3::from_cols(frame.0, DVec3::Y, frame.1).transpose() * m;
+    let m22 = 1.0 / s.z_axis.z;
+    (s.x_axis.x * m22, m22, s.z_axis.x * m22)
+}
+
+// ---------------------------------------------------------------------------------------------
+// Nelder–Mead
+// ---------------------------------------------------------------------------------------------
+
+/// Result of [`nelder_mead`].
+#[derive(Copy, Clone, Debug)]
+pub struct Minimum<const D: usize> {
+    /// Best point found.
+    pub x: [f64; D],
+    /// Objective there.
+    pub value: f64,
+    /// Objective evaluations used.
+    pub evals: usize,
+}
+
+/// Downhill simplex (Nelder & Mead 1965) with the standard coefficients (reflection 1, expansion
+/// 2, contraction ½, shrink ½), starting from `start` and `start + step·eᵢ`. Stops when
+/// `2|f_hi − f_lo| ≤ tol·(|f_hi| + |f_lo|)` (the Numerical Recipes criterion) or after
+/// `max_iters` iterations.
+pub fn nelder_mead<const D: usize>(
+    mut f: impl FnMut(&[f64; D]) -> f64,
+    start: [f64; D],
+    step: f64,
+    tol: f64,
+    max_iters: usize,
+) -> Minimum<D> {
+    let mut pts: Vec<[f64; D]> = (0..=D)
+        .map(|i| {
+            let mut p = start;
+            if i > 0 {
+                p[i - 1] += step;
+            }
+            p
+        })
+        .collect();
+    let mut vals: Vec<f64> = pts.iter().map(&mut f).collect();
+    let mut evals = D + 1;
+    let along = |o: &[f64; D], p: &[f64; D], c: f64| -> [f64; D] { core::array::from_fn(|k| o[k] + c * (o[k] - p[k])) };
+    for _ in 0..max_iters {
+        // Order: best first, worst last (NaN counts as worst).
+        let mut order: Vec<usize> = (0..=D).collect();
+        order.sort_by(|&i, &j| vals[i].partial_cmp(&vals[j]).unwrap_or(std::cmp::Ordering::Greater));
+        pts = order.iter().map(|&i| pts[i]).collect();
+        vals = order.iter().map(|&i| vals[i]).collect();
+        let (lo, hi) = (vals[0], vals[D]);
+        if 2.0 * (hi - lo).abs() <= tol * (hi.abs() + lo.abs()) {
+            break;
+        }
+        let centroid: [f64; D] = core::array::from_fn(|k| pts[..D].iter().map(|p| p[k]).sum::<f64>() / D as f64);
+        let worst = pts[D];
+        let r = along(&centroid, &worst, 1.0);
+        let fr = f(&r);
+        evals += 1;
+        if fr < vals[0] {
+            let e = along(&centroid, &worst, 2.0);
+            let fe = f(&e);
+            evals += 1;
+            if fe < fr {
+                (pts[D], vals[D]) = (e, fe);
+            } else {
+                (pts[D], vals[D]) = (r, fr);
+            }
+            continue;
+        }
+        if fr < vals[D - 1] {
+            (pts[D], vals[D]) = (r, fr);
+            continue;
+        }
+        // Contraction: outside if the reflection beat the worst point, else inside.
+        let (c, threshold) =
+            if fr < vals[D] { (along(&centroid, &worst, 0.5), fr) } else { (along(&centroid, &worst, -0.5), vals[D]) };
+        let fc = f(&c);
+        evals += 1;
+        if fc < threshold {
+            (pts[D], vals[D]) = (c, fc);
+            continue;
+        }
+        let best = pts[0];
+        for i in 1..=D {
+            pts[i] = core::array::from_fn(|k| best[k] + 0.5 * (pts[i][k] - best[k]));
+            vals[i] = f(&pts[i]);
+            evals += 1;
+        }
+    }
+    let best = (0..=D).fold(0, |b, i| if vals[i] < vals[b] { i } else { b });
+    Minimum { x: pts[best], value: vals[best], evals }
+}
+
+// ---------------------------------------------------------------------------------------------
+// The fit
+// ---------------------------------------------------------------------------------------------
+
+/// Parameters of the fit (all recorded in the generated file's header).
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub struct FitConfig {
+    /// `n`: each error evaluation uses `n²` LTC and `n²` BRDF samples (ltc_code: 32).
+    pub fit_samples: usize,
+    /// Per-axis stratified VNDF samples for magnitude, fresnel and the average direction.
+    pub moment_samples: usize,
+    /// Per-axis samples (per technique) of the reported relative L1 error.
+    pub error_samples: usize,
+    /// Initial Nelder–Mead simplex step (in `(ln m11, ln m22, m13/m11)`).
+    pub step: f64,
+    /// Relative Nelder–Mead tolerance on the objective.
+    pub tolerance: f64,
+    /// Iteration cap per Nelder–Mead run.
+    pub max_iters: usize,
+    /// Cap on Nelder–Mead runs per cell (the first plus restarts from the best point).
+    pub max_runs: usize,
+}
+
+impl Default for FitConfig {
+    fn default() -> Self {
+        Self {
+            fit_samples: 64,
+            moment_samples: 512,
+            error_samples: 64,
+            step: 0.05,
+            tolerance: 1.0e-7,
+            max_iters: 400,
+            max_runs: 4,
+        }
+    }
+}
+
+/// The fitted LTC of one cell and what went into it.
+#[derive(Copy, Clone, Debug)]
+pub struct CellFit {
+    /// Roughness row.
+    pub a: usize,
+    /// View column.
+    pub t: usize,
+    /// GGX `α`.
+    pub alpha: f64,
+    /// View direction.
+    pub view: DVec3,
+    /// Lobe moments (magnitude, fresnel, average direction).
+    pub moments: LobeMoments,
+    /// Fitted `m11`.
+    pub m11: f64,
+    /// Fitted `m22`.
+    pub m22: f64,
+    /// Fitted `m13`.
+    pub m13: f64,
+    /// Final objective (the MIS estimate of `∫|f·cos − g|³`).
+    pub objective: f64,
+    /// `∫|f·cos − magnitude·D_ltc| / magnitude`, estimated with
+    /// [`FitConfig::error_samples`]² samples per technique: 0 is a perfect fit, 2 the worst.
+    pub rel_l1_error: f64,
+    /// Objective evaluations the fit used.
+    pub evals: usize,
+}
+
+impl CellFit {
+    /// The cell's frame `(X, Z)`.
+    pub fn frame(&self) -> (DVec3, DVec3) {
+        cell_frame(self.t, &self.moments)
+    }
+
+    /// The fitted (normalized) LTC.
+    pub fn ltc(&self) -> Ltc {
+        Ltc::new(ltc_matrix(self.frame(), self.m11, self.m22, self.m13))
+    }
+
+    /// The cell's `LTC_MATRIX` entry.
+    pub fn packed_matrix(&self) -> [f32; 4] {
+        self.ltc().packed().map(|x| x as f32)
+    }
+
+    /// The cell's `LTC_AMPLITUDE` entry: `(magnitude, fresnel, 0, sphere form factor)`.
+    pub fn packed_amplitude(&self) -> [f32; 4] {
+        let sphere = sphere_table_value(self.a, self.t);
+        [self.moments.magnitude as f32, self.moments.fresnel as f32, 0.0, sphere as f32]
+    }
+}
+
+/// One cell's fitting problem: the lobe and the fixed samples of the error.
+struct CellProblem {
+    ggx: Ggx,
+    moments: LobeMoments,
+    frame: (DVec3, DVec3),
+    /// BRDF samples: `(l, f·cos, pdf_brdf)`; fixed for the cell.
+    brdf: Vec<(DVec3, f64, f64)>,
+    /// Cosine-distributed directions, warped by each candidate `M`.
+    cosine: Vec<DVec3>,
+}
+
+impl CellProblem {
+    fn new(a: usize, t: usize, cfg: &FitConfig) -> Self {
+        let ggx = Ggx::new(cell_alpha(a), cell_view(t));
+        let moments = lobe_moments(&ggx, cfg.moment_samples);
+        let n = cfg.fit_samples;
+        let brdf = (0..n * n)
+            .map(|k| {
+                let (u1, u2) = grid_sample(k, n);
+                let l = ggx.sample(u1, u2).0;
+                let (f, pdf) = ggx.eval_pdf(l);
+                (l, f, pdf)
+            })
+            .collect();
+        let cosine = (0..n * n)
+            .map(|k| {
+                let (u1, u2) = grid_sample(k, n);
+                cosine_direction(u1, u2)
+            })
+            .collect();
+        Self { ggx, moments, frame: cell_frame(t, &moments), brdf, cosine }
+    }
+
+    /// The objective: MIS estimate of `∫|f·cos − magnitude·D_ltc|³`.
+    fn error(&self, ltc: &Ltc) -> f64 {
+        let mag = self.moments.magnitude;
+        let mut sum = 0.0;
+        for &wo in &self.cosine {
+            let (l, pdf_ltc) = ltc.warp(wo);
+            let (f, pdf_brdf) = self.ggx.eval_pdf(l);
+            let d = (f - mag * pdf_ltc).abs();
+            sum += d * d * d / (pdf_ltc + pdf_brdf);
+        }
+        for &(l, f, pdf_brdf) in &self.brdf {
+            let pdf_ltc = ltc.pdf(l);
+            let d = (f - mag * pdf_ltc).abs();
+            let den = pdf_ltc + pdf_brdf;
+            if den > 0.0 {
+                sum += d * d * d / den;
+            }
+        }
+        sum / self.cosine.len() as f64
+    }
+
+    fn ltc(&self, m11: f64, m22: f64, m13: f64) -> Ltc {
+        Ltc::new(ltc_matrix(self.frame, m11, m22, m13))
+    }
+
+    /// Objective at `(m11, m22, m13)`, `+∞` where it is not finite.
+    fn objective(&self, m11: f64, m22: f64, m13: f64) -> f64 {
+        let e = self.error(&self.ltc(m11, m22, m13));
+        if e.is_finite() {
+            e
+        } else {
+            f64::INFINITY
+        }
+    }
+
+    /// Nelder–Mead from `start = (m11, m22, m13)` (isotropic: `m22 = m11`, `m13 = 0`), with
+    /// restarts. Returns `(m11, m22, m13, objective, evals)`.
+    fn fit(&self, start: (f64, f64, f64), isotropic: bool, cfg: &FitConfig) -> (f64, f64, f64, f64, usize) {
+        let mut evals = 0;
+        if isotropic {
+            let f = |p: &[f64; 1]| {
+                let m = p[0].exp();
+                self.objective(m, m, 0.0)
+            };
+            let mut x = [start.0.max(1e-12).ln()];
+            let mut best = f64::INFINITY;
+            for _ in 0..cfg.max_runs {
+                let r = nelder_mead(f, x, cfg.step, cfg.tolerance, cfg.max_iters);
+                evals += r.evals;
+                let improved = best - r.value > cfg.tolerance * r.value.abs();
+                if r.value <= best {
+                    (x, best) = (r.x, r.value);
+                }
+                if !improved {
+                    break;
+                }
+            }
+            let m = x[0].exp();
+            (m, m, 0.0, best, evals)
+        } else {
+            let f = |p: &[f64; 3]| {
+                let m11 = p[0].exp();
+                self.objective(m11, p[1].exp(), p[2] * m11)
+            };
+            let mut x = [start.0.max(1e-12).ln(), start.1.max(1e-12).ln(), start.2 / start.0.max(1e-12)];
+            let mut best = f64::INFINITY;
+            for _ in 0..cfg.max_runs {
+                let r = nelder_mead(f, x, cfg.step, cfg.tolerance, cfg.max_iters);
+                evals += r.evals;
+                let improved = best - r.value > cfg.tolerance * r.value.abs();
+                if r.value <= best {
+                    (x, best) = (r.x, r.value);
+                }
+                if !improved {
+                    break;
+                }
+            }
+            let m11 = x[0].exp();
+            (m11, x[1].exp(), x[2] * m11, best, evals)
+        }
+    }
+}
+
+/// `∫|f·cos − magnitude·D_ltc| / magnitude` by MIS with `n²` stratified samples per technique
+/// (grids offset by ¼ cell against the fit's, so the estimate does not reuse the fit's points).
+pub fn relative_l1_error(ggx: &Ggx, magnitude: f64, ltc: &Ltc, n: usize) -> f64 {
+    let mut sum = 0.0;
+    for k in 0..n * n {
+        let (u1, u2) = grid_sample(k, n);
+        let (u1, u2) = ((u1 + 0.25 / n as f64).fract(), (u2 + 0.25 / n as f64).fract());
+        let (l, pdf_ltc) = ltc.warp(cosine_direction(u1, u2));
+        let (f, pdf_brdf) = ggx.eval_pdf(l);
+        sum += (f - magnitude * pdf_ltc).abs() / (pdf_ltc + pdf_brdf);
+        let l = ggx.sample(u1, u2).0;
+        let (f, pdf_brdf) = ggx.eval_pdf(l);
+        let pdf_ltc = ltc.pdf(l);
+        if pdf_ltc + pdf_brdf > 0.0 {
+            sum += (f - magnitude * pdf_ltc).abs() / (pdf_ltc + pdf_brdf);
+        }
+    }
+    sum / (n * n) as f64 / magnitude
+}
+
+/// Fits cell `(a, t)` starting from `start = (m11, m22, m13)` (in the cell's own frame).
+pub fn fit_cell(a: usize, t: usize, start: (f64, f64, f64), cfg: &FitConfig) -> CellFit {
+    let problem = CellProblem::new(a, t, cfg);
+    let (m11, m22, m13, objective, evals) = problem.fit(start, t == 0, cfg);
+    let ltc = problem.ltc(m11, m22, m13);
+    let rel_l1_error = relative_l1_error(&problem.ggx, problem.moments.magnitude, &ltc, cfg.error_samples);
+    CellFit {
+        a,
+        t,
+        alpha: problem.ggx.alpha,
+        view: problem.ggx.v,
+        moments: problem.moments,
+        m11,
+        m22,
+        m13,
+        objective,
+        rel_l1_error,
+        evals,
+    }
+}
+
+/// The whole fitted table, `cells[cell_index(a, t)]`.
+#[derive(Clone, Debug)]
+pub struct LtcTable {
+    /// The configuration it was fitted with.
+    pub config: FitConfig,
+    /// All 64 × 64 cells, row-major by roughness.
+    pub cells: Vec<CellFit>,
+}
+
+impl LtcTable {
+    /// Cell `(a, t)`.
+    pub fn cell(&self, a: usize, t: usize) -> &CellFit {
+        &self.cells[cell_index(a, t)]
+    }
+}
+
+/// Fits the whole table: the θ = 0 column from rough to sharp (sequential warm starts), then each
+/// roughness row along θ (sequential within a row, rows in parallel). `progress(rows_done)` is
+/// called as rows finish (from worker threads).
+pub fn fit_table(cfg: &FitConfig, progress: &(dyn Fn(usize) + Sync)) -> LtcTable {
+    let n = LTC_SIZE;
+    let mut column0: Vec<Option<CellFit>> = vec![None; n];
+    let mut start = (1.0, 1.0, 0.0);
+    for a in (0..n).rev() {
+        let c = fit_cell(a, 0, start, cfg);
+        start = (c.m11, c.m22, c.m13);
+        column0[a] = Some(c);
+    }
+    let done = std::sync::atomic::AtomicUsize::new(0);
+    let rows: Vec<Vec<CellFit>> = (0..n)
+        .into_par_iter()
+        .map(|a| {
+            let first = column0[a].expect("column 0 is fitted first");
+            let mut row = Vec::with_capacity(n);
+            row.push(first);
+            for t in 1..n {
+                let prev = row[t - 1];
+                row.push(fit_cell(a, t, (prev.m11, prev.m22, prev.m13), cfg));
+            }
+            progress(done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1);
+            row
+        })
+        .collect();
+    LtcTable { config: *cfg, cells: rows.into_iter().flatten().collect() }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Sphere form factor (the clipless path)
+// ---------------------------------------------------------------------------------------------
+
+/// Projected solid angle `∫_cap max(0, cos θ) dω` of a spherical cap of angular radius `σ`
+/// (`sin² σ = sin2_sigma`) whose centre makes the angle `ω` with the normal (`cos ω = z`), i.e. the
+/// cap's form factor times π, clipped to the horizon. Closed form of J. Snyder, "Area light
+/// sources for real-time graphics" (1996), in the form of S. Lagarde and C. de Rousiers, "Moving
+/// Frostbite to PBR" (2014, §4.7.2): `π cos ω sin² σ` while the cap is above the horizon,
+/// `(cos ω·acos y − x·s)·sin² σ + atan(s/x)` with `x = cot σ`, `y = −x cot ω`, `s = sin ω √(1 − y²)`
+/// while it straddles it, and 0 below.
+pub fn sphere_cap_projected_solid_angle(z: f64, sin2_sigma: f64) -> f64 {
+    let z = z.clamp(-1.0, 1.0);
+    let s2 = sin2_sigma.clamp(0.0, 1.0);
+    let sin_sigma = s2.sqrt();
+    let sin_omega = (1.0 - z * z).max(0.0).sqrt();
+    // Above the horizon: ω ≤ π/2 − σ ⇔ cos ω ≥ sin σ.
+    if z >= sin_sigma {
+        return PI * z * s2;
+    }
+    // Below: ω ≥ π/2 + σ ⇔ cos ω ≤ −sin σ.
+    if z <= -sin_sigma {
+        return 0.0;
+    }
+    let cos_sigma = (1.0 - s2).max(0.0).sqrt();
+    let x = cos_sigma / sin_sigma;
+    // sin ω > 0 here (|cos ω| < sin σ ≤ 1).
+    let y = (-x * z / sin_omega).clamp(-1.0, 1.0);
+    let s = sin_omega * (1.0 - y * y).max(0.0).sqrt();
+    ((z * y.acos() - x * s) * s2 + s.atan2(x)).max(0.0)
+}
+
+/// The clipless-path table value: the horizon-clipped form factor of a sphere cap divided by its
+/// unclipped vector form factor length `|F| = sin² σ`, as a function of `z = cos ω` and `len = |F|`:
+/// `I(ω, σ)/(π·len)` (= `max(z, 0)` when `len = 0`). ltc_code's `ltc_2.w`.
+pub fn sphere_form_factor(z: f64, len: f64) -> f64 {
+    if len <= 0.0 {
+        return z.max(0.0);
+    }
+    sphere_cap_projected_solid_angle(z, len) / (PI * len)
+}
+
+/// [`sphere_form_factor`] at table cell `(a, t)`: `z = 2a/63 − 1`, `len = t/63`.
+pub fn sphere_table_value(a: usize, t: usize) -> f64 {
+    let s = (LTC_SIZE - 1) as f64;
+    sphere_form_factor(2.0 * a as f64 / s - 1.0, t as f64 / s)
+}
+
+// ---------------------------------------------------------------------------------------------
+// Generated source, statistics and checks
+// ---------------------------------------------------------------------------------------------
+
+/// The command that regenerates the committed table.
+pub const REGENERATE_COMMAND: &str =
+    "cargo run --release --no-default-features --example fit_ltc -- --out shared/src/ltc_table.rs";
+
+/// The Rust source of `shared/src/ltc_table.rs` for `table`. Floats are written with Rust's
+/// shortest round-trip formatting of the `f32` value, so the file reproduces the `f32`s exactly.
+pub fn table_source(table: &LtcTable) -> String {
+    let matrix: Vec<[f32; 4]> = table.cells.iter().map(CellFit::packed_matrix).collect();
+    let amplitude: Vec<[f32; 4]> = table.cells.iter().map(CellFit::packed_amplitude).collect();
+    packed_table_source(&table.config, &matrix, &amplitude)
+}
+
+/// [`table_source`] from the packed `LTC_MATRIX` and `LTC_AMPLITUDE` entries and the config they
+/// were fitted with (lets a test check that the committed file is exactly what the generator
+/// writes).
+pub fn packed_table_source(c: &FitConfig, matrix: &[[f32; 4]], amplitude: &[[f32; 4]]) -> String {
+    use std::fmt::Write;
+    let n = LTC_SIZE;
+    let mut s = String::new();
+    let _ = write!(
+        s,
+        "//! GGX linearly transformed cosine (LTC) table — GENERATED, do not edit.
+//!
+//! Regenerate with `{REGENERATE_COMMAND}`
+//! (fitter: `raywave_host::ltc_fit`, FIT_VERSION = {FIT_VERSION}); check with `--check`.
+//!
+//! Fit: GGX, height-correlated Smith G2, F = 1; α = max(r², {MIN_ALPHA:e}), r = row/63; view
+//! `v = (sin θ, 0, cos θ)`, `sqrt(1 − cos θ) = col/63`, θ ≤ {MAX_THETA}. Nelder–Mead on
+//! (ln m11, ln m22, m13/m11), step {step}, tolerance {tol:e}, ≤ {iters} iterations × ≤ {runs} runs,
+//! warm-started as ltc_code (rough → sharp on the θ = 0 column, then along θ). Error: MIS
+//! `Σ|f·cos − g|³/(pdf_ltc + pdf_brdf)` with {fs}² LTC + {fs}² VNDF samples; moments with
+//! {ms}² VNDF samples. See `raywave_host::ltc_fit` for the details.
+//!
+//! Layout: `index = row·{n} + col` (row = roughness `a`, col = view `t`), values at `i/63`; look up
+//! with `s = r·63`, `u = sqrt(1 − n·v)·63`, bilinearly.
+//! * `LTC_MATRIX[i] = (m⁻¹₀₀, m⁻¹₂₀, m⁻¹₀₂, m⁻¹₂₂)` of the inverse transform normalized to
+//!   `m⁻¹₁₁ = 1`: `M⁻¹ = Mat3::from_cols(vec3(x, 0, y), Vec3::Y, vec3(z, 0, w))` in the frame
+//!   (`normalize(v − n(n·v))`, `n × x`, `n`).
+//! * `LTC_AMPLITUDE[i] = (magnitude, fresnel, 0, sphere)`: specular albedo
+//!   `F0·magnitude + (1 − F0)·fresnel`; `sphere` is the horizon-clipped sphere form factor over
+//!   `|F|` at `row = 63·(z + 1)/2`, `col = 63·|F|` (clipless path).
+
+/// Cells per table axis.
+pub const LTC_SIZE: u32 = {n};
+
+/// `raywave_host::ltc_fit::FIT_VERSION` of the fitter that wrote this file.
+pub const LTC_FIT_VERSION: u32 = {FIT_VERSION};
+
+// `const` rather than `static`: a const is emitted only where it is used, so the SPIR-V build of
+// this crate carries no 64 KiB tables (the host uploads them as storage buffers). Use them as
+// `&LTC_MATRIX[..]` (one promoted static per use site).
+
+/// Normalized `M⁻¹` entries per cell (see the module documentation).
+#[rustfmt::skip]
+#[allow(clippy::large_const_arrays)]
+pub const LTC_MATRIX: [[f32; 4]; {cells}] = [
+",
+        step = c.step,
+        tol = c.tolerance,
+        iters = c.max_iters,
+        runs = c.max_runs,
+        fs = c.fit_samples,
+        ms = c.moment_samples,
+        cells = n * n,
+    );
+    let row = |s: &mut String, v: [f32; 4]| {
+        let _ = writeln!(s, "    [{:e}, {:e}, {:e}, {:e}],", v[0], v[1], v[2], v[3]);
+    };
+    for &m in matrix {
+        row(&mut s, m);
+    }
+    let _ = write!(
+        s,
+        "];
+
+/// `(magnitude, fresnel, 0, sphere form factor)` per cell (see the module documentation).
+#[rustfmt::skip]
+#[allow(clippy::large_const_arrays)]
+pub const LTC_AMPLITUDE: [[f32; 4]; {}] = [
+",
+        n * n
+    );
+    for &a in amplitude {
+        row(&mut s, a);
+    }
+    s.push_str("];\n");
+    s
+}
+
+/// `(median, 90th percentile, maximum)` of a row's relative L1 errors over its 64 columns
+/// (the 90th percentile is the 58th smallest of 64).
+pub fn row_error_stats(table: &LtcTable, a: usize) -> (f64, f64, f64) {
+    let mut e: Vec<f64> = (0..LTC_SIZE).map(|t| table.cell(a, t).rel_l1_error).collect();
+    e.sort_by(f64::total_cmp);
+    let median = 0.5 * (e[LTC_SIZE / 2 - 1] + e[LTC_SIZE / 2]);
+    (median, e[(LTC_SIZE * 9).div_ceil(10) - 1], e[LTC_SIZE - 1])
+}
+
+/// `∫|p − q|` over the sphere for two LTCs (in `[0, 2]`), by MIS with `n²` samples of each.
+pub fn ltc_l1_distance(p: &Ltc, q: &Ltc, n: usize) -> f64 {
+    let mut sum = 0.0;
+    for k in 0..n * n {
+        let (u1, u2) = grid_sample(k, n);
+        let wo = cosine_direction(u1, u2);
+        for (x, y) in [(p, q), (q, p)] {
+            let l = x.warp(wo).0;
+            let (px, py) = (x.pdf(l), y.pdf(l));
+            if px + py > 0.0 {
+                sum += (px - py).abs() / (px + py);
+            }
+        }
+    }
+    sum / (n * n) as f64
+}
+
+/// Result of re-fitting one committed cell.
+#[derive(Copy, Clone, Debug)]
+pub struct CellCheck {
+    /// The re-fit.
+    pub refit: CellFit,
+    /// `∫|D_committed − D_refit|` (0 identical, 2 disjoint).
+    pub l1_distance: f64,
+    /// `|magnitude_refit − magnitude_committed|`.
+    pub magnitude_diff: f64,
+    /// `|fresnel_refit − fresnel_committed|`.
+    pub fresnel_diff: f64,
+    /// `|sphere_refit − sphere_committed|`.
+    pub sphere_diff: f64,
+}
+
+/// The warm start the full fit gives cell `(a, t)`, taken from the committed table `matrix`:
+/// `(1, 1, 0)` for `(63, 0)`; the `(a + 1, 0)` cell for the rest of column 0; the `(a, t − 1)` cell
+/// (its parameters in its own frame, recovered with [`params_from_packed`]) otherwise.
+pub fn committed_warm_start(a: usize, t: usize, matrix: &[[f32; 4]], cfg: &FitConfig) -> (f64, f64, f64) {
+    let (sa, st) = match (a, t) {
+        (a, 0) if a + 1 == LTC_SIZE => return (1.0, 1.0, 0.0),
+        (a, 0) => (a + 1, 0),
+        (a, t) => (a, t - 1),
+    };
+    let ggx = Ggx::new(cell_alpha(sa), cell_view(st));
+    let frame = cell_frame(st, &lobe_moments(&ggx, cfg.moment_samples));
+    params_from_packed(frame, matrix[cell_index(sa, st)])
+}
+
+/// Re-fits the given cells from their committed warm starts and compares them with the committed
+/// `matrix` and `amplitude` tables (in parallel).
+pub fn check_cells(
+    cells: &[(usize, usize)],
+    matrix: &[[f32; 4]],
+    amplitude: &[[f32; 4]],
+    cfg: &FitConfig,
+) -> Vec<CellCheck> {
+    cells
+        .par_iter()
+        .map(|&(a, t)| {
+            let start = committed_warm_start(a, t, matrix, cfg);
+            let refit = fit_cell(a, t, start, cfg);
+            let i = cell_index(a, t);
+            let committed = Ltc::from_packed(matrix[i]);
+            let fresh = Ltc::from_packed(refit.packed_matrix());
+            let amp = refit.packed_amplitude();
+            CellCheck {
+                refit,
+                l1_distance: ltc_l1_distance(&committed, &fresh, 64),
+                magnitude_diff: (f64::from(amp[0]) - f64::from(amplitude[i][0])).abs(),
+                fresnel_diff: (f64::from(amp[1]) - f64::from(amplitude[i][1])).abs(),
+                sphere_diff: (f64::from(amp[3]) - f64::from(amplitude[i][3])).abs(),
+            }
+        })
+        .collect()
+}
+
+/// Largest `∫|D_committed − D_refit|` (of 2 for disjoint lobes) with which a re-fitted cell still
+/// counts as reproduced. Re-fits from the committed warm starts land within ~10⁻⁵ on the machine
+/// that wrote the table (the start differs only by `f32` rounding); changing the fit's sample
+/// count from 32² to 64² moves cells by ~10⁻³.
+pub const CHECK_L1_TOLERANCE: f64 = 1.0e-3;
+
+/// Largest absolute difference of magnitude, fresnel and sphere terms in a re-fit: they do not
+/// depend on the warm start, so they agree to `f32` rounding.
+pub const CHECK_VALUE_TOLERANCE: f64 = 1.0e-6;
+
+/// `extra` more cells for [`check_cells`], spread over the table by a fixed stride (deterministic).
+pub fn spread_cells(extra: usize) -> Vec<(usize, usize)> {
+    let n = LTC_SIZE * LTC_SIZE;
+    (0..extra).map(|k| (k * 2_654_435_761 + 17) % n).map(|i| (i / LTC_SIZE, i % LTC_SIZE)).collect()
+}
+
+/// A spread of cells for checks: the corners, the first (sharpest) and last (roughest) rows, the
+/// θ = 0 and most grazing columns, and a few interior cells.
+pub const CHECK_CELLS: [(usize, usize); 12] =
+    [(63, 0), (63, 63), (0, 0), (0, 1), (0, 63), (1, 40), (8, 20), (20, 62), (32, 32), (45, 10), (55, 63), (62, 5)];
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use raywave_shared::ltc_table::{LTC_AMPLITUDE, LTC_FIT_VERSION, LTC_MATRIX, LTC_SIZE as TABLE_SIZE};
+
+    /// SplitMix64: a small deterministic generator for the Monte Carlo checks.
+    struct Rng(u64);
+    impl Rng {
+        fn next_f64(&mut self) -> f64 {
+            self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
+            let mut z = self.0;
+            z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+            z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+            z ^= z >> 31;
+            (z >> 11) as f64 / (1u64 << 53) as f64
+        }
+    }
+
+    /// `∫ f(ω) dω` over the directions within `max_theta` of `axis`, by the midpoint rule in
+    /// `(ξ, φ)` with `θ = max_theta·ξᵖ` (dense near the axis, for lobes peaked there).
+    fn graded_quadrature(axis: DVec3, max_theta: f64, p: i32, n: usize, f: impl Fn(DVec3) -> f64) -> f64 {
+        let z = axis.normalize();
+        let x = if z.x.abs() < 0.9 { DVec3::X } else { DVec3::Y };
+        let x = (x - z * z.dot(x)).normalize();
+        let y = z.cross(x);
+        let n_phi = 2 * n;
+        let mut sum = 0.0;
+        for i in 0..n {
+            let xi = (i as f64 + 0.5) / n as f64;
+            let theta = max_theta * xi.powi(p);
+            let dtheta = max_theta * p as f64 * xi.powi(p - 1) / n as f64;
+            let (st, ct) = theta.sin_cos();
+            let mut ring = 0.0;
+            for j in 0..n_phi {
+                let phi = 2.0 * PI * (j as f64 + 0.5) / n_phi as f64;
+                ring += f(st * phi.cos() * x + st * phi.sin() * y + ct * z);
+            }
+            sum += ring * st * dtheta * 2.0 * PI / n_phi as f64;
+        }
+        sum
+    }
+
+    /// `(∫ f·cos dl, ∫ f·cos·(1 − v·h)⁵ dl)` by quadrature: for sharp lobes (α < 0.1) over half
+    /// vectors (`dl = 4 (v·h) dh`) on a grid graded towards the normal, where `D` peaks; for rough
+    /// ones directly over `l` on a uniform `(θ, φ)` grid (the integrand is continuous there).
+    fn albedo_by_quadrature(ggx: &Ggx, n: usize) -> (f64, f64) {
+        let v = ggx.v;
+        let fresnel = |l: DVec3| (1.0 - v.dot((v + l).normalize()).max(0.0)).powi(5);
+        if ggx.alpha < 0.1 {
+            let f = |h: DVec3, with_fresnel: bool| {
+                let vh = v.dot(h);
+                if vh <= 0.0 {
+                    return 0.0;
+                }
+                let l = 2.0 * vh * h - v;
+                let w = ggx.eval_pdf(l).0 * 4.0 * vh;
+                if with_fresnel {
+                    w * (1.0 - vh).powi(5)
+                } else {
+                    w
+                }
+            };
+            let mag = graded_quadrature(DVec3::Z, PI / 2.0, 4, n, |h| f(h, false));
+            let fr = graded_quadrature(DVec3::Z, PI / 2.0, 4, n, |h| f(h, true));
+            (mag, fr)
+        } else {
+            let mag = graded_quadrature(DVec3::Z, PI / 2.0, 1, n, |l| ggx.eval_pdf(l).0);
+            let fr = graded_quadrature(DVec3::Z, PI / 2.0, 1, n, |l| ggx.eval_pdf(l).0 * fresnel(l));
+            (mag, fr)
+        }
+    }
+
+    #[test]
+    fn committed_table_is_from_this_fitter() {
+        assert_eq!(LTC_FIT_VERSION, FIT_VERSION, "regenerate shared/src/ltc_table.rs: {REGENERATE_COMMAND}");
+        assert_eq!(TABLE_SIZE as usize, LTC_SIZE);
+        assert_eq!(LTC_MATRIX.len(), LTC_SIZE * LTC_SIZE);
+        for (i, (m, amp)) in LTC_MATRIX.iter().zip(LTC_AMPLITUDE.iter()).enumerate() {
+            assert!(m.iter().chain(amp.iter()).all(|x| x.is_finite()), "cell {i}");
+            let ltc = Ltc::from_packed(*m);
+            assert!(ltc.det.is_finite() && ltc.det > 0.0, "cell {i}: det {}", ltc.det);
+            assert!(amp[0] > 0.0 && amp[0] <= 1.0, "cell {i}: magnitude {}", amp[0]);
+            assert!(amp[1] >= 0.0 && amp[1] <= amp[0], "cell {i}: fresnel {}", amp[1]);
+            assert_eq!(amp[2], 0.0);
+            assert!((0.0..=1.0).contains(&amp[3]), "cell {i}: sphere {}", amp[3]);
+        }
+        // θ = 0 cells are isotropic: M⁻¹ = diag(1, 1, m11) after normalization.
+        for a in 0..LTC_SIZE {
+            let m = LTC_MATRIX[cell_index(a, 0)];
+            assert!((m[0] - 1.0).abs() < 1e-6 && m[1] == 0.0 && m[2] == 0.0, "{m:?}");
+        }
+    }
+
+    #[test]
+    fn committed_file_is_what_the_generator_writes() {
+        // Same header (fit parameters, version, layout) and formatting: a hand edit or a fit with
+        // a non-default configuration shows up here.
+        let committed = include_str!("../../shared/src/ltc_table.rs");
+        let generated = packed_table_source(&FitConfig::default(), &LTC_MATRIX, &LTC_AMPLITUDE);
+        assert!(committed == generated, "shared/src/ltc_table.rs differs from the generator's output");
+    }
+
+    #[test]
+    fn ggx_ndf_and_visible_normals_are_normalized() {
+        for alpha in [1e-3, 0.05, 0.3, 1.0] {
+            let ggx = Ggx::new(alpha, DVec3::new(0.6, 0.0, 0.8));
+            let ndf = graded_quadrature(DVec3::Z, PI / 2.0, 4, 600, |h| ggx.d(h) * h.z);
+            assert!((ndf - 1.0).abs() < 1e-4, "α {alpha}: ∫D cos = {ndf}");
+            // Visible normals: ∫ G1(v) max(0, v·h) D(h) / v.z dh = 1.
+            let v = ggx.v;
+            let vis =
+                graded_quadrature(DVec3::Z, PI / 2.0, 4, 600, |h| ggx.g1_v() * v.dot(h).max(0.0) * ggx.d(h) / v.z);
+            assert!((vis - 1.0).abs() < 1e-4, "α {alpha}: ∫D_v = {vis}");
+        }
+    }
+
+    #[test]
+    fn ggx_sampler_matches_its_pdf() {
+        // pdf(sample(u)) against the density implied by the reflection, and the VNDF weight.
+        let ggx = Ggx::new(0.3, DVec3::new(0.8, 0.0, 0.6));
+        let mut rng = Rng(7);
+        for _ in 0..1000 {
+            let (l, h) = ggx.sample(rng.next_f64(), rng.next_f64());
+            assert!((l.length() - 1.0).abs() < 1e-12);
+            assert!((h - (l + ggx.v).normalize()).length() < 1e-9);
+            let (f, pdf) = ggx.eval_pdf(l);
+            let expect = ggx.g1_v() * ggx.d(h) / (4.0 * ggx.v.z);
+            assert!((pdf - expect).abs() <= 1e-9 * expect);
+            if l.z > 0.0 {
+                assert!(f / pdf <= 1.0 + 1e-12);
+            }
+        }
+        // ∫ pdf = 1 over the sphere (the sampler never fails).
+        let total = graded_quadrature(DVec3::new(-0.8, 0.0, 0.6), PI, 3, 600, |l| ggx.eval_pdf(l).1);
+        assert!((total - 1.0).abs() < 1e-3, "∫ pdf = {total}");
+    }
+
+    #[test]
+    fn ggx_albedo_is_at_most_one_and_matches_quadrature() {
+        let mut previous = f64::INFINITY;
+        for a in [0, 8, 16, 32, 48, 63] {
+            for t in [0, 20, 40, 56, 63] {
+                let ggx = Ggx::new(cell_alpha(a), cell_view(t));
+                let m = lobe_moments(&ggx, 256);
+                assert!(m.magnitude > 0.0 && m.magnitude <= 1.0, "({a}, {t}): {}", m.magnitude);
+                assert!(m.fresnel >= 0.0 && m.fresnel < m.magnitude);
+                if t == 0 {
+                    // At normal incidence the albedo falls with roughness (masking loss).
+                    assert!(m.magnitude < previous + 1e-9);
+                    previous = m.magnitude;
+                }
+            }
+        }
+        // Nearly smooth, normal incidence: no masking loss, albedo 1.
+        let smooth = lobe_moments(&Ggx::new(MIN_ALPHA, DVec3::Z), 64).magnitude;
+        assert!((smooth - 1.0).abs() < 1e-6, "{smooth}");
+        // Known value: at α = 1, D = 1/π, so the albedo at normal incidence is
+        // ∫ cos/(4π(1 + Λ(l))) dl = ½∫₀¹ μ/(1 + Λ(μ))... = 0.30685 (1-D quadrature, below).
+        let n = 200_000;
+        let one_d: f64 = (0..n)
+            .map(|i| {
+                let mu = (i as f64 + 0.5) / n as f64;
+                // f·cos = D·G2/(4 v.z) with v.z = 1, Λ(v) = 0; dl = dμ dφ.
+                2.0 * PI * (1.0 / PI) / (4.0 * (1.0 + Ggx::lambda(1.0, mu))) / n as f64
+            })
+            .sum();
+        let vndf = lobe_moments(&Ggx::new(1.0, DVec3::Z), 256).magnitude;
+        assert!((vndf - one_d).abs() < 1e-4, "{vndf} vs {one_d}");
+        assert!((one_d - 0.30685).abs() < 1e-4, "{one_d}");
+    }
+
+    #[test]
+    fn ltc_integrates_to_one_and_warp_matches_pdf() {
+        let mut cases = vec![
+            Ltc::new(DMat3::IDENTITY),
+            Ltc::new(DMat3::from_cols(DVec3::new(0.5, 0.0, 0.1), DVec3::new(0.0, 0.7, 0.0), DVec3::new(0.2, 0.0, 1.0))),
+        ];
+        for (a, t) in [(63, 0), (63, 63), (40, 32), (32, 63), (24, 50)] {
+            cases.push(Ltc::from_packed(LTC_MATRIX[cell_index(a, t)]));
+        }
+        for ltc in &cases {
+            let peak = ltc.warp(DVec3::Z).0;
+            let total = graded_quadrature(peak, PI, 3, 700, |l| ltc.pdf(l));
+            assert!((total - 1.0).abs() < 1e-4, "∫ D = {total} for {:?}", ltc.m);
+            let mut rng = Rng(3);
+            for _ in 0..200 {
+                let wo = cosine_direction(rng.next_f64(), rng.next_f64());
+                let (l, pdf) = ltc.warp(wo);
+                assert!((ltc.pdf(l) - pdf).abs() <= 1e-9 * pdf.max(1e-300), "{pdf} vs {}", ltc.pdf(l));
+            }
+        }
+    }
+
+    #[test]
+    fn ltc_packing_round_trips() {
+        let v = cell_view(30);
+        let ggx = Ggx::new(0.2, v);
+        let frame = cell_frame(30, &lobe_moments(&ggx, 32));
+        let ltc = Ltc::new(ltc_matrix(frame, 0.3, 0.2, -0.05));
+        let packed = ltc.packed().map(|x| x as f32);
+        let (m11, m22, m13) = params_from_packed(frame, packed);
+        assert!((m11 - 0.3).abs() < 1e-6 && (m22 - 0.2).abs() < 1e-6 && (m13 + 0.05).abs() < 1e-6);
+        // Same distribution from the packed form.
+        let back = Ltc::from_packed(packed);
+        assert!(ltc_l1_distance(&ltc, &back, 32) < 1e-5);
+    }
+
+    #[test]
+    fn nelder_mead_finds_the_rosenbrock_minimum() {
+        let rosen = |p: &[f64; 2]| (1.0 - p[0]).powi(2) + 100.0 * (p[1] - p[0] * p[0]).powi(2);
+        let m = nelder_mead(rosen, [-1.2, 1.0], 0.1, 1e-14, 2000);
+        assert!((m.x[0] - 1.0).abs() < 1e-4 && (m.x[1] - 1.0).abs() < 1e-4, "{m:?}");
+    }
+
+    #[test]
+    fn sphere_form_factor_matches_numerical_integration() {
+        let mut rng = Rng(11);
+        for &(z, len) in &[
+            (1.0, 0.3),
+            (0.5, 0.1),
+            (0.2, 0.3),
+            (0.0, 0.5),
+            (-0.3, 0.4),
+            (-0.05, 0.01),
+            (0.7, 0.9),
+            (-0.3, 0.2),
+            (-0.9, 0.99),
+        ] {
+            // Monte Carlo over the cap: uniform directions in the cone, weight max(0, cos).
+            let sin2 = len;
+            let cos_sigma = (1.0f64 - sin2).sqrt();
+            let axis = DVec3::new((1.0f64 - z * z).sqrt(), 0.0, z);
+            let x = DVec3::new(z, 0.0, -(1.0f64 - z * z).sqrt());
+            let y = DVec3::Y;
+            let n = 200_000;
+            let mut sum = 0.0;
+            for _ in 0..n {
+                let c = 1.0 - rng.next_f64() * (1.0 - cos_sigma);
+                let s = (1.0 - c * c).sqrt();
+                let phi = 2.0 * PI * rng.next_f64();
+                let d = s * phi.cos() * x + s * phi.sin() * y + c * axis;
+                sum += d.z.max(0.0);
+            }
+            let mc = sum / n as f64 * 2.0 * PI * (1.0 - cos_sigma);
+            let exact = sphere_cap_projected_solid_angle(z, sin2);
+            assert!((mc - exact).abs() < 3e-3 * (PI * sin2), "z {z} len {len}: {exact} vs MC {mc}");
+            let ff = sphere_form_factor(z, len);
+            assert!((ff - exact / (PI * len)).abs() < 1e-12);
+        }
+        assert_eq!(sphere_form_factor(0.5, 0.0), 0.5);
+        assert_eq!(sphere_form_factor(-0.5, 0.0), 0.0);
+        // Continuous across the cases.
+        for &len in &[0.1, 0.5, 0.99] {
+            let s: f64 = f64::sqrt(len);
+            for z in [s, -s] {
+                let (a, b) = (sphere_form_factor(z + 1e-9, len), sphere_form_factor(z - 1e-9, len));
+                assert!((a - b).abs() < 1e-6, "len {len} z {z}: {a} {b}");
+            }
+        }
+    }
+
+    #[test]
+    fn committed_magnitude_and_fresnel_match_independent_integration() {
+        // (1) Deterministic quadrature (see `albedo_by_quadrature`).
+        for (a, t) in [(0, 0), (0, 40), (8, 63), (20, 32), (40, 60), (63, 0), (63, 63), (50, 20)] {
+            let amp = LTC_AMPLITUDE[cell_index(a, t)];
+            let (mag, fr) = albedo_by_quadrature(&Ggx::new(cell_alpha(a), cell_view(t)), 500);
+            assert!((f64::from(amp[0]) - mag).abs() < 1e-3 * mag, "({a}, {t}): magnitude {} vs {mag}", amp[0]);
+            assert!((f64::from(amp[1]) - fr).abs() < 1e-3 * mag, "({a}, {t}): fresnel {} vs {fr}", amp[1]);
+        }
+        // (2) Monte Carlo with pseudo-random normals drawn from D(h)·h.z (ltc_code's sampler, not
+        //     the visible normals the fit uses), 1 %.
+        for (a, t) in [(4, 10), (20, 40), (40, 50), (63, 30)] {
+            let ggx = Ggx::new(cell_alpha(a), cell_view(t));
+            let alpha = ggx.alpha;
+            let mut rng = Rng(a as u64 * 100 + t as u64);
+            let n = 400_000;
+            let (mut mag, mut fr) = (0.0, 0.0);
+            for _ in 0..n {
+                let (u1, u2) = (rng.next_f64(), rng.next_f64());
+                let phi = 2.0 * PI * u1;
+                let r = alpha * (u2 / (1.0 - u2)).sqrt();
+                let h = DVec3::new(r * phi.cos(), r * phi.sin(), 1.0).normalize();
+                let vh = ggx.v.dot(h);
+                if vh <= 0.0 {
+                    continue;
+                }
+                let l = 2.0 * vh * h - ggx.v;
+                let pdf = ggx.d(h) * h.z / (4.0 * vh);
+                let w = ggx.eval_pdf(l).0 / pdf;
+                mag += w;
+                fr += w * (1.0 - vh).powi(5);
+            }
+            let (mag, fr) = (mag / n as f64, fr / n as f64);
+            let amp = LTC_AMPLITUDE[cell_index(a, t)];
+            assert!((f64::from(amp[0]) - mag).abs() < 0.01 * mag, "({a}, {t}): magnitude {} vs MC {mag}", amp[0]);
+            assert!((f64::from(amp[1]) - fr).abs() < 0.01 * mag, "({a}, {t}): fresnel {} vs MC {fr}", amp[1]);
+        }
+    }
+
+    #[test]
+    fn refitting_committed_cells_reproduces_them() {
+        let cfg = FitConfig::default();
+        let checks = check_cells(&CHECK_CELLS, &LTC_MATRIX, &LTC_AMPLITUDE, &cfg);
+        assert!(checks.len() >= 8);
+        for c in &checks {
+            let (a, t) = (c.refit.a, c.refit.t);
+            assert!(c.l1_distance < CHECK_L1_TOLERANCE, "({a}, {t}): L1 {}", c.l1_distance);
+            let v = CHECK_VALUE_TOLERANCE;
+            assert!(c.magnitude_diff <= v && c.fresnel_diff <= v && c.sphere_diff <= v, "({a}, {t}): {c:?}");
+        }
+    }
+}
