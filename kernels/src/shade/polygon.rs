@@ -14,45 +14,88 @@ use spirv_std::num_traits::Float;
 use core::f32::consts::PI;
 use glam::Vec3;
 
-/// Most corners a quad can have after clipping against one plane.
-pub const MAX_CLIPPED_CORNERS: usize = 5;
+/// Most corners a polygon here can have: a quad clipped against two planes (the surface's
+/// horizon, then the horizon of the LTC's cosine space) gains at most one corner per plane.
+pub const MAX_CORNERS: usize = 6;
 
-/// A convex polygon of up to [`MAX_CLIPPED_CORNERS`] corners.
+/// A convex polygon of up to [`MAX_CORNERS`] corners.
 #[derive(Copy, Clone, Debug, PartialEq)]
-pub struct ClippedPolygon {
+pub struct Polygon {
     /// Corners in order; only the first `count` are meaningful.
-    pub corners: [Vec3; MAX_CLIPPED_CORNERS],
-    /// Number of corners, 0 or 3..=5.
+    pub corners: [Vec3; MAX_CORNERS],
+    /// Number of corners, 0 or 3..=6.
     pub count: u32,
 }
 
-/// Clips the quad `q` (corners in order) against the half-space `z ≥ 0` (Sutherland–Hodgman).
-/// Corners exactly on the plane are kept; a quad entirely below yields 0 corners.
-pub fn clip_quad_to_horizon(q: [Vec3; 4]) -> ClippedPolygon {
-    let mut out = ClippedPolygon { corners: [Vec3::ZERO; MAX_CLIPPED_CORNERS], count: 0 };
-    let mut k = 0usize;
-    let mut i = 0usize;
-    while i < 4 {
-        let a = q[i];
-        let b = q[(i + 1) % 4];
-        let a_in = a.z >= 0.0;
-        let b_in = b.z >= 0.0;
-        if a_in && k < MAX_CLIPPED_CORNERS {
-            out.corners[k] = a;
-            k += 1;
-        }
-        if a_in != b_in && k < MAX_CLIPPED_CORNERS {
-            // The crossing point of edge a→b with z = 0; a.z ≠ b.z because exactly one is < 0.
-            let t = a.z / (a.z - b.z);
-            let mut crossing = a + t * (b - a);
-            crossing.z = 0.0;
-            out.corners[k] = crossing;
-            k += 1;
-        }
-        i += 1;
+impl Polygon {
+    /// The quad `q` (corners in order).
+    pub fn quad(q: [Vec3; 4]) -> Self {
+        Self { corners: [q[0], q[1], q[2], q[3], Vec3::ZERO, Vec3::ZERO], count: 4 }
     }
-    out.count = if k >= 3 { k as u32 } else { 0 };
-    out
+
+    /// Every corner mapped by `f` (a linear map keeps the polygon convex and its order).
+    pub fn map(mut self, f: impl Fn(Vec3) -> Vec3) -> Self {
+        let mut i = 0usize;
+        while i < MAX_CORNERS {
+            self.corners[i] = f(self.corners[i]);
+            i += 1;
+        }
+        self
+    }
+
+    /// The polygon clipped against the half-space `z ≥ 0` (Sutherland–Hodgman). Corners exactly
+    /// on the plane are kept; a polygon entirely below (or left with < 3 corners) becomes empty.
+    /// A polygon already at [`MAX_CORNERS`] is clipped with its last crossing dropped (never
+    /// happens for a quad clipped twice).
+    pub fn clip_to_horizon(&self) -> Self {
+        let n = self.count as usize;
+        let mut out = Polygon { corners: [Vec3::ZERO; MAX_CORNERS], count: 0 };
+        let mut k = 0usize;
+        let mut i = 0usize;
+        while i < n && n <= MAX_CORNERS {
+            let a = self.corners[i];
+            let b = self.corners[(i + 1) % n];
+            let a_in = a.z >= 0.0;
+            let b_in = b.z >= 0.0;
+            if a_in && k < MAX_CORNERS {
+                out.corners[k] = a;
+                k += 1;
+            }
+            if a_in != b_in && k < MAX_CORNERS {
+                // Where edge a→b crosses z = 0; a.z ≠ b.z because exactly one is < 0.
+                let t = a.z / (a.z - b.z);
+                let mut crossing = a + t * (b - a);
+                crossing.z = 0.0;
+                out.corners[k] = crossing;
+                k += 1;
+            }
+            i += 1;
+        }
+        out.count = if k >= 3 { k as u32 } else { 0 };
+        out
+    }
+
+    /// The form factor `∫ max(0, cos θ)/π dω` of the polygon (corners relative to the shading
+    /// point, z = normal) after clipping it to `z ≥ 0`, in `[0, 1]`, for either winding. 0 for a
+    /// polygon entirely below the horizon or seen edge-on.
+    pub fn form_factor(&self) -> f32 {
+        let clipped = self.clip_to_horizon();
+        let n = clipped.count as usize;
+        let mut sum = 0.0f32;
+        let mut i = 0usize;
+        while i < n {
+            let a = clipped.corners[i].normalize_or_zero();
+            let b = clipped.corners[(i + 1) % n].normalize_or_zero();
+            sum += edge_integral(a, b);
+            i += 1;
+        }
+        let form_factor = (sum / (2.0 * PI)).abs();
+        if form_factor.is_finite() {
+            form_factor.min(1.0)
+        } else {
+            0.0
+        }
+    }
 }
 
 /// The contribution `θ · (â × b̂)·z / |â × b̂|` of the edge from direction `a` to `b` (unit).
@@ -66,29 +109,9 @@ pub fn edge_integral(a: Vec3, b: Vec3) -> f32 {
     cross.z * theta_over_sin
 }
 
-/// The form factor `∫ max(0, cos θ)/π dω` of the quad with corners `q` (relative to the shading
-/// point, z = normal), in `[0, 1]`, for either winding (a light facing away is the caller's
-/// concern). 0 for a quad entirely below the horizon or seen edge-on.
+/// The form factor of the quad with corners `q` (see [`Polygon::form_factor`]).
 pub fn quad_form_factor(q: [Vec3; 4]) -> f32 {
-    let polygon = clip_quad_to_horizon(q);
-    let n = polygon.count as usize;
-    if n == 0 {
-        return 0.0;
-    }
-    let mut sum = 0.0f32;
-    let mut i = 0usize;
-    while i < n {
-        let a = polygon.corners[i].normalize_or_zero();
-        let b = polygon.corners[(i + 1) % n].normalize_or_zero();
-        sum += edge_integral(a, b);
-        i += 1;
-    }
-    let form_factor = (sum / (2.0 * PI)).abs();
-    if form_factor.is_finite() {
-        form_factor.min(1.0)
-    } else {
-        0.0
-    }
+    Polygon::quad(q).form_factor()
 }
 
 #[cfg(test)]
