@@ -4,6 +4,9 @@
 //! Coordinates there are millimetres; we convert to metres. Reflectances are the published spectra
 //! reduced to approximate linear sRGB. The light is lowered 0.1 mm below the ceiling (as most
 //! renderers of the data do) so the two coplanar surfaces do not fight for the same hits.
+//!
+//! Light quads list their corners counter-clockwise seen from below, so their triangles face −y
+//! (into the box) and the scene derives downward-emitting quad lights from them.
 
 use super::{Camera, Material, Mesh};
 use glam::Vec3;
@@ -39,11 +42,55 @@ const RED: Vec3 = Vec3::new(0.63, 0.065, 0.05);
 const GREEN: Vec3 = Vec3::new(0.14, 0.45, 0.091);
 
 /// The published light's radiance reduced to linear sRGB (the spectrum peaks near 18.4 at 700 nm).
-const LIGHT: Vec3 = Vec3::new(17.0, 12.0, 4.0);
+pub(super) const LIGHT: Vec3 = Vec3::new(17.0, 12.0, 4.0);
+
+/// Height of the lights' planes: 0.1 mm below the ceiling (548.8 mm).
+const LIGHT_Y: f32 = 548.7;
+
+/// `cornell-two-lights`: a warm light, 120 mm × 100 mm, over the front left (towards the red wall,
+/// in front of the tall block), and a cool one, 90 mm × 90 mm, over the back right (towards the
+/// green wall, behind the short block). Luminance × area: 17.0 · 12 000 mm² for the warm one, 10.2 · 8100 mm² for the cool
+/// one (2.5 times less), together 1.7 times the published light's 12.5 · 13 650 mm².
+pub(super) const WARM_LIGHT: Vec3 = Vec3::new(24.0, 16.0, 6.0);
+/// See [`WARM_LIGHT`].
+pub(super) const COOL_LIGHT: Vec3 = Vec3::new(6.0, 10.0, 24.0);
+
+/// Silver's reflectance at normal incidence (F0) in linear sRGB, the usual PBR reference value.
+const SILVER: Vec3 = Vec3::new(0.972, 0.960, 0.915);
+
+/// A rectangular light on the ceiling spanning `x0..x1` × `z0..z1` mm, corners counter-clockwise
+/// seen from below so it faces down.
+fn ceiling_light(name: &str, [x0, x1]: [f32; 2], [z0, z1]: [f32; 2], radiance: Vec3) -> Mesh {
+    quad(
+        name,
+        [[x1, LIGHT_Y, z0], [x1, LIGHT_Y, z1], [x0, LIGHT_Y, z1], [x0, LIGHT_Y, z0]],
+        Material { emission: radiance, ..Material::diffuse(Vec3::ONE) },
+    )
+}
 
 /// The eight meshes of the box: floor, ceiling, back wall, right (green) and left (red) walls, the
 /// short and tall blocks, and the light.
 pub fn meshes() -> Vec<Mesh> {
+    let mut meshes = room(Material::diffuse(WHITE), Material::diffuse(WHITE));
+    meshes.push(ceiling_light("light", [213.0, 343.0], [227.0, 332.0], LIGHT));
+    meshes
+}
+
+/// The nine meshes of `cornell-two-lights`: the box of [`meshes`] with a glossy white short block
+/// (dielectric, roughness 0.25) and a metallic silver tall block (roughness 0.3), and the published
+/// light replaced by a warm and a cool light ([`WARM_LIGHT`], [`COOL_LIGHT`]).
+pub fn two_lights_meshes() -> Vec<Mesh> {
+    let glossy = Material { roughness: 0.25, ..Material::diffuse(WHITE) };
+    let metal = Material { base_color: SILVER, roughness: 0.3, metallic: 1.0, emission: Vec3::ZERO };
+    let mut meshes = room(glossy, metal);
+    meshes.push(ceiling_light("warm light", [330.0, 450.0], [120.0, 220.0], WARM_LIGHT));
+    meshes.push(ceiling_light("cool light", [105.0, 195.0], [335.0, 425.0], COOL_LIGHT));
+    meshes
+}
+
+/// The box without its light: floor, ceiling, back, right and left walls, then the short and tall
+/// blocks in the given materials.
+fn room(short_block: Material, tall_block: Material) -> Vec<Mesh> {
     vec![
         quad(
             "floor",
@@ -79,7 +126,7 @@ pub fn meshes() -> Vec<Mesh> {
                 [[82.0, 0.0, 225.0], [82.0, 165.0, 225.0], [130.0, 165.0, 65.0], [130.0, 0.0, 65.0]],
                 [[240.0, 0.0, 272.0], [240.0, 165.0, 272.0], [82.0, 165.0, 225.0], [82.0, 0.0, 225.0]],
             ],
-            Material::diffuse(WHITE),
+            short_block,
         ),
         block(
             "tall block",
@@ -90,12 +137,7 @@ pub fn meshes() -> Vec<Mesh> {
                 [[314.0, 0.0, 456.0], [314.0, 330.0, 456.0], [265.0, 330.0, 296.0], [265.0, 0.0, 296.0]],
                 [[265.0, 0.0, 296.0], [265.0, 330.0, 296.0], [423.0, 330.0, 247.0], [423.0, 0.0, 247.0]],
             ],
-            Material::diffuse(WHITE),
-        ),
-        quad(
-            "light",
-            [[343.0, 548.7, 227.0], [343.0, 548.7, 332.0], [213.0, 548.7, 332.0], [213.0, 548.7, 227.0]],
-            Material { emission: LIGHT, ..Material::diffuse(Vec3::ONE) },
+            tall_block,
         ),
     ]
 }

@@ -81,6 +81,7 @@ fn material(m: &gltf::Material) -> Material {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use raywave_shared::Light;
     use std::io::Write;
 
     /// A glTF file with one quad (two triangles) in an embedded base64 buffer: 4 positions
@@ -163,6 +164,47 @@ mod tests {
         let f = file(&text);
         let err = load(f.path()).unwrap_err();
         assert!(matches!(err, Error::SceneLoad { .. }), "{err}");
+    }
+
+    #[test]
+    fn emissive_rectangle_becomes_one_downward_quad_light() {
+        // tests/data/emissive_quad.gltf: a 2 m × 2 m floor facing +y at y = 0 and a 0.5 m × 0.25 m
+        // lamp node translated to y = 1.5, its rectangle split along the (1, 3) diagonal and
+        // wound counter-clockwise seen from below; emissive factor (1, 0.5, 0.25), strength 4.
+        let path = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../tests/data/emissive_quad.gltf"));
+        let scene = load(path).unwrap();
+        assert_eq!(scene.meshes().len(), 2);
+        assert_eq!(scene.unsupported_emitters(), 0);
+        let lamp = Light::quad(
+            Vec3::new(-0.25, 1.5, -0.125),
+            Vec3::new(0.5, 0.0, 0.0),
+            Vec3::new(0.0, 0.0, 0.25),
+            Vec3::new(4.0, 2.0, 1.0),
+            false,
+        );
+        assert_eq!(scene.lights(), &[lamp]);
+        let light_mesh = scene.light_mesh(0);
+        assert_eq!(scene.meshes()[light_mesh].name, "lamp primitive 0");
+        assert_eq!(scene.mesh_light(light_mesh), Some(0));
+        assert_eq!(scene.mesh_light(1 - light_mesh), None);
+        let facing = lamp.edge_u.truncate().cross(lamp.edge_v.truncate());
+        assert!(facing.normalize().abs_diff_eq(Vec3::NEG_Y, 1e-6), "emits down, towards the floor: {facing}");
+        assert!(crate::lights::validate_lights(scene.lights()).is_ok());
+    }
+
+    #[test]
+    fn negative_emissive_strength_is_an_error() {
+        let lamp =
+            std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../tests/data/emissive_quad.gltf")).unwrap();
+        let text = lamp.replace(r#""emissiveStrength": 4"#, r#""emissiveStrength": -2"#);
+        assert_ne!(text, lamp);
+        let f = file(&text);
+        match load(f.path()) {
+            Err(Error::InvalidParameter { name: "material.emission", reason }) => {
+                assert!(reason.contains("lamp primitive 0"), "{reason}");
+            }
+            other => panic!("expected an invalid material.emission, got {other:?}"),
+        }
     }
 
     #[test]

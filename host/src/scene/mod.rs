@@ -1,12 +1,15 @@
-//! Scenes: triangle meshes with a camera, validated before any stage sees them.
+//! Scenes: triangle meshes with a camera, validated before any stage sees them, and the analytic
+//! quad lights derived from their emissive parallelograms (see [`Scene::lights`]).
 
 mod cornell;
+mod emitters;
 mod gltf;
 mod obj;
 pub mod procedural;
 
 use crate::error::{Error, Result};
 use glam::{Vec2, Vec3};
+use raywave_shared::Light;
 use std::path::Path;
 
 /// A triangle mesh, one instance in the acceleration structures.
@@ -66,19 +69,21 @@ pub struct SurfaceHit {
     pub material: Material,
 }
 
-/// A validated scene: meshes and a camera. Construct it with [`Scene::load`] or
-/// [`Scene::new`], which both validate.
+/// A validated scene: meshes, a camera and the quad lights derived from the emissive meshes.
+/// Construct it with [`Scene::load`] or [`Scene::new`], which both validate.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Scene {
     name: String,
     meshes: Vec<Mesh>,
     camera: Camera,
     dropped_degenerate: usize,
+    lights: emitters::DerivedLights,
 }
 
-/// Names of the built-in scenes, usable as `builtin:NAME`: the Cornell box, a field of 64
+/// Names of the built-in scenes, usable as `builtin:NAME`: the Cornell box; the Cornell box lit by
+/// two smaller coloured ceiling lights, with a glossy and a metallic block; a field of 64
 /// icospheres (1.3 M triangles) and a hairball of 200 000 thin random triangles.
-pub const BUILTIN_SCENES: &[&str] = &["cornell", "spheres", "hairball"];
+pub const BUILTIN_SCENES: &[&str] = &["cornell", "cornell-two-lights", "spheres", "hairball"];
 
 impl Scene {
     /// Loads a scene: `builtin:NAME` for a built-in scene, otherwise a path to a Wavefront OBJ
@@ -86,6 +91,9 @@ impl Scene {
     pub fn load(spec: &str) -> Result<Scene> {
         match spec.strip_prefix("builtin:") {
             Some("cornell") => Scene::new("builtin:cornell", cornell::meshes(), cornell::camera()),
+            Some("cornell-two-lights") => {
+                Scene::new("builtin:cornell-two-lights", cornell::two_lights_meshes(), cornell::camera())
+            }
             Some("spheres") => {
                 let (meshes, camera) = procedural::sphere_field(4, 5);
                 Scene::new("builtin:spheres", meshes, camera)
@@ -114,8 +122,13 @@ impl Scene {
     /// Builds a scene from meshes and a camera after validating every vertex and triangle.
     /// `name` identifies the scene in error messages (a file path or `builtin:NAME`). Zero-area
     /// triangles are dropped and counted ([`Scene::dropped_degenerate`]), and meshes left empty
-    /// are removed; a non-finite vertex, an out-of-range index, a degenerate camera or a scene
-    /// without any triangle of non-zero area is an error.
+    /// are removed; a non-finite vertex, an out-of-range index, a degenerate camera, a negative or
+    /// non-finite emission, a derived light whose power overflows `f32` or a scene without any
+    /// triangle of non-zero area is an error.
+    ///
+    /// Every remaining mesh whose material emits (non-zero emission) and whose triangles form one
+    /// planar parallelogram becomes one quad light ([`Scene::lights`]); other emissive meshes are
+    /// counted ([`Scene::unsupported_emitters`]). Emissive meshes stay in the scene either way.
     pub fn new(name: &str, mut meshes: Vec<Mesh>, camera: Camera) -> Result<Scene> {
         check_indices_and_vertices(name, &meshes)?;
         let before: usize = meshes.iter().map(|m| m.triangles.len()).sum();
@@ -127,10 +140,40 @@ impl Scene {
             });
         }
         meshes.retain(|m| !m.triangles.is_empty());
-        let scene = Scene { name: name.to_owned(), meshes, camera, dropped_degenerate: 0 };
-        let scene = Scene { dropped_degenerate: before - scene.triangle_count(), ..scene };
+        let dropped_degenerate = before - meshes.iter().map(|m| m.triangles.len()).sum::<usize>();
+        let lights = if u32::try_from(meshes.len()).is_ok() { emitters::derive(&meshes) } else { Default::default() };
+        let scene = Scene { name: name.to_owned(), meshes, camera, dropped_degenerate, lights };
         scene.validate()?;
         Ok(scene)
+    }
+
+    /// The analytic lights: one one-sided [`Light::quad`] per emissive mesh whose triangles form
+    /// one planar parallelogram (two triangles sharing a diagonal, matched within a relative
+    /// tolerance of 10⁻⁴), in mesh order, with the mesh's emission as radiance. Each emits on
+    /// the side its triangles' counter-clockwise winding faces (the glTF and OBJ front face):
+    /// the light's corner is the first triangle's corner off the diagonal and its edges run to
+    /// that triangle's next and previous corners, so `edge_u × edge_v` is the triangle's
+    /// counter-clockwise normal. The meshes stay in [`Scene::meshes`], so rays still hit them.
+    pub fn lights(&self) -> &[Light] {
+        &self.lights.lights
+    }
+
+    /// The index in [`Scene::meshes`] (the instance index) of the mesh that light `light` came
+    /// from. Panics if `light` is not below `lights().len()`, like slice indexing.
+    pub fn light_mesh(&self, light: usize) -> usize {
+        self.lights.light_meshes[light] as usize
+    }
+
+    /// The index in [`Scene::lights`] of mesh (instance) `mesh`'s light, or `None` if that mesh
+    /// is not a light. Panics if `mesh` is not below `meshes().len()`, like slice indexing.
+    pub fn mesh_light(&self, mesh: usize) -> Option<u32> {
+        self.lights.mesh_lights[mesh]
+    }
+
+    /// Emissive meshes that did not become lights because their triangles are not one planar
+    /// parallelogram. They still emit where a ray hits them, but are never sampled as lights.
+    pub fn unsupported_emitters(&self) -> usize {
+        self.lights.unsupported
     }
 
     /// Zero-area triangles removed when the scene was built.
@@ -201,6 +244,27 @@ impl Scene {
                 reason: format!("{}: degenerate camera {c:?}", self.name),
             });
         }
+        for mesh in &self.meshes {
+            let e = mesh.material.emission;
+            if !e.is_finite() || e.min_element() < 0.0 {
+                return Err(Error::InvalidParameter {
+                    name: "material.emission",
+                    reason: format!(
+                        "{}: mesh {:?} emits {e}; emission must be finite and non-negative",
+                        self.name, mesh.name
+                    ),
+                });
+            }
+        }
+        for (index, light) in self.lights().iter().enumerate() {
+            crate::lights::validate_light(index, light).map_err(|err| match err {
+                Error::InvalidParameter { name, reason } => Error::InvalidParameter {
+                    name,
+                    reason: format!("{}: mesh {:?}: {reason}", self.name, self.meshes[self.light_mesh(index)].name),
+                },
+                other => other,
+            })?;
+        }
         Ok(())
     }
 }
@@ -269,6 +333,142 @@ mod tests {
         let scene = Scene::load("builtin:cornell").unwrap();
         assert_eq!(scene.meshes().len(), 8);
         assert_eq!(scene.triangle_count(), 2 * (5 + 1 + 5 + 5));
+    }
+
+    fn emitter(positions: Vec<Vec3>, triangles: Vec<[u32; 3]>, emission: Vec3) -> Mesh {
+        Mesh { material: Material { emission, ..Material::diffuse(Vec3::ONE) }, ..triangle_mesh(positions, triangles) }
+    }
+
+    fn facing(light: &Light) -> Vec3 {
+        light.edge_u.truncate().cross(light.edge_v.truncate()).normalize()
+    }
+
+    #[test]
+    fn cornell_has_one_downward_light_of_the_published_radiance() {
+        let scene = Scene::load("builtin:cornell").unwrap();
+        assert_eq!(scene.lights().len(), 1);
+        assert_eq!(scene.unsupported_emitters(), 0);
+        let light = scene.lights()[0];
+        assert_eq!(light.radiance.truncate(), cornell::LIGHT);
+        assert_eq!(light.two_sided, 0);
+        assert!(facing(&light).abs_diff_eq(Vec3::NEG_Y, 1e-6), "{}", facing(&light));
+        let area = light.edge_u.truncate().cross(light.edge_v.truncate()).length();
+        assert!((area - 0.130 * 0.105).abs() < 1e-6, "{area}");
+        assert_eq!(scene.meshes()[scene.light_mesh(0)].name, "light");
+        assert_eq!(scene.mesh_light(scene.light_mesh(0)), Some(0));
+        assert_eq!((0..scene.meshes().len()).filter(|&m| scene.mesh_light(m).is_some()).count(), 1);
+        assert!(crate::lights::validate_lights(scene.lights()).is_ok());
+    }
+
+    #[test]
+    fn cornell_two_lights_has_two_coloured_lights_and_glossy_blocks() {
+        let scene = Scene::load("builtin:cornell-two-lights").unwrap();
+        assert!(BUILTIN_SCENES.contains(&"cornell-two-lights"));
+        assert_eq!(scene.camera(), Scene::load("builtin:cornell").unwrap().camera());
+        assert_eq!((scene.lights().len(), scene.unsupported_emitters()), (2, 0));
+        assert!(crate::lights::validate_lights(scene.lights()).is_ok());
+        let radiances: Vec<Vec3> = scene.lights().iter().map(|l| l.radiance.truncate()).collect();
+        assert_eq!(radiances, [cornell::WARM_LIGHT, cornell::COOL_LIGHT]);
+        for (k, light) in scene.lights().iter().enumerate() {
+            assert!(facing(light).abs_diff_eq(Vec3::NEG_Y, 1e-6), "light {k}: {}", facing(light));
+            assert!((light.position.y - 0.5487).abs() < 1e-6);
+            assert_eq!(scene.mesh_light(scene.light_mesh(k)), Some(k as u32));
+        }
+        let block = |name: &str| scene.meshes().iter().find(|m| m.name == name).unwrap().material;
+        assert_eq!((block("short block").roughness, block("short block").metallic), (0.25, 0.0));
+        assert_eq!((block("tall block").roughness, block("tall block").metallic), (0.3, 1.0));
+        assert!(scene.meshes().iter().all(|m| m.name != "light"));
+    }
+
+    #[test]
+    fn builtin_scenes_lights_are_valid() {
+        for name in BUILTIN_SCENES {
+            let scene = Scene::load(&format!("builtin:{name}")).unwrap();
+            assert!(crate::lights::validate_lights(scene.lights()).is_ok(), "{name}");
+            assert_eq!(scene.unsupported_emitters(), 0, "{name}");
+        }
+    }
+
+    #[test]
+    fn emissive_parallelograms_become_lights_facing_their_front() {
+        // A unit square in the z = 1 plane; counter-clockwise seen from +z is 0 1 2 3. Both
+        // diagonals, both windings, indexed or as six separate vertices.
+        let c =
+            [Vec3::new(0.0, 0.0, 1.0), Vec3::new(1.0, 0.0, 1.0), Vec3::new(1.0, 1.0, 1.0), Vec3::new(0.0, 1.0, 1.0)];
+        let splits: [([[u32; 3]; 2], Vec3); 4] = [
+            ([[0, 1, 2], [0, 2, 3]], Vec3::Z),
+            ([[0, 1, 3], [1, 2, 3]], Vec3::Z),
+            ([[0, 2, 1], [0, 3, 2]], Vec3::NEG_Z),
+            ([[0, 3, 1], [1, 3, 2]], Vec3::NEG_Z),
+        ];
+        for (triangles, front) in splits {
+            let flat: Vec<Vec3> = triangles.iter().flatten().map(|&i| c[i as usize]).collect();
+            for mesh in [
+                emitter(c.to_vec(), triangles.to_vec(), Vec3::splat(2.0)),
+                emitter(flat, vec![[0, 1, 2], [3, 4, 5]], Vec3::splat(2.0)),
+            ] {
+                let floor = triangle_mesh(vec![Vec3::ZERO, Vec3::X, Vec3::Y], vec![[0, 1, 2]]);
+                let scene = Scene::new("test", vec![floor, mesh], cornell::camera()).unwrap();
+                assert_eq!((scene.lights().len(), scene.unsupported_emitters()), (1, 0), "{triangles:?}");
+                let light = scene.lights()[0];
+                assert_eq!(facing(&light), front, "{triangles:?}");
+                assert_eq!(light.edge_u.truncate().cross(light.edge_v.truncate()).length(), 1.0);
+                assert_eq!((scene.light_mesh(0), scene.mesh_light(0), scene.mesh_light(1)), (1, None, Some(0)));
+                // The emitter stays geometry.
+                assert_eq!(scene.triangle_count(), 3);
+            }
+        }
+    }
+
+    #[test]
+    fn non_planar_and_other_emitters_are_counted_not_lit() {
+        let quad = vec![[0, 1, 2], [0, 2, 3]];
+        let bent = emitter(vec![Vec3::ZERO, Vec3::X, Vec3::new(1.0, 1.0, 0.2), Vec3::Y], quad.clone(), Vec3::ONE);
+        let trapezoid = emitter(vec![Vec3::ZERO, Vec3::X, Vec3::new(0.7, 1.0, 0.0), Vec3::Y], quad.clone(), Vec3::ONE);
+        let sphere = Mesh {
+            material: Material { emission: Vec3::ONE, ..Material::diffuse(Vec3::ONE) },
+            ..procedural::icosphere("ball", Vec3::ZERO, 1.0, 1, Vec3::ONE)
+        };
+        let scene = Scene::new("test", vec![bent, trapezoid, sphere], cornell::camera()).unwrap();
+        assert_eq!((scene.lights().len(), scene.unsupported_emitters()), (0, 3));
+        assert!((0..3).all(|m| scene.mesh_light(m).is_none()));
+    }
+
+    #[test]
+    fn dark_and_degenerate_quads_are_not_lights() {
+        let square = vec![Vec3::ZERO, Vec3::X, Vec3::new(1.0, 1.0, 0.0), Vec3::Y];
+        let dark = emitter(square.clone(), vec![[0, 1, 2], [0, 2, 3]], Vec3::ZERO);
+        // One triangle is degenerate and dropped; the single triangle left is no parallelogram.
+        let half = emitter(square.clone(), vec![[0, 1, 2], [0, 2, 2]], Vec3::ONE);
+        let scene = Scene::new("test", vec![dark, half], cornell::camera()).unwrap();
+        assert_eq!(scene.dropped_degenerate(), 1);
+        assert_eq!((scene.lights().len(), scene.unsupported_emitters()), (0, 1));
+        // A quad collapsed onto a line has only zero-area triangles: dropped, no light, no mesh.
+        let line =
+            emitter(vec![Vec3::ZERO, Vec3::X, Vec3::X * 2.0, Vec3::X * 3.0], vec![[0, 1, 2], [0, 2, 3]], Vec3::ONE);
+        let lit = emitter(square, vec![[0, 1, 2], [0, 2, 3]], Vec3::ONE);
+        let scene = Scene::new("test", vec![line, lit], cornell::camera()).unwrap();
+        assert_eq!((scene.meshes().len(), scene.lights().len(), scene.unsupported_emitters()), (1, 1, 0));
+        assert_eq!(scene.light_mesh(0), 0, "mesh indices count after empty meshes are removed");
+    }
+
+    #[test]
+    fn invalid_emission_and_overflowing_light_power_are_errors() {
+        let square = vec![Vec3::ZERO, Vec3::X, Vec3::new(1.0, 1.0, 0.0), Vec3::Y];
+        for (emission, field) in [
+            (Vec3::new(1.0, -1.0, 0.0), "material.emission"),
+            (Vec3::new(f32::NAN, 1.0, 1.0), "material.emission"),
+            (Vec3::splat(f32::INFINITY), "material.emission"),
+            (Vec3::splat(f32::MAX), "light.radiance"),
+        ] {
+            match scene_with(emitter(square.clone(), vec![[0, 1, 2], [0, 2, 3]], emission)) {
+                Err(Error::InvalidParameter { name, reason }) => {
+                    assert_eq!(name, field, "{emission}");
+                    assert!(reason.contains("test") && reason.contains("\"m\""), "{reason}");
+                }
+                other => panic!("{emission}: expected an invalid {field}, got {other:?}"),
+            }
+        }
     }
 
     #[test]

@@ -1,0 +1,265 @@
+//! Analytic quad lights derived from emissive meshes.
+//!
+//! A mesh becomes one [`Light::quad`] when its material's emission is non-zero and its (already
+//! non-degenerate) triangles form one planar parallelogram:
+//!
+//! - exactly two triangles that share one edge, the parallelogram's diagonal (shared corners are
+//!   matched by position within the tolerance, so duplicated vertices, as non-indexed glTF
+//!   primitives have, still match);
+//! - the corner of the second triangle off the diagonal lies on the first triangle's plane, and
+//!   the four corners form a parallelogram (`p + q = s₀ + s₁` for the off-diagonal corners `p`, `q`
+//!   and the diagonal's ends `s₀`, `s₁`, i.e. opposite edges are equal);
+//! - both triangles wind the same way, so the mesh has one front face.
+//!
+//! Tolerance: `1e-4 · d + 16 ε · m`, with `d` the longest distance between the six triangle
+//! corners, `m` their largest absolute coordinate and `ε` the `f32` machine epsilon: a relative
+//! error of 10⁻⁴ in the shape, plus the rounding of vertices far from the origin (transformed glTF
+//! positions). The checks run in `f64`.
+//!
+//! **Orientation.** The light's corner is the first triangle's corner off the diagonal, `p`; its
+//! edges run from `p` to the triangle's next and previous corners in the triangle's own order.
+//! Then `edge_u × edge_v` is the first triangle's counter-clockwise normal, the side glTF and OBJ
+//! call the front face, and the light emits there (one-sided; the kernels' quad lights emit
+//! towards `edge_u × edge_v`). The second triangle must agree.
+//!
+//! Everything else that emits (more or fewer triangles, non-planar or non-parallelogram shapes,
+//! inconsistent winding) is counted as an unsupported emitter and stays plain geometry.
+
+use super::Mesh;
+use glam::Vec3;
+use raywave_shared::Light;
+
+/// Relative shape tolerance (see the module documentation).
+const RELATIVE_TOLERANCE: f64 = 1e-4;
+
+/// Rounding slack in units of `f32::EPSILON` times the largest absolute coordinate.
+const ROUNDING_SLACK: f64 = 16.0 * f32::EPSILON as f64;
+
+/// The lights derived from a scene's meshes.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub(super) struct DerivedLights {
+    /// One quad light per emissive parallelogram mesh, in mesh order.
+    pub lights: Vec<Light>,
+    /// For each light, the index of the mesh it came from.
+    pub light_meshes: Vec<u32>,
+    /// For each mesh, the index of its light, if it has one.
+    pub mesh_lights: Vec<Option<u32>>,
+    /// Emissive meshes that are not parallelograms.
+    pub unsupported: usize,
+}
+
+/// Derives a quad light from every emissive parallelogram mesh (see the module documentation).
+/// Mesh and light counts must fit in `u32` (the scene checks the mesh count before this).
+pub(super) fn derive(meshes: &[Mesh]) -> DerivedLights {
+    let mut derived = DerivedLights { mesh_lights: vec![None; meshes.len()], ..Default::default() };
+    for (index, mesh) in meshes.iter().enumerate() {
+        let emission = mesh.material.emission;
+        if emission == Vec3::ZERO {
+            continue;
+        }
+        match parallelogram(mesh) {
+            Some(quad) => {
+                derived.mesh_lights[index] = Some(derived.lights.len() as u32);
+                derived.light_meshes.push(index as u32);
+                derived.lights.push(Light::quad(quad.corner, quad.edge_u, quad.edge_v, emission, false));
+            }
+            None => derived.unsupported += 1,
+        }
+    }
+    derived
+}
+
+/// A parallelogram `corner + s·edge_u + t·edge_v`, `s, t ∈ [0, 1]`, facing `edge_u × edge_v`.
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub(super) struct Parallelogram {
+    pub corner: Vec3,
+    pub edge_u: Vec3,
+    pub edge_v: Vec3,
+}
+
+/// The mesh as one front-facing parallelogram, if it is one (see the module documentation).
+pub(super) fn parallelogram(mesh: &Mesh) -> Option<Parallelogram> {
+    let [first, second] = mesh.triangles.as_slice() else { return None };
+    let corners = |t: &[u32; 3]| t.map(|i| mesh.positions.get(i as usize).copied());
+    let (a, b) = (corners(first), corners(second));
+    let a: [Vec3; 3] = [a[0]?, a[1]?, a[2]?];
+    let b: [Vec3; 3] = [b[0]?, b[1]?, b[2]?];
+    let (ad, bd) = (a.map(Vec3::as_dvec3), b.map(Vec3::as_dvec3));
+    let all = [ad[0], ad[1], ad[2], bd[0], bd[1], bd[2]];
+    let mut diameter = 0.0f64;
+    for (i, p) in all.iter().enumerate() {
+        for q in &all[i + 1..] {
+            diameter = diameter.max(p.distance(*q));
+        }
+    }
+    let magnitude = all.iter().fold(0.0f64, |m, p| m.max(p.abs().max_element()));
+    let tolerance = RELATIVE_TOLERANCE * diameter + ROUNDING_SLACK * magnitude;
+    if !tolerance.is_finite() {
+        return None;
+    }
+
+    // Match the first triangle's corners to the second's: exactly two shared corners, each with
+    // exactly one partner, two different partners.
+    let mut partner = [None; 3];
+    for (i, p) in ad.iter().enumerate() {
+        let mut near = (0..3).filter(|&j| p.distance(bd[j]) <= tolerance);
+        partner[i] = near.next();
+        if near.next().is_some() {
+            return None;
+        }
+    }
+    let shared: Vec<usize> = partner.iter().flatten().copied().collect();
+    if shared.len() != 2 || shared[0] == shared[1] {
+        return None;
+    }
+    let off_a = partner.iter().position(Option::is_none)?;
+    let off_b = (0..3).find(|j| !shared.contains(j))?;
+
+    // The first triangle from its off-diagonal corner, in its own (counter-clockwise) order.
+    let (p, x, y) = (ad[off_a], ad[(off_a + 1) % 3], ad[(off_a + 2) % 3]);
+    let q = bd[off_b];
+    let normal = (x - p).cross(y - p);
+    let second_normal = (bd[1] - bd[0]).cross(bd[2] - bd[0]);
+    let unit = normal.try_normalize()?;
+    let consistent = unit.dot(second_normal.try_normalize()?) > 0.0;
+    let planar = (q - p).dot(unit).abs() <= tolerance;
+    let parallelogram = (x + y - p - q).length() <= tolerance;
+    if !(consistent && planar && parallelogram) {
+        return None;
+    }
+
+    let corner = a[off_a];
+    let edge_u = a[(off_a + 1) % 3] - corner;
+    let edge_v = a[(off_a + 2) % 3] - corner;
+    let area = edge_u.cross(edge_v);
+    if area == Vec3::ZERO || !area.is_finite() || area.as_dvec3().dot(normal) <= 0.0 {
+        return None;
+    }
+    Some(Parallelogram { corner, edge_u, edge_v })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::Material;
+
+    fn emissive(positions: Vec<Vec3>, triangles: Vec<[u32; 3]>) -> Mesh {
+        Mesh {
+            name: "emitter".into(),
+            positions,
+            triangles,
+            material: Material { emission: Vec3::new(3.0, 2.0, 1.0), ..Material::diffuse(Vec3::ONE) },
+        }
+    }
+
+    /// The four corners a parallelogram spans, in cyclic order from its corner.
+    fn quad_corners(q: &Parallelogram) -> [Vec3; 4] {
+        [q.corner, q.corner + q.edge_u, q.corner + q.edge_u + q.edge_v, q.corner + q.edge_v]
+    }
+
+    /// Whether every corner of `got` is near one of `want` and vice versa.
+    fn same_corner_set(got: [Vec3; 4], want: [Vec3; 4], tolerance: f32) -> bool {
+        let covers = |a: &[Vec3; 4], b: &[Vec3; 4]| a.iter().all(|p| b.iter().any(|q| p.distance(*q) <= tolerance));
+        covers(&got, &want) && covers(&want, &got)
+    }
+
+    #[test]
+    fn parallelograms_split_either_way_with_either_winding() {
+        // A slanted parallelogram (not a rectangle) in a tilted plane, away from the origin.
+        let origin = Vec3::new(10.0, -3.0, 4.5);
+        let (u, v) = (Vec3::new(2.0, 0.5, 0.0), Vec3::new(0.75, 0.25, 1.5));
+        let c = [origin, origin + u, origin + u + v, origin + v];
+        let front = u.cross(v).normalize();
+        // Counter-clockwise seen from `front`: 0 1 2 3. Both diagonals, both windings, rotated starts.
+        let splits: [([[u32; 3]; 2], f32); 6] = [
+            ([[0, 1, 2], [0, 2, 3]], 1.0),
+            ([[0, 1, 3], [1, 2, 3]], 1.0),
+            ([[2, 3, 1], [3, 0, 1]], 1.0),
+            ([[0, 2, 1], [0, 3, 2]], -1.0),
+            ([[0, 3, 1], [1, 3, 2]], -1.0),
+            ([[3, 2, 0], [2, 1, 0]], -1.0),
+        ];
+        for (triangles, facing) in splits {
+            // Indexed and unindexed (six vertices, like a glTF primitive without indices).
+            let indexed = emissive(c.to_vec(), triangles.to_vec());
+            let flat = triangles.iter().flatten().map(|&i| c[i as usize]).collect();
+            let unindexed = emissive(flat, vec![[0, 1, 2], [3, 4, 5]]);
+            for mesh in [indexed, unindexed] {
+                let q = parallelogram(&mesh).unwrap_or_else(|| panic!("{triangles:?} not detected"));
+                assert!(same_corner_set(quad_corners(&q), c, 1e-5), "{triangles:?}: {q:?}");
+                let n = q.edge_u.cross(q.edge_v);
+                assert!((n.length() - u.cross(v).length()).abs() < 1e-4, "{triangles:?}: area {}", n.length());
+                assert!((n.normalize().dot(front) - facing).abs() < 1e-5, "{triangles:?}: facing {n}");
+                assert!(c.contains(&q.corner));
+            }
+        }
+    }
+
+    #[test]
+    fn near_parallelograms_within_tolerance_are_detected() {
+        // Corners off by e in a square of diameter √2: the tolerance is 1.41e-4 (plus rounding).
+        let near = |e: f32| {
+            let c =
+                vec![Vec3::ZERO, Vec3::new(1.0, 0.0, e), Vec3::new(1.0 + e, 1.0, 0.0), Vec3::new(0.0, 1.0 - e, 0.0)];
+            parallelogram(&emissive(c, vec![[0, 1, 2], [0, 2, 3]])).is_some()
+        };
+        assert!(near(3e-5));
+        assert!(!near(3e-4));
+        // Far from the origin, f32 rounding of the coordinates is tolerated too.
+        let far = Vec3::new(4096.0, 1024.0, -4096.0);
+        let c = [Vec3::ZERO, Vec3::new(0.1, 0.0, 0.0), Vec3::new(0.1, 0.0, 0.3), Vec3::new(0.0, 0.0, 0.3)];
+        let q = parallelogram(&emissive(c.map(|p| p + far).to_vec(), vec![[0, 2, 1], [0, 3, 2]])).unwrap();
+        assert!(q.edge_u.cross(q.edge_v).normalize().abs_diff_eq(Vec3::Y, 1e-3));
+    }
+
+    #[test]
+    fn other_shapes_are_not_parallelograms() {
+        type Case = (&'static str, Vec<Vec3>, Vec<[u32; 3]>);
+        let square = [Vec3::ZERO, Vec3::X, Vec3::new(1.0, 1.0, 0.0), Vec3::Y];
+        let cases: Vec<Case> = vec![
+            ("one triangle", square.to_vec(), vec![[0, 1, 2]]),
+            ("three triangles", square.to_vec(), vec![[0, 1, 2], [0, 2, 3], [0, 1, 3]]),
+            ("non-planar", vec![Vec3::ZERO, Vec3::X, Vec3::new(1.0, 1.0, 0.1), Vec3::Y], vec![[0, 1, 2], [0, 2, 3]]),
+            ("trapezoid", vec![Vec3::ZERO, Vec3::X, Vec3::new(0.8, 1.0, 0.0), Vec3::Y], vec![[0, 1, 2], [0, 2, 3]]),
+            ("kite", vec![Vec3::ZERO, Vec3::X, Vec3::new(1.5, 1.5, 0.0), Vec3::Y], vec![[0, 1, 2], [0, 2, 3]]),
+            (
+                "sharing one corner",
+                [square.to_vec(), vec![Vec3::new(2.0, 1.0, 0.0), Vec3::new(2.0, 2.0, 0.0)]].concat(),
+                vec![[0, 1, 2], [2, 4, 5]],
+            ),
+            (
+                "disjoint",
+                [square.to_vec(), square.map(|p| p + Vec3::Z * 5.0).to_vec()].concat(),
+                vec![[0, 1, 2], [4, 6, 7]],
+            ),
+            ("same triangle twice", square.to_vec(), vec![[0, 1, 2], [0, 1, 2]]),
+            ("front and back", square.to_vec(), vec![[0, 1, 2], [0, 2, 1]]),
+            ("inconsistent winding", square.to_vec(), vec![[0, 1, 2], [0, 3, 2]]),
+            (
+                "folded onto one side",
+                vec![Vec3::ZERO, Vec3::X, Vec3::new(1.0, 1.0, 0.0), Vec3::new(0.5, 0.2, 0.0)],
+                vec![[0, 1, 2], [0, 2, 3]],
+            ),
+        ];
+        for (what, positions, triangles) in cases {
+            assert_eq!(parallelogram(&emissive(positions, triangles)), None, "{what}");
+        }
+    }
+
+    #[test]
+    fn derive_maps_lights_and_meshes_both_ways() {
+        let square = vec![Vec3::ZERO, Vec3::X, Vec3::new(1.0, 1.0, 0.0), Vec3::Y];
+        let lit = emissive(square.clone(), vec![[0, 1, 2], [0, 2, 3]]);
+        let dark = Mesh { material: Material::diffuse(Vec3::ONE), ..lit.clone() };
+        let bent = emissive(vec![Vec3::ZERO, Vec3::X, Vec3::new(1.0, 1.0, 0.5), Vec3::Y], vec![[0, 1, 2], [0, 2, 3]]);
+        let derived = derive(&[dark, lit.clone(), bent, lit]);
+        assert_eq!(derived.lights.len(), 2);
+        assert_eq!(derived.light_meshes, vec![1, 3]);
+        assert_eq!(derived.mesh_lights, vec![None, Some(0), None, Some(1)]);
+        assert_eq!(derived.unsupported, 1);
+        let light = derived.lights[0];
+        assert_eq!(light.radiance.truncate(), Vec3::new(3.0, 2.0, 1.0));
+        assert_eq!(light.two_sided, 0);
+        assert_eq!(light.edge_u.truncate().cross(light.edge_v.truncate()), Vec3::Z);
+    }
+}
