@@ -276,6 +276,68 @@ pub fn occlusion_miss(#[spirv(incoming_ray_payload)] payload: &mut u32) {
     *payload = 0;
 }
 
+/// Entry point of the shade stage: resolves each camera ray's hit into a surface and shades one
+/// sample of it (see `crate::shade::stage`). Bindings: the ray directions, the hit stream, the
+/// scene's triangles and materials, the lights and their BVH, the LTC table, then the outputs.
+#[spirv(compute(threads(64)))]
+#[allow(clippy::too_many_arguments)]
+pub fn shade(
+    #[spirv(global_invocation_id)] global_id: UVec3,
+    #[spirv(num_workgroups)] num_workgroups: UVec3,
+    #[spirv(push_constant)] params: &raywave_shared::ShadeParams,
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 0)] ray_direction: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 1)] hit_t: &[f32],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 2)] hit_primitive: &[u32],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 3)] hit_instance: &[u32],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 4)] hit_barycentrics: &[glam::Vec2],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 5)] triangles: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 6)] first_triangle: &[u32],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 7)] materials: &[raywave_shared::MaterialParams],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 8)] lights: &[raywave_shared::Light],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 9)] light_nodes: &[raywave_shared::LightBvhNode],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 10)] light_trails: &[u32],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 11)] ltc: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 12)] analytic: &mut [Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 13)] unshadowed: &mut [Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 14)] emitted: &mut [Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 15)] shadow_origin: &mut [Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 16)] shadow_direction: &mut [Vec4],
+) {
+    let i = stream_index(global_id, num_workgroups);
+    if i < params.count {
+        let k = i as usize;
+        let direction = glam::Vec4Swizzles::xyz(ray_direction[k]);
+        let surface = crate::shade::stage::resolve_surface(
+            direction,
+            hit_t[k],
+            hit_instance[k],
+            hit_primitive[k],
+            hit_barycentrics[k],
+            triangles,
+            first_triangle,
+        );
+        let scene = crate::shade::stage::ShadeScene {
+            materials,
+            lights: crate::sampling::light_select::LightSet {
+                lights,
+                nodes: light_nodes,
+                trails: light_trails,
+                light_count: params.light_count,
+                node_count: params.light_node_count,
+            },
+            ltc,
+        };
+        let width = if params.width > 0 { params.width } else { 1 };
+        let pixel = glam::UVec2::new(i % width, i / width);
+        let s = crate::shade::stage::shade_sample(params, pixel, direction, &surface, &scene);
+        analytic[k] = s.analytic;
+        unshadowed[k] = s.unshadowed;
+        emitted[k] = s.emitted;
+        shadow_origin[k] = s.shadow_origin;
+        shadow_direction[k] = s.shadow_direction;
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

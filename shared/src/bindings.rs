@@ -59,3 +59,41 @@ pub mod probe {
     /// direction, w pdf).
     pub const SAMPLES: u32 = 0;
 }
+
+/// Bindings of the shade stage (set 0), in order: inputs, then outputs.
+pub mod shade {
+    /// Input: camera-ray directions (`Vec4`).
+    pub const RAY_DIRECTION: u32 = 0;
+    /// Input: hit distance (`f32`).
+    pub const HIT_T: u32 = 1;
+    /// Input: hit primitive (`u32`).
+    pub const HIT_PRIMITIVE: u32 = 2;
+    /// Input: hit instance (`u32`).
+    pub const HIT_INSTANCE: u32 = 3;
+    /// Input: hit barycentrics (`Vec2`).
+    pub const HIT_BARYCENTRICS: u32 = 4;
+    /// Input: triangle vertices by (instance, primitive), three `Vec4` per triangle.
+    pub const TRIANGLES: u32 = 5;
+    /// Input: first triangle of each instance (`u32`).
+    pub const FIRST_TRIANGLE: u32 = 6;
+    /// Input: material per instance (`MaterialParams`).
+    pub const MATERIALS: u32 = 7;
+    /// Input: quad lights (`Light`).
+    pub const LIGHTS: u32 = 8;
+    /// Input: light BVH nodes (`LightBvhNode`).
+    pub const LIGHT_NODES: u32 = 9;
+    /// Input: light trails in the BVH (`u32`).
+    pub const LIGHT_TRAILS: u32 = 10;
+    /// Input: the packed LTC table (`Vec4`).
+    pub const LTC: u32 = 11;
+    /// Output: analytic unshadowed radiance `U` (`Vec4`).
+    pub const ANALYTIC: u32 = 12;
+    /// Output: this sample's `U_N` contribution (`Vec4`).
+    pub const UNSHADOWED: u32 = 13;
+    /// Output: emitted radiance (`Vec4`).
+    pub const EMITTED: u32 = 14;
+    /// Output: shadow-ray origins (`Vec4`, w = tmin).
+    pub const SHADOW_ORIGIN: u32 = 15;
+    /// Output: shadow-ray directions (`Vec4`, w = tmax; 0 = no ray).
+    pub const SHADOW_DIRECTION: u32 = 16;
+}

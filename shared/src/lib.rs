@@ -12,6 +12,7 @@ pub mod generate;
 pub mod light;
 pub mod ltc_table;
 pub mod sampling;
+pub mod shade;
 pub mod stream;
 pub mod trace;
 
@@ -19,4 +20,5 @@ pub use generate::GenerateParams;
 pub use light::Light;
 pub use light::{LightBounds, LightBvhNode};
 pub use sampling::{SamplerParams, SamplerProbeParams, WarpParams};
+pub use shade::{MaterialParams, ShadeParams};
 pub use trace::TraceParams;

@@ -463,6 +463,16 @@ impl<'a> LightSet<'a> {
         self.light_count.min(self.lights.len() as u32)
     }
 
+    /// Number of lights in the set.
+    pub fn len(&self) -> u32 {
+        self.light_count()
+    }
+
+    /// Whether the set has no light.
+    pub fn is_empty(&self) -> bool {
+        self.light_count() == 0
+    }
+
     fn node_count(&self) -> u32 {
         self.node_count.min(self.nodes.len() as u32)
     }

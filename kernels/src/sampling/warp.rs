@@ -724,6 +724,17 @@ pub fn sample_quad_spherical(p: Vec3, o: Vec3, eu: Vec3, ev: Vec3, u: Vec2) -> L
     }
 }
 
+/// Distance along the ray from `p` in unit direction `dir` to the quad `o + s·eu + t·ev` (either
+/// side, edges widened by [`QUAD_EDGE_SLACK`]), or 0 when the ray misses it: where a direction
+/// drawn from a BRDF meets a quad light.
+pub fn quad_ray_distance(p: Vec3, o: Vec3, eu: Vec3, ev: Vec3, dir: Vec3) -> f32 {
+    let g = quad_geometry(p, o, eu, ev);
+    if !(g.area > 0.0) {
+        return 0.0;
+    }
+    quad_hit(&g, eu, ev, dir)
+}
+
 /// Solid-angle pdf of [`sample_quad_spherical`] for unit `dir` (sr⁻¹): `1/Ω` if the ray from `p`
 /// along `dir` hits the quad (either side; edges widened by [`QUAD_EDGE_SLACK`]), else 0. Mirrors the sampler's special cases: 0 when Ω = 0, [`quad_area_pdf`]
 /// when Ω < [`QUAD_MIN_SPHERICAL_SOLID_ANGLE`].

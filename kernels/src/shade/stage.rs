@@ -1,0 +1,443 @@
+//! The shade stage (seed 000, Heitz, Hill & McGuire 2018): per camera sample, the analytic
+//! unshadowed radiance `U` of every quad light, and one stochastic sample shared by the unshadowed
+//! estimate `U_N` and the shadowed estimate `S_N` — the same direction and weight, visibility only
+//! in `S_N` — so that `U · S_N / U_N` keeps the analytic lighting and takes only the shadow from
+//! the noisy estimate.
+//!
+//! **Which BRDF the stochastic estimates evaluate**: the LTC approximation whose integral `U` is
+//! (`E_D·cos/π + E_S·D_LTC`, zero below the surface's horizon) — not the exact GGX. Hence with no
+//! occluder `S_N = U_N` sample by sample and `U · S_N / U_N = U` exactly: the ratio adds no noise
+//! where nothing casts a shadow.
+//!
+//! **Sampling** (seed 000's MIS): with the chosen light's hit probabilities `U_D`, `U_S` (form
+//! factors of the diffuse and specular lobes over the light) and the albedos `E_D`, `E_S`:
+//! `P_Diff = E_D/(E_D + E_S)` (luminances), `P_BRDF = lerp(U_S, U_D, P_Diff)`; with probability
+//! `P_BRDF` sample the BRDF (its diffuse lobe with probability `P_Diff`, else the LTC lobe), else
+//! the light (spherical rectangle). One-sample MIS pdf
+//! `lerp(pdf_light, lerp(pdf_spec, pdf_diff, P_Diff), P_BRDF)`. The light itself is chosen by
+//! [`crate::sampling::light_select::LightSet`] (importance, or a light BVH for many lights).
+
+// `!(x > 0.0)` sends NaN down the "no contribution" branch on purpose.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
+use super::ltc::{self, LtcLobe, ShadingFrame};
+use crate::offset::offset_ray_origin;
+use crate::sampling::light_select::{luminance, LightSet};
+use crate::sampling::{dims, sampler, warp};
+use glam::{Mat3, UVec2, Vec3, Vec4, Vec4Swizzles};
+use raywave_shared::stream::NO_HIT;
+use raywave_shared::{Light, MaterialParams, ShadeParams};
+
+/// A surface seen by a camera ray, as the shade stage reads it (the G-buffer).
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub struct Surface {
+    /// Hit point (xyz, scene units) and hit distance along the camera ray (w); w = 0 for a miss.
+    pub position: Vec4,
+    /// Unit geometric normal facing the camera (xyz); w = 0.
+    pub normal: Vec4,
+    /// Instance (mesh) index of the hit, [`NO_HIT`] for a miss; selects the material.
+    pub instance: u32,
+}
+
+impl Surface {
+    /// A camera ray that hit nothing.
+    pub const MISS: Surface = Surface { position: Vec4::ZERO, normal: Vec4::ZERO, instance: NO_HIT };
+}
+
+/// Turns a hit into a surface: the point interpolated from the triangle's vertices (the most
+/// accurate hit point, which the shadow-ray offset expects) and the unit geometric normal facing
+/// the incoming `direction`. `triangles` holds three `Vec4` vertices per triangle in (instance,
+/// primitive) order, instance `m` starting at triangle `first_triangle[m]`. Malformed indices or a
+/// degenerate triangle give [`Surface::MISS`].
+pub fn resolve_surface(
+    direction: Vec3,
+    hit_t: f32,
+    instance: u32,
+    primitive: u32,
+    barycentrics: glam::Vec2,
+    triangles: &[Vec4],
+    first_triangle: &[u32],
+) -> Surface {
+    if instance == NO_HIT || instance as usize >= first_triangle.len() {
+        return Surface::MISS;
+    }
+    let base = (first_triangle[instance as usize] + primitive) as usize * 3;
+    if base + 2 >= triangles.len() {
+        return Surface::MISS;
+    }
+    let (a, b, c) = (triangles[base].xyz(), triangles[base + 1].xyz(), triangles[base + 2].xyz());
+    let position = a * (1.0 - barycentrics.x - barycentrics.y) + b * barycentrics.x + c * barycentrics.y;
+    let normal = crate::triangle::geometric_normal(a, b, c);
+    if normal == Vec3::ZERO || !position.is_finite() {
+        return Surface::MISS;
+    }
+    let normal = if normal.dot(direction) > 0.0 { -normal } else { normal };
+    Surface { position: position.extend(hit_t), normal: normal.extend(0.0), instance }
+}
+
+/// The scene data the shade stage reads.
+#[derive(Copy, Clone)]
+pub struct ShadeScene<'a> {
+    /// Material per instance.
+    pub materials: &'a [MaterialParams],
+    /// The quad lights and how to choose among them.
+    pub lights: LightSet<'a>,
+    /// The packed LTC table ([`ltc::LTC_TABLE_LEN`] entries).
+    pub ltc: &'a [Vec4],
+}
+
+/// What one shade invocation produces for its pixel.
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub struct ShadeSample {
+    /// Analytic unshadowed radiance `U` (rgb; w = 0).
+    pub analytic: Vec4,
+    /// This sample's contribution to `U_N` (rgb; w = 0); its contribution to `S_N` is the same
+    /// times the shadow ray's visibility.
+    pub unshadowed: Vec4,
+    /// Radiance emitted by the surface itself towards the camera (rgb; w = 0).
+    pub emitted: Vec4,
+    /// Shadow-ray origin (xyz), w = tmin = 0.
+    pub shadow_origin: Vec4,
+    /// Shadow-ray direction (xyz), w = tmax; tmax = 0 when there is nothing to trace.
+    pub shadow_direction: Vec4,
+}
+
+impl ShadeSample {
+    /// The sample of a pixel whose camera ray missed: all zero, no shadow ray.
+    pub const NONE: ShadeSample = ShadeSample {
+        analytic: Vec4::ZERO,
+        unshadowed: Vec4::ZERO,
+        emitted: Vec4::ZERO,
+        shadow_origin: Vec4::ZERO,
+        shadow_direction: Vec4::new(0.0, 0.0, 1.0, 0.0),
+    };
+}
+
+/// A material at one shading point: the lobes' albedos and the LTC lobe.
+#[derive(Copy, Clone, Debug)]
+struct Lobes {
+    /// Diffuse albedo `E_D = base·(1 − metallic)` (Lambert).
+    diffuse: Vec3,
+    /// Specular albedo `E_S` from the table's magnitude and Fresnel terms.
+    specular: Vec3,
+    /// The LTC lobe (`M⁻¹` in `frame`).
+    ltc: LtcLobe,
+    /// `M` (for sampling the lobe).
+    m: Mat3,
+    frame: ShadingFrame,
+}
+
+impl Lobes {
+    fn new(material: &MaterialParams, frame: ShadingFrame, cos_view: f32, table: &[Vec4]) -> Self {
+        let base = material.base_color_roughness.xyz();
+        let metallic = material.emission_metallic.w;
+        // glTF 2.0's dielectric F0 = 0.04 (the metallic-roughness model).
+        let f0 = Vec3::splat(0.04) * (1.0 - metallic) + base * metallic;
+        let ltc = ltc::lookup(table, material.base_color_roughness.w, cos_view);
+        Lobes {
+            diffuse: base * (1.0 - metallic),
+            specular: ltc.specular_albedo(f0),
+            m: crate::sampling::warp::ltc_inverse(ltc.inv_m),
+            ltc,
+            frame,
+        }
+    }
+
+    /// The BRDF·cos the estimates evaluate at world direction `w`: `E_D·cos/π + E_S·D_LTC`,
+    /// zero below the horizon (see the module documentation).
+    fn eval(&self, w: Vec3) -> Vec3 {
+        let local = self.frame.to_local(w);
+        if !(local.z > 0.0) {
+            return Vec3::ZERO;
+        }
+        self.diffuse * warp::cosine_hemisphere_pdf(local) + self.specular * warp::ltc_pdf(self.ltc.inv_m, local)
+    }
+
+    /// The two lobes' densities at `w`: (diffuse, specular).
+    fn pdfs(&self, w: Vec3) -> (f32, f32) {
+        let local = self.frame.to_local(w);
+        (warp::cosine_hemisphere_pdf(local), warp::ltc_pdf(self.ltc.inv_m, local))
+    }
+
+    fn world_direction(&self, local: Vec3) -> Vec3 {
+        self.frame.tangent * local.x + self.frame.bitangent * local.y + self.frame.normal * local.z
+    }
+}
+
+/// Whether `p` is on the emitting side of quad light `light`.
+fn faces(light: &Light, p: Vec3) -> bool {
+    let normal = light.edge_u.xyz().cross(light.edge_v.xyz());
+    let side = normal.dot(p - light.position.xyz());
+    side > 0.0 || (light.two_sided != 0 && side < 0.0)
+}
+
+/// Hit probabilities `(U_D, U_S)` of `light` at `p` for `lobes`; zero if `p` sees its back.
+fn hit_probabilities(light: &Light, p: Vec3, lobes: &Lobes) -> (f32, f32) {
+    if !faces(light, p) {
+        return (0.0, 0.0);
+    }
+    let quad = ltc::local_quad(&lobes.frame, p, light.position.xyz(), light.edge_u.xyz(), light.edge_v.xyz());
+    (ltc::diffuse_form_factor(quad), ltc::specular_form_factor(lobes.ltc.inv_m, quad))
+}
+
+/// The shade stage for one camera sample at `pixel` looking along `view_direction` (from the
+/// camera) at `surface`: `U` summed over all lights, and one MIS sample of the chosen light
+/// shared by `U_N` and `S_N`.
+pub fn shade_sample(
+    params: &ShadeParams,
+    pixel: UVec2,
+    view_direction: Vec3,
+    surface: &Surface,
+    scene: &ShadeScene<'_>,
+) -> ShadeSample {
+    if surface.instance == NO_HIT || surface.instance as usize >= scene.materials.len() {
+        return ShadeSample::NONE;
+    }
+    let material = &scene.materials[surface.instance as usize];
+    let p = surface.position.xyz();
+    let n = surface.normal.xyz();
+    let v = -view_direction;
+    let frame = ShadingFrame::new(n, v);
+    let lobes = Lobes::new(material, frame, n.dot(v), scene.ltc);
+    let emitted = material.emission_metallic.xyz().extend(0.0);
+
+    // U: every light, analytically.
+    let mut analytic = Vec3::ZERO;
+    let light_count = scene.lights.len();
+    let mut k = 0u32;
+    while k < light_count {
+        let light = &scene.lights.lights[k as usize];
+        let (u_d, u_s) = hit_probabilities(light, p, &lobes);
+        analytic += light.radiance.xyz() * (lobes.diffuse * u_d + lobes.specular * u_s);
+        k += 1;
+    }
+
+    // One sample of one light for U_N and S_N.
+    let strategy = sampler::sample_2d(&params.sampler, pixel, params.sample_index, dims::SHADE_STRATEGY);
+    let u_select = sampler::sample_1d(&params.sampler, pixel, params.sample_index, dims::SHADE_LIGHT_SELECT);
+    let u = sampler::sample_2d(&params.sampler, pixel, params.sample_index, dims::SHADE_DIRECTION);
+    let choice = scene.lights.select(p, n, u_select);
+    let mut result = ShadeSample { analytic: analytic.extend(0.0), emitted, ..ShadeSample::NONE };
+    if !choice.is_valid() || choice.pmf <= 0.0 {
+        return result;
+    }
+    let light = &scene.lights.lights[choice.index as usize];
+    let (corner, eu, ev) = (light.position.xyz(), light.edge_u.xyz(), light.edge_v.xyz());
+    let (u_d, u_s) = hit_probabilities(light, p, &lobes);
+    if u_d <= 0.0 && u_s <= 0.0 {
+        return result;
+    }
+    let (e_d, e_s) = (luminance(lobes.diffuse), luminance(lobes.specular));
+    let p_diff = if e_d + e_s > 0.0 { e_d / (e_d + e_s) } else { 1.0 };
+    let p_brdf = u_s + (u_d - u_s) * p_diff;
+
+    let direction = if strategy.x < p_brdf {
+        let local = if strategy.y < p_diff { warp::sample_cosine_hemisphere(u) } else { warp::sample_ltc(lobes.m, u) };
+        lobes.world_direction(local).normalize_or_zero()
+    } else {
+        warp::sample_quad_spherical(p, corner, eu, ev, u).direction
+    };
+    let distance = warp::quad_ray_distance(p, corner, eu, ev, direction);
+    let f = lobes.eval(direction);
+    if !(distance > 0.0) || f == Vec3::ZERO {
+        return result;
+    }
+    let (pdf_diffuse, pdf_specular) = lobes.pdfs(direction);
+    let pdf_brdf = pdf_specular + (pdf_diffuse - pdf_specular) * p_diff;
+    let pdf_light = warp::quad_spherical_pdf(p, corner, eu, ev, direction);
+    let pdf = (pdf_light + (pdf_brdf - pdf_light) * p_brdf) * choice.pmf;
+    if !(pdf > 0.0) {
+        return result;
+    }
+    let weight = f * light.radiance.xyz() / pdf;
+    if !weight.is_finite() {
+        return result;
+    }
+    result.unshadowed = weight.extend(0.0);
+    result.shadow_origin = offset_ray_origin(p, n).extend(0.0);
+    // Stop just short of the light: its own emitter geometry may be in the scene.
+    result.shadow_direction = direction.extend(distance * (1.0 - 1.0e-4));
+    result
+}
+
+/// The ratio estimator's composite for one pixel: `U · S_N / U_N` per channel, falling back to
+/// `U` where `U_N` is (nearly) 0 — no sample reached the light, so the ratio is undefined — plus
+/// the emitted radiance. All inputs are per-pixel means.
+pub fn composite(analytic: Vec3, unshadowed: Vec3, shadowed: Vec3, emitted: Vec3) -> Vec3 {
+    let ratio = |s: f32, u_n: f32| if u_n > 1.0e-7 { (s / u_n).min(1.0e4) } else { 1.0 };
+    let visibility =
+        Vec3::new(ratio(shadowed.x, unshadowed.x), ratio(shadowed.y, unshadowed.y), ratio(shadowed.z, unshadowed.z));
+    let color = emitted + analytic * visibility;
+    if color.is_finite() {
+        color
+    } else {
+        emitted
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sampling::light_select::LightSet;
+    use raywave_shared::ltc_table::{LTC_AMPLITUDE, LTC_MATRIX};
+    use raywave_shared::sampling::{sampler_kind, SamplerParams};
+    use std::vec::Vec;
+
+    fn table() -> Vec<Vec4> {
+        LTC_MATRIX.iter().chain(LTC_AMPLITUDE.iter()).map(|&v| Vec4::from_array(v)).collect()
+    }
+
+    fn material(base: Vec3, roughness: f32, metallic: f32) -> MaterialParams {
+        MaterialParams { base_color_roughness: base.extend(roughness), emission_metallic: Vec3::ZERO.extend(metallic) }
+    }
+
+    fn surface_at_origin() -> Surface {
+        Surface { position: Vec4::new(0.0, 0.0, 0.0, 1.0), normal: Vec4::new(0.0, 0.0, 1.0, 0.0), instance: 0 }
+    }
+
+    /// A downward-facing quad light of half-size `h` centred at `centre`.
+    fn ceiling_light(centre: Vec3, h: f32, radiance: Vec3) -> Light {
+        // edge_u × edge_v = (2h,0,0) × (0,−2h,0) = −z: emits downwards.
+        Light::quad(
+            centre + Vec3::new(-h, h, 0.0),
+            Vec3::new(2.0 * h, 0.0, 0.0),
+            Vec3::new(0.0, -2.0 * h, 0.0),
+            radiance,
+            false,
+        )
+    }
+
+    fn params(kind: u32, seed: u32, sample_index: u32) -> ShadeParams {
+        ShadeParams {
+            sampler: SamplerParams { kind, seed, spp_log2: 16, resolution_log2: 0 },
+            width: 1,
+            count: 1,
+            sample_index,
+            light_count: 0,
+            light_node_count: 0,
+            padding: [0; 3],
+        }
+    }
+
+    /// Mean and standard error of the luminance of `U_N` over `n` samples, and `U`'s luminance.
+    fn estimate(lights: &[Light], material: MaterialParams, view: Vec3, kind: u32, n: u32) -> (f64, f64, f64) {
+        let table = table();
+        let materials = [material];
+        let scene = ShadeScene { materials: &materials, lights: LightSet::new(lights, &[], &[]), ltc: &table };
+        let (mut sum, mut sum2, mut analytic) = (0.0f64, 0.0f64, 0.0f64);
+        for i in 0..n {
+            let s = shade_sample(&params(kind, 5, i), UVec2::ZERO, -view, &surface_at_origin(), &scene);
+            let y = f64::from(luminance(s.unshadowed.xyz()));
+            sum += y;
+            sum2 += y * y;
+            analytic = f64::from(luminance(s.analytic.xyz()));
+            assert!(s.unshadowed.is_finite() && s.shadow_direction.is_finite() && s.shadow_origin.is_finite());
+        }
+        let mean = sum / f64::from(n);
+        let variance = (sum2 / f64::from(n) - mean * mean).max(0.0);
+        (mean, (variance / f64::from(n)).sqrt(), analytic)
+    }
+
+    #[test]
+    fn unshadowed_estimate_is_unbiased_for_u() {
+        // Mean of 2^16 independent samples within 3 standard errors (plus 1e-4 relative for the
+        // f32 accumulation) of the analytic U: glossy and diffuse materials, one and two lights,
+        // a light crossing the horizon, a grazing view.
+        let view = Vec3::new(0.6, 0.0, 0.8);
+        let one = [ceiling_light(Vec3::new(0.3, 0.2, 1.0), 0.4, Vec3::new(5.0, 4.0, 3.0))];
+        let two = [one[0], ceiling_light(Vec3::new(-1.5, 0.0, 0.3), 0.5, Vec3::splat(2.0))];
+        let crossing = [Light::quad(
+            Vec3::new(1.0, -0.5, -0.3),
+            Vec3::new(0.0, 1.0, 0.0),
+            Vec3::new(0.0, 0.0, 1.0),
+            Vec3::ONE,
+            true,
+        )];
+        let cases = [
+            (&one[..], material(Vec3::new(0.8, 0.6, 0.4), 0.3, 0.5), view),
+            (&one[..], material(Vec3::splat(0.7), 1.0, 0.0), view),
+            (&two[..], material(Vec3::new(0.9, 0.9, 0.9), 0.2, 1.0), view),
+            (&crossing[..], material(Vec3::splat(0.5), 0.5, 0.0), Vec3::new(-0.99, 0.0, 0.141).normalize()),
+        ];
+        for (k, (lights, material, view)) in cases.into_iter().enumerate() {
+            for kind in [sampler_kind::INDEPENDENT, sampler_kind::SOBOL] {
+                let (mean, se, analytic) = estimate(lights, material, view, kind, 1 << 16);
+                assert!(analytic > 0.0, "case {k}: U = {analytic}");
+                assert!(
+                    (mean - analytic).abs() <= 3.0 * se + 1e-4 * analytic,
+                    "case {k} kind {kind}: U_N {mean} ± {se} vs U {analytic}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn without_occluders_the_ratio_returns_u_exactly() {
+        let u = Vec3::new(0.3, 1.7, 12.5);
+        let u_n = Vec3::new(0.2, 3.0, 9.0);
+        assert_eq!(composite(u, u_n, u_n, Vec3::ZERO), u);
+        assert_eq!(composite(u, Vec3::ZERO, Vec3::ZERO, Vec3::ONE), u + Vec3::ONE, "U_N ≈ 0 falls back to U");
+    }
+
+    #[test]
+    fn hard_cases_stay_finite() {
+        let table = table();
+        let normal_light = ceiling_light(Vec3::new(0.0, 0.0, 1.0), 0.5, Vec3::splat(3.0));
+        let lights = [
+            normal_light,
+            // Behind the surface, facing away, on the shading plane, tiny (≈1e-6 sr), huge.
+            ceiling_light(Vec3::new(0.0, 0.0, -1.0), 0.5, Vec3::ONE),
+            Light::quad(Vec3::new(-0.5, -0.5, 1.0), Vec3::X, Vec3::Y, Vec3::ONE, false),
+            Light::quad(Vec3::new(1.0, -0.5, 0.0), Vec3::X, Vec3::Y, Vec3::ONE, false),
+            ceiling_light(Vec3::new(0.0, 0.0, 1.0), 5.0e-4, Vec3::splat(1.0e6)),
+            ceiling_light(Vec3::new(0.0, 0.0, 1.0e-3), 1.0e3, Vec3::ONE),
+        ];
+        let materials = [
+            material(Vec3::splat(0.5), 0.0, 0.0),
+            material(Vec3::splat(0.5), 1.0, 1.0),
+            material(Vec3::ZERO, 0.5, 1.0),
+            material(Vec3::ONE, 0.01, 0.0),
+        ];
+        let views = [
+            Vec3::Z,
+            Vec3::new(1.0, 0.0, 1.0e-6).normalize(),
+            Vec3::new(0.0, 1.0, 0.0),
+            Vec3::new(0.3, 0.3, -0.9).normalize(),
+        ];
+        for light in &lights {
+            let set = [*light];
+            for m in 0..materials.len() {
+                let scene = ShadeScene { materials: &materials, lights: LightSet::new(&set, &[], &[]), ltc: &table };
+                let surface = Surface { instance: m as u32, ..surface_at_origin() };
+                for view in views {
+                    for i in 0..64 {
+                        let s = shade_sample(&params(sampler_kind::SOBOL, 1, i), UVec2::ZERO, -view, &surface, &scene);
+                        let all = [s.analytic, s.unshadowed, s.emitted, s.shadow_origin, s.shadow_direction];
+                        assert!(all.iter().all(|v| v.is_finite()), "{light:?} {m} {view}: {s:?}");
+                        assert!(s.analytic.min_element() >= 0.0 && s.unshadowed.min_element() >= 0.0);
+                        let c = composite(s.analytic.xyz(), s.unshadowed.xyz(), Vec3::ZERO, Vec3::ZERO);
+                        assert!(c.is_finite());
+                    }
+                }
+            }
+        }
+        // A light behind the surface contributes nothing and traces nothing.
+        let behind = [lights[1]];
+        let scene = ShadeScene { materials: &materials, lights: LightSet::new(&behind, &[], &[]), ltc: &table };
+        let s = shade_sample(&params(sampler_kind::SOBOL, 1, 0), UVec2::ZERO, -Vec3::Z, &surface_at_origin(), &scene);
+        assert_eq!((s.analytic, s.unshadowed, s.shadow_direction.w), (Vec4::ZERO, Vec4::ZERO, 0.0));
+        // A miss shades nothing.
+        assert_eq!(shade_sample(&params(0, 0, 0), UVec2::ZERO, Vec3::Z, &Surface::MISS, &scene), ShadeSample::NONE);
+    }
+
+    #[test]
+    fn resolve_interpolates_and_faces_the_camera() {
+        let triangles = [Vec4::new(0.0, 0.0, 0.0, 0.0), Vec4::new(1.0, 0.0, 0.0, 0.0), Vec4::new(0.0, 1.0, 0.0, 0.0)];
+        let s = resolve_surface(Vec3::Z, 2.0, 0, 0, glam::Vec2::new(0.25, 0.5), &triangles, &[0]);
+        assert_eq!(s.position, Vec4::new(0.25, 0.5, 0.0, 2.0));
+        assert_eq!(s.normal, Vec4::new(0.0, 0.0, -1.0, 0.0), "faces against the ray");
+        assert_eq!(resolve_surface(Vec3::Z, 2.0, NO_HIT, 0, glam::Vec2::ZERO, &triangles, &[0]), Surface::MISS);
+        assert_eq!(resolve_surface(Vec3::Z, 2.0, 0, 5, glam::Vec2::ZERO, &triangles, &[0]), Surface::MISS);
+        assert_eq!(resolve_surface(Vec3::Z, 2.0, 3, 0, glam::Vec2::ZERO, &triangles, &[0]), Surface::MISS);
+    }
+}

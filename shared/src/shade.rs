@@ -1,0 +1,41 @@
+//! Parameters and stream element types of the shade stage (seed 000's ratio estimator).
+
+use crate::sampling::SamplerParams;
+use bytemuck::{Pod, Zeroable};
+use glam::Vec4;
+
+/// A surface material as the kernels read it (the glTF 2.0 metallic-roughness model).
+#[repr(C)]
+#[derive(Copy, Clone, Debug, PartialEq, Pod, Zeroable)]
+pub struct MaterialParams {
+    /// Linear RGB base colour (xyz, each in [0, 1]) and perceptual roughness (w, in [0, 1]).
+    pub base_color_roughness: Vec4,
+    /// Emitted radiance, linear RGB in W·sr⁻¹·m⁻² (xyz), and metalness (w, in [0, 1]).
+    pub emission_metallic: Vec4,
+}
+
+const _: () = assert!(core::mem::size_of::<MaterialParams>() == 32);
+
+/// Push constants of the shade stage: one invocation per camera sample (= pixel) of one pass.
+#[repr(C)]
+#[derive(Copy, Clone, Debug, PartialEq, Eq, Pod, Zeroable)]
+pub struct ShadeParams {
+    /// The frame's sampler; the stage reads slots `SHADE_STRATEGY`, `SHADE_LIGHT_SELECT` and
+    /// `SHADE_DIRECTION`.
+    pub sampler: SamplerParams,
+    /// Image width in pixels (pixel `(i mod width, i / width)`).
+    pub width: u32,
+    /// Number of invocations (`width · height`).
+    pub count: u32,
+    /// Index of the sample within each pixel.
+    pub sample_index: u32,
+    /// Number of valid lights in the light buffer (a GPU binding cannot be empty, so an unused
+    /// buffer holds one dummy element).
+    pub light_count: u32,
+    /// Number of valid light BVH nodes; 0 selects lights by the linear importance scan.
+    pub light_node_count: u32,
+    /// Explicit padding; always 0.
+    pub padding: [u32; 3],
+}
+
+const _: () = assert!(core::mem::size_of::<ShadeParams>() == 48);
