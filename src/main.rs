@@ -23,7 +23,8 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
-    /// Render a scene through generate → trace and write a normal/depth view as PNG.
+    /// Render a scene: generate → trace → shade (LTC area lights, ratio estimator with stochastic
+    /// shadows) → PNG (and optionally HDR OpenEXR).
     Render(RenderArgs),
     /// Measure stage throughput.
     Bench {
@@ -42,6 +43,34 @@ enum ReportTopic {
     /// Seed 002's variance table (importance warps, light selection, Owen-scrambled Sobol') on the
     /// Cornell box, and the screen-space error spectrum of each sampler.
     Sampling(SamplingReportArgs),
+    /// Seed 000's ratio estimator against the fully stochastic one: RMSE against a converged
+    /// reference for 1…64 samples per pixel, in shadowed and unshadowed pixels.
+    Shade(ShadeReportArgs),
+}
+
+#[derive(clap::Args)]
+struct ShadeReportArgs {
+    /// Built-in scenes, comma-separated.
+    #[arg(long, default_value = "builtin:cornell,builtin:cornell-two-lights", value_delimiter = ',')]
+    scenes: Vec<String>,
+    /// Image side in pixels.
+    #[arg(long, default_value_t = 64)]
+    resolution: u32,
+    /// Samples per pixel of the reference image.
+    #[arg(long, default_value_t = 4096)]
+    reference_spp: u32,
+    /// Largest sample count measured (1, 2, 4, … up to it).
+    #[arg(long, default_value_t = 64)]
+    max_spp: u32,
+    /// Independent repetitions averaged per measurement.
+    #[arg(long, default_value_t = 4)]
+    reps: u32,
+    /// Backend tracing the rays: `cpu` (default), `auto`, `vulkan` or `vulkan:N`.
+    #[arg(long, default_value = "cpu")]
+    device: String,
+    /// Print one JSON object per line instead of a table.
+    #[arg(long)]
+    json: bool,
 }
 
 #[derive(clap::Args)]
@@ -93,7 +122,7 @@ struct TraceBenchArgs {
 
 #[derive(clap::Args)]
 struct RenderArgs {
-    /// `builtin:cornell|spheres|hairball` or a Wavefront OBJ / glTF 2.0 (.gltf, .glb) file.
+    /// `builtin:cornell|cornell-two-lights|spheres|hairball` or a Wavefront OBJ / glTF 2.0 (.gltf, .glb) file.
     #[arg(long, default_value = "builtin:cornell")]
     scene: String,
     /// `auto` (Vulkan if usable, else CPU), `cpu`, `vulkan` or `vulkan:N`.
@@ -109,6 +138,18 @@ struct RenderArgs {
     /// Image height in pixels.
     #[arg(long, default_value_t = 512)]
     height: u32,
+    /// Samples (camera rays, and one shadow ray each) per pixel.
+    #[arg(long, default_value_t = 4)]
+    spp: u32,
+    /// What the image shows: `lit` (direct light with soft shadows) or `normals` (geometry).
+    #[arg(long, default_value = "lit")]
+    view: String,
+    /// Also write the HDR image (linear RGB, 32-bit float OpenEXR).
+    #[arg(long)]
+    exr: Option<PathBuf>,
+    /// Also write the fully stochastic image (S_N without the ratio) as PNG, for comparison.
+    #[arg(long)]
+    stochastic: Option<PathBuf>,
     /// Seed of the sampler.
     #[arg(long, default_value_t = 0)]
     seed: u32,
@@ -137,6 +178,7 @@ fn main() -> ExitCode {
         Command::Render(args) => render_command(args),
         Command::Bench { stage: BenchStage::Trace(args) } => bench_trace_command(args),
         Command::Report { topic: ReportTopic::Sampling(args) } => report_sampling_command(args),
+        Command::Report { topic: ReportTopic::Shade(args) } => report_shade_command(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -181,6 +223,19 @@ fn report_sampling_command(args: SamplingReportArgs) -> raywave::Result<()> {
     })
 }
 
+fn report_shade_command(args: ShadeReportArgs) -> raywave::Result<()> {
+    use raywave::report::shade::{report_shade, ShadeReportOptions};
+    let mut backend = raywave::open_backend(args.device.parse()?, &BackendOptions::default())?;
+    let options = ShadeReportOptions {
+        scenes: args.scenes,
+        resolution: args.resolution,
+        reference_spp: args.reference_spp,
+        max_spp: args.max_spp,
+        reps: args.reps,
+    };
+    report_shade(backend.as_mut(), &options, |line| print_line(if args.json { line.json() } else { line.row() }))
+}
+
 fn render_command(args: RenderArgs) -> raywave::Result<()> {
     let device = args.device.parse::<DeviceChoice>()?;
     let trace = args.trace.as_deref().map(str::parse::<TraceMethod>).transpose()?;
@@ -189,24 +244,29 @@ fn render_command(args: RenderArgs) -> raywave::Result<()> {
         device,
         width: args.width,
         height: args.height,
+        spp: args.spp,
         seed: args.seed,
         sampler: raywave::frame::parse_sampler_kind(&args.sampler)?,
         lens_radius: args.aperture,
         focus_distance: args.focus,
+        view: args.view.parse()?,
         out: args.out,
+        exr: args.exr,
+        stochastic: args.stochastic,
         backend: BackendOptions { validation: args.validate, trace },
     };
     let report = render(&options)?;
     println!("backend  {}", report.backend);
     println!(
-        "scene    {} ({} triangles, {} zero-area dropped)",
-        options.scene, report.triangles, report.dropped_degenerate
+        "scene    {} ({} triangles, {} zero-area dropped, {} quad lights)",
+        options.scene, report.triangles, report.dropped_degenerate, report.lights
     );
-    let rays = u64::from(options.width) * u64::from(options.height);
+    let rays = u64::from(options.width) * u64::from(options.height) * u64::from(options.spp);
     println!(
-        "image    {}×{} → {} ({} of {rays} rays hit)",
+        "image    {}×{} at {} spp → {} ({} of {rays} camera rays hit)",
         options.width,
         options.height,
+        options.spp,
         options.out.display(),
         report.hits
     );

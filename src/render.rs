@@ -1,9 +1,34 @@
-//! The `raywave render` job: scene → generate → trace on a chosen backend → image file.
+//! The `raywave render` job: scene → per sample (generate → trace → shade → occlusion trace), all
+//! on the chosen backend → the ratio estimator's composite → image files.
 
 use crate::{open_backend, BackendOptions, DeviceChoice, Result, Scene, StageTiming};
 use raywave_host::frame::{generate_params_with, sampler_params};
-use raywave_host::visualize::{normal_depth_image, PendingOutput};
+use raywave_host::shading::{self, ShadeAccumulator, ShadeData};
+use raywave_host::visualize::{normal_depth_image, srgb_image, PendingOutput};
 use std::path::PathBuf;
+
+/// What the image shows.
+#[derive(Copy, Clone, Debug, PartialEq, Eq)]
+pub enum RenderView {
+    /// Direct lighting from the scene's quad lights with soft shadows: `U · S_N / U_N`.
+    Lit,
+    /// The geometry: face-forward normals darkened with depth (one sample per pixel).
+    Normals,
+}
+
+impl std::str::FromStr for RenderView {
+    type Err = crate::Error;
+    fn from_str(s: &str) -> Result<Self> {
+        match s {
+            "lit" => Ok(Self::Lit),
+            "normals" => Ok(Self::Normals),
+            other => Err(crate::Error::InvalidParameter {
+                name: "view",
+                reason: format!("unknown view `{other}` (expected lit or normals)"),
+            }),
+        }
+    }
+}
 
 /// What to render and where.
 #[derive(Clone, Debug)]
@@ -16,6 +41,8 @@ pub struct RenderOptions {
     pub width: u32,
     /// Image height in pixels.
     pub height: u32,
+    /// Samples (camera rays, and one shadow ray each) per pixel, ≥ 1.
+    pub spp: u32,
     /// Seed of the sampler.
     pub seed: u32,
     /// Sampler kind (`raywave_shared::sampling::sampler_kind`).
@@ -24,8 +51,14 @@ pub struct RenderOptions {
     pub lens_radius: f32,
     /// Distance of the plane in focus; `None` focuses on the camera's look-at point.
     pub focus_distance: Option<f32>,
-    /// Output PNG path.
+    /// What the image shows.
+    pub view: RenderView,
+    /// Output PNG path (sRGB, clamped).
     pub out: PathBuf,
+    /// Also write the HDR image (linear RGB, 32-bit float OpenEXR) here.
+    pub exr: Option<PathBuf>,
+    /// Also write the fully stochastic image (`S_N`, no ratio) as PNG here, for comparison.
+    pub stochastic: Option<PathBuf>,
     /// Backend options (validation layers).
     pub backend: BackendOptions,
 }
@@ -39,44 +72,103 @@ pub struct RenderReport {
     pub triangles: usize,
     /// Zero-area triangles dropped while loading the scene.
     pub dropped_degenerate: usize,
-    /// Per-stage times.
+    /// Quad lights the shade stage samples.
+    pub lights: usize,
+    /// Per-stage times, summed over the samples.
     pub timings: Vec<StageTiming>,
-    /// Rays that hit geometry.
+    /// Camera rays that hit geometry (over all samples).
     pub hits: usize,
-    /// Bytes of SoA streams the frame used per pixel (ray stream + hit stream).
+    /// Bytes of SoA streams one sample pass uses per pixel (rays, hits, the shade stream, shadow
+    /// rays, occlusion).
     pub stream_bytes_per_pixel: u64,
 }
 
-/// Renders the normal/depth view of `options.scene` into `options.out`. Every input is checked
-/// before work starts and the output file appears only when complete.
+/// Adds `seconds` to the timing of `stage` (appending it the first time).
+fn add_timing(timings: &mut Vec<StageTiming>, stage: &'static str, seconds: f64) {
+    match timings.iter_mut().find(|t| t.stage == stage) {
+        Some(t) => t.seconds += seconds,
+        None => timings.push(StageTiming { stage, seconds }),
+    }
+}
+
+/// Renders `options.scene` into `options.out` (and the optional EXR and stochastic images).
+/// Every input is checked before work starts and each output file appears only when complete.
 pub fn render(options: &RenderOptions) -> Result<RenderReport> {
     let scene = Scene::load(&options.scene)?;
+    let invalid = |name, reason: &str| Err(crate::Error::InvalidParameter { name, reason: reason.into() });
+    if !(options.lens_radius.is_finite() && options.lens_radius >= 0.0) {
+        return invalid("aperture", "must be finite and ≥ 0");
+    }
+    if options.focus_distance.is_some_and(|f| !(f.is_finite() && f > 0.0)) {
+        return invalid("focus", "must be finite and > 0");
+    }
+    if !(1..=65_536).contains(&options.spp) {
+        return invalid("spp", "must be within 1..=65536");
+    }
     let output = PendingOutput::create(&options.out)?;
+    let exr = options.exr.as_deref().map(PendingOutput::create).transpose()?;
+    let stochastic = options.stochastic.as_deref().map(PendingOutput::create).transpose()?;
     let mut backend = open_backend(options.device, &options.backend)?;
     backend.check_image_size(options.width, options.height)?;
     backend.load_scene(&scene)?;
-    let lens_ok = options.lens_radius.is_finite() && options.lens_radius >= 0.0;
-    if !lens_ok {
-        return Err(crate::Error::InvalidParameter { name: "aperture", reason: "must be finite and ≥ 0".into() });
+    let spp = if options.view == RenderView::Lit { options.spp } else { 1 };
+    let sampler = sampler_params(options.sampler, options.seed, options.width, options.height, spp);
+    if !sampler.fits_index() {
+        return invalid("spp", "image side × samples per pixel exceed the sampler's 32-bit index");
     }
-    let sampler = sampler_params(options.sampler, options.seed, options.width, options.height, 1);
-    let mut params = generate_params_with(&scene, options.width, options.height, 0, sampler);
-    params.lens_radius = options.lens_radius;
-    if let Some(focus) = options.focus_distance {
-        if !(focus.is_finite() && focus > 0.0) {
-            return Err(crate::Error::InvalidParameter { name: "focus", reason: "must be finite and > 0".into() });
+    let (width, height) = (options.width, options.height);
+    let pixels = (width * height) as usize;
+    let data = if options.view == RenderView::Lit { Some(ShadeData::new(&scene)?) } else { None };
+    let mut accumulator = ShadeAccumulator::new(pixels);
+    let mut timings = Vec::new();
+    let mut hits = 0;
+    let mut stream_bytes = 0;
+    for sample_index in 0..spp {
+        let mut params = generate_params_with(&scene, width, height, sample_index, sampler);
+        params.lens_radius = options.lens_radius;
+        params.focus_distance = options.focus_distance.unwrap_or(params.focus_distance);
+        let frame = backend.render(&params)?;
+        for t in &frame.timings {
+            add_timing(&mut timings, t.stage, t.seconds);
         }
-        params.focus_distance = focus;
+        hits += frame.hits.primitive.iter().filter(|&&p| p != crate::shared::stream::NO_HIT).count();
+        stream_bytes = frame.rays.bytes() + frame.hits.bytes();
+        let Some(data) = &data else {
+            output.finish_png(&normal_depth_image(&scene, &frame.rays, &frame.hits, width, height))?;
+            return Ok(RenderReport {
+                backend: backend.name(),
+                triangles: scene.triangle_count(),
+                dropped_degenerate: scene.dropped_degenerate(),
+                lights: scene.lights().len(),
+                timings,
+                hits,
+                stream_bytes_per_pixel: stream_bytes / pixels as u64,
+            });
+        };
+        let shade_params = data.params(sampler, width, height, sample_index);
+        let (shades, timing) = backend.shade(&shade_params, data, &frame.rays, &frame.hits)?;
+        add_timing(&mut timings, timing.stage, timing.seconds);
+        let shadow_rays = shading::shadow_rays(&shades);
+        let (occluded, timing) = backend.trace_occlusion(&shadow_rays)?;
+        add_timing(&mut timings, timing.stage, timing.seconds);
+        accumulator.add(&shades, &occluded);
+        stream_bytes += shades.bytes() + std::mem::size_of_val(occluded.as_slice()) as u64 + shadow_rays.bytes();
     }
-    let frame = backend.render(&params)?;
-    let image = normal_depth_image(&scene, &frame.rays, &frame.hits, options.width, options.height);
-    output.finish_png(&image)?;
+    let image = accumulator.ratio_image();
+    output.finish_png(&srgb_image(&image, width, height))?;
+    if let Some(exr) = exr {
+        exr.finish_exr(&image, width, height)?;
+    }
+    if let Some(stochastic) = stochastic {
+        stochastic.finish_png(&srgb_image(&accumulator.stochastic_image(), width, height))?;
+    }
     Ok(RenderReport {
         backend: backend.name(),
         triangles: scene.triangle_count(),
         dropped_degenerate: scene.dropped_degenerate(),
-        hits: frame.hits.primitive.iter().filter(|&&p| p != crate::shared::stream::NO_HIT).count(),
-        stream_bytes_per_pixel: (frame.rays.bytes() + frame.hits.bytes()) / u64::from(options.width * options.height),
-        timings: frame.timings,
+        lights: scene.lights().len(),
+        timings,
+        hits,
+        stream_bytes_per_pixel: stream_bytes / pixels as u64,
     })
 }

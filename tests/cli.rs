@@ -53,10 +53,17 @@ fn cpu_render_writes_a_png_and_reports_stages() {
     let (out, path) = render(dir.path(), "cpu.png", &["--device", "cpu"]);
     assert!(out.status.success(), "{}", stderr(&out));
     let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(stdout.contains("generate") && stdout.contains("trace"), "{stdout}");
+    for stage in ["generate", "trace", "shade", "occlusion"] {
+        assert!(stdout.contains(stage), "{stage} missing: {stdout}");
+    }
     let image = image::open(&path).unwrap().to_rgb8();
     assert_eq!(image.dimensions(), (96, 64));
-    assert!(image.pixels().filter(|p| p.0 != [0, 0, 0]).count() > 96 * 64 / 2, "most pixels see the box");
+    // The lit box: the floor, the back and side walls (the ceiling faces away from the light and
+    // the sides of the wide frame miss the box).
+    assert!(image.pixels().filter(|p| p.0 != [0, 0, 0]).count() > 96 * 64 / 3, "the lit walls fill the frame");
+    // The red wall is on the left, the green one on the right.
+    let (left, right) = (image.get_pixel(22, 32).0, image.get_pixel(73, 32).0);
+    assert!(left[0] > left[1] && right[1] > right[0], "left {left:?} right {right:?}");
 }
 
 #[cfg(feature = "vulkan")]
@@ -85,10 +92,10 @@ fn vulkan_and_cpu_renders_agree() {
 fn renders_a_gltf_scene_and_reports_dropped_triangles() {
     let dir = tempfile::tempdir().unwrap();
     let scene = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/tetrahedron.gltf");
-    let (out, path) = render(dir.path(), "tetra.png", &["--device", "cpu", "--scene", scene]);
+    let (out, path) = render(dir.path(), "tetra.png", &["--device", "cpu", "--scene", scene, "--view", "normals"]);
     assert!(out.status.success(), "{}", stderr(&out));
     let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(stdout.contains("(4 triangles, 1 zero-area dropped)"), "{stdout}");
+    assert!(stdout.contains("(4 triangles, 1 zero-area dropped, 0 quad lights)"), "{stdout}");
     let image = image::open(&path).unwrap().to_rgb8();
     assert!(image.pixels().any(|p| p.0 != [0, 0, 0]), "the tetrahedron is in view of the file's camera");
 }
@@ -126,6 +133,9 @@ fn bad_input_is_a_typed_error_without_output() {
     assert_rejected(&["--device", "vulkan:99"], "vulkan:99");
     assert_rejected(&["--device", "gpu"], "expected auto, cpu, vulkan");
     assert_rejected(&["--device", "cpu", "--sampler", "halton"], "unknown sampler `halton`");
+    assert_rejected(&["--device", "cpu", "--spp", "0"], "spp");
+    assert_rejected(&["--device", "cpu", "--view", "albedo"], "unknown view `albedo`");
+    assert_rejected(&["--device", "cpu", "--exr", "/no/such/dir/out.exr"], "/no/such/dir/out.exr");
     assert_rejected(&["--device", "cpu", "--aperture=-1"], "aperture");
     assert_rejected(&["--device", "cpu", "--aperture", "0.1", "--focus", "0"], "focus");
 
@@ -174,4 +184,63 @@ fn sampling_report_prints_json_lines_for_every_case_and_spectrum() {
     }
     let bad = raywave(&["report", "sampling", "--reps", "1"]);
     assert!(!bad.status.success() && stderr(&bad).contains("reps"), "{}", stderr(&bad));
+}
+
+#[test]
+fn lit_render_writes_png_exr_and_stochastic_images() {
+    let dir = tempfile::tempdir().unwrap();
+    let exr = dir.path().join("lit.exr");
+    let stochastic = dir.path().join("stochastic.png");
+    let extra = [
+        "--device",
+        "cpu",
+        "--scene",
+        "builtin:cornell-two-lights",
+        "--spp",
+        "2",
+        "--exr",
+        exr.to_str().unwrap(),
+        "--stochastic",
+        stochastic.to_str().unwrap(),
+    ];
+    let (out, png) = render(dir.path(), "lit.png", &extra);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(String::from_utf8_lossy(&out.stdout).contains("2 quad lights"));
+    let hdr = image::open(&exr).expect("EXR readable").into_rgb32f();
+    assert_eq!(hdr.dimensions(), (96, 64));
+    assert!(hdr.pixels().all(|p| p.0.iter().all(|c| c.is_finite() && *c >= 0.0)));
+    let max = hdr.pixels().flat_map(|p| p.0).fold(0.0f32, f32::max);
+    assert!(max > 1.0, "the emitters are visible in HDR (max {max})");
+    assert!(image::open(&png).is_ok() && image::open(&stochastic).is_ok());
+    let (out, normals) = render(dir.path(), "normals.png", &["--device", "cpu", "--view", "normals"]);
+    assert!(out.status.success() && image::open(&normals).is_ok(), "{}", stderr(&out));
+}
+
+#[test]
+fn shade_report_prints_json_lines() {
+    let out = raywave(&[
+        "report",
+        "shade",
+        "--json",
+        "--scenes",
+        "builtin:cornell",
+        "--resolution",
+        "8",
+        "--reference-spp",
+        "16",
+        "--max-spp",
+        "2",
+        "--reps",
+        "1",
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let lines: Vec<serde_json::Value> =
+        String::from_utf8(out.stdout).unwrap().lines().map(|l| serde_json::from_str(l).expect("JSON line")).collect();
+    assert_eq!(lines.len(), 2 * 2 * 3);
+    for line in &lines {
+        assert_eq!(line["scene"], "builtin:cornell");
+        assert!(["ratio", "stochastic"].contains(&line["estimator"].as_str().unwrap()));
+        assert!(["all", "shadow", "lit"].contains(&line["region"].as_str().unwrap()));
+        assert!(line["rmse"].as_f64().unwrap().is_finite());
+    }
 }

@@ -3,9 +3,10 @@
 
 use crate::error::Result;
 use crate::scene::Scene;
-use crate::stream::{HitStream, RayStream};
+use crate::shading::ShadeData;
+use crate::stream::{HitStream, RayStream, ShadeStream};
 use glam::{UVec2, Vec4};
-use raywave_shared::{GenerateParams, SamplerProbeParams, WarpParams};
+use raywave_shared::{GenerateParams, SamplerProbeParams, ShadeParams, WarpParams};
 
 /// Time one stage took on a backend.
 #[derive(Clone, Debug, PartialEq)]
@@ -48,6 +49,19 @@ pub trait Backend {
     /// interval, 0 otherwise (shadow rays).
     fn trace_occlusion(&mut self, rays: &RayStream) -> Result<(Vec<u32>, StageTiming)>;
 
+    /// Runs the shade stage: resolves each camera ray's hit (`rays[i]`, `hits[i]`, pixel `i` of a
+    /// `params.width`-wide image) into a surface of `data`'s scene and shades one sample of it.
+    /// `params.count` must equal the number of rays and of hits. Backends that keep `data` on a
+    /// device upload it once and reuse it while the same `data` is passed (see
+    /// [`ShadeData::identity`]).
+    fn shade(
+        &mut self,
+        params: &ShadeParams,
+        data: &ShadeData,
+        rays: &RayStream,
+        hits: &HitStream,
+    ) -> Result<(ShadeStream, StageTiming)>;
+
     /// Runs generate → trace as one frame, keeping the ray stream on the backend in between.
     fn render(&mut self, params: &GenerateParams) -> Result<FrameOutput>;
 
@@ -87,6 +101,26 @@ pub fn warp_probe_len(params: &WarpParams) -> Result<u32> {
             name: "warp probe",
             reason: format!("{} samples exceed {MAX_PROBE_SAMPLES}", params.count),
         })
+    }
+}
+
+/// Checks the inputs of the shade stage every backend shares: one hit per ray, `params.count`
+/// rays, and a width ≥ 1.
+pub(crate) fn check_shade_inputs(params: &ShadeParams, rays: &RayStream, hits: &HitStream) -> Result<()> {
+    let reason = if rays.len() != hits.len() || rays.direction.len() != rays.len() {
+        Some(format!("{} rays ({} directions) but {} hits", rays.len(), rays.direction.len(), hits.len()))
+    } else if [hits.primitive.len(), hits.instance.len(), hits.barycentrics.len()].iter().any(|&n| n != hits.len()) {
+        Some("the hit stream's fields differ in length".to_owned())
+    } else if params.count as usize != hits.len() {
+        Some(format!("params.count = {} but {} rays", params.count, hits.len()))
+    } else if params.width == 0 {
+        Some("params.width must be at least 1".to_owned())
+    } else {
+        None
+    };
+    match reason {
+        Some(reason) => Err(crate::error::Error::InvalidParameter { name: "shade", reason }),
+        None => Ok(()),
     }
 }
 

@@ -11,6 +11,7 @@ pub mod frame;
 pub mod lights;
 pub mod ltc_fit;
 pub mod scene;
+pub mod shading;
 pub mod stats;
 pub mod stream;
 pub mod visualize;

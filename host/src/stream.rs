@@ -1,4 +1,5 @@
-//! Host-side SoA streams: one `Vec` per field, in the layout of [`raywave_shared::stream`].
+//! Host-side SoA streams: one `Vec` per field, in the layout of [`raywave_shared::stream`] (and, for
+//! the shade stage's outputs, of the kernels' `ShadeSample`).
 
 use glam::{Vec2, Vec4};
 use raywave_shared::stream::{HIT_STREAM_BYTES_PER_RAY, RAY_STREAM_BYTES_PER_RAY};
@@ -68,5 +69,54 @@ impl HitStream {
     /// Bytes the stream occupies.
     pub fn bytes(&self) -> u64 {
         self.len() as u64 * u64::from(HIT_STREAM_BYTES_PER_RAY)
+    }
+}
+
+/// The shade stream: what the shade stage writes, one record per camera ray (ray `i` is pixel `i`
+/// of the pass). The fields of the kernels' `ShadeSample`, one `Vec` each.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ShadeStream {
+    /// Analytic unshadowed radiance `U` (rgb; w = 0).
+    pub analytic: Vec<Vec4>,
+    /// This sample's contribution to `U_N` (rgb; w = 0); its contribution to `S_N` is the same
+    /// times the shadow ray's visibility.
+    pub unshadowed: Vec<Vec4>,
+    /// Radiance emitted by the surface itself towards the camera (rgb; w = 0).
+    pub emitted: Vec<Vec4>,
+    /// Shadow-ray origin (xyz), w = tmin.
+    pub shadow_origin: Vec<Vec4>,
+    /// Shadow-ray direction (xyz), w = tmax; tmax = 0 when there is nothing to trace.
+    pub shadow_direction: Vec<Vec4>,
+}
+
+/// Bytes per camera ray in the shade stream (five `Vec4` fields).
+pub const SHADE_STREAM_BYTES_PER_RAY: u32 = 5 * std::mem::size_of::<Vec4>() as u32;
+
+impl ShadeStream {
+    /// A zero-filled stream of `len` records.
+    pub fn zeroed(len: usize) -> Self {
+        let zero = vec![Vec4::ZERO; len];
+        Self {
+            analytic: zero.clone(),
+            unshadowed: zero.clone(),
+            emitted: zero.clone(),
+            shadow_origin: zero.clone(),
+            shadow_direction: zero,
+        }
+    }
+
+    /// Number of records.
+    pub fn len(&self) -> usize {
+        self.analytic.len()
+    }
+
+    /// Whether the stream holds no records.
+    pub fn is_empty(&self) -> bool {
+        self.analytic.is_empty()
+    }
+
+    /// Bytes the stream occupies.
+    pub fn bytes(&self) -> u64 {
+        self.len() as u64 * u64::from(SHADE_STREAM_BYTES_PER_RAY)
     }
 }

@@ -1,4 +1,5 @@
-//! Views of a frame for humans: a shaded normal/depth image written as PNG.
+//! Views of a frame for humans: the lit image tone-mapped to sRGB PNG or written as HDR OpenEXR,
+//! and a shaded normal/depth view.
 
 use crate::error::{Error, Result};
 use crate::scene::Scene;
@@ -26,6 +27,21 @@ pub fn normal_depth_image(scene: &Scene, rays: &RayStream, hits: &HitStream, wid
         image.put_pixel(pixel % width, pixel / width, image::Rgb(rgb));
     }
     image
+}
+
+/// Linear radiance to an 8-bit sRGB image: each channel clamped to [0, 1] (exposure 1, no tone
+/// curve, so values are comparable across renders) and encoded with the sRGB transfer function
+/// (IEC 61966-2-1). `colors` is row-major, `width · height` long.
+pub fn srgb_image(colors: &[Vec3], width: u32, height: u32) -> RgbImage {
+    let encode = |c: f32| {
+        let c = if c.is_finite() { c.clamp(0.0, 1.0) } else { 0.0 };
+        let srgb = if c <= 0.003_130_8 { 12.92 * c } else { 1.055 * c.powf(1.0 / 2.4) - 0.055 };
+        (srgb * 255.0 + 0.5) as u8
+    };
+    RgbImage::from_fn(width, height, |x, y| {
+        let c = colors[(y * width + x) as usize];
+        image::Rgb([encode(c.x), encode(c.y), encode(c.z)])
+    })
 }
 
 /// An output file that appears only when complete: it is created as a temporary file beside the
@@ -58,6 +74,19 @@ impl PendingOutput {
         let mut encoded = std::io::Cursor::new(Vec::new());
         image
             .write_to(&mut encoded, image::ImageFormat::Png)
+            .map_err(|e| Error::Encode { path: self.path.clone(), message: e.to_string() })?;
+        self.finish(encoded.get_ref())
+    }
+
+    /// Encodes linear radiance `colors` (row-major, `width · height`) as a 32-bit float RGB
+    /// OpenEXR file and moves it into place.
+    pub fn finish_exr(self, colors: &[Vec3], width: u32, height: u32) -> Result<()> {
+        let data: Vec<f32> = colors.iter().flat_map(|c| c.to_array()).collect();
+        let image = image::Rgb32FImage::from_raw(width, height, data)
+            .ok_or_else(|| Error::Encode { path: self.path.clone(), message: "image size mismatch".into() })?;
+        let mut encoded = std::io::Cursor::new(Vec::new());
+        image
+            .write_to(&mut encoded, image::ImageFormat::OpenExr)
             .map_err(|e| Error::Encode { path: self.path.clone(), message: e.to_string() })?;
         self.finish(encoded.get_ref())
     }

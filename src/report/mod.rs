@@ -3,4 +3,5 @@
 
 pub mod sampling;
 pub mod scenes;
+pub mod shade;
 pub mod spectrum;

@@ -5,10 +5,13 @@ mod bvh;
 
 pub use bvh::{BvhQuality, CpuScene};
 
-use crate::backend::{check_image_size_common, sampler_probe_len, warp_probe_len, Backend, FrameOutput, StageTiming};
+use crate::backend::{
+    check_image_size_common, check_shade_inputs, sampler_probe_len, warp_probe_len, Backend, FrameOutput, StageTiming,
+};
 use crate::error::{Error, Result};
 use crate::scene::Scene;
-use crate::stream::{HitStream, RayStream};
+use crate::shading::{self, ShadeData};
+use crate::stream::{HitStream, RayStream, ShadeStream};
 use glam::{UVec2, Vec4};
 use rayon::prelude::*;
 use raywave_kernels::sampling::probe;
@@ -16,7 +19,7 @@ use raywave_kernels::{
     generate::generate_ray,
     trace::{trace_closest, trace_occluded},
 };
-use raywave_shared::{GenerateParams, SamplerProbeParams, WarpParams};
+use raywave_shared::{GenerateParams, SamplerProbeParams, ShadeParams, WarpParams};
 use std::time::Instant;
 
 /// Largest image the CPU backend accepts: 2²⁶ pixels (≈ 3.8 GB of ray and hit streams).
@@ -109,6 +112,20 @@ impl Backend for CpuBackend {
     fn trace_occlusion(&mut self, rays: &RayStream) -> Result<(Vec<u32>, StageTiming)> {
         let scene = self.scene()?;
         Ok(timed("occlusion", || trace_occlusion(scene, rays)))
+    }
+
+    fn shade(
+        &mut self,
+        params: &ShadeParams,
+        data: &ShadeData,
+        rays: &RayStream,
+        hits: &HitStream,
+    ) -> Result<(ShadeStream, StageTiming)> {
+        check_shade_inputs(params, rays, hits)?;
+        Ok(timed("shade", || {
+            let surfaces = shading::resolve(data, rays, hits);
+            shading::shade(params, data, rays, &surfaces)
+        }))
     }
 
     fn render(&mut self, params: &GenerateParams) -> Result<FrameOutput> {

@@ -1,5 +1,5 @@
-//! The Vulkan backend: the generate and trace stages as compute dispatches over device-resident
-//! SoA streams.
+//! The Vulkan backend: the generate, trace and shade stages as compute dispatches over
+//! device-resident SoA streams.
 
 use super::accel::{build_scene, SceneAccel};
 use super::buffer::GpuBuffer;
@@ -7,17 +7,20 @@ use super::context::{open, ContextOptions, Core, DeviceInfo};
 use super::kernel::{dispatch_grid, ComputeKernel};
 use super::pass::Resource;
 use super::rt_pipeline::{RtPipelineKernel, CLOSEST_HIT_SHADERS, OCCLUSION_SHADERS};
-use crate::backend::{check_image_size_common, sampler_probe_len, warp_probe_len, Backend, FrameOutput, StageTiming};
+use crate::backend::{
+    check_image_size_common, check_shade_inputs, sampler_probe_len, warp_probe_len, Backend, FrameOutput, StageTiming,
+};
 use crate::cpu::CpuScene;
 use crate::device::TraceMethod;
 use crate::error::{Error, Result};
 use crate::scene::Scene;
-use crate::stream::{HitStream, RayStream};
+use crate::shading::{ShadeData, ShadeDataIdentity};
+use crate::stream::{HitStream, RayStream, ShadeStream};
 use ash::vk;
 use bytemuck::Pod;
 use glam::{UVec2, Vec2, Vec4};
 use gpu_allocator::MemoryLocation;
-use raywave_shared::{bindings, GenerateParams, SamplerProbeParams, TraceParams, WarpParams};
+use raywave_shared::{bindings, GenerateParams, SamplerProbeParams, ShadeParams, TraceParams, WarpParams};
 use std::sync::Arc;
 
 /// Storage buffers of the streams: read and written by shaders, mapped for upload and readback.
@@ -80,6 +83,16 @@ impl DeviceHits {
         })
     }
 
+    fn upload(core: &Arc<Core>, hits: &HitStream) -> Result<Self> {
+        Ok(Self {
+            t: GpuBuffer::with_data(core, &hits.t, STREAM_USAGE, "hit t")?,
+            primitive: GpuBuffer::with_data(core, &hits.primitive, STREAM_USAGE, "hit primitive")?,
+            instance: GpuBuffer::with_data(core, &hits.instance, STREAM_USAGE, "hit instance")?,
+            barycentrics: GpuBuffer::with_data(core, &hits.barycentrics, STREAM_USAGE, "hit barycentrics")?,
+            len: stream_len(hits.len())?,
+        })
+    }
+
     fn read(&self) -> Result<HitStream> {
         let n = self.len as usize;
         Ok(HitStream {
@@ -89,6 +102,88 @@ impl DeviceHits {
             barycentrics: self.barycentrics.read(n)?,
         })
     }
+}
+
+/// The shade stream on the device: the shade stage's five outputs.
+struct DeviceShades {
+    analytic: GpuBuffer,
+    unshadowed: GpuBuffer,
+    emitted: GpuBuffer,
+    shadow_origin: GpuBuffer,
+    shadow_direction: GpuBuffer,
+    len: u32,
+}
+
+impl DeviceShades {
+    fn new(core: &Arc<Core>, len: u32) -> Result<Self> {
+        Ok(Self {
+            analytic: stream_buffer::<Vec4>(core, len, "shade analytic")?,
+            unshadowed: stream_buffer::<Vec4>(core, len, "shade unshadowed")?,
+            emitted: stream_buffer::<Vec4>(core, len, "shade emitted")?,
+            shadow_origin: stream_buffer::<Vec4>(core, len, "shadow ray origin")?,
+            shadow_direction: stream_buffer::<Vec4>(core, len, "shadow ray direction")?,
+            len,
+        })
+    }
+
+    fn read(&self) -> Result<ShadeStream> {
+        let n = self.len as usize;
+        Ok(ShadeStream {
+            analytic: self.analytic.read(n)?,
+            unshadowed: self.unshadowed.read(n)?,
+            emitted: self.emitted.read(n)?,
+            shadow_origin: self.shadow_origin.read(n)?,
+            shadow_direction: self.shadow_direction.read(n)?,
+        })
+    }
+}
+
+/// The scene data of the shade stage on the device, uploaded once per [`ShadeData`] value (the
+/// 128 KiB LTC table, the triangles, …) and reused while the same value comes back.
+struct DeviceShadeData {
+    /// Which [`ShadeData`] these buffers hold.
+    identity: ShadeDataIdentity,
+    triangles: GpuBuffer,
+    first_triangle: GpuBuffer,
+    materials: GpuBuffer,
+    lights: GpuBuffer,
+    light_nodes: GpuBuffer,
+    light_trails: GpuBuffer,
+    ltc: GpuBuffer,
+}
+
+impl DeviceShadeData {
+    fn upload(core: &Arc<Core>, data: &ShadeData) -> Result<Self> {
+        Ok(Self {
+            identity: data.identity(),
+            triangles: input_buffer(core, &data.triangles, "shade triangles")?,
+            first_triangle: input_buffer(core, &data.first_triangle, "shade first triangle")?,
+            materials: input_buffer(core, &data.materials, "shade materials")?,
+            lights: input_buffer(core, &data.lights, "shade lights")?,
+            light_nodes: input_buffer(core, &data.light_nodes, "shade light nodes")?,
+            light_trails: input_buffer(core, &data.light_trails, "shade light trails")?,
+            ltc: input_buffer(core, &data.ltc, "shade ltc table")?,
+        })
+    }
+}
+
+/// A read-only storage buffer holding `data`, or one zeroed element when `data` is empty (a
+/// binding cannot be empty; the stage's parameters carry the valid counts). Fails when the
+/// buffer exceeds the device's storage-buffer range, which a binding could not cover.
+fn input_buffer<T: Pod>(core: &Arc<Core>, data: &[T], name: &str) -> Result<GpuBuffer> {
+    let dummy = [T::zeroed()];
+    let data = if data.is_empty() { &dummy[..] } else { data };
+    let bytes = std::mem::size_of_val(data) as u64;
+    if bytes > u64::from(core.limits.max_storage_buffer_range) {
+        return Err(Error::InvalidParameter {
+            name: "scene",
+            reason: format!(
+                "{name}: {bytes} bytes exceed the device's storage-buffer range of {} bytes",
+                core.limits.max_storage_buffer_range
+            ),
+        });
+    }
+    GpuBuffer::with_data(core, data, STREAM_USAGE, name)
 }
 
 fn stream_len(len: usize) -> Result<u32> {
@@ -120,8 +215,11 @@ pub struct VulkanBackend {
     warp_probe: ComputeKernel,
     trace: TraceKernel,
     occlusion: TraceKernel,
+    shade_kernel: ComputeKernel,
     trace_method: TraceMethod,
     scene: Option<DeviceScene>,
+    /// The shade stage's scene data, cached across `shade` calls.
+    shade_data: Option<DeviceShadeData>,
     core: Arc<Core>,
 }
 
@@ -155,6 +253,27 @@ const HIT_OUTPUTS: [u32; 4] = [
 
 /// Output binding of the occlusion trace.
 const OCCLUSION_OUTPUTS: [u32; 1] = [bindings::occlusion::OCCLUDED];
+
+/// Bindings of the shade stage, in the order [`VulkanBackend::shade`] binds its resources.
+const SHADE_BINDINGS: [u32; 17] = [
+    bindings::shade::RAY_DIRECTION,
+    bindings::shade::HIT_T,
+    bindings::shade::HIT_PRIMITIVE,
+    bindings::shade::HIT_INSTANCE,
+    bindings::shade::HIT_BARYCENTRICS,
+    bindings::shade::TRIANGLES,
+    bindings::shade::FIRST_TRIANGLE,
+    bindings::shade::MATERIALS,
+    bindings::shade::LIGHTS,
+    bindings::shade::LIGHT_NODES,
+    bindings::shade::LIGHT_TRAILS,
+    bindings::shade::LTC,
+    bindings::shade::ANALYTIC,
+    bindings::shade::UNSHADOWED,
+    bindings::shade::EMITTED,
+    bindings::shade::SHADOW_ORIGIN,
+    bindings::shade::SHADOW_DIRECTION,
+];
 
 impl VulkanBackend {
     /// Opens Vulkan device `index` and builds its pipelines. `trace` picks the trace method;
@@ -200,6 +319,9 @@ impl VulkanBackend {
         )?;
         let warp_probe =
             ComputeKernel::new(&core, "entry::warp_probe", &probe_layout, std::mem::size_of::<WarpParams>() as u32)?;
+        let shade_layout: Vec<_> = SHADE_BINDINGS.iter().map(|&binding| (binding, storage)).collect();
+        let shade_kernel =
+            ComputeKernel::new(&core, "entry::shade", &shade_layout, std::mem::size_of::<ShadeParams>() as u32)?;
         let push = std::mem::size_of::<TraceParams>() as u32;
         let hit_layout = trace_bindings(trace_method, &HIT_OUTPUTS);
         let occlusion_layout = trace_bindings(trace_method, &OCCLUSION_OUTPUTS);
@@ -221,7 +343,18 @@ impl VulkanBackend {
                 (rt(&CLOSEST_HIT_SHADERS, &hit_layout)?, rt(&OCCLUSION_SHADERS, &occlusion_layout)?)
             }
         };
-        Ok(Self { generate, sampler_probe, warp_probe, trace, occlusion, trace_method, scene: None, core })
+        Ok(Self {
+            generate,
+            sampler_probe,
+            warp_probe,
+            trace,
+            occlusion,
+            shade_kernel,
+            trace_method,
+            scene: None,
+            shade_data: None,
+            core,
+        })
     }
 
     /// The device's name and features.
@@ -267,12 +400,7 @@ impl VulkanBackend {
             .scene
             .as_ref()
             .ok_or(Error::InvalidParameter { name: "scene", reason: "trace needs a loaded scene".into() })?;
-        if dispatch_grid(&self.core.limits, rays.len).is_none() || u64::from(rays.len) > self.max_rays() {
-            return Err(Error::InvalidParameter {
-                name: "rays",
-                reason: format!("{} rays exceed the device's limits", rays.len),
-            });
-        }
+        self.check_stream(rays.len)?;
         let (scene_resource, triangles) = match scene {
             DeviceScene::Accelerated(accel) => (Resource::AccelerationStructure(accel.tlas.handle), vec![]),
             DeviceScene::Software { nodes, vertices, ids } => {
@@ -291,6 +419,28 @@ impl VulkanBackend {
             TraceKernel::Compute(kernel) => kernel.dispatch(&resources, push, rays.len),
             TraceKernel::RtPipeline(kernel) => kernel.trace(&resources, push, rays.len),
         }
+    }
+
+    /// Checks that a stream of `len` elements fits one storage buffer and one dispatch.
+    fn check_stream(&self, len: u32) -> Result<()> {
+        if dispatch_grid(&self.core.limits, len).is_none() || u64::from(len) > self.max_rays() {
+            return Err(Error::InvalidParameter {
+                name: "rays",
+                reason: format!("{len} rays exceed the device's limits"),
+            });
+        }
+        Ok(())
+    }
+
+    /// Uploads `data` for the shade stage unless the buffers already hold it.
+    fn load_shade_data(&mut self, data: &ShadeData) -> Result<()> {
+        if self.shade_data.as_ref().is_some_and(|d| d.identity == data.identity()) {
+            return Ok(());
+        }
+        // Free the old buffers before allocating the new ones.
+        self.shade_data = None;
+        self.shade_data = Some(DeviceShadeData::upload(&self.core, data)?);
+        Ok(())
     }
 
     fn trace_on_device(&self, rays: &DeviceRays) -> Result<(DeviceHits, StageTiming)> {
@@ -344,6 +494,48 @@ impl Backend for VulkanBackend {
         let occluded = stream_buffer::<u32>(&self.core, device_rays.len, "occluded")?;
         let seconds = self.run_trace_kernel(&self.occlusion, &device_rays, &[&occluded])?;
         Ok((occluded.read(rays.len())?, StageTiming { stage: "occlusion", seconds }))
+    }
+
+    fn shade(
+        &mut self,
+        params: &ShadeParams,
+        data: &ShadeData,
+        rays: &RayStream,
+        hits: &HitStream,
+    ) -> Result<(ShadeStream, StageTiming)> {
+        check_shade_inputs(params, rays, hits)?;
+        let len = stream_len(hits.len())?;
+        self.check_stream(len)?;
+        self.load_shade_data(data)?;
+        let (core, scene) = match &self.shade_data {
+            Some(scene) => (&self.core, scene),
+            None => return Err(Error::InvalidParameter { name: "shade", reason: "shade data not uploaded".into() }),
+        };
+        let direction = GpuBuffer::with_data(core, &rays.direction, STREAM_USAGE, "ray direction")?;
+        let hits = DeviceHits::upload(core, hits)?;
+        let out = DeviceShades::new(core, len)?;
+        let resources = [
+            &direction,
+            &hits.t,
+            &hits.primitive,
+            &hits.instance,
+            &hits.barycentrics,
+            &scene.triangles,
+            &scene.first_triangle,
+            &scene.materials,
+            &scene.lights,
+            &scene.light_nodes,
+            &scene.light_trails,
+            &scene.ltc,
+            &out.analytic,
+            &out.unshadowed,
+            &out.emitted,
+            &out.shadow_origin,
+            &out.shadow_direction,
+        ]
+        .map(Resource::Buffer);
+        let seconds = self.shade_kernel.dispatch(&resources, bytemuck::bytes_of(params), len)?;
+        Ok((out.read()?, StageTiming { stage: "shade", seconds }))
     }
 
     fn render(&mut self, params: &GenerateParams) -> Result<FrameOutput> {

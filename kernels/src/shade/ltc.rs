@@ -12,6 +12,8 @@
 use super::polygon::{quad_form_factor, Polygon};
 use glam::{Mat3, Vec3, Vec4};
 use raywave_shared::ltc_table::LTC_SIZE;
+#[cfg(target_arch = "spirv")]
+use spirv_std::num_traits::Float;
 
 /// Entries of the packed LTC table buffer: `LTC_SIZE²` matrices followed by `LTC_SIZE²`
 /// amplitudes (`raywave_shared::ltc_table::{LTC_MATRIX, LTC_AMPLITUDE}` as `Vec4`s), so the GPU
@@ -94,7 +96,8 @@ impl ShadingFrame {
 /// The corners of the parallelogram `corner + s·edge_u + t·edge_v` relative to `p`, in `frame`.
 pub fn local_quad(frame: &ShadingFrame, p: Vec3, corner: Vec3, edge_u: Vec3, edge_v: Vec3) -> [Vec3; 4] {
     let o = corner - p;
-    [o, o + edge_u, o + edge_u + edge_v, o + edge_v].map(|q| frame.to_local(q))
+    // Written out: rust-gpu cannot compile `<[T; N]>::map` (it offsets pointers into the array).
+    [frame.to_local(o), frame.to_local(o + edge_u), frame.to_local(o + edge_u + edge_v), frame.to_local(o + edge_v)]
 }
 
 /// `U_D`: the clamped-cosine form factor of the quad (local corners `quad`).

@@ -1,0 +1,286 @@
+//! The shade stage on the host: the scene data it reads (materials, lights and their BVH, the
+//! LTC table, triangles by (instance, primitive)), the CPU executor over the kernels' stage
+//! functions, and the per-pixel accumulation of `U`, `U_N`, `S_N` for the ratio estimator.
+
+use crate::error::Result;
+use crate::lights::{wants_bvh, LightBvh};
+use crate::scene::Scene;
+use crate::stream::{HitStream, RayStream, ShadeStream};
+use glam::{UVec2, Vec3, Vec4, Vec4Swizzles};
+use rayon::prelude::*;
+use raywave_kernels::sampling::light_select::LightSet;
+use raywave_kernels::shade::stage::{composite, resolve_surface, shade_sample, ShadeScene, Surface};
+use raywave_shared::ltc_table::{LTC_AMPLITUDE, LTC_MATRIX};
+use raywave_shared::{Light, LightBvhNode, MaterialParams, SamplerParams, ShadeParams};
+use std::sync::atomic::{AtomicU64, Ordering};
+
+/// Everything the shade stage reads about a scene, laid out as its buffers.
+///
+/// Backends that keep this data on a device (Vulkan) upload it on the first `shade` call and reuse
+/// it while the same `ShadeData` is passed: its identity ([`ShadeData::identity`]) is a number
+/// unique to the value plus the address and length of every buffer. Editing the vectors' lengths
+/// or replacing them is noticed; to change values in place, build a new `ShadeData`.
+pub struct ShadeData {
+    /// Material per instance (mesh).
+    pub materials: Vec<MaterialParams>,
+    /// The quad lights.
+    pub lights: Vec<Light>,
+    /// Light BVH nodes (empty: linear importance scan, for few lights).
+    pub light_nodes: Vec<LightBvhNode>,
+    /// Per light, its trail in the BVH (empty without a BVH).
+    pub light_trails: Vec<u32>,
+    /// The LTC table: matrices then amplitudes.
+    pub ltc: Vec<Vec4>,
+    /// Three vertices per triangle, instances one after the other.
+    pub triangles: Vec<Vec4>,
+    /// Index of each instance's first triangle in `triangles / 3`.
+    pub first_triangle: Vec<u32>,
+    /// Unique per value (see [`ShadeData::identity`]).
+    serial: u64,
+}
+
+/// What identifies the contents of a [`ShadeData`] for a backend's upload cache: a number unique
+/// to the value, and the address and length of each of its buffers.
+#[derive(Copy, Clone, Debug, PartialEq, Eq)]
+pub struct ShadeDataIdentity {
+    serial: u64,
+    buffers: [(usize, usize); 7],
+}
+
+impl ShadeData {
+    /// Lays out `scene` for the shade stage; a light BVH is built when the scene has many lights.
+    pub fn new(scene: &Scene) -> Result<Self> {
+        let materials = scene
+            .meshes()
+            .iter()
+            .map(|m| MaterialParams {
+                base_color_roughness: m.material.base_color.extend(m.material.roughness),
+                emission_metallic: m.material.emission.extend(m.material.metallic),
+            })
+            .collect();
+        let lights = scene.lights().to_vec();
+        let (light_nodes, light_trails) = if wants_bvh(lights.len()) {
+            let bvh = LightBvh::build(&lights)?;
+            (bvh.nodes().to_vec(), bvh.trails().to_vec())
+        } else {
+            (Vec::new(), Vec::new())
+        };
+        let mut triangles = Vec::with_capacity(scene.triangle_count() * 3);
+        let mut first_triangle = Vec::with_capacity(scene.meshes().len());
+        for mesh in scene.meshes() {
+            first_triangle.push((triangles.len() / 3) as u32);
+            for t in &mesh.triangles {
+                triangles.extend(t.map(|v| mesh.positions[v as usize].extend(0.0)));
+            }
+        }
+        let ltc = LTC_MATRIX.iter().chain(LTC_AMPLITUDE.iter()).map(|&v| Vec4::from_array(v)).collect();
+        static SERIAL: AtomicU64 = AtomicU64::new(0);
+        let serial = SERIAL.fetch_add(1, Ordering::Relaxed);
+        Ok(Self { materials, lights, light_nodes, light_trails, ltc, triangles, first_triangle, serial })
+    }
+
+    /// This value's identity for upload caches: equal identities mean the same buffers.
+    pub fn identity(&self) -> ShadeDataIdentity {
+        fn buffer<T>(v: &[T]) -> (usize, usize) {
+            (v.as_ptr() as usize, v.len())
+        }
+        ShadeDataIdentity {
+            serial: self.serial,
+            buffers: [
+                buffer(&self.materials),
+                buffer(&self.lights),
+                buffer(&self.light_nodes),
+                buffer(&self.light_trails),
+                buffer(&self.ltc),
+                buffer(&self.triangles),
+                buffer(&self.first_triangle),
+            ],
+        }
+    }
+
+    /// Shade-stage parameters for sample `sample_index` of a `width × height` frame drawn by
+    /// `sampler`, with this scene's light counts.
+    pub fn params(&self, sampler: SamplerParams, width: u32, height: u32, sample_index: u32) -> ShadeParams {
+        ShadeParams {
+            sampler,
+            width,
+            count: width * height,
+            sample_index,
+            light_count: self.lights.len() as u32,
+            light_node_count: self.light_nodes.len() as u32,
+            padding: [0; 3],
+        }
+    }
+
+    /// The kernels' view of this data, with every light and node valid (see
+    /// [`ShadeData::view_for`] for the view a dispatch with given parameters sees).
+    pub fn view(&self) -> ShadeScene<'_> {
+        ShadeScene {
+            materials: &self.materials,
+            lights: LightSet::new(&self.lights, &self.light_nodes, &self.light_trails),
+            ltc: &self.ltc,
+        }
+    }
+
+    /// The kernels' view of this data as the shade entry point builds it from `params`: the valid
+    /// light and node counts are `params.light_count` and `params.light_node_count` (clamped to
+    /// the buffers by `LightSet`).
+    pub fn view_for(&self, params: &ShadeParams) -> ShadeScene<'_> {
+        let mut scene = self.view();
+        scene.lights.light_count = params.light_count;
+        scene.lights.node_count = params.light_node_count;
+        scene
+    }
+}
+
+/// The resolve step on the CPU: the surface each camera ray hit.
+pub fn resolve(data: &ShadeData, rays: &RayStream, hits: &HitStream) -> Vec<Surface> {
+    (0..rays.len())
+        .into_par_iter()
+        .map(|i| {
+            resolve_surface(
+                rays.direction[i].xyz(),
+                hits.t[i],
+                hits.instance[i],
+                hits.primitive[i],
+                hits.barycentrics[i],
+                &data.triangles,
+                &data.first_triangle,
+            )
+        })
+        .collect()
+}
+
+/// The shade stage on the CPU: one record of the kernels' `shade_sample` per camera ray (ray `i`
+/// is pixel `i`), written field by field into a [`ShadeStream`] — what the Vulkan entry point
+/// writes into its five output buffers.
+pub fn shade(params: &ShadeParams, data: &ShadeData, rays: &RayStream, surfaces: &[Surface]) -> ShadeStream {
+    let scene = data.view_for(params);
+    let width = params.width.max(1);
+    let mut out = ShadeStream::zeroed(surfaces.len());
+    (&mut out.analytic, &mut out.unshadowed, &mut out.emitted, &mut out.shadow_origin, &mut out.shadow_direction)
+        .into_par_iter()
+        .enumerate()
+        .for_each(|(i, (analytic, unshadowed, emitted, shadow_origin, shadow_direction))| {
+            let pixel = UVec2::new(i as u32 % width, i as u32 / width);
+            let s = shade_sample(params, pixel, rays.direction[i].xyz(), &surfaces[i], &scene);
+            (*analytic, *unshadowed, *emitted) = (s.analytic, s.unshadowed, s.emitted);
+            (*shadow_origin, *shadow_direction) = (s.shadow_origin, s.shadow_direction);
+        });
+    out
+}
+
+/// Shadow rays of a pass's shade stream, ready for the occlusion trace (ray `i` is pixel `i`).
+pub fn shadow_rays(shades: &ShadeStream) -> RayStream {
+    RayStream {
+        origin: shades.shadow_origin.clone(),
+        direction: shades.shadow_direction.clone(),
+        pixel: (0..shades.len() as u32).collect(),
+    }
+}
+
+/// Per-pixel means over the samples of a frame: the inputs of the ratio estimator and of the
+/// denoiser.
+#[derive(Clone, Debug, Default)]
+pub struct ShadeAccumulator {
+    samples: u32,
+    /// Σ analytic `U` (the same every sample; averaged for robustness).
+    analytic: Vec<Vec3>,
+    /// Σ `U_N` contributions.
+    unshadowed: Vec<Vec3>,
+    /// Σ `S_N` contributions.
+    shadowed: Vec<Vec3>,
+    /// Σ emitted radiance.
+    emitted: Vec<Vec3>,
+}
+
+impl ShadeAccumulator {
+    /// An empty accumulator for `pixels` pixels.
+    pub fn new(pixels: usize) -> Self {
+        let zero = vec![Vec3::ZERO; pixels];
+        Self { samples: 0, analytic: zero.clone(), unshadowed: zero.clone(), shadowed: zero.clone(), emitted: zero }
+    }
+
+    /// Adds one pass: its shade stream and the occlusion of its shadow rays (1 = blocked).
+    pub fn add(&mut self, shades: &ShadeStream, occluded: &[u32]) {
+        self.samples += 1;
+        let passes = shades.analytic.iter().zip(&shades.unshadowed).zip(&shades.emitted).zip(occluded);
+        for (i, (((u, u_n), e), &blocked)) in passes.enumerate().take(self.analytic.len()) {
+            self.analytic[i] += u.xyz();
+            self.unshadowed[i] += u_n.xyz();
+            if blocked == 0 {
+                self.shadowed[i] += u_n.xyz();
+            }
+            self.emitted[i] += e.xyz();
+        }
+    }
+
+    fn mean(&self, sums: &[Vec3]) -> Vec<Vec3> {
+        let scale = 1.0 / self.samples.max(1) as f32;
+        sums.iter().map(|&s| s * scale).collect()
+    }
+
+    /// Per-pixel `U`.
+    pub fn analytic(&self) -> Vec<Vec3> {
+        self.mean(&self.analytic)
+    }
+
+    /// Per-pixel `U_N`.
+    pub fn unshadowed(&self) -> Vec<Vec3> {
+        self.mean(&self.unshadowed)
+    }
+
+    /// Per-pixel `S_N`.
+    pub fn shadowed(&self) -> Vec<Vec3> {
+        self.mean(&self.shadowed)
+    }
+
+    /// The ratio estimator's image: `emitted + U · S_N / U_N` (fallback `U` where `U_N ≈ 0`).
+    pub fn ratio_image(&self) -> Vec<Vec3> {
+        let (u, u_n, s_n, e) = (self.analytic(), self.unshadowed(), self.shadowed(), self.mean(&self.emitted));
+        (0..u.len()).map(|i| composite(u[i], u_n[i], s_n[i], e[i])).collect()
+    }
+
+    /// The fully stochastic image: `emitted + S_N`.
+    pub fn stochastic_image(&self) -> Vec<Vec3> {
+        let (s_n, e) = (self.shadowed(), self.mean(&self.emitted));
+        s_n.iter().zip(&e).map(|(&s, &e)| s + e).collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn identity_tells_values_and_edits_apart() {
+        let scene = Scene::load("builtin:cornell").unwrap();
+        let (a, mut b) = (ShadeData::new(&scene).unwrap(), ShadeData::new(&scene).unwrap());
+        assert_eq!(a.identity(), a.identity());
+        assert_ne!(a.identity(), b.identity(), "two values of the same scene");
+        let before = b.identity();
+        b.lights.clear();
+        assert_ne!(before, b.identity(), "a buffer's length changed");
+    }
+
+    #[test]
+    fn cpu_shade_fills_every_field_and_the_accumulator_takes_the_stream() {
+        let scene = Scene::load("builtin:cornell").unwrap();
+        let data = ShadeData::new(&scene).unwrap();
+        let params = crate::frame::generate_params(&scene, 9, 7, 0, 3);
+        let rays = crate::cpu::generate(&params);
+        let hits = crate::cpu::trace(&crate::cpu::CpuScene::build(&scene).unwrap(), &rays);
+        let shade_params = data.params(params.sampler, 9, 7, 0);
+        let shades = shade(&shade_params, &data, &rays, &resolve(&data, &rays, &hits));
+        assert_eq!(shades.len(), 63);
+        assert_eq!(shades.bytes(), 63 * 80);
+        let lit = shades.analytic.iter().filter(|u| u.max_element() > 0.0).count();
+        assert!(lit > 30, "{lit} of 63 pixels lit");
+        let shadow = shadow_rays(&shades);
+        assert_eq!((shadow.origin, shadow.direction), (shades.shadow_origin.clone(), shades.shadow_direction.clone()));
+        let mut accumulator = ShadeAccumulator::new(63);
+        accumulator.add(&shades, &vec![0; 63]);
+        let u_n: Vec<Vec3> = shades.unshadowed.iter().map(|v| v.xyz()).collect();
+        assert_eq!((accumulator.unshadowed(), accumulator.shadowed()), (u_n.clone(), u_n));
+    }
+}
