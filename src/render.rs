@@ -119,6 +119,16 @@ pub fn render(options: &RenderOptions) -> Result<RenderReport> {
     let (width, height) = (options.width, options.height);
     let pixels = (width * height) as usize;
     let data = if options.view == RenderView::Lit { Some(ShadeData::new(&scene)?) } else { None };
+    let backend_name = backend.name();
+    let report = |timings, hits, stream_bytes: u64| RenderReport {
+        backend: backend_name.clone(),
+        triangles: scene.triangle_count(),
+        dropped_degenerate: scene.dropped_degenerate(),
+        lights: scene.lights().len(),
+        timings,
+        hits,
+        stream_bytes_per_pixel: stream_bytes / pixels as u64,
+    };
     let mut accumulator = ShadeAccumulator::new(pixels);
     let mut timings = Vec::new();
     let mut hits = 0;
@@ -135,15 +145,7 @@ pub fn render(options: &RenderOptions) -> Result<RenderReport> {
         stream_bytes = frame.rays.bytes() + frame.hits.bytes();
         let Some(data) = &data else {
             output.finish_png(&normal_depth_image(&scene, &frame.rays, &frame.hits, width, height))?;
-            return Ok(RenderReport {
-                backend: backend.name(),
-                triangles: scene.triangle_count(),
-                dropped_degenerate: scene.dropped_degenerate(),
-                lights: scene.lights().len(),
-                timings,
-                hits,
-                stream_bytes_per_pixel: stream_bytes / pixels as u64,
-            });
+            return Ok(report(timings, hits, stream_bytes));
         };
         let shade_params = data.params(sampler, width, height, sample_index);
         let (shades, timing) = backend.shade(&shade_params, data, &frame.rays, &frame.hits)?;
@@ -162,13 +164,5 @@ pub fn render(options: &RenderOptions) -> Result<RenderReport> {
     if let Some(stochastic) = stochastic {
         stochastic.finish_png(&srgb_image(&accumulator.stochastic_image(), width, height))?;
     }
-    Ok(RenderReport {
-        backend: backend.name(),
-        triangles: scene.triangle_count(),
-        dropped_degenerate: scene.dropped_degenerate(),
-        lights: scene.lights().len(),
-        timings,
-        hits,
-        stream_bytes_per_pixel: stream_bytes / pixels as u64,
-    })
+    Ok(report(timings, hits, stream_bytes))
 }

@@ -352,6 +352,28 @@ pub struct Minimum<const D: usize> {
     pub evals: usize,
 }
 
+/// Nelder–Mead from `x0`, restarted from the best point (up to `cfg.max_runs` runs) until a run
+/// no longer improves by more than `cfg.tolerance` relative: `(best x, best value, evaluations)`.
+fn minimize_with_restarts<const D: usize>(
+    f: impl Fn(&[f64; D]) -> f64 + Copy,
+    x0: [f64; D],
+    cfg: &FitConfig,
+) -> ([f64; D], f64, usize) {
+    let (mut x, mut best, mut evals) = (x0, f64::INFINITY, 0);
+    for _ in 0..cfg.max_runs {
+        let r = nelder_mead(f, x, cfg.step, cfg.tolerance, cfg.max_iters);
+        evals += r.evals;
+        let improved = best - r.value > cfg.tolerance * r.value.abs();
+        if r.value <= best {
+            (x, best) = (r.x, r.value);
+        }
+        if !improved {
+            break;
+        }
+    }
+    (x, best, evals)
+}
+
 /// Downhill simplex (Nelder & Mead 1965) with the standard coefficients (reflection 1, expansion
 /// 2, contraction ½, shrink ½), starting from `start` and `start + step·eᵢ`. Stops when
 /// `2|f_hi − f_lo| ≤ tol·(|f_hi| + |f_lo|)` (the Numerical Recipes criterion) or after
@@ -590,19 +612,8 @@ impl CellProblem {
                 let m = p[0].exp();
                 self.objective(m, m, 0.0)
             };
-            let mut x = [start.0.max(1e-12).ln()];
-            let mut best = f64::INFINITY;
-            for _ in 0..cfg.max_runs {
-                let r = nelder_mead(f, x, cfg.step, cfg.tolerance, cfg.max_iters);
-                evals += r.evals;
-                let improved = best - r.value > cfg.tolerance * r.value.abs();
-                if r.value <= best {
-                    (x, best) = (r.x, r.value);
-                }
-                if !improved {
-                    break;
-                }
-            }
+            let (x, best, runs_evals) = minimize_with_restarts(f, [start.0.max(1e-12).ln()], cfg);
+            evals += runs_evals;
             let m = x[0].exp();
             (m, m, 0.0, best, evals)
         } else {
@@ -610,19 +621,9 @@ impl CellProblem {
                 let m11 = p[0].exp();
                 self.objective(m11, p[1].exp(), p[2] * m11)
             };
-            let mut x = [start.0.max(1e-12).ln(), start.1.max(1e-12).ln(), start.2 / start.0.max(1e-12)];
-            let mut best = f64::INFINITY;
-            for _ in 0..cfg.max_runs {
-                let r = nelder_mead(f, x, cfg.step, cfg.tolerance, cfg.max_iters);
-                evals += r.evals;
-                let improved = best - r.value > cfg.tolerance * r.value.abs();
-                if r.value <= best {
-                    (x, best) = (r.x, r.value);
-                }
-                if !improved {
-                    break;
-                }
-            }
+            let x0 = [start.0.max(1e-12).ln(), start.1.max(1e-12).ln(), start.2 / start.0.max(1e-12)];
+            let (x, best, runs_evals) = minimize_with_restarts(f, x0, cfg);
+            evals += runs_evals;
             let m11 = x[0].exp();
             (m11, x[1].exp(), x[2] * m11, best, evals)
         }

@@ -97,6 +97,12 @@ impl PendingOutput {
         let output_error = |source| Error::Output { path: path.clone(), source };
         self.temp.write_all(bytes).map_err(output_error)?;
         self.temp.as_file().sync_all().map_err(output_error)?;
+        // The temporary file is private (0600); a finished image is an ordinary file.
+        #[cfg(unix)]
+        {
+            use std::os::unix::fs::PermissionsExt;
+            self.temp.as_file().set_permissions(std::fs::Permissions::from_mode(0o644)).map_err(output_error)?;
+        }
         self.temp.persist(&self.path).map_err(|e| output_error(e.error))?;
         Ok(())
     }
@@ -122,7 +128,22 @@ mod tests {
         assert!(!path.exists());
         pending.finish_png(&RgbImage::new(2, 2)).unwrap();
         assert!(path.exists());
+        #[cfg(unix)]
+        {
+            use std::os::unix::fs::PermissionsExt;
+            let mode = std::fs::metadata(&path).unwrap().permissions().mode() & 0o777;
+            assert_eq!(mode, 0o644, "a finished image is readable by others, like any written file");
+        }
         drop(dir);
+    }
+
+    #[test]
+    fn srgb_encoding_clamps_and_follows_the_transfer_function() {
+        let colors = [Vec3::new(0.0, 1.0, 0.5), Vec3::new(-1.0, 7.0, f32::NAN), Vec3::splat(0.002), Vec3::ZERO];
+        let image = srgb_image(&colors, 2, 2);
+        assert_eq!(image.get_pixel(0, 0).0, [0, 255, 188]); // 0.5 → 0.7354 → 188
+        assert_eq!(image.get_pixel(1, 0).0, [0, 255, 0]);
+        assert_eq!(image.get_pixel(0, 1).0, [7, 7, 7]); // linear segment: 12.92·0.002 → 6.6
     }
 
     #[test]
