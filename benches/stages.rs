@@ -1,11 +1,14 @@
-//! Criterion micro-benchmarks of the stages on the built-in Cornell box: the CPU executor and,
+//! Criterion micro-benchmarks of the stages (generate, trace, shade) on the built-in Cornell box:
+//! the CPU executor and,
 //! when a Vulkan device with ray query is present, the Vulkan backend (per call, including upload,
 //! dispatch and readback; the GPU-only time is what `raywave render` prints per stage).
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use raywave::cpu::{self, CpuScene};
-use raywave::frame::generate_params;
-use raywave::{open_backend, BackendOptions, DeviceChoice, Scene};
+use raywave::frame::{generate_params, sampler_params};
+use raywave::shading::ShadeData;
+use raywave::shared::sampling::sampler_kind;
+use raywave::{open_backend, Backend, BackendOptions, DeviceChoice, Scene};
 use std::hint::black_box;
 
 /// Image sizes benchmarked: a small tile and a 512² frame.
@@ -43,6 +46,28 @@ fn stages(c: &mut Criterion) {
         if let Some(v) = vulkan.as_mut() {
             group.bench_with_input(BenchmarkId::new("vulkan", rays.len()), &rays, |b, r| {
                 b.iter(|| v.trace(black_box(r)).expect("trace"))
+            });
+        }
+    }
+    group.finish();
+
+    // Shade: resolve + U of every light + one MIS sample per camera ray (per call, on the hits of
+    // one primary pass).
+    let data = ShadeData::new(&scene).expect("shade data");
+    let mut cpu_backend = cpu::CpuBackend::new();
+    cpu_backend.load_scene(&scene).expect("BVH builds");
+    let mut group = c.benchmark_group("shade");
+    for (w, h) in SIZES {
+        let rays = cpu::generate(&generate_params(&scene, w, h, 0, 1));
+        let hits = cpu::trace(&cpu_scene, &rays);
+        let params = data.params(sampler_params(sampler_kind::ZSOBOL, 1, w, h, 1), w, h, 0);
+        group.throughput(Throughput::Elements(rays.len() as u64));
+        group.bench_function(BenchmarkId::new("cpu", rays.len()), |b| {
+            b.iter(|| cpu_backend.shade(black_box(&params), &data, &rays, &hits).expect("shade"))
+        });
+        if let Some(v) = vulkan.as_mut() {
+            group.bench_function(BenchmarkId::new("vulkan", rays.len()), |b| {
+                b.iter(|| v.shade(black_box(&params), &data, &rays, &hits).expect("shade"))
             });
         }
     }
