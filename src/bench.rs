@@ -6,7 +6,7 @@ use crate::cpu::{self, CpuScene};
 use crate::frame::generate_params;
 use crate::kernels::hash::{pcg3d, unit_float};
 use crate::kernels::offset::offset_ray_origin;
-use crate::kernels::sampling::warp::sample_cosine_hemisphere;
+use crate::kernels::sampling::warp::{local_to_world, sample_cosine_hemisphere};
 use crate::kernels::trace::{trace_closest, trace_occluded, Ray};
 use crate::shared::stream::NO_HIT;
 use crate::{Error, RayStream, Result, Scene};
@@ -98,8 +98,7 @@ fn ray_sets(scene: &Scene, cpu_scene: &CpuScene, resolution: u32) -> RaySets {
         shadow.pixel.push(primary.pixel[i]);
         let h = pcg3d(UVec3::new(i as u32, 0, 99));
         let local = sample_cosine_hemisphere(Vec2::new(unit_float(h.x), unit_float(h.y)));
-        let (t, s) = n.any_orthonormal_pair();
-        let d = t * local.x + s * local.y + n * local.z;
+        let d = local_to_world(n, local);
         diffuse.origin.push(origin.extend(0.0));
         diffuse.direction.push(d.normalize_or(n).extend(primary.direction[i].w));
         diffuse.pixel.push(primary.pixel[i]);

@@ -3,7 +3,7 @@
 
 use crate::{open_backend, BackendOptions, DeviceChoice, Result, Scene, StageTiming};
 use raywave_host::frame::{generate_params_with, sampler_params};
-use raywave_host::shading::{self, ShadeAccumulator, ShadeData};
+use raywave_host::shading::{ShadeAccumulator, ShadeData};
 use raywave_host::visualize::{normal_depth_image, srgb_image, PendingOutput};
 use std::path::PathBuf;
 
@@ -148,13 +148,12 @@ pub fn render(options: &RenderOptions) -> Result<RenderReport> {
             return Ok(report(timings, hits, stream_bytes));
         };
         let shade_params = data.params(sampler, width, height, sample_index);
-        let (shades, timing) = backend.shade(&shade_params, data, &frame.rays, &frame.hits)?;
-        add_timing(&mut timings, timing.stage, timing.seconds);
-        let shadow_rays = shading::shadow_rays(&shades);
-        let (occluded, timing) = backend.trace_occlusion(&shadow_rays)?;
-        add_timing(&mut timings, timing.stage, timing.seconds);
-        accumulator.add(&shades, &occluded);
-        stream_bytes += shades.bytes() + std::mem::size_of_val(occluded.as_slice()) as u64 + shadow_rays.bytes();
+        let (pass_timings, pass_bytes) =
+            accumulator.shade_pass(backend.as_mut(), &shade_params, data, &frame.rays, &frame.hits)?;
+        for t in pass_timings {
+            add_timing(&mut timings, t.stage, t.seconds);
+        }
+        stream_bytes += pass_bytes;
     }
     let image = accumulator.ratio_image();
     output.finish_png(&srgb_image(&image, width, height))?;

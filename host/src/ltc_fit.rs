@@ -692,18 +692,20 @@ impl LtcTable {
 /// called as rows finish (from worker threads).
 pub fn fit_table(cfg: &FitConfig, progress: &(dyn Fn(usize) + Sync)) -> LtcTable {
     let n = LTC_SIZE;
-    let mut column0: Vec<Option<CellFit>> = vec![None; n];
+    // Column 0 (θ = 0) from rough to sharp, each cell warm-started from the previous one.
+    let mut column0: Vec<CellFit> = Vec::with_capacity(n);
     let mut start = (1.0, 1.0, 0.0);
     for a in (0..n).rev() {
         let c = fit_cell(a, 0, start, cfg);
         start = (c.m11, c.m22, c.m13);
-        column0[a] = Some(c);
+        column0.push(c);
     }
+    column0.reverse();
     let done = std::sync::atomic::AtomicUsize::new(0);
     let rows: Vec<Vec<CellFit>> = (0..n)
         .into_par_iter()
         .map(|a| {
-            let first = column0[a].expect("column 0 is fitted first");
+            let first = column0[a];
             let mut row = Vec::with_capacity(n);
             row.push(first);
             for t in 1..n {

@@ -2,6 +2,7 @@
 //! LTC table, triangles by (instance, primitive)), the CPU executor over the kernels' stage
 //! functions, and the per-pixel accumulation of `U`, `U_N`, `S_N` for the ratio estimator.
 
+use crate::backend::{Backend, StageTiming};
 use crate::error::Result;
 use crate::lights::{wants_bvh, LightBvh};
 use crate::scene::Scene;
@@ -199,6 +200,25 @@ impl ShadeAccumulator {
     pub fn new(pixels: usize) -> Self {
         let zero = vec![Vec3::ZERO; pixels];
         Self { samples: 0, analytic: zero.clone(), unshadowed: zero.clone(), shadowed: zero.clone(), emitted: zero }
+    }
+
+    /// Runs one shade pass on `backend` — shade `rays`/`hits`, trace the shadow rays for
+    /// occlusion — and adds it. Returns the two stages' timings and the bytes of the streams the
+    /// pass used (shade stream, shadow rays, occlusion).
+    pub fn shade_pass(
+        &mut self,
+        backend: &mut dyn Backend,
+        params: &ShadeParams,
+        data: &ShadeData,
+        rays: &RayStream,
+        hits: &HitStream,
+    ) -> Result<([StageTiming; 2], u64)> {
+        let (shades, shade_time) = backend.shade(params, data, rays, hits)?;
+        let shadow_rays = shadow_rays(&shades);
+        let (occluded, occlusion_time) = backend.trace_occlusion(&shadow_rays)?;
+        self.add(&shades, &occluded);
+        let bytes = shades.bytes() + std::mem::size_of_val(occluded.as_slice()) as u64 + shadow_rays.bytes();
+        Ok(([shade_time, occlusion_time], bytes))
     }
 
     /// Adds one pass: its shade stream and the occlusion of its shadow rays (1 = blocked).

@@ -146,7 +146,7 @@ pub struct CaseResult {
 impl CaseResult {
     /// The JSON line.
     pub fn json(&self) -> String {
-        serde_json::to_string(self).expect("a case result serializes")
+        serde_json::to_string(self).unwrap_or_default()
     }
 
     /// A human-readable table row.
@@ -175,12 +175,6 @@ fn lights_for(strategy: Strategy) -> Vec<Light> {
         Strategy::SphereLights { .. } => scenes::two_sphere_lights(),
         Strategy::QuadArea => vec![scenes::skinny_quad_light()],
     }
-}
-
-/// Turns a local direction (z = normal) into world space around `normal`.
-fn to_world(normal: Vec3, local: Vec3) -> Vec3 {
-    let (tangent, bitangent) = normal.any_orthonormal_pair();
-    tangent * local.x + bitangent * local.y + normal * local.z
 }
 
 /// One shadow ray of an estimator: direction, length, and the weight its visibility is
@@ -228,7 +222,7 @@ pub fn shadow_sample(
             if local.z <= 0.0 {
                 return ShadowSample::default();
             }
-            ShadowSample { direction: to_world(point.normal, local), tmax: AO_RADIUS, weight }
+            ShadowSample { direction: warp::local_to_world(point.normal, local), tmax: AO_RADIUS, weight }
         }
         Strategy::SphereLights { cone, importance } => {
             let choice = if importance {
@@ -404,7 +398,7 @@ pub struct SpectrumResult {
 impl SpectrumResult {
     /// The JSON line.
     pub fn json(&self) -> String {
-        serde_json::to_string(self).expect("a spectrum serializes")
+        serde_json::to_string(self).unwrap_or_default()
     }
 
     /// A human-readable row: the low-frequency power and the spectrum in eight bands.
@@ -496,8 +490,6 @@ pub fn validate(options: &SamplingReportOptions) -> Result<()> {
     if options.reps < 2 {
         return invalid("reps", "at least 2 repetitions are needed for a variance");
     }
-    if !(4..=1024).contains(&options.resolution) {
-        return invalid("resolution", "must be within 4..=1024");
-    }
+    super::check_resolution(options.resolution)?;
     Ok(())
 }

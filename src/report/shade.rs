@@ -11,7 +11,7 @@
 
 use crate::frame::{generate_params_with, sampler_params};
 use crate::kernels::sampling::light_select::luminance;
-use crate::shading::{self, ShadeAccumulator, ShadeData};
+use crate::shading::{ShadeAccumulator, ShadeData};
 use crate::shared::sampling::sampler_kind;
 use crate::{Backend, Result, Scene};
 use glam::Vec3;
@@ -52,7 +52,7 @@ pub struct ShadeLine {
 impl ShadeLine {
     /// The JSON line.
     pub fn json(&self) -> String {
-        serde_json::to_string(self).expect("a shade line serializes")
+        serde_json::to_string(self).unwrap_or_default()
     }
 
     /// A table row.
@@ -65,24 +65,23 @@ impl ShadeLine {
 }
 
 /// The visible surfaces of `scene` (loaded into `backend`): one camera ray per pixel, at a fixed
-/// sub-pixel position, traced and resolved — the G-buffer the shade samples are drawn on.
+/// sub-pixel position, traced once — the G-buffer the shade samples are drawn on.
 pub struct GBuffer {
     rays: crate::RayStream,
-    surfaces: Vec<crate::kernels::shade::stage::Surface>,
+    hits: crate::HitStream,
 }
 
 impl GBuffer {
     /// Traces the camera rays of a `resolution²` image.
-    pub fn new(backend: &mut dyn Backend, scene: &Scene, data: &ShadeData, resolution: u32) -> Result<Self> {
+    pub fn new(backend: &mut dyn Backend, scene: &Scene, resolution: u32) -> Result<Self> {
         let sampler = sampler_params(sampler_kind::ZSOBOL, 0, resolution, resolution, 1);
         let frame = backend.render(&generate_params_with(scene, resolution, resolution, 0, sampler))?;
-        let surfaces = shading::resolve(data, &frame.rays, &frame.hits);
-        Ok(Self { rays: frame.rays, surfaces })
+        Ok(Self { rays: frame.rays, hits: frame.hits })
     }
 }
 
-/// Runs `spp` shade samples per pixel on `gbuffer` with `seed` and returns the accumulated
-/// `U`, `U_N`, `S_N`.
+/// Runs `spp` shade passes on `gbuffer` (shade and occlusion on `backend`) with `seed` and
+/// returns the accumulated `U`, `U_N`, `S_N`.
 pub fn accumulate(
     backend: &mut dyn Backend,
     gbuffer: &GBuffer,
@@ -94,10 +93,8 @@ pub fn accumulate(
     let sampler = sampler_params(sampler_kind::ZSOBOL, seed, resolution, resolution, spp);
     let mut accumulator = ShadeAccumulator::new((resolution * resolution) as usize);
     for sample_index in 0..spp {
-        let shade_params = data.params(sampler, resolution, resolution, sample_index);
-        let samples = shading::shade(&shade_params, data, &gbuffer.rays, &gbuffer.surfaces);
-        let (occluded, _) = backend.trace_occlusion(&shading::shadow_rays(&samples))?;
-        accumulator.add(&samples, &occluded);
+        let params = data.params(sampler, resolution, resolution, sample_index);
+        accumulator.shade_pass(backend, &params, data, &gbuffer.rays, &gbuffer.hits)?;
     }
     Ok(accumulator)
 }
@@ -124,14 +121,12 @@ pub fn report_shade(
     if options.reps < 1 || options.max_spp < 1 || options.reference_spp < options.max_spp {
         return invalid("report shade", "needs reps ≥ 1, max-spp ≥ 1 and reference-spp ≥ max-spp");
     }
-    if !(4..=1024).contains(&options.resolution) {
-        return invalid("resolution", "must be within 4..=1024");
-    }
+    super::check_resolution(options.resolution)?;
     for name in &options.scenes {
         let scene = Scene::load(name)?;
         backend.load_scene(&scene)?;
         let data = ShadeData::new(&scene)?;
-        let gbuffer = GBuffer::new(backend, &scene, &data, options.resolution)?;
+        let gbuffer = GBuffer::new(backend, &scene, options.resolution)?;
         let reference_run = accumulate(backend, &gbuffer, &data, options.resolution, options.reference_spp, 0xfeed)?;
         let reference = reference_run.ratio_image();
         let analytic = reference_run.analytic();

@@ -173,11 +173,12 @@ pub fn warp_cases() -> Vec<(String, WarpParams)> {
     cases
 }
 
-/// `params.count` samples of the warp on the CPU: the kernels' warp probe, which draws sample `i`
+/// `params.count` samples of the warp on the CPU backend: the kernels' warp probe, which draws sample `i`
 /// from `params.sampler` (independent random numbers seeded [`SEED`]) exactly as the SPIR-V
 /// probe does on a Vulkan device.
 pub fn cpu_samples(params: &WarpParams) -> Vec<Vec4> {
-    (0..params.count).into_par_iter().map(|i| raywave::kernels::sampling::probe::warp_probe(i, params)).collect()
+    use raywave::Backend;
+    raywave::cpu::CpuBackend::new().warp_probe(params).expect("the warp cases fit the probe's limit")
 }
 
 /// Where the directions of a warp are binned and its pdf integrated.

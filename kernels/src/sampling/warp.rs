@@ -162,6 +162,13 @@ pub fn spherical_direction(sin_theta: f32, cos_theta: f32, phi: f32) -> Vec3 {
     Vec3::new(sin_theta * cos_phi, sin_theta * sin_phi, cos_theta)
 }
 
+/// `local` (z along `axis`) in world space, in the frame `axis.any_orthonormal_pair()` spans
+/// around the unit `axis`: how a direction warped around +z is turned to a normal or cone axis.
+pub fn local_to_world(axis: Vec3, local: Vec3) -> Vec3 {
+    let (tangent, bitangent) = axis.any_orthonormal_pair();
+    tangent * local.x + bitangent * local.y + axis * local.z
+}
+
 /// `direction` if it is finite and has a usable length, else +z; paired with a pdf that is zeroed
 /// whenever the direction had to be replaced. The last step of every warp.
 fn sanitize_sample(direction: Vec3, pdf: f32) -> Vec4 {
@@ -389,10 +396,8 @@ pub fn sample_sphere_light_cone(p: Vec3, c: Vec3, r: f32, u: Vec2) -> LightSampl
     let cos_alpha = sin2_theta / sin_max + cos_theta * safe_sqrt(1.0 - sin2_theta / cone.sin2_max);
     let cos_alpha = clamp_unit_interval(cos_alpha);
     let sin_alpha = safe_sqrt(1.0 - cos_alpha * cos_alpha);
-    let (sin_phi, cos_phi) = (TAU * u.y).sin_cos();
-    let (tx, ty) = cone.axis.any_orthonormal_pair();
     // pbrt-v4: n = Frame::FromZ(axis).FromLocal(−w) with w = SphericalDirection(sin α, cos α, φ).
-    let normal = -(sin_alpha * cos_phi * tx + sin_alpha * sin_phi * ty + cos_alpha * cone.axis);
+    let normal = -local_to_world(cone.axis, spherical_direction(sin_alpha, cos_alpha, TAU * u.y));
     let point = c + r * normal;
     LightSample::towards(p, point, normal, 1.0 / (TAU * cone.one_minus_cos_max))
 }

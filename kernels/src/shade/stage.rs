@@ -24,7 +24,7 @@ use super::ltc::{self, LtcLobe, ShadingFrame};
 use crate::offset::offset_ray_origin;
 use crate::sampling::light_select::{luminance, LightSet};
 use crate::sampling::{dims, sampler, warp};
-use glam::{Mat3, UVec2, Vec3, Vec4, Vec4Swizzles};
+use glam::{UVec2, Vec3, Vec4, Vec4Swizzles};
 use raywave_shared::stream::NO_HIT;
 use raywave_shared::{Light, MaterialParams, ShadeParams};
 
@@ -122,8 +122,6 @@ struct Lobes {
     specular: Vec3,
     /// The LTC lobe (`M⁻¹` in `frame`).
     ltc: LtcLobe,
-    /// `M` (for sampling the lobe).
-    m: Mat3,
     frame: ShadingFrame,
 }
 
@@ -134,13 +132,7 @@ impl Lobes {
         // glTF 2.0's dielectric F0 = 0.04 (the metallic-roughness model).
         let f0 = Vec3::splat(0.04) * (1.0 - metallic) + base * metallic;
         let ltc = ltc::lookup(table, material.base_color_roughness.w, cos_view);
-        Lobes {
-            diffuse: base * (1.0 - metallic),
-            specular: ltc.specular_albedo(f0),
-            m: crate::sampling::warp::ltc_inverse(ltc.inv_m),
-            ltc,
-            frame,
-        }
+        Lobes { diffuse: base * (1.0 - metallic), specular: ltc.specular_albedo(f0), ltc, frame }
     }
 
     /// The BRDF·cos the estimates evaluate at world direction `w`: `E_D·cos/π + E_S·D_LTC`,
@@ -201,38 +193,43 @@ pub fn shade_sample(
     let lobes = Lobes::new(material, frame, n.dot(v), scene.ltc);
     let emitted = material.emission_metallic.xyz().extend(0.0);
 
-    // U: every light, analytically.
-    let mut analytic = Vec3::ZERO;
-    let light_count = scene.lights.len();
-    let mut k = 0u32;
-    while k < light_count {
-        let light = &scene.lights.lights[k as usize];
-        let (u_d, u_s) = hit_probabilities(light, p, &lobes);
-        analytic += light.radiance.xyz() * (lobes.diffuse * u_d + lobes.specular * u_s);
-        k += 1;
-    }
-
-    // One sample of one light for U_N and S_N.
+    // One light for the stochastic sample of U_N and S_N.
     let strategy = sampler::sample_2d(&params.sampler, pixel, params.sample_index, dims::SHADE_STRATEGY);
     let u_select = sampler::sample_1d(&params.sampler, pixel, params.sample_index, dims::SHADE_LIGHT_SELECT);
     let u = sampler::sample_2d(&params.sampler, pixel, params.sample_index, dims::SHADE_DIRECTION);
     let choice = scene.lights.select(p, n, u_select);
+
+    // U: every light, analytically, keeping the chosen light's hit probabilities for the MIS.
+    let mut analytic = Vec3::ZERO;
+    let (mut u_d, mut u_s) = (0.0f32, 0.0f32);
+    let light_count = scene.lights.len();
+    let mut k = 0u32;
+    while k < light_count {
+        let light = &scene.lights.lights[k as usize];
+        let (d, s) = hit_probabilities(light, p, &lobes);
+        analytic += light.radiance.xyz() * (lobes.diffuse * d + lobes.specular * s);
+        if k == choice.index {
+            (u_d, u_s) = (d, s);
+        }
+        k += 1;
+    }
+
     let mut result = ShadeSample { analytic: analytic.extend(0.0), emitted, ..ShadeSample::NONE };
-    if !choice.is_valid() || choice.pmf <= 0.0 {
+    if !choice.is_valid() || choice.pmf <= 0.0 || (u_d <= 0.0 && u_s <= 0.0) {
         return result;
     }
     let light = &scene.lights.lights[choice.index as usize];
     let (corner, eu, ev) = (light.position.xyz(), light.edge_u.xyz(), light.edge_v.xyz());
-    let (u_d, u_s) = hit_probabilities(light, p, &lobes);
-    if u_d <= 0.0 && u_s <= 0.0 {
-        return result;
-    }
     let (e_d, e_s) = (luminance(lobes.diffuse), luminance(lobes.specular));
     let p_diff = if e_d + e_s > 0.0 { e_d / (e_d + e_s) } else { 1.0 };
     let p_brdf = u_s + (u_d - u_s) * p_diff;
 
     let direction = if strategy.x < p_brdf {
-        let local = if strategy.y < p_diff { warp::sample_cosine_hemisphere(u) } else { warp::sample_ltc(lobes.m, u) };
+        let local = if strategy.y < p_diff {
+            warp::sample_cosine_hemisphere(u)
+        } else {
+            warp::sample_ltc(warp::ltc_inverse(lobes.ltc.inv_m), u)
+        };
         lobes.world_direction(local).normalize_or_zero()
     } else {
         warp::sample_quad_spherical(p, corner, eu, ev, u).direction
