@@ -3,11 +3,12 @@
 //!
 //! This facade re-exports the three layers — [`shared`] (the host/kernel contract), [`kernels`]
 //! (the stages as plain `no_std` functions) and the host (scenes, CPU executor, Vulkan backend) —
-//! and adds [`render`], the whole-frame job behind `raywave render`, [`bench`], the trace
-//! benchmark behind `raywave bench trace`, and [`report`], the accuracy reports behind
+//! and adds [`render`], the whole-frame job behind `raywave render`, [`bench`] and
+//! [`bench_denoise`], the benchmarks behind `raywave bench trace|denoise`, and [`report`], the accuracy reports behind
 //! `raywave report`.
 
 pub mod bench;
+pub mod bench_denoise;
 #[cfg(feature = "embree")]
 pub mod embree;
 pub mod render;

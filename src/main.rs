@@ -24,7 +24,7 @@ enum Command {
         json: bool,
     },
     /// Render a scene: generate → trace → shade (LTC area lights, ratio estimator with stochastic
-    /// shadows) → PNG (and optionally HDR OpenEXR).
+    /// shadows) → TV-denoise → composite → PNG (and optionally HDR OpenEXR).
     Render(RenderArgs),
     /// Measure stage throughput.
     Bench {
@@ -46,6 +46,37 @@ enum ReportTopic {
     /// Seed 000's ratio estimator against the fully stochastic one: RMSE against a converged
     /// reference for 1…64 samples per pixel, in shadowed and unshadowed pixels.
     Shade(ShadeReportArgs),
+    /// Seed 000's headline result: relMSE against milliseconds for the stochastic and the ratio
+    /// estimator, raw and denoised (TV, SVGF baseline), at 1…64 samples per pixel.
+    ErrorVsTime(ErrorVsTimeArgs),
+}
+
+#[derive(clap::Args)]
+struct ErrorVsTimeArgs {
+    /// Built-in scenes, comma-separated.
+    #[arg(long, default_value = "builtin:cornell,builtin:cornell-two-lights", value_delimiter = ',')]
+    scenes: Vec<String>,
+    /// Image side in pixels.
+    #[arg(long, default_value_t = 128)]
+    resolution: u32,
+    /// Samples per pixel of the reference image.
+    #[arg(long, default_value_t = 4096)]
+    reference_spp: u32,
+    /// Largest sample count measured (1, 2, 4, … up to it).
+    #[arg(long, default_value_t = 64)]
+    max_spp: u32,
+    /// Independent repetitions averaged per measurement.
+    #[arg(long, default_value_t = 4)]
+    reps: u32,
+    /// Backend running every stage: `cpu` (default), `auto`, `vulkan` or `vulkan:N`.
+    #[arg(long, default_value = "cpu")]
+    device: String,
+    /// Also draw the curves into this PNG file.
+    #[arg(long)]
+    plot: Option<PathBuf>,
+    /// Print one JSON object per line instead of a table.
+    #[arg(long)]
+    json: bool,
 }
 
 #[derive(clap::Args)]
@@ -93,6 +124,37 @@ struct SamplingReportArgs {
 enum BenchStage {
     /// Trace throughput of raywave (CPU and each Vulkan method) and obvhs on the same rays.
     Trace(TraceBenchArgs),
+    /// Seconds and effective bandwidth of each denoise pass for one frame, on the CPU and Vulkan.
+    Denoise(DenoiseBenchArgs),
+}
+
+#[derive(clap::Args)]
+struct DenoiseBenchArgs {
+    /// The scene whose frame is denoised.
+    #[arg(long, default_value = "builtin:cornell")]
+    scene: String,
+    /// Frame width in pixels.
+    #[arg(long, default_value_t = 1920)]
+    width: u32,
+    /// Frame height in pixels.
+    #[arg(long, default_value_t = 1080)]
+    height: u32,
+    /// Samples per pixel of the shaded input.
+    #[arg(long, default_value_t = 1)]
+    spp: u32,
+    /// Timed repetitions per denoiser (the median is reported).
+    #[arg(long, default_value_t = 5)]
+    repeats: u32,
+    /// Skip the Vulkan device.
+    #[arg(long)]
+    no_vulkan: bool,
+    /// Peak memory bandwidth of the Vulkan device in GB/s (default: the datasheet value for
+    /// NVIDIA H100/H200, none otherwise).
+    #[arg(long)]
+    peak_gbps: Option<f64>,
+    /// Print one JSON object per line instead of a table.
+    #[arg(long)]
+    json: bool,
 }
 
 #[derive(clap::Args)]
@@ -150,6 +212,10 @@ struct RenderArgs {
     /// Also write the fully stochastic image (S_N without the ratio) as PNG, for comparison.
     #[arg(long)]
     stochastic: Option<PathBuf>,
+    /// Denoiser of the shadow ratio: `tv` (seed 000's TV-guided joint bilateral filter), `svgf`
+    /// (variance-guided à-trous baseline) or `none` (the raw ratio estimate).
+    #[arg(long, default_value = "tv")]
+    denoise: String,
     /// Seed of the sampler.
     #[arg(long, default_value_t = 0)]
     seed: u32,
@@ -177,8 +243,10 @@ fn main() -> ExitCode {
         Command::Devices { json } => devices(json),
         Command::Render(args) => render_command(args),
         Command::Bench { stage: BenchStage::Trace(args) } => bench_trace_command(args),
+        Command::Bench { stage: BenchStage::Denoise(args) } => bench_denoise_command(args),
         Command::Report { topic: ReportTopic::Sampling(args) } => report_sampling_command(args),
         Command::Report { topic: ReportTopic::Shade(args) } => report_shade_command(args),
+        Command::Report { topic: ReportTopic::ErrorVsTime(args) } => report_error_vs_time_command(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -213,6 +281,20 @@ fn bench_trace_command(args: TraceBenchArgs) -> raywave::Result<()> {
     bench_trace(&options, |line| print_line(if args.json { line.json() } else { line.row() }))
 }
 
+fn bench_denoise_command(args: DenoiseBenchArgs) -> raywave::Result<()> {
+    use raywave::bench_denoise::{bench_denoise, DenoiseBenchOptions};
+    let options = DenoiseBenchOptions {
+        scene: args.scene,
+        width: args.width,
+        height: args.height,
+        spp: args.spp,
+        repeats: args.repeats,
+        vulkan: !args.no_vulkan,
+        peak_gbps: args.peak_gbps,
+    };
+    bench_denoise(&options, |line| print_line(if args.json { line.json() } else { line.row() }))
+}
+
 fn report_sampling_command(args: SamplingReportArgs) -> raywave::Result<()> {
     use raywave::report::sampling::{report_sampling, ReportLine, SamplingReportOptions};
     let mut backend = raywave::open_backend(args.device.parse()?, &BackendOptions::default())?;
@@ -236,6 +318,27 @@ fn report_shade_command(args: ShadeReportArgs) -> raywave::Result<()> {
     report_shade(backend.as_mut(), &options, |line| print_line(if args.json { line.json() } else { line.row() }))
 }
 
+fn report_error_vs_time_command(args: ErrorVsTimeArgs) -> raywave::Result<()> {
+    use raywave::report::error_vs_time::{plot, report_error_vs_time, ErrorVsTimeOptions};
+    // Create the plot's file up front so a bad path fails before the measurements.
+    let pending = args.plot.as_deref().map(raywave::visualize::PendingOutput::create).transpose()?;
+    let mut backend = raywave::open_backend(args.device.parse()?, &BackendOptions::default())?;
+    let options = ErrorVsTimeOptions {
+        scenes: args.scenes,
+        resolution: args.resolution,
+        reference_spp: args.reference_spp,
+        max_spp: args.max_spp,
+        reps: args.reps,
+    };
+    let lines = report_error_vs_time(backend.as_mut(), &options, |line| {
+        print_line(if args.json { line.json() } else { line.row() })
+    })?;
+    match pending {
+        Some(output) => plot(&lines, &format!("{}², {}", options.resolution, backend.name()), output),
+        None => Ok(()),
+    }
+}
+
 fn render_command(args: RenderArgs) -> raywave::Result<()> {
     let device = args.device.parse::<DeviceChoice>()?;
     let trace = args.trace.as_deref().map(str::parse::<TraceMethod>).transpose()?;
@@ -253,6 +356,10 @@ fn render_command(args: RenderArgs) -> raywave::Result<()> {
         out: args.out,
         exr: args.exr,
         stochastic: args.stochastic,
+        denoise: match args.denoise.as_str() {
+            "none" => None,
+            other => Some(other.parse()?),
+        },
         backend: BackendOptions { validation: args.validate, trace },
     };
     let report = render(&options)?;

@@ -1,10 +1,13 @@
 //! The `raywave render` job: scene → per sample (generate → trace → shade → occlusion trace), all
-//! on the chosen backend → the ratio estimator's composite → image files.
+//! on the chosen backend → TV-denoise of `S_N`, `U_N` and the ratio estimator's composite
+//! `U · den(S_N)/den(U_N)` (or another denoiser, or none) → image files.
 
 use crate::{open_backend, BackendOptions, DeviceChoice, Result, Scene, StageTiming};
+use raywave_host::denoise::{rgb, DenoiseInput, DenoiseMethod};
 use raywave_host::frame::{generate_params_with, sampler_params};
-use raywave_host::shading::{ShadeAccumulator, ShadeData};
+use raywave_host::shading::{resolve, ShadeAccumulator, ShadeData};
 use raywave_host::visualize::{normal_depth_image, srgb_image, PendingOutput};
+use raywave_shared::DenoiseParams;
 use std::path::PathBuf;
 
 /// What the image shows.
@@ -59,6 +62,9 @@ pub struct RenderOptions {
     pub exr: Option<PathBuf>,
     /// Also write the fully stochastic image (`S_N`, no ratio) as PNG here, for comparison.
     pub stochastic: Option<PathBuf>,
+    /// The denoiser of the shadow ratio ([`DenoiseMethod::Tv`] by default); `None` composites
+    /// the raw `U · S_N/U_N`.
+    pub denoise: Option<DenoiseMethod>,
     /// Backend options (validation layers).
     pub backend: BackendOptions,
 }
@@ -130,6 +136,8 @@ pub fn render(options: &RenderOptions) -> Result<RenderReport> {
         stream_bytes_per_pixel: stream_bytes / pixels as u64,
     };
     let mut accumulator = ShadeAccumulator::new(pixels);
+    // The denoiser's G-buffer: the surfaces of the first sample's camera rays.
+    let mut surfaces = Vec::new();
     let mut timings = Vec::new();
     let mut hits = 0;
     let mut stream_bytes = 0;
@@ -147,6 +155,9 @@ pub fn render(options: &RenderOptions) -> Result<RenderReport> {
             output.finish_png(&normal_depth_image(&scene, &frame.rays, &frame.hits, width, height))?;
             return Ok(report(timings, hits, stream_bytes));
         };
+        if sample_index == 0 {
+            surfaces = resolve(data, &frame.rays, &frame.hits);
+        }
         let shade_params = data.params(sampler, width, height, sample_index);
         let (pass_timings, pass_bytes) =
             accumulator.shade_pass(backend.as_mut(), &shade_params, data, &frame.rays, &frame.hits)?;
@@ -155,7 +166,18 @@ pub fn render(options: &RenderOptions) -> Result<RenderReport> {
         }
         stream_bytes += pass_bytes;
     }
-    let image = accumulator.ratio_image();
+    let image = match options.denoise {
+        Some(method) => {
+            let params = DenoiseParams { seed: options.seed, ..DenoiseParams::new(width, height) };
+            let (color, pass_timings) =
+                backend.denoise(method, &params, &DenoiseInput::new(&surfaces, &accumulator))?;
+            for t in pass_timings {
+                add_timing(&mut timings, t.stage, t.seconds);
+            }
+            rgb(&color)
+        }
+        None => accumulator.ratio_image(),
+    };
     output.finish_png(&srgb_image(&image, width, height))?;
     if let Some(exr) = exr {
         exr.finish_exr(&image, width, height)?;

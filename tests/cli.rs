@@ -10,6 +10,11 @@ fn raywave(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_raywave")).args(args).output().expect("raywave runs")
 }
 
+/// The JSON object on each line of a command's standard output.
+fn json_lines(out: &Output) -> Vec<serde_json::Value> {
+    String::from_utf8_lossy(&out.stdout).lines().map(|l| serde_json::from_str(l).expect("a JSON line")).collect()
+}
+
 fn stderr(out: &Output) -> String {
     String::from_utf8_lossy(&out.stderr).into_owned()
 }
@@ -159,11 +164,7 @@ fn thin_lens_render_with_each_sampler_writes_a_png() {
 fn sampling_report_prints_json_lines_for_every_case_and_spectrum() {
     let out = raywave(&["report", "sampling", "--json", "--resolution", "8", "--reps", "4"]);
     assert!(out.status.success(), "{}", stderr(&out));
-    let lines: Vec<serde_json::Value> = String::from_utf8(out.stdout)
-        .unwrap()
-        .lines()
-        .map(|l| serde_json::from_str(l).expect("each line is JSON"))
-        .collect();
+    let lines = json_lines(&out);
     let cases: Vec<&str> = lines.iter().filter_map(|l| l["case"].as_str()).collect();
     assert_eq!(
         cases,
@@ -234,8 +235,7 @@ fn shade_report_prints_json_lines() {
         "1",
     ]);
     assert!(out.status.success(), "{}", stderr(&out));
-    let lines: Vec<serde_json::Value> =
-        String::from_utf8(out.stdout).unwrap().lines().map(|l| serde_json::from_str(l).expect("JSON line")).collect();
+    let lines = json_lines(&out);
     assert_eq!(lines.len(), 2 * 2 * 3);
     for line in &lines {
         assert_eq!(line["scene"], "builtin:cornell");
@@ -243,4 +243,87 @@ fn shade_report_prints_json_lines() {
         assert!(["all", "shadow", "lit"].contains(&line["region"].as_str().unwrap()));
         assert!(line["rmse"].as_f64().unwrap().is_finite());
     }
+}
+
+#[test]
+fn error_vs_time_report_prints_every_method_and_draws_the_plot() {
+    let dir = tempfile::tempdir().unwrap();
+    let plot = dir.path().join("error-vs-time.png");
+    let args = [
+        "report",
+        "error-vs-time",
+        "--scenes",
+        "builtin:cornell",
+        "--resolution",
+        "16",
+        "--reference-spp",
+        "16",
+        "--max-spp",
+        "2",
+        "--reps",
+        "1",
+        "--json",
+        "--plot",
+        plot.to_str().unwrap(),
+    ];
+    let out = raywave(&args);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let lines = json_lines(&out);
+    assert_eq!(lines.len(), 2 * 5, "spp × methods");
+    for method in ["stochastic", "stochastic+tv", "ratio", "ratio+tv", "ratio+svgf"] {
+        let line = lines.iter().find(|l| l["method"] == method && l["spp"] == 1).expect("method present");
+        assert_eq!(line["scene"], "builtin:cornell");
+        assert!(line["relmse"].as_f64().unwrap().is_finite() && line["ms"].as_f64().unwrap() > 0.0);
+    }
+    let image = image::open(&plot).expect("plot is a PNG").to_rgb8();
+    assert_eq!(image.width(), 960);
+    assert!(image.pixels().any(|p| p.0 != [255, 255, 255]), "something was drawn");
+    let bad =
+        raywave(&["report", "error-vs-time", "--reps", "0", "--plot", plot.with_extension("x.png").to_str().unwrap()]);
+    assert!(!bad.status.success() && stderr(&bad).contains("reps"));
+    assert!(!plot.with_extension("x.png").exists(), "no partial plot");
+}
+
+#[test]
+fn denoise_bench_prints_each_pass_and_the_total() {
+    let args = ["bench", "denoise", "--width", "40", "--height", "24", "--repeats", "1", "--no-vulkan", "--json"];
+    let out = raywave(&args);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let lines = json_lines(&out);
+    assert_eq!(
+        lines.len(),
+        (6 + 1) + (4 + 1),
+        "tv and svgf (one à-trous iteration at this size) passes, each with a total"
+    );
+    for line in &lines {
+        assert_eq!((line["stage"].as_str(), line["pixels"].as_u64()), (Some("denoise"), Some(960)));
+        assert!(line["seconds"].as_f64().unwrap() > 0.0 && line["bytes"].as_u64().unwrap() > 0);
+    }
+    let tv_total = lines.iter().find(|l| l["method"] == "tv" && l["pass"] == "total").unwrap();
+    let tv_bytes: u64 = lines
+        .iter()
+        .filter(|l| l["method"] == "tv" && l["pass"] != "total")
+        .map(|l| l["bytes"].as_u64().unwrap())
+        .sum();
+    assert_eq!(tv_total["bytes"].as_u64(), Some(tv_bytes));
+}
+
+#[test]
+fn render_denoises_by_default_and_takes_each_denoiser() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut images = Vec::new();
+    for denoise in ["tv", "svgf", "none"] {
+        let (out, path) =
+            render(dir.path(), &format!("{denoise}.png"), &["--device", "cpu", "--spp", "1", "--denoise", denoise]);
+        assert!(out.status.success(), "{}", stderr(&out));
+        let stdout = String::from_utf8_lossy(&out.stdout);
+        assert_eq!(stdout.contains("denoise"), denoise != "none", "{stdout}");
+        images.push(image::open(&path).unwrap().to_rgb8());
+    }
+    assert_ne!(images[0], images[2], "TV changes the 1-spp image");
+    assert_ne!(images[1], images[2], "SVGF changes the 1-spp image");
+    let (default, path) = render(dir.path(), "default.png", &["--device", "cpu", "--spp", "1"]);
+    assert!(default.status.success());
+    assert_eq!(image::open(&path).unwrap().to_rgb8(), images[0], "TV is the default");
+    assert_rejected(&["--denoise", "blur"], "denoise");
 }

@@ -1,12 +1,13 @@
 //! What every execution backend offers: the stages over host streams, and a whole frame that
 //! keeps the streams on the backend between stages.
 
+use crate::denoise::{DenoiseInput, DenoiseMethod};
 use crate::error::Result;
 use crate::scene::Scene;
 use crate::shading::ShadeData;
 use crate::stream::{HitStream, RayStream, ShadeStream};
 use glam::{UVec2, Vec4};
-use raywave_shared::{GenerateParams, SamplerProbeParams, ShadeParams, WarpParams};
+use raywave_shared::{DenoiseParams, GenerateParams, SamplerProbeParams, ShadeParams, WarpParams};
 
 /// Time one stage took on a backend.
 #[derive(Clone, Debug, PartialEq)]
@@ -61,6 +62,15 @@ pub trait Backend {
         rays: &RayStream,
         hits: &HitStream,
     ) -> Result<(ShadeStream, StageTiming)>;
+
+    /// Runs denoiser `method` on `input` (a `params.width × params.height` image): every pass
+    /// on this backend. Returns the colour image (rgb; w = 1) and each pass's time.
+    fn denoise(
+        &mut self,
+        method: DenoiseMethod,
+        params: &DenoiseParams,
+        input: &DenoiseInput,
+    ) -> Result<(Vec<Vec4>, Vec<StageTiming>)>;
 
     /// Runs generate → trace as one frame, keeping the ray stream on the backend in between.
     fn render(&mut self, params: &GenerateParams) -> Result<FrameOutput>;

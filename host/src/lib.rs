@@ -5,6 +5,7 @@
 
 pub mod backend;
 pub mod cpu;
+pub mod denoise;
 pub mod device;
 pub mod error;
 pub mod frame;

@@ -255,15 +255,20 @@ impl ShadeAccumulator {
         self.mean(&self.shadowed)
     }
 
+    /// Per-pixel emitted radiance.
+    pub fn emitted(&self) -> Vec<Vec3> {
+        self.mean(&self.emitted)
+    }
+
     /// The ratio estimator's image: `emitted + U · S_N / U_N` (fallback `U` where `U_N ≈ 0`).
     pub fn ratio_image(&self) -> Vec<Vec3> {
-        let (u, u_n, s_n, e) = (self.analytic(), self.unshadowed(), self.shadowed(), self.mean(&self.emitted));
+        let (u, u_n, s_n, e) = (self.analytic(), self.unshadowed(), self.shadowed(), self.emitted());
         (0..u.len()).map(|i| composite(u[i], u_n[i], s_n[i], e[i])).collect()
     }
 
     /// The fully stochastic image: `emitted + S_N`.
     pub fn stochastic_image(&self) -> Vec<Vec3> {
-        let (s_n, e) = (self.shadowed(), self.mean(&self.emitted));
+        let (s_n, e) = (self.shadowed(), self.emitted());
         s_n.iter().zip(&e).map(|(&s, &e)| s + e).collect()
     }
 }

@@ -338,6 +338,236 @@ pub fn shade(
     }
 }
 
+/// The pixel of invocation `i` of a `params.width`-wide image, if `i` is inside it.
+fn denoise_pixel(params: &raywave_shared::DenoiseParams, i: u32) -> Option<glam::IVec2> {
+    if i < params.pixels() {
+        Some(glam::IVec2::new((i % params.width) as i32, (i / params.width) as i32))
+    } else {
+        None
+    }
+}
+
+/// Entry point of the denoisers' ratio pass: `S_N/U_N` per pixel (one invocation per pixel).
+#[spirv(compute(threads(64)))]
+pub fn denoise_ratio(
+    #[spirv(global_invocation_id)] global_id: UVec3,
+    #[spirv(num_workgroups)] num_workgroups: UVec3,
+    #[spirv(push_constant)] params: &raywave_shared::DenoiseParams,
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 0)] shadowed: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 1)] unshadowed: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 2)] ratio: &mut [Vec4],
+) {
+    let i = stream_index(global_id, num_workgroups);
+    if denoise_pixel(params, i).is_some() {
+        let k = i as usize;
+        ratio[k] = crate::denoise::noise::ratio_pixel(shadowed[k], unshadowed[k]);
+    }
+}
+
+/// Entry point of the denoiser's raw noise estimate (one invocation per pixel).
+#[spirv(compute(threads(64)))]
+pub fn denoise_noise(
+    #[spirv(global_invocation_id)] global_id: UVec3,
+    #[spirv(num_workgroups)] num_workgroups: UVec3,
+    #[spirv(push_constant)] params: &raywave_shared::DenoiseParams,
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 0)] ratio: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 1)] noise: &mut [f32],
+) {
+    let i = stream_index(global_id, num_workgroups);
+    if let Some(pixel) = denoise_pixel(params, i) {
+        noise[i as usize] = crate::denoise::noise::noise_estimate(params, pixel, ratio);
+    }
+}
+
+/// Entry point of the noise estimate's 3×3 blur (one invocation per pixel).
+#[spirv(compute(threads(64)))]
+pub fn denoise_noise_blur(
+    #[spirv(global_invocation_id)] global_id: UVec3,
+    #[spirv(num_workgroups)] num_workgroups: UVec3,
+    #[spirv(push_constant)] params: &raywave_shared::DenoiseParams,
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 0)] raw: &[f32],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 1)] blurred: &mut [f32],
+) {
+    let i = stream_index(global_id, num_workgroups);
+    if let Some(pixel) = denoise_pixel(params, i) {
+        blurred[i as usize] = crate::denoise::noise::blurred_noise(params, pixel, raw);
+    }
+}
+
+/// A line segment of the bilateral pass in workgroup memory: `TILE_LEN` taps, the centre of
+/// invocation `local` at `local + MAX_RADIUS`.
+struct TileLine<'a> {
+    shadowed: &'a [Vec4; TILE],
+    unshadowed: &'a [Vec4; TILE],
+    position: &'a [Vec4; TILE],
+    normal: &'a [Vec4; TILE],
+    center: i32,
+}
+
+/// Workgroup tile length as an array length.
+const TILE: usize = raywave_shared::denoise::TILE_LEN as usize;
+
+impl crate::denoise::bilateral::FilterLine for TileLine<'_> {
+    fn tap(&self, offset: i32) -> crate::denoise::bilateral::FilterTap {
+        let k = (self.center + offset) as usize;
+        crate::denoise::bilateral::FilterTap {
+            shadowed: self.shadowed[k],
+            unshadowed: self.unshadowed[k],
+            guide: crate::denoise::Guide { position: self.position[k], normal: self.normal[k] },
+        }
+    }
+}
+
+/// Entry point of one 1-D pass of the joint bilateral filter along `params.axis`. Each
+/// workgroup filters a `WORKGROUP_SIZE`-pixel segment of one line (the host dispatches
+/// [`raywave_shared::DenoiseParams::bilateral_invocations`]): it first loads the segment and
+/// `MAX_RADIUS` pixels on each side into workgroup memory, one global read per pixel, then every
+/// invocation filters its pixel from the tile with the CPU's `bilateral_pass`.
+#[spirv(compute(threads(64)))]
+#[allow(clippy::too_many_arguments)]
+pub fn denoise_bilateral(
+    #[spirv(workgroup_id)] group: UVec3,
+    #[spirv(num_workgroups)] num_workgroups: UVec3,
+    #[spirv(local_invocation_index)] local: u32,
+    #[spirv(push_constant)] params: &raywave_shared::DenoiseParams,
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 0)] position: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 1)] normal: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 2)] noise: &[f32],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 3)] shadowed: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 4)] unshadowed: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 5)] shadowed_out: &mut [Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 6)] unshadowed_out: &mut [Vec4],
+    #[spirv(workgroup)] tile_shadowed: &mut [Vec4; TILE],
+    #[spirv(workgroup)] tile_unshadowed: &mut [Vec4; TILE],
+    #[spirv(workgroup)] tile_position: &mut [Vec4; TILE],
+    #[spirv(workgroup)] tile_normal: &mut [Vec4; TILE],
+) {
+    use crate::denoise::bilateral::{FilterLine, ImageLine};
+    use raywave_shared::denoise::{MAX_RADIUS, TILE_LEN};
+    let segments = params.segments_per_line();
+    let group_index = group.y * num_workgroups.x + group.x;
+    let (line, segment) = (group_index / segments.max(1), group_index % segments.max(1));
+    let (length, lines) = params.lines();
+    let start = (segment * WORKGROUP_SIZE) as i32;
+    let source = ImageLine {
+        shadowed,
+        unshadowed,
+        position,
+        normal,
+        center: crate::denoise::bilateral::line_pixel(params, line, 0),
+        params,
+    };
+    // Every invocation of a workgroup takes the same branch: `line` is per workgroup.
+    if line < lines {
+        let mut k = local;
+        while k < TILE_LEN {
+            let tap = source.tap(start - MAX_RADIUS as i32 + k as i32);
+            let slot = k as usize;
+            tile_shadowed[slot] = tap.shadowed;
+            tile_unshadowed[slot] = tap.unshadowed;
+            tile_position[slot] = tap.guide.position;
+            tile_normal[slot] = tap.guide.normal;
+            k += WORKGROUP_SIZE;
+        }
+    }
+    spirv_std::arch::workgroup_memory_barrier_with_group_sync();
+    let along = start + local as i32;
+    if line < lines && (along as u32) < length {
+        let tile = TileLine {
+            shadowed: tile_shadowed,
+            unshadowed: tile_unshadowed,
+            position: tile_position,
+            normal: tile_normal,
+            center: (local + MAX_RADIUS) as i32,
+        };
+        let pixel = crate::denoise::bilateral::line_pixel(params, line, along);
+        let i = (pixel.y as u32 * params.width + pixel.x as u32) as usize;
+        let (s, u) = crate::denoise::bilateral::bilateral_pass(&tile, noise[i], params);
+        shadowed_out[i] = s;
+        unshadowed_out[i] = u;
+    }
+}
+
+/// Entry point of the denoiser's composite `emitted + U · den(S_N)/den(U_N)` (one invocation per
+/// pixel).
+#[spirv(compute(threads(64)))]
+#[allow(clippy::too_many_arguments)]
+pub fn denoise_composite(
+    #[spirv(global_invocation_id)] global_id: UVec3,
+    #[spirv(num_workgroups)] num_workgroups: UVec3,
+    #[spirv(push_constant)] params: &raywave_shared::DenoiseParams,
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 0)] analytic: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 1)] emitted: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 2)] shadowed: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 3)] unshadowed: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 4)] color: &mut [Vec4],
+) {
+    use glam::Vec4Swizzles;
+    let i = stream_index(global_id, num_workgroups);
+    if denoise_pixel(params, i).is_some() {
+        let k = i as usize;
+        let c =
+            crate::shade::stage::composite(analytic[k].xyz(), unshadowed[k].xyz(), shadowed[k].xyz(), emitted[k].xyz());
+        color[k] = c.extend(1.0);
+    }
+}
+
+/// Entry point of the SVGF baseline's spatial variance of the ratio (one invocation per pixel).
+#[spirv(compute(threads(64)))]
+pub fn svgf_variance(
+    #[spirv(global_invocation_id)] global_id: UVec3,
+    #[spirv(num_workgroups)] num_workgroups: UVec3,
+    #[spirv(push_constant)] params: &raywave_shared::DenoiseParams,
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 0)] ratio: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 1)] position: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 2)] normal: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 3)] with_variance: &mut [Vec4],
+) {
+    let i = stream_index(global_id, num_workgroups);
+    if let Some(pixel) = denoise_pixel(params, i) {
+        with_variance[i as usize] = crate::denoise::svgf::ratio_and_variance(params, pixel, ratio, position, normal);
+    }
+}
+
+/// Entry point of one SVGF à-trous iteration with spacing `params.step` (one invocation per
+/// pixel).
+#[spirv(compute(threads(64)))]
+pub fn svgf_atrous(
+    #[spirv(global_invocation_id)] global_id: UVec3,
+    #[spirv(num_workgroups)] num_workgroups: UVec3,
+    #[spirv(push_constant)] params: &raywave_shared::DenoiseParams,
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 0)] ratio: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 1)] position: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 2)] normal: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 3)] filtered: &mut [Vec4],
+) {
+    let i = stream_index(global_id, num_workgroups);
+    if let Some(pixel) = denoise_pixel(params, i) {
+        filtered[i as usize] = crate::denoise::svgf::atrous_step(params, pixel, ratio, position, normal);
+    }
+}
+
+/// Entry point of the SVGF baseline's composite `emitted + U · den(ratio)` (one invocation per
+/// pixel).
+#[spirv(compute(threads(64)))]
+pub fn svgf_composite(
+    #[spirv(global_invocation_id)] global_id: UVec3,
+    #[spirv(num_workgroups)] num_workgroups: UVec3,
+    #[spirv(push_constant)] params: &raywave_shared::DenoiseParams,
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 0)] analytic: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 1)] emitted: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 2)] ratio: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 3)] color: &mut [Vec4],
+) {
+    use glam::Vec4Swizzles;
+    let i = stream_index(global_id, num_workgroups);
+    if denoise_pixel(params, i).is_some() {
+        let k = i as usize;
+        let c = crate::shade::stage::apply_visibility(analytic[k].xyz(), ratio[k].xyz(), emitted[k].xyz());
+        color[k] = c.extend(1.0);
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

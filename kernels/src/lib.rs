@@ -10,6 +10,7 @@
 #[cfg(test)]
 extern crate std;
 
+pub mod denoise;
 pub mod entry;
 pub mod generate;
 pub mod hash;

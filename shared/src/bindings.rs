@@ -97,3 +97,24 @@ pub mod shade {
     /// Output: shadow-ray directions (`Vec4`, w = tmax; 0 = no ray).
     pub const SHADOW_DIRECTION: u32 = 16;
 }
+
+/// Bindings of the denoise passes (set 0): every pass binds storage buffers `0..n` in the order
+/// its entry point (`raywave_kernels::entry::denoise_*`, `svgf_*`) lists; these are the counts.
+pub mod denoise {
+    /// `denoise_ratio`: `S_N`, `U_N` in; ratio (`Vec4`) out.
+    pub const RATIO: u32 = 3;
+    /// `denoise_noise`: ratio in; raw noise (`f32`) out.
+    pub const NOISE: u32 = 2;
+    /// `denoise_noise_blur`: raw noise in; blurred noise out.
+    pub const NOISE_BLUR: u32 = 2;
+    /// `denoise_bilateral`: position, normal, noise, `S_N`, `U_N` in; filtered `S_N`, `U_N` out.
+    pub const BILATERAL: u32 = 7;
+    /// `denoise_composite`: `U`, emitted, `S_N`, `U_N` in; colour out.
+    pub const COMPOSITE: u32 = 5;
+    /// `svgf_variance`: ratio, position, normal in; ratio and variance out.
+    pub const SVGF_VARIANCE: u32 = 4;
+    /// `svgf_atrous`: ratio and variance, position, normal in; filtered ratio and variance out.
+    pub const SVGF_ATROUS: u32 = 4;
+    /// `svgf_composite`: `U`, emitted, ratio in; colour out.
+    pub const SVGF_COMPOSITE: u32 = 4;
+}

@@ -8,6 +8,7 @@
 
 pub mod bindings;
 pub mod bvh;
+pub mod denoise;
 pub mod generate;
 pub mod light;
 pub mod ltc_table;
@@ -16,6 +17,7 @@ pub mod shade;
 pub mod stream;
 pub mod trace;
 
+pub use denoise::DenoiseParams;
 pub use generate::GenerateParams;
 pub use light::Light;
 pub use light::{LightBounds, LightBvhNode};

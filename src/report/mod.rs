@@ -1,6 +1,7 @@
 //! `raywave report …`: accuracy measurements with stated repetitions, printed as a table or as
 //! one JSON object per line.
 
+pub mod error_vs_time;
 pub mod sampling;
 pub mod scenes;
 pub mod shade;

@@ -69,6 +69,8 @@ impl ShadeLine {
 pub struct GBuffer {
     rays: crate::RayStream,
     hits: crate::HitStream,
+    /// Seconds the backend took to generate and trace the camera rays.
+    pub seconds: f64,
 }
 
 impl GBuffer {
@@ -76,12 +78,18 @@ impl GBuffer {
     pub fn new(backend: &mut dyn Backend, scene: &Scene, resolution: u32) -> Result<Self> {
         let sampler = sampler_params(sampler_kind::ZSOBOL, 0, resolution, resolution, 1);
         let frame = backend.render(&generate_params_with(scene, resolution, resolution, 0, sampler))?;
-        Ok(Self { rays: frame.rays, hits: frame.hits })
+        let seconds = frame.timings.iter().map(|t| t.seconds).sum();
+        Ok(Self { rays: frame.rays, hits: frame.hits, seconds })
+    }
+
+    /// The surface each pixel's camera ray hit (the denoiser's G-buffer).
+    pub fn surfaces(&self, data: &ShadeData) -> Vec<crate::kernels::shade::stage::Surface> {
+        crate::shading::resolve(data, &self.rays, &self.hits)
     }
 }
 
 /// Runs `spp` shade passes on `gbuffer` (shade and occlusion on `backend`) with `seed` and
-/// returns the accumulated `U`, `U_N`, `S_N`.
+/// returns the accumulated `U`, `U_N`, `S_N` and the seconds the passes took on the backend.
 pub fn accumulate(
     backend: &mut dyn Backend,
     gbuffer: &GBuffer,
@@ -89,14 +97,16 @@ pub fn accumulate(
     resolution: u32,
     spp: u32,
     seed: u32,
-) -> Result<ShadeAccumulator> {
+) -> Result<(ShadeAccumulator, f64)> {
     let sampler = sampler_params(sampler_kind::ZSOBOL, seed, resolution, resolution, spp);
     let mut accumulator = ShadeAccumulator::new((resolution * resolution) as usize);
+    let mut seconds = 0.0;
     for sample_index in 0..spp {
         let params = data.params(sampler, resolution, resolution, sample_index);
-        accumulator.shade_pass(backend, &params, data, &gbuffer.rays, &gbuffer.hits)?;
+        let (timings, _) = accumulator.shade_pass(backend, &params, data, &gbuffer.rays, &gbuffer.hits)?;
+        seconds += timings.iter().map(|t| t.seconds).sum::<f64>();
     }
-    Ok(accumulator)
+    Ok((accumulator, seconds))
 }
 
 /// Mean squared error over `pixels` (mean over RGB).
@@ -127,7 +137,8 @@ pub fn report_shade(
         backend.load_scene(&scene)?;
         let data = ShadeData::new(&scene)?;
         let gbuffer = GBuffer::new(backend, &scene, options.resolution)?;
-        let reference_run = accumulate(backend, &gbuffer, &data, options.resolution, options.reference_spp, 0xfeed)?;
+        let (reference_run, _) =
+            accumulate(backend, &gbuffer, &data, options.resolution, options.reference_spp, 0xfeed)?;
         let reference = reference_run.ratio_image();
         let analytic = reference_run.analytic();
         let all: Vec<usize> = (0..reference.len()).collect();
@@ -146,7 +157,7 @@ pub fn report_shade(
         while spp <= options.max_spp {
             let mut sums = [[0.0f64; 3]; 2];
             for rep in 0..options.reps {
-                let run = accumulate(backend, &gbuffer, &data, options.resolution, spp, rep)?;
+                let (run, _) = accumulate(backend, &gbuffer, &data, options.resolution, spp, rep)?;
                 let (ratio, stochastic) = (run.ratio_image(), run.stochastic_image());
                 for (e, image) in [&ratio, &stochastic].into_iter().enumerate() {
                     for (r, pixels) in [&all, &shadow, &lit].into_iter().enumerate() {

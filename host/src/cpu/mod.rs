@@ -2,12 +2,14 @@
 //! same invocation range a Vulkan dispatch covers.
 
 mod bvh;
+mod denoise;
 
 pub use bvh::{BvhQuality, CpuScene};
 
 use crate::backend::{
     check_image_size_common, check_shade_inputs, sampler_probe_len, warp_probe_len, Backend, FrameOutput, StageTiming,
 };
+use crate::denoise::{DenoiseInput, DenoiseMethod};
 use crate::error::{Error, Result};
 use crate::scene::Scene;
 use crate::shading::{self, ShadeData};
@@ -19,7 +21,7 @@ use raywave_kernels::{
     generate::generate_ray,
     trace::{trace_closest, trace_occluded},
 };
-use raywave_shared::{GenerateParams, SamplerProbeParams, ShadeParams, WarpParams};
+use raywave_shared::{DenoiseParams, GenerateParams, SamplerProbeParams, ShadeParams, WarpParams};
 use std::time::Instant;
 
 /// Largest image the CPU backend accepts: 2²⁶ pixels (≈ 3.8 GB of ray and hit streams).
@@ -132,6 +134,16 @@ impl Backend for CpuBackend {
         let (rays, generate_time) = self.generate(params)?;
         let (hits, trace_time) = self.trace(&rays)?;
         Ok(FrameOutput { rays, hits, timings: vec![generate_time, trace_time] })
+    }
+
+    fn denoise(
+        &mut self,
+        method: DenoiseMethod,
+        params: &DenoiseParams,
+        input: &DenoiseInput,
+    ) -> Result<(Vec<Vec4>, Vec<StageTiming>)> {
+        input.check(params)?;
+        Ok(denoise::denoise(method, params, input))
     }
 
     fn sampler_probe(&mut self, params: &SamplerProbeParams) -> Result<Vec<UVec2>> {

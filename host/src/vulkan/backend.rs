@@ -4,6 +4,7 @@
 use super::accel::{build_scene, SceneAccel};
 use super::buffer::GpuBuffer;
 use super::context::{open, ContextOptions, Core, DeviceInfo};
+use super::denoise::DenoiseKernels;
 use super::kernel::{dispatch_grid, ComputeKernel};
 use super::pass::Resource;
 use super::rt_pipeline::{RtPipelineKernel, CLOSEST_HIT_SHADERS, OCCLUSION_SHADERS};
@@ -11,6 +12,7 @@ use crate::backend::{
     check_image_size_common, check_shade_inputs, sampler_probe_len, warp_probe_len, Backend, FrameOutput, StageTiming,
 };
 use crate::cpu::CpuScene;
+use crate::denoise::{DenoiseInput, DenoiseMethod};
 use crate::device::TraceMethod;
 use crate::error::{Error, Result};
 use crate::scene::Scene;
@@ -20,7 +22,9 @@ use ash::vk;
 use bytemuck::Pod;
 use glam::{UVec2, Vec2, Vec4};
 use gpu_allocator::MemoryLocation;
-use raywave_shared::{bindings, GenerateParams, SamplerProbeParams, ShadeParams, TraceParams, WarpParams};
+use raywave_shared::{
+    bindings, DenoiseParams, GenerateParams, SamplerProbeParams, ShadeParams, TraceParams, WarpParams,
+};
 use std::sync::Arc;
 
 /// Storage buffers of the streams: read and written by shaders, mapped for upload and readback.
@@ -216,6 +220,7 @@ pub struct VulkanBackend {
     trace: TraceKernel,
     occlusion: TraceKernel,
     shade_kernel: ComputeKernel,
+    denoise_kernels: DenoiseKernels,
     trace_method: TraceMethod,
     scene: Option<DeviceScene>,
     /// The shade stage's scene data, cached across `shade` calls.
@@ -350,6 +355,7 @@ impl VulkanBackend {
             trace,
             occlusion,
             shade_kernel,
+            denoise_kernels: DenoiseKernels::new(&core)?,
             trace_method,
             scene: None,
             shade_data: None,
@@ -542,6 +548,17 @@ impl Backend for VulkanBackend {
         let (rays, generate_time) = self.generate_on_device(params)?;
         let (hits, trace_time) = self.trace_on_device(&rays)?;
         Ok(FrameOutput { rays: rays.read()?, hits: hits.read()?, timings: vec![generate_time, trace_time] })
+    }
+
+    fn denoise(
+        &mut self,
+        method: DenoiseMethod,
+        params: &DenoiseParams,
+        input: &DenoiseInput,
+    ) -> Result<(Vec<Vec4>, Vec<StageTiming>)> {
+        input.check(params)?;
+        self.check_stream(params.pixels())?;
+        self.denoise_kernels.run(&self.core, method, params, input)
     }
 
     fn sampler_probe(&mut self, params: &SamplerProbeParams) -> Result<Vec<UVec2>> {

@@ -6,6 +6,7 @@ mod accel;
 mod backend;
 mod buffer;
 mod context;
+mod denoise;
 mod kernel;
 mod pass;
 mod rt_pipeline;

@@ -257,19 +257,31 @@ pub fn shade_sample(
     result
 }
 
-/// The ratio estimator's composite for one pixel: `U · S_N / U_N` per channel, falling back to
-/// `U` where `U_N` is (nearly) 0 — no sample reached the light, so the ratio is undefined — plus
-/// the emitted radiance. All inputs are per-pixel means.
-pub fn composite(analytic: Vec3, unshadowed: Vec3, shadowed: Vec3, emitted: Vec3) -> Vec3 {
-    let ratio = |s: f32, u_n: f32| if u_n > 1.0e-7 { (s / u_n).min(1.0e4) } else { 1.0 };
-    let visibility =
-        Vec3::new(ratio(shadowed.x, unshadowed.x), ratio(shadowed.y, unshadowed.y), ratio(shadowed.z, unshadowed.z));
+/// The shadow ratio `S_N / U_N` per channel, in `[0, 1]` for a pixel's means (`S_N ≤ U_N` sample
+/// by sample): 1 — "unshadowed" — where `U_N` is (nearly) 0, i.e. no sample reached the light
+/// and the ratio is undefined, so the composite falls back to `U` [H-DX, H-CPU].
+pub fn shadow_ratio(shadowed: Vec3, unshadowed: Vec3) -> Vec3 {
+    let ratio = |s: f32, u_n: f32| if u_n > 1.0e-7 { (s / u_n).clamp(0.0, 1.0e4) } else { 1.0 };
+    Vec3::new(ratio(shadowed.x, unshadowed.x), ratio(shadowed.y, unshadowed.y), ratio(shadowed.z, unshadowed.z))
+}
+
+/// A pixel's colour from its analytic unshadowed radiance `U` and its shadow `visibility` (a
+/// [`shadow_ratio`], raw or denoised): `emitted + U · visibility`, or `emitted` alone should
+/// that not be finite.
+pub fn apply_visibility(analytic: Vec3, visibility: Vec3, emitted: Vec3) -> Vec3 {
     let color = emitted + analytic * visibility;
     if color.is_finite() {
         color
     } else {
         emitted
     }
+}
+
+/// The ratio estimator's composite for one pixel: `U · S_N / U_N` per channel, falling back to
+/// `U` where `U_N` is (nearly) 0 (see [`shadow_ratio`]), plus the emitted radiance. All inputs
+/// are per-pixel means (or their denoised values).
+pub fn composite(analytic: Vec3, unshadowed: Vec3, shadowed: Vec3, emitted: Vec3) -> Vec3 {
+    apply_visibility(analytic, shadow_ratio(shadowed, unshadowed), emitted)
 }
 
 #[cfg(test)]

@@ -1,0 +1,107 @@
+//! The denoise passes on the CPU: each pass is the kernel function over every pixel (rayon),
+//! exactly what the Vulkan entry points run per invocation.
+
+use crate::backend::StageTiming;
+use crate::denoise::{DenoiseInput, DenoiseMethod, DenoisePass};
+use glam::{IVec2, Vec4};
+use rayon::prelude::*;
+use raywave_kernels::denoise::bilateral::{bilateral_pass, ImageLine};
+use raywave_kernels::denoise::{noise, svgf};
+use raywave_kernels::shade::stage::{apply_visibility, composite};
+use raywave_shared::denoise::axis;
+use raywave_shared::DenoiseParams;
+use std::time::Instant;
+
+/// The buffers a denoiser threads through its passes.
+struct Working {
+    noise_raw: Vec<f32>,
+    noise: Vec<f32>,
+    shadowed: Vec<Vec4>,
+    unshadowed: Vec<Vec4>,
+    ratio: Vec<Vec4>,
+    color: Vec<Vec4>,
+}
+
+/// Evaluates `f` at every pixel of the image in parallel.
+fn per_pixel<T: Send>(params: &DenoiseParams, f: impl Fn(IVec2) -> T + Sync) -> Vec<T> {
+    let width = params.width;
+    (0..params.pixels()).into_par_iter().map(|i| f(IVec2::new((i % width) as i32, (i / width) as i32))).collect()
+}
+
+/// Runs `pass` on the CPU.
+fn run_pass(pass: DenoisePass, params: &DenoiseParams, input: &DenoiseInput, w: &mut Working) {
+    let index = |p: IVec2| (p.y as u32 * params.width + p.x as u32) as usize;
+    match pass {
+        DenoisePass::Ratio => {
+            w.ratio = w.shadowed.iter().zip(&w.unshadowed).map(|(&s, &u)| noise::ratio_pixel(s, u)).collect();
+        }
+        DenoisePass::Noise => w.noise_raw = per_pixel(params, |p| noise::noise_estimate(params, p, &w.ratio)),
+        DenoisePass::NoiseBlur => w.noise = per_pixel(params, |p| noise::blurred_noise(params, p, &w.noise_raw)),
+        DenoisePass::BilateralX | DenoisePass::BilateralY => {
+            let along = if pass == DenoisePass::BilateralX { axis::X } else { axis::Y };
+            let params = DenoiseParams { axis: along, ..*params };
+            let filtered = per_pixel(&params, |center| {
+                let line = ImageLine {
+                    shadowed: &w.shadowed,
+                    unshadowed: &w.unshadowed,
+                    position: &input.position,
+                    normal: &input.normal,
+                    center,
+                    params: &params,
+                };
+                bilateral_pass(&line, w.noise[index(center)], &params)
+            });
+            (w.shadowed, w.unshadowed) = filtered.into_iter().unzip();
+        }
+        DenoisePass::Composite => {
+            w.color = per_pixel(params, |p| {
+                let i = index(p);
+                let c = composite(
+                    input.analytic[i].truncate(),
+                    w.unshadowed[i].truncate(),
+                    w.shadowed[i].truncate(),
+                    input.emitted[i].truncate(),
+                );
+                c.extend(1.0)
+            });
+        }
+        DenoisePass::SvgfVariance => {
+            w.ratio =
+                per_pixel(params, |p| svgf::ratio_and_variance(params, p, &w.ratio, &input.position, &input.normal));
+        }
+        DenoisePass::SvgfAtrous { step } => {
+            let params = DenoiseParams { step, ..*params };
+            w.ratio = per_pixel(&params, |p| svgf::atrous_step(&params, p, &w.ratio, &input.position, &input.normal));
+        }
+        DenoisePass::SvgfComposite => {
+            w.color = per_pixel(params, |p| {
+                let i = index(p);
+                apply_visibility(input.analytic[i].truncate(), w.ratio[i].truncate(), input.emitted[i].truncate())
+                    .extend(1.0)
+            });
+        }
+    }
+}
+
+/// Runs `method` on `input` (already checked against `params`): the colour image (rgb, w = 1)
+/// and each pass's wall-clock time.
+pub fn denoise(method: DenoiseMethod, params: &DenoiseParams, input: &DenoiseInput) -> (Vec<Vec4>, Vec<StageTiming>) {
+    let mut working = Working {
+        noise_raw: Vec::new(),
+        noise: Vec::new(),
+        shadowed: input.shadowed.clone(),
+        unshadowed: input.unshadowed.clone(),
+        ratio: Vec::new(),
+        color: Vec::new(),
+    };
+    let timings = method
+        .passes(params)
+        .into_iter()
+        .map(|pass| {
+            let start = Instant::now();
+            run_pass(pass, params, input, &mut working);
+            StageTiming { stage: pass.name(), seconds: start.elapsed().as_secs_f64() }
+        })
+        .collect();
+    (working.color, timings)
+}

@@ -1,0 +1,228 @@
+//! The denoise stage on the host: its inputs (the accumulated `U`, `U_N`, `S_N` and a G-buffer),
+//! the methods compared in the error-vs-time report, their passes and the bytes each moves.
+//! The passes themselves are `raywave_kernels::denoise`, run by each backend's `denoise`.
+
+use crate::error::{Error, Result};
+use crate::shading::ShadeAccumulator;
+use glam::{Vec3, Vec4};
+use raywave_kernels::sampling::light_select::luminance;
+use raywave_kernels::shade::stage::Surface;
+use raywave_shared::denoise::MAX_RADIUS;
+use raywave_shared::DenoiseParams;
+
+/// A denoiser of the shadow term.
+#[derive(Copy, Clone, Debug, PartialEq, Eq, Hash)]
+pub enum DenoiseMethod {
+    /// Seed 000's filter: TV noise estimate → separable joint bilateral of `S_N` and `U_N` →
+    /// `U · den(S_N)/den(U_N)`.
+    Tv,
+    /// The baseline: SVGF-style variance-guided à-trous of the ratio `S_N/U_N`
+    /// (`params.atrous_iterations`, Falcor's 4 on large frames), same edge stops →
+    /// `U · den(ratio)`.
+    Svgf,
+}
+
+impl DenoiseMethod {
+    /// The method's name on the command line and in reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Tv => "tv",
+            Self::Svgf => "svgf",
+        }
+    }
+
+    /// The passes the method runs with `params`, in order.
+    pub fn passes(self, params: &DenoiseParams) -> Vec<DenoisePass> {
+        match self {
+            Self::Tv => vec![
+                DenoisePass::Ratio,
+                DenoisePass::Noise,
+                DenoisePass::NoiseBlur,
+                DenoisePass::BilateralX,
+                DenoisePass::BilateralY,
+                DenoisePass::Composite,
+            ],
+            Self::Svgf => {
+                let mut passes = vec![DenoisePass::Ratio, DenoisePass::SvgfVariance];
+                let iterations = params.atrous_iterations.clamp(1, MAX_ATROUS_ITERATIONS);
+                passes.extend((0..iterations).map(|k| DenoisePass::SvgfAtrous { step: 1 << k }));
+                passes.push(DenoisePass::SvgfComposite);
+                passes
+            }
+        }
+    }
+}
+
+impl std::str::FromStr for DenoiseMethod {
+    type Err = Error;
+    fn from_str(s: &str) -> Result<Self> {
+        match s {
+            "tv" => Ok(Self::Tv),
+            "svgf" => Ok(Self::Svgf),
+            other => Err(Error::InvalidParameter {
+                name: "denoise",
+                reason: format!("unknown denoiser `{other}` (expected tv or svgf)"),
+            }),
+        }
+    }
+}
+
+/// Most à-trous iterations of the SVGF baseline: 4, Falcor SVGFPass's `mFilterIterations`
+/// (steps 1, 2, 4, 8).
+pub const MAX_ATROUS_ITERATIONS: u32 = 4;
+
+/// One pass of a denoiser.
+#[derive(Copy, Clone, Debug, PartialEq, Eq)]
+pub enum DenoisePass {
+    /// The ratio image `S_N/U_N`.
+    Ratio,
+    /// Raw TV noise estimate of the ratio.
+    Noise,
+    /// 3×3 blur of the noise estimate.
+    NoiseBlur,
+    /// Joint bilateral pass along rows.
+    BilateralX,
+    /// Joint bilateral pass along columns.
+    BilateralY,
+    /// `emitted + U · den(S_N)/den(U_N)`.
+    Composite,
+    /// SVGF: the ratio's spatial variance.
+    SvgfVariance,
+    /// SVGF: one à-trous iteration with this tap spacing.
+    SvgfAtrous {
+        /// Tap spacing in pixels.
+        step: u32,
+    },
+    /// SVGF: `emitted + U · den(ratio)`.
+    SvgfComposite,
+}
+
+impl DenoisePass {
+    /// The pass's name in timings.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Ratio => "denoise ratio",
+            Self::Noise => "denoise noise",
+            Self::NoiseBlur => "denoise noise blur",
+            Self::BilateralX => "denoise bilateral x",
+            Self::BilateralY => "denoise bilateral y",
+            Self::Composite => "denoise composite",
+            Self::SvgfVariance => "svgf variance",
+            Self::SvgfAtrous { .. } => "svgf atrous",
+            Self::SvgfComposite => "svgf composite",
+        }
+    }
+
+    /// Bytes the pass must move per pixel: each buffer it reads or writes, once (neighbourhood
+    /// taps are assumed to hit the cache or, for the bilateral passes, workgroup memory). `Vec4`
+    /// buffers are 16 bytes, the noise 4.
+    pub fn bytes_per_pixel(self) -> u64 {
+        const V: u64 = 16;
+        const F: u64 = 4;
+        match self {
+            Self::Ratio => 3 * V,
+            Self::Noise => V + F,
+            Self::NoiseBlur => 2 * F,
+            Self::BilateralX | Self::BilateralY => 4 * V + F + 2 * V,
+            Self::Composite => 4 * V + V,
+            Self::SvgfVariance => 3 * V + V,
+            Self::SvgfAtrous { .. } => 3 * V + V,
+            Self::SvgfComposite => 3 * V + V,
+        }
+    }
+}
+
+/// Everything a denoiser reads, one entry per pixel of a `width × height` image (row-major).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct DenoiseInput {
+    /// Surface point and depth along the camera ray (w > 0; 0 = no surface).
+    pub position: Vec<Vec4>,
+    /// Unit normal facing the camera and the analytic luminance `lum(U)` (w).
+    pub normal: Vec<Vec4>,
+    /// Analytic unshadowed radiance `U` (rgb).
+    pub analytic: Vec<Vec4>,
+    /// Emitted radiance seen directly (rgb).
+    pub emitted: Vec<Vec4>,
+    /// `S_N` (rgb).
+    pub shadowed: Vec<Vec4>,
+    /// `U_N` (rgb).
+    pub unshadowed: Vec<Vec4>,
+}
+
+impl DenoiseInput {
+    /// The inputs of a frame: the accumulated estimates and the G-buffer of `surfaces` (the
+    /// surface each pixel's camera ray hit; the first sample's when the camera jitters).
+    pub fn new(surfaces: &[Surface], accumulator: &ShadeAccumulator) -> Self {
+        let analytic = accumulator.analytic();
+        let position = surfaces
+            .iter()
+            .map(|s| if s.position.is_finite() && s.position.w > 0.0 { s.position } else { Vec4::ZERO })
+            .collect();
+        let normal = surfaces.iter().zip(&analytic).map(|(s, &u)| s.normal.truncate().extend(luminance(u))).collect();
+        let four = |v: Vec<Vec3>| v.into_iter().map(|c| c.extend(0.0)).collect();
+        Self {
+            position,
+            normal,
+            analytic: four(analytic),
+            emitted: four(accumulator.emitted()),
+            shadowed: four(accumulator.shadowed()),
+            unshadowed: four(accumulator.unshadowed()),
+        }
+    }
+
+    /// The inputs that make a denoiser filter the fully stochastic image `S_N` (the
+    /// "stochastic+tv" baseline): `U_N` and `U` replaced by one constant per channel — the mean of `S_N`
+    /// over the surfaces — so the noise estimate sees `S_N` at the scale of a ratio and the
+    /// composite returns `den(S_N)`. The G-buffer (edge stops) stays the same.
+    pub fn stochastic(&self) -> Self {
+        let surfaces: Vec<&Vec4> =
+            self.shadowed.iter().zip(&self.position).filter(|(_, p)| p.w > 0.0).map(|(s, _)| s).collect();
+        let mean = surfaces.iter().fold(Vec4::ZERO, |a, &&s| a + s) / surfaces.len().max(1) as f32;
+        let scale = mean.max(Vec4::splat(1e-6)).truncate().extend(0.0);
+        Self {
+            unshadowed: vec![scale; self.shadowed.len()],
+            analytic: vec![scale; self.shadowed.len()],
+            ..self.clone()
+        }
+    }
+
+    /// Pixels in the image.
+    pub fn len(&self) -> usize {
+        self.position.len()
+    }
+
+    /// Whether the image is empty.
+    pub fn is_empty(&self) -> bool {
+        self.position.is_empty()
+    }
+
+    /// Checks the inputs against `params`: every buffer holds `width · height` entries and the
+    /// radius is within `1..=MAX_RADIUS`.
+    pub fn check(&self, params: &DenoiseParams) -> Result<()> {
+        let pixels = u64::from(params.width) * u64::from(params.height);
+        let lengths = [&self.position, &self.normal, &self.analytic, &self.emitted, &self.shadowed, &self.unshadowed];
+        let reason = if pixels == 0 {
+            Some("the image is empty".to_owned())
+        } else if lengths.iter().any(|b| b.len() as u64 != pixels) {
+            Some(format!(
+                "{}×{} pixels but buffers of {:?} entries",
+                params.width,
+                params.height,
+                lengths.map(|b| b.len())
+            ))
+        } else if !(1..=MAX_RADIUS).contains(&params.radius) {
+            Some(format!("radius {} outside 1..={MAX_RADIUS}", params.radius))
+        } else {
+            None
+        };
+        match reason {
+            Some(reason) => Err(Error::InvalidParameter { name: "denoise", reason }),
+            None => Ok(()),
+        }
+    }
+}
+
+/// Converts a denoiser's `Vec4` colours to RGB.
+pub fn rgb(color: &[Vec4]) -> Vec<Vec3> {
+    color.iter().map(|c| c.truncate()).collect()
+}

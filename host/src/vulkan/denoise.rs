@@ -1,0 +1,153 @@
+//! The denoise passes on a Vulkan device: one compute pipeline per pass entry point, the
+//! intermediate images kept on the device between passes.
+
+use super::buffer::GpuBuffer;
+use super::context::Core;
+use super::kernel::ComputeKernel;
+use super::pass::Resource;
+use crate::backend::StageTiming;
+use crate::denoise::{DenoiseInput, DenoiseMethod, DenoisePass};
+use crate::error::Result;
+use ash::vk;
+use bytemuck::Pod;
+use glam::Vec4;
+use gpu_allocator::MemoryLocation;
+use raywave_shared::bindings::denoise as counts;
+use raywave_shared::denoise::axis;
+use raywave_shared::DenoiseParams;
+use std::sync::Arc;
+
+/// The pipelines of every denoise pass.
+pub(crate) struct DenoiseKernels {
+    ratio: ComputeKernel,
+    noise: ComputeKernel,
+    noise_blur: ComputeKernel,
+    bilateral: ComputeKernel,
+    composite: ComputeKernel,
+    svgf_variance: ComputeKernel,
+    svgf_atrous: ComputeKernel,
+    svgf_composite: ComputeKernel,
+}
+
+/// A device image of `pixels` elements of `T`.
+fn image<T: Pod>(core: &Arc<Core>, pixels: u32, name: &str) -> Result<GpuBuffer> {
+    let bytes = u64::from(pixels.max(1)) * std::mem::size_of::<T>() as u64;
+    GpuBuffer::new(core, bytes, vk::BufferUsageFlags::STORAGE_BUFFER, MemoryLocation::GpuToCpu, name)
+}
+
+/// A device image holding `data`.
+fn upload(core: &Arc<Core>, data: &[Vec4], name: &str) -> Result<GpuBuffer> {
+    GpuBuffer::with_data(core, data, vk::BufferUsageFlags::STORAGE_BUFFER, name)
+}
+
+impl DenoiseKernels {
+    /// Builds the pipelines.
+    pub fn new(core: &Arc<Core>) -> Result<Self> {
+        let push = std::mem::size_of::<DenoiseParams>() as u32;
+        let kernel = |entry, count: u32| {
+            let layout: Vec<_> = (0..count).map(|b| (b, vk::DescriptorType::STORAGE_BUFFER)).collect();
+            ComputeKernel::new(core, entry, &layout, push)
+        };
+        Ok(Self {
+            ratio: kernel("entry::denoise_ratio", counts::RATIO)?,
+            noise: kernel("entry::denoise_noise", counts::NOISE)?,
+            noise_blur: kernel("entry::denoise_noise_blur", counts::NOISE_BLUR)?,
+            bilateral: kernel("entry::denoise_bilateral", counts::BILATERAL)?,
+            composite: kernel("entry::denoise_composite", counts::COMPOSITE)?,
+            svgf_variance: kernel("entry::svgf_variance", counts::SVGF_VARIANCE)?,
+            svgf_atrous: kernel("entry::svgf_atrous", counts::SVGF_ATROUS)?,
+            svgf_composite: kernel("entry::svgf_composite", counts::SVGF_COMPOSITE)?,
+        })
+    }
+
+    /// Runs `method` on `input` (already checked against `params`): uploads the inputs, runs
+    /// every pass on the device and reads the colour back. Timings are the passes' GPU times.
+    pub fn run(
+        &self,
+        core: &Arc<Core>,
+        method: DenoiseMethod,
+        params: &DenoiseParams,
+        input: &DenoiseInput,
+    ) -> Result<(Vec<Vec4>, Vec<StageTiming>)> {
+        let pixels = params.pixels();
+        let position = upload(core, &input.position, "denoise position")?;
+        let normal = upload(core, &input.normal, "denoise normal")?;
+        let analytic = upload(core, &input.analytic, "denoise analytic")?;
+        let emitted = upload(core, &input.emitted, "denoise emitted")?;
+        // Ping-pong pairs: [0] holds the current S_N / U_N / ratio, [1] receives the next.
+        let mut shadowed = [upload(core, &input.shadowed, "S_N")?, image::<Vec4>(core, pixels, "S_N filtered")?];
+        let mut unshadowed = [upload(core, &input.unshadowed, "U_N")?, image::<Vec4>(core, pixels, "U_N filtered")?];
+        let mut ratio = [image::<Vec4>(core, pixels, "ratio")?, image::<Vec4>(core, pixels, "ratio filtered")?];
+        let noise_raw = image::<f32>(core, pixels, "noise raw")?;
+        let noise = image::<f32>(core, pixels, "noise")?;
+        let color = image::<Vec4>(core, pixels, "denoised colour")?;
+        let mut timings = Vec::new();
+        for pass in method.passes(params) {
+            let b = Resource::Buffer;
+            let seconds = match pass {
+                DenoisePass::Ratio => self.ratio.dispatch(
+                    &[b(&shadowed[0]), b(&unshadowed[0]), b(&ratio[0])],
+                    bytemuck::bytes_of(params),
+                    pixels,
+                )?,
+                DenoisePass::Noise => {
+                    self.noise.dispatch(&[b(&ratio[0]), b(&noise_raw)], bytemuck::bytes_of(params), pixels)?
+                }
+                DenoisePass::NoiseBlur => {
+                    self.noise_blur.dispatch(&[b(&noise_raw), b(&noise)], bytemuck::bytes_of(params), pixels)?
+                }
+                DenoisePass::BilateralX | DenoisePass::BilateralY => {
+                    let along = if pass == DenoisePass::BilateralX { axis::X } else { axis::Y };
+                    let params = DenoiseParams { axis: along, ..*params };
+                    let seconds = self.bilateral.dispatch(
+                        &[
+                            b(&position),
+                            b(&normal),
+                            b(&noise),
+                            b(&shadowed[0]),
+                            b(&unshadowed[0]),
+                            b(&shadowed[1]),
+                            b(&unshadowed[1]),
+                        ],
+                        bytemuck::bytes_of(&params),
+                        params.bilateral_invocations(),
+                    )?;
+                    shadowed.swap(0, 1);
+                    unshadowed.swap(0, 1);
+                    seconds
+                }
+                DenoisePass::Composite => self.composite.dispatch(
+                    &[b(&analytic), b(&emitted), b(&shadowed[0]), b(&unshadowed[0]), b(&color)],
+                    bytemuck::bytes_of(params),
+                    pixels,
+                )?,
+                DenoisePass::SvgfVariance => {
+                    let seconds = self.svgf_variance.dispatch(
+                        &[b(&ratio[0]), b(&position), b(&normal), b(&ratio[1])],
+                        bytemuck::bytes_of(params),
+                        pixels,
+                    )?;
+                    ratio.swap(0, 1);
+                    seconds
+                }
+                DenoisePass::SvgfAtrous { step } => {
+                    let params = DenoiseParams { step, ..*params };
+                    let seconds = self.svgf_atrous.dispatch(
+                        &[b(&ratio[0]), b(&position), b(&normal), b(&ratio[1])],
+                        bytemuck::bytes_of(&params),
+                        pixels,
+                    )?;
+                    ratio.swap(0, 1);
+                    seconds
+                }
+                DenoisePass::SvgfComposite => self.svgf_composite.dispatch(
+                    &[b(&analytic), b(&emitted), b(&ratio[0]), b(&color)],
+                    bytemuck::bytes_of(params),
+                    pixels,
+                )?,
+            };
+            timings.push(StageTiming { stage: pass.name(), seconds });
+        }
+        Ok((color.read(pixels as usize)?, timings))
+    }
+}

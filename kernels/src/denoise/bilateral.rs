@@ -1,0 +1,190 @@
+//! The separable joint bilateral filter of seed 000 (the reference code's two 1-D passes as its
+//! ports quote them [H-DX, H-CPU, H-UNITY, H-SD]; `../shared/reference/ddgi-ratio-ltc.md` §2.2):
+//! a Gaussian whose radius follows the noise estimate, times the edge stops, with the **same
+//! weights** applied to `S_N` and `U_N` so their ratio is filtered without the analytic
+//! shading's detail leaking into it.
+
+#[cfg(target_arch = "spirv")]
+use spirv_std::num_traits::Float;
+
+use super::guide::{edge_stop, Guide};
+use glam::Vec4;
+use raywave_shared::denoise::{DenoiseParams, MAX_RADIUS};
+
+/// One pixel of a line as the filter reads it.
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub struct FilterTap {
+    /// `S_N` (rgb; w unused).
+    pub shadowed: Vec4,
+    /// `U_N` (rgb; w unused).
+    pub unshadowed: Vec4,
+    /// The pixel's G-buffer.
+    pub guide: Guide,
+}
+
+impl FilterTap {
+    /// A tap outside the image: no surface, so its weight is 0.
+    pub const OUTSIDE: FilterTap = FilterTap { shadowed: Vec4::ZERO, unshadowed: Vec4::ZERO, guide: Guide::NONE };
+}
+
+/// The pixels of one filter line around a centre: the CPU reads them from the image, the Vulkan
+/// pass from a workgroup-shared tile.
+pub trait FilterLine {
+    /// The pixel `offset` steps from the centre along the line (`|offset| ≤ MAX_RADIUS`);
+    /// [`FilterTap::OUTSIDE`] past the image.
+    fn tap(&self, offset: i32) -> FilterTap;
+}
+
+/// The Gaussian's radius in pixels for a noise estimate `noise`: `saturate(1.5·noise)·R` [H-DX].
+pub fn gaussian_radius(noise: f32, radius: u32) -> f32 {
+    (1.5 * noise).clamp(0.0, 1.0) * radius.clamp(1, MAX_RADIUS) as f32
+}
+
+/// One 1-D pass at a pixel: returns the filtered `(S_N, U_N)`. Taps `r ∈ [−R, R]` weigh
+/// `exp(−(r/g)²) · edge_stop`, with `g` the [`gaussian_radius`]; the centre weighs 1. A pixel
+/// whose `g ≤ 0.5` — no shadow noise — or that has no surface passes through untouched [H-DX].
+pub fn bilateral_pass<L: FilterLine>(line: &L, noise: f32, params: &DenoiseParams) -> (Vec4, Vec4) {
+    let center = line.tap(0);
+    let sigma = gaussian_radius(noise, params.radius);
+    // `sigma` is finite: the noise estimate is clamped to [0, 1].
+    if sigma <= 0.5 || !center.guide.is_surface() {
+        return (center.shadowed, center.unshadowed);
+    }
+    let radius = params.radius.clamp(1, MAX_RADIUS) as i32;
+    let (mut shadowed, mut unshadowed, mut total) = (center.shadowed, center.unshadowed, 1.0);
+    let mut r = 1;
+    while r <= radius {
+        let gaussian = (-(r as f32 / sigma) * (r as f32 / sigma)).exp();
+        let mut side = -1;
+        while side <= 1 {
+            let tap = line.tap(side * r);
+            let w = gaussian * edge_stop(&center.guide, &tap.guide, params.edge_weights);
+            if w > 0.0 {
+                shadowed += w * tap.shadowed;
+                unshadowed += w * tap.unshadowed;
+                total += w;
+            }
+            side += 2;
+        }
+        r += 1;
+    }
+    (shadowed / total, unshadowed / total)
+}
+
+/// The pixel `along` steps into filter line `line` of a pass along `params.axis`: `(along, line)`
+/// along x, `(line, along)` along y.
+pub fn line_pixel(params: &DenoiseParams, line: u32, along: i32) -> glam::IVec2 {
+    if params.axis == raywave_shared::denoise::axis::Y {
+        glam::IVec2::new(line as i32, along)
+    } else {
+        glam::IVec2::new(along, line as i32)
+    }
+}
+
+/// [`FilterLine`] over whole images in memory (the CPU executor, and tests): the line through
+/// `center` along `params.axis`.
+pub struct ImageLine<'a> {
+    /// `S_N` per pixel.
+    pub shadowed: &'a [Vec4],
+    /// `U_N` per pixel.
+    pub unshadowed: &'a [Vec4],
+    /// Surface point and depth per pixel (see [`Guide::position`]).
+    pub position: &'a [Vec4],
+    /// Normal and analytic luminance per pixel (see [`Guide::normal`]).
+    pub normal: &'a [Vec4],
+    /// The centre pixel.
+    pub center: glam::IVec2,
+    /// The filter's parameters (size and axis).
+    pub params: &'a DenoiseParams,
+}
+
+impl FilterLine for ImageLine<'_> {
+    fn tap(&self, offset: i32) -> FilterTap {
+        let step = if self.params.axis == raywave_shared::denoise::axis::Y {
+            glam::IVec2::new(0, offset)
+        } else {
+            glam::IVec2::new(offset, 0)
+        };
+        let p = self.center + step;
+        if p.x < 0 || p.y < 0 || p.x as u32 >= self.params.width || p.y as u32 >= self.params.height {
+            return FilterTap::OUTSIDE;
+        }
+        let i = (p.y as u32 * self.params.width + p.x as u32) as usize;
+        FilterTap {
+            shadowed: self.shadowed[i],
+            unshadowed: self.unshadowed[i],
+            guide: Guide { position: self.position[i], normal: self.normal[i] },
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::{IVec2, Vec3};
+    use std::{vec, vec::Vec};
+
+    struct Plane {
+        shadowed: Vec<Vec4>,
+        unshadowed: Vec<Vec4>,
+        position: Vec<Vec4>,
+        normal: Vec<Vec4>,
+        params: DenoiseParams,
+    }
+
+    /// A `w × 1` strip on the plane y = 0 seen from 10 units, with `visibility` per pixel.
+    fn strip(visibility: &[f32]) -> Plane {
+        let n = visibility.len();
+        let u = Vec4::new(0.4, 0.5, 0.6, 0.0);
+        Plane {
+            shadowed: visibility.iter().map(|&v| u * v).collect(),
+            unshadowed: vec![u; n],
+            position: (0..n).map(|x| Vec3::new(x as f32 * 0.01, 0.0, 0.0).extend(10.0)).collect(),
+            normal: vec![Vec3::Y.extend(0.5); n],
+            params: DenoiseParams { radius: MAX_RADIUS, ..DenoiseParams::new(n as u32, 1) },
+        }
+    }
+
+    fn filter(p: &Plane, x: i32, noise: f32) -> (Vec4, Vec4) {
+        let line = ImageLine {
+            shadowed: &p.shadowed,
+            unshadowed: &p.unshadowed,
+            position: &p.position,
+            normal: &p.normal,
+            center: IVec2::new(x, 0),
+            params: &p.params,
+        };
+        bilateral_pass(&line, noise, &p.params)
+    }
+
+    #[test]
+    fn quiet_pixels_pass_through_and_noisy_ones_average() {
+        let visibility: Vec<f32> = (0..41).map(|x| (x % 2) as f32).collect();
+        let p = strip(&visibility);
+        assert_eq!(filter(&p, 20, 0.0), (p.shadowed[20], p.unshadowed[20]), "no noise: untouched");
+        assert_eq!(filter(&p, 20, 0.03), (p.shadowed[20], p.unshadowed[20]), "g = 0.45 px: untouched");
+        assert_ne!(filter(&p, 20, 0.04), (p.shadowed[20], p.unshadowed[20]), "g = 0.6 px: filtered");
+        assert!((gaussian_radius(0.5, 10) - 7.5).abs() < 1e-6 && gaussian_radius(2.0, 10) == 10.0);
+    }
+
+    #[test]
+    fn same_weights_for_both_signals_keep_the_ratio_in_range() {
+        let visibility: Vec<f32> = (0..41).map(|x| (x % 2) as f32).collect();
+        let p = strip(&visibility);
+        let (s, u) = filter(&p, 20, 1.0);
+        let ratio = s.x / u.x;
+        assert!((ratio - 0.5).abs() < 0.1, "alternating visibility filters to ≈ 1/2: {ratio}");
+        assert!((s.y / u.y - ratio).abs() < 1e-6, "one ratio for every channel");
+    }
+
+    #[test]
+    fn taps_outside_the_image_or_the_surface_are_ignored() {
+        let mut p = strip(&[1.0, 0.0, 1.0, 0.0]);
+        p.position[3] = Vec4::ZERO;
+        let (s, u) = filter(&p, 0, 1.0);
+        let ratio = s.x / u.x;
+        assert!(ratio > 0.5 && ratio < 1.0, "{ratio}");
+        let (s, u) = filter(&p, 3, 1.0);
+        assert_eq!((s, u), (p.shadowed[3], p.unshadowed[3]), "a miss passes through");
+    }
+}

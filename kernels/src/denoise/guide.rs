@@ -1,0 +1,120 @@
+//! The G-buffer the denoiser's edge stops read, and the edge-stop weight itself.
+
+use glam::{Vec4, Vec4Swizzles};
+
+/// A pixel's surface as the edge stops see it.
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub struct Guide {
+    /// Surface point (xyz, scene units) and its depth along the camera ray (w, > 0); w = 0 where
+    /// the camera ray hit nothing (such pixels are never filtered or used as taps).
+    pub position: Vec4,
+    /// Unit surface normal facing the camera (xyz) and the luminance of the analytic `U` (w).
+    pub normal: Vec4,
+}
+
+impl Guide {
+    /// A pixel without a surface (a miss, or a tap outside the image).
+    pub const NONE: Guide = Guide { position: Vec4::ZERO, normal: Vec4::ZERO };
+
+    /// Whether a camera ray hit a surface here.
+    pub fn is_surface(&self) -> bool {
+        self.position.w > 0.0
+    }
+}
+
+/// Depth differences are measured relative to the centre's depth so the stop is unit-free: with
+/// weight 1 a relative difference of 1/4 zeroes it — the reference's `1 − |Δz|·Wd` in metres for
+/// a surface 4 m away [H-DX].
+const DEPTH_SCALE: f32 = 4.0;
+
+/// Tap offsets below this fraction of the centre's depth count as the same point for the plane
+/// stop (the reference's `dist² < 0.001` in metres, made unit-free).
+const SAME_POINT: f32 = 1.0e-4;
+
+/// Analytic luminances below this (relative to the brighter of the two) count as equal.
+const DARK: f32 = 1.0e-12;
+
+/// The joint bilateral weight of `tap` seen from `center`, in `[0, 1]`: the product of the four
+/// edge stops of the reference code [H-DX, H-CPU], with `weights` = (depth `Wd`, normal `Wn`,
+/// plane `Wp`, analytic `Wa`):
+/// - depth `max(0, 1 − Wd·4·|Δz|/z)` (relative, see `DEPTH_SCALE`);
+/// - normal `max(0, 1 − Wn·(1 − (n_c·n_t)⁴))`;
+/// - plane `max(0, 1 − 2·Wp·max(|dq·n_t|, |dq·n_c|)/|dq|)²` (1 for coincident points);
+/// - analytic `max(0, 1 − 10·Wa·|ΔL|/max(L_c, L_t))` — relative to the luminances so it does not
+///   depend on the lights' units (the reference uses absolute display-referred values).
+///
+/// 0 when the tap has no surface.
+pub fn edge_stop(center: &Guide, tap: &Guide, weights: Vec4) -> f32 {
+    if !tap.is_surface() || !center.is_surface() {
+        return 0.0;
+    }
+    let depth_center = center.position.w;
+    let depth = (1.0 - weights.x * DEPTH_SCALE * (tap.position.w - depth_center).abs() / depth_center).max(0.0);
+    let (n_c, n_t) = (center.normal.xyz(), tap.normal.xyz());
+    let cos = n_c.dot(n_t).max(0.0);
+    let cos4 = (cos * cos) * (cos * cos);
+    let normal = (1.0 - weights.y * (1.0 - cos4)).max(0.0);
+    let offset = tap.position.xyz() - center.position.xyz();
+    let distance = offset.length();
+    let plane = if distance <= SAME_POINT * depth_center {
+        1.0
+    } else {
+        let off_plane = offset.dot(n_t).abs().max(offset.dot(n_c).abs()) / distance;
+        let w = (1.0 - 2.0 * weights.z * off_plane).max(0.0);
+        w * w
+    };
+    let (l_c, l_t) = (center.normal.w.max(0.0), tap.normal.w.max(0.0));
+    let brighter = l_c.max(l_t);
+    let analytic =
+        if brighter <= DARK { 1.0 } else { (1.0 - 10.0 * weights.w * (l_c - l_t).abs() / brighter).max(0.0) };
+    let w = depth * normal * plane * analytic;
+    if w.is_finite() {
+        w
+    } else {
+        0.0
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::Vec3;
+    use raywave_shared::denoise::DEFAULT_EDGE_WEIGHTS;
+
+    fn guide(p: Vec3, depth: f32, n: Vec3, l: f32) -> Guide {
+        Guide { position: p.extend(depth), normal: n.extend(l) }
+    }
+
+    #[test]
+    fn same_plane_neighbours_weigh_one_and_edges_zero() {
+        let c = guide(Vec3::ZERO, 10.0, Vec3::Y, 0.5);
+        let neighbour = guide(Vec3::new(0.01, 0.0, 0.0), 10.0, Vec3::Y, 0.5);
+        assert_eq!(edge_stop(&c, &neighbour, DEFAULT_EDGE_WEIGHTS), 1.0);
+        let wall = guide(Vec3::new(0.01, 0.01, 0.0), 10.0, Vec3::X, 0.5);
+        assert_eq!(edge_stop(&c, &wall, DEFAULT_EDGE_WEIGHTS), 0.0, "perpendicular normal");
+        let behind = guide(Vec3::new(0.0, -5.0, 0.0), 15.0, Vec3::Y, 0.5);
+        assert_eq!(edge_stop(&c, &behind, DEFAULT_EDGE_WEIGHTS), 0.0, "depth jump off the plane");
+        assert_eq!(edge_stop(&c, &Guide::NONE, DEFAULT_EDGE_WEIGHTS), 0.0, "no surface");
+        let brighter = guide(Vec3::new(0.01, 0.0, 0.0), 10.0, Vec3::Y, 1.0);
+        let w = edge_stop(&c, &brighter, DEFAULT_EDGE_WEIGHTS);
+        assert!((w - (1.0 - 0.9 * 0.5)).abs() < 1e-6, "analytic stop {w}");
+    }
+
+    #[test]
+    fn weights_are_scale_free_and_finite() {
+        for scale in [1e-3f32, 1.0, 1e5] {
+            let c = guide(Vec3::ZERO, 10.0 * scale, Vec3::Y, 0.5);
+            let t = guide(Vec3::new(0.01, 0.001, 0.0) * scale, 10.1 * scale, Vec3::Y, 0.4);
+            let w = edge_stop(&c, &t, DEFAULT_EDGE_WEIGHTS);
+            let w1 = edge_stop(
+                &guide(Vec3::ZERO, 10.0, Vec3::Y, 0.5),
+                &guide(Vec3::new(0.01, 0.001, 0.0), 10.1, Vec3::Y, 0.4),
+                DEFAULT_EDGE_WEIGHTS,
+            );
+            assert!((w - w1).abs() < 1e-4, "scale {scale}: {w} vs {w1}");
+        }
+        let nan = guide(Vec3::splat(f32::NAN), 1.0, Vec3::Y, f32::NAN);
+        let c = guide(Vec3::ZERO, 1.0, Vec3::Y, 0.5);
+        assert_eq!(edge_stop(&c, &nan, DEFAULT_EDGE_WEIGHTS), 0.0);
+    }
+}

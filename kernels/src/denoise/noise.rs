@@ -1,0 +1,153 @@
+//! The noise estimate that steers the filter radius (seed 000; the reference code's
+//! `estimateNoise` as quoted by its public ports [H-PF, H-EST, H-CPU], see
+//! `../shared/reference/ddgi-ratio-ltc.md` §2.1): the total variation — summed second-difference
+//! magnitudes — of the shadow ratio `S_N/U_N` along randomly rotated lines through the pixel,
+//! the maximum over the lines, normalized; then a 3×3 box blur.
+
+#[cfg(target_arch = "spirv")]
+use spirv_std::num_traits::Float;
+
+use crate::hash::{pcg3d, unit_float};
+use crate::sampling::warp::sin_cos_accurate;
+use crate::shade::stage::shadow_ratio;
+use core::f32::consts::FRAC_PI_4;
+use glam::{IVec2, UVec3, Vec2, Vec3, Vec4, Vec4Swizzles};
+use raywave_shared::denoise::{DenoiseParams, MAX_RADIUS, NOISE_LINES};
+
+/// Clamps `p` into the image and returns its pixel index.
+pub fn clamped_index(p: IVec2, width: u32, height: u32) -> usize {
+    let x = p.x.clamp(0, width as i32 - 1);
+    let y = p.y.clamp(0, height as i32 - 1);
+    (y as u32 * width + x as u32) as usize
+}
+
+/// The ratio image's entry for one pixel: its shadow ratio `S_N/U_N` (rgb; 1 where `U_N ≈ 0`),
+/// computed once per pixel by the ratio pass so the noise estimate's many taps only load it.
+pub fn ratio_pixel(shadowed: Vec4, unshadowed: Vec4) -> Vec4 {
+    shadow_ratio(shadowed.xyz(), unshadowed.xyz()).extend(0.0)
+}
+
+/// The ratio at the pixel nearest to `point` (clamped into the image). `(x + ½) as i32` rounds
+/// every coordinate that lies inside the image to nearest (and truncation only moves negative
+/// ones, which the clamp sends to 0 either way) without the software `round` of `no_std`.
+fn line_tap(point: Vec2, width: u32, height: u32, ratio: &[Vec4]) -> Vec3 {
+    let nearest = IVec2::new((point.x + 0.5) as i32, (point.y + 0.5) as i32);
+    ratio[clamped_index(nearest, width, height)].xyz()
+}
+
+/// The raw noise estimate of pixel `pixel` from the ratio image `ratio` ([`ratio_pixel`] per
+/// pixel), in `[0, 1]`: along [`NOISE_LINES`] lines at angles
+/// `angle0 + k·π/4` (`angle0` hashed from the pixel and `params.seed`), the ratio is tapped at
+/// the nearest pixel to each offset `r ∈ [−R_e, R_e]`, `R_e = min(10, R)` (taps past the border
+/// clamp to it); `d2 = Σ |v[r−2] − 2·v[r−1] + v[r]|` (RGB length), and the estimate is
+/// `clamp(sqrt(d2/R)/1.5, 0, 1)`, the maximum over the lines [H-CPU, H-EST].
+pub fn noise_estimate(params: &DenoiseParams, pixel: IVec2, ratio: &[Vec4]) -> f32 {
+    let radius = params.radius.clamp(1, MAX_RADIUS) as i32;
+    let (width, height) = (params.width.max(1), params.height.max(1));
+    let bits = pcg3d(UVec3::new(pixel.x as u32, pixel.y as u32, params.seed)).x;
+    let (sin0, cos0) = sin_cos_accurate(unit_float(bits) * FRAC_PI_4);
+    let mut direction = Vec2::new(cos0, sin0);
+    let (sin_step, cos_step) = (core::f32::consts::FRAC_1_SQRT_2, core::f32::consts::FRAC_1_SQRT_2);
+    let center = pixel.as_vec2();
+    let mut estimate: f32 = 0.0;
+    let mut line = 0;
+    while line < NOISE_LINES {
+        let mut before = line_tap(center - direction * radius as f32, width, height, ratio);
+        let mut previous = line_tap(center - direction * (radius - 1) as f32, width, height, ratio);
+        let mut variation = 0.0;
+        let mut r = -radius + 2;
+        while r <= radius {
+            let v = line_tap(center + direction * r as f32, width, height, ratio);
+            variation += (before - 2.0 * previous + v).length();
+            before = previous;
+            previous = v;
+            r += 1;
+        }
+        estimate = estimate.max(((variation / radius as f32).sqrt() / 1.5).clamp(0.0, 1.0));
+        // Rotate by π/4 for the next line.
+        direction =
+            Vec2::new(direction.x * cos_step - direction.y * sin_step, direction.x * sin_step + direction.y * cos_step);
+        line += 1;
+    }
+    if estimate.is_finite() {
+        estimate
+    } else {
+        1.0
+    }
+}
+
+/// The noise blur: the mean of the raw estimates in the 3×3 box around `pixel` that lies inside
+/// the image [H-CPU, H-UNITY].
+pub fn blurred_noise(params: &DenoiseParams, pixel: IVec2, raw: &[f32]) -> f32 {
+    let (mut sum, mut count) = (0.0, 0.0);
+    let mut dy = -1;
+    while dy <= 1 {
+        let mut dx = -1;
+        while dx <= 1 {
+            let p = pixel + IVec2::new(dx, dy);
+            if p.x >= 0 && p.y >= 0 && (p.x as u32) < params.width && (p.y as u32) < params.height {
+                sum += raw[(p.y as u32 * params.width + p.x as u32) as usize];
+                count += 1.0;
+            }
+            dx += 1;
+        }
+        dy += 1;
+    }
+    if count > 0.0 {
+        sum / count
+    } else {
+        0.0
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::hash::CounterRng;
+    use std::{vec, vec::Vec};
+
+    fn image(width: u32, height: u32, visibility: impl Fn(u32, u32) -> f32) -> Vec<Vec4> {
+        let unshadowed = Vec4::new(0.5, 0.4, 0.3, 0.0);
+        (0..width * height).map(|i| ratio_pixel(unshadowed * visibility(i % width, i / width), unshadowed)).collect()
+    }
+
+    #[test]
+    fn smooth_ratios_are_quiet_and_binary_noise_is_loud() {
+        let params = DenoiseParams { radius: MAX_RADIUS, ..DenoiseParams::new(48, 32) };
+        let r = image(48, 32, |_, _| 0.3);
+        assert_eq!(noise_estimate(&params, IVec2::new(24, 16), &r), 0.0, "a constant ratio");
+        // Along rotated lines the nearest-pixel taps of a ramp step unevenly, so it is not 0.
+        let r = image(48, 32, |x, _| x as f32 / 47.0);
+        let ramp = noise_estimate(&params, IVec2::new(24, 16), &r);
+        assert!(ramp < 0.2, "a smooth ramp is quiet: {ramp}");
+        let r = image(48, 32, |x, _| if x < 24 { 1.0 } else { 0.0 });
+        let edge = noise_estimate(&params, IVec2::new(24, 16), &r);
+        let mut rng = CounterRng::new(3);
+        let values: Vec<f32> = (0..48 * 32).map(|_| if rng.next_f32() < 0.5 { 1.0 } else { 0.0 }).collect();
+        let r = image(48, 32, |x, y| values[(y * 48 + x) as usize]);
+        let noisy = noise_estimate(&params, IVec2::new(24, 16), &r);
+        assert_eq!(noisy, 1.0, "coin-flip visibility saturates the estimate");
+        assert!(edge < noisy, "a clean shadow edge ({edge}) is less noisy than coin flips");
+    }
+
+    #[test]
+    fn undefined_ratios_count_as_unshadowed_and_stay_finite() {
+        let params = DenoiseParams { radius: MAX_RADIUS, ..DenoiseParams::new(16, 16) };
+        let zero: Vec<Vec4> = (0..256).map(|_| ratio_pixel(Vec4::ZERO, Vec4::ZERO)).collect();
+        assert_eq!(noise_estimate(&params, IVec2::new(8, 8), &zero), 0.0);
+        let nan: Vec<Vec4> = (0..256).map(|_| ratio_pixel(Vec4::splat(f32::NAN), Vec4::splat(f32::NAN))).collect();
+        assert!(nan.iter().all(|r| r.is_finite()), "an undefined ratio is 1");
+        assert!(noise_estimate(&params, IVec2::new(0, 0), &vec![Vec4::splat(f32::NAN); 256]).is_finite());
+        let single = DenoiseParams { radius: MAX_RADIUS, ..DenoiseParams::new(1, 1) };
+        assert_eq!(noise_estimate(&single, IVec2::ZERO, &zero[..1]), 0.0);
+    }
+
+    #[test]
+    fn blur_averages_inside_the_image() {
+        let params = DenoiseParams { radius: MAX_RADIUS, ..DenoiseParams::new(3, 2) };
+        let raw = [1.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+        assert_eq!(blurred_noise(&params, IVec2::new(0, 0), &raw), 0.25);
+        assert_eq!(blurred_noise(&params, IVec2::new(2, 1), &raw), 0.0);
+        assert!((blurred_noise(&params, IVec2::new(1, 1), &raw) - 1.0 / 6.0).abs() < 1e-7);
+    }
+}

@@ -1,0 +1,215 @@
+//! The variance-guided à-trous baseline (SVGF, Schied et al. 2017, spatial part; constants from
+//! Falcor's SVGFPass, see `../shared/reference/sampling-denoise.md` §3.1), applied to the shadow
+//! ratio with the same edge stops as the TV filter so the comparison isolates the noise guide.
+//! A single frame has no temporal history, so the variance is estimated spatially (Falcor's
+//! `SVGFFilterMoments` path for histories shorter than 4 frames): luminance moments over 7×7
+//! bilateral taps, boosted by `4/h` with `h = 1`.
+
+#[cfg(target_arch = "spirv")]
+use spirv_std::num_traits::Float;
+
+use super::guide::{edge_stop, Guide};
+use crate::sampling::light_select::luminance;
+use glam::{IVec2, Vec4, Vec4Swizzles};
+use raywave_shared::denoise::DenoiseParams;
+
+/// Radius of the spatial moments window: 7×7 (Falcor SVGFFilterMoments).
+const MOMENTS_RADIUS: i32 = 3;
+
+/// Per-axis à-trous kernel weights at offsets 0, 1, 2: the 5-tap B3 spline {1, 2/3, 1/6}
+/// (Falcor SVGFAtrous).
+const ATROUS_KERNEL: [f32; 3] = [1.0, 2.0 / 3.0, 1.0 / 6.0];
+
+/// Falcor's `1e-10` under the variance's square root.
+const VARIANCE_EPSILON: f32 = 1.0e-10;
+
+/// The G-buffer entry of pixel `i`.
+fn guide_at(position: &[Vec4], normal: &[Vec4], i: usize) -> Guide {
+    Guide { position: position[i], normal: normal[i] }
+}
+
+/// The index of `p` if it lies inside the image.
+fn index_inside(params: &DenoiseParams, p: IVec2) -> Option<usize> {
+    let inside = p.x >= 0 && p.y >= 0 && (p.x as u32) < params.width && (p.y as u32) < params.height;
+    if inside {
+        Some((p.y as u32 * params.width + p.x as u32) as usize)
+    } else {
+        None
+    }
+}
+
+/// The à-trous input of `pixel`: its shadow ratio (rgb, from the ratio image `ratio`) and the
+/// spatial variance of the ratio's luminance (w) — the moments over 7×7 taps weighted by the edge
+/// stops, `max(0, m₂ − m₁²)` times `params.svgf.y` (the history boost). Pixels without a surface
+/// keep variance 0.
+pub fn ratio_and_variance(
+    params: &DenoiseParams,
+    pixel: IVec2,
+    ratio: &[Vec4],
+    position: &[Vec4],
+    normal: &[Vec4],
+) -> Vec4 {
+    let Some(c) = index_inside(params, pixel) else { return Vec4::new(1.0, 1.0, 1.0, 0.0) };
+    let center = guide_at(position, normal, c);
+    if !center.is_surface() {
+        return ratio[c].xyz().extend(0.0);
+    }
+    let (mut m1, mut m2, mut total) = (0.0, 0.0, 0.0);
+    let mut dy = -MOMENTS_RADIUS;
+    while dy <= MOMENTS_RADIUS {
+        let mut dx = -MOMENTS_RADIUS;
+        while dx <= MOMENTS_RADIUS {
+            if let Some(t) = index_inside(params, pixel + IVec2::new(dx, dy)) {
+                let w =
+                    if t == c { 1.0 } else { edge_stop(&center, &guide_at(position, normal, t), params.edge_weights) };
+                if w > 0.0 {
+                    let l = luminance(ratio[t].xyz());
+                    m1 += w * l;
+                    m2 += w * l * l;
+                    total += w;
+                }
+            }
+            dx += 1;
+        }
+        dy += 1;
+    }
+    let (m1, m2) = (m1 / total, m2 / total);
+    let variance = ((m2 - m1 * m1).max(0.0) * params.svgf.y).max(0.0);
+    ratio[c].xyz().extend(if variance.is_finite() { variance } else { 0.0 })
+}
+
+/// The variance at `pixel` prefiltered by a 3×3 Gaussian {1/4, 1/8, 1/16} (Falcor), renormalized
+/// where the kernel leaves the image.
+fn prefiltered_variance(params: &DenoiseParams, pixel: IVec2, ratio: &[Vec4]) -> f32 {
+    let (mut sum, mut total) = (0.0, 0.0);
+    let mut dy = -1;
+    while dy <= 1 {
+        let mut dx = -1;
+        while dx <= 1 {
+            if let Some(t) = index_inside(params, pixel + IVec2::new(dx, dy)) {
+                let k = if dx == 0 && dy == 0 {
+                    0.25
+                } else if dx == 0 || dy == 0 {
+                    0.125
+                } else {
+                    0.0625
+                };
+                sum += k * ratio[t].w;
+                total += k;
+            }
+            dx += 1;
+        }
+        dy += 1;
+    }
+    sum / total
+}
+
+/// One à-trous iteration at `pixel` with tap spacing `params.step`: 5×5 taps weighted by the B3
+/// kernel, the edge stops and the luminance stop `exp(−|Δl| / (phiColor·sqrt(var₃ₓ₃)))`; the
+/// variance (w) is carried with squared weights (Falcor SVGFAtrous). Pixels without a surface
+/// pass through.
+pub fn atrous_step(params: &DenoiseParams, pixel: IVec2, ratio: &[Vec4], position: &[Vec4], normal: &[Vec4]) -> Vec4 {
+    let Some(c) = index_inside(params, pixel) else { return Vec4::new(1.0, 1.0, 1.0, 0.0) };
+    let center = guide_at(position, normal, c);
+    if !center.is_surface() {
+        return ratio[c];
+    }
+    let l_center = luminance(ratio[c].xyz());
+    let phi = params.svgf.x * (VARIANCE_EPSILON + prefiltered_variance(params, pixel, ratio)).max(0.0).sqrt();
+    let step = params.step.max(1) as i32;
+    let (mut color, mut variance, mut total) = (glam::Vec3::ZERO, 0.0, 0.0);
+    let mut dy = -2;
+    while dy <= 2 {
+        let mut dx = -2;
+        while dx <= 2 {
+            if let Some(t) = index_inside(params, pixel + IVec2::new(dx, dy) * step) {
+                let kernel = ATROUS_KERNEL[dx.unsigned_abs() as usize] * ATROUS_KERNEL[dy.unsigned_abs() as usize];
+                let w = if t == c {
+                    1.0
+                } else {
+                    let luminance_stop = (-(luminance(ratio[t].xyz()) - l_center).abs() / phi).exp();
+                    kernel * luminance_stop * edge_stop(&center, &guide_at(position, normal, t), params.edge_weights)
+                };
+                if w > 0.0 {
+                    color += w * ratio[t].xyz();
+                    variance += w * w * ratio[t].w;
+                    total += w;
+                }
+            }
+            dx += 1;
+        }
+        dy += 1;
+    }
+    let out = (color / total).extend(variance / (total * total));
+    if out.is_finite() {
+        out
+    } else {
+        ratio[c]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::hash::CounterRng;
+    use glam::Vec3;
+    use raywave_shared::denoise::MAX_RADIUS;
+    use std::{vec, vec::Vec};
+
+    struct Image {
+        shadowed: Vec<Vec4>,
+        unshadowed: Vec<Vec4>,
+        position: Vec<Vec4>,
+        normal: Vec<Vec4>,
+        params: DenoiseParams,
+    }
+
+    fn plane(width: u32, height: u32, visibility: impl Fn(u32, u32) -> f32) -> Image {
+        let u = Vec4::new(0.4, 0.5, 0.6, 0.0);
+        let n = (width * height) as usize;
+        Image {
+            shadowed: (0..width * height).map(|i| u * visibility(i % width, i / width)).collect(),
+            unshadowed: vec![u; n],
+            position: (0..width * height)
+                .map(|i| Vec3::new((i % width) as f32, 0.0, (i / width) as f32).extend(100.0))
+                .collect(),
+            normal: vec![Vec3::Y.extend(0.5); n],
+            params: DenoiseParams { radius: MAX_RADIUS, ..DenoiseParams::new(width, height) },
+        }
+    }
+
+    fn svgf(img: &Image) -> Vec<Vec4> {
+        let p = &img.params;
+        let pixels = |i: u32| IVec2::new((i % p.width) as i32, (i / p.width) as i32);
+        let raw: Vec<Vec4> =
+            img.shadowed.iter().zip(&img.unshadowed).map(|(&s, &u)| super::super::noise::ratio_pixel(s, u)).collect();
+        let mut ratio: Vec<Vec4> =
+            (0..p.pixels()).map(|i| ratio_and_variance(p, pixels(i), &raw, &img.position, &img.normal)).collect();
+        for k in 0..4 {
+            let params = DenoiseParams { step: 1 << k, ..*p };
+            ratio =
+                (0..p.pixels()).map(|i| atrous_step(&params, pixels(i), &ratio, &img.position, &img.normal)).collect();
+        }
+        ratio
+    }
+
+    #[test]
+    fn constant_ratio_has_no_variance_and_stays_put() {
+        let img = plane(16, 16, |_, _| 0.25);
+        for v in svgf(&img) {
+            assert!((v.x - 0.25).abs() < 1e-6 && v.w.abs() < 1e-9, "{v}");
+        }
+    }
+
+    #[test]
+    fn coin_flip_visibility_is_smoothed_towards_its_mean() {
+        let mut rng = CounterRng::new(9);
+        let flips: Vec<f32> = (0..32 * 32).map(|_| if rng.next_f32() < 0.5 { 1.0 } else { 0.0 }).collect();
+        let img = plane(32, 32, |x, y| flips[(y * 32 + x) as usize]);
+        let out = svgf(&img);
+        let rms = |v: &[Vec4]| (v.iter().map(|r| (r.x - 0.5) * (r.x - 0.5)).sum::<f32>() / v.len() as f32).sqrt();
+        let before: Vec<Vec4> = flips.iter().map(|&f| Vec4::splat(f)).collect();
+        assert!(rms(&out) < 0.3 * rms(&before), "{} vs {}", rms(&out), rms(&before));
+        assert!(out.iter().all(|v| v.is_finite()));
+    }
+}

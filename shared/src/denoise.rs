@@ -1,0 +1,163 @@
+//! Parameters of the denoise stage: seed 000's total-variation-guided joint bilateral filter of
+//! `S_N` and `U_N` (Heitz, Hill & McGuire 2018), and the SVGF-style à-trous baseline (Schied et
+//! al. 2017). Source keys refer to `../shared/reference/ddgi-ratio-ltc.md` §2 and
+//! `sampling-denoise.md` §3.1.
+
+use crate::bindings::WORKGROUP_SIZE;
+use bytemuck::{Pod, Zeroable};
+use glam::Vec4;
+
+/// Largest filter radius R in pixels: the reference code's R = 10 [H-DX, H-CPU, H-SD]. The
+/// Vulkan bilateral pass keeps `WORKGROUP_SIZE + 2·MAX_RADIUS` pixels of a line in workgroup
+/// memory, so the radius is bounded at compile time.
+pub const MAX_RADIUS: u32 = 10;
+
+/// Pixels of one line a bilateral workgroup loads into shared memory: its own
+/// `WORKGROUP_SIZE` plus `MAX_RADIUS` on each side.
+pub const TILE_LEN: u32 = WORKGROUP_SIZE + 2 * MAX_RADIUS;
+
+/// Number of randomly rotated lines the noise estimate measures total variation along: 4, at
+/// `angle0 + k·π/4` [H-PF, H-EST, H-CPU].
+pub const NOISE_LINES: u32 = 4;
+
+/// Default edge-stop weights (depth, normal, plane, analytic) = (1.0, 1.5, 1.5, 0.09) of the DX
+/// port and ShadowDenoiser [H-DX, H-SD].
+pub const DEFAULT_EDGE_WEIGHTS: Vec4 = Vec4::new(1.0, 1.5, 1.5, 0.09);
+
+/// Default SVGF colour edge stop `phiColor` = 10 (Falcor SVGFPass `mPhiColor`).
+pub const DEFAULT_SVGF_PHI_COLOR: f32 = 10.0;
+
+/// Default SVGF variance boost 4: Falcor multiplies the spatial variance estimate by `4/h` for a
+/// history of `h` frames, and a single frame has `h = 1` (SVGFFilterMoments).
+pub const DEFAULT_SVGF_VARIANCE_BOOST: f32 = 4.0;
+
+/// Filter axis of a bilateral pass.
+pub mod axis {
+    /// Along image rows (x).
+    pub const X: u32 = 0;
+    /// Along image columns (y).
+    pub const Y: u32 = 1;
+}
+
+/// Push constants of every denoise pass. One invocation per pixel, except the bilateral pass,
+/// which runs `WORKGROUP_SIZE`-pixel segments of lines (see [`DenoiseParams::bilateral_invocations`]).
+#[repr(C)]
+#[derive(Copy, Clone, Debug, PartialEq, Pod, Zeroable)]
+pub struct DenoiseParams {
+    /// Image width in pixels (pixel `i` is `(i mod width, i / width)`).
+    pub width: u32,
+    /// Image height in pixels.
+    pub height: u32,
+    /// Filter radius R in pixels, `1..=MAX_RADIUS`; also bounds the noise lines (`min(10, R)`).
+    pub radius: u32,
+    /// The bilateral pass's [`axis`].
+    pub axis: u32,
+    /// The à-trous pass's tap spacing in pixels (1, 2, 4, 8 over the iterations).
+    pub step: u32,
+    /// Seed of the per-pixel rotation of the noise lines.
+    pub seed: u32,
+    /// À-trous iterations of the SVGF baseline (the host's pass list; the kernels ignore it).
+    pub atrous_iterations: u32,
+    /// Explicit padding; always 0.
+    pub padding: u32,
+    /// Edge-stop weights (depth, normal, plane, analytic), see [`DEFAULT_EDGE_WEIGHTS`].
+    pub edge_weights: Vec4,
+    /// SVGF baseline: (`phiColor`, variance boost, 0, 0).
+    pub svgf: Vec4,
+}
+
+const _: () = assert!(core::mem::size_of::<DenoiseParams>() == 64);
+
+impl DenoiseParams {
+    /// The defaults for a `width × height` image: the DX port's edge weights, Falcor's SVGF
+    /// constants, and a filter footprint that follows the image size — R = 10 (the reference
+    /// code's, tuned for 1080p) on frames whose short side is ≥ 640 pixels, `short side / 64`
+    /// (at least 1) below, since the penumbrae the filter must not blur across shrink with the
+    /// image (at 128², R = 2 minimizes relMSE on both built-in scenes; the README's table); and
+    /// 4 à-trous iterations (Falcor) with R ≥ 5, one per doubling of R below (footprint
+    /// `2·(2^k − 1)` pixels ≈ 3R).
+    pub const fn new(width: u32, height: u32) -> Self {
+        let short = if width < height { width } else { height };
+        let radius = if short / 64 > MAX_RADIUS {
+            MAX_RADIUS
+        } else if short < 128 {
+            1
+        } else {
+            short / 64
+        };
+        let atrous_iterations = if radius >= 5 {
+            4
+        } else if radius >= 3 {
+            3
+        } else if radius == 2 {
+            2
+        } else {
+            1
+        };
+        Self {
+            width,
+            height,
+            radius,
+            axis: axis::X,
+            step: 1,
+            seed: 0,
+            atrous_iterations,
+            padding: 0,
+            edge_weights: DEFAULT_EDGE_WEIGHTS,
+            svgf: Vec4::new(DEFAULT_SVGF_PHI_COLOR, DEFAULT_SVGF_VARIANCE_BOOST, 0.0, 0.0),
+        }
+    }
+
+    /// Pixels in the image.
+    pub const fn pixels(&self) -> u32 {
+        self.width * self.height
+    }
+
+    /// Length of the lines the bilateral pass filters along and how many there are:
+    /// `(width, height)` along x, `(height, width)` along y.
+    pub const fn lines(&self) -> (u32, u32) {
+        if self.axis == axis::Y {
+            (self.height, self.width)
+        } else {
+            (self.width, self.height)
+        }
+    }
+
+    /// Workgroup-sized segments each line splits into.
+    pub const fn segments_per_line(&self) -> u32 {
+        self.lines().0.div_ceil(WORKGROUP_SIZE)
+    }
+
+    /// Invocations of a bilateral pass: every line padded to whole workgroups.
+    pub const fn bilateral_invocations(&self) -> u32 {
+        self.lines().1 * self.segments_per_line() * WORKGROUP_SIZE
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn footprint_follows_the_image_size() {
+        let footprint = |w, h| {
+            let p = DenoiseParams::new(w, h);
+            (p.radius, p.atrous_iterations)
+        };
+        assert_eq!(footprint(1920, 1080), (MAX_RADIUS, 4), "the reference code's R = 10 at 1080p");
+        assert_eq!(footprint(640, 4000), (MAX_RADIUS, 4));
+        assert_eq!(footprint(128, 128), (2, 2));
+        assert_eq!(footprint(256, 300), (4, 3));
+        assert_eq!(footprint(1, 1), (1, 1));
+        assert_eq!(footprint(127, 5000), (1, 1));
+    }
+
+    #[test]
+    fn bilateral_dispatch_pads_every_line_to_whole_workgroups() {
+        let p = DenoiseParams { axis: axis::Y, ..DenoiseParams::new(70, 130) };
+        assert_eq!((p.lines(), p.segments_per_line()), ((130, 70), 3));
+        assert_eq!(p.bilateral_invocations(), 70 * 3 * WORKGROUP_SIZE);
+        let p = DenoiseParams { axis: axis::X, ..p };
+        assert_eq!(p.bilateral_invocations(), 130 * 2 * WORKGROUP_SIZE);
+    }
+}

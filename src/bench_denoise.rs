@@ -1,0 +1,180 @@
+//! `raywave bench denoise`: seconds per denoise pass and the bytes each must move per second, for
+//! one frame (1920×1080 by default) of a built-in scene, on the CPU and on a Vulkan device.
+//!
+//! The frame's inputs (`U`, `U_N`, `S_N` at `spp` samples and the G-buffer) are shaded once on the
+//! CPU; then each backend runs each denoiser `repeats` times and the median per pass is reported.
+//! "Bytes" counts every buffer a pass reads or writes once ([`crate::denoise::DenoisePass::bytes_per_pixel`]) —
+//! the traffic of an ideal cache — so `gb_per_s` is the effective bandwidth, and on a GPU with a
+//! known peak (`--peak-gbps`, or the datasheet value of an NVIDIA H100/H200) its fraction.
+
+use crate::denoise::{DenoiseInput, DenoiseMethod};
+use crate::frame::{generate_params_with, sampler_params};
+use crate::shading::{resolve, ShadeAccumulator, ShadeData};
+use crate::shared::sampling::sampler_kind;
+use crate::shared::DenoiseParams;
+use crate::{open_backend, Backend, BackendOptions, DeviceChoice, Result, Scene};
+
+/// What to measure.
+#[derive(Clone, Debug)]
+pub struct DenoiseBenchOptions {
+    /// `builtin:NAME` or a scene file.
+    pub scene: String,
+    /// Image width in pixels.
+    pub width: u32,
+    /// Image height in pixels.
+    pub height: u32,
+    /// Samples per pixel of the shaded input.
+    pub spp: u32,
+    /// Timed repetitions per denoiser; the median per pass is reported.
+    pub repeats: u32,
+    /// Also measure the best Vulkan device, if there is one.
+    pub vulkan: bool,
+    /// Peak memory bandwidth of the Vulkan device in GB/s, if known to the caller.
+    pub peak_gbps: Option<f64>,
+}
+
+/// One pass (or a whole denoiser, `pass = "total"`) on one backend, printed as one JSON line.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct DenoiseMeasurement {
+    /// Always `denoise`.
+    pub stage: &'static str,
+    /// The backend's name.
+    #[serde(rename = "impl")]
+    pub implementation: String,
+    /// `tv` or `svgf`.
+    pub method: &'static str,
+    /// The pass's name, or `total`.
+    pub pass: &'static str,
+    /// Pixels per frame.
+    pub pixels: u64,
+    /// Median seconds (GPU timestamps on Vulkan, wall clock on the CPU).
+    pub seconds: f64,
+    /// Bytes the pass must move.
+    pub bytes: u64,
+    /// Effective bandwidth `bytes / seconds`, in GB/s (10⁹ bytes).
+    pub gb_per_s: f64,
+    /// `gb_per_s` as a fraction of the device's peak memory bandwidth, where known.
+    pub bandwidth_fraction: Option<f64>,
+}
+
+impl DenoiseMeasurement {
+    /// The JSON line.
+    pub fn json(&self) -> String {
+        serde_json::to_string(self).unwrap_or_default()
+    }
+
+    /// A table row.
+    pub fn row(&self) -> String {
+        let fraction = self.bandwidth_fraction.map_or(String::new(), |f| format!("  {:.1} % of peak", 100.0 * f));
+        format!(
+            "{:<40} {:<5} {:<20} {:>9.3} ms  {:>7.2} GB/s{fraction}",
+            self.implementation,
+            self.method,
+            self.pass,
+            1e3 * self.seconds,
+            self.gb_per_s
+        )
+    }
+}
+
+/// Datasheet peak memory bandwidth (GB/s) of the GPUs this project is lent, by device name:
+/// H100 SXM5 80 GB HBM3 3 350, H100 PCIe 2 000, H200 4 800 (NVIDIA H100 and H200 datasheets).
+pub fn known_peak_gbps(device_name: &str) -> Option<f64> {
+    if device_name.contains("H200") {
+        Some(4800.0)
+    } else if device_name.contains("H100") && device_name.contains("PCIe") {
+        Some(2000.0)
+    } else if device_name.contains("H100") {
+        Some(3350.0)
+    } else {
+        None
+    }
+}
+
+/// Shades the benchmark frame's inputs on the CPU.
+fn frame_input(options: &DenoiseBenchOptions) -> Result<DenoiseInput> {
+    let scene = Scene::load(&options.scene)?;
+    let mut cpu = crate::cpu::CpuBackend::new();
+    cpu.check_image_size(options.width, options.height)?;
+    cpu.load_scene(&scene)?;
+    let data = ShadeData::new(&scene)?;
+    let (width, height) = (options.width, options.height);
+    let sampler = sampler_params(sampler_kind::ZSOBOL, 0, width, height, options.spp);
+    let mut accumulator = ShadeAccumulator::new((width * height) as usize);
+    let mut surfaces = Vec::new();
+    for sample_index in 0..options.spp {
+        let frame = cpu.render(&generate_params_with(&scene, width, height, sample_index, sampler))?;
+        if sample_index == 0 {
+            surfaces = resolve(&data, &frame.rays, &frame.hits);
+        }
+        let params = data.params(sampler, width, height, sample_index);
+        accumulator.shade_pass(&mut cpu, &params, &data, &frame.rays, &frame.hits)?;
+    }
+    Ok(DenoiseInput::new(&surfaces, &accumulator))
+}
+
+fn median(mut values: Vec<f64>) -> f64 {
+    values.sort_by(f64::total_cmp);
+    values.get(values.len() / 2).copied().unwrap_or(f64::NAN)
+}
+
+/// Measures `backend`, handing each line to `emit`.
+fn bench_backend(
+    backend: &mut dyn Backend,
+    input: &DenoiseInput,
+    options: &DenoiseBenchOptions,
+    peak_gbps: Option<f64>,
+    emit: &mut impl FnMut(&DenoiseMeasurement),
+) -> Result<()> {
+    let params = DenoiseParams::new(options.width, options.height);
+    let pixels = u64::from(params.pixels());
+    for method in [DenoiseMethod::Tv, DenoiseMethod::Svgf] {
+        let passes = method.passes(&params);
+        let mut seconds = vec![Vec::new(); passes.len()];
+        // One untimed run first: drivers compile pipelines lazily (lavapipe at the first dispatch).
+        backend.denoise(method, &params, input)?;
+        for _ in 0..options.repeats.max(1) {
+            let (_, timings) = backend.denoise(method, &params, input)?;
+            for (s, t) in seconds.iter_mut().zip(timings) {
+                s.push(t.seconds);
+            }
+        }
+        let line = |pass: &'static str, seconds: f64, bytes: u64| {
+            let gb_per_s = bytes as f64 / seconds / 1e9;
+            DenoiseMeasurement {
+                stage: "denoise",
+                implementation: backend.name(),
+                method: method.name(),
+                pass,
+                pixels,
+                seconds,
+                bytes,
+                gb_per_s,
+                bandwidth_fraction: peak_gbps.map(|peak| gb_per_s / peak),
+            }
+        };
+        let (mut total_seconds, mut total_bytes) = (0.0, 0);
+        for (pass, s) in passes.iter().zip(seconds) {
+            let (s, bytes) = (median(s), pass.bytes_per_pixel() * pixels);
+            total_seconds += s;
+            total_bytes += bytes;
+            emit(&line(pass.name(), s, bytes));
+        }
+        emit(&line("total", total_seconds, total_bytes));
+    }
+    Ok(())
+}
+
+/// Runs the benchmark, handing each line to `emit` as soon as it is measured.
+pub fn bench_denoise(options: &DenoiseBenchOptions, mut emit: impl FnMut(&DenoiseMeasurement)) -> Result<()> {
+    let input = frame_input(options)?;
+    let mut cpu = crate::cpu::CpuBackend::new();
+    bench_backend(&mut cpu, &input, options, None, &mut emit)?;
+    if options.vulkan {
+        if let Ok(mut vulkan) = open_backend(DeviceChoice::Vulkan(None), &BackendOptions::default()) {
+            let peak = options.peak_gbps.or_else(|| known_peak_gbps(&vulkan.name()));
+            bench_backend(vulkan.as_mut(), &input, options, peak, &mut emit)?;
+        }
+    }
+    Ok(())
+}

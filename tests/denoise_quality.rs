@@ -1,0 +1,366 @@
+//! What the denoise stage must get right, on the CPU backend (the Vulkan passes run the same
+//! kernel functions; `parity_denoise.rs` holds them to the CPU).
+//!
+//! **Hard cases, built directly as [`DenoiseInput`]s** (no scene):
+//! - a depth discontinuity — a fully lit near plane beside a far plane in a coin-flip shadow, the
+//!   configuration of a contact shadow seen past an occluder's silhouette: the noise lines of the
+//!   lit pixels near the edge cross into the shadow, so those pixels are filtered with a wide
+//!   Gaussian, and only the edge stops keep the shadow from leaking onto them. A control with both
+//!   halves at the same depth shows the leak the edge stops prevent (measured: the lit side
+//!   exactly `U` with the depth edge, for TV and SVGF; 0.199 (TV) and 0.191 (SVGF) relative off
+//!   next to the edge without it; the shadow's RMS 0.023 (TV), 0.013 (SVGF), raw 0.5);
+//! - regions where `U ≈ 0` (no light reaches them, `U_N = 0` too): the output is exactly the
+//!   emitted radiance there, and nothing becomes NaN or Inf when inputs are zero;
+//! - a noise-free ratio (`S_N = U_N` everywhere): the TV filter returns `U + emitted` exactly.
+//!
+//! **Scene quality at 1 spp** against a converged reference (the ratio estimate at
+//! [`REFERENCE_SPP`] spp, cached under `CARGO_TARGET_TMPDIR`), relMSE averaged over [`SEEDS`], at
+//! 128² with the footprint `DenoiseParams::new` picks there (R = 2, two à-trous iterations — the
+//! relMSE minimum of both filters on both scenes): on both built-in scenes the TV-guided filter of
+//! the ratio must beat the raw ratio, the SVGF baseline and the stochastic image raw and TV-filtered.
+//!
+//! Measured (CPU, 128², 1 spp, seeds 1–4, reference 4096 spp), relMSE:
+//!
+//! | scene | stochastic | stochastic+tv | ratio | ratio+tv | ratio+svgf |
+//! |---|---|---|---|---|---|
+//! | cornell-two-lights | 0.02884 | 0.00118 | 0.00821 | 0.00050 | 0.00167 |
+//! | cornell | 0.00463 | 0.00028 | 0.00180 | 0.00017 | 0.00031 |
+//!
+//! Issue 6 asks for ratio+tv ≤ 0.25 × stochastic+tv; measured 0.42 (two lights) and 0.62
+//! (Cornell), so that target is printed, not asserted, until it is met. (With R = 10 at 64² it
+//! held on the two-light box, 0.18, but ratio+tv then did no better than the raw ratio on the
+//! Cornell box: the wide blur spread lit floor into the umbrae under the blocks.)
+//!
+//! Computing a reference takes about 140 s in the test profile (both at once on two cores); the
+//! cached ones load in milliseconds.
+
+use glam::{Vec3, Vec4};
+use raywave::cpu::CpuBackend;
+use raywave::denoise::{DenoiseInput, DenoiseMethod};
+use raywave::kernels::hash::CounterRng;
+use raywave::kernels::sampling::light_select::luminance;
+use raywave::report::error_vs_time::{relmse, PreparedScene, METHODS};
+use raywave::shared::denoise::MAX_RADIUS;
+use raywave::shared::DenoiseParams;
+use raywave::{Backend, Scene};
+use std::path::PathBuf;
+use std::time::Instant;
+
+/// 1 or 0 with equal probability: a coin-flip visibility.
+fn coin(rng: &mut CounterRng) -> f32 {
+    if rng.next_f32() < 0.5 {
+        1.0
+    } else {
+        0.0
+    }
+}
+
+/// One pixel of a synthetic input.
+#[derive(Copy, Clone, Debug, Default)]
+struct Pixel {
+    /// Surface point; `None` for a miss.
+    point: Option<Vec3>,
+    normal: Vec3,
+    analytic: Vec3,
+    unshadowed: Vec3,
+    shadowed: Vec3,
+    emitted: Vec3,
+}
+
+/// A `width × height` input from `pixel(x, y)`; depth is the distance from the origin (the
+/// camera).
+fn build(width: u32, height: u32, mut pixel: impl FnMut(u32, u32) -> Pixel) -> (DenoiseParams, DenoiseInput) {
+    let mut input = DenoiseInput::default();
+    for y in 0..height {
+        for x in 0..width {
+            let p = pixel(x, y);
+            match p.point {
+                Some(point) => {
+                    input.position.push(point.extend(point.length()));
+                    input.normal.push(p.normal.extend(luminance(p.analytic)));
+                }
+                None => {
+                    input.position.push(Vec4::ZERO);
+                    input.normal.push(Vec4::ZERO);
+                }
+            }
+            input.analytic.push(p.analytic.extend(0.0));
+            input.unshadowed.push(p.unshadowed.extend(0.0));
+            input.shadowed.push(p.shadowed.extend(0.0));
+            input.emitted.push(p.emitted.extend(0.0));
+        }
+    }
+    // The widest footprint, whatever the image size: the hard cases are hardest with it.
+    let params =
+        DenoiseParams { radius: MAX_RADIUS, atrous_iterations: 4, seed: 5, ..DenoiseParams::new(width, height) };
+    (params, input)
+}
+
+/// The point of a camera-facing plane at distance `distance` seen through pixel `(x, y)` of a
+/// `width × height` image (90° field of view).
+fn on_plane(x: u32, y: u32, width: u32, height: u32, distance: f32) -> Vec3 {
+    let side = width.max(height) as f32;
+    let u = (x as f32 + 0.5 - 0.5 * width as f32) / (0.5 * side);
+    let v = (0.5 * height as f32 - y as f32 - 0.5) / (0.5 * side);
+    Vec3::new(u, v, -1.0) * distance
+}
+
+fn denoise(method: DenoiseMethod, params: &DenoiseParams, input: &DenoiseInput) -> Vec<Vec3> {
+    let (color, timings) = CpuBackend::new().denoise(method, params, input).expect("denoise");
+    assert_eq!(timings.len(), method.passes(params).len());
+    assert_eq!(color.len(), input.len());
+    let bad = color.iter().filter(|c| !c.is_finite()).count();
+    assert_eq!(bad, 0, "{}: {bad} non-finite pixels", method.name());
+    raywave::denoise::rgb(&color)
+}
+
+/// Largest relative difference of the channels of `a` and `b`.
+fn rel(a: Vec3, b: Vec3) -> f32 {
+    ((a - b).abs() / a.abs().max(b.abs()).max(Vec3::splat(1e-6))).max_element()
+}
+
+const EDGE_WIDTH: u32 = 64;
+const EDGE_HEIGHT: u32 = 32;
+/// First column of the shadowed far plane.
+const EDGE: u32 = 32;
+const LIT: Vec3 = Vec3::new(0.8, 0.7, 0.6);
+const SHADOWED: Vec3 = Vec3::new(0.5, 0.5, 0.5);
+
+/// Left of [`EDGE`] a near plane (distance `near`) fully lit — `S_N = U_N`, `U_N` itself noisy —
+/// right of it a plane at distance 10 in a coin-flip shadow.
+fn depth_edge(near: f32) -> (DenoiseParams, DenoiseInput) {
+    let mut rng = CounterRng::new(42);
+    build(EDGE_WIDTH, EDGE_HEIGHT, |x, y| {
+        let lit = x < EDGE;
+        let analytic = if lit { LIT } else { SHADOWED };
+        let unshadowed = analytic * (0.5 + rng.next_f32());
+        let visible = if lit { 1.0 } else { coin(&mut rng) };
+        Pixel {
+            point: Some(on_plane(x, y, EDGE_WIDTH, EDGE_HEIGHT, if lit { near } else { 10.0 })),
+            normal: Vec3::Z,
+            analytic,
+            unshadowed,
+            shadowed: unshadowed * visible,
+            emitted: Vec3::ZERO,
+        }
+    })
+}
+
+/// Largest relative deviation from `U` on the lit side, within `columns` of the edge.
+fn lit_deviation(color: &[Vec3], input: &DenoiseInput, columns: u32) -> f32 {
+    let mut worst: f32 = 0.0;
+    for y in 0..EDGE_HEIGHT {
+        for x in EDGE - columns..EDGE {
+            let i = (y * EDGE_WIDTH + x) as usize;
+            worst = worst.max(rel(color[i], input.analytic[i].truncate()));
+        }
+    }
+    worst
+}
+
+/// RMS deviation of the shadowed side's visibility (colour / `U`, luminance) from its mean.
+fn shadow_rms(color: &[Vec3]) -> f32 {
+    let visibility: Vec<f32> = (0..EDGE_HEIGHT)
+        .flat_map(|y| (EDGE..EDGE_WIDTH).map(move |x| (y * EDGE_WIDTH + x) as usize))
+        .map(|i| luminance(color[i]) / luminance(SHADOWED))
+        .collect();
+    let mean = visibility.iter().sum::<f32>() / visibility.len() as f32;
+    (visibility.iter().map(|v| (v - mean) * (v - mean)).sum::<f32>() / visibility.len() as f32).sqrt()
+}
+
+#[test]
+fn shadows_do_not_leak_across_depth_edges() {
+    let (params, input) = depth_edge(1.0);
+    let raw: Vec<Vec3> = (0..input.len())
+        .map(|i| {
+            let (u, s, u_n) =
+                (input.analytic[i].truncate(), input.shadowed[i].truncate(), input.unshadowed[i].truncate());
+            u * s / u_n
+        })
+        .collect();
+    let raw_rms = shadow_rms(&raw);
+    for method in [DenoiseMethod::Tv, DenoiseMethod::Svgf] {
+        let color = denoise(method, &params, &input);
+        let adjacent = lit_deviation(&color, &input, 1);
+        let lit = lit_deviation(&color, &input, EDGE);
+        let rms = shadow_rms(&color);
+        eprintln!(
+            "{}: lit side off U by {adjacent:.2e} next to the edge, {lit:.2e} anywhere; shadow RMS {rms:.3} \
+             (raw {raw_rms:.3})",
+            method.name()
+        );
+        assert!(lit <= 1e-3, "{}: the shadow leaks onto the lit plane ({lit:.2e} relative)", method.name());
+        assert!(rms < 0.5 * raw_rms, "{}: the shadow is not denoised (RMS {rms} vs {raw_rms})", method.name());
+    }
+    // The control: the same image with both halves at the same depth (one plane, same normal)
+    // does leak — the TV filter's noise lines reach across, and only the analytic stop, not the
+    // depth stop, weighs the shadowed taps down — so the assertion above measures the edge stops.
+    let (params, flat) = depth_edge(10.0);
+    for method in [DenoiseMethod::Tv, DenoiseMethod::Svgf] {
+        let color = denoise(method, &params, &flat);
+        let leak = lit_deviation(&color, &flat, 1);
+        eprintln!("{} without the depth edge: lit side off U by {leak:.2e} next to the edge", method.name());
+        assert!(leak > 1e-2, "{}: the control does not leak ({leak:.2e})", method.name());
+    }
+}
+
+#[test]
+fn unlit_regions_show_their_emission_exactly_and_zeros_stay_finite() {
+    const SIZE: u32 = 32;
+    let mut rng = CounterRng::new(7);
+    let dark = |x: u32, y: u32| (8..16).contains(&x) && (8..20).contains(&y);
+    let (params, input) = build(SIZE, SIZE, |x, y| {
+        let point = on_plane(x, y, SIZE, SIZE, 5.0);
+        if y == SIZE - 1 {
+            // A row of background: no surface.
+            return Pixel { emitted: Vec3::new(0.1, 0.2, 0.3), ..Pixel::default() };
+        }
+        if dark(x, y) {
+            // No light reaches it (U = U_N = S_N = 0), but it glows.
+            let emitted = if (x + y) % 3 == 0 { Vec3::new(2.0, 1.0, 0.5) } else { Vec3::ZERO };
+            return Pixel { point: Some(point), normal: Vec3::Z, emitted, ..Pixel::default() };
+        }
+        let analytic = Vec3::new(0.7, 0.6, 0.5);
+        // Some lit pixels drew no sample that reached the light: U_N = S_N = 0.
+        let unshadowed = if (x * 7 + y * 3) % 11 == 0 { Vec3::ZERO } else { analytic * (0.5 + rng.next_f32()) };
+        Pixel {
+            point: Some(point),
+            normal: Vec3::Z,
+            analytic,
+            unshadowed,
+            shadowed: unshadowed * coin(&mut rng),
+            emitted: Vec3::ZERO,
+        }
+    });
+    let zeros = DenoiseInput {
+        position: input.position.clone(),
+        normal: input.normal.iter().map(|n| n.truncate().extend(0.0)).collect(),
+        ..build(SIZE, SIZE, |_, _| Pixel::default()).1
+    };
+    for method in [DenoiseMethod::Tv, DenoiseMethod::Svgf] {
+        let color = denoise(method, &params, &input);
+        let mut dark_pixels = 0;
+        for y in 0..SIZE {
+            for x in 0..SIZE {
+                let i = (y * SIZE + x) as usize;
+                if dark(x, y) {
+                    assert_eq!(color[i], input.emitted[i].truncate(), "{}: pixel ({x}, {y})", method.name());
+                    dark_pixels += 1;
+                }
+            }
+        }
+        assert_eq!(dark_pixels, 8 * 12);
+        // A black image (and its stochastic variant, whose S_N mean is 0) stays black.
+        for (what, inputs) in [("zeros", &zeros), ("stochastic zeros", &zeros.stochastic())] {
+            let color = denoise(method, &params, inputs);
+            assert!(color.iter().all(|&c| c == Vec3::ZERO), "{}: {what} not black", method.name());
+        }
+        denoise(method, &params, &input.stochastic());
+    }
+}
+
+#[test]
+fn a_noise_free_ratio_passes_through_exactly() {
+    const WIDTH: u32 = 41;
+    const HEIGHT: u32 = 27;
+    let mut rng = CounterRng::new(3);
+    let (params, input) = build(WIDTH, HEIGHT, |x, y| {
+        if x == 0 {
+            return Pixel { emitted: Vec3::splat(0.25), ..Pixel::default() };
+        }
+        // Depth, analytic term and U_N all vary (U_N is noisy and sometimes 0); the ratio is 1.
+        let analytic = Vec3::new(0.9, 0.5, 0.2) * (0.2 + rng.next_f32());
+        let unshadowed = if rng.next_f32() < 0.1 { Vec3::ZERO } else { analytic * (0.2 + 2.0 * rng.next_f32()) };
+        Pixel {
+            point: Some(on_plane(x, y, WIDTH, HEIGHT, 3.0 + 0.1 * x as f32)),
+            normal: Vec3::new(0.0, 0.3, 1.0).normalize(),
+            analytic,
+            unshadowed,
+            shadowed: unshadowed,
+            emitted: if (x + y) % 5 == 0 { Vec3::new(0.0, 1.5, 3.0) } else { Vec3::ZERO },
+        }
+    });
+    let expected: Vec<Vec3> = (0..input.len()).map(|i| (input.analytic[i] + input.emitted[i]).truncate()).collect();
+    assert_eq!(denoise(DenoiseMethod::Tv, &params, &input), expected, "TV changed a noise-free ratio");
+    let svgf = denoise(DenoiseMethod::Svgf, &params, &input);
+    let worst = svgf.iter().zip(&expected).map(|(&a, &b)| rel(a, b)).fold(0.0, f32::max);
+    assert!(worst < 1e-6, "SVGF moved a noise-free ratio by {worst:e}");
+}
+
+/// Side of the scene images.
+const RESOLUTION: u32 = 128;
+/// Samples per pixel of the reference.
+const REFERENCE_SPP: u32 = 4096;
+/// Sampler seeds of the measured frames (the reference uses its own).
+const SEEDS: [u32; 4] = [1, 2, 3, 4];
+
+/// The reference image of `scene_name`, from the cache under `CARGO_TARGET_TMPDIR` (raw
+/// little-endian f32 RGB) or computed and cached.
+fn reference(backend: &mut CpuBackend, prepared: &PreparedScene, scene_name: &str) -> Vec<Vec3> {
+    let file = scene_name.replace(|c: char| !c.is_ascii_alphanumeric(), "_");
+    let path = PathBuf::from(env!("CARGO_TARGET_TMPDIR"))
+        .join(format!("denoise-reference-{file}-{RESOLUTION}px-{REFERENCE_SPP}spp.f32"));
+    let pixels = (RESOLUTION * RESOLUTION) as usize;
+    if let Ok(bytes) = std::fs::read(&path) {
+        if bytes.len() == pixels * 12 {
+            let floats: Vec<f32> =
+                bytes.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect();
+            return floats.chunks_exact(3).map(Vec3::from_slice).collect();
+        }
+    }
+    let start = Instant::now();
+    let image = prepared.reference(backend, REFERENCE_SPP).expect("reference");
+    eprintln!("{scene_name}: reference at {REFERENCE_SPP} spp took {:.1} s", start.elapsed().as_secs_f64());
+    let bytes: Vec<u8> = image.iter().flat_map(|c| c.to_array()).flat_map(f32::to_le_bytes).collect();
+    let partial = path.with_extension(format!("{}.partial", std::process::id()));
+    std::fs::write(&partial, bytes).expect("write the reference");
+    std::fs::rename(&partial, &path).expect("cache the reference");
+    image
+}
+
+/// Mean relMSE per method ([`METHODS`] order) at 1 spp over [`SEEDS`].
+fn scene_relmse(scene_name: &str) -> [f64; METHODS.len()] {
+    let mut backend = CpuBackend::new();
+    let scene = Scene::load(scene_name).expect("built-in scene loads");
+    let prepared = PreparedScene::new(&mut backend, &scene, RESOLUTION).expect("G-buffer");
+    let reference = reference(&mut backend, &prepared, scene_name);
+    let mut sums = [0.0; METHODS.len()];
+    for seed in SEEDS {
+        let frame = prepared.frame(&mut backend, 1, seed).expect("frame");
+        for (sum, (image, _)) in sums.iter_mut().zip(&frame) {
+            *sum += relmse(image, &reference);
+        }
+    }
+    let means = sums.map(|s| s / SEEDS.len() as f64);
+    for (method, value) in METHODS.iter().zip(means) {
+        eprintln!("{scene_name}: 1 spp {method:<14} relMSE {value:.5}");
+    }
+    means
+}
+
+/// The relMSE of `method`.
+fn of(values: &[f64; METHODS.len()], method: &str) -> f64 {
+    values[METHODS.iter().position(|m| *m == method).expect("a method")]
+}
+
+/// Asserts what holds at 1 spp on `scene_name` — ratio+tv beats the raw ratio, the SVGF
+/// baseline and the TV filter of the stochastic image — and prints the gain over the latter that
+/// issue 6 asks to be ≤ 0.25 (not met yet; see the module documentation).
+fn assert_ratio_tv_wins(scene_name: &str) {
+    let values = scene_relmse(scene_name);
+    let ratio_tv = of(&values, "ratio+tv");
+    eprintln!("{scene_name}: ratio+tv / stochastic+tv = {:.3}", ratio_tv / of(&values, "stochastic+tv"));
+    for other in ["ratio", "ratio+svgf", "stochastic+tv", "stochastic"] {
+        assert!(ratio_tv < of(&values, other), "{scene_name}: ratio+tv {ratio_tv} vs {other} {}", of(&values, other));
+    }
+}
+
+#[test]
+fn ratio_tv_beats_every_baseline_on_the_two_light_cornell_box() {
+    assert_ratio_tv_wins("builtin:cornell-two-lights");
+}
+
+#[test]
+fn ratio_tv_beats_every_baseline_on_the_cornell_box() {
+    assert_ratio_tv_wins("builtin:cornell");
+}
