@@ -53,12 +53,22 @@ enum ReportTopic {
 
 #[derive(clap::Args)]
 struct ErrorVsTimeArgs {
-    /// Built-in scenes, comma-separated.
-    #[arg(long, default_value = "builtin:cornell,builtin:cornell-two-lights", value_delimiter = ',')]
-    scenes: Vec<String>,
     /// Image side in pixels.
     #[arg(long, default_value_t = 128)]
     resolution: u32,
+    #[command(flatten)]
+    common: SceneReportArgs,
+    /// Also draw the curves into this PNG file.
+    #[arg(long)]
+    plot: Option<PathBuf>,
+}
+
+/// The arguments every scene report takes (see `raywave::report::SceneReportOptions`).
+#[derive(clap::Args)]
+struct SceneReportArgs {
+    /// Built-in scenes, comma-separated.
+    #[arg(long, default_value = "builtin:cornell,builtin:cornell-two-lights", value_delimiter = ',')]
+    scenes: Vec<String>,
     /// Samples per pixel of the reference image.
     #[arg(long, default_value_t = 4096)]
     reference_spp: u32,
@@ -71,37 +81,36 @@ struct ErrorVsTimeArgs {
     /// Backend running every stage: `cpu` (default), `auto`, `vulkan` or `vulkan:N`.
     #[arg(long, default_value = "cpu")]
     device: String,
-    /// Also draw the curves into this PNG file.
-    #[arg(long)]
-    plot: Option<PathBuf>,
     /// Print one JSON object per line instead of a table.
     #[arg(long)]
     json: bool,
 }
 
+impl SceneReportArgs {
+    /// The report's options at image side `resolution`, and the backend it runs on.
+    fn open(
+        self,
+        resolution: u32,
+    ) -> raywave::Result<(raywave::report::SceneReportOptions, Box<dyn raywave::Backend>)> {
+        let backend = raywave::open_backend(self.device.parse()?, &BackendOptions::default())?;
+        let options = raywave::report::SceneReportOptions {
+            scenes: self.scenes,
+            resolution,
+            reference_spp: self.reference_spp,
+            max_spp: self.max_spp,
+            reps: self.reps,
+        };
+        Ok((options, backend))
+    }
+}
+
 #[derive(clap::Args)]
 struct ShadeReportArgs {
-    /// Built-in scenes, comma-separated.
-    #[arg(long, default_value = "builtin:cornell,builtin:cornell-two-lights", value_delimiter = ',')]
-    scenes: Vec<String>,
     /// Image side in pixels.
     #[arg(long, default_value_t = 64)]
     resolution: u32,
-    /// Samples per pixel of the reference image.
-    #[arg(long, default_value_t = 4096)]
-    reference_spp: u32,
-    /// Largest sample count measured (1, 2, 4, … up to it).
-    #[arg(long, default_value_t = 64)]
-    max_spp: u32,
-    /// Independent repetitions averaged per measurement.
-    #[arg(long, default_value_t = 4)]
-    reps: u32,
-    /// Backend tracing the rays: `cpu` (default), `auto`, `vulkan` or `vulkan:N`.
-    #[arg(long, default_value = "cpu")]
-    device: String,
-    /// Print one JSON object per line instead of a table.
-    #[arg(long)]
-    json: bool,
+    #[command(flatten)]
+    common: SceneReportArgs,
 }
 
 #[derive(clap::Args)]
@@ -306,32 +315,21 @@ fn report_sampling_command(args: SamplingReportArgs) -> raywave::Result<()> {
 }
 
 fn report_shade_command(args: ShadeReportArgs) -> raywave::Result<()> {
-    use raywave::report::shade::{report_shade, ShadeReportOptions};
-    let mut backend = raywave::open_backend(args.device.parse()?, &BackendOptions::default())?;
-    let options = ShadeReportOptions {
-        scenes: args.scenes,
-        resolution: args.resolution,
-        reference_spp: args.reference_spp,
-        max_spp: args.max_spp,
-        reps: args.reps,
-    };
-    report_shade(backend.as_mut(), &options, |line| print_line(if args.json { line.json() } else { line.row() }))
+    let json = args.common.json;
+    let (options, mut backend) = args.common.open(args.resolution)?;
+    raywave::report::shade::report_shade(backend.as_mut(), &options, |line| {
+        print_line(if json { line.json() } else { line.row() })
+    })
 }
 
 fn report_error_vs_time_command(args: ErrorVsTimeArgs) -> raywave::Result<()> {
-    use raywave::report::error_vs_time::{plot, report_error_vs_time, ErrorVsTimeOptions};
+    use raywave::report::error_vs_time::{plot, report_error_vs_time};
     // Create the plot's file up front so a bad path fails before the measurements.
     let pending = args.plot.as_deref().map(raywave::visualize::PendingOutput::create).transpose()?;
-    let mut backend = raywave::open_backend(args.device.parse()?, &BackendOptions::default())?;
-    let options = ErrorVsTimeOptions {
-        scenes: args.scenes,
-        resolution: args.resolution,
-        reference_spp: args.reference_spp,
-        max_spp: args.max_spp,
-        reps: args.reps,
-    };
+    let json = args.common.json;
+    let (options, mut backend) = args.common.open(args.resolution)?;
     let lines = report_error_vs_time(backend.as_mut(), &options, |line| {
-        print_line(if args.json { line.json() } else { line.row() })
+        print_line(if json { line.json() } else { line.row() })
     })?;
     match pending {
         Some(output) => plot(&lines, &format!("{}², {}", options.resolution, backend.name()), output),

@@ -175,10 +175,13 @@ impl DenoiseInput {
     /// over the surfaces — so the noise estimate sees `S_N` at the scale of a ratio and the
     /// composite returns `den(S_N)`. The G-buffer (edge stops) stays the same.
     pub fn stochastic(&self) -> Self {
-        let surfaces: Vec<&Vec4> =
-            self.shadowed.iter().zip(&self.position).filter(|(_, p)| p.w > 0.0).map(|(s, _)| s).collect();
-        let mean = surfaces.iter().fold(Vec4::ZERO, |a, &&s| a + s) / surfaces.len().max(1) as f32;
-        let scale = mean.max(Vec4::splat(1e-6)).truncate().extend(0.0);
+        let (sum, count) = self
+            .shadowed
+            .iter()
+            .zip(&self.position)
+            .filter(|(_, p)| p.w > 0.0)
+            .fold((Vec4::ZERO, 0usize), |(sum, count), (&s, _)| (sum + s, count + 1));
+        let scale = (sum / count.max(1) as f32).max(Vec4::splat(1e-6)).truncate().extend(0.0);
         Self {
             unshadowed: vec![scale; self.shadowed.len()],
             analytic: vec![scale; self.shadowed.len()],

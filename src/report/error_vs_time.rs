@@ -25,19 +25,7 @@ pub const METHODS: [&str; 5] = ["stochastic", "stochastic+tv", "ratio", "ratio+t
 pub const RELMSE_EPSILON: f64 = 0.01;
 
 /// What to measure.
-#[derive(Clone, Debug)]
-pub struct ErrorVsTimeOptions {
-    /// Built-in scenes (`builtin:NAME`).
-    pub scenes: Vec<String>,
-    /// Image side in pixels.
-    pub resolution: u32,
-    /// Samples per pixel of the reference.
-    pub reference_spp: u32,
-    /// Largest sample count measured (powers of two from 1).
-    pub max_spp: u32,
-    /// Independent repetitions averaged per measurement.
-    pub reps: u32,
-}
+pub type ErrorVsTimeOptions = super::SceneReportOptions;
 
 /// One measurement, printed as one JSON line.
 #[derive(Clone, Debug, serde::Serialize)]
@@ -137,20 +125,13 @@ pub fn report_error_vs_time(
     options: &ErrorVsTimeOptions,
     mut emit: impl FnMut(&ErrorVsTimeLine),
 ) -> Result<Vec<ErrorVsTimeLine>> {
-    if options.reps < 1 || options.max_spp < 1 || options.reference_spp < options.max_spp {
-        return Err(crate::Error::InvalidParameter {
-            name: "report error-vs-time",
-            reason: "needs reps ≥ 1, max-spp ≥ 1 and reference-spp ≥ max-spp".into(),
-        });
-    }
-    super::check_resolution(options.resolution)?;
+    options.check("report error-vs-time")?;
     let mut lines = Vec::new();
     for name in &options.scenes {
         let scene = Scene::load(name)?;
         let prepared = PreparedScene::new(backend, &scene, options.resolution)?;
         let reference = prepared.reference(backend, options.reference_spp)?;
-        let mut spp = 1;
-        while spp <= options.max_spp {
+        for spp in options.spp_steps() {
             let mut sums = [(0.0, 0.0); METHODS.len()];
             for rep in 0..options.reps {
                 for (sum, (image, ms)) in sums.iter_mut().zip(prepared.frame(backend, spp, rep)?) {
@@ -164,7 +145,6 @@ pub fn report_error_vs_time(
                 emit(&line);
                 lines.push(line);
             }
-            spp *= 2;
         }
     }
     Ok(lines)

@@ -7,6 +7,42 @@ pub mod scenes;
 pub mod shade;
 pub mod spectrum;
 
+/// What a scene report (`report shade`, `report error-vs-time`) measures: on each scene, a
+/// converged reference and runs at 1, 2, 4, … `max_spp` samples per pixel.
+#[derive(Clone, Debug)]
+pub struct SceneReportOptions {
+    /// Built-in scenes (`builtin:NAME`).
+    pub scenes: Vec<String>,
+    /// Image side in pixels.
+    pub resolution: u32,
+    /// Samples per pixel of the reference.
+    pub reference_spp: u32,
+    /// Largest sample count measured (powers of two from 1).
+    pub max_spp: u32,
+    /// Independent repetitions averaged per measurement.
+    pub reps: u32,
+}
+
+impl SceneReportOptions {
+    /// Checks the options of report `name`: reps ≥ 1, max-spp ≥ 1, reference-spp ≥ max-spp, and
+    /// the resolution ([`check_resolution`]).
+    pub fn check(&self, name: &'static str) -> crate::Result<()> {
+        if self.reps < 1 || self.max_spp < 1 || self.reference_spp < self.max_spp {
+            return Err(crate::Error::InvalidParameter {
+                name,
+                reason: "needs reps ≥ 1, max-spp ≥ 1 and reference-spp ≥ max-spp".into(),
+            });
+        }
+        check_resolution(self.resolution)
+    }
+
+    /// The measured sample counts: 1, 2, 4, … up to `max_spp`.
+    pub fn spp_steps(&self) -> impl Iterator<Item = u32> {
+        let max = self.max_spp;
+        std::iter::successors(Some(1u32), |&n| n.checked_mul(2)).take_while(move |&n| n <= max)
+    }
+}
+
 /// Checks a report's image side: 4 to 1024 pixels (smaller images have no statistics worth
 /// reporting, larger ones only cost time).
 pub fn check_resolution(resolution: u32) -> crate::Result<()> {

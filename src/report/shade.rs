@@ -17,19 +17,7 @@ use crate::{Backend, Result, Scene};
 use glam::Vec3;
 
 /// What to measure.
-#[derive(Clone, Debug)]
-pub struct ShadeReportOptions {
-    /// Built-in scenes (`builtin:NAME`).
-    pub scenes: Vec<String>,
-    /// Image side in pixels.
-    pub resolution: u32,
-    /// Samples per pixel of the reference.
-    pub reference_spp: u32,
-    /// Largest sample count measured (powers of two from 1).
-    pub max_spp: u32,
-    /// Independent repetitions averaged per measurement.
-    pub reps: u32,
-}
+pub type ShadeReportOptions = super::SceneReportOptions;
 
 /// One measurement, printed as one JSON line.
 #[derive(Clone, Debug, serde::Serialize)]
@@ -127,11 +115,7 @@ pub fn report_shade(
     options: &ShadeReportOptions,
     mut emit: impl FnMut(&ShadeLine),
 ) -> Result<()> {
-    let invalid = |name, reason: &str| Err(crate::Error::InvalidParameter { name, reason: reason.into() });
-    if options.reps < 1 || options.max_spp < 1 || options.reference_spp < options.max_spp {
-        return invalid("report shade", "needs reps ≥ 1, max-spp ≥ 1 and reference-spp ≥ max-spp");
-    }
-    super::check_resolution(options.resolution)?;
+    options.check("report shade")?;
     for name in &options.scenes {
         let scene = Scene::load(name)?;
         backend.load_scene(&scene)?;
@@ -153,8 +137,7 @@ pub fn report_shade(
             .copied()
             .filter(|i| lit_reference(i) && luminance(reference[*i]) >= 0.995 * luminance(analytic[*i]))
             .collect();
-        let mut spp = 1;
-        while spp <= options.max_spp {
+        for spp in options.spp_steps() {
             let mut sums = [[0.0f64; 3]; 2];
             for rep in 0..options.reps {
                 let (run, _) = accumulate(backend, &gbuffer, &data, options.resolution, spp, rep)?;
@@ -178,7 +161,6 @@ pub fn report_shade(
                     });
                 }
             }
-            spp *= 2;
         }
     }
     Ok(())

@@ -15,7 +15,7 @@ use glam::{IVec2, UVec3, Vec2, Vec3, Vec4, Vec4Swizzles};
 use raywave_shared::denoise::{DenoiseParams, MAX_RADIUS, NOISE_LINES};
 
 /// Clamps `p` into the image and returns its pixel index.
-pub fn clamped_index(p: IVec2, width: u32, height: u32) -> usize {
+fn clamped_index(p: IVec2, width: u32, height: u32) -> usize {
     let x = p.x.clamp(0, width as i32 - 1);
     let y = p.y.clamp(0, height as i32 - 1);
     (y as u32 * width + x as u32) as usize
