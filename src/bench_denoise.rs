@@ -23,7 +23,7 @@ pub struct DenoiseBenchOptions {
     pub width: u32,
     /// Image height in pixels.
     pub height: u32,
-    /// Samples per pixel of the shaded input.
+    /// Samples per pixel of the shaded input (the TV filter narrows as `1/√N`).
     pub spp: u32,
     /// Timed repetitions per denoiser; the median per pass is reported.
     pub repeats: u32,
@@ -126,7 +126,7 @@ fn bench_backend(
     peak_gbps: Option<f64>,
     emit: &mut impl FnMut(&DenoiseMeasurement),
 ) -> Result<()> {
-    let params = DenoiseParams::new(options.width, options.height);
+    let params = DenoiseParams { samples_per_pixel: options.spp, ..DenoiseParams::new(options.width, options.height) };
     let pixels = u64::from(params.pixels());
     for method in [DenoiseMethod::Tv, DenoiseMethod::Svgf] {
         let passes = method.passes(&params);

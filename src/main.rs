@@ -323,7 +323,7 @@ fn report_shade_command(args: ShadeReportArgs) -> raywave::Result<()> {
 }
 
 fn report_error_vs_time_command(args: ErrorVsTimeArgs) -> raywave::Result<()> {
-    use raywave::report::error_vs_time::{plot, report_error_vs_time};
+    use raywave::report::error_vs_time::{fastest_by_error, plot, report_error_vs_time};
     // Create the plot's file up front so a bad path fails before the measurements.
     let pending = args.plot.as_deref().map(raywave::visualize::PendingOutput::create).transpose()?;
     let json = args.common.json;
@@ -331,6 +331,12 @@ fn report_error_vs_time_command(args: ErrorVsTimeArgs) -> raywave::Result<()> {
     let lines = report_error_vs_time(backend.as_mut(), &options, |line| {
         print_line(if json { line.json() } else { line.row() })
     })?;
+    if !json {
+        print_line(String::new());
+        for row in fastest_by_error(&lines) {
+            print_line(row.row());
+        }
+    }
     match pending {
         Some(output) => plot(&lines, &format!("{}², {}", options.resolution, backend.name()), output),
         None => Ok(()),

@@ -168,7 +168,11 @@ pub fn render(options: &RenderOptions) -> Result<RenderReport> {
     }
     let image = match options.denoise {
         Some(method) => {
-            let params = DenoiseParams { seed: options.seed, ..DenoiseParams::new(width, height) };
+            let params = DenoiseParams {
+                seed: options.seed,
+                samples_per_pixel: accumulator.samples(),
+                ..DenoiseParams::new(width, height)
+            };
             let (color, pass_timings) =
                 backend.denoise(method, &params, &DenoiseInput::new(&surfaces, &accumulator))?;
             for t in pass_timings {

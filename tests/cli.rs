@@ -275,6 +275,11 @@ fn error_vs_time_report_prints_every_method_and_draws_the_plot() {
         assert_eq!(line["scene"], "builtin:cornell");
         assert!(line["relmse"].as_f64().unwrap().is_finite() && line["ms"].as_f64().unwrap() > 0.0);
     }
+    // The table ends with the fastest method per error level.
+    let table = raywave(&args[..args.len() - 3]);
+    assert!(table.status.success(), "{}", stderr(&table));
+    let text = String::from_utf8_lossy(&table.stdout);
+    assert!(text.lines().any(|l| l.contains("relMSE ≤") && l.contains("fastest")), "{text}");
     let image = image::open(&plot).expect("plot is a PNG").to_rgb8();
     assert_eq!(image.width(), 960);
     assert!(image.pixels().any(|p| p.0 != [255, 255, 255]), "something was drawn");

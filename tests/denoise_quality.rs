@@ -13,23 +13,39 @@
 //!   emitted radiance there, and nothing becomes NaN or Inf when inputs are zero;
 //! - a noise-free ratio (`S_N = U_N` everywhere): the TV filter returns `U + emitted` exactly.
 //!
-//! **Scene quality at 1 spp** against a converged reference (the ratio estimate at
-//! [`REFERENCE_SPP`] spp, cached under `CARGO_TARGET_TMPDIR`), relMSE averaged over [`SEEDS`], at
-//! 128² with the footprint `DenoiseParams::new` picks there (R = 2, two à-trous iterations — the
-//! relMSE minimum of both filters on both scenes): on both built-in scenes the TV-guided filter of
-//! the ratio must beat the raw ratio, the SVGF baseline and the stochastic image raw and TV-filtered.
+//! **Scene quality** against a converged reference (the ratio estimate at [`REFERENCE_SPP`] spp,
+//! cached under `CARGO_TARGET_TMPDIR`), relMSE averaged over [`SEEDS`], at 128² with the
+//! footprint `DenoiseParams::new` picks there (R = 2, two à-trous iterations — the 1-spp relMSE
+//! minimum of both filters on both scenes), at each of [`SPP`]: on both built-in scenes the
+//! TV-guided filter of the ratio must beat the raw ratio, the SVGF baseline and the stochastic
+//! image raw and TV-filtered, at 1, 4 and 8 spp; at 16 = 4R² spp, where its Gaussian
+//! (`R/√N` at most) is down to ½ pixel, it must be the raw ratio exactly.
 //!
-//! Measured (CPU, 128², 1 spp, seeds 1–4, reference 4096 spp), relMSE:
+//! Measured (CPU, 128², seeds 1–4, reference 4096 spp), relMSE:
 //!
-//! | scene | stochastic | stochastic+tv | ratio | ratio+tv | ratio+svgf |
-//! |---|---|---|---|---|---|
-//! | cornell-two-lights | 0.02884 | 0.00118 | 0.00821 | 0.00050 | 0.00167 |
-//! | cornell | 0.00463 | 0.00028 | 0.00180 | 0.00017 | 0.00031 |
+//! | scene | spp | stochastic | stochastic+tv | ratio | ratio+tv | ratio+svgf |
+//! |---|---|---|---|---|---|---|
+//! | cornell-two-lights | 1 | 0.02884 | 0.00118 | 0.00821 | 0.00050 | 0.00167 |
+//! | cornell-two-lights | 4 | 0.00245 | 0.00048 | 0.00110 | 0.00023 | 0.00039 |
+//! | cornell-two-lights | 8 | 0.00088 | 0.00042 | 0.00041 | 0.00023 | 0.00035 |
+//! | cornell-two-lights | 16 | 0.00032 | 0.00032 | 0.00017 | 0.00017 | 0.00035 |
+//! | cornell | 1 | 0.00463 | 0.00028 | 0.00180 | 0.00017 | 0.00031 |
+//! | cornell | 4 | 0.00039 | 0.00012 | 0.00018 | 0.00007 | 0.00027 |
+//! | cornell | 8 | 0.00015 | 0.00009 | 0.00006 | 0.00005 | 0.00027 |
+//! | cornell | 16 | 0.000055 | 0.000055 | 0.000020 | 0.000020 | 0.00027 |
 //!
-//! Issue 6 asks for ratio+tv ≤ 0.25 × stochastic+tv; measured 0.42 (two lights) and 0.62
-//! (Cornell), so that target is printed, not asserted, until it is met. (With R = 10 at 64² it
-//! held on the two-light box, 0.18, but ratio+tv then did no better than the raw ratio on the
-//! Cornell box: the wide blur spread lit floor into the umbrae under the blocks.)
+//! Before the `1/√N` narrowing the filter kept its 1-spp width at every `N` and plateaued at
+//! ≈ 1·10⁻⁴ (Cornell) from 4 spp on, blurring shadow edges, so the raw ratio beat it from
+//! ~8 spp.
+//!
+//! Issue 6 asks for ratio+tv ≤ 0.25 × stochastic+tv at 1 spp; measured 0.42 (two lights) and 0.62
+//! (Cornell), so that target is printed, not asserted, until it is met. Where the error is: split
+//! by region (Cornell, 1 spp), ratio+tv is 20× better than stochastic+tv in unshadowed pixels
+//! (6·10⁻⁶ vs 1.1·10⁻⁴ of the image's relMSE) but equal in penumbrae (1.3·10⁻⁴ each) and umbrae
+//! (4·10⁻⁵ each): there both filter one binary visibility sample per pixel, and ~60 % of that
+//! error is the blur's bias at the shadows' edges. (With R = 10 at 64² the ratio held on the
+//! two-light box, 0.18, but ratio+tv then did no better than the raw ratio on the Cornell box: the
+//! wide blur spread lit floor into the umbrae under the blocks.)
 //!
 //! Computing a reference takes about 140 s in the test profile (both at once on two cores); the
 //! cached ones load in milliseconds.
@@ -318,24 +334,32 @@ fn reference(backend: &mut CpuBackend, prepared: &PreparedScene, scene_name: &st
     image
 }
 
-/// Mean relMSE per method ([`METHODS`] order) at 1 spp over [`SEEDS`].
-fn scene_relmse(scene_name: &str) -> [f64; METHODS.len()] {
+/// Samples per pixel the scene tests measure: 1 (issue 6's target), the filter narrowing as
+/// `1/√N` at 4 and 8, and 16 = 4R², where the TV filter at R = 2 is the identity.
+const SPP: [u32; 4] = [1, 4, 8, 16];
+
+/// Mean relMSE per method ([`METHODS`] order) at each of [`SPP`] over [`SEEDS`].
+fn scene_relmse(scene_name: &str) -> Vec<(u32, [f64; METHODS.len()])> {
     let mut backend = CpuBackend::new();
     let scene = Scene::load(scene_name).expect("built-in scene loads");
     let prepared = PreparedScene::new(&mut backend, &scene, RESOLUTION).expect("G-buffer");
     let reference = reference(&mut backend, &prepared, scene_name);
-    let mut sums = [0.0; METHODS.len()];
-    for seed in SEEDS {
-        let frame = prepared.frame(&mut backend, 1, seed).expect("frame");
-        for (sum, (image, _)) in sums.iter_mut().zip(&frame) {
-            *sum += relmse(image, &reference);
-        }
-    }
-    let means = sums.map(|s| s / SEEDS.len() as f64);
-    for (method, value) in METHODS.iter().zip(means) {
-        eprintln!("{scene_name}: 1 spp {method:<14} relMSE {value:.5}");
-    }
-    means
+    SPP.iter()
+        .map(|&spp| {
+            let mut sums = [0.0; METHODS.len()];
+            for seed in SEEDS {
+                let frame = prepared.frame(&mut backend, spp, seed).expect("frame");
+                for (sum, (image, _)) in sums.iter_mut().zip(&frame) {
+                    *sum += relmse(image, &reference);
+                }
+            }
+            let means = sums.map(|s| s / SEEDS.len() as f64);
+            for (method, value) in METHODS.iter().zip(means) {
+                eprintln!("{scene_name}: {spp:>2} spp {method:<14} relMSE {value:.6}");
+            }
+            (spp, means)
+        })
+        .collect()
 }
 
 /// The relMSE of `method`.
@@ -343,15 +367,29 @@ fn of(values: &[f64; METHODS.len()], method: &str) -> f64 {
     values[METHODS.iter().position(|m| *m == method).expect("a method")]
 }
 
-/// Asserts what holds at 1 spp on `scene_name` — ratio+tv beats the raw ratio, the SVGF
-/// baseline and the TV filter of the stochastic image — and prints the gain over the latter that
-/// issue 6 asks to be ≤ 0.25 (not met yet; see the module documentation).
+/// Asserts what holds on `scene_name`: at every measured spp below 4R², ratio+tv beats the raw
+/// ratio, the SVGF baseline and the TV filter of the stochastic image (raw and filtered); from
+/// 4R² on it is the raw ratio exactly. Prints the 1-spp gain over stochastic+tv that issue 6
+/// asks to be ≤ 0.25 (not met yet; see the module documentation).
 fn assert_ratio_tv_wins(scene_name: &str) {
-    let values = scene_relmse(scene_name);
-    let ratio_tv = of(&values, "ratio+tv");
-    eprintln!("{scene_name}: ratio+tv / stochastic+tv = {:.3}", ratio_tv / of(&values, "stochastic+tv"));
-    for other in ["ratio", "ratio+svgf", "stochastic+tv", "stochastic"] {
-        assert!(ratio_tv < of(&values, other), "{scene_name}: ratio+tv {ratio_tv} vs {other} {}", of(&values, other));
+    let shipped = DenoiseParams::new(RESOLUTION, RESOLUTION);
+    for (spp, values) in scene_relmse(scene_name) {
+        let ratio_tv = of(&values, "ratio+tv");
+        if spp == 1 {
+            eprintln!("{scene_name}: ratio+tv / stochastic+tv = {:.3}", ratio_tv / of(&values, "stochastic+tv"));
+        }
+        let params = DenoiseParams { samples_per_pixel: spp, ..shipped };
+        if params.tv_filter_is_identity() {
+            assert_eq!(ratio_tv, of(&values, "ratio"), "{scene_name} at {spp} spp: the identity filter");
+            continue;
+        }
+        for other in ["ratio", "ratio+svgf", "stochastic+tv", "stochastic"] {
+            assert!(
+                ratio_tv < of(&values, other),
+                "{scene_name} at {spp} spp: ratio+tv {ratio_tv} vs {other} {}",
+                of(&values, other)
+            );
+        }
     }
 }
 

@@ -8,7 +8,8 @@
 //! bilateral pass's workgroup tiles straddle the ends of rows and columns and the last segment of
 //! every line is partial — filtered with the largest footprint (R = 10, four à-trous
 //! iterations), which uses the tiles' halos in full, and with the footprint
-//! `DenoiseParams::new` picks for the size. And synthetic coin-flip shadows on the degenerate sizes 1 × 1 (every
+//! `DenoiseParams::new` picks for the size; and the two-light box at 4 spp, where the TV filter's
+//! Gaussian is √4 narrower. And synthetic coin-flip shadows on the degenerate sizes 1 × 1 (every
 //! tap outside the image) and 3 × 200 (rows shorter than the filter radius, columns of four
 //! segments).
 //!
@@ -22,7 +23,7 @@
 //! Not bit-exact, because the kernels use `exp` and `sqrt` (Vulkan bounds their error at
 //! `3 + 2·|x|` ulp and 3 ulp — lavapipe is close to libm, a GPU need not be), and because the
 //! filter makes discrete decisions on such values: a pixel passes through untouched when its
-//! Gaussian radius `1.5·noise·R ≤ 0.5 px`, and each tap of the rotated noise lines is the nearest
+//! Gaussian radius `saturate(1.5·noise)·R/√N ≤ 0.5 px`, and each tap of the rotated noise lines is the nearest
 //! pixel to `centre + r·(cos θ, sin θ)`, so a last-bit difference in `θ` can move a tap lying on a
 //! pixel boundary to the neighbouring pixel and change that pixel's noise estimate (and with it
 //! its filter radius) by a visible amount. Such decisions are rare — a value has to lie within a
@@ -68,6 +69,8 @@ use raywave::{Backend, Scene};
 const RESOLUTION: u32 = 75;
 /// Samples per pixel of the scene frames: 1, the noisiest input and the one the filter is for.
 const SPP: u32 = 1;
+/// Samples per pixel of the case where the TV filter narrows with `N`.
+const MANY_SPP: u32 = 4;
 /// Sampler and noise-line seed of the scene frames.
 const SEED: u32 = 7;
 /// The scenes whose frames are denoised.
@@ -103,12 +106,14 @@ fn cases(name: &str, params: DenoiseParams, input: DenoiseInput) -> Vec<Case> {
     ]
 }
 
-/// A 1-spp frame of `scene_name` at [`RESOLUTION`], shaded and traced on the CPU.
-fn scene_input(cpu: &mut CpuBackend, scene_name: &str) -> (DenoiseParams, DenoiseInput) {
+/// An `spp`-sample frame of `scene_name` at [`RESOLUTION`], shaded and traced on the CPU, with
+/// the [`full_footprint`] parameters for that many samples.
+fn scene_input(cpu: &mut CpuBackend, scene_name: &str, spp: u32) -> (DenoiseParams, DenoiseInput) {
     let scene = Scene::load(scene_name).expect("built-in scene loads");
     let prepared = PreparedScene::new(cpu, &scene, RESOLUTION).expect("G-buffer");
-    let (run, _) = accumulate(cpu, &prepared.gbuffer, &prepared.data, RESOLUTION, SPP, SEED).expect("shade");
-    (full_footprint(RESOLUTION, RESOLUTION, SEED), DenoiseInput::new(&prepared.surfaces, &run))
+    let (run, _) = accumulate(cpu, &prepared.gbuffer, &prepared.data, RESOLUTION, spp, SEED).expect("shade");
+    let params = DenoiseParams { samples_per_pixel: run.samples(), ..full_footprint(RESOLUTION, RESOLUTION, SEED) };
+    (params, DenoiseInput::new(&prepared.surfaces, &run))
 }
 
 /// The parameters of a `width × height` image with the largest footprint, whatever the image
@@ -308,7 +313,7 @@ fn denoise_matches_the_cpu_on_every_vulkan_device() {
     let mut cpu = CpuBackend::new();
     let mut all = Vec::new();
     for scene in SCENES {
-        let (params, input) = scene_input(&mut cpu, scene);
+        let (params, input) = scene_input(&mut cpu, scene, SPP);
         all.extend(cases(scene, params, input.clone()));
         // The footprint the report uses at this size (`DenoiseParams::new`).
         let shipped = DenoiseParams { seed: SEED, ..DenoiseParams::new(RESOLUTION, RESOLUTION) };
@@ -316,6 +321,10 @@ fn denoise_matches_the_cpu_on_every_vulkan_device() {
             all.extend(cases(&format!("{scene} (R = {})", shipped.radius), shipped, input));
         }
     }
+    // More samples narrow the TV filter's Gaussian by √N (R = 10 stays below 4R², so it filters).
+    let (params, input) = scene_input(&mut cpu, SCENES[0], MANY_SPP);
+    assert!(!params.tv_filter_is_identity());
+    all.extend(cases(&format!("{} at {MANY_SPP} spp", SCENES[0]), params, input));
     check_parity("denoise parity", &all, 0.03);
 }
 

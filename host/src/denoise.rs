@@ -31,9 +31,11 @@ impl DenoiseMethod {
         }
     }
 
-    /// The passes the method runs with `params`, in order.
+    /// The passes the method runs with `params`, in order. The TV filter is only its composite
+    /// where it would leave every pixel as it is ([`DenoiseParams::tv_filter_is_identity`]).
     pub fn passes(self, params: &DenoiseParams) -> Vec<DenoisePass> {
         match self {
+            Self::Tv if params.tv_filter_is_identity() => vec![DenoisePass::Composite],
             Self::Tv => vec![
                 DenoisePass::Ratio,
                 DenoisePass::Noise,
@@ -200,7 +202,7 @@ impl DenoiseInput {
     }
 
     /// Checks the inputs against `params`: every buffer holds `width · height` entries and the
-    /// radius is within `1..=MAX_RADIUS`.
+    /// radius is within `1..=MAX_RADIUS`, and the estimates average at least one sample.
     pub fn check(&self, params: &DenoiseParams) -> Result<()> {
         let pixels = u64::from(params.width) * u64::from(params.height);
         let lengths = [&self.position, &self.normal, &self.analytic, &self.emitted, &self.shadowed, &self.unshadowed];
@@ -215,6 +217,8 @@ impl DenoiseInput {
             ))
         } else if !(1..=MAX_RADIUS).contains(&params.radius) {
             Some(format!("radius {} outside 1..={MAX_RADIUS}", params.radius))
+        } else if params.samples_per_pixel == 0 {
+            Some("samples per pixel is 0 (the estimates average at least one sample)".to_owned())
         } else {
             None
         };

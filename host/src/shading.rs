@@ -235,6 +235,11 @@ impl ShadeAccumulator {
         }
     }
 
+    /// Samples (shade passes) added so far: the `N` of `U_N` and `S_N`.
+    pub fn samples(&self) -> u32 {
+        self.samples
+    }
+
     fn mean(&self, sums: &[Vec3]) -> Vec<Vec3> {
         let scale = 1.0 / self.samples.max(1) as f32;
         sums.iter().map(|&s| s * scale).collect()

@@ -58,8 +58,9 @@ pub struct DenoiseParams {
     pub seed: u32,
     /// À-trous iterations of the SVGF baseline (the host's pass list; the kernels ignore it).
     pub atrous_iterations: u32,
-    /// Explicit padding; always 0.
-    pub padding: u32,
+    /// Samples per pixel `N` behind `S_N` and `U_N` (≥ 1; 0 counts as 1). The TV filter's
+    /// Gaussian narrows as `1/√N` (see `raywave_kernels::denoise::bilateral::gaussian_radius`).
+    pub samples_per_pixel: u32,
     /// Edge-stop weights (depth, normal, plane, analytic), see [`DEFAULT_EDGE_WEIGHTS`].
     pub edge_weights: Vec4,
     /// SVGF baseline: (`phiColor`, variance boost, 0, 0).
@@ -102,10 +103,24 @@ impl DenoiseParams {
             step: 1,
             seed: 0,
             atrous_iterations,
-            padding: 0,
+            samples_per_pixel: 1,
             edge_weights: DEFAULT_EDGE_WEIGHTS,
             svgf: Vec4::new(DEFAULT_SVGF_PHI_COLOR, DEFAULT_SVGF_VARIANCE_BOOST, 0.0, 0.0),
         }
+    }
+
+    /// Whether the TV filter leaves every pixel as it is: its widest Gaussian, `R/√N`
+    /// pixels, is ≤ ½ pixel (`N ≥ 4R²`), where every pixel passes through — so the host skips
+    /// the noise and bilateral passes.
+    pub const fn tv_filter_is_identity(&self) -> bool {
+        let radius = if self.radius > MAX_RADIUS {
+            MAX_RADIUS
+        } else if self.radius == 0 {
+            1
+        } else {
+            self.radius
+        } as u64;
+        self.samples_per_pixel as u64 >= 4 * radius * radius
     }
 
     /// Pixels in the image.
@@ -150,6 +165,17 @@ mod tests {
         assert_eq!(footprint(256, 300), (4, 3));
         assert_eq!(footprint(1, 1), (1, 1));
         assert_eq!(footprint(127, 5000), (1, 1));
+    }
+
+    #[test]
+    fn the_tv_filter_switches_off_once_its_widest_gaussian_is_half_a_pixel() {
+        let at = |radius, samples_per_pixel| {
+            DenoiseParams { radius, samples_per_pixel, ..DenoiseParams::new(64, 64) }.tv_filter_is_identity()
+        };
+        assert!(!at(2, 1) && !at(2, 15) && at(2, 16) && at(2, 1 << 20));
+        assert!(!at(MAX_RADIUS, 399) && at(MAX_RADIUS, 400) && at(MAX_RADIUS + 5, 400));
+        assert!(!at(0, 3) && at(0, 4), "radius 0 is filtered as 1");
+        assert!(!at(1, 0), "0 samples count as 1");
     }
 
     #[test]

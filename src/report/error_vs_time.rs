@@ -107,7 +107,11 @@ impl PreparedScene {
         let (run, shade_seconds) = accumulate(backend, &self.gbuffer, &self.data, self.resolution, spp, seed)?;
         let base_ms = 1e3 * (self.gbuffer.seconds + shade_seconds);
         let input = DenoiseInput::new(&self.surfaces, &run);
-        let params = DenoiseParams { seed, ..DenoiseParams::new(self.resolution, self.resolution) };
+        let params = DenoiseParams {
+            seed,
+            samples_per_pixel: run.samples(),
+            ..DenoiseParams::new(self.resolution, self.resolution)
+        };
         let mut denoised = |method, input: &DenoiseInput| -> Result<(Vec<Vec3>, f64)> {
             let (color, timings) = backend.denoise(method, &params, input)?;
             Ok((rgb(&color), base_ms + 1e3 * timings.iter().map(|t| t.seconds).sum::<f64>()))
@@ -148,6 +152,93 @@ pub fn report_error_vs_time(
         }
     }
     Ok(lines)
+}
+
+/// Milliseconds `method` needs on `scene` to reach relMSE `error` along its measured curve
+/// (points in `lines` order, 1 … max spp): the first point at or below `error`, interpolated
+/// linearly in log–log from the point before it; `None` if no point gets there.
+pub fn time_to_reach(lines: &[ErrorVsTimeLine], scene: &str, method: &str, error: f64) -> Option<f64> {
+    let curve = lines.iter().filter(|l| l.scene == scene && l.method == method);
+    let mut previous: Option<&ErrorVsTimeLine> = None;
+    for point in curve {
+        if point.relmse <= error {
+            return Some(match previous {
+                Some(above)
+                    if point.relmse < error
+                        && above.relmse > 0.0
+                        && point.relmse > 0.0
+                        && above.ms > 0.0
+                        && point.ms > 0.0 =>
+                {
+                    let along = (error.ln() - above.relmse.ln()) / (point.relmse.ln() - above.relmse.ln());
+                    (above.ms.ln() + along * (point.ms.ln() - above.ms.ln())).exp()
+                }
+                _ => point.ms,
+            });
+        }
+        previous = Some(point);
+    }
+    None
+}
+
+/// The fastest method to one error level on one scene.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FastestLine {
+    /// Scene name.
+    pub scene: String,
+    /// The relMSE to reach.
+    pub relmse: f64,
+    /// The method that gets there first, and its milliseconds ([`time_to_reach`]).
+    pub fastest: (&'static str, f64),
+    /// The next fastest method and its milliseconds, if another one gets there.
+    pub runner_up: Option<(&'static str, f64)>,
+}
+
+impl FastestLine {
+    /// A table row.
+    pub fn row(&self) -> String {
+        let runner_up = match self.runner_up {
+            Some((method, ms)) => format!("  (next: {method} {ms:.1} ms)"),
+            None => "  (no other method gets there)".to_owned(),
+        };
+        format!(
+            "{:<28} relMSE ≤ {:.1e}  fastest {:<14} {:>9.1} ms{runner_up}",
+            self.scene, self.relmse, self.fastest.0, self.fastest.1
+        )
+    }
+}
+
+/// For each scene in `lines`, the fastest method at error levels four per decade (1, 1.8, 3.2,
+/// 5.6 × 10ᵏ) from the worst first point of any curve down to the best error any method reaches
+/// — the plot's headline read off as a table.
+pub fn fastest_by_error(lines: &[ErrorVsTimeLine]) -> Vec<FastestLine> {
+    let mut scenes: Vec<&str> = lines.iter().map(|l| l.scene.as_str()).collect();
+    scenes.dedup();
+    let mut table = Vec::new();
+    for scene in scenes {
+        let ours = || lines.iter().filter(move |l| l.scene == scene && l.relmse > 0.0);
+        let worst = ours().filter(|l| l.spp == 1).map(|l| l.relmse).fold(f64::MIN, f64::max);
+        let best = ours().map(|l| l.relmse).fold(f64::MAX, f64::min);
+        if !(worst.is_finite() && best.is_finite() && best <= worst) {
+            continue;
+        }
+        const PER_DECADE: f64 = 4.0;
+        let mut k = (worst.log10() * PER_DECADE).floor();
+        while 10f64.powf(k / PER_DECADE) >= best * (1.0 - 1e-9) {
+            // Rounded to two digits so the levels read as 1, 1.8, 3.2, 5.6.
+            let level = 10f64.powf(k / PER_DECADE);
+            let scale = 10f64.powf(level.log10().floor() - 1.0);
+            let relmse = (level / scale).round() * scale;
+            let mut times: Vec<(&'static str, f64)> =
+                METHODS.iter().filter_map(|&m| time_to_reach(lines, scene, m, relmse).map(|ms| (m, ms))).collect();
+            times.sort_by(|a, b| a.1.total_cmp(&b.1));
+            if let Some(&fastest) = times.first() {
+                table.push(FastestLine { scene: scene.to_owned(), relmse, fastest, runner_up: times.get(1).copied() });
+            }
+            k -= 1.0;
+        }
+    }
+    table
 }
 
 /// The font of the plot's text: DejaVu Sans Mono (Bitstream Vera licence,
@@ -222,4 +313,46 @@ pub fn plot(lines: &[ErrorVsTimeLine], title: &str, output: PendingOutput) -> Re
     }
     let image = image::RgbImage::from_raw(width, height, pixels).ok_or_else(|| plot_error(&"plot buffer size"))?;
     output.finish_png(&image)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn line(method: &'static str, spp: u32, relmse: f64, ms: f64) -> ErrorVsTimeLine {
+        ErrorVsTimeLine { scene: "s".to_owned(), spp, method, relmse, ms }
+    }
+
+    #[test]
+    fn time_to_reach_interpolates_in_log_log_and_gives_up_below_the_curve() {
+        let lines = [line("ratio", 1, 1e-2, 10.0), line("ratio", 2, 1e-4, 1000.0)];
+        let at = |e| time_to_reach(&lines, "s", "ratio", e);
+        assert_eq!(at(1e-1), Some(10.0), "the first point is already below");
+        assert!((at(1e-3).unwrap() - 100.0).abs() < 1e-9, "halfway in log–log");
+        assert_eq!(at(1e-4), Some(1000.0), "exactly on a point");
+        assert_eq!(at(1e-5), None);
+        assert_eq!(time_to_reach(&lines, "other", "ratio", 1.0), None);
+    }
+
+    #[test]
+    fn the_fastest_method_is_read_off_every_error_level() {
+        let lines = [
+            line("ratio", 1, 1e-2, 10.0),
+            line("ratio+tv", 1, 1e-3, 12.0),
+            line("ratio", 2, 1e-4, 100.0),
+            line("ratio+tv", 2, 1e-4, 200.0),
+        ];
+        let table = fastest_by_error(&lines);
+        let levels: Vec<f64> = table.iter().map(|l| l.relmse).collect();
+        assert_eq!(levels.first(), Some(&1e-2));
+        assert_eq!(levels.last(), Some(&1e-4));
+        assert_eq!(levels.len(), 9, "four levels per decade, both ends included: {levels:?}");
+        assert_eq!(table[0].fastest.0, "ratio", "1e-2: ratio's first frame is cheaper");
+        let at_1e3 = table.iter().find(|l| (l.relmse - 1e-3).abs() < 1e-12).unwrap();
+        assert_eq!(at_1e3.fastest, ("ratio+tv", 12.0));
+        assert_eq!(at_1e3.runner_up.unwrap().0, "ratio");
+        let last = table.last().unwrap().fastest;
+        assert!(last.0 == "ratio" && (last.1 - 100.0).abs() < 1e-9, "{last:?}");
+        assert!(table.iter().all(|l| l.scene == "s") && table.iter().all(|l| l.row().contains("fastest")));
+    }
 }
