@@ -230,10 +230,12 @@ fn run(backend: &mut dyn Backend, case: &Case) -> Vec<Vec4> {
     let names: Vec<&str> = timings.iter().map(|t| t.stage).collect();
     assert_eq!(names, expected, "{who}: pass timings");
     // The passes that make up each method, whatever preparatory passes (a ratio image, …) the
-    // executors add: TV = noise, its blur, the two bilateral passes, the composite; SVGF = the
+    // executors add: TV = noise, its blur, the two bilateral passes, the composite (only the
+    // composite where the filter is the identity); SVGF = the
     // à-trous iterations (4, Falcor's, with the full radius) and the composite.
     let atrous = case.params.atrous_iterations.clamp(1, MAX_ATROUS_ITERATIONS) as usize;
     let required: &[(&str, usize)] = match case.method {
+        DenoiseMethod::Tv if case.params.tv_filter_is_identity() => &[("denoise composite", 1)],
         DenoiseMethod::Tv => &[
             ("denoise noise", 1),
             ("denoise noise blur", 1),
@@ -343,4 +345,15 @@ fn denoise_matches_the_cpu_on_degenerate_sizes_on_every_vulkan_device() {
     }
     check_parity("denoise parity (1×1)", &all[..3], 0.0);
     check_parity("denoise parity (3×200)", &all[3..], 0.3);
+}
+
+#[test]
+fn an_identity_tv_filter_is_the_raw_composite_on_every_vulkan_device() {
+    let (params, input) = synthetic(3, 200, 13);
+    let params = DenoiseParams { samples_per_pixel: 4 * params.radius * params.radius, ..params };
+    assert!(params.tv_filter_is_identity());
+    let case = Case { name: "3×200 at N = 4R²".to_owned(), method: DenoiseMethod::Tv, params, input };
+    let color: Vec<Vec3> = run(&mut CpuBackend::new(), &case).iter().map(|c| c.truncate()).collect();
+    assert_eq!(color, raw_composite(&case.input), "the identity filter changed a pixel");
+    check_parity("denoise parity (identity)", &[case], 0.0);
 }

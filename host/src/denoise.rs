@@ -233,3 +233,44 @@ impl DenoiseInput {
 pub fn rgb(color: &[Vec4]) -> Vec<Vec3> {
     color.iter().map(|c| c.truncate()).collect()
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn input(pixels: usize) -> DenoiseInput {
+        let v = vec![Vec4::ZERO; pixels];
+        DenoiseInput {
+            position: v.clone(),
+            normal: v.clone(),
+            analytic: v.clone(),
+            emitted: v.clone(),
+            shadowed: v.clone(),
+            unshadowed: v,
+        }
+    }
+
+    #[test]
+    fn check_names_what_is_wrong() {
+        let params = DenoiseParams::new(4, 3);
+        assert!(input(12).check(&params).is_ok());
+        let reason = |input: DenoiseInput, params: DenoiseParams| match input.check(&params) {
+            Err(Error::InvalidParameter { name: "denoise", reason }) => reason,
+            other => panic!("expected a denoise parameter error, got {other:?}"),
+        };
+        assert!(reason(input(0), DenoiseParams::new(0, 3)).contains("empty"));
+        assert!(reason(input(11), params).contains("4×3 pixels"));
+        assert!(reason(input(12), DenoiseParams { radius: 0, ..params }).contains("radius 0"));
+        assert!(reason(input(12), DenoiseParams { radius: MAX_RADIUS + 1, ..params }).contains("radius 11"));
+        assert!(reason(input(12), DenoiseParams { samples_per_pixel: 0, ..params }).contains("samples per pixel"));
+    }
+
+    #[test]
+    fn an_identity_tv_filter_runs_only_the_composite() {
+        let params = DenoiseParams::new(128, 128);
+        assert_eq!(DenoiseMethod::Tv.passes(&params).len(), 6);
+        let many = DenoiseParams { samples_per_pixel: 4 * params.radius * params.radius, ..params };
+        assert_eq!(DenoiseMethod::Tv.passes(&many), vec![DenoisePass::Composite]);
+        assert_eq!(DenoiseMethod::Svgf.passes(&many), DenoiseMethod::Svgf.passes(&params), "SVGF keeps its passes");
+    }
+}
