@@ -113,15 +113,9 @@ impl DenoiseParams {
     /// Whether the TV filter leaves every pixel as it is: its widest Gaussian, `R/√N`
     /// pixels, is ≤ ½ pixel (`N ≥ 4R²`), where every pixel passes through — so the host skips
     /// the noise and bilateral passes.
-    pub const fn tv_filter_is_identity(&self) -> bool {
-        let radius = if self.radius > MAX_RADIUS {
-            MAX_RADIUS
-        } else if self.radius == 0 {
-            1
-        } else {
-            self.radius
-        } as u64;
-        self.samples_per_pixel as u64 >= 4 * radius * radius
+    pub fn tv_filter_is_identity(&self) -> bool {
+        let radius = u64::from(self.radius.clamp(1, MAX_RADIUS));
+        u64::from(self.samples_per_pixel) >= 4 * radius * radius
     }
 
     /// Pixels in the image.

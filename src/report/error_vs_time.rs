@@ -208,34 +208,38 @@ impl FastestLine {
     }
 }
 
+/// The error levels of [`fastest_by_error`] within a decade, descending: four per decade, as
+/// 10^(k/4) rounded to two digits.
+const LEVELS_PER_DECADE: [f64; 4] = [5.6, 3.2, 1.8, 1.0];
+
+/// The scenes of `lines`, in report order.
+fn scenes(lines: &[ErrorVsTimeLine]) -> Vec<&str> {
+    let mut scenes: Vec<&str> = lines.iter().map(|l| l.scene.as_str()).collect();
+    scenes.dedup();
+    scenes
+}
+
 /// For each scene in `lines`, the fastest method at error levels four per decade (1, 1.8, 3.2,
 /// 5.6 × 10ᵏ) from the worst first point of any curve down to the best error any method reaches
 /// — the plot's headline read off as a table.
 pub fn fastest_by_error(lines: &[ErrorVsTimeLine]) -> Vec<FastestLine> {
-    let mut scenes: Vec<&str> = lines.iter().map(|l| l.scene.as_str()).collect();
-    scenes.dedup();
     let mut table = Vec::new();
-    for scene in scenes {
+    for scene in scenes(lines) {
         let ours = || lines.iter().filter(move |l| l.scene == scene && l.relmse > 0.0);
         let worst = ours().filter(|l| l.spp == 1).map(|l| l.relmse).fold(f64::MIN, f64::max);
         let best = ours().map(|l| l.relmse).fold(f64::MAX, f64::min);
         if !(worst.is_finite() && best.is_finite() && best <= worst) {
             continue;
         }
-        const PER_DECADE: f64 = 4.0;
-        let mut k = (worst.log10() * PER_DECADE).floor();
-        while 10f64.powf(k / PER_DECADE) >= best * (1.0 - 1e-9) {
-            // Rounded to two digits so the levels read as 1, 1.8, 3.2, 5.6.
-            let level = 10f64.powf(k / PER_DECADE);
-            let scale = 10f64.powf(level.log10().floor() - 1.0);
-            let relmse = (level / scale).round() * scale;
+        let decades = (best.log10().floor() as i32..=worst.log10().floor() as i32).rev();
+        let levels = decades.flat_map(|k| LEVELS_PER_DECADE.map(|m| m * 10f64.powi(k)));
+        for relmse in levels.filter(|&e| e <= worst * (1.0 + 1e-9) && e >= best * (1.0 - 1e-9)) {
             let mut times: Vec<(&'static str, f64)> =
                 METHODS.iter().filter_map(|&m| time_to_reach(lines, scene, m, relmse).map(|ms| (m, ms))).collect();
             times.sort_by(|a, b| a.1.total_cmp(&b.1));
             if let Some(&fastest) = times.first() {
                 table.push(FastestLine { scene: scene.to_owned(), relmse, fastest, runner_up: times.get(1).copied() });
             }
-            k -= 1.0;
         }
     }
     table
@@ -252,8 +256,7 @@ pub fn plot(lines: &[ErrorVsTimeLine], title: &str, output: PendingOutput) -> Re
     let plot_error = |e: &dyn std::fmt::Display| crate::Error::InvalidParameter { name: "plot", reason: e.to_string() };
     // Registering twice (a second plot in one process) replaces the same font.
     plotters::style::register_font("sans-serif", FontStyle::Normal, FONT).map_err(|_| plot_error(&"bad font"))?;
-    let mut scenes: Vec<&str> = lines.iter().map(|l| l.scene.as_str()).collect();
-    scenes.dedup();
+    let scenes = scenes(lines);
     let (width, panel_height) = (960u32, 560u32);
     let height = panel_height * scenes.len().max(1) as u32;
     let mut pixels = vec![255u8; (width * height * 3) as usize];
