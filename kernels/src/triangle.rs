@@ -88,6 +88,7 @@ impl WatertightRay {
 
     /// A vertex in the ray's sheared frame: (x, y) on the plane the ray pierces at the origin,
     /// z the scaled distance along the ray.
+    #[inline(always)]
     fn transform(&self, v: Vec3A) -> Vec3A {
         let d = v - self.origin;
         self.columns[0] * d.x + self.columns[1] * d.y + self.columns[2] * d.z
@@ -101,6 +102,7 @@ impl WatertightRay {
     }
 
     /// [`intersect`](Self::intersect) on SIMD-aligned vertices.
+    #[inline(always)]
     pub fn intersect_a(&self, v0: Vec3A, v1: Vec3A, v2: Vec3A, tmin: f32, tmax: f32) -> Option<TriangleHit> {
         let a = self.transform(v0);
         let b = self.transform(v1);
@@ -110,9 +112,11 @@ impl WatertightRay {
         let u = c.x * b.y - c.y * b.x;
         let v = a.x * c.y - a.y * c.x;
         let w = b.x * a.y - b.y * a.x;
-        let outside = (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0);
+        // Non-short-circuit operators: one branch instead of six data-dependent ones, which
+        // incoherent rays mispredict.
+        let outside = ((u < 0.0) | (v < 0.0) | (w < 0.0)) & ((u > 0.0) | (v > 0.0) | (w > 0.0));
         let det = u + v + w;
-        if outside || det == 0.0 {
+        if outside | (det == 0.0) {
             return None;
         }
 

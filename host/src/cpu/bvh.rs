@@ -72,6 +72,44 @@ pub struct CpuScene {
     /// obvhs's own BVH, kept for the benchmark that compares against obvhs's traversal.
     obvhs: CwBvh,
     build_time: Duration,
+    /// Which build of the kernel traversal the queries run (detected once, at build time).
+    isa: TraversalIsa,
+}
+
+/// The instruction-set build of the kernel traversal a [`CpuScene`] runs: the same source, compiled
+/// for the baseline target or for x86-64-v3 when the CPU has it (detected at run time, so one binary
+/// serves every x86-64 CPU). Both give bit-identical hits.
+#[derive(Copy, Clone, Debug, PartialEq, Eq)]
+pub enum TraversalIsa {
+    /// The compile target's baseline (SSE2 on x86-64).
+    Portable,
+    /// AVX2, FMA, BMI1/2, LZCNT and POPCNT.
+    X86_64V3,
+}
+
+impl TraversalIsa {
+    /// The best build this CPU runs.
+    pub fn detect() -> Self {
+        #[cfg(target_arch = "x86_64")]
+        if std::is_x86_feature_detected!("avx2")
+            && std::is_x86_feature_detected!("fma")
+            && std::is_x86_feature_detected!("bmi1")
+            && std::is_x86_feature_detected!("bmi2")
+            && std::is_x86_feature_detected!("lzcnt")
+            && std::is_x86_feature_detected!("popcnt")
+        {
+            return Self::X86_64V3;
+        }
+        Self::Portable
+    }
+
+    /// The name in benchmark output.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Portable => "portable",
+            Self::X86_64V3 => "x86-64-v3",
+        }
+    }
 }
 
 impl CpuScene {
@@ -113,7 +151,7 @@ impl CpuScene {
             })
             .collect();
         let ids = order.iter().map(|&i| ids[i as usize]).collect();
-        Ok(Self { nodes, vertices, ids, obvhs, build_time: start.elapsed() })
+        Ok(Self { nodes, vertices, ids, obvhs, build_time: start.elapsed(), isa: TraversalIsa::detect() })
     }
 
     /// The scene as the trace kernels read it.
@@ -134,6 +172,24 @@ impl CpuScene {
     /// (instance, primitive) per triangle in BVH order, for upload to a device.
     pub fn ids(&self) -> &[UVec2] {
         &self.ids
+    }
+
+    /// The instruction-set build of the traversal this scene's queries run.
+    pub fn traversal_isa(&self) -> TraversalIsa {
+        self.isa
+    }
+
+    /// Runs this scene's queries with `isa` instead of the detected build (for tests comparing the
+    /// builds). Fails if the CPU lacks the features `isa` needs.
+    pub fn set_traversal_isa(&mut self, isa: TraversalIsa) -> Result<()> {
+        if isa == TraversalIsa::X86_64V3 && TraversalIsa::detect() != TraversalIsa::X86_64V3 {
+            return Err(Error::InvalidParameter {
+                name: "traversal isa",
+                reason: "this CPU lacks AVX2, FMA, BMI1/2, LZCNT or POPCNT".into(),
+            });
+        }
+        self.isa = isa;
+        Ok(())
     }
 
     /// Wall-clock time of the whole build (flattening, obvhs build, conversion).
@@ -190,12 +246,22 @@ impl CpuScene {
 
 impl ClosestHitQuery for CpuScene {
     fn closest_hit(&self, ray: &Ray) -> Hit {
+        #[cfg(target_arch = "x86_64")]
+        if self.isa == TraversalIsa::X86_64V3 {
+            // SAFETY: `isa` is X86_64V3 only where `TraversalIsa::detect` found every feature.
+            return unsafe { self.view().closest_hit_x86_64_v3(ray) };
+        }
         self.view().closest_hit(ray)
     }
 }
 
 impl OcclusionQuery for CpuScene {
     fn occluded(&self, ray: &Ray) -> bool {
+        #[cfg(target_arch = "x86_64")]
+        if self.isa == TraversalIsa::X86_64V3 {
+            // SAFETY: as in `closest_hit`.
+            return unsafe { self.view().occluded_x86_64_v3(ray) };
+        }
         self.view().occluded(ray)
     }
 }
@@ -234,5 +300,44 @@ mod tests {
         assert_eq!(&bytemuck::bytes_of(&shared.child_bounds)[8..16], &original.child_max_x);
         assert_eq!(&bytemuck::bytes_of(&shared.child_bounds)[40..48], &original.child_max_z);
         assert!(tree_depth(&cpu.nodes) >= 1);
+    }
+
+    /// Rays from random points of the scene's bounding box in random directions, some of them
+    /// axis-aligned (with ±0 components), with random interval ends.
+    fn random_rays(scene: &Scene, count: u32) -> Vec<Ray> {
+        use raywave_kernels::hash::{pcg3d, unit_float};
+        let (lo, hi) = scene.bounds();
+        (0..count)
+            .map(|i| {
+                let [a, b] = [pcg3d(glam::UVec3::new(i, 1, 5)), pcg3d(glam::UVec3::new(i, 2, 5))];
+                let origin = lo + (hi - lo) * glam::Vec3::new(unit_float(a.x), unit_float(a.y), unit_float(a.z));
+                let mut direction = glam::Vec3::new(unit_float(b.x), unit_float(b.y), unit_float(b.z)) * 2.0 - 1.0;
+                if i % 5 == 0 {
+                    direction =
+                        [glam::Vec3::X, glam::Vec3::NEG_Y, glam::Vec3::new(-0.0, 0.0, 1.0)][(i / 5 % 3) as usize];
+                }
+                let tmax = if b.x & 1 == 0 { 1e30 } else { (hi - lo).length() * unit_float(b.y) };
+                Ray { origin, direction, tmin: 0.0, tmax }
+            })
+            .collect()
+    }
+
+    #[test]
+    fn every_instruction_set_build_gives_identical_hits() {
+        let scene = Scene::load("builtin:hairball").unwrap();
+        let mut cpu = CpuScene::build(&scene).unwrap();
+        let rays = random_rays(&scene, 20_000);
+        cpu.set_traversal_isa(TraversalIsa::Portable).unwrap();
+        let portable: Vec<(Hit, bool)> = rays.iter().map(|r| (cpu.closest_hit(r), cpu.occluded(r))).collect();
+        assert!(portable.iter().filter(|(hit, _)| hit.is_hit()).count() > 1_000, "the rays must hit something");
+        if TraversalIsa::detect() == TraversalIsa::Portable {
+            // Nothing else to compare on this CPU; asking for the other build must fail cleanly.
+            assert!(cpu.set_traversal_isa(TraversalIsa::X86_64V3).is_err());
+            return;
+        }
+        cpu.set_traversal_isa(TraversalIsa::X86_64V3).unwrap();
+        for (ray, expected) in rays.iter().zip(&portable) {
+            assert_eq!((cpu.closest_hit(ray), cpu.occluded(ray)), *expected, "{ray:?}");
+        }
     }
 }

@@ -4,7 +4,7 @@
 mod bvh;
 mod denoise;
 
-pub use bvh::{BvhQuality, CpuScene};
+pub use bvh::{BvhQuality, CpuScene, TraversalIsa};
 
 use crate::backend::{
     check_image_size_common, check_shade_inputs, sampler_probe_len, warp_probe_len, Backend, FrameOutput, StageTiming,

@@ -34,16 +34,11 @@ pub struct CwBvhScene<'a> {
     pub ids: &'a [UVec2],
 }
 
-/// Byte `index` (0–7) of an 8-byte field stored as two little-endian words.
-fn byte8(words: [u32; 2], index: u32) -> u32 {
-    let word = if index < 4 { words[0] } else { words[1] };
-    (word >> ((index & 3) * 8)) & 0xff
-}
-
 /// Planes of four children (word `half` of child-bounds array `array`: 0 = min x … 5 = max z) in
 /// grid cells, moved one cell outwards. The expansion keeps every triangle strictly inside its
 /// child box, so a ray parallel to an axis that lies exactly on a box plane (zero-length slab,
 /// `(q − o)·1/d = 0`) still enters the box; it costs about 1 % larger boxes.
+#[inline(always)]
 fn planes(node: &CwBvhNode, array: u32, half: u32) -> Vec4 {
     let q = unpack_bytes(node.child_bounds[(array * 2 + half) as usize]);
     if array & 1 == 1 {
@@ -55,6 +50,7 @@ fn planes(node: &CwBvhNode, array: u32, half: u32) -> Vec4 {
 
 /// The four bytes of `w`, low byte first, as exact floats in [0, 255].
 #[cfg(not(all(target_arch = "x86_64", target_feature = "sse2")))]
+#[inline(always)]
 fn unpack_bytes(w: u32) -> Vec4 {
     Vec4::new((w & 0xff) as f32, ((w >> 8) & 0xff) as f32, ((w >> 16) & 0xff) as f32, (w >> 24) as f32)
 }
@@ -62,6 +58,7 @@ fn unpack_bytes(w: u32) -> Vec4 {
 /// The four bytes of `w`, low byte first, as exact floats in [0, 255]: the same values as the
 /// portable version, widened in SSE registers (bytes → 16 → 32-bit lanes → floats).
 #[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
+#[inline(always)]
 fn unpack_bytes(w: u32) -> Vec4 {
     use core::arch::x86_64::{
         _mm_cvtepi32_ps, _mm_cvtsi32_si128, _mm_setzero_si128, _mm_unpacklo_epi16, _mm_unpacklo_epi8,
@@ -75,6 +72,7 @@ fn unpack_bytes(w: u32) -> Vec4 {
 }
 
 /// Index of the highest set bit of a non-zero word.
+#[inline(always)]
 fn highest_bit(bits: u32) -> u32 {
     31 - bits.leading_zeros()
 }
@@ -90,6 +88,7 @@ struct BoxRay {
 }
 
 impl BoxRay {
+    #[inline(always)]
     fn new(ray: &Ray) -> Self {
         let d = ray.direction;
         let safe = |c: f32| if c.abs() < MIN_DIRECTION { MIN_DIRECTION.copysign(c) } else { c };
@@ -102,6 +101,7 @@ impl BoxRay {
 
     /// The hit mask of `node`'s children for this ray within `[tmin, tmax]`. Four children are
     /// tested at once as `Vec4` lanes (SSE on the CPU, vector instructions in SPIR-V).
+    #[inline(always)]
     fn intersect(&self, node: &CwBvhNode, tmin: f32, tmax: f32) -> u32 {
         let e = node.exponents_and_imask;
         let cell = Vec3::new(
@@ -124,30 +124,89 @@ impl BoxRay {
             };
             let t_near = slab(0, true).max(slab(1, true)).max(slab(2, true)).max(Vec4::splat(tmin));
             let t_far = slab(0, false).min(slab(1, false)).min(slab(2, false)).min(Vec4::splat(tmax)) * FAR_SLACK;
-            let mut lanes = t_near.cmple(t_far).bitmask();
-            while lanes != 0 {
-                let child = half * 4 + lanes.trailing_zeros();
-                lanes &= lanes - 1;
-                let meta = byte8(node.child_meta, child);
-                let is_internal = meta & 0x18 == 0x18;
-                // Internal children land in bits 24–31, permuted by octant into traversal order;
-                // leaves set their triangle count (unary, top 3 bits) at their triangle offset.
-                let bit = if is_internal { (meta & 0x1f) ^ self.octant_inv } else { meta & 0x1f };
-                hits |= (meta >> 5) << bit;
-            }
+            let lanes = t_near.cmple(t_far).bitmask();
+            hits |= child_hit_bits(node.child_meta[half as usize], lanes, self.octant_inv);
             half += 1;
         }
         hits
     }
 }
 
+/// The hit-mask bits of the four children whose meta bytes are `meta_word` (low byte first) and
+/// whose lanes are set in `lanes`: an internal child sets bit `24 + slot`, its slot permuted by
+/// the ray's inverted octant into traversal order; a leaf sets its triangle count (unary, top 3
+/// meta bits) at its triangle offset; an empty slot (meta 0) sets nothing. The four bytes are
+/// decoded side by side in one word and without branches, so the random hit patterns of
+/// incoherent rays cost no mispredictions.
+#[inline(always)]
+fn child_hit_bits(meta_word: u32, lanes: u32, octant_inv: u32) -> u32 {
+    // Internal children have meta bits 3 and 4 set (slot 24–31); leaf offsets are below 24.
+    let internal = ((meta_word & (meta_word << 1) & 0x1010_1010) >> 4) * 0xff;
+    let bit = (meta_word ^ ((octant_inv * 0x0101_0101) & internal)) & 0x1f1f_1f1f;
+    // Lane k's bit moved to bit 8k (the four products of the multiplication cannot overlap),
+    // widened to a byte mask.
+    let hit = ((lanes * 0x0020_4081) & 0x0101_0101) * 0xff;
+    let count = (meta_word >> 5) & 0x0707_0707 & hit;
+    (count & 0xff) << (bit & 0xff)
+        | ((count >> 8) & 0xff) << ((bit >> 8) & 0xff)
+        | ((count >> 16) & 0xff) << ((bit >> 16) & 0xff)
+        | (count >> 24) << (bit >> 24)
+}
+
 impl CwBvhScene<'_> {
+    #[inline(always)]
     fn triangle_hit(&self, ray: &WatertightRay, index: u32, tmin: f32, tmax: f32) -> Option<(f32, glam::Vec2)> {
         let base = (index * 3) as usize;
         let v0 = Vec3A::from_vec4(self.vertices[base]);
         let v1 = Vec3A::from_vec4(self.vertices[base + 1]);
         let v2 = Vec3A::from_vec4(self.vertices[base + 2]);
         ray.intersect_a(v0, v1, v2, tmin, tmax).map(|h| (h.t, h.barycentrics))
+    }
+}
+
+impl CwBvhScene<'_> {
+    /// Starts loading every child node and triangle a node test found hit, so that their cache
+    /// misses overlap with each other and with the triangle tests that follow instead of
+    /// stalling traversal one after another (measured: +5 % on the sphere field's diffuse rays,
+    /// +11 % on the hairball's).
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    fn prefetch_hit_children(&self, node: &CwBvhNode, hits: u32, octant_inv: u32) {
+        let imask = node.exponents_and_imask >> 24;
+        let mut internal = hits >> 24;
+        while internal != 0 {
+            let bit = internal.trailing_zeros();
+            internal &= internal - 1;
+            prefetch(self.nodes, node.child_base + (imask & !(0xffff_ffffu32 << (bit ^ octant_inv))).count_ones());
+        }
+        let mut triangles = hits & 0x00ff_ffff;
+        while triangles != 0 {
+            let bit = triangles.trailing_zeros();
+            triangles &= triangles - 1;
+            let first_vertex = (node.primitive_base + bit) * 3;
+            prefetch(self.vertices, first_vertex);
+            prefetch(self.vertices, first_vertex + 2);
+        }
+    }
+
+    #[cfg(not(target_arch = "x86_64"))]
+    fn prefetch_hit_children(&self, _node: &CwBvhNode, _hits: u32, _octant_inv: u32) {}
+}
+
+/// Hints the CPU to load the cache lines of `items[index]` into L1 (nothing for an index out of
+/// range).
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn prefetch<T>(items: &[T], index: u32) {
+    use core::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
+    if let Some(item) = items.get(index as usize) {
+        let first = (item as *const T).cast::<i8>();
+        let last = first.wrapping_add(core::mem::size_of::<T>() - 1);
+        // SAFETY: a prefetch is a hint that never faults; the address lies inside `item` anyway.
+        unsafe {
+            _mm_prefetch::<_MM_HINT_T0>(first);
+            _mm_prefetch::<_MM_HINT_T0>(last);
+        }
     }
 }
 
@@ -172,6 +231,7 @@ pub struct TraversalStats {
 impl CwBvhScene<'_> {
     /// Walks the tree front to back. With `any_hit` it returns at the first triangle hit in
     /// `[tmin, tmax]` (occlusion), otherwise it shrinks `tmax` to each closer hit (closest hit).
+    #[inline(always)]
     fn traverse(&self, ray: &Ray, any_hit: bool) -> Found {
         let box_ray = BoxRay::new(ray);
         let tri_ray = WatertightRay::new(ray.origin, ray.direction);
@@ -196,6 +256,7 @@ impl CwBvhScene<'_> {
                 let node = &self.nodes[child as usize];
                 let hits = box_ray.intersect(node, ray.tmin, found.t);
                 found.stats.nodes += 1;
+                self.prefetch_hit_children(node, hits, box_ray.octant_inv);
                 node_group = UVec2::new(node.child_base, (hits & 0xff00_0000) | (node.exponents_and_imask >> 24));
                 triangle_group = UVec2::new(node.primitive_base, hits & 0x00ff_ffff);
             } else {
@@ -236,8 +297,11 @@ impl CwBvhScene<'_> {
     }
 }
 
-impl ClosestHitQuery for CwBvhScene<'_> {
-    fn closest_hit(&self, ray: &Ray) -> Hit {
+impl CwBvhScene<'_> {
+    /// The closest hit, written out where it is called so that each instruction-set build below
+    /// compiles the whole traversal.
+    #[inline(always)]
+    fn closest_hit_inline(&self, ray: &Ray) -> Hit {
         let found = self.traverse(ray, false);
         if found.index == u32::MAX {
             return Hit::MISS;
@@ -245,17 +309,108 @@ impl ClosestHitQuery for CwBvhScene<'_> {
         let id = self.ids[found.index as usize];
         Hit { t: found.t, primitive: id.y, instance: id.x, barycentrics: found.barycentrics }
     }
+
+    /// Whether anything blocks the ray, written out where it is called (see
+    /// [`closest_hit_inline`](Self::closest_hit_inline)).
+    #[inline(always)]
+    fn occluded_inline(&self, ray: &Ray) -> bool {
+        self.traverse(ray, true).index != u32::MAX
+    }
+}
+
+impl ClosestHitQuery for CwBvhScene<'_> {
+    fn closest_hit(&self, ray: &Ray) -> Hit {
+        self.closest_hit_inline(ray)
+    }
 }
 
 impl OcclusionQuery for CwBvhScene<'_> {
     fn occluded(&self, ray: &Ray) -> bool {
-        self.traverse(ray, true).index != u32::MAX
+        self.occluded_inline(ray)
+    }
+}
+
+/// The traversal compiled for x86-64-v3 CPUs (AVX2, FMA, BMI1/2, LZCNT, POPCNT), for hosts that
+/// detect those features at run time: the same source with VEX-encoded vector instructions and
+/// single-instruction population and leading-zero counts. Results are bit-identical to the
+/// portable build, since Rust never contracts a multiply and an add into an FMA.
+#[cfg(target_arch = "x86_64")]
+impl CwBvhScene<'_> {
+    /// [`ClosestHitQuery::closest_hit`] for x86-64-v3.
+    ///
+    /// # Safety
+    /// The CPU must support AVX2, FMA, BMI1, BMI2, LZCNT and POPCNT (check with
+    /// `is_x86_feature_detected!`).
+    #[target_feature(enable = "avx2,fma,bmi1,bmi2,lzcnt,popcnt")]
+    pub unsafe fn closest_hit_x86_64_v3(&self, ray: &Ray) -> Hit {
+        self.closest_hit_inline(ray)
+    }
+
+    /// [`OcclusionQuery::occluded`] for x86-64-v3.
+    ///
+    /// # Safety
+    /// As for [`closest_hit_x86_64_v3`](Self::closest_hit_x86_64_v3).
+    #[target_feature(enable = "avx2,fma,bmi1,bmi2,lzcnt,popcnt")]
+    pub unsafe fn occluded_x86_64_v3(&self, ray: &Ray) -> bool {
+        self.occluded_inline(ray)
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::hash::pcg3d;
+    use glam::UVec3;
+
+    /// The hit-mask bits child by child, as the decoding is specified (one branch per child).
+    fn child_hit_bits_reference(meta_word: u32, lanes: u32, octant_inv: u32) -> u32 {
+        let mut bits = 0;
+        for k in 0..4 {
+            let meta = (meta_word >> (8 * k)) & 0xff;
+            if lanes & (1 << k) == 0 || meta == 0 {
+                continue;
+            }
+            let bit = if meta & 0x18 == 0x18 { (meta & 0x1f) ^ octant_inv } else { meta & 0x1f };
+            bits |= (meta >> 5) << bit;
+        }
+        bits
+    }
+
+    /// A meta byte obvhs can write: empty, internal child `0b001_11xxx`, or a leaf with 1–3
+    /// triangles (unary count in the top bits) at an offset that leaves them below bit 24.
+    fn meta_byte(random: u32) -> u32 {
+        match random % 3 {
+            0 => 0,
+            1 => 0b0011_1000 | ((random >> 2) & 7),
+            _ => {
+                let count = 1 + (random >> 2) % 3;
+                let offset = (random >> 4) % (25 - count);
+                (((1 << count) - 1) << 5) | offset
+            }
+        }
+    }
+
+    #[test]
+    fn word_parallel_child_decoding_matches_child_by_child_decoding() {
+        for i in 0..20_000u32 {
+            let h = pcg3d(UVec3::new(i, 17, 3));
+            let meta_word = (0..4).fold(0, |w, k| w | (meta_byte(h.x >> (8 * k)) << (8 * k)));
+            let (lanes, octant_inv) = (h.y & 0xf, h.z & 7);
+            assert_eq!(
+                child_hit_bits(meta_word, lanes, octant_inv),
+                child_hit_bits_reference(meta_word, lanes, octant_inv),
+                "meta {meta_word:#010x} lanes {lanes:#x} octant {octant_inv}"
+            );
+        }
+        // Every slot internal and hit: the eight octant permutations of bits 24–31.
+        for octant_inv in 0..8 {
+            let all_internal = 0x3b3a_3938; // slots 0–3 of the first half
+            assert_eq!(
+                child_hit_bits(all_internal, 0xf, octant_inv),
+                child_hit_bits_reference(all_internal, 0xf, octant_inv)
+            );
+        }
+    }
 
     #[test]
     fn byte_unpacking_is_exact_and_low_byte_first() {
