@@ -66,6 +66,10 @@ pub struct BuildMeasurement {
     /// BVH nodes + triangle vertices + ids, bytes per triangle (NaN, printed as null, where the
     /// library does not report its memory).
     pub bytes_per_triangle: f64,
+    /// The instruction-set build raywave's CPU traversal runs over this BVH (`portable` or
+    /// `x86-64-v3`, detected at run time); absent for other libraries' builds.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub traversal_isa: Option<&'static str>,
 }
 
 /// The three ray sets of one scene.
@@ -107,8 +111,13 @@ fn ray_sets(scene: &Scene, cpu_scene: &CpuScene, resolution: u32) -> RaySets {
 }
 
 /// Median of `repeats` timings of `run`.
+#[cfg(feature = "vulkan")]
 fn median_seconds(repeats: u32, mut run: impl FnMut() -> f64) -> f64 {
-    let mut times: Vec<f64> = (0..repeats.max(1)).map(|_| run()).collect();
+    median((0..repeats.max(1)).map(|_| run()).collect())
+}
+
+/// The median of a non-empty list of timings.
+fn median(mut times: Vec<f64>) -> f64 {
     times.sort_by(f64::total_cmp);
     times[times.len() / 2]
 }
@@ -199,6 +208,7 @@ pub fn bench_trace(options: &TraceBenchOptions, mut emit: impl FnMut(&dyn BenchL
         triangles: scene.triangle_count(),
         seconds: cpu_scene.build_time().as_secs_f64(),
         bytes_per_triangle: cpu_scene.bytes_per_triangle(),
+        traversal_isa: Some(cpu_scene.traversal_isa().name()),
     });
     #[cfg(feature = "embree")]
     let embree = {
@@ -210,6 +220,7 @@ pub fn bench_trace(options: &TraceBenchOptions, mut emit: impl FnMut(&dyn BenchL
             triangles: scene.triangle_count(),
             seconds: start.elapsed().as_secs_f64(),
             bytes_per_triangle: f64::NAN,
+            traversal_isa: None,
         });
         embree
     };
@@ -222,13 +233,25 @@ pub fn bench_trace(options: &TraceBenchOptions, mut emit: impl FnMut(&dyn BenchL
             .build()
             .map_err(|e| Error::InvalidParameter { name: "threads", reason: e.to_string() })?;
         for (kind, rays) in kinds {
-            let time = |tracer: &dyn CpuTracer| {
-                median_seconds(options.repeats, || pool.install(|| time_cpu(tracer, kind, rays)))
-            };
-            emit(&measurement("raywave-cpu", kind, threads, rays.len(), time(&RaywaveCpu(&cpu_scene))));
-            emit(&measurement("obvhs", kind, threads, rays.len(), time(&ObvhsReference(&cpu_scene))));
-            #[cfg(feature = "embree")]
-            emit(&measurement("embree", kind, threads, rays.len(), time(&embree)));
+            let raywave = RaywaveCpu(&cpu_scene);
+            let obvhs = ObvhsReference(&cpu_scene);
+            let tracers: [(&str, &dyn CpuTracer); _] = [
+                ("raywave-cpu", &raywave),
+                ("obvhs", &obvhs),
+                #[cfg(feature = "embree")]
+                ("embree", &embree),
+            ];
+            // Repetitions interleave the tracers, so that a slow spell of a shared machine lands on
+            // all of them alike and their ratios stay comparable.
+            let mut times = vec![Vec::new(); tracers.len()];
+            for _ in 0..options.repeats.max(1) {
+                for ((_, tracer), times) in tracers.iter().zip(&mut times) {
+                    times.push(pool.install(|| time_cpu(*tracer, kind, rays)));
+                }
+            }
+            for ((name, _), times) in tracers.iter().zip(times) {
+                emit(&measurement(name, kind, threads, rays.len(), median(times)));
+            }
         }
     }
     #[cfg(feature = "vulkan")]
@@ -311,8 +334,9 @@ impl BenchLine for BuildMeasurement {
         serde_json::to_string(self).unwrap_or_default()
     }
     fn row(&self) -> String {
+        let isa = self.traversal_isa.map(|isa| format!(", raywave traversal build {isa}")).unwrap_or_default();
         format!(
-            "{:<20} {} triangles built in {:.3} s, {:.1} bytes/triangle",
+            "{:<20} {} triangles built in {:.3} s, {:.1} bytes/triangle{isa}",
             self.implementation, self.triangles, self.seconds, self.bytes_per_triangle
         )
     }
