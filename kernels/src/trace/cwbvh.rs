@@ -71,6 +71,14 @@ fn unpack_bytes(w: u32) -> Vec4 {
     }
 }
 
+/// Node index of the internal child in `slot` (0–7): internal children are stored contiguously
+/// from `child_base` in slot order, so it is `child_base` plus the internal slots below `slot` in
+/// `imask` (bit i set when slot i is internal).
+#[inline(always)]
+fn internal_child(child_base: u32, imask: u32, slot: u32) -> u32 {
+    child_base + (imask & !(0xffff_ffffu32 << slot)).count_ones()
+}
+
 /// Index of the highest set bit of a non-zero word.
 #[inline(always)]
 fn highest_bit(bits: u32) -> u32 {
@@ -177,7 +185,7 @@ impl CwBvhScene<'_> {
         while internal != 0 {
             let bit = internal.trailing_zeros();
             internal &= internal - 1;
-            prefetch(self.nodes, node.child_base + (imask & !(0xffff_ffffu32 << (bit ^ octant_inv))).count_ones());
+            prefetch(self.nodes, internal_child(node.child_base, imask, bit ^ octant_inv));
         }
         let mut triangles = hits & 0x00ff_ffff;
         while triangles != 0 {
@@ -252,7 +260,7 @@ impl CwBvhScene<'_> {
                     stack_len += 1;
                 }
                 let slot = (bit - 24) ^ box_ray.octant_inv;
-                let child = node_group.x + (imask & 0xff & !(0xffff_ffffu32 << slot)).count_ones();
+                let child = internal_child(node_group.x, imask & 0xff, slot);
                 let node = &self.nodes[child as usize];
                 let hits = box_ray.intersect(node, ray.tmin, found.t);
                 found.stats.nodes += 1;
