@@ -251,15 +251,21 @@ pub struct TraversalStats {
     pub triangles: u32,
 }
 
+/// Whether the traversal tests a node's triangles one iteration later, after the next node test:
+/// their loads, started by the prefetch right after the first test, then have a node test's time
+/// to arrive instead of stalling the triangle test (x86-64 CPU, diffuse rays: +9 % on the
+/// hairball, +13 % on the sphere field; the next node is tested with a `tmax` those triangles
+/// have not shrunk yet, which costs under 2 % more node and triangle tests). Only where that
+/// prefetch exists: lavapipe ran the SPIR-V traversal slower with the deferral (sphere field,
+/// primary rays: 1.7 → 1.2 Mrays/s).
+const DEFER_TRIANGLES: bool = cfg!(target_arch = "x86_64");
+
 impl CwBvhScene<'_> {
     /// Walks the tree front to back. With `any_hit` it returns at the first triangle hit in
     /// `[tmin, tmax]` (occlusion), otherwise it shrinks `tmax` to each closer hit (closest hit).
     ///
-    /// The triangles a node test finds are tested one iteration later, after the next node test:
-    /// their loads, started by the prefetch right after the first test, then have a node test's
-    /// time to arrive instead of stalling the triangle test (measured: +9 % on the hairball's
-    /// diffuse rays, +13 % on the sphere field's). The next node is tested with a `tmax` those
-    /// triangles have not shrunk yet, which costs under 2 % more node and triangle tests.
+    /// On x86-64 ([`DEFER_TRIANGLES`]) the triangles a node test finds are tested one iteration
+    /// later, after the next node test.
     #[inline(always)]
     fn traverse<B: ChildBoxTest>(&self, ray: &Ray, box_ray: &B, any_hit: bool) -> Found {
         let tri_ray = WatertightRay::new(ray.origin, ray.direction);
@@ -271,7 +277,7 @@ impl CwBvhScene<'_> {
         let mut found =
             Found { index: u32::MAX, t: ray.tmax, barycentrics: glam::Vec2::ZERO, stats: TraversalStats::default() };
         loop {
-            // Triangles of the node tested in this iteration, for the next one.
+            // Triangles of the node tested in this iteration, for the next one (when deferring).
             let mut next_triangles = UVec2::ZERO;
             if node_group.y & 0xff00_0000 != 0 {
                 let bit = highest_bit(node_group.y & 0xff00_0000);
@@ -288,7 +294,12 @@ impl CwBvhScene<'_> {
                 found.stats.nodes += 1;
                 self.prefetch_hit_children(node, hits, box_ray.octant_inv());
                 node_group = UVec2::new(node.child_base, (hits & 0xff00_0000) | (node.exponents_and_imask >> 24));
-                next_triangles = UVec2::new(node.primitive_base, hits & 0x00ff_ffff);
+                let node_triangles = UVec2::new(node.primitive_base, hits & 0x00ff_ffff);
+                if DEFER_TRIANGLES {
+                    next_triangles = node_triangles;
+                } else {
+                    triangle_group = node_triangles;
+                }
             } else {
                 // Groups are only pushed with internal hits left, so this is reached only when
                 // nothing remains to expand: the root group is exhausted, or the stack emptied and
@@ -309,6 +320,7 @@ impl CwBvhScene<'_> {
                     }
                 }
             }
+            // (Zero when not deferring: this iteration tested the node's triangles already.)
             triangle_group = next_triangles;
             if node_group.y & 0xff00_0000 == 0 {
                 if stack_len == 0 {
