@@ -5,6 +5,10 @@
 //! operands per child, and the same hit-mask bits — with about half the instructions: one
 //! byte-to-float conversion per plane array instead of two, no per-half broadcasts, and the meta
 //! bytes decoded with per-lane variable shifts instead of word arithmetic.
+//!
+//! Every `unsafe fn` here has one precondition: the CPU supports AVX2. They are `#[inline(always)]`
+//! so that they compile into the caller's x86-64-v3 build; only [`BoxRay8`]'s test calls them, and
+//! a `BoxRay8` exists only where AVX2 was detected.
 
 use super::{BoxRay, ChildBoxTest, FAR_SLACK};
 use core::arch::x86_64::{
