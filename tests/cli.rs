@@ -274,6 +274,8 @@ fn error_vs_time_report_prints_every_method_and_draws_the_plot() {
         let line = lines.iter().find(|l| l["method"] == method && l["spp"] == 1).expect("method present");
         assert_eq!(line["scene"], "builtin:cornell");
         assert!(line["relmse"].as_f64().unwrap().is_finite() && line["ms"].as_f64().unwrap() > 0.0);
+        let flip = line["flip"].as_f64().unwrap();
+        assert!((0.0..=1.0).contains(&flip), "FLIP {flip}");
     }
     // The table ends with the fastest method per error level.
     let table = raywave(&args[..args.len() - 3]);

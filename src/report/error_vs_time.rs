@@ -1,5 +1,5 @@
 //! `raywave report error-vs-time`: the headline result of seed 000 — error (relMSE against a
-//! converged reference) against milliseconds for the stochastic estimator and the ratio
+//! converged reference, and FLIP beside it) against milliseconds for the stochastic estimator and the ratio
 //! estimator, each raw and denoised, at 1 … `max_spp` samples per pixel.
 //!
 //! Methods: `stochastic` (`S_N`), `stochastic+tv` (the TV filter applied to `S_N`, see
@@ -10,6 +10,7 @@
 //! on its frame: the G-buffer's camera rays, the shade and occlusion passes, and the denoiser's
 //! passes (GPU timestamps on Vulkan, wall clock on the CPU), averaged over the repetitions.
 
+use super::flip::mean_flip;
 use super::shade::{accumulate, GBuffer};
 use crate::denoise::{rgb, DenoiseInput, DenoiseMethod};
 use crate::shading::ShadeData;
@@ -38,6 +39,8 @@ pub struct ErrorVsTimeLine {
     pub method: &'static str,
     /// Relative MSE against the reference ([`relmse`]), mean over the repetitions.
     pub relmse: f64,
+    /// Mean FLIP against the reference ([`mean_flip`]), mean over the repetitions.
+    pub flip: f64,
     /// Milliseconds of backend time for the frame, mean over the repetitions.
     pub ms: f64,
 }
@@ -51,8 +54,8 @@ impl ErrorVsTimeLine {
     /// A table row.
     pub fn row(&self) -> String {
         format!(
-            "{:<28} {:>3} spp  {:<14} relMSE {:.6}  {:>9.2} ms",
-            self.scene, self.spp, self.method, self.relmse, self.ms
+            "{:<28} {:>3} spp  {:<14} relMSE {:.6}  FLIP {:.4}  {:>9.2} ms",
+            self.scene, self.spp, self.method, self.relmse, self.flip, self.ms
         )
     }
 }
@@ -136,16 +139,19 @@ pub fn report_error_vs_time(
         let prepared = PreparedScene::new(backend, &scene, options.resolution)?;
         let reference = prepared.reference(backend, options.reference_spp)?;
         for spp in options.spp_steps() {
-            let mut sums = [(0.0, 0.0); METHODS.len()];
+            let side = prepared.resolution;
+            let mut sums = [(0.0, 0.0, 0.0); METHODS.len()];
             for rep in 0..options.reps {
                 for (sum, (image, ms)) in sums.iter_mut().zip(prepared.frame(backend, spp, rep)?) {
                     sum.0 += relmse(&image, &reference);
-                    sum.1 += ms;
+                    sum.1 += mean_flip(&image, &reference, side, side);
+                    sum.2 += ms;
                 }
             }
-            for (method, (relmse, ms)) in METHODS.into_iter().zip(sums) {
+            for (method, (relmse, flip, ms)) in METHODS.into_iter().zip(sums) {
                 let reps = f64::from(options.reps);
-                let line = ErrorVsTimeLine { scene: name.clone(), spp, method, relmse: relmse / reps, ms: ms / reps };
+                let (relmse, flip, ms) = (relmse / reps, flip / reps, ms / reps);
+                let line = ErrorVsTimeLine { scene: name.clone(), spp, method, relmse, flip, ms };
                 emit(&line);
                 lines.push(line);
             }
@@ -323,7 +329,7 @@ mod tests {
     use super::*;
 
     fn line(method: &'static str, spp: u32, relmse: f64, ms: f64) -> ErrorVsTimeLine {
-        ErrorVsTimeLine { scene: "s".to_owned(), spp, method, relmse, ms }
+        ErrorVsTimeLine { scene: "s".to_owned(), spp, method, relmse, flip: 0.0, ms }
     }
 
     #[test]

@@ -2,6 +2,7 @@
 //! one JSON object per line.
 
 pub mod error_vs_time;
+pub mod flip;
 pub mod sampling;
 pub mod scenes;
 pub mod shade;
