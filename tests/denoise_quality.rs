@@ -61,8 +61,7 @@ use raywave::cpu::CpuBackend;
 use raywave::denoise::{DenoiseInput, DenoiseMethod};
 use raywave::kernels::hash::CounterRng;
 use raywave::kernels::sampling::light_select::luminance;
-use raywave::report::error_vs_time::{relmse, PreparedScene, METHODS};
-use raywave::report::flip::mean_flip;
+use raywave::report::error_vs_time::{MethodError, PreparedScene, METHODS};
 use raywave::shared::denoise::MAX_RADIUS;
 use raywave::shared::DenoiseParams;
 use raywave::{Backend, Scene};
@@ -345,48 +344,36 @@ fn reference(backend: &mut CpuBackend, prepared: &PreparedScene, scene_name: &st
 /// `1/√N` at 4 and 8, and 16 = 4R², where the TV filter at R = 2 is the identity.
 const SPP: [u32; 4] = [1, 4, 8, 16];
 
-/// One error metric per method, in [`METHODS`] order.
-type PerMethod = [f64; METHODS.len()];
-
-/// The errors of every method at one sample count: relMSE and FLIP, each the mean over [`SEEDS`].
-struct Errors {
-    spp: u32,
-    relmse: PerMethod,
-    flip: PerMethod,
-}
-
-/// The [`Errors`] at each of [`SPP`].
-fn scene_errors(scene_name: &str) -> Vec<Errors> {
+/// Every method's errors ([`METHODS`] order), means over [`SEEDS`], at each of [`SPP`].
+fn scene_errors(scene_name: &str) -> Vec<(u32, [MethodError; METHODS.len()])> {
     let mut backend = CpuBackend::new();
     let scene = Scene::load(scene_name).expect("built-in scene loads");
     let prepared = PreparedScene::new(&mut backend, &scene, RESOLUTION).expect("G-buffer");
     let reference = reference(&mut backend, &prepared, scene_name);
     SPP.iter()
         .map(|&spp| {
-            let (mut relmse_sums, mut flip_sums) = ([0.0; METHODS.len()], [0.0; METHODS.len()]);
-            for seed in SEEDS {
-                let frame = prepared.frame(&mut backend, spp, seed).expect("frame");
-                for (k, (image, _)) in frame.iter().enumerate() {
-                    relmse_sums[k] += relmse(image, &reference);
-                    flip_sums[k] += mean_flip(image, &reference, RESOLUTION, RESOLUTION);
-                }
+            let errors = prepared.errors(&mut backend, &reference, spp, &SEEDS).expect("frames");
+            for (method, error) in METHODS.iter().zip(&errors) {
+                eprintln!("{scene_name}: {spp:>2} spp {method:<14} relMSE {:.6}  FLIP {:.4}", error.relmse, error.flip);
             }
-            let mean = |sums: PerMethod| sums.map(|s| s / SEEDS.len() as f64);
-            let errors = Errors { spp, relmse: mean(relmse_sums), flip: mean(flip_sums) };
-            for (k, method) in METHODS.iter().enumerate() {
-                eprintln!(
-                    "{scene_name}: {spp:>2} spp {method:<14} relMSE {:.6}  FLIP {:.4}",
-                    errors.relmse[k], errors.flip[k]
-                );
-            }
-            errors
+            (spp, errors)
         })
         .collect()
 }
 
-/// The error of `method`.
-fn of(values: &PerMethod, method: &str) -> f64 {
-    values[METHODS.iter().position(|m| *m == method).expect("a method")]
+/// The errors of `method`.
+fn of(errors: &[MethodError; METHODS.len()], method: &str) -> MethodError {
+    errors[METHODS.iter().position(|m| *m == method).expect("a method")]
+}
+
+/// Asserts that ratio+tv's `metric` is below that of every other method — the raw ratio, the SVGF
+/// baseline and the stochastic image raw and TV-filtered; `what` names the case in the message.
+fn assert_ratio_tv_lowest(errors: &[MethodError; METHODS.len()], metric: fn(&MethodError) -> f64, what: &str) {
+    let ratio_tv = metric(&of(errors, "ratio+tv"));
+    for other in ["ratio", "ratio+svgf", "stochastic+tv", "stochastic"] {
+        let value = metric(&of(errors, other));
+        assert!(ratio_tv < value, "{what}: ratio+tv {ratio_tv} vs {other} {value}");
+    }
 }
 
 /// Asserts what holds on `scene_name`: at every measured spp below 4R², ratio+tv beats the raw
@@ -396,35 +383,26 @@ fn of(values: &PerMethod, method: &str) -> f64 {
 /// documentation), and the same gain in FLIP.
 fn assert_ratio_tv_wins(scene_name: &str) {
     let shipped = DenoiseParams::new(RESOLUTION, RESOLUTION);
-    for Errors { spp, relmse: values, flip } in scene_errors(scene_name) {
-        let ratio_tv = of(&values, "ratio+tv");
+    let relmse = |e: &MethodError| e.relmse;
+    let flip = |e: &MethodError| e.flip;
+    for (spp, errors) in scene_errors(scene_name) {
+        let gain =
+            |metric: fn(&MethodError) -> f64| metric(&of(&errors, "ratio+tv")) / metric(&of(&errors, "stochastic+tv"));
         if spp == 1 {
-            eprintln!("{scene_name}: ratio+tv / stochastic+tv = {:.3}", ratio_tv / of(&values, "stochastic+tv"));
-            let flip_ratio_tv = of(&flip, "ratio+tv");
-            eprintln!(
-                "{scene_name}: FLIP ratio+tv / stochastic+tv = {:.3}",
-                flip_ratio_tv / of(&flip, "stochastic+tv")
-            );
-            for other in ["ratio", "ratio+svgf", "stochastic+tv", "stochastic"] {
-                assert!(
-                    flip_ratio_tv < of(&flip, other),
-                    "{scene_name} at 1 spp: FLIP of ratio+tv {flip_ratio_tv} vs {other} {}",
-                    of(&flip, other)
-                );
-            }
+            eprintln!("{scene_name}: ratio+tv / stochastic+tv = {:.3}", gain(relmse));
+            eprintln!("{scene_name}: FLIP ratio+tv / stochastic+tv = {:.3}", gain(flip));
+            assert_ratio_tv_lowest(&errors, flip, &format!("{scene_name} at 1 spp, FLIP"));
         }
         let params = DenoiseParams { samples_per_pixel: spp, ..shipped };
         if params.tv_filter_is_identity() {
-            assert_eq!(ratio_tv, of(&values, "ratio"), "{scene_name} at {spp} spp: the identity filter");
+            assert_eq!(
+                of(&errors, "ratio+tv").relmse,
+                of(&errors, "ratio").relmse,
+                "{scene_name} at {spp} spp: the identity filter"
+            );
             continue;
         }
-        for other in ["ratio", "ratio+svgf", "stochastic+tv", "stochastic"] {
-            assert!(
-                ratio_tv < of(&values, other),
-                "{scene_name} at {spp} spp: ratio+tv {ratio_tv} vs {other} {}",
-                of(&values, other)
-            );
-        }
+        assert_ratio_tv_lowest(&errors, relmse, &format!("{scene_name} at {spp} spp, relMSE"));
     }
 }
 

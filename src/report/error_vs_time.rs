@@ -1,6 +1,6 @@
 //! `raywave report error-vs-time`: the headline result of seed 000 — error (relMSE against a
-//! converged reference, and FLIP beside it) against milliseconds for the stochastic estimator and the ratio
-//! estimator, each raw and denoised, at 1 … `max_spp` samples per pixel.
+//! converged reference, and FLIP beside it) against milliseconds for the stochastic estimator and
+//! the ratio estimator, each raw and denoised, at 1 … `max_spp` samples per pixel.
 //!
 //! Methods: `stochastic` (`S_N`), `stochastic+tv` (the TV filter applied to `S_N`, see
 //! [`DenoiseInput::stochastic`]), `ratio` (`U · S_N/U_N`), `ratio+tv` (seed 000's TV-guided joint
@@ -124,6 +124,38 @@ impl PreparedScene {
         let ratio_svgf = denoised(DenoiseMethod::Svgf, &input)?;
         Ok(vec![(run.stochastic_image(), base_ms), stochastic_tv, (run.ratio_image(), base_ms), ratio_tv, ratio_svgf])
     }
+
+    /// Every method's error against `reference` and time at `spp` samples, in [`METHODS`]
+    /// order: the means over one [`frame`](Self::frame) per seed of `seeds` (at least one).
+    pub fn errors(
+        &self,
+        backend: &mut dyn Backend,
+        reference: &[Vec3],
+        spp: u32,
+        seeds: &[u32],
+    ) -> Result<[MethodError; METHODS.len()]> {
+        let mut sums = [MethodError::default(); METHODS.len()];
+        for &seed in seeds {
+            for (sum, (image, ms)) in sums.iter_mut().zip(self.frame(backend, spp, seed)?) {
+                sum.relmse += relmse(&image, reference);
+                sum.flip += mean_flip(&image, reference, self.resolution, self.resolution);
+                sum.ms += ms;
+            }
+        }
+        let count = seeds.len().max(1) as f64;
+        Ok(sums.map(|s| MethodError { relmse: s.relmse / count, flip: s.flip / count, ms: s.ms / count }))
+    }
+}
+
+/// One method's error and time, averaged over frames (see [`PreparedScene::errors`]).
+#[derive(Copy, Clone, Debug, Default, PartialEq)]
+pub struct MethodError {
+    /// Relative MSE against the reference ([`relmse`]).
+    pub relmse: f64,
+    /// Mean FLIP against the reference ([`mean_flip`]).
+    pub flip: f64,
+    /// Milliseconds of backend time for the frame.
+    pub ms: f64,
 }
 
 /// Runs the report, handing each line to `emit` as soon as it is measured; returns every line.
@@ -138,19 +170,10 @@ pub fn report_error_vs_time(
         let scene = Scene::load(name)?;
         let prepared = PreparedScene::new(backend, &scene, options.resolution)?;
         let reference = prepared.reference(backend, options.reference_spp)?;
+        let seeds: Vec<u32> = (0..options.reps).collect();
         for spp in options.spp_steps() {
-            let side = prepared.resolution;
-            let mut sums = [(0.0, 0.0, 0.0); METHODS.len()];
-            for rep in 0..options.reps {
-                for (sum, (image, ms)) in sums.iter_mut().zip(prepared.frame(backend, spp, rep)?) {
-                    sum.0 += relmse(&image, &reference);
-                    sum.1 += mean_flip(&image, &reference, side, side);
-                    sum.2 += ms;
-                }
-            }
-            for (method, (relmse, flip, ms)) in METHODS.into_iter().zip(sums) {
-                let reps = f64::from(options.reps);
-                let (relmse, flip, ms) = (relmse / reps, flip / reps, ms / reps);
+            for (method, error) in METHODS.into_iter().zip(prepared.errors(backend, &reference, spp, &seeds)?) {
+                let MethodError { relmse, flip, ms } = error;
                 let line = ErrorVsTimeLine { scene: name.clone(), spp, method, relmse, flip, ms };
                 emit(&line);
                 lines.push(line);
