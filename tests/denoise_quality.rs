@@ -14,7 +14,8 @@
 //! - a noise-free ratio (`S_N = U_N` everywhere): the TV filter returns `U + emitted` exactly.
 //!
 //! **Scene quality** against a converged reference (the ratio estimate at [`REFERENCE_SPP`] spp,
-//! cached under `CARGO_TARGET_TMPDIR`), relMSE averaged over [`SEEDS`], at 128² with the
+//! cached under `CARGO_TARGET_TMPDIR` per build of this test, so a change to the shading code or
+//! its tables never meets a stale reference), relMSE averaged over [`SEEDS`], at 128² with the
 //! footprint `DenoiseParams::new` picks there (R = 2, two à-trous iterations — the 1-spp relMSE
 //! minimum on the Cornell box; the two-light box would prefer R = 3 by 15 %), at each of [`SPP`]: on both built-in scenes the
 //! TV-guided filter of the ratio must beat the raw ratio, the SVGF baseline and the stochastic
@@ -53,8 +54,8 @@
 //! two-light box, 0.18, but ratio+tv then did no better than the raw ratio on the Cornell box: the
 //! wide blur spread lit floor into the umbrae under the blocks.)
 //!
-//! Computing a reference takes about 140 s in the test profile (both at once on two cores); the
-//! cached ones load in milliseconds.
+//! Computing a reference takes about 140 s in the test profile (both at once on two cores), once
+//! per build of this test; the cached ones load in milliseconds.
 
 use glam::{Vec3, Vec4};
 use raywave::cpu::CpuBackend;
@@ -316,12 +317,25 @@ const REFERENCE_SPP: u32 = 4096;
 /// Sampler seeds of the measured frames (the reference uses its own).
 const SEEDS: [u32; 4] = [1, 2, 3, 4];
 
+/// A fingerprint of this test binary: the reference depends on every piece of shading code and
+/// data (the LTC table, the sampler, the kernels) compiled into it, so the cache is keyed on the
+/// binary itself.
+fn build_fingerprint() -> u64 {
+    use std::hash::{Hash, Hasher};
+    let exe = std::env::current_exe().and_then(std::fs::read).expect("read the test binary");
+    let mut hasher = std::collections::hash_map::DefaultHasher::new();
+    exe.hash(&mut hasher);
+    hasher.finish()
+}
+
 /// The reference image of `scene_name`, from the cache under `CARGO_TARGET_TMPDIR` (raw
-/// little-endian f32 RGB) or computed and cached.
+/// little-endian f32 RGB, one file per scene and [`build_fingerprint`]) or computed and cached;
+/// references of other builds are deleted.
 fn reference(backend: &mut CpuBackend, prepared: &PreparedScene, scene_name: &str) -> Vec<Vec3> {
     let file = scene_name.replace(|c: char| !c.is_ascii_alphanumeric(), "_");
-    let path = PathBuf::from(env!("CARGO_TARGET_TMPDIR"))
-        .join(format!("denoise-reference-{file}-{RESOLUTION}px-{REFERENCE_SPP}spp.f32"));
+    let prefix = format!("denoise-reference-{file}-{RESOLUTION}px-{REFERENCE_SPP}spp");
+    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR"));
+    let path = dir.join(format!("{prefix}-{:016x}.f32", build_fingerprint()));
     let pixels = (RESOLUTION * RESOLUTION) as usize;
     if let Ok(bytes) = std::fs::read(&path) {
         if bytes.len() == pixels * 12 {
@@ -337,6 +351,15 @@ fn reference(backend: &mut CpuBackend, prepared: &PreparedScene, scene_name: &st
     let partial = path.with_extension(format!("{}.partial", std::process::id()));
     std::fs::write(&partial, bytes).expect("write the reference");
     std::fs::rename(&partial, &path).expect("cache the reference");
+    let stale = std::fs::read_dir(&dir)
+        .into_iter()
+        .flatten()
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| p != &path && p.file_name().and_then(|n| n.to_str()).is_some_and(|n| n.starts_with(&prefix)));
+    for old in stale {
+        let _ = std::fs::remove_file(old);
+    }
     image
 }
 
