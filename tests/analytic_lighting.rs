@@ -11,10 +11,12 @@
 //! Issue 5's targets: diffuse relative error ≤ 0.5 % (asserted); specular median ≤ 1 % and max
 //! ≤ 5 % at roughness ≥ 0.1, relative to the reference — **not met**: the LTC approximation of the
 //! lobe's tails and of grazing views (the fit's own error, printed by `examples/fit_ltc`) gives
-//! median 10 % and max ≈ 100 % on lights that catch only a lobe tail. The test prints that table
-//! and asserts the error relative to the lobe's albedo, which is what a shaded pixel sees
-//! (`|U_S − ref|·E_S` against `E_S`), at its measured envelope: median ≤ 1 %, 90th percentile
-//! ≤ 5 %, max ≤ 15 % (measured 0.17 %, 4.5 %, 13 %), so a regression of the fit or of the
+//! median 4.2 %, and errors of 30–140 % on lights that catch only a lobe's tail (under 5 % of its
+//! albedo). The test prints that table and asserts the error relative to the lobe's albedo,
+//! which is what a shaded pixel sees (`|U_S − ref|·E_S` against `E_S`), at its measured envelope:
+//! median ≤ 0.5 %, 90th percentile ≤ 2.5 %, max ≤ 10 % (measured 0.14 %, 1.6 %, 9.0 %; with the
+//! FIT_VERSION 1 table, whose frame was not fitted, 0.17 %, 4.5 %, 13 %), and the median relative
+//! to the reference at ≤ 5 % (measured 4.2 %; 10 % before), so a regression of the fit or of the
 //! polygon integration fails.
 
 use glam::{DVec3, Vec3, Vec4};
@@ -226,7 +228,8 @@ fn analytic_u_matches_the_f64_reference() {
         100.0 * max
     );
     let at = |q: f64| energy_errors[((energy_errors.len() - 1) as f64 * q) as usize];
-    assert!(at(0.5) <= 0.01, "specular median error (albedo-relative) {}", at(0.5));
-    assert!(at(0.9) <= 0.05, "specular p90 error (albedo-relative) {}", at(0.9));
-    assert!(at(1.0) <= 0.15, "specular max error (albedo-relative) {}", at(1.0));
+    assert!(at(0.5) <= 0.005, "specular median error (albedo-relative) {}", at(0.5));
+    assert!(at(0.9) <= 0.025, "specular p90 error (albedo-relative) {}", at(0.9));
+    assert!(at(1.0) <= 0.10, "specular max error (albedo-relative) {}", at(1.0));
+    assert!(median <= 0.05, "specular median error (relative to the reference) {median}");
 }
