@@ -23,10 +23,10 @@
 //!   `f·cos/pdf = G2/G1(v)` lies in `[0, 1]` and the moments below converge fast. (ltc_code samples
 //!   `D(h)·cos θ_h` instead; either works for the MIS error.)
 //! * **Moments** of the lobe, by stratified VNDF sampling ([`FitConfig::moment_samples`]² points):
-//!   `magnitude = ∫ f·cos dl` (the directional albedo with F = 1),
-//!   and `fresnel = ∫ f·cos·(1 − v·h)⁵ dl`. With Schlick's Fresnel `F = F0 + (1 − F0)(1 − v·h)⁵` the specular albedo is
-//!   `E_S(F0) = F0·magnitude + (1 − F0)·fresnel`, exactly as ltc_code's shader uses its
-//!   `ltc_2.xy`.
+//!   `magnitude = ∫ f·cos dl` (the directional albedo with F = 1) and
+//!   `fresnel = ∫ f·cos·(1 − v·h)⁵ dl`. With Schlick's Fresnel `F = F0 + (1 − F0)(1 − v·h)⁵` the
+//!   specular albedo is `E_S(F0) = F0·magnitude + (1 − F0)·fresnel`, exactly as ltc_code's shader
+//!   uses its `ltc_2.xy`.
 //! * **LTC form** ([`LtcParams`]). `M = [X Y Z]·K`, `K = [[m11, 0, m13], [0, m22, 0], [0, 0, 1]]`
 //!   (rows), in the frame `Z = (sin ψ, 0, cos ψ)`, `X = (cos ψ, 0, −sin ψ)`, `Y = (0, 1, 0)`. That is
 //!   every transform the table's four `M⁻¹` entries can store, up to scale. **Unlike ltc_code**,
@@ -35,8 +35,8 @@
 //!   up with the surface's, and fixing `Z` leaves up to 10 % of the LTC's mass below the surface
 //!   for views to 78° (where the horizon clipping of `U` drops it; 1.2 % with `ψ` fitted). Freeing
 //!   `ψ` (and the L1 error below) halves the fit's L1 error at roughness 0.6 (0.16 → 0.07 at
-//!   θ = 42°, 0.31 → 0.14 at 65°). At θ = 0 the lobe is
-//!   rotationally symmetric and the fit is isotropic (`ψ = 0`, `m22 = m11`, `m13 = 0`).
+//!   θ = 42°, 0.31 → 0.14 at 65°). At θ = 0 the lobe is rotationally symmetric and the fit is
+//!   isotropic (`ψ = 0`, `m22 = m11`, `m13 = 0`).
 //!   Nelder–Mead works on `p = (ln m11, ln m22, m13/m11, ψ)` (one parameter, `ln m11`, when
 //!   isotropic): the log keeps `m11, m22 > 0` and gives sharp lobes (`m ~ α`) the same relative
 //!   resolution as rough ones; ltc_code optimizes `(m11, m22, m13)` directly with `m ≥ 10⁻⁷`.
@@ -46,7 +46,8 @@
 //!   `∫|f·cos − g|ᵖ`, `p =` [`FitConfig::error_power`]. ltc_code uses `p = 3`; we use `p = 1`,
 //!   because the L1 error bounds what the table is for: for any light `P`,
 //!   `|∫_P f·cos − ∫_P g| ≤ ∫|f·cos − g|`, so a cell's relative L1 error bounds the error of `U`
-//!   relative to the lobe's albedo for every light at once.
+//!   relative to the lobe's albedo for every light at once. (With `ψ` free, `p = 3` and `p = 2`
+//!   also let Nelder–Mead run off on the sharpest rows, to lobes disjoint from the GGX lobe.)
 //! * **Order and warm starts** (as ltc_code): roughness from 1 down to 0; at θ = 0 the fit starts
 //!   from the θ = 0 fit of the next rougher row (`m11 = 1` at r = 1); for θ > 0 from the previous
 //!   θ of the same row (all four parameters). The θ = 0 column is therefore fitted first,
