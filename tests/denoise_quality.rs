@@ -319,13 +319,16 @@ const SEEDS: [u32; 4] = [1, 2, 3, 4];
 
 /// A fingerprint of this test binary: the reference depends on every piece of shading code and
 /// data (the LTC table, the sampler, the kernels) compiled into it, so the cache is keyed on the
-/// binary itself.
+/// binary itself. Computed once per process (the scene tests share it).
 fn build_fingerprint() -> u64 {
-    use std::hash::{Hash, Hasher};
-    let exe = std::env::current_exe().and_then(std::fs::read).expect("read the test binary");
-    let mut hasher = std::collections::hash_map::DefaultHasher::new();
-    exe.hash(&mut hasher);
-    hasher.finish()
+    static FINGERPRINT: std::sync::OnceLock<u64> = std::sync::OnceLock::new();
+    *FINGERPRINT.get_or_init(|| {
+        use std::hash::{Hash, Hasher};
+        let exe = std::env::current_exe().and_then(std::fs::read).expect("read the test binary");
+        let mut hasher = std::collections::hash_map::DefaultHasher::new();
+        exe.hash(&mut hasher);
+        hasher.finish()
+    })
 }
 
 /// The reference image of `scene_name`, from the cache under `CARGO_TARGET_TMPDIR` (raw

@@ -328,14 +328,19 @@ pub struct LtcParams {
     pub psi: f64,
 }
 
+/// The frame `(X, Z)` of angle ψ: `Z = (sin ψ, 0, cos ψ)`, `X = (cos ψ, 0, −sin ψ)`.
+fn frame_at(psi: f64) -> (DVec3, DVec3) {
+    let (sin, cos) = psi.sin_cos();
+    (DVec3::new(cos, 0.0, -sin), DVec3::new(sin, 0.0, cos))
+}
+
 impl LtcParams {
     /// The clamped cosine itself (`M = I`): the warm start of the roughest θ = 0 cell.
     pub const IDENTITY: Self = Self { m11: 1.0, m22: 1.0, m13: 0.0, psi: 0.0 };
 
     /// The frame `(X, Z)`.
     pub fn frame(&self) -> (DVec3, DVec3) {
-        let (sin, cos) = self.psi.sin_cos();
-        (DVec3::new(cos, 0.0, -sin), DVec3::new(sin, 0.0, cos))
+        frame_at(self.psi)
     }
 
     /// The transform `M = [X Y Z]·K`.
@@ -362,7 +367,7 @@ impl LtcParams {
     pub fn from_packed(t: [f32; 4]) -> Self {
         let m = Ltc::from_packed(t).m;
         let psi = (-m.x_axis.z).atan2(m.x_axis.x);
-        let (x, z) = Self { psi, ..Self::IDENTITY }.frame();
+        let (x, z) = frame_at(psi);
         let s = DMat3::from_cols(x, DVec3::Y, z).transpose() * m;
         let m22 = 1.0 / s.z_axis.z;
         Self { m11: s.x_axis.x * m22, m22, m13: s.z_axis.x * m22, psi }
