@@ -90,11 +90,10 @@ fn print_errors(table: &ltc_fit::LtcTable) {
 }
 
 fn check(cfg: &FitConfig, extra: usize) -> ExitCode {
-    use raywave::shared::ltc_table::{LTC_AMPLITUDE, LTC_MATRIX};
     let start = Instant::now();
     let mut cells = ltc_fit::CHECK_CELLS.to_vec();
     cells.extend(ltc_fit::spread_cells(extra));
-    let checks = ltc_fit::check_cells(&cells, &LTC_MATRIX, &LTC_AMPLITUDE, cfg);
+    let checks = ltc_fit::check_cells(&cells, &ltc_fit::PackedTable::committed(), cfg);
     println!("{:>3} {:>3} {:>10} {:>10} {:>10} {:>10}", "row", "col", "L1 dist", "d mag", "d fresnel", "d sphere");
     let mut ok = true;
     for c in &checks {

@@ -9,22 +9,23 @@
 //! standard error is estimated too, and each comparison allows 3σ of it.
 //!
 //! Issue 5's targets: diffuse relative error ≤ 0.5 % (asserted); specular median ≤ 1 % and max
-//! ≤ 5 % at roughness ≥ 0.1, relative to the reference — **not met**: the LTC approximation of the
-//! lobe's tails and of grazing views (the fit's own error, printed by `examples/fit_ltc`) gives
-//! median 4.2 %, and errors of 30–140 % on lights that catch only a lobe's tail (under 5 % of its
-//! albedo). The test prints that table and asserts the error relative to the lobe's albedo,
-//! which is what a shaded pixel sees (`|U_S − ref|·E_S` against `E_S`), at its measured envelope:
-//! median ≤ 0.5 %, 90th percentile ≤ 2.5 %, max ≤ 10 % (measured 0.14 %, 1.6 %, 9.0 %; with the
-//! FIT_VERSION 1 table, whose frame was not fitted, 0.17 %, 4.5 %, 13 %), and the median relative
-//! to the reference at ≤ 5 % (measured 4.2 %; 10 % before), so a regression of the fit or of the
-//! polygon integration fails.
+//! ≤ 5 % at roughness ≥ 0.1, relative to the reference. The median is **met** with the two-lobe
+//! table (FIT_VERSION 3: 0.68 %; one lobe, FIT_VERSION 2: 4.2 %) and asserted; the max is **not**:
+//! lights that catch only a lobe's far tail (every case above 30 % has a reference `U_S` below
+//! 0.006 — a light low on the view's side, or overhead at grazing views) keep errors of
+//! 30–140 %. The test prints that table and
+//! also asserts the error relative to the lobe's albedo, which is what a shaded pixel sees
+//! (`|U_S − ref|·E_S` against `E_S`), at its measured envelope: median ≤ 0.1 %, 90th percentile
+//! ≤ 1.5 %, max ≤ 5 % (measured 0.00 %, 0.87 %, 3.5 %; one lobe 0.14 %, 1.6 %, 9.0 %; ltc_code's
+//! fixed frame 0.17 %, 4.5 %, 13 %), so a regression of the fit or of the polygon integration
+//! fails.
 
 use glam::{DVec3, Vec3, Vec4};
 use rayon::prelude::*;
 use raywave::kernels::hash::{pcg3d, unit_float};
 use raywave::kernels::shade::ltc::{diffuse_form_factor, local_quad, lookup, specular_form_factor, ShadingFrame};
 use raywave::ltc_fit::Ggx;
-use raywave::shared::ltc_table::{LTC_AMPLITUDE, LTC_MATRIX};
+use raywave::shared::ltc_table::packed_entries;
 
 /// Samples per strategy (a 2⁹ × 2⁸ jittered grid).
 const SAMPLES: u32 = 1 << 17;
@@ -134,7 +135,7 @@ fn lights(view: DVec3) -> [(&'static str, Quad); 4] {
 
 #[test]
 fn analytic_u_matches_the_f64_reference() {
-    let table: Vec<Vec4> = LTC_MATRIX.iter().chain(LTC_AMPLITUDE.iter()).map(|&v| Vec4::from_array(v)).collect();
+    let table: Vec<Vec4> = packed_entries().map(Vec4::from_array).collect();
     let grid: Vec<(f32, f32)> = [0.05f32, 0.1, 0.2, 0.35, 0.5, 0.75, 1.0]
         .into_iter()
         .flat_map(|r| [0.0f32, 30.0, 60.0, 80.0, 89.9].into_iter().map(move |t| (r, t)))
@@ -163,7 +164,7 @@ fn analytic_u_matches_the_f64_reference() {
                 let frame = ShadingFrame::new(Vec3::Z, view.as_vec3());
                 let corners = local_quad(&frame, Vec3::ZERO, quad.corner.as_vec3(), quad.u.as_vec3(), quad.v.as_vec3());
                 let lobe = lookup(table, roughness, view.z as f32);
-                let specular = f64::from(lobe.magnitude) * f64::from(specular_form_factor(lobe.inv_m, corners));
+                let specular = f64::from(lobe.magnitude) * f64::from(specular_form_factor(&lobe, corners));
                 let diffuse = f64::from(diffuse_form_factor(corners));
                 Case {
                     roughness,
@@ -228,8 +229,8 @@ fn analytic_u_matches_the_f64_reference() {
         100.0 * max
     );
     let at = |q: f64| energy_errors[((energy_errors.len() - 1) as f64 * q) as usize];
-    assert!(at(0.5) <= 0.005, "specular median error (albedo-relative) {}", at(0.5));
-    assert!(at(0.9) <= 0.025, "specular p90 error (albedo-relative) {}", at(0.9));
-    assert!(at(1.0) <= 0.10, "specular max error (albedo-relative) {}", at(1.0));
-    assert!(median <= 0.05, "specular median error (relative to the reference) {median}");
+    assert!(at(0.5) <= 0.001, "specular median error (albedo-relative) {}", at(0.5));
+    assert!(at(0.9) <= 0.015, "specular p90 error (albedo-relative) {}", at(0.9));
+    assert!(at(1.0) <= 0.05, "specular max error (albedo-relative) {}", at(1.0));
+    assert!(median <= 0.01, "specular median error (relative to the reference) {median}");
 }

@@ -11,7 +11,7 @@ use glam::{UVec2, Vec3, Vec4, Vec4Swizzles};
 use rayon::prelude::*;
 use raywave_kernels::sampling::light_select::LightSet;
 use raywave_kernels::shade::stage::{composite, resolve_surface, shade_sample, ShadeScene, Surface};
-use raywave_shared::ltc_table::{LTC_AMPLITUDE, LTC_MATRIX};
+use raywave_shared::ltc_table::packed_entries;
 use raywave_shared::{Light, LightBvhNode, MaterialParams, SamplerParams, ShadeParams};
 use std::sync::atomic::{AtomicU64, Ordering};
 
@@ -74,7 +74,7 @@ impl ShadeData {
                 triangles.extend(t.map(|v| mesh.positions[v as usize].extend(0.0)));
             }
         }
-        let ltc = LTC_MATRIX.iter().chain(LTC_AMPLITUDE.iter()).map(|&v| Vec4::from_array(v)).collect();
+        let ltc = packed_entries().map(Vec4::from_array).collect();
         static SERIAL: AtomicU64 = AtomicU64::new(0);
         let serial = SERIAL.fetch_add(1, Ordering::Relaxed);
         Ok(Self { materials, lights, light_nodes, light_trails, ltc, triangles, first_triangle, serial })

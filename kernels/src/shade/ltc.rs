@@ -6,26 +6,33 @@
 //! clamped-cosine form factor of the light (the diffuse lobe), and `U_S`, the integral of the
 //! specular LTC lobe over the light. Each is a form factor of the light's corners after a linear
 //! map (identity, or the table's `M⁻¹`), so both come from [`super::polygon::quad_form_factor`].
+//! The table's lobe is a mixture of two LTCs (one clamped cosine has lighter tails than GGX), so
+//! `U_S` is the weighted sum of two such form factors.
 //! With the directional albedos `E_D`, `E_S` the unshadowed radiance is
 //! `U = L · (E_D·U_D + E_S·U_S)`.
 
 use super::polygon::{quad_form_factor, Polygon};
-use glam::{Mat3, Vec3, Vec4};
+use crate::sampling::warp;
+use glam::{Mat3, Vec2, Vec3, Vec4};
 use raywave_shared::ltc_table::LTC_SIZE;
 #[cfg(target_arch = "spirv")]
 use spirv_std::num_traits::Float;
 
-/// Entries of the packed LTC table buffer: `LTC_SIZE²` matrices followed by `LTC_SIZE²`
-/// amplitudes (`raywave_shared::ltc_table::{LTC_MATRIX, LTC_AMPLITUDE}` as `Vec4`s), so the GPU
-/// binds one storage buffer.
-pub const LTC_TABLE_LEN: u32 = 2 * LTC_SIZE * LTC_SIZE;
+/// Entries of the packed LTC table buffer: `LTC_SIZE²` first-lobe matrices, `LTC_SIZE²`
+/// second-lobe matrices, then `LTC_SIZE²` amplitudes (`raywave_shared::ltc_table::packed_entries`
+/// as `Vec4`s), so the GPU binds one storage buffer.
+pub const LTC_TABLE_LEN: u32 = 3 * LTC_SIZE * LTC_SIZE;
 
-/// The fitted GGX lobe at one (roughness, view angle): the normalized `M⁻¹` in the shading frame
-/// and the lobe's amplitude terms.
+/// The fitted GGX lobe at one (roughness, view angle): a mixture `w·D₁ + (1 − w)·D₂` of two LTCs
+/// (their normalized `M⁻¹` in the shading frame) and the lobe's amplitude terms.
 #[derive(Copy, Clone, Debug, PartialEq)]
 pub struct LtcLobe {
-    /// `M⁻¹`, normalized to `m⁻¹₁₁ = 1` (scale does not change the distribution).
+    /// The first LTC's `M⁻¹`, normalized to `m⁻¹₁₁ = 1` (scale does not change the distribution).
     pub inv_m: Mat3,
+    /// The second LTC's `M⁻¹`, normalized likewise.
+    pub inv_m_2: Mat3,
+    /// Weight `w ∈ [0, 1]` of the first LTC.
+    pub weight: f32,
     /// Directional albedo of the GGX BRDF with F = 1: `∫ f·cos dω`.
     pub magnitude: f32,
     /// The Schlick Fresnel weight: specular albedo `E_S = F0·magnitude + (1 − F0)·fresnel`.
@@ -33,9 +40,31 @@ pub struct LtcLobe {
 }
 
 impl LtcLobe {
+    /// A single LTC `inv_m` (both mixture lobes the same) with unit magnitude and no Fresnel term:
+    /// for tests and for callers with their own transform.
+    pub fn single(inv_m: Mat3) -> Self {
+        Self { inv_m, inv_m_2: inv_m, weight: 1.0, magnitude: 1.0, fresnel: 0.0 }
+    }
+
     /// Specular directional albedo `E_S` for normal-incidence reflectance `f0` (RGB).
     pub fn specular_albedo(&self, f0: Vec3) -> Vec3 {
         f0 * self.magnitude + (Vec3::ONE - f0) * self.fresnel
+    }
+
+    /// The mixture's density (sr⁻¹) at the local unit direction `local`.
+    pub fn pdf(&self, local: Vec3) -> f32 {
+        self.weight * warp::ltc_pdf(self.inv_m, local) + (1.0 - self.weight) * warp::ltc_pdf(self.inv_m_2, local)
+    }
+
+    /// A local direction drawn from the mixture with `u ∈ [0,1)²`: `u.x` picks the lobe (the
+    /// first below `w`) and is rescaled to `[0, 1)` for that lobe's own cosine sample. Its
+    /// density is [`LtcLobe::pdf`].
+    pub fn sample(&self, u: Vec2) -> Vec3 {
+        let w = self.weight;
+        let (inv_m, x) = if u.x < w { (self.inv_m, u.x / w) } else { (self.inv_m_2, (u.x - w) / (1.0 - w)) };
+        // 1 − 2⁻²⁴: the largest f32 below 1, where the rescaling rounds up.
+        let x = x.clamp(0.0, 0.99999994);
+        warp::sample_ltc(warp::ltc_inverse(inv_m), Vec2::new(x, u.y))
     }
 }
 
@@ -57,10 +86,13 @@ pub fn lookup(table: &[Vec4], roughness: f32, cos_theta_v: f32) -> LtcLobe {
         let bottom = at(s0 + 1, t0, offset) * (1.0 - ft) + at(s0 + 1, t0 + 1, offset) * ft;
         top * (1.0 - fs) + bottom * fs
     };
-    let m = bilinear(0);
-    let amplitude = bilinear(LTC_SIZE * LTC_SIZE);
+    let inverse = |m: Vec4| Mat3::from_cols(Vec3::new(m.x, 0.0, m.y), Vec3::Y, Vec3::new(m.z, 0.0, m.w));
+    let cells = LTC_SIZE * LTC_SIZE;
+    let amplitude = bilinear(2 * cells);
     LtcLobe {
-        inv_m: Mat3::from_cols(Vec3::new(m.x, 0.0, m.y), Vec3::Y, Vec3::new(m.z, 0.0, m.w)),
+        inv_m: inverse(bilinear(0)),
+        inv_m_2: inverse(bilinear(cells)),
+        weight: amplitude.z,
         magnitude: amplitude.x,
         fresnel: amplitude.y,
     }
@@ -105,23 +137,29 @@ pub fn diffuse_form_factor(quad: [Vec3; 4]) -> f32 {
     quad_form_factor(quad)
 }
 
-/// `U_S`: the integral of the LTC lobe `inv_m` over the quad (local corners `quad`). The quad is
-/// first clipped to the surface's horizon — the BRDF·cos the LTC stands for is zero below it,
+/// `U_S`: the integral of the LTC mixture `lobe` over the quad (local corners `quad`). The quad
+/// is first clipped to the surface's horizon — the BRDF·cos the LTC stands for is zero below it,
 /// while the LTC itself is not (its support is the half-space `(M⁻¹ω).z > 0`), so a light
 /// crossing the horizon would otherwise collect lobe mass that does not exist — then mapped by
-/// `M⁻¹` and integrated as a form factor (which clips it again, in the cosine's space).
-pub fn specular_form_factor(inv_m: Mat3, quad: [Vec3; 4]) -> f32 {
-    Polygon::quad(quad).clip_to_horizon().map(|q| inv_m * q).form_factor()
+/// each lobe's `M⁻¹` and integrated as a form factor (which clips it again, in the cosine's
+/// space); the two form factors are mixed by the lobe's weight.
+pub fn specular_form_factor(lobe: &LtcLobe, quad: [Vec3; 4]) -> f32 {
+    let clipped = Polygon::quad(quad).clip_to_horizon();
+    let (inv_m, inv_m_2) = (lobe.inv_m, lobe.inv_m_2);
+    let first = clipped.map(|q| inv_m * q).form_factor();
+    let second = clipped.map(|q| inv_m_2 * q).form_factor();
+    lobe.weight * first + (1.0 - lobe.weight) * second
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use raywave_shared::ltc_table::{LTC_AMPLITUDE, LTC_MATRIX};
+    use crate::hash::{pcg3d, unit_float};
+    use raywave_shared::ltc_table::{packed_entries, LTC_AMPLITUDE, LTC_MATRIX, LTC_MATRIX_2};
     use std::vec::Vec;
 
     fn table() -> Vec<Vec4> {
-        LTC_MATRIX.iter().chain(LTC_AMPLITUDE.iter()).map(|&v| Vec4::from_array(v)).collect()
+        packed_entries().map(Vec4::from_array).collect()
     }
 
     #[test]
@@ -132,12 +170,14 @@ mod tests {
             let t = col as f32 / 63.0;
             let lobe = lookup(&table, roughness, 1.0 - t * t);
             let i = (row * 64 + col) as usize;
-            let m = LTC_MATRIX[i];
-            let got = [lobe.inv_m.x_axis.x, lobe.inv_m.x_axis.z, lobe.inv_m.z_axis.x, lobe.inv_m.z_axis.z];
-            for k in 0..4 {
-                assert!((got[k] - m[k]).abs() <= 1e-4 * m[k].abs().max(1.0), "({row},{col}) {got:?} vs {m:?}");
+            for (inv_m, m) in [(lobe.inv_m, LTC_MATRIX[i]), (lobe.inv_m_2, LTC_MATRIX_2[i])] {
+                let got = [inv_m.x_axis.x, inv_m.x_axis.z, inv_m.z_axis.x, inv_m.z_axis.z];
+                for k in 0..4 {
+                    assert!((got[k] - m[k]).abs() <= 1e-4 * m[k].abs().max(1.0), "({row},{col}) {got:?} vs {m:?}");
+                }
             }
             assert!((lobe.magnitude - LTC_AMPLITUDE[i][0]).abs() < 1e-4);
+            assert!((lobe.weight - LTC_AMPLITUDE[i][2]).abs() < 1e-4);
         }
     }
 
@@ -145,16 +185,57 @@ mod tests {
     fn identity_lobe_is_the_diffuse_form_factor_and_a_hemisphere_light_catches_the_lobe() {
         let frame = ShadingFrame::new(Vec3::Y, Vec3::new(0.6, 0.8, 0.0));
         let quad = local_quad(&frame, Vec3::ZERO, Vec3::new(-0.3, 1.0, -0.2), Vec3::X * 0.5, Vec3::Z * 0.4);
-        assert_eq!(specular_form_factor(Mat3::IDENTITY, quad), diffuse_form_factor(quad));
+        assert_eq!(specular_form_factor(&LtcLobe::single(Mat3::IDENTITY), quad), diffuse_form_factor(quad));
         // A huge light over the hemisphere holds (nearly) the whole LTC lobe at normal incidence.
         let table = table();
         for roughness in [0.1f32, 0.5, 1.0] {
             let lobe = lookup(&table, roughness, 1.0);
             let frame = ShadingFrame::new(Vec3::Z, Vec3::Z);
             let big = local_quad(&frame, Vec3::ZERO, Vec3::new(-1e4, -1e4, 1.0), Vec3::X * 2e4, Vec3::Y * 2e4);
-            let u = specular_form_factor(lobe.inv_m, big);
+            let u = specular_form_factor(&lobe, big);
             assert!((u - 1.0).abs() < 2e-3, "roughness {roughness}: {u}");
         }
+    }
+
+    #[test]
+    fn mixture_sampling_matches_its_pdf_and_form_factor() {
+        // Two different lobes, 30 % / 70 %: a tilted sharp one and a wide one.
+        let lobe = LtcLobe {
+            inv_m: Mat3::from_cols(Vec3::new(4.0, 0.0, -1.0), Vec3::Y, Vec3::new(1.5, 0.0, 0.3)),
+            inv_m_2: Mat3::from_cols(Vec3::new(1.0, 0.0, 0.0), Vec3::Y, Vec3::new(0.2, 0.0, 1.5)),
+            weight: 0.3,
+            ..LtcLobe::single(Mat3::IDENTITY)
+        };
+        let quad = [
+            Vec3::new(-0.2, -0.5, 1.0),
+            Vec3::new(0.8, -0.5, 1.0),
+            Vec3::new(0.8, 0.5, 1.0),
+            Vec3::new(-0.2, 0.5, 1.0),
+        ];
+        // The quad spans x ∈ [−0.2, 0.8], y ∈ [−0.5, 0.5] on the plane z = 1.
+        let through_quad = |l: Vec3| {
+            let p = l / l.z;
+            l.z > 0.0 && (-0.2..=0.8).contains(&p.x) && (-0.5..=0.5).contains(&p.y)
+        };
+        let n = 1u32 << 18;
+        let (mut hits, mut ratio_1, mut ratio_2) = (0u32, 0.0f64, 0.0f64);
+        for i in 0..n {
+            let h = pcg3d(glam::UVec3::new(i, 7, 11));
+            let l = lobe.sample(Vec2::new(unit_float(h.x), unit_float(h.y)));
+            let pdf = lobe.pdf(l);
+            assert!(pdf > 0.0 && l.is_finite(), "{l} {pdf}");
+            // E[p_k/p] = ∫ p_k = 1 for each lobe: the pdf is the density the sampler draws from.
+            ratio_1 += f64::from(warp::ltc_pdf(lobe.inv_m, l) / pdf);
+            ratio_2 += f64::from(warp::ltc_pdf(lobe.inv_m_2, l) / pdf);
+            hits += u32::from(through_quad(l));
+        }
+        let (ratio_1, ratio_2) = (ratio_1 / f64::from(n), ratio_2 / f64::from(n));
+        assert!((ratio_1 - 1.0).abs() < 0.02 && (ratio_2 - 1.0).abs() < 0.02, "{ratio_1} {ratio_2}");
+        // The fraction of samples through the quad is the mixture's form factor (4σ binomial).
+        let fraction = f64::from(hits) / f64::from(n);
+        let form_factor = f64::from(specular_form_factor(&lobe, quad));
+        let sigma = (form_factor * (1.0 - form_factor) / f64::from(n)).sqrt();
+        assert!((fraction - form_factor).abs() < 4.0 * sigma, "{fraction} vs {form_factor} ± {sigma}");
     }
 
     #[test]
@@ -162,10 +243,11 @@ mod tests {
         let table = table();
         for (roughness, cos_v) in [(0.0, 1.0), (0.0, 0.0), (1.0, 0.0), (f32::NAN, f32::NAN), (-1.0, 2.0)] {
             let lobe = lookup(&table, roughness, cos_v);
-            assert!(lobe.inv_m.is_finite() && lobe.magnitude.is_finite() && lobe.fresnel.is_finite());
+            assert!(lobe.inv_m.is_finite() && lobe.inv_m_2.is_finite() && lobe.weight.is_finite());
+            assert!(lobe.magnitude.is_finite() && lobe.fresnel.is_finite());
             let frame = ShadingFrame::new(Vec3::Z, Vec3::new(1.0, 0.0, 1e-7).normalize());
             let quad = local_quad(&frame, Vec3::ZERO, Vec3::new(-1.0, -1.0, 0.5), Vec3::X * 2.0, Vec3::Y * 2.0);
-            let u = specular_form_factor(lobe.inv_m, quad);
+            let u = specular_form_factor(&lobe, quad);
             assert!(u.is_finite() && (0.0..=1.0).contains(&u), "{roughness} {cos_v}: {u}");
         }
         // View along the normal: any tangent, still orthonormal.

@@ -120,7 +120,7 @@ struct Lobes {
     diffuse: Vec3,
     /// Specular albedo `E_S` from the table's magnitude and Fresnel terms.
     specular: Vec3,
-    /// The LTC lobe (`M⁻¹` in `frame`).
+    /// The LTC lobe (a two-LTC mixture, each `M⁻¹` in `frame`).
     ltc: LtcLobe,
     frame: ShadingFrame,
 }
@@ -142,13 +142,13 @@ impl Lobes {
         if !(local.z > 0.0) {
             return Vec3::ZERO;
         }
-        self.diffuse * warp::cosine_hemisphere_pdf(local) + self.specular * warp::ltc_pdf(self.ltc.inv_m, local)
+        self.diffuse * warp::cosine_hemisphere_pdf(local) + self.specular * self.ltc.pdf(local)
     }
 
     /// The two lobes' densities at `w`: (diffuse, specular).
     fn pdfs(&self, w: Vec3) -> (f32, f32) {
         let local = self.frame.to_local(w);
-        (warp::cosine_hemisphere_pdf(local), warp::ltc_pdf(self.ltc.inv_m, local))
+        (warp::cosine_hemisphere_pdf(local), self.ltc.pdf(local))
     }
 
     fn world_direction(&self, local: Vec3) -> Vec3 {
@@ -169,7 +169,7 @@ fn hit_probabilities(light: &Light, p: Vec3, lobes: &Lobes) -> (f32, f32) {
         return (0.0, 0.0);
     }
     let quad = ltc::local_quad(&lobes.frame, p, light.position.xyz(), light.edge_u.xyz(), light.edge_v.xyz());
-    (ltc::diffuse_form_factor(quad), ltc::specular_form_factor(lobes.ltc.inv_m, quad))
+    (ltc::diffuse_form_factor(quad), ltc::specular_form_factor(&lobes.ltc, quad))
 }
 
 /// The shade stage for one camera sample at `pixel` looking along `view_direction` (from the
@@ -225,11 +225,7 @@ pub fn shade_sample(
     let p_brdf = u_s + (u_d - u_s) * p_diff;
 
     let direction = if strategy.x < p_brdf {
-        let local = if strategy.y < p_diff {
-            warp::sample_cosine_hemisphere(u)
-        } else {
-            warp::sample_ltc(warp::ltc_inverse(lobes.ltc.inv_m), u)
-        };
+        let local = if strategy.y < p_diff { warp::sample_cosine_hemisphere(u) } else { lobes.ltc.sample(u) };
         lobes.world_direction(local).normalize_or_zero()
     } else {
         warp::sample_quad_spherical(p, corner, eu, ev, u).direction
@@ -288,12 +284,12 @@ pub fn composite(analytic: Vec3, unshadowed: Vec3, shadowed: Vec3, emitted: Vec3
 mod tests {
     use super::*;
     use crate::sampling::light_select::LightSet;
-    use raywave_shared::ltc_table::{LTC_AMPLITUDE, LTC_MATRIX};
+    use raywave_shared::ltc_table::packed_entries;
     use raywave_shared::sampling::{sampler_kind, SamplerParams};
     use std::vec::Vec;
 
     fn table() -> Vec<Vec4> {
-        LTC_MATRIX.iter().chain(LTC_AMPLITUDE.iter()).map(|&v| Vec4::from_array(v)).collect()
+        packed_entries().map(Vec4::from_array).collect()
     }
 
     fn material(base: Vec3, roughness: f32, metallic: f32) -> MaterialParams {
