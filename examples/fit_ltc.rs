@@ -62,7 +62,7 @@ fn main() -> ExitCode {
 
 /// Prints the relative L1 error `∫|f·cos − g|/∫f·cos` per roughness row (median and max over θ).
 fn print_errors(table: &ltc_fit::LtcTable) {
-    println!("relative L1 error of the LTC vs the GGX lobe, ∫|f·cos − g| / ∫f·cos, per roughness row:");
+    println!("relative L1 error of the two-lobe LTC vs the GGX lobe, ∫|f·cos − g| / ∫f·cos, per roughness row:");
     println!("{:>3} {:>6} {:>9} {:>8} {:>8} {:>8} {:>6}", "row", "r", "alpha", "median", "p90", "max", "at col");
     for a in 0..LTC_SIZE {
         let (median, p90, max) = ltc_fit::row_error_stats(table, a);
