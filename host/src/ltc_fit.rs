@@ -349,7 +349,7 @@ fn frame_at(psi: f64) -> (DVec3, DVec3) {
 }
 
 impl LtcParams {
-    /// The clamped cosine itself (`M = I`): the warm start of the roughest θ = 0 cell.
+    /// The clamped cosine itself (`M = I`): the first lobe of [`LtcMixture::START`].
     pub const IDENTITY: Self = Self { m11: 1.0, m22: 1.0, m13: 0.0, psi: 0.0 };
 
     /// The frame `(X, Z)`.
@@ -389,8 +389,8 @@ impl LtcParams {
 }
 
 /// The fitted model of one cell: a mixture of two LTCs, `weight·D₀ + (1 − weight)·D₁`. One
-/// clamped cosine has lighter tails than GGX, so a single LTC misses the lobe's far side and its
-/// back-scatter; a second, wider lobe carries them (see the module documentation).
+/// clamped cosine has lighter tails than GGX; the second lobe follows more of them (see the
+/// module documentation for what it gains and what it does not).
 #[derive(Copy, Clone, Debug, PartialEq)]
 pub struct LtcMixture {
     /// The two lobes' transforms.
@@ -433,11 +433,6 @@ impl LtcMixtureDensity {
     /// `weight·p0 + (1 − weight)·p1`.
     fn mix(&self, p0: f64, p1: f64) -> f64 {
         self.weight * p0 + (1.0 - self.weight) * p1
-    }
-
-    /// Recovers the density from its stored entries.
-    pub fn from_packed(m0: [f32; 4], m1: [f32; 4], weight: f32) -> Self {
-        Self { ltcs: [Ltc::from_packed(m0), Ltc::from_packed(m1)], weight: f64::from(weight) }
     }
 }
 
@@ -987,8 +982,7 @@ impl PackedTable<'_> {
 
     /// Its density.
     pub fn density(&self, a: usize, t: usize) -> LtcMixtureDensity {
-        let i = cell_index(a, t);
-        LtcMixtureDensity::from_packed(self.matrix[i], self.matrix_2[i], self.amplitude[i][2])
+        self.mixture(a, t).density()
     }
 }
 
@@ -1142,9 +1136,8 @@ pub fn check_cells(cells: &[(usize, usize)], table: &PackedTable<'_>, cfg: &FitC
         .par_iter()
         .map(|&(a, t)| {
             let refit = fit_cell(a, t, committed_warm_start(a, t, table), cfg);
-            let [m0, m1] = refit.packed_matrices();
             let amp = refit.packed_amplitude();
-            let fresh = LtcMixtureDensity::from_packed(m0, m1, amp[2]);
+            let fresh = refit.stored_mixture().density();
             let committed = table.amplitude[cell_index(a, t)];
             CellCheck {
                 refit,

@@ -135,20 +135,14 @@ impl Lobes {
         Lobes { diffuse: base * (1.0 - metallic), specular: ltc.specular_albedo(f0), ltc, frame }
     }
 
-    /// The BRDF·cos the estimates evaluate at world direction `w`: `E_D·cos/π + E_S·D_LTC`,
-    /// zero below the horizon (see the module documentation).
-    fn eval(&self, w: Vec3) -> Vec3 {
+    /// At world direction `w`: the BRDF·cos the estimates evaluate, `E_D·cos/π + E_S·D_LTC` (zero
+    /// below the horizon, see the module documentation), and the two lobes' densities (diffuse,
+    /// specular) — one evaluation of the LTC mixture serves both.
+    fn eval_and_pdfs(&self, w: Vec3) -> (Vec3, f32, f32) {
         let local = self.frame.to_local(w);
-        if !(local.z > 0.0) {
-            return Vec3::ZERO;
-        }
-        self.diffuse * warp::cosine_hemisphere_pdf(local) + self.specular * self.ltc.pdf(local)
-    }
-
-    /// The two lobes' densities at `w`: (diffuse, specular).
-    fn pdfs(&self, w: Vec3) -> (f32, f32) {
-        let local = self.frame.to_local(w);
-        (warp::cosine_hemisphere_pdf(local), self.ltc.pdf(local))
+        let (pdf_diffuse, pdf_specular) = (warp::cosine_hemisphere_pdf(local), self.ltc.pdf(local));
+        let f = if local.z > 0.0 { self.diffuse * pdf_diffuse + self.specular * pdf_specular } else { Vec3::ZERO };
+        (f, pdf_diffuse, pdf_specular)
     }
 
     fn world_direction(&self, local: Vec3) -> Vec3 {
@@ -231,11 +225,10 @@ pub fn shade_sample(
         warp::sample_quad_spherical(p, corner, eu, ev, u).direction
     };
     let distance = warp::quad_ray_distance(p, corner, eu, ev, direction);
-    let f = lobes.eval(direction);
+    let (f, pdf_diffuse, pdf_specular) = lobes.eval_and_pdfs(direction);
     if !(distance > 0.0) || f == Vec3::ZERO {
         return result;
     }
-    let (pdf_diffuse, pdf_specular) = lobes.pdfs(direction);
     let pdf_brdf = pdf_specular + (pdf_diffuse - pdf_specular) * p_diff;
     let pdf_light = warp::quad_spherical_pdf(p, corner, eu, ev, direction);
     let pdf = (pdf_light + (pdf_brdf - pdf_light) * p_brdf) * choice.pmf;
