@@ -52,10 +52,10 @@
 //!   Tried on single cells and rejected (no better `U` against the f64 reference): a fitted
 //!   scale above the horizon (so a mixture may straddle it at grazing views; the fit keeps the
 //!   scale within 1 ± 0.08 and the error at roughness 0.35, θ = 90° stays at relative L1 0.31);
-//!   13 more starts per grazing cell, 12 of them random (best 0.31 there, 0.12 for 0.13 at roughness
-//!   0.49, 79.5°); and tail-weighted errors `|f·cos − g|/√(f·cos + g)` or `/(f·cos + g)`, which
-//!   trade the lobe's peak for its tails (a mirror-direction light's error 0.4 % → 5–27 %) or
-//!   diverge at sharp roughness.
+//!   13 more starts per grazing cell, 12 of them random (best 0.31 there, 0.12 for 0.13 at
+//!   roughness 0.49, 79.5°); and tail-weighted errors `|f·cos − g|/√(f·cos + g)` or
+//!   `/(f·cos + g)`, which trade the lobe's peak for its tails (a mirror-direction light's error
+//!   0.4 % → 5–27 %) or diverge at sharp roughness.
 //! * **Error** (minimized): `Σ |f·cos − g|ᵖ/(pdf₁ + pdf₂ + pdf_brdf)` over `n²` directions drawn
 //!   from each LTC lobe and `n²` BRDF-sampled ones (stratified grids, `n =`
 //!   [`FitConfig::fit_samples`]), divided by `n²`: the balance-heuristic estimate of
