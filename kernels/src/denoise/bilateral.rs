@@ -44,6 +44,13 @@ pub trait FilterLine {
 /// blur's bias at shadow edges — which the TV estimate cannot tell from noise, since a clean edge
 /// has second differences at any `N` — shrinks with it. Without it the filter kept blurring edges
 /// at 16 spp and more, and the raw ratio beat it there (measured in `tests/denoise_quality.rs`).
+/// A slower narrowing trades one built-in scene against the other (`raywave report
+/// error-vs-time`, 128², R = 2, ratio+tv relMSE at 2/4/8/16 spp): `N^(−1/3)` costs the Cornell
+/// box 5/11/10/27 % (its small light's penumbrae make the blur's bias dominate) and gains the
+/// two-light box 7/15/40/34 % (light selection keeps its ratio noisy; at 16 spp both against
+/// the unfiltered ratio, where `N^(−1/2)` has switched the filter off); `N^(−1/4)` costs
+/// 8–89 % and gains 9–43 %. The exponent cannot see which case a pixel is in; a per-pixel
+/// sample variance of the ratio could, and would need its own buffer through the stages.
 pub fn gaussian_radius(noise: f32, radius: u32, samples_per_pixel: u32) -> f32 {
     let width = (1.5 * noise).clamp(0.0, 1.0) * radius.clamp(1, MAX_RADIUS) as f32;
     width / (samples_per_pixel.max(1) as f32).sqrt()
