@@ -46,8 +46,8 @@ pub trait FilterLine {
 /// at 16 spp and more, and the raw ratio beat it there (measured in `tests/denoise_quality.rs`).
 /// A slower narrowing trades one built-in scene against the other (`raywave report
 /// error-vs-time`, 128², R = 2, ratio+tv relMSE at 2/4/8/16 spp): `N^(−1/3)` costs the Cornell
-/// box 5/11/10/27 % (its small light's penumbrae make the blur's bias dominate) and gains the
-/// two-light box 7/15/40/34 % (light selection keeps its ratio noisy; at 16 spp both against
+/// box 5/11/10/27 % (the wider blur's bias outweighs the variance it removes) and gains the
+/// two-light box 7/15/40/34 % (its raw ratio is 8× noisier at 16 spp; at 16 spp both against
 /// the unfiltered ratio, where `N^(−1/2)` has switched the filter off); `N^(−1/4)` costs
 /// 8–89 % and gains 9–43 %. The exponent cannot see which case a pixel is in; a per-pixel
 /// sample variance of the ratio could, and would need its own buffer through the stages.
