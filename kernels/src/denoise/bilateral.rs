@@ -49,8 +49,19 @@ pub trait FilterLine {
 /// box 5/11/10/27 % (the wider blur's bias outweighs the variance it removes) and gains the
 /// two-light box 7/15/40/34 % (its raw ratio is 8× noisier at 16 spp; at 16 spp both against
 /// the unfiltered ratio, where `N^(−1/2)` has switched the filter off); `N^(−1/4)` costs
-/// 8–89 % and gains 9–43 %. The exponent cannot see which case a pixel is in; a per-pixel
-/// sample variance of the ratio could, and would need its own buffer through the stages.
+/// 8–89 % and gains 9–43 %.
+///
+/// A per-pixel sample variance does not tell the cases apart either (measured with the same
+/// report; the ratio's standard error `σ̂` by the delta method from per-pixel luminance moments of
+/// `S_N` and `U_N`, its 3×3 RMS, in place of `1/√N` from 2 spp on, the filter running at every
+/// `N`): `max(1/√N, min(1, 2σ̂))`, which widens only pixels noisier than one binary sample,
+/// changed either scene by at most 2 % — the two-light box's raw ratio is noisier because more
+/// of its pixels are in penumbra, not because they are noisier; `min(1, 4σ̂)` gained the
+/// two-light box 27/23/6 % at 8/16/32 spp and cost the Cornell box 14/26/14/6 % at 2/4/8/16;
+/// the unblurred `σ̂` of a few samples, often 0 in a penumbra, left noisy pixels unfiltered
+/// (2.8× and 7.8× the error at 2 spp). What separates the scenes is signal — the blur's bias at
+/// the Cornell box's contact shadows — which neither the TV estimate nor a variance can tell
+/// from noise.
 pub fn gaussian_radius(noise: f32, radius: u32, samples_per_pixel: u32) -> f32 {
     let width = (1.5 * noise).clamp(0.0, 1.0) * radius.clamp(1, MAX_RADIUS) as f32;
     width / (samples_per_pixel.max(1) as f32).sqrt()
