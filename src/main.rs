@@ -360,10 +360,7 @@ fn render_command(args: RenderArgs) -> raywave::Result<()> {
         out: args.out,
         exr: args.exr,
         stochastic: args.stochastic,
-        denoise: match args.denoise.as_str() {
-            "none" => None,
-            other => Some(other.parse()?),
-        },
+        denoise: args.denoise.parse()?,
         backend: BackendOptions { validation: args.validate, trace },
     };
     let report = render(&options)?;

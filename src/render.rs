@@ -62,9 +62,9 @@ pub struct RenderOptions {
     pub exr: Option<PathBuf>,
     /// Also write the fully stochastic image (`S_N`, no ratio) as PNG here, for comparison.
     pub stochastic: Option<PathBuf>,
-    /// The denoiser of the shadow ratio ([`DenoiseMethod::Tv`] by default); `None` composites
-    /// the raw `U · S_N/U_N`.
-    pub denoise: Option<DenoiseMethod>,
+    /// The denoiser of the shadow ratio ([`DenoiseMethod::Tv`] by default;
+    /// [`DenoiseMethod::None`] composites the raw `U · S_N/U_N`).
+    pub denoise: DenoiseMethod,
     /// Backend options (validation layers).
     pub backend: BackendOptions,
 }
@@ -166,22 +166,17 @@ pub fn render(options: &RenderOptions) -> Result<RenderReport> {
         }
         stream_bytes += pass_bytes;
     }
-    let image = match options.denoise {
-        Some(method) => {
-            let params = DenoiseParams {
-                seed: options.seed,
-                samples_per_pixel: accumulator.samples(),
-                ..DenoiseParams::new(width, height)
-            };
-            let (color, pass_timings) =
-                backend.denoise(method, &params, &DenoiseInput::new(&surfaces, &accumulator))?;
-            for t in pass_timings {
-                add_timing(&mut timings, t.stage, t.seconds);
-            }
-            rgb(&color)
-        }
-        None => accumulator.ratio_image(),
+    let params = DenoiseParams {
+        seed: options.seed,
+        samples_per_pixel: accumulator.samples(),
+        ..DenoiseParams::new(width, height)
     };
+    let (color, pass_timings) =
+        backend.denoise(options.denoise, &params, &DenoiseInput::new(&surfaces, &accumulator))?;
+    for t in pass_timings {
+        add_timing(&mut timings, t.stage, t.seconds);
+    }
+    let image = rgb(&color);
     output.finish_png(&srgb_image(&image, width, height))?;
     if let Some(exr) = exr {
         exr.finish_exr(&image, width, height)?;

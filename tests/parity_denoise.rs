@@ -235,14 +235,14 @@ fn run(backend: &mut dyn Backend, case: &Case) -> Vec<Vec4> {
     // à-trous iterations (4, Falcor's, with the full radius) and the composite.
     let atrous = case.params.atrous_iterations.clamp(1, MAX_ATROUS_ITERATIONS) as usize;
     let required: &[(&str, usize)] = match case.method {
-        DenoiseMethod::Tv if case.params.tv_filter_is_identity() => &[("denoise composite", 1)],
-        DenoiseMethod::Tv => &[
+        DenoiseMethod::Tv if !case.params.tv_filter_is_identity() => &[
             ("denoise noise", 1),
             ("denoise noise blur", 1),
             ("denoise bilateral x", 1),
             ("denoise bilateral y", 1),
             ("denoise composite", 1),
         ],
+        DenoiseMethod::Tv | DenoiseMethod::None => &[("denoise composite", 1)],
         DenoiseMethod::Svgf => &[("svgf atrous", atrous), ("svgf composite", 1)],
     };
     for &(pass, count) in required {

@@ -20,6 +20,10 @@ pub enum DenoiseMethod {
     /// (`params.atrous_iterations`, Falcor's 4 on large frames), same edge stops →
     /// `U · den(ratio)`.
     Svgf,
+    /// No filter: the composite pass alone, `emitted + U · S_N/U_N` — the raw ratio estimate
+    /// (or, given [`DenoiseInput::stochastic`], the raw `S_N`), made by the same pass that ends the
+    /// filters, so a report times every method's image alike.
+    None,
 }
 
 impl DenoiseMethod {
@@ -28,14 +32,17 @@ impl DenoiseMethod {
         match self {
             Self::Tv => "tv",
             Self::Svgf => "svgf",
+            Self::None => "none",
         }
     }
 
     /// The passes the method runs with `params`, in order. The TV filter is only its composite
-    /// where it would leave every pixel as it is ([`DenoiseParams::tv_filter_is_identity`]).
+    /// (it reduces to [`DenoiseMethod::None`]) where it would leave every pixel as it is
+    /// ([`DenoiseParams::tv_filter_is_identity`]).
     pub fn passes(self, params: &DenoiseParams) -> Vec<DenoisePass> {
         match self {
-            Self::Tv if params.tv_filter_is_identity() => vec![DenoisePass::Composite],
+            Self::None => vec![DenoisePass::Composite],
+            Self::Tv if params.tv_filter_is_identity() => Self::None.passes(params),
             Self::Tv => vec![
                 DenoisePass::Ratio,
                 DenoisePass::Noise,
@@ -61,9 +68,10 @@ impl std::str::FromStr for DenoiseMethod {
         match s {
             "tv" => Ok(Self::Tv),
             "svgf" => Ok(Self::Svgf),
+            "none" => Ok(Self::None),
             other => Err(Error::InvalidParameter {
                 name: "denoise",
-                reason: format!("unknown denoiser `{other}` (expected tv or svgf)"),
+                reason: format!("unknown denoiser `{other}` (expected tv, svgf or none)"),
             }),
         }
     }
@@ -272,5 +280,14 @@ mod tests {
         let many = DenoiseParams { samples_per_pixel: 4 * params.radius * params.radius, ..params };
         assert_eq!(DenoiseMethod::Tv.passes(&many), vec![DenoisePass::Composite]);
         assert_eq!(DenoiseMethod::Svgf.passes(&many), DenoiseMethod::Svgf.passes(&params), "SVGF keeps its passes");
+        assert_eq!(DenoiseMethod::None.passes(&params), vec![DenoisePass::Composite], "no filter at any N");
+    }
+
+    #[test]
+    fn methods_parse_from_their_names() {
+        for method in [DenoiseMethod::Tv, DenoiseMethod::Svgf, DenoiseMethod::None] {
+            assert_eq!(method.name().parse::<DenoiseMethod>().ok(), Some(method));
+        }
+        assert!(matches!("blur".parse::<DenoiseMethod>(), Err(Error::InvalidParameter { name: "denoise", .. })));
     }
 }

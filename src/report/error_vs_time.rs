@@ -7,8 +7,10 @@
 //! bilateral filter) and `ratio+svgf` (the variance-guided à-trous baseline). As in
 //! `report shade`, the visible surfaces are a fixed G-buffer; the reference is the ratio
 //! estimate at `reference_spp` samples. The time of a method is what the chosen backend spent
-//! on its frame: the G-buffer's camera rays, the shade and occlusion passes, and the denoiser's
-//! passes (GPU timestamps on Vulkan, wall clock on the CPU), averaged over the repetitions.
+//! on its frame: the G-buffer's camera rays, the shade and occlusion passes, and the passes that
+//! make its image from the accumulated estimates — the composite alone for the raw methods
+//! ([`DenoiseMethod::None`]), a filter and the composite for the others (GPU timestamps on
+//! Vulkan, wall clock on the CPU) — averaged over the repetitions.
 
 use super::flip::mean_flip;
 use super::shade::{accumulate, GBuffer};
@@ -119,10 +121,14 @@ impl PreparedScene {
             let (color, timings) = backend.denoise(method, &params, input)?;
             Ok((rgb(&color), base_ms + 1e3 * timings.iter().map(|t| t.seconds).sum::<f64>()))
         };
-        let stochastic_tv = denoised(DenoiseMethod::Tv, &input.stochastic())?;
-        let ratio_tv = denoised(DenoiseMethod::Tv, &input)?;
-        let ratio_svgf = denoised(DenoiseMethod::Svgf, &input)?;
-        Ok(vec![(run.stochastic_image(), base_ms), stochastic_tv, (run.ratio_image(), base_ms), ratio_tv, ratio_svgf])
+        let stochastic = input.stochastic();
+        Ok(vec![
+            denoised(DenoiseMethod::None, &stochastic)?,
+            denoised(DenoiseMethod::Tv, &stochastic)?,
+            denoised(DenoiseMethod::None, &input)?,
+            denoised(DenoiseMethod::Tv, &input)?,
+            denoised(DenoiseMethod::Svgf, &input)?,
+        ])
     }
 
     /// Every method's error against `reference` and time at `spp` samples, in [`METHODS`]
