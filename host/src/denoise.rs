@@ -183,7 +183,8 @@ impl DenoiseInput {
     /// The inputs that make a denoiser filter the fully stochastic image `S_N` (the
     /// "stochastic+tv" baseline): `U_N` and `U` replaced by one constant per channel — the mean of `S_N`
     /// over the surfaces — so the noise estimate sees `S_N` at the scale of a ratio and the
-    /// composite returns `den(S_N)`. The G-buffer (edge stops) stays the same.
+    /// composite returns `den(S_N)` (up to rounding, for pixels below 10⁴ times that mean, where
+    /// `shadow_ratio` clamps). The G-buffer (edge stops) stays the same.
     pub fn stochastic(&self) -> Self {
         let (sum, count) = self
             .shadowed
