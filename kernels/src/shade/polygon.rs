@@ -44,17 +44,22 @@ impl Polygon {
     }
 
     /// The polygon clipped against the half-space `z ≥ 0` (Sutherland–Hodgman). Corners exactly
-    /// on the plane are kept; a polygon entirely below (or left with < 3 corners) becomes empty.
+    /// on the plane are kept; a polygon entirely below, left with < 3 corners, or with no corner
+    /// above the plane (lying in it: a light whose plane holds the shading point) becomes empty —
+    /// the last so that its zero solid angle is exact rather than the rounding residue of its
+    /// edge angles, which differs between backends' `atan2`.
     /// A polygon already at [`MAX_CORNERS`] is clipped with its last crossing dropped (never
     /// happens for a quad clipped twice).
     pub fn clip_to_horizon(&self) -> Self {
         let n = self.count as usize;
         let mut out = Polygon { corners: [Vec3::ZERO; MAX_CORNERS], count: 0 };
         let mut k = 0usize;
+        let mut above = false;
         let mut i = 0usize;
         while i < n && n <= MAX_CORNERS {
             let a = self.corners[i];
             let b = self.corners[(i + 1) % n];
+            above |= a.z > 0.0;
             let a_in = a.z >= 0.0;
             let b_in = b.z >= 0.0;
             if a_in && k < MAX_CORNERS {
@@ -71,33 +76,26 @@ impl Polygon {
             }
             i += 1;
         }
-        out.count = if k >= 3 { k as u32 } else { 0 };
+        out.count = if k >= 3 && above { k as u32 } else { 0 };
         out
     }
 
     /// The form factor `∫ max(0, cos θ)/π dω` of the polygon (corners relative to the shading
     /// point, z = normal) after clipping it to `z ≥ 0`, in `[0, 1]`, for either winding. 0 for a
-    /// polygon entirely below the horizon or seen edge-on, and exactly 0 for one lying in the
-    /// horizon plane (no corner above it — a light whose plane holds the shading point), whose
-    /// edge angles would otherwise cancel only up to the `atan2`'s rounding, which differs
-    /// between backends.
+    /// polygon entirely below the horizon, lying in it, or seen edge-on.
     pub fn form_factor(&self) -> f32 {
         let clipped = self.clip_to_horizon();
         let n = clipped.count as usize;
         let mut sum = 0.0f32;
-        let mut highest = 0.0f32;
         let mut i = 0usize;
         while i < n {
-            highest = highest.max(clipped.corners[i].z);
             let a = clipped.corners[i].normalize_or_zero();
             let b = clipped.corners[(i + 1) % n].normalize_or_zero();
             sum += edge_integral(a, b);
             i += 1;
         }
         let form_factor = (sum / (2.0 * PI)).abs();
-        if highest <= 0.0 {
-            0.0
-        } else if form_factor.is_finite() {
+        if form_factor.is_finite() {
             form_factor.min(1.0)
         } else {
             0.0
