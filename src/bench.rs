@@ -113,7 +113,7 @@ fn ray_sets(scene: &Scene, cpu_scene: &CpuScene, resolution: u32) -> RaySets {
 /// Median of `repeats` timings of `run`.
 #[cfg(feature = "vulkan")]
 fn median_seconds(repeats: u32, mut run: impl FnMut() -> f64) -> f64 {
-    median((0..repeats.max(1)).map(|_| run()).collect())
+    median((0..repeats).map(|_| run()).collect())
 }
 
 /// The median of a non-empty list of timings.
@@ -195,11 +195,21 @@ fn measurement(implementation: &str, kind: &'static str, threads: usize, rays: u
     }
 }
 
+/// Checks a benchmark's timed repetitions: at least one, since the median of none is undefined.
+pub(crate) fn check_repeats(repeats: u32) -> Result<()> {
+    if repeats == 0 {
+        return Err(Error::InvalidParameter { name: "repeats", reason: "must be at least 1".into() });
+    }
+    Ok(())
+}
+
 /// Runs the trace benchmark; `emit` receives each measurement as soon as it is taken.
 pub fn bench_trace(options: &TraceBenchOptions, mut emit: impl FnMut(&dyn BenchLine)) -> Result<()> {
     if options.threads.contains(&0) {
         return Err(Error::InvalidParameter { name: "threads", reason: "thread counts must be at least 1".into() });
     }
+    check_repeats(options.repeats)?;
+    crate::Backend::check_image_size(&crate::cpu::CpuBackend::new(), options.resolution, options.resolution)?;
     let scene = Scene::load(&options.scene)?;
     let cpu_scene = CpuScene::build_with(&scene, options.bvh)?;
     emit(&BuildMeasurement {
@@ -244,7 +254,7 @@ pub fn bench_trace(options: &TraceBenchOptions, mut emit: impl FnMut(&dyn BenchL
             // Repetitions interleave the tracers, so that a slow spell of a shared machine lands on
             // all of them alike and their ratios stay comparable.
             let mut times = vec![Vec::new(); tracers.len()];
-            for _ in 0..options.repeats.max(1) {
+            for _ in 0..options.repeats {
                 for ((_, tracer), times) in tracers.iter().zip(&mut times) {
                     times.push(pool.install(|| time_cpu(*tracer, kind, rays)));
                 }

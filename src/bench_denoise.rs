@@ -8,7 +8,7 @@
 //! known peak (`--peak-gbps`, or the datasheet value of an NVIDIA H100/H200) its fraction.
 
 use crate::denoise::{DenoiseInput, DenoiseMethod};
-use crate::frame::{generate_params_with, sampler_params};
+use crate::frame::{check_samples_per_pixel, generate_params_with, sampler_params};
 use crate::shading::{resolve, ShadeAccumulator, ShadeData};
 use crate::shared::sampling::sampler_kind;
 use crate::shared::DenoiseParams;
@@ -96,6 +96,7 @@ fn frame_input(options: &DenoiseBenchOptions) -> Result<DenoiseInput> {
     let scene = Scene::load(&options.scene)?;
     let mut cpu = crate::cpu::CpuBackend::new();
     cpu.check_image_size(options.width, options.height)?;
+    check_samples_per_pixel("spp", options.width, options.height, options.spp)?;
     cpu.load_scene(&scene)?;
     let data = ShadeData::new(&scene)?;
     let (width, height) = (options.width, options.height);
@@ -133,7 +134,7 @@ fn bench_backend(
         let mut seconds = vec![Vec::new(); passes.len()];
         // One untimed run first: drivers compile pipelines lazily (lavapipe at the first dispatch).
         backend.denoise(method, &params, input)?;
-        for _ in 0..options.repeats.max(1) {
+        for _ in 0..options.repeats {
             let (_, timings) = backend.denoise(method, &params, input)?;
             for (s, t) in seconds.iter_mut().zip(timings) {
                 s.push(t.seconds);
@@ -167,6 +168,10 @@ fn bench_backend(
 
 /// Runs the benchmark, handing each line to `emit` as soon as it is measured.
 pub fn bench_denoise(options: &DenoiseBenchOptions, mut emit: impl FnMut(&DenoiseMeasurement)) -> Result<()> {
+    crate::bench::check_repeats(options.repeats)?;
+    if options.peak_gbps.is_some_and(|peak| !(peak.is_finite() && peak > 0.0)) {
+        return Err(crate::Error::InvalidParameter { name: "peak-gbps", reason: "must be finite and > 0".into() });
+    }
     let input = frame_input(options)?;
     let mut cpu = crate::cpu::CpuBackend::new();
     bench_backend(&mut cpu, &input, options, None, &mut emit)?;

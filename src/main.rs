@@ -325,7 +325,11 @@ fn report_shade_command(args: ShadeReportArgs) -> raywave::Result<()> {
 fn report_error_vs_time_command(args: ErrorVsTimeArgs) -> raywave::Result<()> {
     use raywave::report::error_vs_time::{fastest_by_error, plot, report_error_vs_time};
     // Create the plot's file up front so a bad path fails before the measurements.
-    let pending = args.plot.as_deref().map(raywave::visualize::PendingOutput::create).transpose()?;
+    let pending = args
+        .plot
+        .as_deref()
+        .map(|path| raywave::visualize::PendingOutput::create(path, image::ImageFormat::Png))
+        .transpose()?;
     let json = args.common.json;
     let (options, mut backend) = args.common.open(args.resolution)?;
     let lines = report_error_vs_time(backend.as_mut(), &options, |line| {

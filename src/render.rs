@@ -3,8 +3,9 @@
 //! `U · den(S_N)/den(U_N)` (or another denoiser, or none) → image files.
 
 use crate::{open_backend, BackendOptions, DeviceChoice, Result, Scene, StageTiming};
+use image::ImageFormat;
 use raywave_host::denoise::{rgb, DenoiseInput, DenoiseMethod};
-use raywave_host::frame::{generate_params_with, sampler_params};
+use raywave_host::frame::{check_samples_per_pixel, generate_params_with, sampler_params};
 use raywave_host::shading::{resolve, ShadeAccumulator, ShadeData};
 use raywave_host::visualize::{normal_depth_image, srgb_image, PendingOutput};
 use raywave_shared::DenoiseParams;
@@ -108,20 +109,16 @@ pub fn render(options: &RenderOptions) -> Result<RenderReport> {
     if options.focus_distance.is_some_and(|f| !(f.is_finite() && f > 0.0)) {
         return invalid("focus", "must be finite and > 0");
     }
-    if !(1..=65_536).contains(&options.spp) {
-        return invalid("spp", "must be within 1..=65536");
-    }
-    let output = PendingOutput::create(&options.out)?;
-    let exr = options.exr.as_deref().map(PendingOutput::create).transpose()?;
-    let stochastic = options.stochastic.as_deref().map(PendingOutput::create).transpose()?;
+    let output = PendingOutput::create(&options.out, ImageFormat::Png)?;
+    let exr = options.exr.as_deref().map(|path| PendingOutput::create(path, ImageFormat::OpenExr)).transpose()?;
+    let stochastic =
+        options.stochastic.as_deref().map(|path| PendingOutput::create(path, ImageFormat::Png)).transpose()?;
     let mut backend = open_backend(options.device, &options.backend)?;
     backend.check_image_size(options.width, options.height)?;
+    check_samples_per_pixel("spp", options.width, options.height, options.spp)?;
     backend.load_scene(&scene)?;
     let spp = if options.view == RenderView::Lit { options.spp } else { 1 };
     let sampler = sampler_params(options.sampler, options.seed, options.width, options.height, spp);
-    if !sampler.fits_index() {
-        return invalid("spp", "image side × samples per pixel exceed the sampler's 32-bit index");
-    }
     let (width, height) = (options.width, options.height);
     let pixels = (width * height) as usize;
     let data = if options.view == RenderView::Lit { Some(ShadeData::new(&scene)?) } else { None };
@@ -152,7 +149,7 @@ pub fn render(options: &RenderOptions) -> Result<RenderReport> {
         hits += frame.hits.primitive.iter().filter(|&&p| p != crate::shared::stream::NO_HIT).count();
         stream_bytes = frame.rays.bytes() + frame.hits.bytes();
         let Some(data) = &data else {
-            output.finish_png(&normal_depth_image(&scene, &frame.rays, &frame.hits, width, height))?;
+            output.finish_srgb8(&normal_depth_image(&scene, &frame.rays, &frame.hits, width, height))?;
             return Ok(report(timings, hits, stream_bytes));
         };
         if sample_index == 0 {
@@ -177,12 +174,12 @@ pub fn render(options: &RenderOptions) -> Result<RenderReport> {
         add_timing(&mut timings, t.stage, t.seconds);
     }
     let image = rgb(&color);
-    output.finish_png(&srgb_image(&image, width, height))?;
+    output.finish_srgb8(&srgb_image(&image, width, height))?;
     if let Some(exr) = exr {
-        exr.finish_exr(&image, width, height)?;
+        exr.finish_linear_rgb(&image, width, height)?;
     }
     if let Some(stochastic) = stochastic {
-        stochastic.finish_png(&srgb_image(&accumulator.stochastic_image(), width, height))?;
+        stochastic.finish_srgb8(&srgb_image(&accumulator.stochastic_image(), width, height))?;
     }
     Ok(report(timings, hits, stream_bytes))
 }

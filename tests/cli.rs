@@ -138,15 +138,46 @@ fn bad_input_is_a_typed_error_without_output() {
     assert_rejected(&["--device", "vulkan:99"], "vulkan:99");
     assert_rejected(&["--device", "gpu"], "expected auto, cpu, vulkan");
     assert_rejected(&["--device", "cpu", "--sampler", "halton"], "unknown sampler `halton`");
-    assert_rejected(&["--device", "cpu", "--spp", "0"], "spp");
+    assert_rejected(&["--device", "cpu", "--spp", "0"], "spp: 0 is outside 1..=65536");
+    assert_rejected(&["--device", "cpu", "--spp", "70000"], "spp: 70000 is outside 1..=65536");
+    let sampler_overflow = ["--device", "cpu", "--width", "65536", "--height", "1024", "--spp", "4"];
+    assert_rejected(&sampler_overflow, "exceed the sampler's 32-bit index");
     assert_rejected(&["--device", "cpu", "--view", "albedo"], "unknown view `albedo`");
     assert_rejected(&["--device", "cpu", "--exr", "/no/such/dir/out.exr"], "/no/such/dir/out.exr");
     assert_rejected(&["--device", "cpu", "--aperture=-1"], "aperture");
+    let (jpg, hdr_png) = (dir.path().join("stochastic.jpg"), dir.path().join("hdr.png"));
+    assert_rejected(&["--device", "cpu", "--stochastic", jpg.to_str().unwrap()], "must end in .png");
+    assert_rejected(&["--device", "cpu", "--exr", hdr_png.to_str().unwrap()], "must end in .exr");
+    assert!(!jpg.exists() && !hdr_png.exists());
     assert_rejected(&["--device", "cpu", "--aperture", "0.1", "--focus", "0"], "focus");
 
     let out = raywave(&["render", "--device", "cpu", "--out", "/no/such/dir/out.png"]);
     assert!(!out.status.success());
     assert!(stderr(&out).contains("cannot write output /no/such/dir/out.png"), "{}", stderr(&out));
+}
+
+/// Benchmark and report options out of range: each command fails at once with the option named
+/// (before, `--repeats 0` measured one repetition, `--spp 0` failed inside the denoiser, a
+/// negative `--peak-gbps` gave negative bandwidth fractions, and a reference past the sampler's index
+/// repeated its samples).
+#[test]
+fn bench_and_report_options_out_of_range_are_typed_errors() {
+    let cases: [(&[&str], &str); 7] = [
+        (&["bench", "denoise", "--no-vulkan", "--repeats", "0"], "repeats: must be at least 1"),
+        (&["bench", "denoise", "--no-vulkan", "--spp", "0"], "spp: 0 is outside"),
+        (&["bench", "denoise", "--no-vulkan", "--spp", "8192"], "exceed the sampler's 32-bit index"),
+        (&["bench", "denoise", "--no-vulkan", "--peak-gbps=-5"], "peak-gbps: must be finite and > 0"),
+        (&["bench", "trace", "--no-vulkan", "--repeats", "0"], "repeats: must be at least 1"),
+        (&["bench", "trace", "--no-vulkan", "--resolution", "0"], "at least 1"),
+        (&["report", "shade", "--resolution", "1024", "--reference-spp", "8192"], "reference-spp: 8192 samples"),
+    ];
+    for (args, needle) in cases {
+        let out = raywave(args);
+        assert!(!out.status.success(), "{args:?} should fail");
+        let message = stderr(&out);
+        assert!(message.contains(needle), "{args:?}: expected {needle:?} in {message:?}");
+        assert!(!message.contains("panicked") && out.stdout.is_empty(), "{args:?}: {message}");
+    }
 }
 
 #[test]

@@ -27,6 +27,33 @@ pub fn sampler_params(kind: u32, seed: u32, width: u32, height: u32, samples_per
     SamplerParams { kind, seed, spp_log2: log2_ceil(samples_per_pixel), resolution_log2: log2_ceil(width.max(height)) }
 }
 
+/// Most samples per pixel a frame takes (2¹⁶): far past convergence for every estimator here
+/// (the reports' references use 4096).
+pub const MAX_SAMPLES_PER_PIXEL: u32 = 65_536;
+
+/// Checks a sample count per pixel for a `width × height` frame: within
+/// `1..=`[`MAX_SAMPLES_PER_PIXEL`], and the Morton-ordered sample space (image side and count
+/// rounded up to powers of two, [`SamplerParams::fits_index`]) within the sampler's 32-bit index,
+/// beyond which sample indices would wrap and repeat. `name` is the option's name for the error.
+pub fn check_samples_per_pixel(
+    name: &'static str,
+    width: u32,
+    height: u32,
+    samples_per_pixel: u32,
+) -> crate::error::Result<()> {
+    let invalid = |reason: String| Err(crate::error::Error::InvalidParameter { name, reason });
+    if !(1..=MAX_SAMPLES_PER_PIXEL).contains(&samples_per_pixel) {
+        return invalid(format!("{samples_per_pixel} is outside 1..={MAX_SAMPLES_PER_PIXEL}"));
+    }
+    if !sampler_params(sampler_kind::ZSOBOL, 0, width, height, samples_per_pixel).fits_index() {
+        return invalid(format!(
+            "{samples_per_pixel} samples per pixel of a {width}×{height} image exceed the sampler's 32-bit \
+             index (2·log2(side) + log2(samples), each rounded up, must be ≤ 32)"
+        ));
+    }
+    Ok(())
+}
+
 /// Generate-stage parameters for `scene`'s pinhole camera at `width × height` (both ≥ 1), sample
 /// `sample_index` of one, drawn by the default blue-noise sampler (`ZSOBOL`) with `seed`. See
 /// [`generate_params_with`].

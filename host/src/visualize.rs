@@ -5,7 +5,7 @@ use crate::error::{Error, Result};
 use crate::scene::Scene;
 use crate::stream::{HitStream, RayStream};
 use glam::{Vec3, Vec4Swizzles};
-use image::RgbImage;
+use image::{EncodableLayout, ImageBuffer, ImageFormat, PixelWithColorType, RgbImage};
 use std::io::Write;
 use std::path::Path;
 
@@ -44,55 +44,65 @@ pub fn srgb_image(colors: &[Vec3], width: u32, height: u32) -> RgbImage {
     })
 }
 
-/// An output file that appears only when complete: it is created as a temporary file beside the
-/// destination (so an unwritable path fails before any work) and renamed over it on [`finish`].
-///
-/// [`finish`]: PendingOutput::finish
+/// An image file that appears only when complete: it is created as a temporary file beside the
+/// destination (so an unwritable path fails before any work) and renamed over it when finished.
 pub struct PendingOutput {
     path: std::path::PathBuf,
+    format: ImageFormat,
     temp: tempfile::NamedTempFile,
 }
 
 impl PendingOutput {
-    /// Reserves `path` for writing; fails with [`Error::Output`] if its directory is missing or
-    /// not writable.
-    pub fn create(path: &Path) -> Result<Self> {
+    /// Reserves `path` for an image in `format`; fails with [`Error::Output`] if the file name's
+    /// extension is not that format's (a `.jpg` holding PNG bytes would mislead every viewer), or
+    /// if its directory is missing or not writable.
+    pub fn create(path: &Path, format: ImageFormat) -> Result<Self> {
         let dir = match path.parent() {
             Some(p) if !p.as_os_str().is_empty() => p,
             _ => Path::new("."),
         };
         let output_error = |source| Error::Output { path: path.to_owned(), source };
+        if ImageFormat::from_path(path).ok() != Some(format) {
+            let extensions = format.extensions_str().join(", .");
+            let reason = format!("the file name must end in .{extensions} (the image is written as {format:?})");
+            return Err(output_error(std::io::Error::new(std::io::ErrorKind::InvalidInput, reason)));
+        }
         if path.is_dir() {
             return Err(output_error(std::io::Error::new(std::io::ErrorKind::IsADirectory, "is a directory")));
         }
         let temp = tempfile::Builder::new().prefix(".raywave-").tempfile_in(dir).map_err(output_error)?;
-        Ok(Self { path: path.to_owned(), temp })
+        Ok(Self { path: path.to_owned(), format, temp })
     }
 
-    /// Encodes `image` as PNG and moves it into place.
-    pub fn finish_png(self, image: &RgbImage) -> Result<()> {
-        let mut encoded = std::io::Cursor::new(Vec::new());
-        image
-            .write_to(&mut encoded, image::ImageFormat::Png)
-            .map_err(|e| Error::Encode { path: self.path.clone(), message: e.to_string() })?;
-        self.finish(encoded.get_ref())
+    /// Encodes an 8-bit sRGB `image` in the output's format and moves it into place.
+    pub fn finish_srgb8(self, image: &RgbImage) -> Result<()> {
+        self.finish_image(image)
     }
 
-    /// Encodes linear radiance `colors` (row-major, `width · height`) as a 32-bit float RGB
-    /// OpenEXR file and moves it into place.
-    pub fn finish_exr(self, colors: &[Vec3], width: u32, height: u32) -> Result<()> {
+    /// Encodes linear radiance `colors` (row-major, `width · height`) as 32-bit float RGB in the
+    /// output's format (OpenEXR keeps the HDR values) and moves it into place.
+    pub fn finish_linear_rgb(self, colors: &[Vec3], width: u32, height: u32) -> Result<()> {
         let data: Vec<f32> = colors.iter().flat_map(|c| c.to_array()).collect();
         let image = image::Rgb32FImage::from_raw(width, height, data)
             .ok_or_else(|| Error::Encode { path: self.path.clone(), message: "image size mismatch".into() })?;
+        self.finish_image(&image)
+    }
+
+    /// Encodes `image` in the output's format and moves it into place.
+    fn finish_image<P>(self, image: &ImageBuffer<P, Vec<P::Subpixel>>) -> Result<()>
+    where
+        P: PixelWithColorType,
+        [P::Subpixel]: EncodableLayout,
+    {
         let mut encoded = std::io::Cursor::new(Vec::new());
         image
-            .write_to(&mut encoded, image::ImageFormat::OpenExr)
+            .write_to(&mut encoded, self.format)
             .map_err(|e| Error::Encode { path: self.path.clone(), message: e.to_string() })?;
         self.finish(encoded.get_ref())
     }
 
     /// Writes `bytes` and moves the file into place.
-    pub fn finish(mut self, bytes: &[u8]) -> Result<()> {
+    fn finish(mut self, bytes: &[u8]) -> Result<()> {
         let path = self.path.clone();
         let output_error = |source| Error::Output { path: path.clone(), source };
         self.temp.write_all(bytes).map_err(output_error)?;
@@ -114,19 +124,22 @@ mod tests {
 
     #[test]
     fn unwritable_output_fails_before_work_and_leaves_nothing() {
-        let err = PendingOutput::create(Path::new("/nonexistent-dir/out.png")).err().unwrap();
+        let err = PendingOutput::create(Path::new("/nonexistent-dir/out.png"), ImageFormat::Png).err().unwrap();
         assert!(matches!(err, Error::Output { .. }), "{err}");
         let dir = tempfile::tempdir().unwrap();
-        assert!(PendingOutput::create(dir.path()).is_err(), "a directory is not a file");
+        assert!(PendingOutput::create(dir.path(), ImageFormat::Png).is_err(), "a directory is not a file");
+        let png_dir = dir.path().join("frames.png");
+        std::fs::create_dir(&png_dir).unwrap();
+        assert!(PendingOutput::create(&png_dir, ImageFormat::Png).is_err(), "a directory named .png is not a file");
     }
 
     #[test]
     fn output_appears_only_on_finish() {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("out.png");
-        let pending = PendingOutput::create(&path).unwrap();
+        let pending = PendingOutput::create(&path, ImageFormat::Png).unwrap();
         assert!(!path.exists());
-        pending.finish_png(&RgbImage::new(2, 2)).unwrap();
+        pending.finish_srgb8(&RgbImage::new(2, 2)).unwrap();
         assert!(path.exists());
         #[cfg(unix)]
         {
@@ -135,6 +148,23 @@ mod tests {
             assert_eq!(mode, 0o644, "a finished image is readable by others, like any written file");
         }
         drop(dir);
+    }
+
+    #[test]
+    fn file_name_must_carry_the_format_extension() {
+        let dir = tempfile::tempdir().unwrap();
+        for (name, format) in
+            [("out.jpg", ImageFormat::Png), ("out", ImageFormat::Png), ("out.png", ImageFormat::OpenExr)]
+        {
+            let err = PendingOutput::create(&dir.path().join(name), format).err().expect(name);
+            assert!(matches!(err, Error::Output { .. }) && err.to_string().contains("must end in ."), "{name}: {err}");
+        }
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0, "nothing created");
+        let exr = dir.path().join("OUT.EXR");
+        let pending = PendingOutput::create(&exr, ImageFormat::OpenExr).expect("upper-case extension");
+        pending.finish_linear_rgb(&[Vec3::new(0.5, 2.0, 1e3)], 1, 1).unwrap();
+        let read = image::open(&exr).unwrap().into_rgb32f();
+        assert_eq!(read.get_pixel(0, 0).0, [0.5, 2.0, 1e3], "HDR values survive");
     }
 
     #[test]
@@ -150,7 +180,7 @@ mod tests {
     fn dropped_output_leaves_no_file() {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("out.png");
-        drop(PendingOutput::create(&path).unwrap());
+        drop(PendingOutput::create(&path, ImageFormat::Png).unwrap());
         assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
     }
 }

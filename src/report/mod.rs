@@ -25,8 +25,9 @@ pub struct SceneReportOptions {
 }
 
 impl SceneReportOptions {
-    /// Checks the options of report `name`: reps ≥ 1, max-spp ≥ 1, reference-spp ≥ max-spp, and
-    /// the resolution ([`check_resolution`]).
+    /// Checks the options of report `name`: reps ≥ 1, max-spp ≥ 1, reference-spp ≥ max-spp, the
+    /// resolution ([`check_resolution`]) and the reference's sample count
+    /// ([`check_samples_per_pixel`](crate::frame::check_samples_per_pixel)).
     pub fn check(&self, name: &'static str) -> crate::Result<()> {
         if self.reps < 1 || self.max_spp < 1 || self.reference_spp < self.max_spp {
             return Err(crate::Error::InvalidParameter {
@@ -34,7 +35,8 @@ impl SceneReportOptions {
                 reason: "needs reps ≥ 1, max-spp ≥ 1 and reference-spp ≥ max-spp".into(),
             });
         }
-        check_resolution(self.resolution)
+        check_resolution(self.resolution)?;
+        crate::frame::check_samples_per_pixel("reference-spp", self.resolution, self.resolution, self.reference_spp)
     }
 
     /// The measured sample counts: 1, 2, 4, … up to `max_spp`.
