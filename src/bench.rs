@@ -21,9 +21,9 @@ pub struct TraceBenchOptions {
     pub scene: String,
     /// CPU thread counts to measure (each ≥ 1).
     pub threads: Vec<usize>,
-    /// Camera rays per side: `resolution²` primary rays.
+    /// Camera rays per side (≥ 1, within the CPU backend's image size): `resolution²` primary rays.
     pub resolution: u32,
-    /// Timed repetitions per measurement; the median is reported.
+    /// Timed repetitions per measurement (≥ 1); the median is reported.
     pub repeats: u32,
     /// Also measure every Vulkan trace method of the best Vulkan device, if there is one.
     pub vulkan: bool,

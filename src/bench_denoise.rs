@@ -23,13 +23,14 @@ pub struct DenoiseBenchOptions {
     pub width: u32,
     /// Image height in pixels.
     pub height: u32,
-    /// Samples per pixel of the shaded input (the TV filter narrows as `1/√N`).
+    /// Samples per pixel of the shaded input (the TV filter narrows as `1/√N`), checked by
+    /// [`check_samples_per_pixel`].
     pub spp: u32,
-    /// Timed repetitions per denoiser; the median per pass is reported.
+    /// Timed repetitions per denoiser (≥ 1); the median per pass is reported.
     pub repeats: u32,
     /// Also measure the best Vulkan device, if there is one.
     pub vulkan: bool,
-    /// Peak memory bandwidth of the Vulkan device in GB/s, if known to the caller.
+    /// Peak memory bandwidth of the Vulkan device in GB/s (finite, > 0), if known to the caller.
     pub peak_gbps: Option<f64>,
 }
 

@@ -5,8 +5,8 @@
 //! Bad files give an [`Error::SceneLoad`] naming the file and the JSON field, never a panic or a
 //! hang: on top of the `gltf` crate's validation this checks what that crate trusts (POSITION
 //! accessor indices, the accessor types of POSITION and indices, accessor counts and spans
-//! against their buffer views and buffers) and that the node hierarchy is a tree. Images are not loaded
-//! (textures are not sampled), so a missing texture file is no error.
+//! against their buffer views and buffers) and that the node hierarchy is a tree. Images are not
+//! loaded (textures are not sampled), so a missing texture file is no error.
 
 use super::{framing_camera, Camera, Material, Mesh, Scene};
 use crate::error::{Error, Result};
