@@ -149,7 +149,7 @@ pub fn render(options: &RenderOptions) -> Result<RenderReport> {
         hits += frame.hits.primitive.iter().filter(|&&p| p != crate::shared::stream::NO_HIT).count();
         stream_bytes = frame.rays.bytes() + frame.hits.bytes();
         let Some(data) = &data else {
-            output.finish_srgb8(&normal_depth_image(&scene, &frame.rays, &frame.hits, width, height))?;
+            output.finish_image(&normal_depth_image(&scene, &frame.rays, &frame.hits, width, height))?;
             return Ok(report(timings, hits, stream_bytes));
         };
         if sample_index == 0 {
@@ -174,12 +174,12 @@ pub fn render(options: &RenderOptions) -> Result<RenderReport> {
         add_timing(&mut timings, t.stage, t.seconds);
     }
     let image = rgb(&color);
-    output.finish_srgb8(&srgb_image(&image, width, height))?;
+    output.finish_image(&srgb_image(&image, width, height))?;
     if let Some(exr) = exr {
         exr.finish_linear_rgb(&image, width, height)?;
     }
     if let Some(stochastic) = stochastic {
-        stochastic.finish_srgb8(&srgb_image(&accumulator.stochastic_image(), width, height))?;
+        stochastic.finish_image(&srgb_image(&accumulator.stochastic_image(), width, height))?;
     }
     Ok(report(timings, hits, stream_bytes))
 }

@@ -74,11 +74,6 @@ impl PendingOutput {
         Ok(Self { path: path.to_owned(), format, temp })
     }
 
-    /// Encodes an 8-bit sRGB `image` in the output's format and moves it into place.
-    pub fn finish_srgb8(self, image: &RgbImage) -> Result<()> {
-        self.finish_image(image)
-    }
-
     /// Encodes linear radiance `colors` (row-major, `width · height`) as 32-bit float RGB in the
     /// output's format (OpenEXR keeps the HDR values) and moves it into place.
     pub fn finish_linear_rgb(self, colors: &[Vec3], width: u32, height: u32) -> Result<()> {
@@ -88,8 +83,9 @@ impl PendingOutput {
         self.finish_image(&image)
     }
 
-    /// Encodes `image` in the output's format and moves it into place.
-    fn finish_image<P>(self, image: &ImageBuffer<P, Vec<P::Subpixel>>) -> Result<()>
+    /// Encodes `image` (8-bit sRGB for PNG, 32-bit float for OpenEXR) in the output's format and
+    /// moves it into place.
+    pub fn finish_image<P>(self, image: &ImageBuffer<P, Vec<P::Subpixel>>) -> Result<()>
     where
         P: PixelWithColorType,
         [P::Subpixel]: EncodableLayout,
@@ -139,7 +135,7 @@ mod tests {
         let path = dir.path().join("out.png");
         let pending = PendingOutput::create(&path, ImageFormat::Png).unwrap();
         assert!(!path.exists());
-        pending.finish_srgb8(&RgbImage::new(2, 2)).unwrap();
+        pending.finish_image(&RgbImage::new(2, 2)).unwrap();
         assert!(path.exists());
         #[cfg(unix)]
         {

@@ -350,7 +350,7 @@ pub fn plot(lines: &[ErrorVsTimeLine], title: &str, output: PendingOutput) -> Re
         root.present().map_err(|e| plot_error(&e))?;
     }
     let image = image::RgbImage::from_raw(width, height, pixels).ok_or_else(|| plot_error(&"plot buffer size"))?;
-    output.finish_srgb8(&image)
+    output.finish_image(&image)
 }
 
 #[cfg(test)]

@@ -54,9 +54,8 @@ pub fn load(path: &Path) -> Result<Scene> {
             for (index, primitive) in mesh.primitives().enumerate() {
                 let name = format!("{} primitive {index}", mesh.name().unwrap_or("mesh"));
                 let field = format!("meshes[{}].primitives[{index}]", mesh.index());
-                let (positions, triangles) =
-                    triangles(&primitive, &buffers, &field).map_err(|e| load_error(format!("{e} (in {name:?})")))?;
-                let positions = positions.into_iter().map(|p| world.transform_point3(p)).collect();
+                let (positions, triangles) = triangles(&primitive, &buffers, world, &field)
+                    .map_err(|e| load_error(format!("{e} (in {name:?})")))?;
                 meshes.push(Mesh { name, positions, triangles, material: material(&primitive.material()) });
             }
         }
@@ -122,13 +121,14 @@ fn check_position_accessor_indices(root: &gltf::json::Root) -> std::result::Resu
     Ok(())
 }
 
-/// The positions (model space) and triangles of one primitive, whose JSON path `field` the errors
-/// name: triangle mode, POSITION a VEC3 float accessor and indices (if any) a SCALAR unsigned
-/// integer one, as glTF 2.0 requires (the `gltf` crate's reader would panic on float indices and
-/// read other types as garbage), each inside its buffer ([`check_accessor`]).
+/// The positions (moved to world space by `world`) and triangles of one primitive, whose JSON
+/// path `field` the errors name: triangle mode, POSITION a VEC3 float accessor and indices (if
+/// any) a SCALAR unsigned integer one, as glTF 2.0 requires (the `gltf` crate's reader would panic
+/// on float indices and read other types as garbage), each inside its buffer ([`check_accessor`]).
 fn triangles(
     primitive: &gltf::Primitive,
     buffers: &[buffer::Data],
+    world: Mat4,
     field: &str,
 ) -> std::result::Result<(Vec<Vec3>, Vec<[u32; 3]>), String> {
     if primitive.mode() != gltf::mesh::Mode::Triangles {
@@ -138,8 +138,11 @@ fn triangles(
     let position = primitive.get(&Semantic::Positions).ok_or_else(|| format!("{field}: no POSITION attribute"))?;
     let position_field = format!("{field}.attributes.POSITION");
     check_accessor(&position, buffers, &position_field, Dimensions::Vec3, &[DataType::F32])?;
-    let positions: Vec<Vec3> =
-        reader.read_positions().ok_or_else(|| unreadable(&position, &position_field))?.map(Vec3::from_array).collect();
+    let positions: Vec<Vec3> = reader
+        .read_positions()
+        .ok_or_else(|| unreadable(&position, &position_field))?
+        .map(|p| world.transform_point3(Vec3::from_array(p)))
+        .collect();
     let indices: Vec<u32> = match primitive.indices() {
         Some(accessor) => {
             let indices_field = format!("{field}.indices");
