@@ -40,8 +40,9 @@ fn main() -> ExitCode {
     }
     eprintln!("fitting {LTC_SIZE}×{LTC_SIZE} LTC cells with {cfg:?}");
     let start = Instant::now();
-    let table = ltc_fit::fit_table(&cfg, &|rows| {
-        eprintln!("  {rows}/{LTC_SIZE} roughness rows done ({:.1} s)", start.elapsed().as_secs_f64());
+    let table = ltc_fit::fit_table(&cfg, &|diagonals| {
+        let total = 2 * LTC_SIZE - 1;
+        eprintln!("  {diagonals}/{total} anti-diagonals done ({:.1} s)", start.elapsed().as_secs_f64());
     });
     let secs = start.elapsed().as_secs_f64();
     let evals: usize = table.cells.iter().map(|c| c.evals).sum();
