@@ -13,7 +13,7 @@
 //! table (FIT_VERSION 4: 0.43 %; FIT_VERSION 3: 0.68 %; one lobe, FIT_VERSION 2: 4.2 %) and
 //! asserted; the max is **not**: lights that catch only a lobe's far tail (a light low on the
 //! view's side, or overhead at grazing views; reference `U_S` below 0.006) keep errors of
-//! 30–170 %, and at 89.9° the lookup between the table's last two columns adds some (roughness
+//! 30–173 %, and at 89.9° the lookup between the table's last two columns adds some (roughness
 //! 0.75, light around the mirror direction: 60 %; 3.6 % with FIT_VERSION 3, whose grazing
 //! column had not switched basin — `tests/ltc_interpolation.rs`). 14 of 120 cases exceed 30 %,
 //! 33 exceed 5 % (FIT_VERSION 3: 12 and 32). The test prints that table and

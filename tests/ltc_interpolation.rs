@@ -12,8 +12,8 @@
 //! 0.3 — for θ = 33–46°, and in rows 6–17 near θ = 45–48°); FIT_VERSION 3 (warm starts along θ
 //! only) 0.020, 0.121, 0.79, 93 seams.
 //! The test prints those figures and asserts that envelope, so a refit that interpolates worse
-//! fails. The errors are relative to the lobe's albedo: a light's `U_S` errs by at most that
-//! fraction of `E_S`.
+//! fails. Each error is `∫|f·cos − magnitude·D| / magnitude` with the lobe's exact magnitude, so
+//! it bounds the shape's share of any light's `U_S` error relative to the albedo `E_S`.
 
 use glam::{DVec3, Mat3, Vec4};
 use rayon::prelude::*;
