@@ -15,10 +15,10 @@
 //! fails. Each error is `∫|f·cos − magnitude·D| / magnitude` with the lobe's exact magnitude, so
 //! it bounds the shape's share of any light's `U_S` error relative to the albedo `E_S`.
 
-use glam::{DVec3, Mat3, Vec4};
+use glam::Vec4;
 use rayon::prelude::*;
 use raywave::kernels::shade::ltc::lookup;
-use raywave::ltc_fit::{error_percentiles, lobe_moments, relative_l1_error, Ggx, LtcMixture, MAX_THETA, MIN_ALPHA};
+use raywave::ltc_fit::{alpha_at, error_percentiles, lobe_moments, relative_l1_error, view_at, Ggx, LtcMixture};
 use raywave::shared::ltc_table::{packed_entries, LTC_SIZE};
 
 /// The first row at roughness ≥ 0.1: the centres of row 6 lie at roughness 6.5/63 = 0.103.
@@ -30,19 +30,11 @@ const ERROR_SAMPLES: usize = 32;
 /// Relative L1 error of the interpolated table at fractional row `s` and column `t`
 /// (roughness `s/63`, `sqrt(1 − cos θ) = t/63`).
 fn interpolated_error(table: &[Vec4], s: f64, t: f64) -> f64 {
-    let last = f64::from(LTC_SIZE - 1);
-    let roughness = s / last;
-    let x = t / last;
-    // As the fitter's cells (`cell_alpha`, `cell_view`): α = max(r², MIN_ALPHA), θ ≤ MAX_THETA.
-    let theta = (1.0 - x * x).acos().min(MAX_THETA);
-    let cos_theta = theta.cos();
-    let view = DVec3::new(theta.sin(), 0.0, cos_theta);
-    let ggx = Ggx::new((roughness * roughness).max(MIN_ALPHA), view);
+    let ggx = Ggx::new(alpha_at(s), view_at(t));
     let magnitude = lobe_moments(&ggx, 128).magnitude;
-    let lobe = lookup(table, roughness as f32, cos_theta as f32);
-    let packed = |m: Mat3| [m.x_axis.x, m.x_axis.z, m.z_axis.x, m.z_axis.z];
-    let mixture = LtcMixture::from_packed(packed(lobe.inv_m), packed(lobe.inv_m_2), lobe.weight);
-    relative_l1_error(&ggx, magnitude, &mixture.density(), ERROR_SAMPLES)
+    let roughness = s / f64::from(LTC_SIZE - 1);
+    let lobe = lookup(table, roughness as f32, ggx.v.z as f32);
+    relative_l1_error(&ggx, magnitude, &LtcMixture::from_lookup(&lobe).density(), ERROR_SAMPLES)
 }
 
 #[test]

@@ -127,8 +127,9 @@
 //!   1/2π of the edge integral built in) and `z_F = F.z/|F|`; the form factor is then `|F|·w`.
 //!   Polygons can use horizon clipping instead and ignore `w`.
 
-use glam::{DMat3, DVec3};
+use glam::{DMat3, DVec3, Mat3};
 use rayon::prelude::*;
+use raywave_kernels::shade::ltc::LtcLobe;
 use std::f64::consts::PI;
 
 /// Version of the fitting procedure; bump it whenever a change alters the fitted values, and
@@ -156,14 +157,25 @@ pub const MAX_THETA: f64 = 1.57;
 
 /// The GGX `α` of table row `a` (perceptual roughness `a/63`, squared, clamped to [`MIN_ALPHA`]).
 pub fn cell_alpha(a: usize) -> f64 {
-    let r = a as f64 / (LTC_SIZE - 1) as f64;
+    alpha_at(a as f64)
+}
+
+/// GGX α at fractional table row `s` (between cells, where the kernels interpolate):
+/// `max(r², MIN_ALPHA)`, `r = s/63`.
+pub fn alpha_at(s: f64) -> f64 {
+    let r = s / (LTC_SIZE - 1) as f64;
     (r * r).max(MIN_ALPHA)
 }
 
 /// The view direction of table column `t`: `sqrt(1 − cos θ) = t/63`, θ clamped to [`MAX_THETA`];
 /// `v = (sin θ, 0, cos θ)`.
 pub fn cell_view(t: usize) -> DVec3 {
-    let x = t as f64 / (LTC_SIZE - 1) as f64;
+    view_at(t as f64)
+}
+
+/// The view direction at fractional table column `t` (see [`cell_view`]).
+pub fn view_at(t: f64) -> DVec3 {
+    let x = t / (LTC_SIZE - 1) as f64;
     let theta = (1.0 - x * x).clamp(-1.0, 1.0).acos().min(MAX_THETA);
     DVec3::new(theta.sin(), 0.0, theta.cos())
 }
@@ -451,6 +463,13 @@ impl LtcMixture {
     /// Recovers the mixture from its stored entries: the two normalized inverses and the weight.
     pub fn from_packed(m0: [f32; 4], m1: [f32; 4], weight: f32) -> Self {
         Self { lobes: [LtcParams::from_packed(m0), LtcParams::from_packed(m1)], weight: f64::from(weight) }
+    }
+
+    /// The mixture the kernels' table lookup ([`raywave_kernels::shade::ltc::lookup`]) returned:
+    /// what a shading point uses, possibly interpolated between cells.
+    pub fn from_lookup(lobe: &LtcLobe) -> Self {
+        let packed = |m: Mat3| [m.x_axis.x, m.x_axis.z, m.z_axis.x, m.z_axis.z];
+        Self::from_packed(packed(lobe.inv_m), packed(lobe.inv_m_2), lobe.weight)
     }
 }
 

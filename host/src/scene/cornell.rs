@@ -1,5 +1,5 @@
 //! The Cornell box, from the measurements published by the Cornell University Program of Computer
-//! Graphics ("Cornell Box Data", https://www.graphics.cornell.edu/online/box/data.html).
+//! Graphics ("Cornell Box Data", <https://www.graphics.cornell.edu/online/box/data.html>).
 //!
 //! Coordinates there are millimetres; we convert to metres. Reflectances are the published spectra
 //! reduced to approximate linear sRGB. The light is lowered 0.1 mm below the ceiling (as most
