@@ -119,13 +119,13 @@
 //!   in the frame `x = normalize(v − n(n·v))`, `y = n × x`, `z = n` (the view in the `+x` half).
 //!   ltc_code's `ltc_1`, in the same order.
 //! * `LTC_AMPLITUDE[i] = (magnitude, fresnel, w, sphere)` — ltc_code's `ltc_2`: the albedo with
-//!   F = 1 and the Schlick term above (specular albedo `F0·x + (1 − F0)·y`); `z` is the first
-//!   lobe's weight `w`;
-//!   `w` is the horizon-clipped sphere form factor for the "clipless" path ([`sphere_form_factor`]),
-//!   which has its **own** coordinates on the same grid: `row ↔ (z_F + 1)/2`, `col ↔ |F|`, where
-//!   `F` is the vector form factor of the (unclipped) light in the LTC's cosine space (with the
-//!   1/2π of the edge integral built in) and `z_F = F.z/|F|`; the form factor is then `|F|·w`.
-//!   Polygons can use horizon clipping instead and ignore `w`.
+//!   F = 1 and the Schlick term above (specular albedo `F0·x + (1 − F0)·y`), the first lobe's
+//!   weight `w`, and the horizon-clipped sphere form factor for the "clipless" path
+//!   ([`sphere_form_factor`]). That last one has its **own** coordinates on the same grid:
+//!   `row ↔ (z_F + 1)/2`, `col ↔ |F|`, where `F` is the vector form factor of the (unclipped)
+//!   light in the LTC's cosine space (with the 1/2π of the edge integral built in) and
+//!   `z_F = F.z/|F|`; the form factor is then `|F|·sphere`. Polygons can use horizon clipping
+//!   instead and ignore `sphere`.
 
 use glam::{DMat3, DVec3, Mat3};
 use rayon::prelude::*;
