@@ -54,8 +54,12 @@ mod spirv {
     pub fn build_kernels() -> Result<(), Box<dyn std::error::Error>> {
         let manifest_dir = PathBuf::from(std::env::var("CARGO_MANIFEST_DIR")?);
         let kernels = manifest_dir.join("..").join("kernels").canonicalize()?;
-        println!("cargo::rerun-if-changed={}", kernels.display());
-        println!("cargo::rerun-if-changed={}", manifest_dir.join("../shared").canonicalize()?.display());
+        // Relative to this package's root, which cargo resolves against the checkout being built:
+        // an absolute path would tie the shared build cache (`.ci/run`'s `$RAYWAVE_CACHE`) to the
+        // checkout that last ran this script, and a second checkout's kernel edits would keep
+        // that checkout's stale SPIR-V.
+        println!("cargo::rerun-if-changed=../kernels");
+        println!("cargo::rerun-if-changed=../shared");
 
         let backend = Install::from_shader_crate(kernels.clone()).within_build_script().run()?;
         // Entry point name → module path, each from the first (leanest) variant that emits it.
