@@ -8,6 +8,7 @@ use raywave::cpu::{self, CpuScene};
 use raywave::frame::{generate_params, sampler_params};
 use raywave::shading::ShadeData;
 use raywave::shared::sampling::sampler_kind;
+use raywave::shared::ShadeParams;
 use raywave::{open_backend, Backend, BackendOptions, DeviceChoice, Scene};
 use std::hint::black_box;
 
@@ -64,6 +65,11 @@ fn stages(c: &mut Criterion) {
         group.throughput(Throughput::Elements(rays.len() as u64));
         group.bench_function(BenchmarkId::new("cpu", rays.len()), |b| {
             b.iter(|| cpu_backend.shade(black_box(&params), &data, &rays, &hits).expect("shade"))
+        });
+        // With the quadrature residual added to every light's U_S (ShadeParams::analytic_residual).
+        let residual_params = ShadeParams { analytic_residual: 1, ..params };
+        group.bench_function(BenchmarkId::new("cpu-residual", rays.len()), |b| {
+            b.iter(|| cpu_backend.shade(black_box(&residual_params), &data, &rays, &hits).expect("shade"))
         });
         if let Some(v) = vulkan.as_mut() {
             group.bench_function(BenchmarkId::new("vulkan", rays.len()), |b| {

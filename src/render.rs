@@ -66,6 +66,9 @@ pub struct RenderOptions {
     /// The denoiser of the shadow ratio ([`DenoiseMethod::Tv`] by default;
     /// [`DenoiseMethod::None`] composites the raw `U · S_N/U_N`).
     pub denoise: DenoiseMethod,
+    /// Whether `U`'s specular term takes the quadrature residual towards GGX
+    /// ([`ShadeData::analytic_residual`]).
+    pub analytic_residual: bool,
     /// Backend options (validation layers).
     pub backend: BackendOptions,
 }
@@ -121,7 +124,13 @@ pub fn render(options: &RenderOptions) -> Result<RenderReport> {
     let sampler = sampler_params(options.sampler, options.seed, options.width, options.height, spp);
     let (width, height) = (options.width, options.height);
     let pixels = (width * height) as usize;
-    let data = if options.view == RenderView::Lit { Some(ShadeData::new(&scene)?) } else { None };
+    let data = if options.view == RenderView::Lit {
+        let mut data = ShadeData::new(&scene)?;
+        data.analytic_residual = options.analytic_residual;
+        Some(data)
+    } else {
+        None
+    };
     let backend_name = backend.name();
     let report = |timings, hits, stream_bytes: u64| RenderReport {
         backend: backend_name.clone(),

@@ -223,18 +223,8 @@ fn lit_render_writes_png_exr_and_stochastic_images() {
     let dir = tempfile::tempdir().unwrap();
     let exr = dir.path().join("lit.exr");
     let stochastic = dir.path().join("stochastic.png");
-    let extra = [
-        "--device",
-        "cpu",
-        "--scene",
-        "builtin:cornell-two-lights",
-        "--spp",
-        "2",
-        "--exr",
-        exr.to_str().unwrap(),
-        "--stochastic",
-        stochastic.to_str().unwrap(),
-    ];
+    let frame = ["--device", "cpu", "--scene", "builtin:cornell-two-lights", "--spp", "2"];
+    let extra = [&frame[..], &["--exr", exr.to_str().unwrap(), "--stochastic", stochastic.to_str().unwrap()]].concat();
     let (out, png) = render(dir.path(), "lit.png", &extra);
     assert!(out.status.success(), "{}", stderr(&out));
     assert!(String::from_utf8_lossy(&out.stdout).contains("2 quad lights"));
@@ -244,6 +234,19 @@ fn lit_render_writes_png_exr_and_stochastic_images() {
     let max = hdr.pixels().flat_map(|p| p.0).fold(0.0f32, f32::max);
     assert!(max > 1.0, "the emitters are visible in HDR (max {max})");
     assert!(image::open(&png).is_ok() && image::open(&stochastic).is_ok());
+    // The same frame with the quadrature residual in U: valid, close, and not the same.
+    let exr_residual = dir.path().join("residual.exr");
+    let with_residual = [&frame[..], &["--exr", exr_residual.to_str().unwrap(), "--analytic-residual"]].concat();
+    let (out, _) = render(dir.path(), "residual.png", &with_residual);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let corrected = image::open(&exr_residual).expect("EXR readable").into_rgb32f();
+    let channels = |image: &image::Rgb32FImage| image.pixels().flat_map(|p| p.0).collect::<Vec<f32>>();
+    let (plain, corrected) = (channels(&hdr), channels(&corrected));
+    assert!(corrected.iter().all(|c| c.is_finite() && *c >= 0.0));
+    let changed = plain.iter().zip(&corrected).filter(|(a, b)| (*a - *b).abs() > 1e-6 * a.abs().max(1e-3)).count();
+    let (sum_plain, sum_corrected) = (plain.iter().sum::<f32>(), corrected.iter().sum::<f32>());
+    assert!(changed > 0, "--analytic-residual changed no pixel");
+    assert!((sum_corrected / sum_plain - 1.0).abs() < 0.02, "{sum_corrected} vs {sum_plain}");
     let (out, normals) = render(dir.path(), "normals.png", &["--device", "cpu", "--view", "normals"]);
     assert!(out.status.success() && image::open(&normals).is_ok(), "{}", stderr(&out));
 }

@@ -36,6 +36,9 @@ pub struct ShadeData {
     pub triangles: Vec<Vec4>,
     /// Index of each instance's first triangle in `triangles / 3`.
     pub first_triangle: Vec<u32>,
+    /// Whether `U_S` takes the quadrature residual towards GGX ([`ShadeParams::analytic_residual`]);
+    /// off by default.
+    pub analytic_residual: bool,
     /// Unique per value (see [`ShadeData::identity`]).
     serial: u64,
 }
@@ -77,7 +80,17 @@ impl ShadeData {
         let ltc = packed_entries().map(Vec4::from_array).collect();
         static SERIAL: AtomicU64 = AtomicU64::new(0);
         let serial = SERIAL.fetch_add(1, Ordering::Relaxed);
-        Ok(Self { materials, lights, light_nodes, light_trails, ltc, triangles, first_triangle, serial })
+        Ok(Self {
+            materials,
+            lights,
+            light_nodes,
+            light_trails,
+            ltc,
+            triangles,
+            first_triangle,
+            analytic_residual: false,
+            serial,
+        })
     }
 
     /// This value's identity for upload caches: equal identities mean the same buffers.
@@ -100,7 +113,7 @@ impl ShadeData {
     }
 
     /// Shade-stage parameters for sample `sample_index` of a `width × height` frame drawn by
-    /// `sampler`, with this scene's light counts.
+    /// `sampler`, with this scene's light counts and [`ShadeData::analytic_residual`] choice.
     pub fn params(&self, sampler: SamplerParams, width: u32, height: u32, sample_index: u32) -> ShadeParams {
         ShadeParams {
             sampler,
@@ -109,7 +122,8 @@ impl ShadeData {
             sample_index,
             light_count: self.lights.len() as u32,
             light_node_count: self.light_nodes.len() as u32,
-            padding: [0; 3],
+            analytic_residual: u32::from(self.analytic_residual),
+            padding: [0; 2],
         }
     }
 

@@ -1,6 +1,8 @@
 //! The shade stage (seed 000): form factors of polygonal lights under linearly transformed
-//! cosines (analytic U), and the stage that pairs them with stochastic shadows.
+//! cosines (analytic U), an optional quadrature residual towards the exact GGX lobe, and the
+//! stage that pairs them with stochastic shadows.
 
 pub mod ltc;
 pub mod polygon;
+pub mod residual;
 pub mod stage;
