@@ -203,14 +203,9 @@ fn analytic_u_matches_the_f64_reference() {
         })
         .collect();
 
-    // Relative error beyond the reference's own 3σ; values below 1e-4 are compared absolutely.
-    let excess = |(ours, reference, rel_sigma): (f64, f64, f64)| {
-        let scale = reference.max(1e-4);
-        ((ours - reference).abs() / scale - 3.0 * rel_sigma).max(0.0)
-    };
     println!("roughness  view°   light                         diffuse err   specular: LTC  corrected  reference   err: LTC  corrected");
     for c in &cases {
-        let d = excess(c.diffuse);
+        let d = relative_excess(c.diffuse);
         println!(
             "{:>9} {:>6} {:<30} {:>9.2e}    {:>10.5} {:>10.5} {:>10.5} {:>9.2}% {:>9.2}%",
             c.roughness,
@@ -220,14 +215,14 @@ fn analytic_u_matches_the_f64_reference() {
             c.specular.0,
             c.corrected.0,
             c.specular.1,
-            100.0 * excess(c.specular),
-            100.0 * excess(c.corrected)
+            100.0 * relative_excess(c.specular),
+            100.0 * relative_excess(c.corrected)
         );
         assert!(c.diffuse.0.is_finite() && c.specular.0.is_finite() && c.corrected.0.is_finite());
         assert!(d <= 0.005, "diffuse lobe off by {d} at {} {}° {}", c.roughness, c.view_degrees, c.light);
     }
-    let ltc = SpecularErrors::new(&cases, |c| c.specular, excess);
-    let corrected = SpecularErrors::new(&cases, |c| c.corrected, excess);
+    let ltc = SpecularErrors::new(&cases, |c| c.specular);
+    let corrected = SpecularErrors::new(&cases, |c| c.corrected);
     ltc.print("LTC");
     corrected.print("LTC + quadrature residual");
     // The LTC alone, at its measured envelope (module documentation).
@@ -248,6 +243,18 @@ fn analytic_u_matches_the_f64_reference() {
     assert!(corrected.albedo_relative(1.0) <= ltc.albedo_relative(1.0), "the residual made the worst case worse");
 }
 
+/// Error of `ours` relative to `reference` beyond the reference's own 3σ (`rel_sigma` is its
+/// relative standard error); values below 1e-4 are compared absolutely.
+fn relative_excess((ours, reference, rel_sigma): (f64, f64, f64)) -> f64 {
+    ((ours - reference).abs() / reference.max(1e-4) - 3.0 * rel_sigma).max(0.0)
+}
+
+/// Error of a specular `ours` beyond the reference's 3σ, relative to the lobe's albedo
+/// `magnitude` (what a shaded pixel sees).
+fn albedo_excess((ours, reference, rel_sigma): (f64, f64, f64), magnitude: f64) -> f64 {
+    ((ours - reference).abs() - 3.0 * rel_sigma * reference).max(0.0) / magnitude
+}
+
 /// Specular errors at roughness ≥ 0.1, each sorted: relative to the reference (issue 5's metric)
 /// and relative to the lobe's albedo (what a pixel sees).
 struct SpecularErrors {
@@ -260,13 +267,12 @@ struct SpecularErrors {
 }
 
 impl SpecularErrors {
-    fn new(cases: &[Case], value: impl Fn(&Case) -> (f64, f64, f64), excess: impl Fn((f64, f64, f64)) -> f64) -> Self {
+    fn new(cases: &[Case], value: impl Fn(&Case) -> (f64, f64, f64)) -> Self {
         let (mut relative, mut relative_to_80) = (Vec::new(), Vec::new());
         let (mut albedo_relative, mut albedo_relative_to_80) = (Vec::new(), Vec::new());
         for c in cases.iter().filter(|c| c.roughness >= 0.1) {
-            let (ours, reference, rel_sigma) = value(c);
-            let r = excess((ours, reference, rel_sigma));
-            let e = ((ours - reference).abs() - 3.0 * rel_sigma * reference).max(0.0) / c.magnitude;
+            let r = relative_excess(value(c));
+            let e = albedo_excess(value(c), c.magnitude);
             relative.push(r);
             albedo_relative.push(e);
             if c.view_degrees <= 80.0 {
@@ -381,11 +387,10 @@ fn the_residual_helps_on_random_lights() {
             let ltc = magnitude * f64::from(specular_form_factor(&lobe, corners));
             let corrected = magnitude
                 * f64::from(specular_form_factor_corrected(&lobe, &GgxLobe::new(roughness, cos_v as f32), corners));
-            let relative = |x: f64| ((x - reference).abs() / reference.max(1e-4) - 3.0 * rel_sigma).max(0.0);
-            let albedo = |x: f64| ((x - reference).abs() - 3.0 * rel_sigma * reference).max(0.0) / magnitude;
+            let (ltc, corrected) = ((ltc, reference, rel_sigma), (corrected, reference, rel_sigma));
             Some(RandomLightErrors {
-                relative: [relative(ltc), relative(corrected)],
-                albedo_relative: [albedo(ltc), albedo(corrected)],
+                relative: [relative_excess(ltc), relative_excess(corrected)],
+                albedo_relative: [albedo_excess(ltc, magnitude), albedo_excess(corrected, magnitude)],
             })
         })
         .collect();

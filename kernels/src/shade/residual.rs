@@ -36,8 +36,8 @@ use spirv_std::num_traits::Float;
 
 use super::ltc::LtcLobe;
 use super::polygon::Polygon;
-use core::f32::consts::PI;
-use glam::Vec3;
+use crate::sampling::warp::{ggx_d, GGX_MIN_ALPHA};
+use glam::{Vec2, Vec3};
 
 /// Relative difference between the nodes' integral of the LTC lobe and its exact form factor up to
 /// which the residual is trusted in full (it fades out up to twice this). 2 %, measured on the 120
@@ -45,10 +45,6 @@ use glam::Vec3;
 /// overshoot (64 % off the reference), 1 % dropped corrections that helped (6 cases beyond 5 %
 /// instead of 2).
 pub const RESOLVED_TOLERANCE: f32 = 0.02;
-
-/// Smallest GGX `α` (roughness 0 is clamped to it), as the table's fit
-/// (`raywave_host::ltc_fit::MIN_ALPHA`).
-pub const MIN_ALPHA: f32 = 1.0e-4;
 
 /// `cos θ` of the most grazing view the table was fitted at (θ = 1.57,
 /// `raywave_host::ltc_fit::MAX_THETA`); views beyond are evaluated there, as the lookup does.
@@ -58,8 +54,8 @@ pub const MIN_COS_VIEW: f32 = 7.963e-4;
 /// table stands for, at one shading point, in the LTC frame (z = normal, view in the `+x` half).
 #[derive(Copy, Clone, Debug, PartialEq)]
 pub struct GgxLobe {
-    /// `α²`, with `α = max(roughness², MIN_ALPHA)`.
-    alpha2: f32,
+    /// `α = max(roughness², GGX_MIN_ALPHA)` (the table's fit clamps to the same 10⁻⁴).
+    alpha: f32,
     /// Unit view direction, `z ≥ MIN_COS_VIEW`.
     view: Vec3,
     /// Smith `Λ` of the view.
@@ -72,11 +68,10 @@ impl GgxLobe {
     /// puts it.
     pub fn new(roughness: f32, cos_theta_v: f32) -> Self {
         let r = if roughness > 0.0 { roughness.min(1.0) } else { 0.0 };
-        let alpha = (r * r).max(MIN_ALPHA);
+        let alpha = (r * r).max(GGX_MIN_ALPHA);
         let z = if cos_theta_v > MIN_COS_VIEW { cos_theta_v.min(1.0) } else { MIN_COS_VIEW };
         let view = Vec3::new((1.0 - z * z).max(0.0).sqrt(), 0.0, z);
-        let alpha2 = alpha * alpha;
-        Self { alpha2, view, lambda_view: smith_lambda(alpha2, z) }
+        Self { alpha, view, lambda_view: smith_lambda(alpha * alpha, z) }
     }
 
     /// `f(v, l)·cos θ_l` (sr⁻¹) at the unit local direction `l`: `D(h)·G₂/(4 cos θ_v)`, 0 at or
@@ -86,14 +81,8 @@ impl GgxLobe {
             return 0.0;
         }
         let h = (self.view + l).normalize_or_zero();
-        if !(h.z > 0.0) {
-            return 0.0;
-        }
-        // D = α²/(π (h.x² + h.y² + α² h.z²)²): the form with sin²θ_h = h.x² + h.y² keeps its
-        // precision near the normal.
-        let q = h.x * h.x + h.y * h.y + self.alpha2 * h.z * h.z;
-        let d = self.alpha2 / (PI * q * q);
-        let g2 = 1.0 / (1.0 + self.lambda_view + smith_lambda(self.alpha2, l.z));
+        let d = ggx_d(h, Vec2::splat(self.alpha));
+        let g2 = 1.0 / (1.0 + self.lambda_view + smith_lambda(self.alpha * self.alpha, l.z));
         d * g2 / (4.0 * self.view.z)
     }
 }
@@ -156,9 +145,9 @@ pub fn residual(ltc: &LtcLobe, ggx: &GgxLobe, clipped: &Polygon, ltc_integral: f
     if clipped.count < 3 || !(ltc_integral > 0.0) || !(ltc.magnitude > 0.0) {
         return 0.0;
     }
-    let miss = |sum_ltc: f32| (sum_ltc - ltc_integral).abs() / ltc_integral;
     let (sum_ggx, sum_ltc) = polygon_integrals(clipped, ltc, ggx);
-    let trust = (2.0 - miss(sum_ltc) / RESOLVED_TOLERANCE).clamp(0.0, 1.0);
+    let miss = (sum_ltc - ltc_integral).abs() / ltc_integral;
+    let trust = (2.0 - miss / RESOLVED_TOLERANCE).clamp(0.0, 1.0);
     let correction = trust * (sum_ggx / ltc.magnitude - sum_ltc);
     if correction.is_finite() {
         correction
@@ -171,19 +160,18 @@ pub fn residual(ltc: &LtcLobe, ggx: &GgxLobe, clipped: &Polygon, ltc_integral: f
 /// centre direction.
 fn polygon_integrals(clipped: &Polygon, ltc: &LtcLobe, ggx: &GgxLobe) -> (f32, f32) {
     let n = clipped.count as usize;
+    let unit = clipped.map(|c| c.normalize_or_zero());
     let mut centre = Vec3::ZERO;
     let mut i = 0usize;
     while i < n {
-        centre += clipped.corners[i].normalize_or_zero();
+        centre += unit.corners[i];
         i += 1;
     }
     let centre = centre.normalize_or_zero();
     let (mut sum_ggx, mut sum_ltc) = (0.0f32, 0.0f32);
     let mut i = 0usize;
     while i < n {
-        let b = clipped.corners[i].normalize_or_zero();
-        let c = clipped.corners[(i + 1) % n].normalize_or_zero();
-        let (g, d) = triangle_integrals(centre, b, c, ltc, ggx);
+        let (g, d) = triangle_integrals(centre, unit.corners[i], unit.corners[(i + 1) % n], ltc, ggx);
         sum_ggx += g;
         sum_ltc += d;
         i += 1;
