@@ -33,7 +33,9 @@
 //! a brute-force 3000² integration over the light, the nodes' `∫ G` is 11 % high at roughness 0.5
 //! and 68 % at 0.35, their `∫ D_LTC` within 0.2 % and 3.2 % of exact (so the residual is trusted
 //! in full and in part). At such views the GGX lobe's shape departs furthest from the LTC's, and
-//! the LTC's quadrature stops vouching for the GGX lobe's. Tried and dropped (measured on the same
+//! the LTC's quadrature stops vouching for the GGX lobe's. The lobe varies there on a scale far
+//! below the fan's triangles: splitting every triangle into quarters `k` times, `∫ G` is still
+//! 5.4 % and 1.0 % high at `k = 3` (64× the nodes) and 1.1 % and 0.2 % at `k = 4`. Tried and dropped (measured on the same
 //! grid): checking each fan triangle against its own exact LTC integral and splitting it into
 //! quarters, twice, where it misses — the overhead light at 89.9° and roughness 0.1 got worse
 //! (1.7 % → 58 %: trusted and dropped pieces of one light mixed); choosing per piece between this
