@@ -11,8 +11,8 @@
 //! direction. The residual `G − D_LTC` is smooth wherever the lobe's peak is not on the light, and
 //! there a low-order rule integrates it well. Measured against the f64 reference
 //! (`tests/analytic_lighting.rs`, roughness ≥ 0.1): on its 120-light grid the cases beyond 5 % of
-//! the reference fall from 33 to 2 (both at 89.9°, 8 % and 9 %; the largest error from 173 % to
-//! 9 %, up to 80° from 173 % to 2.9 %); on 357 random lights from 182 to 3, none made worse. It
+//! the reference fall from 34 to 2 (both at 89.9°, 8.8 % and 10.0 %; the largest error from 173 %
+//! to 10 %, up to 80° from 173 % to 3.2 %); on 357 random lights from 184 to 3, none made worse. It
 //! costs the CPU shade stage 1.6–1.9× its time (Cornell box, `shade/cpu-residual` bench).
 //!
 //! When the rule may be trusted is measured, not guessed: the same nodes integrate `D_LTC`, whose
@@ -60,9 +60,9 @@ use glam::{Vec2, Vec3};
 
 /// Relative difference between the nodes' integral of the LTC lobe and its exact form factor up to
 /// which the residual is trusted in full (it fades out up to twice this). 2 %, measured on the 120
-/// lights of `tests/analytic_lighting.rs` at roughness ≥ 0.1: 5 % let a grazing correction
-/// overshoot (64 % off the reference), 1 % dropped corrections that helped (6 cases beyond 5 %
-/// instead of 2).
+/// lights of `tests/analytic_lighting.rs` at roughness ≥ 0.1 (with its earlier 2.6·10⁵-sample
+/// reference): 5 % let a grazing correction overshoot (64 % off the reference), 1 % dropped
+/// corrections that helped (6 cases beyond 5 % instead of 2).
 pub const RESOLVED_TOLERANCE: f32 = 0.02;
 
 /// `cos θ` of the most grazing view the table was fitted at (θ = 1.57,
