@@ -27,6 +27,10 @@ pub fn ratio_pixel(shadowed: Vec4, unshadowed: Vec4) -> Vec4 {
 /// The ratio at the pixel nearest to `point` (clamped into the image). `(x + ½) as i32` rounds
 /// every coordinate that lies inside the image to nearest (and truncation only moves negative
 /// ones, which the clamp sends to 0 either way) without the software `round` of `no_std`.
+/// Always inlined, as is [`line_taps`]: left to itself the CPU build called it for every tap and
+/// returned the `Vec3` through memory; inlined, the 1080p noise pass takes 0.7× the time (CPU,
+/// 2 threads, alternating runs: 706 → 500 ms), with the same results.
+#[inline(always)]
 fn line_tap(point: Vec2, width: u32, height: u32, ratio: &[Vec4]) -> Vec3 {
     let nearest = IVec2::new((point.x + 0.5) as i32, (point.y + 0.5) as i32);
     ratio[clamped_index(nearest, width, height)].xyz()
@@ -51,6 +55,7 @@ struct LineTaps {
 
 /// The taps `r` steps along the four lines through `center` with direction components `dx`,
 /// `dy` (lane `k` = line `k`): the ratio at the pixel nearest to `center + r·direction_k`.
+#[inline(always)]
 fn line_taps(center: Vec2, dx: Vec4, dy: Vec4, r: f32, width: u32, height: u32, ratio: &[Vec4]) -> LineTaps {
     let xs = Vec4::splat(center.x) + dx * r;
     let ys = Vec4::splat(center.y) + dy * r;
