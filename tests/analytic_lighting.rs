@@ -16,23 +16,23 @@
 //!
 //! - **The LTC alone** (`specular_form_factor`, the default). The median is met with the two-lobe
 //!   table (FIT_VERSION 4: 0.67 %; with the smaller reference 0.43 %, FIT_VERSION 3 0.68 %, one
-//!   lobe, FIT_VERSION 2, 4.2 %) and
-//!   asserted; the max is not: lights that catch only a lobe's far tail (a light low on the view's
-//!   side, or overhead at grazing views; reference `U_S` below 0.006) keep errors of 30–173 %,
-//!   and at 89.9° the lookup between the table's last two columns adds some (roughness 0.75, light
-//!   around the mirror direction: 60 %; 3.6 % with FIT_VERSION 3, whose grazing column had not
-//!   switched basin — `tests/ltc_interpolation.rs`). 15 of 120 cases exceed 30 %, 34 exceed 5 %
-//!   (smaller reference: 14 and 33; FIT_VERSION 3: 12 and 32). The error relative to the lobe's albedo, which is what a shaded
-//!   pixel sees (`|U_S − ref|·E_S` against `E_S`), is asserted at its measured envelope: median
-//!   ≤ 0.1 %, 90th percentile ≤ 1.5 %, max ≤ 5 % (measured 0.01 %, 0.77 %, 4.0 %; the earlier
-//!   versions, at the next case up for the percentile: FIT_VERSION 3 0.00 %, 0.87 %, 3.5 %; one
-//!   lobe 0.14 %, 1.6 %, 9.0 %; ltc_code's fixed frame 0.17 %, 4.5 %, 13 %), so a regression of
-//!   the fit or of the polygon integration fails.
+//!   lobe, FIT_VERSION 2, 4.2 %) and asserted; the max is not: lights that catch only a lobe's far
+//!   tail (a light low on the view's side, or overhead at grazing views; reference `U_S` below
+//!   0.006) keep errors of 30–173 %, and at 89.9° the lookup between the table's last two columns
+//!   adds some (roughness 0.75, light around the mirror direction: 60 %; 3.6 % with FIT_VERSION 3,
+//!   whose grazing column had not switched basin — `tests/ltc_interpolation.rs`). 15 of 120 cases
+//!   exceed 30 %, 34 exceed 5 % (smaller reference: 14 and 33; FIT_VERSION 3: 12 and 32). The error
+//!   relative to the lobe's albedo, which is what a shaded pixel sees (`|U_S − ref|·E_S` against
+//!   `E_S`), is asserted at its measured envelope: median ≤ 0.1 %, 90th percentile ≤ 1.5 %, max ≤
+//!   5 % (measured 0.01 %, 0.77 %, 4.0 %; the earlier versions, at the next case up for the
+//!   percentile: FIT_VERSION 3 0.00 %, 0.87 %, 3.5 %; one lobe 0.14 %, 1.6 %, 9.0 %; ltc_code's
+//!   fixed frame 0.17 %, 4.5 %, 13 %), so a regression of the fit or of the polygon integration
+//!   fails.
 //! - **With the quadrature residual** (`specular_form_factor_corrected`,
-//!   `raywave::kernels::shade::residual`; `raywave render --analytic-residual`): median 0.00 %;
-//!   max 3.2 % up to 80° (target met and asserted) and 10.0 % at 89.9°, where two lights around
-//!   the mirror direction keep 8.8 % and 10.0 % (asserted ≤ 11 %): 2 of 120 cases beyond 5 %,
-//!   none beyond 30 %. Its albedo-relative max stays 4.0 % (the residual is dropped where the nodes do
+//!   `raywave::kernels::shade::residual`; `raywave render --analytic-residual`): median 0.00 %; max
+//!   3.2 % up to 80° (target met and asserted) and 10.0 % at 89.9°, where two lights around the
+//!   mirror direction keep 8.8 % and 10.0 % (asserted ≤ 11 %): 2 of 120 cases beyond 5 %, none
+//!   beyond 30 %. Its albedo-relative max stays 4.0 % (the residual is dropped where the nodes do
 //!   not resolve the lobe, as for the roughness-0.35 mirror light at 89.9°), asserted not to grow.
 //!
 //! A second test draws 400 random quads, views and roughnesses (fixed seed) and asserts that the
@@ -275,8 +275,9 @@ impl SpecularErrors {
         let (mut relative, mut relative_to_80) = (Vec::new(), Vec::new());
         let (mut albedo_relative, mut albedo_relative_to_80) = (Vec::new(), Vec::new());
         for c in cases.iter().filter(|c| c.roughness >= 0.1) {
-            let r = relative_excess(value(c));
-            let e = albedo_excess(value(c), c.magnitude);
+            let measured = value(c);
+            let r = relative_excess(measured);
+            let e = albedo_excess(measured, c.magnitude);
             relative.push(r);
             albedo_relative.push(e);
             if c.view_degrees <= 80.0 {

@@ -26,26 +26,26 @@
 //! solid-angle Jacobian `|p·((B − A) × (C − A))|/|p|³`, integrated by the collapsed (Duffy) product
 //! of 3-point Gauss–Legendre rules (exact for polynomials of degree 5 in `s` and `t`). A 3-point
 //! rule per triangle was tried and let wrong corrections through (an albedo-relative error of
-//! 37 %); splitting unresolved triangles into four changed no case beyond the reference's noise.
+//! 37 %).
 //!
 //! Where the check is fooled: the two grid cases left beyond 5 % (89.9° views, lights around the
-//! mirror direction) are lights over which the nodes integrate `D_LTC` well but not `G` — against
-//! a brute-force 3000² integration over the light, the nodes' `∫ G` is 11 % high at roughness 0.5
-//! and 68 % at 0.35, their `∫ D_LTC` within 0.2 % and 3.2 % of exact (so the residual is trusted
-//! in full and in part). At such views the GGX lobe's shape departs furthest from the LTC's, and
-//! the LTC's quadrature stops vouching for the GGX lobe's. The lobe varies there on a scale far
-//! below the fan's triangles: splitting every triangle into quarters `k` times, `∫ G` is still
-//! 5.4 % and 1.0 % high at `k = 3` (64× the nodes) and 1.1 % and 0.2 % at `k = 4`. Tried and dropped (measured on the same
-//! grid): checking each fan triangle against its own exact LTC integral and splitting it into
-//! quarters, twice, where it misses — the overhead light at 89.9° and roughness 0.1 got worse
-//! (1.7 % → 58 %: trusted and dropped pieces of one light mixed); choosing per piece between this
-//! control variate and the direct `∫ G − exact ∫ D_LTC` by their change under splitting
-//! (adaptive quadrature's error estimate) — it fixes that overhead light and takes the
-//! roughness-0.35 mirror light from 8 % to 6 % (with the earlier 2.6·10⁵-sample reference), but
-//! the roughness-0.5 one passes the global check and never reaches it, and one random light got
-//! worse; forcing it at views
-//! beyond 80° — the mirror lights got worse (26 % and 45 %); centring the fan on the mirror
-//! direction — 23 % and 25 %.
+//! mirror direction) are lights over which the nodes integrate `D_LTC` well but not `G` — against a
+//! brute-force 3000² integration over the light, the nodes' `∫ G` is 11 % high at roughness 0.5 and
+//! 68 % at 0.35, their `∫ D_LTC` within 0.2 % and 3.2 % of exact (so the residual is trusted in
+//! full and in part). At such views the GGX lobe's shape departs furthest from the LTC's, and the
+//! LTC's quadrature stops vouching for the GGX lobe's. The lobe varies there on a scale far below
+//! the fan's triangles: splitting every triangle into quarters `k` times, `∫ G` is still 5.4 % and
+//! 1.0 % high at `k = 3` (64× the nodes) and 1.1 % and 0.2 % at `k = 4`, while one split moves it
+//! the wrong way (68 → 82 % and 11 → 22 % high). Tried and dropped (measured on the same grid):
+//! checking each fan triangle against its own exact LTC integral and splitting it into quarters,
+//! twice, where it misses — the overhead light at 89.9° and roughness 0.1 got worse (1.7 % → 58 %:
+//! trusted and dropped pieces of one light mixed); choosing per piece between this control variate
+//! and the direct `∫ G − exact ∫ D_LTC` by their change under splitting (adaptive quadrature's
+//! error estimate) — it fixes that overhead light and takes the roughness-0.35 mirror light from
+//! 8 % to 6 % (with the earlier 2.6·10⁵-sample reference), but the roughness-0.5 one passes the
+//! global check and never reaches it, and one random light got worse; forcing it at views beyond
+//! 80° — the mirror lights got worse (26 % and 45 %); centring the fan on the mirror direction —
+//! 23 % and 25 %.
 
 // `!(x > 0.0)` sends NaN down the "nothing to add" branch on purpose.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
