@@ -66,7 +66,7 @@ fn stages(c: &mut Criterion) {
         group.bench_function(BenchmarkId::new("cpu", rays.len()), |b| {
             b.iter(|| cpu_backend.shade(black_box(&params), &data, &rays, &hits).expect("shade"))
         });
-        // With the quadrature residual added to every light's U_S (ShadeParams::analytic_residual).
+        // With every light's U_S from the GGX lobe's integral (ShadeParams::analytic_residual).
         let residual_params = ShadeParams { analytic_residual: 1, ..params };
         group.bench_function(BenchmarkId::new("cpu-residual", rays.len()), |b| {
             b.iter(|| cpu_backend.shade(black_box(&residual_params), &data, &rays, &hits).expect("shade"))

@@ -67,8 +67,9 @@
 //!   cells, but the mirror light falls to −89…−98 % in four (a sharp peak covers too little
 //!   solid angle to count). With the sum of the two (the relative part weighted 0.1) the low
 //!   light stays at −26…−99 % in seven cells. A third polygon integral per light would not buy
-//!   the ≤ 5 % target. What does, at run time and up to 80° views, is a quadrature of the
-//!   residual `GGX − LTC` over the light (`raywave_kernels::shade::residual`, opt-in for its cost).
+//!   the ≤ 5 % target. What does, at run time and at every view, is the GGX lobe's own integral
+//!   over the light — the LTC's plus its residual `GGX − LTC` — by quadrature in the half-vector's
+//!   slope space (`raywave_kernels::shade::slope_quadrature`, opt-in for its cost).
 //! * **Error** (minimized): `Σ |f·cos − g|ᵖ/(pdf₁ + pdf₂ + pdf_brdf)` over `n²` directions drawn
 //!   from each LTC lobe and `n²` BRDF-sampled ones (stratified grids, `n =`
 //!   [`FitConfig::fit_samples`]), divided by `n²`: the balance-heuristic estimate of

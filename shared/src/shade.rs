@@ -34,9 +34,10 @@ pub struct ShadeParams {
     pub light_count: u32,
     /// Number of valid light BVH nodes; 0 selects lights by the linear importance scan.
     pub light_node_count: u32,
-    /// 1: add the quadrature residual towards GGX to each light's specular hit probability `U_S`
-    /// (`raywave_kernels::shade::residual`: accurate far-tail and grazing `U`, about 36 more GGX
-    /// and LTC evaluations per light); 0: the LTC form factors alone.
+    /// 1: each light's specular hit probability `U_S` takes the residual towards GGX — it becomes
+    /// the GGX lobe's own integral over the light (`raywave_kernels::shade::slope_quadrature`:
+    /// accurate far-tail and grazing `U`, about 5× the stage's time on the CPU); 0: the LTC form
+    /// factors alone.
     pub analytic_residual: u32,
     /// Explicit padding; always 0.
     pub padding: [u32; 2],

@@ -11,8 +11,9 @@
 //! With the directional albedos `E_D`, `E_S` the unshadowed radiance is
 //! `U = L · (E_D·U_D + E_S·U_S)`.
 
+use super::ggx::GgxLobe;
 use super::polygon::{quad_form_factor, Polygon};
-use super::residual::{residual, GgxLobe};
+use super::slope_quadrature::ggx_integral;
 use crate::sampling::warp;
 use glam::{Mat3, Vec2, Vec3, Vec4};
 use raywave_shared::ltc_table::LTC_SIZE;
@@ -148,14 +149,16 @@ pub fn specular_form_factor(lobe: &LtcLobe, quad: [Vec3; 4]) -> f32 {
     mixture_form_factor(lobe, &Polygon::quad(quad).clip_to_horizon())
 }
 
-/// `U_S` as [`specular_form_factor`] plus the quadrature residual towards the GGX lobe `ggx` the
-/// table cell stands for ([`residual`]), in `[0, 1]`: accurate also for lights that catch only
-/// the lobe's far tail, at the cost of 9 GGX and LTC evaluations per triangle of the light (a
-/// quad: 4 triangles, 5 if it crosses the horizon).
+/// `U_S` of the GGX lobe `ggx` the table cell stands for, rather than of its LTC: the LTC's
+/// [`specular_form_factor`] plus its residual towards GGX, computed as the GGX lobe's integral
+/// over the light by [`ggx_integral`] and normalized by the table's magnitude (so that it takes
+/// the same albedo terms), in `[0, 1]`. Accurate also where the LTC is not — lights that catch
+/// only the lobe's far tail, grazing views — at the cost of 30–200 radial integrals per light.
 pub fn specular_form_factor_corrected(lobe: &LtcLobe, ggx: &GgxLobe, quad: [Vec3; 4]) -> f32 {
-    let clipped = Polygon::quad(quad).clip_to_horizon();
-    let exact_ltc = mixture_form_factor(lobe, &clipped);
-    (exact_ltc + residual(lobe, ggx, &clipped, exact_ltc)).clamp(0.0, 1.0)
+    if lobe.magnitude.is_nan() || lobe.magnitude <= 0.0 {
+        return 0.0;
+    }
+    (ggx_integral(&Polygon::quad(quad).clip_to_horizon(), ggx) / lobe.magnitude).clamp(0.0, 1.0)
 }
 
 /// The LTC mixture's integral over `clipped` (local corners, already clipped to the horizon).

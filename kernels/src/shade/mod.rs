@@ -2,7 +2,8 @@
 //! cosines (analytic U), an optional quadrature residual towards the exact GGX lobe, and the
 //! stage that pairs them with stochastic shadows.
 
+pub mod ggx;
 pub mod ltc;
 pub mod polygon;
-pub mod residual;
+pub mod slope_quadrature;
 pub mod stage;

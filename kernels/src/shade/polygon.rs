@@ -120,27 +120,30 @@ pub fn quad_form_factor(q: [Vec3; 4]) -> f32 {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
-    /// Monte Carlo (f64, stratified) form factor of the quad `corner + s·u + t·v` from the origin.
-    fn reference(corner: Vec3, u: Vec3, v: Vec3) -> f64 {
-        let n = 1000;
+    /// `∫ f(l) dω` over the parallelogram `corner + s·u + t·v` seen from the origin, by the
+    /// midpoint rule on an `n × n` grid over its plane, in f64: the shade tests' brute-force
+    /// reference for integrals over a light.
+    pub(crate) fn solid_angle_integral(corner: Vec3, u: Vec3, v: Vec3, n: u32, f: impl Fn(glam::DVec3) -> f64) -> f64 {
         let (c, u, v) = (corner.as_dvec3(), u.as_dvec3(), v.as_dvec3());
-        let area = u.cross(v).length();
-        let normal = u.cross(v) / area;
+        let area_normal = u.cross(v);
         let mut sum = 0.0;
         for i in 0..n {
             for j in 0..n {
-                let p = c + u * ((i as f64 + 0.5) / n as f64) + v * ((j as f64 + 0.5) / n as f64);
+                let p = c + u * ((f64::from(i) + 0.5) / f64::from(n)) + v * ((f64::from(j) + 0.5) / f64::from(n));
                 let d2 = p.length_squared();
-                let w = p / d2.sqrt();
-                let cos_surface = w.z.max(0.0);
-                let cos_light = normal.dot(-w).abs();
-                sum += cos_surface * cos_light / d2;
+                let l = p / d2.sqrt();
+                sum += f(l) * area_normal.dot(l).abs() / d2;
             }
         }
-        sum * area / (n * n) as f64 / std::f64::consts::PI
+        sum / f64::from(n * n)
+    }
+
+    /// The form factor of the quad `corner + s·u + t·v` from the origin, numerically.
+    fn reference(corner: Vec3, u: Vec3, v: Vec3) -> f64 {
+        solid_angle_integral(corner, u, v, 1000, |l| l.z.max(0.0) / std::f64::consts::PI)
     }
 
     #[test]

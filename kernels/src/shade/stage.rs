@@ -8,8 +8,9 @@
 //! (`E_D·cos/π + E_S·D_LTC`, zero below the surface's horizon) — not the exact GGX. Hence with no
 //! occluder `S_N = U_N` sample by sample and `U · S_N / U_N = U` exactly: the ratio adds no noise
 //! where nothing casts a shadow. With [`ShadeParams::analytic_residual`] `U`'s specular term also
-//! takes the quadrature residual towards the GGX lobe ([`super::residual`]); the estimates still
-//! evaluate the LTC lobes (the corrected `U_S` enters only their MIS probability), so the ratio
+//! takes the residual towards the GGX lobe — `U_S` becomes the GGX lobe's own integral over the
+//! light ([`super::slope_quadrature`]); the estimates still evaluate the LTC lobes (the corrected
+//! `U_S` enters only their MIS probability), so the ratio
 //! is still exactly `U` without occluders, while the fully stochastic `S_N` converges to the LTC's
 //! shading rather than to the corrected `U`.
 //!
@@ -24,8 +25,8 @@
 // `!(x > 0.0)` sends NaN down the "no contribution" branch on purpose.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
+use super::ggx::GgxLobe;
 use super::ltc::{self, LtcLobe, ShadingFrame};
-use super::residual::GgxLobe;
 use crate::offset::offset_ray_origin;
 use crate::sampling::light_select::{luminance, LightSet};
 use crate::sampling::{dims, sampler, warp};
@@ -127,7 +128,7 @@ struct Lobes {
     specular: Vec3,
     /// The LTC lobe (a two-LTC mixture, each `M⁻¹` in `frame`).
     ltc: LtcLobe,
-    /// The GGX lobe the LTC stands for, when `U_S` takes the quadrature residual
+    /// The GGX lobe the LTC stands for, when `U_S` takes the residual towards it
     /// ([`ShadeParams::analytic_residual`]).
     ggx: Option<GgxLobe>,
     frame: ShadingFrame,
