@@ -1,6 +1,7 @@
 //! The isotropic GGX lobe (height-correlated Smith masking-shadowing, `F = 1`) that the LTC table
-//! was fitted to, at one shading point: what `U_S` stands for, evaluated exactly by
-//! [`super::slope_quadrature`] when `ShadeParams::analytic_residual` asks for it.
+//! was fitted to, at one shading point: what `U_S` stands for. With
+//! `ShadeParams::analytic_residual` the stage integrates it over each light
+//! ([`super::slope_quadrature`]) and its stochastic estimates evaluate it per sample.
 
 // `!(x > 0.0)` sends NaN down the "below the horizon" branch on purpose.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]

@@ -266,21 +266,21 @@ fn radial_integral(edges: &Edges, ggx: &GgxLobe, phi: f32) -> f32 {
         e += 1;
     }
     sort(&mut psi, count);
-    let slope_direction = |p: f32| {
-        let r = alpha * p.tan();
-        Vec3::new(r * cos, r * sin, 1.0)
+    // The slope-space point `w = (s, 1)` at angle `ψ` of this azimuth, with `sin ψ`, `cos ψ`.
+    let point = |psi: f32| {
+        let (sin_psi, cos_psi) = psi.sin_cos();
+        let r = alpha * sin_psi / cos_psi;
+        (Vec3::new(r * cos, r * sin, 1.0), sin_psi, cos_psi)
     };
     let mut total = 0.0f32;
     let mut i = 0usize;
     while i + 1 < count {
         let (p0, p1) = (psi[i], psi[i + 1]);
-        if p1 > p0 && edges.contains(light_direction(v, slope_direction(0.5 * (p0 + p1))), 0.0) {
+        if p1 > p0 && edges.contains(light_direction(v, point(0.5 * (p0 + p1)).0), 0.0) {
             let mut k = 0u32;
             while k < 3 {
                 let (x, weight) = gauss3(k);
-                let (sin_psi, cos_psi) = (p0 + x * (p1 - p0)).sin_cos();
-                let r = alpha * sin_psi / cos_psi;
-                let w = Vec3::new(r * cos, r * sin, 1.0);
+                let (w, sin_psi, cos_psi) = point(p0 + x * (p1 - p0));
                 let l = light_direction(v, w);
                 let v_dot_w = v.dot(w);
                 if v_dot_w > 0.0 && l.z > 0.0 {
