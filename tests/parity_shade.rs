@@ -3,7 +3,7 @@
 //! three passes with `U` from the LTC form factors and one with the quadrature residual added
 //! (`ShadeParams::analytic_residual`), under the same tolerances: with the residual's adaptive
 //! quadrature of the GGX lobe (whose refinement may take other turns on another device, within its
-//! 10⁻³ tolerance) `U` still agrees within 4.2·10⁻⁵ of the pass's largest on llvmpipe.
+//! 10⁻³ tolerance) `U` still agrees within 2.8·10⁻⁵ of the pass's largest on llvmpipe.
 //!
 //! **What is compared, and how tightly.**
 //! - The emitted radiance: every pixel within 1e-4 relative (to `max(|a|, |b|, 1e-3)`); it is
