@@ -72,12 +72,12 @@ const MAX_BREAKS: usize = 3 * MAX_CORNERS;
 /// the lobe's frame relative to the shading point — in the units of the lobe's albedo (`F = 1`).
 /// 0 for an empty polygon or where the rule produced no finite value.
 pub fn ggx_integral(clipped: &Polygon, ggx: &GgxLobe) -> f32 {
-    let edges = Edges::new(clipped);
+    let edges = Edges::new(clipped, ggx.view());
     if edges.count < 3 {
         return 0.0;
     }
     let mut breaks = [0.0f32; MAX_BREAKS];
-    let count = edges.azimuth_breaks(clipped, ggx.view(), &mut breaks);
+    let count = edges.azimuth_breaks(ggx.view(), &mut breaks);
     let total = adaptive_azimuth_integral(&breaks, count, |phi| radial_integral(&edges, ggx, phi));
     let value = total / TAU;
     if value.is_finite() && value > 0.0 {
@@ -87,29 +87,36 @@ pub fn ggx_integral(clipped: &Polygon, ggx: &GgxLobe) -> f32 {
     }
 }
 
-/// The great circles through the polygon's edges, as unit normals pointing inside.
+/// The polygon as the rule needs it, computed once per light: its unit corners and the great
+/// circles through its edges — unit normals pointing inside, and where each one crosses a ray of
+/// slope space for the view `v`.
 struct Edges {
+    corners: [Vec3; MAX_CORNERS],
     normals: [Vec3; MAX_CORNERS],
+    quadratics: [EdgeQuadratic; MAX_CORNERS],
     count: usize,
 }
 
 impl Edges {
-    fn new(clipped: &Polygon) -> Self {
+    fn new(clipped: &Polygon, v: Vec3) -> Self {
         let count = clipped.count as usize;
+        let corners = clipped.map(|c| c.normalize_or_zero()).corners;
         let mut centre = Vec3::ZERO;
         let mut i = 0usize;
         while i < count {
-            centre += clipped.corners[i].normalize_or_zero();
+            centre += corners[i];
             i += 1;
         }
         let mut normals = [Vec3::ZERO; MAX_CORNERS];
+        let mut quadratics = [EdgeQuadratic::ZERO; MAX_CORNERS];
         let mut i = 0usize;
         while i < count {
-            let m = clipped.corners[i].cross(clipped.corners[(i + 1) % count]).normalize_or_zero();
+            let m = corners[i].cross(corners[(i + 1) % count]).normalize_or_zero();
             normals[i] = if m.dot(centre) < 0.0 { -m } else { m };
+            quadratics[i] = EdgeQuadratic::new(normals[i], v);
             i += 1;
         }
-        Self { normals, count }
+        Self { corners, normals, quadratics, count }
     }
 
     /// Whether the unit direction `l` is inside the polygon, tolerating `slack` (in cosine).
@@ -125,11 +132,11 @@ impl Edges {
 
     /// Writes the azimuths (in `[0, 2π)`, sorted) where the radial integral is not smooth —
     /// the corners' and the edges' tangent rays — and returns how many.
-    fn azimuth_breaks(&self, clipped: &Polygon, v: Vec3, breaks: &mut [f32; MAX_BREAKS]) -> usize {
+    fn azimuth_breaks(&self, v: Vec3, breaks: &mut [f32; MAX_BREAKS]) -> usize {
         let mut count = 0usize;
         let mut i = 0usize;
         while i < self.count {
-            let w = v + clipped.corners[i].normalize_or_zero();
+            let w = v + self.corners[i];
             breaks[count] = wrap(w.y.atan2(w.x));
             count += 1;
             i += 1;
@@ -146,8 +153,7 @@ impl Edges {
     /// Appends the azimuths of the rays tangent to edge `e`'s curve in slope space at a point on
     /// the edge itself; returns the new count.
     fn push_tangencies(&self, e: usize, v: Vec3, breaks: &mut [f32; MAX_BREAKS], mut count: usize) -> usize {
-        let m = self.normals[e];
-        let quadratic = EdgeQuadratic::new(m, v);
+        let quadratic = &self.quadratics[e];
         // The discriminant as a quadratic form in (cos φ, sin φ): zero along two directions (and
         // their opposites) when indefinite.
         let (dcc, dcs, dss) = quadratic.discriminant_form();
@@ -180,32 +186,37 @@ impl Edges {
 }
 
 /// Where a ray of slope space crosses the great circle `m·l = 0`: with `w = (r cos φ, r sin φ, 1)`,
-/// `2(v·w)(m·w) − (m·v)|w|² = A r² + B r + C = 0`.
+/// `2(v·w)(m·w) − (m·v)|w|² = A r² + B r + C = 0`, kept as `A = a_cc cos²φ + a_cs cos φ sin φ +
+/// a_ss sin²φ`, `B = b_c cos φ + b_s sin φ` and the constant `C`.
+#[derive(Copy, Clone)]
 struct EdgeQuadratic {
-    m: Vec3,
-    v: Vec3,
-    mv: f32,
+    a: [f32; 3],
+    b: [f32; 2],
+    c: f32,
 }
 
 impl EdgeQuadratic {
+    const ZERO: Self = Self { a: [0.0; 3], b: [0.0; 2], c: 0.0 };
+
     fn new(m: Vec3, v: Vec3) -> Self {
-        Self { m, v, mv: m.dot(v) }
+        let mv = m.dot(v);
+        Self {
+            a: [2.0 * v.x * m.x - mv, 2.0 * (v.x * m.y + v.y * m.x), 2.0 * v.y * m.y - mv],
+            b: [2.0 * (v.x * m.z + v.z * m.x), 2.0 * (v.y * m.z + v.z * m.y)],
+            c: 2.0 * v.z * m.z - mv,
+        }
     }
 
     /// `(A, B, C)` along the azimuth with the given sine and cosine.
     fn along(&self, sin: f32, cos: f32) -> (f32, f32, f32) {
-        let (m, v) = (self.m, self.v);
-        let (v1, m1) = (v.x * cos + v.y * sin, m.x * cos + m.y * sin);
-        (2.0 * v1 * m1 - self.mv, 2.0 * (v1 * m.z + v.z * m1), 2.0 * v.z * m.z - self.mv)
+        let (a, b) = (self.a, self.b);
+        (a[0] * cos * cos + a[1] * cos * sin + a[2] * sin * sin, b[0] * cos + b[1] * sin, self.c)
     }
 
     /// `B² − 4AC` as `d_cc cos²φ + d_cs cos φ sin φ + d_ss sin²φ`.
     fn discriminant_form(&self) -> (f32, f32, f32) {
-        let (m, v, mv) = (self.m, self.v, self.mv);
-        let (acc, acs, ass) = (2.0 * v.x * m.x - mv, 2.0 * (v.x * m.y + v.y * m.x), 2.0 * v.y * m.y - mv);
-        let (bc, bs) = (2.0 * (v.x * m.z + v.z * m.x), 2.0 * (v.y * m.z + v.z * m.y));
-        let c = 2.0 * v.z * m.z - mv;
-        (bc * bc - 4.0 * c * acc, 2.0 * bc * bs - 4.0 * c * acs, bs * bs - 4.0 * c * ass)
+        let (a, b, c) = (self.a, self.b, self.c);
+        (b[0] * b[0] - 4.0 * c * a[0], 2.0 * b[0] * b[1] - 4.0 * c * a[1], b[1] * b[1] - 4.0 * c * a[2])
     }
 
     /// The positive roots `r` (NaN where there is none).
@@ -254,7 +265,7 @@ fn radial_integral(edges: &Edges, ggx: &GgxLobe, phi: f32) -> f32 {
     let mut count = 2usize;
     let mut e = 0usize;
     while e < edges.count {
-        let roots = EdgeQuadratic::new(edges.normals[e], v).positive_roots(sin, cos);
+        let roots = edges.quadratics[e].positive_roots(sin, cos);
         let mut j = 0usize;
         while j < 2 {
             if roots[j] > 0.0 {
@@ -331,11 +342,18 @@ fn adaptive_azimuth_integral(breaks: &[f32; MAX_BREAKS], count: usize, f: impl F
         }
         i += 1;
     }
+    // Each piece's Simpson value and error estimate, updated only where a piece changes.
+    let mut estimates = [(0.0f32, 0.0f32); MAX_PIECES];
+    let mut i = 0usize;
+    while i < pieces {
+        estimates[i] = simpson(&xs[i], &ys[i]);
+        i += 1;
+    }
     loop {
         let (mut total, mut error, mut worst, mut worst_error) = (0.0f32, 0.0f32, 0usize, -1.0f32);
         let mut i = 0usize;
         while i < pieces {
-            let (value, piece_error) = simpson(&xs[i], &ys[i]);
+            let (value, piece_error) = estimates[i];
             total += value;
             error += piece_error;
             if piece_error > worst_error {
@@ -358,6 +376,7 @@ fn adaptive_azimuth_integral(breaks: &[f32; MAX_BREAKS], count: usize, f: impl F
             let (q1, q3) = (0.5 * (a + m), 0.5 * (m + b));
             xs[slots[h]] = [a, q1, m, q3, b];
             ys[slots[h]] = [fa, f(q1), fm, f(q3), fb];
+            estimates[slots[h]] = simpson(&xs[slots[h]], &ys[slots[h]]);
             h += 1;
         }
         pieces += 1;
