@@ -48,6 +48,23 @@ pub enum Error {
         /// The offending position, as text.
         position: String,
     },
+    /// A vertex coordinate's magnitude exceeds [`crate::scene::MAX_COORDINATE`].
+    #[error(
+        "scene {scene}: mesh {mesh:?} vertex {vertex} at {position} is out of range (each coordinate must lie \
+         within ±{limit:e} scene units)"
+    )]
+    VertexOutOfRange {
+        /// The scene (file path or built-in name).
+        scene: String,
+        /// The mesh's name.
+        mesh: String,
+        /// Index of the vertex within the mesh.
+        vertex: usize,
+        /// The offending position, as text.
+        position: String,
+        /// The largest coordinate magnitude accepted.
+        limit: f32,
+    },
     /// A triangle refers to a vertex that does not exist.
     #[error("scene {scene}: mesh {mesh:?} triangle {triangle} uses vertex {index} but the mesh has {vertex_count}")]
     IndexOutOfRange {

@@ -26,7 +26,7 @@ pub fn load(path: &Path) -> Result<Scene> {
         .or_else(|| document.scenes().next())
         .ok_or_else(|| load_error("the file defines no scene".into()))?;
     let mut meshes = Vec::new();
-    let mut camera = None;
+    let mut scene_camera = None;
     // Depth-first over the node tree, carrying each node's world transform.
     let mut pending: Vec<(gltf::Node, Mat4)> = scene.nodes().map(|n| (n, Mat4::IDENTITY)).collect();
     let mut visited = vec![false; document.nodes().len()];
@@ -40,14 +40,9 @@ pub fn load(path: &Path) -> Result<Scene> {
             )));
         }
         let world = parent * Mat4::from_cols_array_2d(&node.transform().matrix());
-        if let (None, Some(node_camera)) = (&camera, node.camera()) {
+        if let (None, Some(node_camera)) = (&scene_camera, node.camera()) {
             if let gltf::camera::Projection::Perspective(p) = node_camera.projection() {
-                camera = Some(Camera {
-                    position: world.transform_point3(Vec3::ZERO),
-                    look_at: world.transform_point3(Vec3::NEG_Z),
-                    up: world.transform_vector3(Vec3::Y),
-                    vertical_fov_degrees: p.yfov().to_degrees(),
-                });
+                scene_camera = Some(camera(&node, &node_camera, &p, world).map_err(load_error)?);
             }
         }
         if let Some(mesh) = node.mesh() {
@@ -56,12 +51,13 @@ pub fn load(path: &Path) -> Result<Scene> {
                 let field = format!("meshes[{}].primitives[{index}]", mesh.index());
                 let (positions, triangles) = triangles(&primitive, &buffers, world, &field)
                     .map_err(|e| load_error(format!("{e} (in {name:?})")))?;
-                meshes.push(Mesh { name, positions, triangles, material: material(&primitive.material()) });
+                let material = material(&primitive.material()).map_err(load_error)?;
+                meshes.push(Mesh { name, positions, triangles, material });
             }
         }
         pending.extend(node.children().map(|child| (child, world)));
     }
-    let camera = camera.unwrap_or_else(|| framing_camera(&meshes));
+    let camera = scene_camera.unwrap_or_else(|| framing_camera(&meshes));
     Scene::new(&path.display().to_string(), meshes, camera)
 }
 
@@ -245,16 +241,61 @@ fn unreadable(accessor: &gltf::Accessor, field: &str) -> String {
     format!("{field}: accessor {}: its data cannot be read", accessor.index())
 }
 
-/// The metallic-roughness parameters of a glTF material (factors only; textures are not sampled).
-fn material(m: &gltf::Material) -> Material {
+/// The metallic-roughness parameters of a glTF material (factors only; textures are not
+/// sampled), each checked against the range glTF 2.0 gives it; an error names the field.
+fn material(m: &gltf::Material) -> std::result::Result<Material, String> {
+    let field = m.index().map_or_else(|| "the default material".to_owned(), |k| format!("materials[{k}]"));
+    let in_unit_range = |name: &str, values: &[f32]| {
+        if values.iter().all(|v| (0.0..=1.0).contains(v)) {
+            Ok(())
+        } else {
+            Err(format!("{field}.{name} is {values:?}; glTF 2.0 requires each component in [0, 1]"))
+        }
+    };
     let pbr = m.pbr_metallic_roughness();
-    let [r, g, b, _alpha] = pbr.base_color_factor();
-    Material {
-        base_color: Vec3::new(r, g, b),
-        roughness: pbr.roughness_factor().clamp(0.0, 1.0),
-        metallic: pbr.metallic_factor().clamp(0.0, 1.0),
-        emission: Vec3::from_array(m.emissive_factor()) * m.emissive_strength().unwrap_or(1.0),
+    let base_color = pbr.base_color_factor();
+    in_unit_range("pbrMetallicRoughness.baseColorFactor", &base_color)?;
+    in_unit_range("pbrMetallicRoughness.roughnessFactor", &[pbr.roughness_factor()])?;
+    in_unit_range("pbrMetallicRoughness.metallicFactor", &[pbr.metallic_factor()])?;
+    in_unit_range("emissiveFactor", &m.emissive_factor())?;
+    let strength = m.emissive_strength().unwrap_or(1.0);
+    if !(strength.is_finite() && strength >= 0.0) {
+        return Err(format!(
+            "{field}.extensions.KHR_materials_emissive_strength.emissiveStrength is {strength}; it must be \
+             finite and ≥ 0"
+        ));
     }
+    let [r, g, b, _alpha] = base_color;
+    Ok(Material {
+        base_color: Vec3::new(r, g, b),
+        roughness: pbr.roughness_factor(),
+        metallic: pbr.metallic_factor(),
+        emission: Vec3::from_array(m.emissive_factor()) * strength,
+    })
+}
+
+/// The camera of node `node` (world transform `world`) with perspective projection `p`: the
+/// node looks along its −z with +y up; an error names the field that leaves it degenerate.
+fn camera(
+    node: &gltf::Node,
+    camera: &gltf::Camera,
+    p: &gltf::camera::Perspective,
+    world: Mat4,
+) -> std::result::Result<Camera, String> {
+    let yfov = p.yfov();
+    if !(yfov > 0.0 && yfov < std::f32::consts::PI) {
+        return Err(format!("cameras[{}].perspective.yfov is {yfov} rad; it must be in (0, π)", camera.index()));
+    }
+    let (position, look_at, up) =
+        (world.transform_point3(Vec3::ZERO), world.transform_point3(Vec3::NEG_Z), world.transform_vector3(Vec3::Y));
+    if !(position.is_finite() && look_at.is_finite()) || (look_at - position).cross(up) == Vec3::ZERO {
+        return Err(format!(
+            "nodes[{}] (camera {}): its world transform collapses the camera's view or up axis (a zero scale?)",
+            node.index(),
+            camera.index()
+        ));
+    }
+    Ok(Camera { position, look_at, up, vertical_fov_degrees: yfov.to_degrees() })
 }
 
 #[cfg(test)]
@@ -403,6 +444,37 @@ mod tests {
         assert_eq!(scene.meshes()[0].positions, corners);
     }
 
+    /// Material factors outside glTF 2.0's ranges (once clamped or passed on silently) and
+    /// cameras that cannot see: each a `SceneLoad` error with the JSON path of the field.
+    #[test]
+    fn materials_and_cameras_out_of_range_are_errors_naming_the_field() {
+        let lamp =
+            std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../tests/data/emissive_quad.gltf")).unwrap();
+        let cases = [
+            (
+                "\"baseColorFactor\": [\n     0.7",
+                "\"baseColorFactor\": [\n     -0.7",
+                "materials[0].pbrMetallicRoughness.baseColorFactor",
+            ),
+            ("\"roughnessFactor\": 1", "\"roughnessFactor\": 1.5", "materials[0].pbrMetallicRoughness.roughnessFactor"),
+            ("\"metallicFactor\": 0", "\"metallicFactor\": -1", "materials[0].pbrMetallicRoughness.metallicFactor"),
+            ("\"emissiveFactor\": [\n    1,", "\"emissiveFactor\": [\n    3e38,", "materials[1].emissiveFactor"),
+            ("\"yfov\": 0.9", "\"yfov\": 4.0", "cameras[0].perspective.yfov is 4 rad"),
+            (
+                "\"camera\": 0,",
+                "\"camera\": 0, \"scale\": [0, 0, 0],",
+                "nodes[2] (camera 0): its world transform collapses",
+            ),
+        ];
+        for (from, to, field) in cases {
+            let text = lamp.replacen(from, to, 1);
+            assert_ne!(text, lamp, "{from:?} is in the file");
+            let f = file(&text);
+            let err = load(f.path()).unwrap_err();
+            assert!(matches!(err, Error::SceneLoad { .. }) && err.to_string().contains(field), "{field}: {err}");
+        }
+    }
+
     #[test]
     fn emissive_rectangle_becomes_one_downward_quad_light() {
         // tests/data/emissive_quad.gltf: a 2 m × 2 m floor facing +y at y = 0 and a 0.5 m × 0.25 m
@@ -436,12 +508,10 @@ mod tests {
         let text = lamp.replace(r#""emissiveStrength": 4"#, r#""emissiveStrength": -2"#);
         assert_ne!(text, lamp);
         let f = file(&text);
-        match load(f.path()) {
-            Err(Error::InvalidParameter { name: "material.emission", reason }) => {
-                assert!(reason.contains("lamp primitive 0"), "{reason}");
-            }
-            other => panic!("expected an invalid material.emission, got {other:?}"),
-        }
+        let err = load(f.path()).unwrap_err();
+        assert!(matches!(err, Error::SceneLoad { .. }), "{err}");
+        let field = "materials[1].extensions.KHR_materials_emissive_strength.emissiveStrength is -2";
+        assert!(err.to_string().contains(field), "{err}");
     }
 
     #[test]

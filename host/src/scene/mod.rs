@@ -122,8 +122,9 @@ impl Scene {
     /// Builds a scene from meshes and a camera after validating every vertex and triangle.
     /// `name` identifies the scene in error messages (a file path or `builtin:NAME`). Zero-area
     /// triangles are dropped and counted ([`Scene::dropped_degenerate`]), and meshes left empty
-    /// are removed; a non-finite vertex, an out-of-range index, a degenerate camera, a negative or
-    /// non-finite emission, a derived light whose power overflows `f32` or a scene without any
+    /// are removed; a non-finite vertex or one beyond [`MAX_COORDINATE`], an out-of-range index, a
+    /// degenerate camera (or one beyond [`MAX_COORDINATE`]), an emission outside `[0,`
+    /// [`MAX_EMISSION`]`]`, a base colour, roughness or metalness outside `[0, 1]`, a derived light whose power overflows `f32` or a scene without any
     /// triangle of non-zero area is an error.
     ///
     /// Every remaining mesh whose material emits (non-zero emission) and whose triangles form one
@@ -237,23 +238,41 @@ impl Scene {
         }
         let c = &self.camera;
         let fov_ok = c.vertical_fov_degrees > 0.0 && c.vertical_fov_degrees < 180.0;
-        let finite = c.position.is_finite() && c.look_at.is_finite() && c.up.is_finite();
+        let finite = in_range(c.position) && in_range(c.look_at) && c.up.is_finite();
         if !(finite && fov_ok) || (c.look_at - c.position).cross(c.up) == Vec3::ZERO {
             return Err(Error::InvalidParameter {
                 name: "camera",
-                reason: format!("{}: degenerate camera {c:?}", self.name),
+                reason: format!(
+                    "{}: degenerate camera {c:?} (the position and look-at point must be finite and within \
+                     ±{MAX_COORDINATE:e}, apart, and not in line with the up direction; the vertical field of \
+                     view in (0°, 180°))",
+                    self.name
+                ),
             });
         }
         for mesh in &self.meshes {
-            let e = mesh.material.emission;
-            if !e.is_finite() || e.min_element() < 0.0 {
-                return Err(Error::InvalidParameter {
-                    name: "material.emission",
-                    reason: format!(
-                        "{}: mesh {:?} emits {e}; emission must be finite and non-negative",
-                        self.name, mesh.name
-                    ),
-                });
+            let invalid = |name, reason: String| {
+                Err(Error::InvalidParameter { name, reason: format!("{}: mesh {:?} {reason}", self.name, mesh.name) })
+            };
+            let m = &mesh.material;
+            let e = m.emission;
+            // `min_element`/`max_element` skip NaN, hence `is_finite`.
+            if !(e.is_finite() && e.min_element() >= 0.0 && e.max_element() <= MAX_EMISSION) {
+                return invalid(
+                    "material.emission",
+                    format!("emits {e}; each component must be in [0, {MAX_EMISSION:e}]"),
+                );
+            }
+            if !(m.base_color.is_finite() && m.base_color.min_element() >= 0.0 && m.base_color.max_element() <= 1.0) {
+                return invalid(
+                    "material.base_color",
+                    format!("has base colour {}; each component must be in [0, 1]", m.base_color),
+                );
+            }
+            for (name, value) in [("material.roughness", m.roughness), ("material.metallic", m.metallic)] {
+                if !(0.0..=1.0).contains(&value) {
+                    return invalid(name, format!("has {value}; it must be in [0, 1]"));
+                }
             }
         }
         for (index, light) in self.lights().iter().enumerate() {
@@ -269,7 +288,25 @@ impl Scene {
     }
 }
 
-/// Checks every vertex is finite and every index is in range, naming the first offender.
+/// The largest coordinate magnitude of a vertex or of the camera, in scene units. Up to it the
+/// difference of two points stays below 2·10¹⁸ per axis, so the squared lengths and cross
+/// products the kernels form (≤ 1.2·10³⁷) stay finite in `f32` (max 3.4·10³⁸); far beyond it
+/// obvhs' CWBVH build fails (its conversion indexed out of bounds from about 10¹⁹ on, measured).
+pub const MAX_COORDINATE: f32 = 1.0e18;
+
+/// The largest emitted radiance component accepted, in W/(m²·sr): 10⁶ times the sun's disc
+/// (≈ 2·10⁷), and small enough that sums over every sample of a pixel
+/// ([`crate::frame::MAX_SAMPLES_PER_PIXEL`] = 65 536) and over thousands of lights stay finite in
+/// `f32` (a component of 3·10³⁸ reached the EXR output as infinity after 4 samples).
+pub const MAX_EMISSION: f32 = 1.0e20;
+
+/// Whether every coordinate of `p` is finite and within [`MAX_COORDINATE`].
+fn in_range(p: Vec3) -> bool {
+    p.abs().max_element() <= MAX_COORDINATE
+}
+
+/// Checks every vertex is finite and within [`MAX_COORDINATE`] and every index is in range,
+/// naming the first offender.
 fn check_indices_and_vertices(scene: &str, meshes: &[Mesh]) -> Result<()> {
     for mesh in meshes {
         if let Some((vertex, p)) = mesh.positions.iter().enumerate().find(|(_, p)| !p.is_finite()) {
@@ -278,6 +315,15 @@ fn check_indices_and_vertices(scene: &str, meshes: &[Mesh]) -> Result<()> {
                 mesh: mesh.name.clone(),
                 vertex,
                 position: p.to_string(),
+            });
+        }
+        if let Some((vertex, p)) = mesh.positions.iter().enumerate().find(|(_, p)| !in_range(**p)) {
+            return Err(Error::VertexOutOfRange {
+                scene: scene.to_owned(),
+                mesh: mesh.name.clone(),
+                vertex,
+                position: p.to_string(),
+                limit: MAX_COORDINATE,
             });
         }
         for (triangle, indices) in mesh.triangles.iter().enumerate() {
@@ -459,7 +505,8 @@ mod tests {
             (Vec3::new(1.0, -1.0, 0.0), "material.emission"),
             (Vec3::new(f32::NAN, 1.0, 1.0), "material.emission"),
             (Vec3::splat(f32::INFINITY), "material.emission"),
-            (Vec3::splat(f32::MAX), "light.radiance"),
+            (Vec3::splat(f32::MAX), "material.emission"),
+            (Vec3::new(0.0, 2.0 * MAX_EMISSION, 0.0), "material.emission"),
         ] {
             match scene_with(emitter(square.clone(), vec![[0, 1, 2], [0, 2, 3]], emission)) {
                 Err(Error::InvalidParameter { name, reason }) => {
@@ -469,6 +516,49 @@ mod tests {
                 other => panic!("{emission}: expected an invalid {field}, got {other:?}"),
             }
         }
+        // Within both limits, but 10²⁰ W/(m²·sr) over a (10¹⁷ m)² light overflows its power.
+        let huge = square.iter().map(|p| *p * 1e17).collect();
+        let err = scene_with(emitter(huge, vec![[0, 1, 2], [0, 2, 3]], Vec3::splat(MAX_EMISSION))).unwrap_err();
+        assert!(matches!(err, Error::InvalidParameter { name: "light.radiance", .. }), "{err}");
+    }
+
+    #[test]
+    fn materials_outside_their_ranges_are_errors() {
+        let lit = Material::diffuse(Vec3::splat(0.5));
+        for (material, field) in [
+            (Material { base_color: Vec3::new(0.5, -0.1, 0.5), ..lit }, "material.base_color"),
+            (Material { base_color: Vec3::new(0.5, 1.5, 0.5), ..lit }, "material.base_color"),
+            (Material { base_color: Vec3::new(f32::NAN, 0.5, 0.5), ..lit }, "material.base_color"),
+            (Material { roughness: -0.5, ..lit }, "material.roughness"),
+            (Material { metallic: f32::NAN, ..lit }, "material.metallic"),
+        ] {
+            let mesh = Mesh { material, ..triangle_mesh(unit_triangle(), vec![[0, 1, 2]]) };
+            match scene_with(mesh) {
+                Err(Error::InvalidParameter { name, reason }) => {
+                    assert_eq!(name, field, "{material:?}");
+                    assert!(reason.contains("test") && reason.contains("\"m\""), "{reason}");
+                }
+                other => panic!("{material:?}: expected an invalid {field}, got {other:?}"),
+            }
+        }
+        let edges = Material { base_color: Vec3::ONE, roughness: 0.0, metallic: 1.0, ..lit };
+        assert!(scene_with(Mesh { material: edges, ..triangle_mesh(unit_triangle(), vec![[0, 1, 2]]) }).is_ok());
+    }
+
+    #[test]
+    fn coordinates_beyond_the_limit_are_errors_and_the_limit_itself_is_not() {
+        let far = |scale: f32| unit_triangle().into_iter().map(|p| p * scale).collect::<Vec<_>>();
+        let err = scene_with(triangle_mesh(far(2.0 * MAX_COORDINATE), vec![[0, 1, 2]])).unwrap_err();
+        assert!(matches!(err, Error::VertexOutOfRange { vertex: 1, .. }), "{err}");
+        assert!(err.to_string().contains("\"m\"") && err.to_string().contains("1e18"), "{err}");
+        let camera = Camera { position: Vec3::new(0.0, 0.0, -2.0 * MAX_COORDINATE), ..cornell::camera() };
+        let err = Scene::new("test", vec![triangle_mesh(unit_triangle(), vec![[0, 1, 2]])], camera).unwrap_err();
+        assert!(matches!(err, Error::InvalidParameter { name: "camera", .. }), "{err}");
+        // At the limit the scene loads, and the CPU backend builds its BVH (obvhs' CWBVH build
+        // panicked from about 10¹⁹ on).
+        let camera = Camera { position: Vec3::new(0.0, 0.0, MAX_COORDINATE), ..cornell::camera() };
+        let scene = Scene::new("test", vec![triangle_mesh(far(MAX_COORDINATE), vec![[0, 1, 2]])], camera).unwrap();
+        crate::Backend::load_scene(&mut crate::cpu::CpuBackend::new(), &scene).unwrap();
     }
 
     #[test]

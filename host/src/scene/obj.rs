@@ -11,14 +11,24 @@ const DEFAULT_ALBEDO: Vec3 = Vec3::splat(0.7);
 
 /// Loads and validates an OBJ file.
 pub fn load(path: &Path) -> Result<Scene> {
+    let load_error = |message: String| Error::SceneLoad { path: path.to_owned(), message };
+    // Opened here first: tobj reports any failure to open as a bare "open file failed".
+    if path.is_dir() {
+        return Err(load_error("is a directory".into()));
+    }
+    std::fs::File::open(path).map_err(|e| load_error(e.to_string()))?;
     let options = tobj::LoadOptions { triangulate: true, single_index: true, ..Default::default() };
-    let (models, _materials) = tobj::load_obj(path, &options)
-        .map_err(|e| Error::SceneLoad { path: path.to_owned(), message: e.to_string() })?;
+    let (models, _materials) = tobj::load_obj(path, &options).map_err(|e| load_error(e.to_string()))?;
     let meshes: Vec<Mesh> = models
         .into_iter()
         .enumerate()
         .map(|(i, model)| Mesh {
-            name: if model.name.is_empty() { format!("mesh {i}") } else { model.name },
+            // tobj names objects without an `o`/`g` line "unnamed_object".
+            name: if model.name.is_empty() || model.name == "unnamed_object" {
+                format!("mesh {i}")
+            } else {
+                model.name
+            },
             positions: model.mesh.positions.chunks_exact(3).map(|p| Vec3::new(p[0], p[1], p[2])).collect(),
             triangles: model.mesh.indices.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect(),
             material: Material::diffuse(DEFAULT_ALBEDO),
@@ -46,6 +56,8 @@ mod tests {
         let scene = load(f.path()).unwrap();
         assert_eq!(scene.triangle_count(), 2);
         assert_eq!(scene.meshes()[0].name, "quad");
+        let f = obj_file("v 0 0 0\nv 1 0 0\nv 1 1 0\nf 1 2 3\n");
+        assert_eq!(load(f.path()).unwrap().meshes()[0].name, "mesh 0", "an object without a name");
     }
 
     #[test]
@@ -53,6 +65,10 @@ mod tests {
         let err = load(Path::new("/nonexistent/scene.obj")).unwrap_err();
         assert!(matches!(err, Error::SceneLoad { .. }), "{err}");
         assert!(err.to_string().contains("/nonexistent/scene.obj"));
+        assert!(err.to_string().contains("No such file"), "the OS's reason: {err}");
+        let dir = tempfile::Builder::new().suffix(".obj").tempdir().unwrap();
+        let err = load(dir.path()).unwrap_err();
+        assert!(err.to_string().contains("is a directory"), "{err}");
     }
 
     #[test]
