@@ -116,10 +116,11 @@ fn median_seconds(repeats: u32, mut run: impl FnMut() -> f64) -> f64 {
     median((0..repeats).map(|_| run()).collect())
 }
 
-/// The median of a non-empty list of timings.
-fn median(mut times: Vec<f64>) -> f64 {
+/// The median of a list of timings (the upper one of an even count; NaN for none, which the
+/// benchmarks' checks of their repetitions rule out). Shared by every `raywave bench`.
+pub(crate) fn median(mut times: Vec<f64>) -> f64 {
     times.sort_by(f64::total_cmp);
-    times[times.len() / 2]
+    times.get(times.len() / 2).copied().unwrap_or(f64::NAN)
 }
 
 fn wall(f: impl FnOnce()) -> f64 {

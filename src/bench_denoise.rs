@@ -7,6 +7,7 @@
 //! the traffic of an ideal cache — so `gb_per_s` is the effective bandwidth, and on a GPU with a
 //! known peak (`--peak-gbps`, or the datasheet value of an NVIDIA H100/H200) its fraction.
 
+use crate::bench::median;
 use crate::denoise::{DenoiseInput, DenoiseMethod};
 use crate::frame::{check_samples_per_pixel, generate_params_with, sampler_params};
 use crate::shading::{resolve, ShadeAccumulator, ShadeData};
@@ -113,11 +114,6 @@ fn frame_input(options: &DenoiseBenchOptions) -> Result<DenoiseInput> {
         accumulator.shade_pass(&mut cpu, &params, &data, &frame.rays, &frame.hits)?;
     }
     Ok(DenoiseInput::new(&surfaces, &accumulator))
-}
-
-fn median(mut values: Vec<f64>) -> f64 {
-    values.sort_by(f64::total_cmp);
-    values.get(values.len() / 2).copied().unwrap_or(f64::NAN)
 }
 
 /// Measures `backend`, handing each line to `emit`.

@@ -2,7 +2,7 @@
 
 use clap::{Parser, Subcommand};
 use raywave::bench::{bench_trace, TraceBenchOptions};
-use raywave::render::{render, RenderOptions};
+use raywave::render::{render, RenderOptions, RenderView};
 use raywave::{BackendOptions, DeviceChoice, TraceMethod};
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -168,7 +168,8 @@ struct DenoiseBenchArgs {
 
 #[derive(clap::Args)]
 struct TraceBenchArgs {
-    /// `builtin:cornell`, `builtin:spheres` (1.3 M triangles), `builtin:hairball` or an OBJ file.
+    /// `builtin:cornell`, `builtin:spheres` (1.3 M triangles), `builtin:hairball` or a scene file
+    /// (`.obj`, `.gltf`, `.glb`).
     #[arg(long, default_value = "builtin:spheres")]
     scene: String,
     /// CPU threads; default: 1 and all cores.
@@ -375,23 +376,32 @@ fn render_command(args: RenderArgs) -> raywave::Result<()> {
         backend: BackendOptions { validation: args.validate, trace },
     };
     let report = render(&options)?;
-    println!("backend  {}", report.backend);
-    println!(
+    print_line(format!("backend  {}", report.backend));
+    print_line(format!(
         "scene    {} ({} triangles, {} zero-area dropped, {} quad lights)",
         options.scene, report.triangles, report.dropped_degenerate, report.lights
-    );
-    let rays = u64::from(options.width) * u64::from(options.height) * u64::from(options.spp);
-    println!(
-        "image    {}×{} at {} spp → {} ({} of {rays} camera rays hit)",
+    ));
+    if report.unsupported_emitters > 0 {
+        eprintln!(
+            "warning: {} emissive mesh(es) of {} are not one planar parallelogram: they glow where seen but light nothing",
+            report.unsupported_emitters, options.scene
+        );
+    }
+    if report.lights == 0 && options.view == RenderView::Lit {
+        eprintln!("warning: {} has no quad light, so nothing is lit (emitters glow where seen)", options.scene);
+    }
+    let spp = report.samples_per_pixel;
+    let rays = u64::from(options.width) * u64::from(options.height) * u64::from(spp);
+    print_line(format!(
+        "image    {}×{} at {spp} spp → {} ({} of {rays} camera rays hit)",
         options.width,
         options.height,
-        options.spp,
         options.out.display(),
         report.hits
-    );
-    println!("streams  {} bytes/pixel", report.stream_bytes_per_pixel);
+    ));
+    print_line(format!("streams  {} bytes/pixel", report.stream_bytes_per_pixel));
     for t in &report.timings {
-        println!("stage    {:<9} {:>10.3} ms", t.stage, t.seconds * 1e3);
+        print_line(format!("stage    {:<9} {:>10.3} ms", t.stage, t.seconds * 1e3));
     }
     Ok(())
 }
@@ -428,12 +438,12 @@ fn devices(json: bool) -> raywave::Result<()> {
             "vulkan": vulkan.as_ref().ok(),
             "vulkan_error": vulkan.as_ref().err(),
         });
-        println!("{value}");
+        print_line(value.to_string());
         return Ok(());
     }
-    println!("cpu        {threads} threads (rayon)");
+    print_line(format!("cpu        {threads} threads (rayon)"));
     match vulkan {
-        Ok(list) if list.is_empty() => println!("vulkan     no devices"),
+        Ok(list) if list.is_empty() => print_line("vulkan     no devices".into()),
         Ok(list) => {
             for d in list {
                 let flag = |k: &str| {
@@ -443,14 +453,14 @@ fn devices(json: bool) -> raywave::Result<()> {
                         "no"
                     }
                 };
-                println!(
+                print_line(format!(
                     "vulkan:{:<3} {} ({}, Vulkan {})  ray_query={} acceleration_structure={} ray_tracing_pipeline={} buffer_device_address={}",
                     d["index"], d["name"].as_str().unwrap_or("?"), d["type"].as_str().unwrap_or("?"), d["api_version"].as_str().unwrap_or("?"),
                     flag("ray_query"), flag("acceleration_structure"), flag("ray_tracing_pipeline"), flag("buffer_device_address"),
-                );
+                ));
             }
         }
-        Err(e) => println!("vulkan     unavailable: {e}"),
+        Err(e) => print_line(format!("vulkan     unavailable: {e}")),
     }
     Ok(())
 }

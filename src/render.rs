@@ -7,7 +7,7 @@ use image::ImageFormat;
 use raywave_host::denoise::{rgb, DenoiseInput, DenoiseMethod};
 use raywave_host::frame::{check_samples_per_pixel, generate_params_with, sampler_params};
 use raywave_host::shading::{resolve, ShadeAccumulator, ShadeData};
-use raywave_host::visualize::{normal_depth_image, srgb_image, PendingOutput};
+use raywave_host::visualize::{normal_depth_image, persist_all, srgb_image, PendingOutput};
 use raywave_shared::DenoiseParams;
 use std::path::PathBuf;
 
@@ -84,6 +84,11 @@ pub struct RenderReport {
     pub dropped_degenerate: usize,
     /// Quad lights the shade stage samples.
     pub lights: usize,
+    /// Emissive meshes that are not one planar parallelogram: they glow where seen but light
+    /// nothing ([`Scene::unsupported_emitters`]).
+    pub unsupported_emitters: usize,
+    /// Samples per pixel traced: `spp` for the lit view, 1 for the normals view.
+    pub samples_per_pixel: u32,
     /// Per-stage times, summed over the samples.
     pub timings: Vec<StageTiming>,
     /// Camera rays that hit geometry (over all samples).
@@ -101,17 +106,48 @@ fn add_timing(timings: &mut Vec<StageTiming>, stage: &'static str, seconds: f64)
     }
 }
 
+/// The largest thin-lens aperture radius and focus distance accepted, in scene units, as for
+/// the scene's coordinates ([`raywave_host::scene::MAX_COORDINATE`]): ray origins on the lens
+/// stay in the range the trace and shade stages handle (an aperture of 10²⁰ rendered black).
+pub const MAX_LENS_DISTANCE: f32 = raywave_host::scene::MAX_COORDINATE;
+
+/// Checks the options that do not need the scene: lens values in range, outputs that the view
+/// writes, and no file named twice.
+fn check_options(options: &RenderOptions) -> Result<()> {
+    let invalid = |name, reason: String| Err(crate::Error::InvalidParameter { name, reason });
+    if !(0.0..=MAX_LENS_DISTANCE).contains(&options.lens_radius) {
+        return invalid("aperture", format!("{} is outside [0, {MAX_LENS_DISTANCE:e}]", options.lens_radius));
+    }
+    if let Some(focus) = options.focus_distance {
+        if !(focus > 0.0 && focus <= MAX_LENS_DISTANCE) {
+            return invalid("focus", format!("{focus} is outside (0, {MAX_LENS_DISTANCE:e}]"));
+        }
+    }
+    if options.view == RenderView::Normals {
+        for (name, given) in [("exr", options.exr.is_some()), ("stochastic", options.stochastic.is_some())] {
+            if given {
+                return invalid(name, "the normals view writes only --out; drop it or use --view lit".into());
+            }
+        }
+    }
+    let named =
+        [("out", Some(&options.out)), ("exr", options.exr.as_ref()), ("stochastic", options.stochastic.as_ref())];
+    let absolute = |path: &PathBuf| std::path::absolute(path).unwrap_or_else(|_| path.clone());
+    for (k, (name, path)) in named.iter().enumerate() {
+        let Some(path) = path else { continue };
+        if let Some((other, _)) = named[..k].iter().find(|(_, p)| p.is_some_and(|p| absolute(p) == absolute(path))) {
+            return invalid(name, format!("{} is also --{other}'s file; each output needs its own", path.display()));
+        }
+    }
+    Ok(())
+}
+
 /// Renders `options.scene` into `options.out` (and the optional EXR and stochastic images).
-/// Every input is checked before work starts and each output file appears only when complete.
+/// Every input is checked before work starts, and the output files appear together, each
+/// complete, or not at all.
 pub fn render(options: &RenderOptions) -> Result<RenderReport> {
+    check_options(options)?;
     let scene = Scene::load(&options.scene)?;
-    let invalid = |name, reason: &str| Err(crate::Error::InvalidParameter { name, reason: reason.into() });
-    if !(options.lens_radius.is_finite() && options.lens_radius >= 0.0) {
-        return invalid("aperture", "must be finite and ≥ 0");
-    }
-    if options.focus_distance.is_some_and(|f| !(f.is_finite() && f > 0.0)) {
-        return invalid("focus", "must be finite and > 0");
-    }
     let output = PendingOutput::create(&options.out, ImageFormat::Png)?;
     let exr = options.exr.as_deref().map(|path| PendingOutput::create(path, ImageFormat::OpenExr)).transpose()?;
     let stochastic =
@@ -137,6 +173,8 @@ pub fn render(options: &RenderOptions) -> Result<RenderReport> {
         triangles: scene.triangle_count(),
         dropped_degenerate: scene.dropped_degenerate(),
         lights: scene.lights().len(),
+        unsupported_emitters: scene.unsupported_emitters(),
+        samples_per_pixel: spp,
         timings,
         hits,
         stream_bytes_per_pixel: stream_bytes / pixels as u64,
@@ -183,12 +221,13 @@ pub fn render(options: &RenderOptions) -> Result<RenderReport> {
         add_timing(&mut timings, t.stage, t.seconds);
     }
     let image = rgb(&color);
-    output.finish_image(&srgb_image(&image, width, height))?;
+    let mut written = vec![output.write_image(&srgb_image(&image, width, height))?];
     if let Some(exr) = exr {
-        exr.finish_linear_rgb(&image, width, height)?;
+        written.push(exr.write_linear_rgb(&image, width, height)?);
     }
     if let Some(stochastic) = stochastic {
-        stochastic.finish_image(&srgb_image(&accumulator.stochastic_image(), width, height))?;
+        written.push(stochastic.write_image(&srgb_image(&accumulator.stochastic_image(), width, height))?);
     }
+    persist_all(written)?;
     Ok(report(timings, hits, stream_bytes))
 }

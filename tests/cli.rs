@@ -150,10 +150,63 @@ fn bad_input_is_a_typed_error_without_output() {
     assert_rejected(&["--device", "cpu", "--exr", hdr_png.to_str().unwrap()], "must end in .exr");
     assert!(!jpg.exists() && !hdr_png.exists());
     assert_rejected(&["--device", "cpu", "--aperture", "0.1", "--focus", "0"], "focus");
+    // Beyond ±10¹⁸ the squared distances the kernels form overflow, and obvhs' BVH build panicked.
+    let far = dir.path().join("far.obj");
+    std::fs::write(&far, "v 0 0 0\nv 1e19 0 0\nv 0 1 0\nf 1 2 3\n").unwrap();
+    assert_rejected(
+        &["--device", "cpu", "--scene", far.to_str().unwrap()],
+        "vertex 1 at [10000000000000000000, 0, 0] is out of range",
+    );
+    assert_rejected(&["--device", "cpu", "--aperture", "1e20"], "aperture: 100000000000000000000 is outside");
+    assert_rejected(&["--device", "cpu", "--aperture", "0.1", "--focus", "1e19"], "focus");
+    let normals_exr = dir.path().join("normals.exr");
+    assert_rejected(&["--device", "cpu", "--view", "normals", "--exr", normals_exr.to_str().unwrap()], "normals view");
+    assert!(!normals_exr.exists());
 
     let out = raywave(&["render", "--device", "cpu", "--out", "/no/such/dir/out.png"]);
     assert!(!out.status.success());
     assert!(stderr(&out).contains("cannot write output /no/such/dir/out.png"), "{}", stderr(&out));
+
+    // One file named by two outputs: the stochastic image silently replaced the main one.
+    let twice = dir.path().join("twice.png");
+    let (out, _) = render(dir.path(), "twice.png", &["--device", "cpu", "--stochastic", twice.to_str().unwrap()]);
+    assert!(!out.status.success() && stderr(&out).contains("is also --out's file"), "{}", stderr(&out));
+    assert!(!twice.exists());
+}
+
+/// A closed standard output (`raywave render … | head -1`) ends the command quietly; `println!`
+/// panicked on the broken pipe.
+#[test]
+fn closed_stdout_is_not_a_panic() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("piped.png");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_raywave"))
+        .args(["render", "--device", "cpu", "--width", "16", "--height", "16", "--out", path.to_str().unwrap()])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Closed before the render finishes and prints.
+    drop(child.stdout.take());
+    let out = child.wait_with_output().unwrap();
+    assert!(out.status.success() && !stderr(&out).contains("panicked"), "{:?}: {}", out.status, stderr(&out));
+    assert!(path.exists(), "the image is written before anything is printed");
+}
+
+/// A scene without quad lights renders (emitters glow, nothing is lit) with a warning; the
+/// reports, which measure direct light, refuse it instead of printing errors of 0.
+#[test]
+fn lightless_scenes_warn_in_render_and_are_refused_by_reports() {
+    let dir = tempfile::tempdir().unwrap();
+    let (out, path) = render(dir.path(), "dark.png", &["--device", "cpu", "--scene", "builtin:hairball"]);
+    assert!(out.status.success() && path.exists(), "{}", stderr(&out));
+    assert!(stderr(&out).contains("builtin:hairball has no quad light"), "{}", stderr(&out));
+    for report in ["shade", "error-vs-time"] {
+        let out = raywave(&["report", report, "--scenes", "builtin:cornell,builtin:hairball", "--json"]);
+        assert!(!out.status.success(), "report {report} should fail");
+        assert!(stderr(&out).contains("builtin:hairball has no quad light"), "{}", stderr(&out));
+        assert!(out.stdout.is_empty(), "nothing measured before the check: {}", String::from_utf8_lossy(&out.stdout));
+    }
 }
 
 /// Benchmark and report options out of range: each command fails at once with the option named

@@ -75,17 +75,18 @@ impl PendingOutput {
     }
 
     /// Encodes linear radiance `colors` (row-major, `width · height`) as 32-bit float RGB in the
-    /// output's format (OpenEXR keeps the HDR values) and moves it into place.
-    pub fn finish_linear_rgb(self, colors: &[Vec3], width: u32, height: u32) -> Result<()> {
+    /// output's format (OpenEXR keeps the HDR values) into the temporary file; see
+    /// [`WrittenOutput`] for moving it into place.
+    pub fn write_linear_rgb(self, colors: &[Vec3], width: u32, height: u32) -> Result<WrittenOutput> {
         let data: Vec<f32> = colors.iter().flat_map(|c| c.to_array()).collect();
         let image = image::Rgb32FImage::from_raw(width, height, data)
             .ok_or_else(|| Error::Encode { path: self.path.clone(), message: "image size mismatch".into() })?;
-        self.finish_image(&image)
+        self.write_image(&image)
     }
 
-    /// Encodes `image` (8-bit sRGB for PNG, 32-bit float for OpenEXR) in the output's format and
-    /// moves it into place.
-    pub fn finish_image<P>(self, image: &ImageBuffer<P, Vec<P::Subpixel>>) -> Result<()>
+    /// Encodes `image` (8-bit sRGB for PNG, 32-bit float for OpenEXR) in the output's format into
+    /// the temporary file; see [`WrittenOutput`] for moving it into place.
+    pub fn write_image<P>(self, image: &ImageBuffer<P, Vec<P::Subpixel>>) -> Result<WrittenOutput>
     where
         P: PixelWithColorType,
         [P::Subpixel]: EncodableLayout,
@@ -94,11 +95,20 @@ impl PendingOutput {
         image
             .write_to(&mut encoded, self.format)
             .map_err(|e| Error::Encode { path: self.path.clone(), message: e.to_string() })?;
-        self.finish(encoded.get_ref())
+        self.write(encoded.get_ref())
     }
 
-    /// Writes `bytes` and moves the file into place.
-    fn finish(mut self, bytes: &[u8]) -> Result<()> {
+    /// [`PendingOutput::write_image`], then moves the file into place: for a job with one output.
+    pub fn finish_image<P>(self, image: &ImageBuffer<P, Vec<P::Subpixel>>) -> Result<()>
+    where
+        P: PixelWithColorType,
+        [P::Subpixel]: EncodableLayout,
+    {
+        self.write_image(image)?.persist()
+    }
+
+    /// Writes `bytes` to the temporary file and makes it an ordinary, durable file.
+    fn write(mut self, bytes: &[u8]) -> Result<WrittenOutput> {
         let path = self.path.clone();
         let output_error = |source| Error::Output { path: path.clone(), source };
         self.temp.write_all(bytes).map_err(output_error)?;
@@ -109,9 +119,46 @@ impl PendingOutput {
             use std::os::unix::fs::PermissionsExt;
             self.temp.as_file().set_permissions(std::fs::Permissions::from_mode(0o644)).map_err(output_error)?;
         }
-        self.temp.persist(&self.path).map_err(|e| output_error(e.error))?;
+        Ok(WrittenOutput { path: self.path, temp: self.temp })
+    }
+}
+
+/// An image written completely to its temporary file beside the destination, not yet in place.
+/// A job with several outputs writes them all before it moves any ([`persist_all`]), so a
+/// failure while encoding or writing one (a full disk, a directory removed meanwhile) leaves none
+/// of them behind. Dropped, it deletes its temporary file.
+#[derive(Debug)]
+pub struct WrittenOutput {
+    path: std::path::PathBuf,
+    temp: tempfile::NamedTempFile,
+}
+
+impl WrittenOutput {
+    /// Renames the temporary file over the destination.
+    pub fn persist(self) -> Result<()> {
+        let path = self.path;
+        self.temp.persist(&path).map_err(|e| Error::Output { path: path.clone(), source: e.error })?;
         Ok(())
     }
+}
+
+/// Moves every output into place, in order. Should a rename fail, the outputs this call already
+/// moved are removed again (the remaining temporary files are deleted when dropped), so a job's
+/// outputs appear all together or not at all.
+pub fn persist_all(outputs: Vec<WrittenOutput>) -> Result<()> {
+    let mut placed = Vec::new();
+    for output in outputs {
+        let path = output.path.clone();
+        if let Err(err) = output.persist() {
+            for done in &placed {
+                // Best effort: the error that matters is the one being returned.
+                let _ = std::fs::remove_file(done);
+            }
+            return Err(err);
+        }
+        placed.push(path);
+    }
+    Ok(())
 }
 
 #[cfg(test)]
@@ -127,6 +174,27 @@ mod tests {
         let png_dir = dir.path().join("frames.png");
         std::fs::create_dir(&png_dir).unwrap();
         assert!(PendingOutput::create(&png_dir, ImageFormat::Png).is_err(), "a directory named .png is not a file");
+    }
+
+    #[test]
+    fn outputs_appear_together_or_not_at_all() {
+        let dir = tempfile::tempdir().unwrap();
+        let (first, later) = (dir.path().join("a.png"), dir.path().join("sub"));
+        std::fs::create_dir(&later).unwrap();
+        let write = |path: &Path| {
+            PendingOutput::create(path, ImageFormat::Png).unwrap().write_image(&RgbImage::new(2, 2)).unwrap()
+        };
+        let outputs = vec![write(&first), write(&later.join("b.png"))];
+        assert!(!first.exists(), "written, not yet in place");
+        // The second output's directory disappears before the job moves its files into place.
+        std::fs::remove_dir_all(&later).unwrap();
+        let err = persist_all(outputs).unwrap_err();
+        assert!(matches!(err, Error::Output { ref path, .. } if path.ends_with("sub/b.png")), "{err}");
+        assert!(!first.exists(), "the first output was taken back");
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0, "no temporary file left either");
+        let second = dir.path().join("b.png");
+        persist_all(vec![write(&first), write(&second)]).unwrap();
+        assert!(first.exists() && second.exists());
     }
 
     #[test]
@@ -158,7 +226,7 @@ mod tests {
         assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0, "nothing created");
         let exr = dir.path().join("OUT.EXR");
         let pending = PendingOutput::create(&exr, ImageFormat::OpenExr).expect("upper-case extension");
-        pending.finish_linear_rgb(&[Vec3::new(0.5, 2.0, 1e3)], 1, 1).unwrap();
+        pending.write_linear_rgb(&[Vec3::new(0.5, 2.0, 1e3)], 1, 1).unwrap().persist().unwrap();
         let read = image::open(&exr).unwrap().into_rgb32f();
         assert_eq!(read.get_pixel(0, 0).0, [0.5, 2.0, 1e3], "HDR values survive");
     }

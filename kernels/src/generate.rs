@@ -48,7 +48,10 @@ pub fn generate_ray(ray_index: u32, params: &GenerateParams) -> CameraRay {
                 * params.lens_radius;
         let focus = origin + pinhole * params.focus_distance;
         origin += lens.x * params.right.xyz().normalize() + lens.y * params.up.xyz().normalize();
-        direction = (focus - origin).normalize();
+        // Scaled before its length is taken: `|focus − origin|²` overflows f32 from about 10¹⁹
+        // (a far focus plane with a wide field of view), which left rays without a direction.
+        let to_focus = focus - origin;
+        direction = (to_focus / to_focus.abs().max_element()).normalize();
     }
     CameraRay { origin: origin.extend(params.tmin), direction: direction.extend(params.tmax), pixel: ray_index }
 }
@@ -149,6 +152,23 @@ mod tests {
             let d = pinhole.direction.xyz();
             let expected = pinhole.origin.xyz() + (5.0 / d.z) * d;
             assert!((focus_points[0] - expected).length() < 1e-4, "{:?} vs {expected:?}", focus_points[0]);
+        }
+    }
+
+    #[test]
+    fn far_focus_planes_and_wide_apertures_keep_unit_directions() {
+        // 10¹⁸ is the host's limit for both; with a wide field of view (179°: right and up about
+        // a hundred times forward) the focus point lies near 10²⁰ and its squared distance
+        // overflows f32.
+        let mut p = params(4, 4);
+        p.right *= 200.0;
+        p.up *= 400.0;
+        for (lens_radius, focus_distance) in [(1.0e18, 1.0), (0.1, 1.0e18), (1.0e18, 1.0e18)] {
+            let p = GenerateParams { lens_radius, focus_distance, ..p };
+            for i in 0..p.ray_count() {
+                let d = generate_ray(i, &p).direction.xyz();
+                assert!(d.is_finite() && (d.length() - 1.0).abs() < 1e-5, "{lens_radius} {focus_distance}: {d}");
+            }
         }
     }
 }

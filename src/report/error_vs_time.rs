@@ -172,8 +172,7 @@ pub fn report_error_vs_time(
 ) -> Result<Vec<ErrorVsTimeLine>> {
     options.check("report error-vs-time")?;
     let mut lines = Vec::new();
-    for name in &options.scenes {
-        let scene = Scene::load(name)?;
+    for (name, scene) in options.scenes.iter().zip(options.load_scenes()?) {
         let prepared = PreparedScene::new(backend, &scene, options.resolution)?;
         let reference = prepared.reference(backend, options.reference_spp)?;
         let seeds: Vec<u32> = (0..options.reps).collect();

@@ -39,6 +39,23 @@ impl SceneReportOptions {
         crate::frame::check_samples_per_pixel("reference-spp", self.resolution, self.resolution, self.reference_spp)
     }
 
+    /// Loads every scene before any is measured, so that a bad name or a scene the report cannot
+    /// measure fails at once: each needs a quad light — the estimators compared are of the
+    /// direct light from quad lights, and a scene without one would print errors of 0.
+    pub fn load_scenes(&self) -> crate::Result<Vec<crate::Scene>> {
+        let load = |name: &String| {
+            let scene = crate::Scene::load(name)?;
+            if scene.lights().is_empty() {
+                return Err(crate::Error::InvalidParameter {
+                    name: "scenes",
+                    reason: format!("{name} has no quad light, so there is no direct light to estimate"),
+                });
+            }
+            Ok(scene)
+        };
+        self.scenes.iter().map(load).collect()
+    }
+
     /// The measured sample counts: 1, 2, 4, … up to `max_spp`.
     pub fn spp_steps(&self) -> impl Iterator<Item = u32> {
         let max = self.max_spp;

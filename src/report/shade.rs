@@ -116,8 +116,7 @@ pub fn report_shade(
     mut emit: impl FnMut(&ShadeLine),
 ) -> Result<()> {
     options.check("report shade")?;
-    for name in &options.scenes {
-        let scene = Scene::load(name)?;
+    for (name, scene) in options.scenes.iter().zip(options.load_scenes()?) {
         backend.load_scene(&scene)?;
         let data = ShadeData::new(&scene)?;
         let gbuffer = GBuffer::new(backend, &scene, options.resolution)?;
