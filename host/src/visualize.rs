@@ -70,6 +70,11 @@ impl PendingOutput {
         if path.is_dir() {
             return Err(output_error(std::io::Error::new(std::io::ErrorKind::IsADirectory, "is a directory")));
         }
+        // Checked here: tempfile's error would name its random temporary file, not the output.
+        if !dir.is_dir() {
+            let reason = format!("directory {} does not exist", dir.display());
+            return Err(output_error(std::io::Error::new(std::io::ErrorKind::NotFound, reason)));
+        }
         let temp = tempfile::Builder::new().prefix(".raywave-").tempfile_in(dir).map_err(output_error)?;
         Ok(Self { path: path.to_owned(), format, temp })
     }
@@ -169,6 +174,7 @@ mod tests {
     fn unwritable_output_fails_before_work_and_leaves_nothing() {
         let err = PendingOutput::create(Path::new("/nonexistent-dir/out.png"), ImageFormat::Png).err().unwrap();
         assert!(matches!(err, Error::Output { .. }), "{err}");
+        assert!(!err.to_string().contains(".raywave-"), "names the output, not the temporary file: {err}");
         let dir = tempfile::tempdir().unwrap();
         assert!(PendingOutput::create(dir.path(), ImageFormat::Png).is_err(), "a directory is not a file");
         let png_dir = dir.path().join("frames.png");
