@@ -21,6 +21,11 @@
 //! the light (spherical rectangle). One-sample MIS pdf
 //! `lerp(pdf_light, lerp(pdf_spec, pdf_diff, P_Diff), P_BRDF)`. The light itself is chosen by
 //! [`crate::sampling::light_select::LightSet`] (importance, or a light BVH for many lights).
+//! A BRDF sample that misses the light contributes 0 to both estimates (at 1 spp the ratio then
+//! falls back to `U`). Measured and not adopted: redrawing such a sample up to 8 times — `P_BRDF`
+//! is exactly its hit probability, so the retried density stays analytic — lowered the Cornell
+//! box's stochastic RMSE at 1 spp by 15 % (64², `raywave report shade`) and left the ratio's
+//! unchanged (0.0068): the fallback pixels are too few to matter, and it departs from seed 000's MIS.
 
 // `!(x > 0.0)` sends NaN down the "no contribution" branch on purpose.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
