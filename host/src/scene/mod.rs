@@ -123,9 +123,10 @@ impl Scene {
     /// `name` identifies the scene in error messages (a file path or `builtin:NAME`). Zero-area
     /// triangles are dropped and counted ([`Scene::dropped_degenerate`]), and meshes left empty
     /// are removed; a non-finite vertex or one beyond [`MAX_COORDINATE`], an out-of-range index, a
-    /// degenerate camera (or one beyond [`MAX_COORDINATE`]), an emission outside `[0,`
-    /// [`MAX_EMISSION`]`]`, a base colour, roughness or metalness outside `[0, 1]`, a derived light whose power overflows `f32` or a scene without any
-    /// triangle of non-zero area is an error.
+    /// degenerate camera (or one beyond [`MAX_COORDINATE`]), an emission outside
+    /// `[0, MAX_EMISSION]` ([`MAX_EMISSION`]), a base colour, roughness or metalness outside
+    /// `[0, 1]`, a derived light whose power overflows `f32` or a scene without any triangle of
+    /// non-zero area is an error.
     ///
     /// Every remaining mesh whose material emits (non-zero emission) and whose triangles form one
     /// planar parallelogram becomes one quad light ([`Scene::lights`]); other emissive meshes are
@@ -302,7 +303,8 @@ pub const MAX_EMISSION: f32 = 1.0e20;
 
 /// Whether every coordinate of `p` is finite and within [`MAX_COORDINATE`].
 fn in_range(p: Vec3) -> bool {
-    p.abs().max_element() <= MAX_COORDINATE
+    // `max_element` skips NaN, hence `is_finite`.
+    p.is_finite() && p.abs().max_element() <= MAX_COORDINATE
 }
 
 /// Checks every vertex is finite and within [`MAX_COORDINATE`] and every index is in range,
@@ -551,9 +553,11 @@ mod tests {
         let err = scene_with(triangle_mesh(far(2.0 * MAX_COORDINATE), vec![[0, 1, 2]])).unwrap_err();
         assert!(matches!(err, Error::VertexOutOfRange { vertex: 1, .. }), "{err}");
         assert!(err.to_string().contains("\"m\"") && err.to_string().contains("1e18"), "{err}");
-        let camera = Camera { position: Vec3::new(0.0, 0.0, -2.0 * MAX_COORDINATE), ..cornell::camera() };
-        let err = Scene::new("test", vec![triangle_mesh(unit_triangle(), vec![[0, 1, 2]])], camera).unwrap_err();
-        assert!(matches!(err, Error::InvalidParameter { name: "camera", .. }), "{err}");
+        for position in [Vec3::new(0.0, 0.0, -2.0 * MAX_COORDINATE), Vec3::new(f32::NAN, 0.0, -1.0)] {
+            let camera = Camera { position, ..cornell::camera() };
+            let err = Scene::new("test", vec![triangle_mesh(unit_triangle(), vec![[0, 1, 2]])], camera).unwrap_err();
+            assert!(matches!(err, Error::InvalidParameter { name: "camera", .. }), "{position}: {err}");
+        }
         // At the limit the scene loads, and the CPU backend builds its BVH (obvhs' CWBVH build
         // panicked from about 10¹⁹ on).
         let camera = Camera { position: Vec3::new(0.0, 0.0, MAX_COORDINATE), ..cornell::camera() };
