@@ -58,8 +58,9 @@ impl Surface {
 /// Turns a hit into a surface: the point interpolated from the triangle's vertices (the most
 /// accurate hit point, which the shadow-ray offset expects) and the unit geometric normal facing
 /// the incoming `direction`. `triangles` holds three `Vec4` vertices per triangle in (instance,
-/// primitive) order, instance `m` starting at triangle `first_triangle[m]`. Malformed indices or a
-/// degenerate triangle give [`Surface::MISS`].
+/// primitive) order, instance `m` starting at triangle `first_triangle[m]`. Malformed indices (an
+/// instance or primitive that is [`NO_HIT`] or beyond that instance's triangles) or a degenerate
+/// triangle give [`Surface::MISS`].
 pub fn resolve_surface(
     direction: Vec3,
     hit_t: f32,
@@ -72,10 +73,19 @@ pub fn resolve_surface(
     if instance == NO_HIT || instance as usize >= first_triangle.len() {
         return Surface::MISS;
     }
-    let base = (first_triangle[instance as usize] + primitive) as usize * 3;
-    if base + 2 >= triangles.len() {
+    // The instance's triangles run from its first to the next instance's (or the last).
+    let triangle_count = (triangles.len() / 3) as u32;
+    let first = first_triangle[instance as usize];
+    let end = if (instance as usize) + 1 < first_triangle.len() {
+        first_triangle[instance as usize + 1].min(triangle_count)
+    } else {
+        triangle_count
+    };
+    // Compared, not added first: `first + primitive` wraps for `primitive = NO_HIT`.
+    if first >= end || primitive >= end - first {
         return Surface::MISS;
     }
+    let base = (first + primitive) as usize * 3;
     let (a, b, c) = (triangles[base].xyz(), triangles[base + 1].xyz(), triangles[base + 2].xyz());
     let position = a * (1.0 - barycentrics.x - barycentrics.y) + b * barycentrics.x + c * barycentrics.y;
     let normal = crate::triangle::geometric_normal(a, b, c);
@@ -579,5 +589,14 @@ mod tests {
         assert_eq!(resolve_surface(Vec3::Z, 2.0, NO_HIT, 0, glam::Vec2::ZERO, &triangles, &[0]), Surface::MISS);
         assert_eq!(resolve_surface(Vec3::Z, 2.0, 0, 5, glam::Vec2::ZERO, &triangles, &[0]), Surface::MISS);
         assert_eq!(resolve_surface(Vec3::Z, 2.0, 3, 0, glam::Vec2::ZERO, &triangles, &[0]), Surface::MISS);
+        // Two instances of one triangle each: a primitive past instance 0's own triangles, and
+        // NO_HIT as the primitive of instance 1 (whose first + primitive wrapped to triangle 0).
+        let two = [triangles, triangles.map(|v| v + Vec4::Z)].concat();
+        let hit =
+            |instance, primitive| resolve_surface(Vec3::Z, 2.0, instance, primitive, glam::Vec2::ZERO, &two, &[0, 1]);
+        assert_eq!(hit(1, 0).position.z, 1.0, "instance 1's own triangle");
+        assert_eq!(hit(0, 1), Surface::MISS, "instance 0 has one triangle");
+        assert_eq!(hit(1, NO_HIT), Surface::MISS);
+        assert_eq!(hit(1, 1), Surface::MISS);
     }
 }
