@@ -117,10 +117,10 @@ pub fn warp_probe_len(params: &WarpParams) -> Result<u32> {
 /// Checks the inputs of the shade stage every backend shares: one hit per ray, `params.count`
 /// rays, and a width ≥ 1.
 pub(crate) fn check_shade_inputs(params: &ShadeParams, rays: &RayStream, hits: &HitStream) -> Result<()> {
-    let reason = if rays.len() != hits.len() || rays.direction.len() != rays.len() {
-        Some(format!("{} rays ({} directions) but {} hits", rays.len(), rays.direction.len(), hits.len()))
-    } else if [hits.primitive.len(), hits.instance.len(), hits.barycentrics.len()].iter().any(|&n| n != hits.len()) {
-        Some("the hit stream's fields differ in length".to_owned())
+    rays.check("shade")?;
+    hits.check("shade")?;
+    let reason = if rays.len() != hits.len() {
+        Some(format!("{} rays but {} hits", rays.len(), hits.len()))
     } else if params.count as usize != hits.len() {
         Some(format!("params.count = {} but {} rays", params.count, hits.len()))
     } else if params.width == 0 {
@@ -130,6 +130,32 @@ pub(crate) fn check_shade_inputs(params: &ShadeParams, rays: &RayStream, hits: &
     };
     match reason {
         Some(reason) => Err(crate::error::Error::InvalidParameter { name: "shade", reason }),
+        None => Ok(()),
+    }
+}
+
+/// Checks generate-stage parameters beyond the image size (which each backend checks against its
+/// own limit): a finite camera basis with a non-zero view direction and image plane, `0 ≤ tmin <
+/// tmax` finite, and a finite non-negative aperture with a positive finite focus distance when it
+/// is open — what [`GenerateParams`]' fields document; a zeroed basis gave NaN ray directions.
+pub(crate) fn check_generate_params(params: &GenerateParams) -> Result<()> {
+    let basis = [params.origin, params.forward, params.right, params.up];
+    let plane = params.right.truncate().cross(params.up.truncate());
+    let reason = if !basis.iter().all(|v| v.is_finite()) {
+        Some("the camera's origin, forward, right and up must be finite".to_owned())
+    } else if params.forward.truncate() == glam::Vec3::ZERO || plane == glam::Vec3::ZERO {
+        Some("the camera's forward axis and its right × up image plane must be non-zero".to_owned())
+    } else if !(params.tmin >= 0.0 && params.tmax > params.tmin && params.tmax.is_finite()) {
+        Some(format!("needs 0 ≤ tmin < tmax, both finite (tmin {}, tmax {})", params.tmin, params.tmax))
+    } else if !(params.lens_radius.is_finite() && params.lens_radius >= 0.0) {
+        Some(format!("lens_radius {} must be finite and ≥ 0", params.lens_radius))
+    } else if params.lens_radius > 0.0 && !(params.focus_distance.is_finite() && params.focus_distance > 0.0) {
+        Some(format!("focus_distance {} must be finite and > 0 with an aperture", params.focus_distance))
+    } else {
+        None
+    };
+    match reason {
+        Some(reason) => Err(crate::error::Error::InvalidParameter { name: "generate", reason }),
         None => Ok(()),
     }
 }

@@ -3,13 +3,14 @@
 //! functions, and the per-pixel accumulation of `U`, `U_N`, `S_N` for the ratio estimator.
 
 use crate::backend::{Backend, StageTiming};
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::lights::{wants_bvh, LightBvh};
-use crate::scene::Scene;
+use crate::scene::{Material, Scene};
 use crate::stream::{HitStream, RayStream, ShadeStream};
 use glam::{UVec2, Vec3, Vec4, Vec4Swizzles};
 use rayon::prelude::*;
 use raywave_kernels::sampling::light_select::LightSet;
+use raywave_kernels::shade::ltc::LTC_TABLE_LEN;
 use raywave_kernels::shade::stage::{composite, resolve_surface, shade_sample, ShadeScene, Surface};
 use raywave_shared::ltc_table::packed_entries;
 use raywave_shared::{Light, LightBvhNode, MaterialParams, SamplerParams, ShadeParams};
@@ -93,6 +94,42 @@ impl ShadeData {
         })
     }
 
+    /// Checks what the shade stage assumes of this data, whose fields are public so that an
+    /// engine can edit them between frames: each material in the ranges [`Scene::new`] enforces,
+    /// the lights valid ([`crate::lights::validate_lights`]), the LTC table complete
+    /// ([`LTC_TABLE_LEN`] entries), three vertices per triangle and the instances' first
+    /// triangles ascending within them. Every backend's `shade` calls it; an error names the field.
+    pub fn check(&self) -> Result<()> {
+        let invalid = |name, reason: String| Err(Error::InvalidParameter { name, reason });
+        for (index, m) in self.materials.iter().enumerate() {
+            let material = Material {
+                base_color: m.base_color_roughness.xyz(),
+                roughness: m.base_color_roughness.w,
+                metallic: m.emission_metallic.w,
+                emission: m.emission_metallic.xyz(),
+            };
+            if let Err((name, reason)) = material.check() {
+                return invalid(name, format!("shade data materials[{index}] {reason}"));
+            }
+        }
+        crate::lights::validate_lights(&self.lights)?;
+        if self.ltc.len() != LTC_TABLE_LEN as usize {
+            return invalid("ltc", format!("{} entries; the table has {LTC_TABLE_LEN}", self.ltc.len()));
+        }
+        let triangle_count = self.triangles.len() / 3;
+        let ascending = self.first_triangle.windows(2).all(|w| w[0] <= w[1]);
+        let within = self.first_triangle.last().is_none_or(|&last| last as usize <= triangle_count);
+        if !self.triangles.len().is_multiple_of(3) || !ascending || !within || u32::try_from(triangle_count).is_err() {
+            let reason = format!(
+                "{} vertices (three per triangle) and first triangles {:?}… (ascending, at most the triangle count)",
+                self.triangles.len(),
+                &self.first_triangle[..self.first_triangle.len().min(8)]
+            );
+            return invalid("triangles", reason);
+        }
+        Ok(())
+    }
+
     /// This value's identity for upload caches: equal identities mean the same buffers.
     pub fn identity(&self) -> ShadeDataIdentity {
         fn buffer<T>(v: &[T]) -> (usize, usize) {
@@ -118,7 +155,8 @@ impl ShadeData {
         ShadeParams {
             sampler,
             width,
-            count: width * height,
+            // Saturating: a count that does not fit fails `Backend::shade`'s check, never wraps.
+            count: width.saturating_mul(height),
             sample_index,
             light_count: self.lights.len() as u32,
             light_node_count: self.light_nodes.len() as u32,
@@ -148,7 +186,8 @@ impl ShadeData {
     }
 }
 
-/// The resolve step on the CPU: the surface each camera ray hit.
+/// The resolve step on the CPU: the surface each camera ray hit. Panics, like slice indexing, if
+/// `hits` holds fewer records than `rays` ([`Backend::shade`] checks its streams first).
 pub fn resolve(data: &ShadeData, rays: &RayStream, hits: &HitStream) -> Vec<Surface> {
     (0..rays.len())
         .into_par_iter()
@@ -168,7 +207,8 @@ pub fn resolve(data: &ShadeData, rays: &RayStream, hits: &HitStream) -> Vec<Surf
 
 /// The shade stage on the CPU: one record of the kernels' `shade_sample` per camera ray (ray `i`
 /// is pixel `i`), written field by field into a [`ShadeStream`] — what the Vulkan entry point
-/// writes into its five output buffers.
+/// writes into its five output buffers. Panics, like slice indexing, if `rays` holds fewer rays
+/// than `surfaces` ([`Backend::shade`] checks its streams and `data` first).
 pub fn shade(params: &ShadeParams, data: &ShadeData, rays: &RayStream, surfaces: &[Surface]) -> ShadeStream {
     let scene = data.view_for(params);
     let width = params.width.max(1);
@@ -230,16 +270,27 @@ impl ShadeAccumulator {
         let (shades, shade_time) = backend.shade(params, data, rays, hits)?;
         let shadow_rays = shadow_rays(&shades);
         let (occluded, occlusion_time) = backend.trace_occlusion(&shadow_rays)?;
-        self.add(&shades, &occluded);
+        self.add(&shades, &occluded)?;
         let bytes = shades.bytes() + std::mem::size_of_val(occluded.as_slice()) as u64 + shadow_rays.bytes();
         Ok(([shade_time, occlusion_time], bytes))
     }
 
-    /// Adds one pass: its shade stream and the occlusion of its shadow rays (1 = blocked).
-    pub fn add(&mut self, shades: &ShadeStream, occluded: &[u32]) {
+    /// Adds one pass: its shade stream and the occlusion of its shadow rays (1 = blocked), both
+    /// one record per pixel of this accumulator (an error otherwise, and nothing is added).
+    pub fn add(&mut self, shades: &ShadeStream, occluded: &[u32]) -> Result<()> {
+        shades.check("accumulate")?;
+        let pixels = self.analytic.len();
+        if shades.len() != pixels || occluded.len() != pixels {
+            let reason = format!(
+                "{} shade records and {} occlusion results for an accumulator of {pixels} pixels",
+                shades.len(),
+                occluded.len()
+            );
+            return Err(Error::InvalidParameter { name: "accumulate", reason });
+        }
         self.samples += 1;
         let passes = shades.analytic.iter().zip(&shades.unshadowed).zip(&shades.emitted).zip(occluded);
-        for (i, (((u, u_n), e), &blocked)) in passes.enumerate().take(self.analytic.len()) {
+        for (i, (((u, u_n), e), &blocked)) in passes.enumerate() {
             self.analytic[i] += u.xyz();
             self.unshadowed[i] += u_n.xyz();
             if blocked == 0 {
@@ -247,6 +298,7 @@ impl ShadeAccumulator {
             }
             self.emitted[i] += e.xyz();
         }
+        Ok(())
     }
 
     /// Samples (shade passes) added so far: the `N` of `U_N` and `S_N`.
@@ -323,7 +375,7 @@ mod tests {
         let shadow = shadow_rays(&shades);
         assert_eq!((shadow.origin, shadow.direction), (shades.shadow_origin.clone(), shades.shadow_direction.clone()));
         let mut accumulator = ShadeAccumulator::new(63);
-        accumulator.add(&shades, &vec![0; 63]);
+        accumulator.add(&shades, &vec![0; 63]).unwrap();
         let u_n: Vec<Vec3> = shades.unshadowed.iter().map(|v| v.xyz()).collect();
         assert_eq!((accumulator.unshadowed(), accumulator.shadowed()), (u_n.clone(), u_n));
     }

@@ -1,6 +1,7 @@
 //! Host-side SoA streams: one `Vec` per field, in the layout of [`raywave_shared::stream`] (and, for
 //! the shade stage's outputs, of the kernels' `ShadeSample`).
 
+use crate::error::{Error, Result};
 use glam::{Vec2, Vec4};
 use raywave_shared::stream::{HIT_STREAM_BYTES_PER_RAY, RAY_STREAM_BYTES_PER_RAY};
 
@@ -35,6 +36,23 @@ impl RayStream {
     pub fn bytes(&self) -> u64 {
         self.len() as u64 * u64::from(RAY_STREAM_BYTES_PER_RAY)
     }
+
+    /// Checks that the fields hold one entry per ray each: an error naming `stage` otherwise (the
+    /// trace stages read origins and directions for `len()` rays, which the pixel field counts).
+    pub fn check(&self, stage: &'static str) -> Result<()> {
+        if self.origin.len() == self.len() && self.direction.len() == self.len() {
+            return Ok(());
+        }
+        Err(Error::InvalidParameter {
+            name: stage,
+            reason: format!(
+                "the ray stream's fields differ in length: {} origins, {} directions, {} pixels",
+                self.origin.len(),
+                self.direction.len(),
+                self.pixel.len()
+            ),
+        })
+    }
 }
 
 /// The hit stream: what trace writes, one record per ray.
@@ -59,6 +77,22 @@ impl HitStream {
     /// Number of records.
     pub fn len(&self) -> usize {
         self.t.len()
+    }
+
+    /// Checks that the fields hold one entry per record each: an error naming `stage` otherwise.
+    pub fn check(&self, stage: &'static str) -> Result<()> {
+        let lengths = [self.primitive.len(), self.instance.len(), self.barycentrics.len()];
+        if lengths.iter().all(|&n| n == self.len()) {
+            return Ok(());
+        }
+        let reason = format!(
+            "the hit stream's fields differ in length: {} t, {} primitives, {} instances, {} barycentrics",
+            self.len(),
+            lengths[0],
+            lengths[1],
+            lengths[2]
+        );
+        Err(Error::InvalidParameter { name: stage, reason })
     }
 
     /// Whether the stream holds no records.
@@ -108,6 +142,20 @@ impl ShadeStream {
     /// Number of records.
     pub fn len(&self) -> usize {
         self.analytic.len()
+    }
+
+    /// Checks that the fields hold one entry per record each: an error naming `stage` otherwise.
+    pub fn check(&self, stage: &'static str) -> Result<()> {
+        let fields = [&self.unshadowed, &self.emitted, &self.shadow_origin, &self.shadow_direction];
+        if fields.iter().all(|f| f.len() == self.len()) {
+            return Ok(());
+        }
+        let reason = format!(
+            "the shade stream's fields differ in length: {} analytic, {:?} unshadowed, emitted, shadow origins and directions",
+            self.len(),
+            fields.map(|f| f.len())
+        );
+        Err(Error::InvalidParameter { name: stage, reason })
     }
 
     /// Whether the stream holds no records.

@@ -10,7 +10,9 @@ use std::io::Write;
 use std::path::Path;
 
 /// The normal/depth view: each hit pixel shows its face-forward geometric normal mapped to colour
-/// (`0.5 + 0.5·n`), darkened with distance so depth edges read; misses are black.
+/// (`0.5 + 0.5·n`), darkened with distance so depth edges read; misses are black. `rays` and
+/// `hits` come from one trace of `scene` over a `width × height` image; otherwise this panics,
+/// like slice indexing.
 pub fn normal_depth_image(scene: &Scene, rays: &RayStream, hits: &HitStream, width: u32, height: u32) -> RgbImage {
     let mut image = RgbImage::new(width, height);
     let t_max = hits.t.iter().copied().fold(f32::MIN_POSITIVE, f32::max);
@@ -31,7 +33,8 @@ pub fn normal_depth_image(scene: &Scene, rays: &RayStream, hits: &HitStream, wid
 
 /// Linear radiance to an 8-bit sRGB image: each channel clamped to [0, 1] (exposure 1, no tone
 /// curve, so values are comparable across renders) and encoded with the sRGB transfer function
-/// (IEC 61966-2-1). `colors` is row-major, `width · height` long.
+/// (IEC 61966-2-1). `colors` is row-major, `width · height` long (shorter panics, like slice
+/// indexing).
 pub fn srgb_image(colors: &[Vec3], width: u32, height: u32) -> RgbImage {
     let encode = |c: f32| {
         let c = if c.is_finite() { c.clamp(0.0, 1.0) } else { 0.0 };

@@ -64,7 +64,9 @@ impl ErrorVsTimeLine {
 
 /// Relative MSE, `½·mean((x − y)² / (y² + ε))` over pixels and RGB channels, ε =
 /// [`RELMSE_EPSILON`] (Gharbi et al. 2019; `../shared/reference/sampling-denoise.md` §3.4).
+/// Panics if the images differ in length (the mean would be over the wrong count).
 pub fn relmse(image: &[Vec3], reference: &[Vec3]) -> f64 {
+    assert_eq!(image.len(), reference.len(), "relmse: image and reference differ in size");
     let sum: f64 = image
         .iter()
         .zip(reference)

@@ -7,7 +7,8 @@ mod denoise;
 pub use bvh::{BvhQuality, CpuScene, TraversalIsa};
 
 use crate::backend::{
-    check_image_size_common, check_shade_inputs, sampler_probe_len, warp_probe_len, Backend, FrameOutput, StageTiming,
+    check_generate_params, check_image_size_common, check_shade_inputs, sampler_probe_len, warp_probe_len, Backend,
+    FrameOutput, StageTiming,
 };
 use crate::denoise::{DenoiseInput, DenoiseMethod};
 use crate::error::{Error, Result};
@@ -103,15 +104,18 @@ impl Backend for CpuBackend {
 
     fn generate(&mut self, params: &GenerateParams) -> Result<(RayStream, StageTiming)> {
         self.check_image_size(params.width, params.height)?;
+        check_generate_params(params)?;
         Ok(timed("generate", || generate(params)))
     }
 
     fn trace(&mut self, rays: &RayStream) -> Result<(HitStream, StageTiming)> {
+        rays.check("trace")?;
         let scene = self.scene()?;
         Ok(timed("trace", || trace(scene, rays)))
     }
 
     fn trace_occlusion(&mut self, rays: &RayStream) -> Result<(Vec<u32>, StageTiming)> {
+        rays.check("trace_occlusion")?;
         let scene = self.scene()?;
         Ok(timed("occlusion", || trace_occlusion(scene, rays)))
     }
@@ -124,6 +128,7 @@ impl Backend for CpuBackend {
         hits: &HitStream,
     ) -> Result<(ShadeStream, StageTiming)> {
         check_shade_inputs(params, rays, hits)?;
+        data.check()?;
         Ok(timed("shade", || {
             let surfaces = shading::resolve(data, rays, hits);
             shading::shade(params, data, rays, &surfaces)
@@ -217,5 +222,64 @@ mod tests {
     #[test]
     fn trace_without_a_scene_is_an_error() {
         assert!(CpuBackend::new().trace(&RayStream::zeroed(1)).is_err());
+    }
+
+    /// What a linking engine can get wrong through the public API — streams whose fields differ in
+    /// length, a zeroed camera, shade data edited after construction, an accumulator of another
+    /// size — is a typed error naming the stage or field. Before, trace zipped to the shortest
+    /// field (extra records read as hits on triangle 0), generate returned NaN directions, a NaN
+    /// metalness left the shade stage as NaN `U`, and an emptied LTC table panicked.
+    #[test]
+    fn malformed_streams_parameters_and_shade_data_are_errors() {
+        use crate::error::Error;
+        use crate::shading::{ShadeAccumulator, ShadeData};
+        let name_of = |err: Error| match err {
+            Error::InvalidParameter { name, .. } => name,
+            other => panic!("expected an invalid parameter, got {other}"),
+        };
+        let scene = Scene::load("builtin:cornell").unwrap();
+        let mut cpu = CpuBackend::new();
+        cpu.load_scene(&scene).unwrap();
+        let mut rays = RayStream::zeroed(4);
+        rays.pixel.push(4);
+        assert_eq!(name_of(cpu.trace(&rays).unwrap_err()), "trace");
+        assert_eq!(name_of(cpu.trace_occlusion(&rays).unwrap_err()), "trace_occlusion");
+        let zeroed = GenerateParams { width: 1, height: 1, ..bytemuck::Zeroable::zeroed() };
+        assert_eq!(name_of(cpu.generate(&zeroed).unwrap_err()), "generate");
+        let params = crate::frame::generate_params(&scene, 4, 4, 0, 1);
+        for broken in [
+            GenerateParams { tmax: params.tmin, ..params },
+            GenerateParams { lens_radius: 0.1, focus_distance: 0.0, ..params },
+            GenerateParams { up: Vec4::splat(f32::NAN), ..params },
+        ] {
+            assert_eq!(name_of(cpu.generate(&broken).unwrap_err()), "generate", "{broken:?}");
+        }
+
+        let (rays, _) = cpu.generate(&params).unwrap();
+        let (hits, _) = cpu.trace(&rays).unwrap();
+        let valid = ShadeData::new(&scene).unwrap();
+        let shade_params = valid.params(params.sampler, 4, 4, 0);
+        type Edit = fn(&mut ShadeData);
+        let edits: [(Edit, &str); 4] = [
+            (|d| d.materials[0].emission_metallic.w = f32::NAN, "material.metallic"),
+            (|d| d.materials[1].base_color_roughness.x = 2.0, "material.base_color"),
+            (|d| d.ltc.clear(), "ltc"),
+            (|d| d.first_triangle[1] = u32::MAX, "triangles"),
+        ];
+        for (edit, field) in edits {
+            let mut data = ShadeData::new(&scene).unwrap();
+            edit(&mut data);
+            assert_eq!(name_of(cpu.shade(&shade_params, &data, &rays, &hits).unwrap_err()), field);
+        }
+        let mut short_hits = hits.clone();
+        short_hits.instance.pop();
+        assert_eq!(name_of(cpu.shade(&shade_params, &valid, &rays, &short_hits).unwrap_err()), "shade");
+
+        let (shades, _) = cpu.shade(&shade_params, &valid, &rays, &hits).unwrap();
+        let mut accumulator = ShadeAccumulator::new(16);
+        assert_eq!(name_of(accumulator.add(&shades, &[0; 15]).unwrap_err()), "accumulate");
+        assert_eq!(name_of(ShadeAccumulator::new(17).add(&shades, &[0; 16]).unwrap_err()), "accumulate");
+        accumulator.add(&shades, &[0; 16]).unwrap();
+        assert_eq!(accumulator.samples(), 1, "only the valid pass counted");
     }
 }

@@ -43,6 +43,27 @@ impl Material {
     pub const fn diffuse(albedo: Vec3) -> Self {
         Self { base_color: albedo, roughness: 1.0, metallic: 0.0, emission: Vec3::ZERO }
     }
+
+    /// Checks each parameter's range — base colour, roughness and metalness in `[0, 1]`, emission
+    /// in `[0, MAX_EMISSION]` ([`MAX_EMISSION`]) — returning the first offender's field name and
+    /// what is wrong with it.
+    pub(crate) fn check(&self) -> std::result::Result<(), (&'static str, String)> {
+        let e = self.emission;
+        // `min_element`/`max_element` skip NaN, hence `is_finite`.
+        if !(e.is_finite() && e.min_element() >= 0.0 && e.max_element() <= MAX_EMISSION) {
+            return Err(("material.emission", format!("emits {e}; each component must be in [0, {MAX_EMISSION:e}]")));
+        }
+        let b = self.base_color;
+        if !(b.is_finite() && b.min_element() >= 0.0 && b.max_element() <= 1.0) {
+            return Err(("material.base_color", format!("has base colour {b}; each component must be in [0, 1]")));
+        }
+        for (name, value) in [("material.roughness", self.roughness), ("material.metallic", self.metallic)] {
+            if !(0.0..=1.0).contains(&value) {
+                return Err((name, format!("has {value}; it must be in [0, 1]")));
+            }
+        }
+        Ok(())
+    }
 }
 
 /// A pinhole camera.
@@ -240,7 +261,12 @@ impl Scene {
         let c = &self.camera;
         let fov_ok = c.vertical_fov_degrees > 0.0 && c.vertical_fov_degrees < 180.0;
         let finite = in_range(c.position) && in_range(c.look_at) && c.up.is_finite();
-        if !(finite && fov_ok) || (c.look_at - c.position).cross(c.up) == Vec3::ZERO {
+        // The basis the generate stage's parameters take (`frame::generate_params_with`): a view
+        // direction or up vector too short to normalize in f32 (1e-30) passed an exact-zero test
+        // and gave NaN rays.
+        let forward = (c.look_at - c.position).normalize();
+        let basis_ok = forward.is_finite() && forward.cross(c.up).normalize().is_finite();
+        if !(finite && fov_ok && basis_ok) {
             return Err(Error::InvalidParameter {
                 name: "camera",
                 reason: format!(
@@ -252,29 +278,10 @@ impl Scene {
             });
         }
         for mesh in &self.meshes {
-            let invalid = |name, reason: String| {
-                Err(Error::InvalidParameter { name, reason: format!("{}: mesh {:?} {reason}", self.name, mesh.name) })
-            };
-            let m = &mesh.material;
-            let e = m.emission;
-            // `min_element`/`max_element` skip NaN, hence `is_finite`.
-            if !(e.is_finite() && e.min_element() >= 0.0 && e.max_element() <= MAX_EMISSION) {
-                return invalid(
-                    "material.emission",
-                    format!("emits {e}; each component must be in [0, {MAX_EMISSION:e}]"),
-                );
-            }
-            if !(m.base_color.is_finite() && m.base_color.min_element() >= 0.0 && m.base_color.max_element() <= 1.0) {
-                return invalid(
-                    "material.base_color",
-                    format!("has base colour {}; each component must be in [0, 1]", m.base_color),
-                );
-            }
-            for (name, value) in [("material.roughness", m.roughness), ("material.metallic", m.metallic)] {
-                if !(0.0..=1.0).contains(&value) {
-                    return invalid(name, format!("has {value}; it must be in [0, 1]"));
-                }
-            }
+            mesh.material.check().map_err(|(name, reason)| Error::InvalidParameter {
+                name,
+                reason: format!("{}: mesh {:?} {reason}", self.name, mesh.name),
+            })?;
         }
         for (index, light) in self.lights().iter().enumerate() {
             crate::lights::validate_light(index, light).map_err(|err| match err {
@@ -553,10 +560,16 @@ mod tests {
         let err = scene_with(triangle_mesh(far(2.0 * MAX_COORDINATE), vec![[0, 1, 2]])).unwrap_err();
         assert!(matches!(err, Error::VertexOutOfRange { vertex: 1, .. }), "{err}");
         assert!(err.to_string().contains("\"m\"") && err.to_string().contains("1e18"), "{err}");
-        for position in [Vec3::new(0.0, 0.0, -2.0 * MAX_COORDINATE), Vec3::new(f32::NAN, 0.0, -1.0)] {
-            let camera = Camera { position, ..cornell::camera() };
+        let cornell = cornell::camera();
+        for camera in [
+            Camera { position: Vec3::new(0.0, 0.0, -2.0 * MAX_COORDINATE), ..cornell },
+            Camera { position: Vec3::new(f32::NAN, 0.0, -1.0), ..cornell },
+            // Non-zero, but too short to normalize in f32 (the generate stage's rays were NaN).
+            Camera { look_at: cornell.position + Vec3::new(1e-30, 0.0, 0.0), ..cornell },
+            Camera { position: Vec3::ZERO, look_at: Vec3::X, up: Vec3::new(1.0, 1e-30, 0.0), ..cornell },
+        ] {
             let err = Scene::new("test", vec![triangle_mesh(unit_triangle(), vec![[0, 1, 2]])], camera).unwrap_err();
-            assert!(matches!(err, Error::InvalidParameter { name: "camera", .. }), "{position}: {err}");
+            assert!(matches!(err, Error::InvalidParameter { name: "camera", .. }), "{camera:?}: {err}");
         }
         // At the limit the scene loads, and the CPU backend builds its BVH (obvhs' CWBVH build
         // panicked from about 10¹⁹ on).

@@ -9,7 +9,8 @@ use super::kernel::{dispatch_grid, ComputeKernel};
 use super::pass::Resource;
 use super::rt_pipeline::{RtPipelineKernel, CLOSEST_HIT_SHADERS, OCCLUSION_SHADERS};
 use crate::backend::{
-    check_image_size_common, check_shade_inputs, sampler_probe_len, warp_probe_len, Backend, FrameOutput, StageTiming,
+    check_generate_params, check_image_size_common, check_shade_inputs, sampler_probe_len, warp_probe_len, Backend,
+    FrameOutput, StageTiming,
 };
 use crate::cpu::CpuScene;
 use crate::denoise::{DenoiseInput, DenoiseMethod};
@@ -390,6 +391,7 @@ impl VulkanBackend {
 
     fn generate_on_device(&self, params: &GenerateParams) -> Result<(DeviceRays, StageTiming)> {
         self.check_image_size(params.width, params.height)?;
+        check_generate_params(params)?;
         let rays = DeviceRays::new(&self.core, params.ray_count())?;
         let seconds = self.generate.dispatch(
             &[Resource::Buffer(&rays.origin), Resource::Buffer(&rays.direction), Resource::Buffer(&rays.pixel)],
@@ -490,12 +492,14 @@ impl Backend for VulkanBackend {
     }
 
     fn trace(&mut self, rays: &RayStream) -> Result<(HitStream, StageTiming)> {
+        rays.check("trace")?;
         let device_rays = DeviceRays::upload(&self.core, rays)?;
         let (hits, timing) = self.trace_on_device(&device_rays)?;
         Ok((hits.read()?, timing))
     }
 
     fn trace_occlusion(&mut self, rays: &RayStream) -> Result<(Vec<u32>, StageTiming)> {
+        rays.check("trace_occlusion")?;
         let device_rays = DeviceRays::upload(&self.core, rays)?;
         let occluded = stream_buffer::<u32>(&self.core, device_rays.len, "occluded")?;
         let seconds = self.run_trace_kernel(&self.occlusion, &device_rays, &[&occluded])?;
@@ -510,6 +514,7 @@ impl Backend for VulkanBackend {
         hits: &HitStream,
     ) -> Result<(ShadeStream, StageTiming)> {
         check_shade_inputs(params, rays, hits)?;
+        data.check()?;
         let len = stream_len(hits.len())?;
         self.check_stream(len)?;
         self.load_shade_data(data)?;
