@@ -1,15 +1,16 @@
-//! Wavefront OBJ scenes (through the `tobj` crate): every OBJ model becomes a mesh, materials are
-//! ignored for now (grey albedo), and the camera frames the scene's bounds.
+//! Wavefront OBJ scenes (through the `tobj` crate): every OBJ model (object, or part of one with
+//! its own `usemtl` material) becomes a mesh with the material of its MTL entry, and the camera
+//! frames the scene's bounds.
 
 use super::{framing_camera, Material, Mesh, Scene};
 use crate::error::{Error, Result};
 use glam::Vec3;
 use std::path::Path;
 
-/// Albedo given to meshes of an OBJ file (materials come with the shade stage).
+/// Albedo of meshes without a material (no `usemtl`, or an MTL entry without `Kd`).
 const DEFAULT_ALBEDO: Vec3 = Vec3::splat(0.7);
 
-/// Loads and validates an OBJ file.
+/// Loads and validates an OBJ file and the material library (`mtllib`) it names.
 pub fn load(path: &Path) -> Result<Scene> {
     let load_error = |message: String| Error::SceneLoad { path: path.to_owned(), message };
     // Opened here first: tobj reports any failure to open as a bare "open file failed".
@@ -18,25 +19,46 @@ pub fn load(path: &Path) -> Result<Scene> {
     }
     std::fs::File::open(path).map_err(|e| load_error(e.to_string()))?;
     let options = tobj::LoadOptions { triangulate: true, single_index: true, ..Default::default() };
-    let (models, _materials) = tobj::load_obj(path, &options).map_err(|e| load_error(e.to_string()))?;
+    let (models, materials) = tobj::load_obj(path, &options).map_err(|e| load_error(e.to_string()))?;
+    // A library that cannot be read would leave every mesh grey and every light dark.
+    let materials = materials
+        .map_err(|e| load_error(format!("the material library its `mtllib` line names cannot be loaded: {e}")))?;
     let meshes: Vec<Mesh> = models
         .into_iter()
         .enumerate()
-        .map(|(i, model)| Mesh {
+        .map(|(i, model)| {
             // tobj names objects without an `o`/`g` line "unnamed_object".
-            name: if model.name.is_empty() || model.name == "unnamed_object" {
-                format!("mesh {i}")
-            } else {
-                model.name
-            },
-            positions: model.mesh.positions.chunks_exact(3).map(|p| Vec3::new(p[0], p[1], p[2])).collect(),
-            triangles: model.mesh.indices.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect(),
-            material: Material::diffuse(DEFAULT_ALBEDO),
+            let object =
+                if model.name.is_empty() || model.name == "unnamed_object" { format!("mesh {i}") } else { model.name };
+            let entry = model.mesh.material_id.and_then(|id| materials.get(id));
+            Mesh {
+                name: entry.map_or_else(|| object.clone(), |m| format!("{object} ({})", m.name)),
+                positions: model.mesh.positions.chunks_exact(3).map(|p| Vec3::new(p[0], p[1], p[2])).collect(),
+                triangles: model.mesh.indices.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect(),
+                material: entry.map_or(Material::diffuse(DEFAULT_ALBEDO), material),
+            }
         })
         .collect();
     let name = path.display().to_string();
     let camera = framing_camera(&meshes);
     Scene::new(&name, meshes, camera)
+}
+
+/// The material of an MTL entry: `Kd` is the base colour ([`DEFAULT_ALBEDO`] without it), `Ke`
+/// the emitted radiance, and the PBR extension's `Pr`/`Pm` (as Blender and 3ds Max write it)
+/// the perceptual roughness and metalness. Without `Pr` the roughness follows the Phong exponent
+/// `Ns` by Walter et al. 2007's correspondence `α = √(2/(Ns + 2))` (§5.2; roughness = √α), and
+/// is 1 without either; without `Pm` the surface is a dielectric. Values are checked with the
+/// scene (`Scene::new`), which names the mesh.
+fn material(m: &tobj::Material) -> Material {
+    let pbr = |key: &str| m.unknown_param.get(key).and_then(|v| v.trim().parse::<f32>().ok());
+    let roughness = pbr("Pr").or_else(|| m.shininess.map(|ns| (2.0 / (ns.max(0.0) + 2.0)).sqrt().sqrt()));
+    Material {
+        base_color: m.diffuse.map_or(DEFAULT_ALBEDO, Vec3::from_array),
+        roughness: roughness.unwrap_or(1.0),
+        metallic: pbr("Pm").unwrap_or(0.0),
+        emission: m.emissive.map_or(Vec3::ZERO, Vec3::from_array),
+    }
 }
 
 #[cfg(test)]
@@ -69,6 +91,50 @@ mod tests {
         let dir = tempfile::Builder::new().suffix(".obj").tempdir().unwrap();
         let err = load(dir.path()).unwrap_err();
         assert!(err.to_string().contains("is a directory"), "{err}");
+    }
+
+    /// A floor and a lamp quad wound to face down, with an MTL library: the lamp's `Ke` makes it
+    /// a quad light, `Kd`/`Pr`/`Pm` and `Ns` set the materials, a mesh before any `usemtl` stays grey
+    /// (a `usemtl` holds for the objects after it, as in the format).
+    #[test]
+    fn mtl_materials_and_emissive_quads_become_materials_and_lights() {
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::write(
+            dir.path().join("scene.mtl"),
+            "newmtl floor\nKd 0.5 0.25 1\nNs 198\nnewmtl lamp\nKd 1 1 1\nKe 4 2 1\nnewmtl metal\nKd 0.9 0.8 0.7\nPr 0.3\nPm 1\n",
+        )
+        .unwrap();
+        let obj = "mtllib scene.mtl\n\
+                   v -1 0 -1\nv 1 0 -1\nv 1 0 1\nv -1 0 1\n\
+                   v -0.25 1.5 -0.25\nv 0.25 1.5 -0.25\nv 0.25 1.5 0.25\nv -0.25 1.5 0.25\n\
+                   v 0 0.2 0\nv 0.2 0.2 0\nv 0 0.4 0\n\
+                   o plain\nf 9 11 10\n\
+                   o floor\nusemtl floor\nf 1 4 3 2\n\
+                   o lamp\nusemtl lamp\nf 5 6 7 8\n\
+                   o chip\nusemtl metal\nf 9 10 11\n";
+        let path = dir.path().join("scene.obj");
+        std::fs::write(&path, obj).unwrap();
+        let scene = load(&path).unwrap();
+        let by_name = |name: &str| scene.meshes().iter().find(|m| m.name == name).unwrap_or_else(|| panic!("{name}"));
+        let floor = by_name("floor (floor)").material;
+        assert_eq!(floor.base_color, Vec3::new(0.5, 0.25, 1.0));
+        assert!((floor.roughness - 0.1f32.sqrt()).abs() < 1e-6, "Ns 198: α = √(2/200) = 0.1, {}", floor.roughness);
+        let metal = by_name("chip (metal)").material;
+        assert_eq!((metal.roughness, metal.metallic), (0.3, 1.0));
+        assert_eq!(by_name("plain").material, Material::diffuse(DEFAULT_ALBEDO));
+        assert_eq!(scene.lights().len(), 1, "the lamp quad is a light");
+        let lamp = scene.lights()[0];
+        assert_eq!(lamp.radiance.truncate(), Vec3::new(4.0, 2.0, 1.0));
+        let facing = lamp.edge_u.truncate().cross(lamp.edge_v.truncate());
+        assert!(facing.y < 0.0, "counter-clockwise seen from below: emits down, {facing}");
+
+        // A library that is missing, or a base colour out of range, is an error naming the file.
+        std::fs::remove_file(dir.path().join("scene.mtl")).unwrap();
+        let err = load(&path).unwrap_err();
+        assert!(err.to_string().contains("material library") && err.to_string().contains("scene.obj"), "{err}");
+        std::fs::write(dir.path().join("scene.mtl"), "newmtl floor\nKd 2 0 0\nnewmtl lamp\nnewmtl metal\n").unwrap();
+        let err = load(&path).unwrap_err();
+        assert!(err.to_string().contains("floor (floor)") && err.to_string().contains("base colour"), "{err}");
     }
 
     #[test]
