@@ -40,18 +40,9 @@ impl RayStream {
     /// Checks that the fields hold one entry per ray each: an error naming `stage` otherwise (the
     /// trace stages read origins and directions for `len()` rays, which the pixel field counts).
     pub fn check(&self, stage: &'static str) -> Result<()> {
-        if self.origin.len() == self.len() && self.direction.len() == self.len() {
-            return Ok(());
-        }
-        Err(Error::InvalidParameter {
-            name: stage,
-            reason: format!(
-                "the ray stream's fields differ in length: {} origins, {} directions, {} pixels",
-                self.origin.len(),
-                self.direction.len(),
-                self.pixel.len()
-            ),
-        })
+        let fields =
+            [("origins", self.origin.len()), ("directions", self.direction.len()), ("pixels", self.pixel.len())];
+        check_field_lengths(stage, "ray", &fields)
     }
 }
 
@@ -81,18 +72,13 @@ impl HitStream {
 
     /// Checks that the fields hold one entry per record each: an error naming `stage` otherwise.
     pub fn check(&self, stage: &'static str) -> Result<()> {
-        let lengths = [self.primitive.len(), self.instance.len(), self.barycentrics.len()];
-        if lengths.iter().all(|&n| n == self.len()) {
-            return Ok(());
-        }
-        let reason = format!(
-            "the hit stream's fields differ in length: {} t, {} primitives, {} instances, {} barycentrics",
-            self.len(),
-            lengths[0],
-            lengths[1],
-            lengths[2]
-        );
-        Err(Error::InvalidParameter { name: stage, reason })
+        let fields = [
+            ("t", self.t.len()),
+            ("primitives", self.primitive.len()),
+            ("instances", self.instance.len()),
+            ("barycentrics", self.barycentrics.len()),
+        ];
+        check_field_lengths(stage, "hit", &fields)
     }
 
     /// Whether the stream holds no records.
@@ -146,16 +132,14 @@ impl ShadeStream {
 
     /// Checks that the fields hold one entry per record each: an error naming `stage` otherwise.
     pub fn check(&self, stage: &'static str) -> Result<()> {
-        let fields = [&self.unshadowed, &self.emitted, &self.shadow_origin, &self.shadow_direction];
-        if fields.iter().all(|f| f.len() == self.len()) {
-            return Ok(());
-        }
-        let reason = format!(
-            "the shade stream's fields differ in length: {} analytic, {:?} unshadowed, emitted, shadow origins and directions",
-            self.len(),
-            fields.map(|f| f.len())
-        );
-        Err(Error::InvalidParameter { name: stage, reason })
+        let fields = [
+            ("analytic", self.analytic.len()),
+            ("unshadowed", self.unshadowed.len()),
+            ("emitted", self.emitted.len()),
+            ("shadow origins", self.shadow_origin.len()),
+            ("shadow directions", self.shadow_direction.len()),
+        ];
+        check_field_lengths(stage, "shade", &fields)
     }
 
     /// Whether the stream holds no records.
@@ -167,4 +151,15 @@ impl ShadeStream {
     pub fn bytes(&self) -> u64 {
         self.len() as u64 * u64::from(SHADE_STREAM_BYTES_PER_RAY)
     }
+}
+
+/// The streams' shared check: every `(field, length)` of a `stream` stream equal, else an error
+/// naming `stage` and listing them.
+fn check_field_lengths(stage: &'static str, stream: &str, fields: &[(&str, usize)]) -> Result<()> {
+    if fields.iter().all(|&(_, n)| n == fields[0].1) {
+        return Ok(());
+    }
+    let listed: Vec<String> = fields.iter().map(|(name, n)| format!("{n} {name}")).collect();
+    let reason = format!("the {stream} stream's fields differ in length: {}", listed.join(", "));
+    Err(Error::InvalidParameter { name: stage, reason })
 }

@@ -286,16 +286,20 @@ fn camera(
     if !(yfov > 0.0 && yfov < std::f32::consts::PI) {
         return Err(format!("cameras[{}].perspective.yfov is {yfov} rad; it must be in (0, π)", camera.index()));
     }
-    let (position, look_at, up) =
-        (world.transform_point3(Vec3::ZERO), world.transform_point3(Vec3::NEG_Z), world.transform_vector3(Vec3::Y));
-    if !(position.is_finite() && look_at.is_finite()) || (look_at - position).cross(up) == Vec3::ZERO {
+    let camera_at = Camera {
+        position: world.transform_point3(Vec3::ZERO),
+        look_at: world.transform_point3(Vec3::NEG_Z),
+        up: world.transform_vector3(Vec3::Y),
+        vertical_fov_degrees: yfov.to_degrees(),
+    };
+    if !camera_at.has_view_basis() {
         return Err(format!(
             "nodes[{}] (camera {}): its world transform collapses the camera's view or up axis (a zero scale?)",
             node.index(),
             camera.index()
         ));
     }
-    Ok(Camera { position, look_at, up, vertical_fov_degrees: yfov.to_degrees() })
+    Ok(camera_at)
 }
 
 #[cfg(test)]

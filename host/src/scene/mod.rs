@@ -79,6 +79,16 @@ pub struct Camera {
     pub vertical_fov_degrees: f32,
 }
 
+impl Camera {
+    /// Whether the view direction and the right axis normalize to finite vectors, as the generate
+    /// stage's parameters take them (`frame::generate_params_with`): a view direction or up vector
+    /// too short to normalize in f32 (1e-30) passed an exact-zero test and gave NaN rays.
+    pub(crate) fn has_view_basis(&self) -> bool {
+        let forward = (self.look_at - self.position).normalize();
+        forward.is_finite() && forward.cross(self.up).normalize().is_finite()
+    }
+}
+
 /// A point where a ray hit a scene's surface (see [`Scene::hit_surface`]).
 #[derive(Copy, Clone, Debug, PartialEq)]
 pub struct SurfaceHit {
@@ -261,12 +271,7 @@ impl Scene {
         let c = &self.camera;
         let fov_ok = c.vertical_fov_degrees > 0.0 && c.vertical_fov_degrees < 180.0;
         let finite = in_range(c.position) && in_range(c.look_at) && c.up.is_finite();
-        // The basis the generate stage's parameters take (`frame::generate_params_with`): a view
-        // direction or up vector too short to normalize in f32 (1e-30) passed an exact-zero test
-        // and gave NaN rays.
-        let forward = (c.look_at - c.position).normalize();
-        let basis_ok = forward.is_finite() && forward.cross(c.up).normalize().is_finite();
-        if !(finite && fov_ok && basis_ok) {
+        if !(finite && fov_ok && c.has_view_basis()) {
             return Err(Error::InvalidParameter {
                 name: "camera",
                 reason: format!(
