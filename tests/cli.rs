@@ -323,10 +323,10 @@ fn shade_report_prints_json_lines() {
     ]);
     assert!(out.status.success(), "{}", stderr(&out));
     let lines = json_lines(&out);
-    assert_eq!(lines.len(), 2 * 2 * 3);
+    assert_eq!(lines.len(), 3 + 2 * 2 * 3, "the 1-spp floor's regions, then spp × estimators × regions");
     for line in &lines {
         assert_eq!(line["scene"], "builtin:cornell");
-        assert!(["ratio", "stochastic"].contains(&line["estimator"].as_str().unwrap()));
+        assert!(["visibility-floor", "ratio", "stochastic"].contains(&line["estimator"].as_str().unwrap()));
         assert!(["all", "shadow", "lit"].contains(&line["region"].as_str().unwrap()));
         assert!(line["rmse"].as_f64().unwrap().is_finite());
     }
@@ -363,6 +363,9 @@ fn error_vs_time_report_prints_every_method_and_draws_the_plot() {
         assert!(line["relmse"].as_f64().unwrap().is_finite() && line["ms"].as_f64().unwrap() > 0.0);
         let flip = line["flip"].as_f64().unwrap();
         assert!((0.0..=1.0).contains(&flip), "FLIP {flip}");
+        let part = |key: &str| line[key].as_f64().unwrap_or_else(|| panic!("{key} missing"));
+        let (shadow, lit) = (part("relmse_shadow"), part("relmse_lit"));
+        assert!(shadow >= 0.0 && lit >= 0.0 && shadow + lit <= line["relmse"].as_f64().unwrap() * (1.0 + 1e-12));
     }
     // The table ends with the fastest method per error level.
     let table = raywave(&args[..args.len() - 3]);

@@ -418,6 +418,7 @@ fn assert_ratio_tv_wins(scene_name: &str) {
             eprintln!("{scene_name}: ratio+tv / stochastic+tv = {:.3}", gain(relmse));
             eprintln!("{scene_name}: FLIP ratio+tv / stochastic+tv = {:.3}", gain(flip));
             assert_ratio_tv_lowest(&errors, flip, &format!("{scene_name} at 1 spp, FLIP"));
+            assert_ratio_tv_gains_where_lit(scene_name, &errors);
         }
         let params = DenoiseParams { samples_per_pixel: spp, ..shipped };
         if params.tv_filter_is_identity() {
@@ -430,6 +431,30 @@ fn assert_ratio_tv_wins(scene_name: &str) {
         }
         assert_ratio_tv_lowest(&errors, relmse, &format!("{scene_name} at {spp} spp, relMSE"));
     }
+}
+
+/// Asserts where ratio+tv's advantage over stochastic+tv is made at 1 spp: in unshadowed pixels,
+/// where its `U · S_N/U_N` is exactly `U`, its part of the relMSE is under a tenth of
+/// stochastic+tv's; in shadowed ones both filter one binary visibility sample per pixel, and the
+/// parts (printed) are alike. The parts add up to no more than the whole.
+fn assert_ratio_tv_gains_where_lit(scene_name: &str, errors: &[MethodError; METHODS.len()]) {
+    let (ratio_tv, stochastic_tv) = (of(errors, "ratio+tv"), of(errors, "stochastic+tv"));
+    for (method, e) in [("ratio+tv", ratio_tv), ("stochastic+tv", stochastic_tv)] {
+        eprintln!(
+            "{scene_name}: 1 spp {method:<14} relMSE {:.6} = shadow {:.6} + lit {:.6} + unlit {:.6}",
+            e.relmse,
+            e.relmse_shadow,
+            e.relmse_lit,
+            e.relmse - e.relmse_shadow - e.relmse_lit
+        );
+        assert!(e.relmse_shadow + e.relmse_lit <= e.relmse * (1.0 + 1e-12), "{method}: parts beyond the whole");
+    }
+    assert!(
+        ratio_tv.relmse_lit < 0.1 * stochastic_tv.relmse_lit,
+        "{scene_name} lit: ratio+tv {} vs stochastic+tv {}",
+        ratio_tv.relmse_lit,
+        stochastic_tv.relmse_lit
+    );
 }
 
 #[test]

@@ -1,13 +1,18 @@
 //! The shade report's claims on a small image: in unshadowed pixels the ratio estimator is exact
 //! (its error is the reference's residual, ≪ the stochastic error), and over the whole image it
-//! beats the fully stochastic estimator at 1 and 2 samples per pixel. Fixed seeds; 32² pixels,
-//! a 1024-spp reference, 4 repetitions.
+//! beats the fully stochastic estimator at 1 and 2 samples per pixel; at 1 spp, in shadowed
+//! pixels, it sits at the visibility floor (the error of any unbiased estimate made of `U` times
+//! one binary visibility sample), which on the Cornell box is above half the stochastic error over
+//! all pixels. Fixed seeds; 32² pixels, a 1024-spp reference, 4 repetitions.
+//!
+//! Measured here: Cornell box, 1 spp, ratio in shadow 1.07 × the floor; floor over all pixels
+//! 0.57 × the stochastic RMSE (64², 4096-spp reference: 1.00 × and 0.57 ×).
 
 use raywave::cpu::CpuBackend;
 use raywave::report::shade::{report_shade, ShadeLine, ShadeReportOptions};
 
 #[test]
-fn ratio_estimator_is_exact_where_lit_and_beats_the_stochastic_one() {
+fn ratio_estimator_is_exact_where_lit_at_the_visibility_floor_in_shadow_and_beats_the_stochastic_one() {
     let options = ShadeReportOptions {
         scenes: vec!["builtin:cornell".into(), "builtin:cornell-two-lights".into()],
         resolution: 32,
@@ -17,7 +22,7 @@ fn ratio_estimator_is_exact_where_lit_and_beats_the_stochastic_one() {
     };
     let mut lines: Vec<ShadeLine> = Vec::new();
     report_shade(&mut CpuBackend::new(), &options, |line| lines.push(line.clone())).expect("report runs");
-    assert_eq!(lines.len(), 2 * 2 * 2 * 3, "scenes × spp × estimators × regions");
+    assert_eq!(lines.len(), 2 * (3 + 2 * 2 * 3), "scenes × (floor regions + spp × estimators × regions)");
     let rmse = |scene: &str, spp: u32, estimator: &str, region: &str| {
         lines
             .iter()
@@ -35,4 +40,20 @@ fn ratio_estimator_is_exact_where_lit_and_beats_the_stochastic_one() {
             assert!(lit_ratio < 0.05 * lit_stochastic, "{scene} {spp} spp lit: {lit_ratio} vs {lit_stochastic}");
         }
     }
+    // One light of one colour, where the floor is exact for unbiased estimates: the 1-spp ratio
+    // estimate is `U` times its one shadow ray's visibility, so in shadowed pixels its error is
+    // the floor's, off only by the ratio's bias and the repetitions' noise.
+    let cornell = "builtin:cornell";
+    let (floor, ratio) = (rmse(cornell, 1, "visibility-floor", "shadow"), rmse(cornell, 1, "ratio", "shadow"));
+    eprintln!("{cornell} 1 spp shadow: ratio {ratio:.5} floor {floor:.5} ({:.2}×)", ratio / floor);
+    assert!(floor > 0.0 && (0.9..1.2).contains(&(ratio / floor)), "ratio {ratio} vs floor {floor} in shadow");
+    // README: issue 5's target (ratio ≤ 0.5 × stochastic over all pixels at 1 spp) is below that
+    // floor on the Cornell box — no unbiased estimate of this kind reaches it there.
+    let (floor_all, stochastic_all) =
+        (rmse(cornell, 1, "visibility-floor", "all"), rmse(cornell, 1, "stochastic", "all"));
+    eprintln!(
+        "{cornell} 1 spp all: floor {floor_all:.5} stochastic {stochastic_all:.5} ({:.2}×)",
+        floor_all / stochastic_all
+    );
+    assert!(floor_all > 0.5 * stochastic_all, "floor {floor_all} vs stochastic {stochastic_all}");
 }

@@ -10,10 +10,12 @@
 //! on its frame: the G-buffer's camera rays, the shade and occlusion passes, and the passes that
 //! make its image from the accumulated estimates — the composite alone for the raw methods
 //! ([`DenoiseMethod::None`]), a filter and the composite for the others (GPU timestamps on
-//! Vulkan, wall clock on the CPU) — averaged over the repetitions.
+//! Vulkan, wall clock on the CPU) — averaged over the repetitions. Each relMSE is split into the
+//! parts made in shadowed and in unshadowed pixels ([`ShadowRegions`]), which shows where a
+//! method's error is.
 
 use super::flip::mean_flip;
-use super::shade::{accumulate, GBuffer};
+use super::shade::{accumulate, GBuffer, ShadowRegions};
 use crate::denoise::{rgb, DenoiseInput, DenoiseMethod};
 use crate::shading::ShadeData;
 use crate::shared::DenoiseParams;
@@ -41,6 +43,11 @@ pub struct ErrorVsTimeLine {
     pub method: &'static str,
     /// Relative MSE against the reference ([`relmse`]), mean over the repetitions.
     pub relmse: f64,
+    /// The part of `relmse` made in shadowed pixels (penumbrae and umbrae, [`ShadowRegions`]).
+    pub relmse_shadow: f64,
+    /// The part of `relmse` made in unshadowed pixels; with `relmse_shadow` and the part in
+    /// pixels without direct light it adds up to `relmse`.
+    pub relmse_lit: f64,
     /// Mean FLIP against the reference ([`mean_flip`]), mean over the repetitions.
     pub flip: f64,
     /// Milliseconds of backend time for the frame, mean over the repetitions.
@@ -56,8 +63,8 @@ impl ErrorVsTimeLine {
     /// A table row.
     pub fn row(&self) -> String {
         format!(
-            "{:<28} {:>3} spp  {:<14} relMSE {:.6}  FLIP {:.4}  {:>9.2} ms",
-            self.scene, self.spp, self.method, self.relmse, self.flip, self.ms
+            "{:<28} {:>3} spp  {:<14} relMSE {:.6} (shadow {:.6}, lit {:.6})  FLIP {:.4}  {:>9.2} ms",
+            self.scene, self.spp, self.method, self.relmse, self.relmse_shadow, self.relmse_lit, self.flip, self.ms
         )
     }
 }
@@ -67,16 +74,24 @@ impl ErrorVsTimeLine {
 /// Panics if the images differ in length (the mean would be over the wrong count).
 pub fn relmse(image: &[Vec3], reference: &[Vec3]) -> f64 {
     assert_eq!(image.len(), reference.len(), "relmse: image and reference differ in size");
-    let sum: f64 = image
-        .iter()
-        .zip(reference)
-        .map(|(x, y)| {
-            let (x, y) = (x.as_dvec3(), y.as_dvec3());
-            let d = x - y;
-            (d * d / (y * y + RELMSE_EPSILON)).element_sum()
-        })
-        .sum();
+    let sum: f64 = image.iter().zip(reference).map(|(&x, &y)| relative_squared_error(x, y)).sum();
     0.5 * sum / (3 * reference.len().max(1)) as f64
+}
+
+/// The part of [`relmse`] made in `pixels`: their terms over the whole image's count, so the
+/// parts of disjoint sets of pixels add up to the image's relMSE. Panics if the images differ in
+/// length or an index is out of range.
+pub fn relmse_part(image: &[Vec3], reference: &[Vec3], pixels: &[usize]) -> f64 {
+    assert_eq!(image.len(), reference.len(), "relmse_part: image and reference differ in size");
+    let sum: f64 = pixels.iter().map(|&i| relative_squared_error(image[i], reference[i])).sum();
+    0.5 * sum / (3 * reference.len().max(1)) as f64
+}
+
+/// One pixel's term of [`relmse`]: `Σ_rgb (x − y)² / (y² + ε)`, in f64.
+fn relative_squared_error(x: Vec3, y: Vec3) -> f64 {
+    let (x, y) = (x.as_dvec3(), y.as_dvec3());
+    let d = x - y;
+    (d * d / (y * y + RELMSE_EPSILON)).element_sum()
 }
 
 /// A scene prepared for the measurements: its shade data, fixed G-buffer, surfaces and the
@@ -88,6 +103,9 @@ pub struct PreparedScene {
     pub gbuffer: GBuffer,
     /// The surface per pixel (the denoiser's G-buffer).
     pub surfaces: Vec<crate::kernels::shade::stage::Surface>,
+    /// The analytic unshadowed radiance `U` per pixel (the same in every frame: the surfaces
+    /// are fixed), which tells shadowed pixels from unshadowed ones in the reference.
+    pub analytic: Vec<Vec3>,
     /// Image side in pixels.
     pub resolution: u32,
 }
@@ -99,7 +117,8 @@ impl PreparedScene {
         let data = ShadeData::new(scene)?;
         let gbuffer = GBuffer::new(backend, scene, resolution)?;
         let surfaces = gbuffer.surfaces(&data);
-        Ok(Self { data, gbuffer, surfaces, resolution })
+        let analytic = accumulate(backend, &gbuffer, &data, resolution, 1, 0)?.0.analytic();
+        Ok(Self { data, gbuffer, surfaces, analytic, resolution })
     }
 
     /// The converged image: the ratio estimate at `spp` samples per pixel (seed fixed apart from
@@ -142,16 +161,25 @@ impl PreparedScene {
         spp: u32,
         seeds: &[u32],
     ) -> Result<[MethodError; METHODS.len()]> {
+        let regions = ShadowRegions::new(&self.analytic, reference);
         let mut sums = [MethodError::default(); METHODS.len()];
         for &seed in seeds {
             for (sum, (image, ms)) in sums.iter_mut().zip(self.frame(backend, spp, seed)?) {
                 sum.relmse += relmse(&image, reference);
+                sum.relmse_shadow += relmse_part(&image, reference, &regions.shadow);
+                sum.relmse_lit += relmse_part(&image, reference, &regions.lit);
                 sum.flip += mean_flip(&image, reference, self.resolution, self.resolution);
                 sum.ms += ms;
             }
         }
         let count = seeds.len().max(1) as f64;
-        Ok(sums.map(|s| MethodError { relmse: s.relmse / count, flip: s.flip / count, ms: s.ms / count }))
+        Ok(sums.map(|s| MethodError {
+            relmse: s.relmse / count,
+            relmse_shadow: s.relmse_shadow / count,
+            relmse_lit: s.relmse_lit / count,
+            flip: s.flip / count,
+            ms: s.ms / count,
+        }))
     }
 }
 
@@ -160,6 +188,10 @@ impl PreparedScene {
 pub struct MethodError {
     /// Relative MSE against the reference ([`relmse`]).
     pub relmse: f64,
+    /// The part of `relmse` made in shadowed pixels ([`relmse_part`], [`ShadowRegions`]).
+    pub relmse_shadow: f64,
+    /// The part of `relmse` made in unshadowed pixels.
+    pub relmse_lit: f64,
     /// Mean FLIP against the reference ([`mean_flip`]).
     pub flip: f64,
     /// Milliseconds of backend time for the frame.
@@ -180,8 +212,9 @@ pub fn report_error_vs_time(
         let seeds: Vec<u32> = (0..options.reps).collect();
         for spp in options.spp_steps() {
             for (method, error) in METHODS.into_iter().zip(prepared.errors(backend, &reference, spp, &seeds)?) {
-                let MethodError { relmse, flip, ms } = error;
-                let line = ErrorVsTimeLine { scene: name.clone(), spp, method, relmse, flip, ms };
+                let MethodError { relmse, relmse_shadow, relmse_lit, flip, ms } = error;
+                let line =
+                    ErrorVsTimeLine { scene: name.clone(), spp, method, relmse, relmse_shadow, relmse_lit, flip, ms };
                 emit(&line);
                 lines.push(line);
             }
@@ -359,7 +392,29 @@ mod tests {
     use super::*;
 
     fn line(method: &'static str, spp: u32, relmse: f64, ms: f64) -> ErrorVsTimeLine {
-        ErrorVsTimeLine { scene: "s".to_owned(), spp, method, relmse, flip: 0.0, ms }
+        ErrorVsTimeLine {
+            scene: "s".to_owned(),
+            spp,
+            method,
+            relmse,
+            relmse_shadow: 0.0,
+            relmse_lit: 0.0,
+            flip: 0.0,
+            ms,
+        }
+    }
+
+    #[test]
+    fn the_parts_of_relmse_add_up_over_a_partition_of_the_pixels() {
+        let reference = [Vec3::ZERO, Vec3::ONE, Vec3::splat(0.5), Vec3::new(2.0, 0.0, 1.0)];
+        let image = [Vec3::splat(0.1), Vec3::splat(1.5), Vec3::splat(0.5), Vec3::ZERO];
+        let whole = relmse(&image, &reference);
+        let parts = [relmse_part(&image, &reference, &[0, 3]), relmse_part(&image, &reference, &[1, 2])];
+        assert!(whole > 0.0 && (parts[0] + parts[1] - whole).abs() < 1e-15 * whole, "{parts:?} vs {whole}");
+        // Pixel 0 alone: ½ · 3 · 0.1² / (0 + ε) over 3 channels × 4 pixels (0.1 as f32: 3·10⁻⁸ relative).
+        let pixel_0 = relmse_part(&image, &reference, &[0]);
+        assert!((pixel_0 - 0.5 * 3.0 / 12.0).abs() < 1e-6, "{pixel_0}");
+        assert_eq!(relmse_part(&image, &reference, &[2]), 0.0, "an exact pixel adds nothing");
     }
 
     #[test]

@@ -6,8 +6,10 @@
 //! exactly where nothing is in shadow), then for 1, 2, 4, … 64 samples per pixel the RMSE of the
 //! ratio estimate `U · S_N / U_N` and of the stochastic `S_N` against it — over all pixels, over
 //! shadowed pixels (reference `S/U` below 0.995 in luminance) and over unshadowed ones — averaged
-//! over `reps` independent seeds. Emitters seen directly add the same radiance to every sample
-//! of a fixed surface, so they cancel in the error.
+//! over `reps` independent seeds — and, once per scene, the error of any unbiased estimate made
+//! of `U` times one binary visibility sample (the `visibility-floor` lines), which is what the
+//! 1-spp ratio estimate is up to its small bias. Emitters seen directly add the same radiance to
+//! every sample of a fixed surface, so they cancel in the error.
 
 use crate::frame::{generate_params_with, sampler_params};
 use crate::kernels::sampling::light_select::luminance;
@@ -26,12 +28,13 @@ pub struct ShadeLine {
     pub scene: String,
     /// Samples per pixel.
     pub spp: u32,
-    /// `ratio` or `stochastic`.
+    /// `ratio`, `stochastic`, or `visibility-floor` (1 spp only: the error of any unbiased
+    /// estimate that multiplies `U` by one binary visibility sample; see [`visibility_floor`]).
     pub estimator: &'static str,
     /// `all`, `shadow` or `lit`.
     pub region: &'static str,
     /// Root-mean-square error against the reference (linear radiance, mean over RGB), averaged
-    /// over the repetitions.
+    /// over the repetitions (the `visibility-floor`: computed from the reference alone).
     pub rmse: f64,
     /// Pixels in the region.
     pub pixels: usize,
@@ -76,6 +79,38 @@ impl GBuffer {
     }
 }
 
+/// The share of a pixel's analytic `U` (in luminance) its converged image must show to count as
+/// unshadowed: 99.5 %, so that the reference's own residual noise does not count as shadow.
+pub const LIT_FRACTION: f32 = 0.995;
+
+/// The pixels of an image split by how much of their direct light reaches them in the
+/// converged image: the error of a shadow estimator is made in the first set.
+pub struct ShadowRegions {
+    /// Pixels in penumbra or umbra: the converged image shows less than [`LIT_FRACTION`] of `U`.
+    pub shadow: Vec<usize>,
+    /// Unshadowed pixels: the converged image shows at least [`LIT_FRACTION`] of `U`.
+    pub lit: Vec<usize>,
+}
+
+impl ShadowRegions {
+    /// Splits the pixels of `reference` (converged, emitted radiance included) by their analytic
+    /// unshadowed `analytic`; pixels without direct light (`U` = 0) are in neither set.
+    pub fn new(analytic: &[Vec3], reference: &[Vec3]) -> Self {
+        let (mut shadow, mut lit) = (Vec::new(), Vec::new());
+        for (i, (&u, &converged)) in analytic.iter().zip(reference).enumerate() {
+            let u = luminance(u);
+            if u > 0.0 {
+                if luminance(converged) < LIT_FRACTION * u {
+                    shadow.push(i);
+                } else {
+                    lit.push(i);
+                }
+            }
+        }
+        Self { shadow, lit }
+    }
+}
+
 /// Runs `spp` shade passes on `gbuffer` (shade and occlusion on `backend`) with `seed` and
 /// returns the accumulated `U`, `U_N`, `S_N` and the seconds the passes took on the backend.
 pub fn accumulate(
@@ -109,6 +144,32 @@ fn mse(image: &[Vec3], reference: &[Vec3], pixels: &[usize]) -> f64 {
     sum / pixels.len().max(1) as f64
 }
 
+/// The RMSE over `pixels` (mean over RGB) that an **unbiased** estimate made of the analytic `U`
+/// times **one binary visibility sample** per pixel leaves: with the reference's shadow ratio
+/// `v = (reference − emitted) / U` per channel, a 0/1 sample of mean `v` has the variance
+/// `v(1 − v)`, so the pixel's squared error is `U² · v(1 − v)` — whatever the sampling that draws
+/// it. At 1 spp the ratio estimate is such a product (`S_N / U_N` is the one shadow ray's
+/// visibility, 0 or 1), with a mean that differs from `v` only by the ratio estimator's bias (it
+/// is consistent, not unbiased): so in penumbrae it cannot beat the fully stochastic estimate by
+/// more than that estimate's lighting noise, however the light is sampled (seed 000: "only the
+/// visibility is stochastic"). The bound is exact for lights of one colour; under lights of
+/// different colours `v` differs between channels and one scalar sample cannot have every
+/// channel's mean. Stratified samples (ZSobol) beat `floor/√N` at `N` > 1, so only the 1-spp
+/// floor is reported.
+pub fn visibility_floor(analytic: &[Vec3], reference: &[Vec3], emitted: &[Vec3], pixels: &[usize]) -> f64 {
+    let sum: f64 = pixels
+        .iter()
+        .map(|&i| {
+            let u = analytic[i].as_dvec3();
+            let shadowed = (reference[i] - emitted[i]).as_dvec3();
+            let v = (shadowed / u).clamp(glam::DVec3::ZERO, glam::DVec3::ONE);
+            let v = glam::DVec3::select(u.cmpgt(glam::DVec3::ZERO), v, glam::DVec3::ONE);
+            (u * u * v * (glam::DVec3::ONE - v)).element_sum() / 3.0
+        })
+        .sum();
+    (sum / pixels.len().max(1) as f64).sqrt()
+}
+
 /// Runs the report, handing each line to `emit` as soon as it is measured.
 pub fn report_shade(
     backend: &mut dyn Backend,
@@ -125,17 +186,18 @@ pub fn report_shade(
         let reference = reference_run.ratio_image();
         let analytic = reference_run.analytic();
         let all: Vec<usize> = (0..reference.len()).collect();
-        let lit_reference = |i: &usize| luminance(analytic[*i]) > 0.0;
-        let shadow: Vec<usize> = all
-            .iter()
-            .copied()
-            .filter(|i| lit_reference(i) && luminance(reference[*i]) < 0.995 * luminance(analytic[*i]))
-            .collect();
-        let lit: Vec<usize> = all
-            .iter()
-            .copied()
-            .filter(|i| lit_reference(i) && luminance(reference[*i]) >= 0.995 * luminance(analytic[*i]))
-            .collect();
+        let ShadowRegions { shadow, lit } = ShadowRegions::new(&analytic, &reference);
+        let emitted = reference_run.emitted();
+        for (region, pixels) in [("all", &all), ("shadow", &shadow), ("lit", &lit)] {
+            emit(&ShadeLine {
+                scene: name.clone(),
+                spp: 1,
+                estimator: "visibility-floor",
+                region,
+                rmse: visibility_floor(&analytic, &reference, &emitted, pixels),
+                pixels: pixels.len(),
+            });
+        }
         for spp in options.spp_steps() {
             let mut sums = [[0.0f64; 3]; 2];
             for rep in 0..options.reps {
@@ -163,4 +225,26 @@ pub fn report_shade(
         }
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn visibility_floor_is_the_binary_sample_variance_times_u_squared() {
+        // Pixel 0: half in shadow under U = 2 in every channel → U²·¼ = 1. Pixel 1: lit (v = 1),
+        // pixel 2: umbra (v = 0), pixel 3: U = 0 (nothing to estimate) — no error for any of them.
+        // Pixel 4: v = (0.1, 0.5, 0.9) under U = 1 over an emitter of 5 that cancels.
+        let analytic = [Vec3::splat(2.0), Vec3::splat(3.0), Vec3::splat(3.0), Vec3::ZERO, Vec3::ONE];
+        let emitted = [Vec3::ZERO, Vec3::ZERO, Vec3::ZERO, Vec3::ZERO, Vec3::splat(5.0)];
+        let reference = [Vec3::ONE, Vec3::splat(3.0), Vec3::ZERO, Vec3::ONE, Vec3::new(5.1, 5.5, 5.9)];
+        let floor = |pixels: &[usize]| visibility_floor(&analytic, &reference, &emitted, pixels);
+        assert!((floor(&[0]) - 1.0).abs() < 1e-12);
+        assert_eq!(floor(&[1, 2, 3]), 0.0);
+        assert!((floor(&[0, 1]) - 0.5f64.sqrt()).abs() < 1e-12, "a mean over the pixels");
+        let expected = ((0.09 + 0.25 + 0.09) / 3.0f64).sqrt();
+        assert!((floor(&[4]) - expected).abs() < 1e-6, "{} vs {expected}", floor(&[4]));
+        assert_eq!(floor(&[]), 0.0);
+    }
 }
