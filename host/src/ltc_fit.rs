@@ -183,8 +183,10 @@ pub fn view_at(t: f64) -> DVec3 {
     DVec3::new(theta.sin(), 0.0, theta.cos())
 }
 
-/// Index of cell (`a` roughness row, `t` view column) in the flat table.
+/// Index of cell (`a` roughness row, `t` view column) in the flat table. Panics if `a` or `t` is
+/// not below [`LTC_SIZE`] (a column past the last would address the next row's first cell).
 pub fn cell_index(a: usize, t: usize) -> usize {
+    assert!(a < LTC_SIZE && t < LTC_SIZE, "LTC cell ({a}, {t}) outside the {LTC_SIZE}² table");
     a * LTC_SIZE + t
 }
 
@@ -958,7 +960,7 @@ pub struct LtcTable {
 }
 
 impl LtcTable {
-    /// Cell `(a, t)`.
+    /// Cell `(a, t)`; panics outside the table, as [`cell_index`].
     pub fn cell(&self, a: usize, t: usize) -> &CellFit {
         &self.cells[cell_index(a, t)]
     }

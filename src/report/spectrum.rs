@@ -13,16 +13,19 @@ pub struct PowerSpectrum {
 }
 
 impl PowerSpectrum {
-    /// An empty accumulator for `side × side` images.
+    /// An empty accumulator for `side × side` images. Panics if `side` < 2: a 1 × 1 image has no
+    /// frequency but DC, so there is no spectrum to average (the reports hold images to ≥ 4).
     pub fn new(side: usize) -> Self {
+        assert!(side >= 2, "a power spectrum needs images of at least 2 × 2 pixels, not {side} × {side}");
         Self { side, power: vec![0.0; side * side], images: 0 }
     }
 
     /// Adds the spectrum of one row-major `side × side` error image (its mean is removed first,
-    /// so the DC term does not dominate).
+    /// so the DC term does not dominate). Panics if `error` does not hold `side²` values.
     pub fn add(&mut self, error: &[f64]) {
         let n = self.side;
-        let mean = error.iter().sum::<f64>() / error.len().max(1) as f64;
+        assert_eq!(error.len(), n * n, "PowerSpectrum::add: not a {n} × {n} image");
+        let mean = error.iter().sum::<f64>() / error.len() as f64;
         let mut data: Vec<Complex<f64>> = error.iter().map(|&e| Complex::new(e - mean, 0.0)).collect();
         let fft = FftPlanner::new().plan_fft_forward(n);
         for row in data.chunks_mut(n) {
