@@ -48,7 +48,8 @@
 //! measured 16–19 % for the ratio filters with R = 10 and 5.8–13.5 % with R = 1 (most of a
 //! Cornell box is fully lit, ratio 1, and stays put), 57–66 % for the stochastic one, 66.7 %
 //! (every surface pixel) on 3 × 200 — so the test cannot pass with passes that do nothing. A single pixel comes back exactly as the
-//! undenoised composite.
+//! undenoised composite. An input holding a NaN is the same typed error, naming the value, on
+//! every backend.
 #![cfg(feature = "vulkan")]
 
 mod common;
@@ -356,4 +357,28 @@ fn an_identity_tv_filter_is_the_raw_composite_on_every_vulkan_device() {
     let color: Vec<Vec3> = run(&mut CpuBackend::new(), &case).iter().map(|c| c.truncate()).collect();
     assert_eq!(color, raw_composite(&case.input), "the identity filter changed a pixel");
     check_parity("denoise parity (identity)", &[case], 0.0);
+}
+
+/// Runs every method on `backend` with `input`, which holds a NaN in `shadowed[7]`, and asserts
+/// the typed input error naming that value.
+fn assert_refuses_nan(backend: &mut dyn Backend, params: &DenoiseParams, input: &DenoiseInput) {
+    for method in [DenoiseMethod::Tv, DenoiseMethod::Svgf, DenoiseMethod::None] {
+        match backend.denoise(method, params, input) {
+            Err(raywave::Error::InvalidParameter { name: "denoise", reason }) => {
+                assert!(reason.contains("shadowed[7] (pixel 1, 2)"), "{} {method:?}: {reason}", backend.name())
+            }
+            other => panic!("{} {method:?}: expected the input error, got {:?}", backend.name(), other.map(|_| ())),
+        }
+    }
+}
+
+#[test]
+fn a_nan_input_is_the_same_typed_error_on_the_cpu_and_every_vulkan_device() {
+    let (params, mut input) = synthetic(3, 200, 14);
+    input.shadowed[7].x = f32::NAN;
+    assert_refuses_nan(&mut CpuBackend::new(), &params, &input);
+    for mut device in vulkan::each_device("denoise input check") {
+        assert_refuses_nan(&mut device, &params, &input);
+        vulkan::assert_clean(&device);
+    }
 }
