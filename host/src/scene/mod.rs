@@ -4,6 +4,7 @@
 mod cornell;
 mod emitters;
 mod gltf;
+mod line_counter;
 mod obj;
 pub mod procedural;
 

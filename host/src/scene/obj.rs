@@ -2,6 +2,7 @@
 //! its own `usemtl` material) becomes a mesh with the material of its MTL entry, and the camera
 //! frames the scene's bounds.
 
+use super::line_counter::LineCounter;
 use super::{framing_camera, Material, Mesh, Scene};
 use crate::error::{Error, Result};
 use glam::Vec3;
@@ -17,9 +18,14 @@ pub fn load(path: &Path) -> Result<Scene> {
     if path.is_dir() {
         return Err(load_error("is a directory".into()));
     }
-    std::fs::File::open(path).map_err(|e| load_error(e.to_string()))?;
+    let file = std::fs::File::open(path).map_err(|e| load_error(e.to_string()))?;
     let options = tobj::LoadOptions { triangulate: true, single_index: true, ..Default::default() };
-    let (models, materials) = tobj::load_obj(path, &options).map_err(|e| load_error(e.to_string()))?;
+    // tobj reads line by line and stops at its first error, so the reader's line is the one at fault.
+    let mut reader = LineCounter::new(file);
+    let directory = path.parent().unwrap_or(Path::new(""));
+    let (models, materials) =
+        tobj::load_obj_buf(&mut reader, &options, |library| tobj::load_mtl(directory.join(library)))
+            .map_err(|e| load_error(locate(e, reader.line())))?;
     // A library that cannot be read would leave every mesh grey and every light dark.
     let materials = materials
         .map_err(|e| load_error(format!("the material library its `mtllib` line names cannot be loaded: {e}")))?;
@@ -42,6 +48,24 @@ pub fn load(path: &Path) -> Result<Scene> {
     let name = path.display().to_string();
     let camera = framing_camera(&meshes);
     Scene::new(&name, meshes, camera)
+}
+
+/// tobj's error `error`, raised while its reader was in line `line`, with that line: the line at
+/// fault for the errors of one line (a number that does not parse, a malformed face), or the
+/// line that closed the object whose faces index past the data (tobj checks them as it closes an
+/// object: at the next `o`, `g` or `usemtl` line, or at the end of the file).
+fn locate(error: tobj::LoadError, line: usize) -> String {
+    use tobj::LoadError::{
+        FaceColorOutOfBounds, FaceNormalOutOfBounds, FaceTexCoordOutOfBounds, FaceVertexOutOfBounds, InvalidPolygon,
+    };
+    match error {
+        FaceVertexOutOfBounds
+        | FaceTexCoordOutOfBounds
+        | FaceNormalOutOfBounds
+        | FaceColorOutOfBounds
+        | InvalidPolygon => format!("{error} in a face of the object closed at line {line}"),
+        _ => format!("line {line}: {error}"),
+    }
 }
 
 /// The material of an MTL entry: `Kd` is the base colour ([`DEFAULT_ALBEDO`] without it), `Ke`
@@ -138,6 +162,24 @@ mod tests {
     }
 
     #[test]
+    fn parse_errors_name_the_line_at_fault() {
+        let quad = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\n";
+        let error = |text: &str| load(obj_file(text).path()).unwrap_err().to_string();
+        let position = error(&format!("# a comment\n{quad}v 1 zero 2\nf 1 2 3\n"));
+        assert!(position.contains("line 6: position parse error"), "{position}");
+        let face = error(&format!("{quad}o quad\nf 1 2 x\nf 1 2 3\n"));
+        assert!(face.contains("line 6: face parse error"), "{face}");
+        let last = error(&format!("{quad}f 1 2 3\nvn 0 1"));
+        assert!(last.contains("line 6: normal parse error"), "the last line, without a line break: {last}");
+        // Faces are checked as their object closes: at the next `o` line, here line 7.
+        let closed = error(&format!("{quad}o a\nf 1 2 7\no b\nf 1 2 3\n"));
+        assert!(
+            closed.contains("face vertex index out of bounds in a face of the object closed at line 7"),
+            "{closed}"
+        );
+    }
+
+    #[test]
     fn nan_vertex_and_zero_area_faces_are_rejected() {
         let f = obj_file("v 0 0 0\nv 1 0 0\nv nan 1 0\nf 1 2 3\n");
         let err = load(f.path()).unwrap_err();
@@ -149,7 +191,8 @@ mod tests {
     #[test]
     fn out_of_range_face_and_empty_file_are_rejected() {
         let f = obj_file("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n");
-        assert!(load(f.path()).is_err());
+        let err = load(f.path()).unwrap_err().to_string();
+        assert!(err.contains("out of bounds in a face of the object closed at line 4"), "{err}");
         let f = obj_file("# nothing here\n");
         assert!(matches!(load(f.path()).unwrap_err(), Error::EmptyScene { .. }));
     }
