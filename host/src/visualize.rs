@@ -66,8 +66,10 @@ impl PendingOutput {
         };
         let output_error = |source| Error::Output { path: path.to_owned(), source };
         if ImageFormat::from_path(path).ok() != Some(format) {
-            let extensions = format.extensions_str().join(", .");
-            let reason = format!("the file name must end in .{extensions} (the image is written as {format:?})");
+            let extensions = format.extensions_str();
+            let kind = extensions.first().map_or_else(|| format!("{format:?}"), |e| e.to_uppercase());
+            let reason =
+                format!("the file name must end in .{} (the image is written as {kind})", extensions.join(", ."));
             return Err(output_error(std::io::Error::new(std::io::ErrorKind::InvalidInput, reason)));
         }
         if path.is_dir() {
@@ -231,6 +233,8 @@ mod tests {
         {
             let err = PendingOutput::create(&dir.path().join(name), format).err().expect(name);
             assert!(matches!(err, Error::Output { .. }) && err.to_string().contains("must end in ."), "{name}: {err}");
+            let kind = if format == ImageFormat::Png { "written as PNG" } else { "written as EXR" };
+            assert!(err.to_string().contains(kind), "{name}: {err}");
         }
         assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0, "nothing created");
         let exr = dir.path().join("OUT.EXR");
