@@ -220,16 +220,11 @@ impl DenoiseInput {
     /// machine (≈ 10 GB/s, memory-bound; the upload to a Vulkan device reads them once more).
     pub fn check(&self, params: &DenoiseParams) -> Result<()> {
         let pixels = u64::from(params.width) * u64::from(params.height);
-        let lengths = [&self.position, &self.normal, &self.analytic, &self.emitted, &self.shadowed, &self.unshadowed];
+        let lengths = self.buffers().map(|(_, buffer, _)| buffer.len());
         let reason = if pixels == 0 {
             Some("the image is empty".to_owned())
-        } else if lengths.iter().any(|b| b.len() as u64 != pixels) {
-            Some(format!(
-                "{}×{} pixels but buffers of {:?} entries",
-                params.width,
-                params.height,
-                lengths.map(|b| b.len())
-            ))
+        } else if lengths.iter().any(|&len| len as u64 != pixels) {
+            Some(format!("{}×{} pixels but buffers of {lengths:?} entries", params.width, params.height))
         } else if !(1..=MAX_RADIUS).contains(&params.radius) {
             Some(format!("radius {} outside 1..={MAX_RADIUS}", params.radius))
         } else if params.samples_per_pixel == 0 {
@@ -243,18 +238,22 @@ impl DenoiseInput {
         }
     }
 
-    /// The first pixel holding a value the denoiser cannot filter ([`ValueRule`]), named by
-    /// buffer and pixel `(x, y)` of a `width`-wide image.
-    fn first_invalid_value(&self, width: u32) -> Option<String> {
-        let buffers = [
+    /// The six buffers, named, in declaration order, with the rule their values follow.
+    fn buffers(&self) -> [(&'static str, &[Vec4], ValueRule); 6] {
+        [
             ("position", &self.position, ValueRule::Finite),
             ("normal", &self.normal, ValueRule::LuminanceInW),
             ("analytic", &self.analytic, ValueRule::Radiance),
             ("emitted", &self.emitted, ValueRule::Radiance),
             ("shadowed", &self.shadowed, ValueRule::Radiance),
             ("unshadowed", &self.unshadowed, ValueRule::Radiance),
-        ];
-        buffers.into_iter().find_map(|(name, buffer, rule)| {
+        ]
+    }
+
+    /// The first pixel holding a value the denoiser cannot filter ([`ValueRule`]), named by
+    /// buffer and pixel `(x, y)` of a `width`-wide image.
+    fn first_invalid_value(&self, width: u32) -> Option<String> {
+        self.buffers().into_iter().find_map(|(name, buffer, rule)| {
             buffer.iter().enumerate().find_map(|(i, &value)| {
                 let why = rule.violation(value)?;
                 let (x, y) = (i as u64 % u64::from(width), i as u64 / u64::from(width));

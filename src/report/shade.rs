@@ -16,7 +16,7 @@ use crate::kernels::sampling::light_select::luminance;
 use crate::shading::{ShadeAccumulator, ShadeData};
 use crate::shared::sampling::sampler_kind;
 use crate::{Backend, Result, Scene};
-use glam::Vec3;
+use glam::{DVec3, Vec3};
 
 /// What to measure.
 pub type ShadeReportOptions = super::SceneReportOptions;
@@ -162,9 +162,9 @@ pub fn visibility_floor(analytic: &[Vec3], reference: &[Vec3], emitted: &[Vec3],
         .map(|&i| {
             let u = analytic[i].as_dvec3();
             let shadowed = (reference[i] - emitted[i]).as_dvec3();
-            let v = (shadowed / u).clamp(glam::DVec3::ZERO, glam::DVec3::ONE);
-            let v = glam::DVec3::select(u.cmpgt(glam::DVec3::ZERO), v, glam::DVec3::ONE);
-            (u * u * v * (glam::DVec3::ONE - v)).element_sum() / 3.0
+            let v = (shadowed / u).clamp(DVec3::ZERO, DVec3::ONE);
+            let v = DVec3::select(u.cmpgt(DVec3::ZERO), v, DVec3::ONE);
+            (u * u * v * (DVec3::ONE - v)).element_sum() / 3.0
         })
         .sum();
     (sum / pixels.len().max(1) as f64).sqrt()

@@ -46,7 +46,8 @@ impl<R: Read> BufRead for LineCounter<R> {
     }
 
     fn consume(&mut self, amount: usize) {
-        let consumed = &self.inner.buffer()[..amount.min(self.inner.buffer().len())];
+        let buffered = self.inner.buffer();
+        let consumed = &buffered[..amount.min(buffered.len())];
         self.breaks += consumed.iter().filter(|&&b| b == b'\n').count();
         if let Some(&last) = consumed.last() {
             self.at_line_start = last == b'\n';
