@@ -8,7 +8,7 @@
 //! known peak (`--peak-gbps`, or the datasheet value of an NVIDIA H100/H200) its fraction.
 
 use crate::bench::median;
-use crate::denoise::{DenoiseInput, DenoiseMethod};
+use crate::denoise::{check_radius, frame_params, DenoiseInput, DenoiseMethod};
 use crate::frame::{check_samples_per_pixel, generate_params_with, sampler_params};
 use crate::shading::{resolve, ShadeAccumulator, ShadeData};
 use crate::shared::sampling::sampler_kind;
@@ -33,6 +33,10 @@ pub struct DenoiseBenchOptions {
     pub vulkan: bool,
     /// Peak memory bandwidth of the Vulkan device in GB/s (finite, > 0), if known to the caller.
     pub peak_gbps: Option<f64>,
+    /// The filter radius R in pixels (`1..=MAX_RADIUS`); `None` follows the frame size
+    /// ([`DenoiseParams::default_radius`]: 10 at 1080p). The bilateral passes read `2R + 1`
+    /// taps per pixel and SVGF's à-trous iterations follow R, so their time does too.
+    pub denoise_radius: Option<u32>,
 }
 
 /// One pass (or a whole denoiser, `pass = "total"`) on one backend, printed as one JSON line.
@@ -49,6 +53,8 @@ pub struct DenoiseMeasurement {
     pub pass: &'static str,
     /// Pixels per frame.
     pub pixels: u64,
+    /// The filter radius R in pixels.
+    pub radius: u32,
     /// Median seconds (GPU timestamps on Vulkan, wall clock on the CPU).
     pub seconds: f64,
     /// Bytes the pass must move.
@@ -69,9 +75,10 @@ impl DenoiseMeasurement {
     pub fn row(&self) -> String {
         let fraction = self.bandwidth_fraction.map_or(String::new(), |f| format!("  {:.1} % of peak", 100.0 * f));
         format!(
-            "{:<40} {:<5} {:<20} {:>9.3} ms  {:>7.2} GB/s{fraction}",
+            "{:<40} {:<5} R={:<3} {:<20} {:>9.3} ms  {:>7.2} GB/s{fraction}",
             self.implementation,
             self.method,
+            self.radius,
             self.pass,
             1e3 * self.seconds,
             self.gb_per_s
@@ -124,7 +131,10 @@ fn bench_backend(
     peak_gbps: Option<f64>,
     emit: &mut impl FnMut(&DenoiseMeasurement),
 ) -> Result<()> {
-    let params = DenoiseParams { samples_per_pixel: options.spp, ..DenoiseParams::new(options.width, options.height) };
+    let params = DenoiseParams {
+        samples_per_pixel: options.spp,
+        ..frame_params(options.width, options.height, options.denoise_radius)
+    };
     let pixels = u64::from(params.pixels());
     for method in [DenoiseMethod::Tv, DenoiseMethod::Svgf] {
         let passes = method.passes(&params);
@@ -145,6 +155,7 @@ fn bench_backend(
                 method: method.name(),
                 pass,
                 pixels,
+                radius: params.radius,
                 seconds,
                 bytes,
                 gb_per_s,
@@ -169,6 +180,7 @@ pub fn bench_denoise(options: &DenoiseBenchOptions, mut emit: impl FnMut(&Denois
     if options.peak_gbps.is_some_and(|peak| !(peak.is_finite() && peak > 0.0)) {
         return Err(crate::Error::InvalidParameter { name: "peak-gbps", reason: "must be finite and > 0".into() });
     }
+    check_radius("denoise-radius", options.denoise_radius)?;
     let input = frame_input(options)?;
     let mut cpu = crate::cpu::CpuBackend::new();
     bench_backend(&mut cpu, &input, options, None, &mut emit)?;

@@ -61,6 +61,17 @@ struct ErrorVsTimeArgs {
     /// Also draw the curves into this PNG file.
     #[arg(long)]
     plot: Option<PathBuf>,
+    #[command(flatten)]
+    radius: DenoiseRadiusArg,
+}
+
+/// The filters' footprint, an option of `render`, `bench denoise` and `report error-vs-time`.
+#[derive(clap::Args)]
+struct DenoiseRadiusArg {
+    /// Filter radius R in pixels, 1–10 (default: 10 from a 640-pixel short side up, side/64
+    /// below — 2 at 128²).
+    #[arg(long)]
+    denoise_radius: Option<u32>,
 }
 
 /// The arguments every scene report takes (see `raywave::report::SceneReportOptions`).
@@ -161,6 +172,8 @@ struct DenoiseBenchArgs {
     /// NVIDIA H100/H200, none otherwise).
     #[arg(long)]
     peak_gbps: Option<f64>,
+    #[command(flatten)]
+    radius: DenoiseRadiusArg,
     /// Print one JSON object per line instead of a table.
     #[arg(long)]
     json: bool,
@@ -226,6 +239,8 @@ struct RenderArgs {
     /// (variance-guided à-trous baseline) or `none` (the raw ratio estimate).
     #[arg(long, default_value = "tv")]
     denoise: String,
+    #[command(flatten)]
+    radius: DenoiseRadiusArg,
     /// Give each light's analytic specular term the integral of the GGX lobe the LTC table stands
     /// for (the LTC's plus its residual towards GGX): accurate far-tail and grazing-view
     /// highlights (within 1.1 % of a converged reference; the LTC alone is up to 173 % off for
@@ -307,6 +322,7 @@ fn bench_denoise_command(args: DenoiseBenchArgs) -> raywave::Result<()> {
         repeats: args.repeats,
         vulkan: !args.no_vulkan,
         peak_gbps: args.peak_gbps,
+        denoise_radius: args.radius.denoise_radius,
     };
     bench_denoise(&options, |line| print_line(if args.json { line.json() } else { line.row() }))
 }
@@ -330,7 +346,7 @@ fn report_shade_command(args: ShadeReportArgs) -> raywave::Result<()> {
 }
 
 fn report_error_vs_time_command(args: ErrorVsTimeArgs) -> raywave::Result<()> {
-    use raywave::report::error_vs_time::{fastest_by_error, plot, report_error_vs_time};
+    use raywave::report::error_vs_time::{fastest_by_error, plot, report_error_vs_time, ErrorVsTimeOptions};
     // Create the plot's file up front so a bad path fails before the measurements.
     let pending = args
         .plot
@@ -338,7 +354,8 @@ fn report_error_vs_time_command(args: ErrorVsTimeArgs) -> raywave::Result<()> {
         .map(|path| raywave::visualize::PendingOutput::create(path, image::ImageFormat::Png))
         .transpose()?;
     let json = args.common.json;
-    let (options, mut backend) = args.common.open(args.resolution)?;
+    let (report, mut backend) = args.common.open(args.resolution)?;
+    let options = ErrorVsTimeOptions { report, denoise_radius: args.radius.denoise_radius };
     let lines = report_error_vs_time(backend.as_mut(), &options, |line| {
         print_line(if json { line.json() } else { line.row() })
     })?;
@@ -349,7 +366,10 @@ fn report_error_vs_time_command(args: ErrorVsTimeArgs) -> raywave::Result<()> {
         }
     }
     match pending {
-        Some(output) => plot(&lines, &format!("{}², {}", options.resolution, backend.name()), output),
+        Some(output) => {
+            let title = format!("{}², R = {}, {}", options.report.resolution, options.radius(), backend.name());
+            plot(&lines, &title, output)
+        }
         None => Ok(()),
     }
 }
@@ -372,6 +392,7 @@ fn render_command(args: RenderArgs) -> raywave::Result<()> {
         exr: args.exr,
         stochastic: args.stochastic,
         denoise: args.denoise.parse()?,
+        denoise_radius: args.radius.denoise_radius,
         analytic_residual: args.analytic_residual,
         backend: BackendOptions { validation: args.validate, trace },
     };

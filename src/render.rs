@@ -4,7 +4,7 @@
 
 use crate::{open_backend, BackendOptions, DeviceChoice, Result, Scene, StageTiming};
 use image::ImageFormat;
-use raywave_host::denoise::{rgb, DenoiseInput, DenoiseMethod};
+use raywave_host::denoise::{check_radius, frame_params, rgb, DenoiseInput, DenoiseMethod};
 use raywave_host::frame::{check_samples_per_pixel, generate_params_with, sampler_params};
 use raywave_host::shading::{resolve, ShadeAccumulator, ShadeData};
 use raywave_host::visualize::{normal_depth_image, persist_all, srgb_image, PendingOutput};
@@ -66,6 +66,10 @@ pub struct RenderOptions {
     /// The denoiser of the shadow ratio ([`DenoiseMethod::Tv`] by default;
     /// [`DenoiseMethod::None`] composites the raw `U · S_N/U_N`).
     pub denoise: DenoiseMethod,
+    /// The filter radius R in pixels (`1..=MAX_RADIUS`; the TV filter's widest Gaussian, and the
+    /// SVGF baseline's footprint); `None` follows the image size
+    /// ([`DenoiseParams::default_radius`]: 10 at 1080p, 2 at 128²).
+    pub denoise_radius: Option<u32>,
     /// Whether `U`'s specular term takes the quadrature residual towards GGX
     /// ([`ShadeData::analytic_residual`]).
     pub analytic_residual: bool,
@@ -111,10 +115,11 @@ fn add_timing(timings: &mut Vec<StageTiming>, stage: &'static str, seconds: f64)
 /// stay in the range the trace and shade stages handle (an aperture of 10²⁰ rendered black).
 pub const MAX_LENS_DISTANCE: f32 = raywave_host::scene::MAX_COORDINATE;
 
-/// Checks the options that do not need the scene: lens values in range, outputs that the view
-/// writes, and no file named twice.
+/// Checks the options that do not need the scene: lens values and filter radius in range,
+/// outputs that the view writes, and no file named twice.
 fn check_options(options: &RenderOptions) -> Result<()> {
     let invalid = |name, reason: String| Err(crate::Error::InvalidParameter { name, reason });
+    check_radius("denoise-radius", options.denoise_radius)?;
     if !(0.0..=MAX_LENS_DISTANCE).contains(&options.lens_radius) {
         return invalid("aperture", format!("{} is outside [0, {MAX_LENS_DISTANCE:e}]", options.lens_radius));
     }
@@ -213,7 +218,7 @@ pub fn render(options: &RenderOptions) -> Result<RenderReport> {
     let params = DenoiseParams {
         seed: options.seed,
         samples_per_pixel: accumulator.samples(),
-        ..DenoiseParams::new(width, height)
+        ..frame_params(width, height, options.denoise_radius)
     };
     let (color, pass_timings) =
         backend.denoise(options.denoise, &params, &DenoiseInput::new(&surfaces, &accumulator))?;

@@ -212,14 +212,17 @@ fn lightless_scenes_warn_in_render_and_are_refused_by_reports() {
 /// Benchmark and report options out of range: each command fails at once with the option named
 /// (before, `--repeats 0` measured one repetition, `--spp 0` failed inside the denoiser, a
 /// negative `--peak-gbps` gave negative bandwidth fractions, and a reference past the sampler's index
-/// repeated its samples).
+/// repeated its samples; a filter radius outside the shared-memory tile's must fail before the
+/// frame is shaded or the reference converged).
 #[test]
 fn bench_and_report_options_out_of_range_are_typed_errors() {
-    let cases: [(&[&str], &str); 7] = [
+    let cases: [(&[&str], &str); 9] = [
         (&["bench", "denoise", "--no-vulkan", "--repeats", "0"], "repeats: must be at least 1"),
         (&["bench", "denoise", "--no-vulkan", "--spp", "0"], "spp: 0 is outside"),
         (&["bench", "denoise", "--no-vulkan", "--spp", "8192"], "exceed the sampler's 32-bit index"),
         (&["bench", "denoise", "--no-vulkan", "--peak-gbps=-5"], "peak-gbps: must be finite and > 0"),
+        (&["bench", "denoise", "--no-vulkan", "--denoise-radius", "0"], "denoise-radius: radius 0 outside 1..=10"),
+        (&["report", "error-vs-time", "--denoise-radius", "11"], "denoise-radius: radius 11 outside 1..=10"),
         (&["bench", "trace", "--no-vulkan", "--repeats", "0"], "repeats: must be at least 1"),
         (&["bench", "trace", "--no-vulkan", "--resolution", "0"], "at least 1"),
         (&["report", "shade", "--resolution", "1024", "--reference-spp", "8192"], "reference-spp: 8192 samples"),
@@ -375,6 +378,17 @@ fn error_vs_time_report_prints_every_method_and_draws_the_plot() {
     let image = image::open(&plot).expect("plot is a PNG").to_rgb8();
     assert_eq!(image.width(), 960);
     assert!(image.pixels().any(|p| p.0 != [255, 255, 255]), "something was drawn");
+    // `--denoise-radius` widens the filters (R = 1 at 16² by default) and nothing else.
+    let wider = json_lines(&raywave(&[&args[..args.len() - 2], &["--denoise-radius", "3"]].concat()));
+    let relmse = |lines: &[serde_json::Value], method: &str| {
+        lines.iter().find(|l| l["method"] == method && l["spp"] == 1).map(|l| l["relmse"].as_f64().unwrap())
+    };
+    for method in ["stochastic", "ratio"] {
+        assert_eq!(relmse(&wider, method), relmse(&lines, method), "{method} is not filtered");
+    }
+    for method in ["stochastic+tv", "ratio+tv", "ratio+svgf"] {
+        assert_ne!(relmse(&wider, method), relmse(&lines, method), "{method} at R = 3");
+    }
     let bad =
         raywave(&["report", "error-vs-time", "--reps", "0", "--plot", plot.with_extension("x.png").to_str().unwrap()]);
     assert!(!bad.status.success() && stderr(&bad).contains("reps"));
@@ -403,6 +417,10 @@ fn denoise_bench_prints_each_pass_and_the_total() {
         .map(|l| l["bytes"].as_u64().unwrap())
         .sum();
     assert_eq!(tv_total["bytes"].as_u64(), Some(tv_bytes));
+    assert!(lines.iter().all(|l| l["radius"] == 1), "R follows the frame: 1 below a 128-pixel side");
+    let wider = json_lines(&raywave(&[&args[..], &["--denoise-radius", "3"]].concat()));
+    assert!(wider.iter().all(|l| l["radius"] == 3), "{wider:?}");
+    assert_eq!(wider.iter().filter(|l| l["pass"] == "svgf atrous").count(), 3, "three à-trous iterations at R = 3");
 }
 
 #[test]
@@ -425,5 +443,15 @@ fn render_denoises_by_default_and_takes_each_denoiser() {
     let (default, path) = render(dir.path(), "default.png", &["--device", "cpu", "--spp", "1"]);
     assert!(default.status.success());
     assert_eq!(image::open(&path).unwrap().to_rgb8(), images[0], "TV is the default");
+    // 96×64 filters with R = 1 unless told otherwise.
+    let radius = |r: &str| {
+        let (out, path) =
+            render(dir.path(), &format!("r{r}.png"), &["--device", "cpu", "--spp", "1", "--denoise-radius", r]);
+        assert!(out.status.success(), "{}", stderr(&out));
+        image::open(&path).unwrap().to_rgb8()
+    };
+    assert_eq!(radius("1"), images[0], "R = 1 is this size's default");
+    assert_ne!(radius("4"), images[0], "R = 4 filters wider");
     assert_rejected(&["--denoise", "blur"], "denoise");
+    assert_rejected(&["--device", "cpu", "--denoise-radius", "11"], "denoise-radius: radius 11 outside 1..=10");
 }

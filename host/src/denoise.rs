@@ -225,8 +225,8 @@ impl DenoiseInput {
             Some("the image is empty".to_owned())
         } else if lengths.iter().any(|&len| len as u64 != pixels) {
             Some(format!("{}×{} pixels but buffers of {lengths:?} entries", params.width, params.height))
-        } else if !(1..=MAX_RADIUS).contains(&params.radius) {
-            Some(format!("radius {} outside 1..={MAX_RADIUS}", params.radius))
+        } else if let Some(reason) = radius_problem(params.radius) {
+            Some(reason)
         } else if params.samples_per_pixel == 0 {
             Some("samples per pixel is 0 (the estimates average at least one sample)".to_owned())
         } else {
@@ -289,6 +289,28 @@ impl ValueRule {
     }
 }
 
+/// Why `radius` cannot be a filter radius, or `None` if it can: it must be within
+/// `1..=MAX_RADIUS`, the pixels a Vulkan bilateral workgroup keeps on each side of its segment.
+fn radius_problem(radius: u32) -> Option<String> {
+    (!(1..=MAX_RADIUS).contains(&radius)).then(|| format!("radius {radius} outside 1..={MAX_RADIUS}"))
+}
+
+/// Checks a filter radius given as option `name` (`--denoise-radius`) before any work is done:
+/// a typed error naming the option if it is outside `1..=MAX_RADIUS`.
+pub fn check_radius(name: &'static str, radius: Option<u32>) -> Result<()> {
+    match radius.and_then(radius_problem) {
+        Some(reason) => Err(Error::InvalidParameter { name, reason }),
+        None => Ok(()),
+    }
+}
+
+/// The denoise parameters of a `width × height` frame with filter radius `radius` — `None` for
+/// the one that follows the image size ([`DenoiseParams::default_radius`]) — and the SVGF
+/// baseline's matching à-trous iterations ([`DenoiseParams::with_radius`]).
+pub fn frame_params(width: u32, height: u32, radius: Option<u32>) -> DenoiseParams {
+    DenoiseParams::with_radius(width, height, radius.unwrap_or(DenoiseParams::default_radius(width, height)))
+}
+
 /// Converts a denoiser's `Vec4` colours to RGB.
 pub fn rgb(color: &[Vec4]) -> Vec<Vec3> {
     color.iter().map(|c| c.truncate()).collect()
@@ -308,6 +330,23 @@ mod tests {
             shadowed: v.clone(),
             unshadowed: v,
         }
+    }
+
+    #[test]
+    fn a_radius_option_is_checked_and_sets_the_footprint() {
+        assert!(check_radius("denoise-radius", None).is_ok());
+        assert!(check_radius("denoise-radius", Some(1)).is_ok() && check_radius("r", Some(MAX_RADIUS)).is_ok());
+        for bad in [0, MAX_RADIUS + 1, u32::MAX] {
+            match check_radius("denoise-radius", Some(bad)) {
+                Err(Error::InvalidParameter { name: "denoise-radius", reason }) => {
+                    assert!(reason.contains(&format!("radius {bad} outside 1..={MAX_RADIUS}")), "{reason}")
+                }
+                other => panic!("radius {bad}: expected an error naming the option, got {other:?}"),
+            }
+        }
+        assert_eq!(frame_params(128, 96, None), DenoiseParams::new(128, 96));
+        let chosen = frame_params(128, 96, Some(6));
+        assert_eq!((chosen.radius, chosen.atrous_iterations, chosen.width, chosen.height), (6, 4, 128, 96));
     }
 
     #[test]

@@ -71,22 +71,16 @@ const _: () = assert!(core::mem::size_of::<DenoiseParams>() == 64);
 
 impl DenoiseParams {
     /// The defaults for a `width × height` image: the DX port's edge weights, Falcor's SVGF
-    /// constants, and a filter footprint that follows the image size — R = 10 (the reference
-    /// code's, tuned for 1080p) on frames whose short side is ≥ 640 pixels, `short side / 64`
-    /// (at least 1) below, since the penumbrae the filter must not blur across shrink with the
-    /// image (at 128², R = 2: the Cornell box's relMSE minimum, the two-light box's R = 3 being
-    /// 15 % better there and 40 % worse on the Cornell box; the README's Denoising section); and
-    /// 4 à-trous iterations (Falcor) with R ≥ 5, one per doubling of R below (footprint
-    /// `2·(2^k − 1)` pixels ≈ 3R).
+    /// constants, and the footprint [`Self::default_radius`] picks for the image size.
     pub const fn new(width: u32, height: u32) -> Self {
-        let short = if width < height { width } else { height };
-        let radius = if short / 64 > MAX_RADIUS {
-            MAX_RADIUS
-        } else if short < 128 {
-            1
-        } else {
-            short / 64
-        };
+        Self::with_radius(width, height, Self::default_radius(width, height))
+    }
+
+    /// The defaults with filter radius `radius` (`1..=MAX_RADIUS`; the denoiser refuses others)
+    /// and the SVGF baseline's à-trous iterations that match it: 4 (Falcor) with R ≥ 5, one per
+    /// doubling of R below (footprint `2·(2^k − 1)` pixels ≈ 3R), so both filters cover about
+    /// the same pixels.
+    pub const fn with_radius(width: u32, height: u32, radius: u32) -> Self {
         let atrous_iterations = if radius >= 5 {
             4
         } else if radius >= 3 {
@@ -107,6 +101,23 @@ impl DenoiseParams {
             samples_per_pixel: 1,
             edge_weights: DEFAULT_EDGE_WEIGHTS,
             svgf: Vec4::new(DEFAULT_SVGF_PHI_COLOR, DEFAULT_SVGF_VARIANCE_BOOST, 0.0, 0.0),
+        }
+    }
+
+    /// The filter radius that follows the image size: R = 10 (the reference code's, tuned for
+    /// 1080p) on frames whose short side is ≥ 640 pixels, `short side / 64` (at least 1) below,
+    /// since the penumbrae the filter must not blur across shrink with the image. At 128², R = 2
+    /// is the Cornell box's 1-spp relMSE minimum, the two-light box's R = 3 being 15 % better
+    /// there and 40 % worse on the Cornell box (the README's Denoising section, which also lists
+    /// R = 1 … 10 at 128² and 256²).
+    pub const fn default_radius(width: u32, height: u32) -> u32 {
+        let short = if width < height { width } else { height };
+        if short / 64 > MAX_RADIUS {
+            MAX_RADIUS
+        } else if short < 128 {
+            1
+        } else {
+            short / 64
         }
     }
 
@@ -160,6 +171,12 @@ mod tests {
         assert_eq!(footprint(256, 300), (4, 3));
         assert_eq!(footprint(1, 1), (1, 1));
         assert_eq!(footprint(127, 5000), (1, 1));
+        let chosen = |radius| {
+            let p = DenoiseParams::with_radius(1920, 1080, radius);
+            (p.radius, p.atrous_iterations)
+        };
+        assert_eq!([chosen(1), chosen(2), chosen(3), chosen(4), chosen(5)], [(1, 1), (2, 2), (3, 3), (4, 3), (5, 4)]);
+        assert_eq!(DenoiseParams::with_radius(128, 128, 2), DenoiseParams::new(128, 128));
     }
 
     #[test]

@@ -16,7 +16,7 @@
 
 use super::flip::mean_flip;
 use super::shade::{accumulate, GBuffer, ShadowRegions};
-use crate::denoise::{rgb, DenoiseInput, DenoiseMethod};
+use crate::denoise::{check_radius, frame_params, rgb, DenoiseInput, DenoiseMethod};
 use crate::shading::ShadeData;
 use crate::shared::DenoiseParams;
 use crate::visualize::PendingOutput;
@@ -30,7 +30,29 @@ pub const METHODS: [&str; 5] = ["stochastic", "stochastic+tv", "ratio", "ratio+t
 pub const RELMSE_EPSILON: f64 = 0.01;
 
 /// What to measure.
-pub type ErrorVsTimeOptions = super::SceneReportOptions;
+#[derive(Clone, Debug)]
+pub struct ErrorVsTimeOptions {
+    /// Scenes, image side, sample counts and repetitions.
+    pub report: super::SceneReportOptions,
+    /// The filters' radius R in pixels (`1..=MAX_RADIUS`; the TV filter's widest Gaussian, SVGF's
+    /// footprint); `None` follows the image size ([`DenoiseParams::default_radius`]: 2 at 128²).
+    pub denoise_radius: Option<u32>,
+}
+
+impl ErrorVsTimeOptions {
+    /// Checks the options before any measurement ([`super::SceneReportOptions::check`] and the
+    /// radius).
+    pub fn check(&self) -> Result<()> {
+        self.report.check("report error-vs-time")?;
+        check_radius("denoise-radius", self.denoise_radius)
+    }
+
+    /// The radius the filters run with.
+    pub fn radius(&self) -> u32 {
+        let side = self.report.resolution;
+        frame_params(side, side, self.denoise_radius).radius
+    }
+}
 
 /// One measurement, printed as one JSON line.
 #[derive(Clone, Debug, serde::Serialize)]
@@ -108,6 +130,9 @@ pub struct PreparedScene {
     pub analytic: Vec<Vec3>,
     /// Image side in pixels.
     pub resolution: u32,
+    /// The filters' radius R in pixels: [`DenoiseParams::default_radius`] for the image side
+    /// unless set.
+    pub denoise_radius: u32,
 }
 
 impl PreparedScene {
@@ -118,7 +143,8 @@ impl PreparedScene {
         let gbuffer = GBuffer::new(backend, scene, resolution)?;
         let surfaces = gbuffer.surfaces(&data);
         let analytic = accumulate(backend, &gbuffer, &data, resolution, 1, 0)?.0.analytic();
-        Ok(Self { data, gbuffer, surfaces, analytic, resolution })
+        let denoise_radius = DenoiseParams::default_radius(resolution, resolution);
+        Ok(Self { data, gbuffer, surfaces, analytic, resolution, denoise_radius })
     }
 
     /// The converged image: the ratio estimate at `spp` samples per pixel (seed fixed apart from
@@ -136,7 +162,7 @@ impl PreparedScene {
         let params = DenoiseParams {
             seed,
             samples_per_pixel: run.samples(),
-            ..DenoiseParams::new(self.resolution, self.resolution)
+            ..DenoiseParams::with_radius(self.resolution, self.resolution, self.denoise_radius)
         };
         let mut denoised = |method, input: &DenoiseInput| -> Result<(Vec<Vec3>, f64)> {
             let (color, timings) = backend.denoise(method, &params, input)?;
@@ -204,13 +230,17 @@ pub fn report_error_vs_time(
     options: &ErrorVsTimeOptions,
     mut emit: impl FnMut(&ErrorVsTimeLine),
 ) -> Result<Vec<ErrorVsTimeLine>> {
-    options.check("report error-vs-time")?;
+    options.check()?;
+    let report = &options.report;
     let mut lines = Vec::new();
-    for (name, scene) in options.scenes.iter().zip(options.load_scenes()?) {
-        let prepared = PreparedScene::new(backend, &scene, options.resolution)?;
-        let reference = prepared.reference(backend, options.reference_spp)?;
-        let seeds: Vec<u32> = (0..options.reps).collect();
-        for spp in options.spp_steps() {
+    for (name, scene) in report.scenes.iter().zip(report.load_scenes()?) {
+        let prepared = PreparedScene {
+            denoise_radius: options.radius(),
+            ..PreparedScene::new(backend, &scene, report.resolution)?
+        };
+        let reference = prepared.reference(backend, report.reference_spp)?;
+        let seeds: Vec<u32> = (0..report.reps).collect();
+        for spp in report.spp_steps() {
             for (method, error) in METHODS.into_iter().zip(prepared.errors(backend, &reference, spp, &seeds)?) {
                 let MethodError { relmse, relmse_shadow, relmse_lit, flip, ms } = error;
                 let line =
