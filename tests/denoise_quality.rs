@@ -53,7 +53,10 @@
 //! error is the blur's bias at the shadows' edges. The split is `MethodError::relmse_shadow` /
 //! `relmse_lit`; the test prints it and asserts ratio+tv's lit part below a tenth of
 //! stochastic+tv's. With a lit part of 0, ratio+tv would still be 0.60× (Cornell) and 0.43× (two
-//! lights) of stochastic+tv. (With R = 10 at 64² the ratio held on the
+//! lights) of stochastic+tv. No footprint gets there (`--denoise-radius` 1 … 6 at 128², 3 and 4
+//! at 256²: 0.43–0.78× on the Cornell box, 0.32–0.53× with two lights), nor one picked per 8×8
+//! tile by an oracle that knows the reference (`examples/footprint_oracle.rs`: 0.51× and 0.30×
+//! from the shadowed part alone). (With R = 10 at 64² the ratio held on the
 //! two-light box, 0.18, but ratio+tv then did no better than the raw ratio on the Cornell box: the
 //! wide blur spread lit floor into the umbrae under the blocks.)
 //!
