@@ -120,8 +120,7 @@ fn build(width: u32, height: u32, mut pixel: impl FnMut(u32, u32) -> Pixel) -> (
         }
     }
     // The widest footprint, whatever the image size: the hard cases are hardest with it.
-    let params =
-        DenoiseParams { radius: MAX_RADIUS, atrous_iterations: 4, seed: 5, ..DenoiseParams::new(width, height) };
+    let params = DenoiseParams { seed: 5, ..DenoiseParams::with_radius(width, height, MAX_RADIUS) };
     (params, input)
 }
 

@@ -121,7 +121,7 @@ fn scene_input(cpu: &mut CpuBackend, scene_name: &str, spp: u32) -> (DenoisePara
 /// size — R = [`MAX_RADIUS`], so the bilateral tiles' halos are used in full, and Falcor's four
 /// à-trous iterations — and noise-line seed `seed`.
 fn full_footprint(width: u32, height: u32, seed: u32) -> DenoiseParams {
-    DenoiseParams { radius: MAX_RADIUS, atrous_iterations: 4, seed, ..DenoiseParams::new(width, height) }
+    DenoiseParams { seed, ..DenoiseParams::with_radius(width, height, MAX_RADIUS) }
 }
 
 /// A `width × height` image of a slanted floor with coin-flip visibility, a smooth analytic
