@@ -443,14 +443,14 @@ fn render_denoises_by_default_and_takes_each_denoiser() {
     let (default, path) = render(dir.path(), "default.png", &["--device", "cpu", "--spp", "1"]);
     assert!(default.status.success());
     assert_eq!(image::open(&path).unwrap().to_rgb8(), images[0], "TV is the default");
-    // 96×64 filters with R = 1 unless told otherwise.
+    // 96×64 filters with R = 2 unless told otherwise.
     let radius = |r: &str| {
         let (out, path) =
             render(dir.path(), &format!("r{r}.png"), &["--device", "cpu", "--spp", "1", "--denoise-radius", r]);
         assert!(out.status.success(), "{}", stderr(&out));
         image::open(&path).unwrap().to_rgb8()
     };
-    assert_eq!(radius("1"), images[0], "R = 1 is this size's default");
+    assert_eq!(radius("2"), images[0], "R = 2 is this size's default");
     assert_ne!(radius("4"), images[0], "R = 4 filters wider");
     assert_rejected(&["--denoise", "blur"], "denoise");
     assert_rejected(&["--device", "cpu", "--denoise-radius", "11"], "denoise-radius: radius 11 outside 1..=10");

@@ -104,21 +104,27 @@ impl DenoiseParams {
         }
     }
 
-    /// The filter radius that follows the image size: R = 10 (the reference code's, tuned for
-    /// 1080p) on frames whose short side is ≥ 640 pixels, `short side / 64` (at least 1) below,
-    /// since the penumbrae the filter must not blur across shrink with the image. At 128², R = 2
-    /// is the Cornell box's 1-spp relMSE minimum, the two-light box's R = 3 being 15 % better
-    /// there and 40 % worse on the Cornell box (the README's Denoising section, which also lists
-    /// R = 1 … 10 at 128² and 256²).
+    /// The filter radius that follows the image size: `R = 10 · (s / 1080)^(2/3)` for a short
+    /// side of `s` pixels, rounded, within 1 … 10 — the reference code's R = 10 at 1080p
+    /// [H-DX, H-SD], narrower on smaller frames, whose penumbrae span fewer pixels. The 2/3
+    /// power is measured (`raywave report error-vs-time --denoise-radius`, 1 spp, the README's
+    /// Denoising section): on the built-in scenes the relMSE minimum moves from R = 2 at 128² to
+    /// 3–4 at 256² and 5 at 512² — slower than the image, since every pixel still holds one
+    /// binary visibility sample. This gives 2, 4 and 6 there; the earlier `s / 64` gave R = 8 at
+    /// 512² (the render's default size), with 1.7× (Cornell box) and 1.4× (two lights) the
+    /// ratio+tv error of R = 6, and R = 10 from 640 pixels up.
+    ///
+    /// In integers (no `powf` in `no_std` const code): the largest `r ≤ 10` with
+    /// `10·(s/1080)^(2/3) ≥ r − ½`, i.e. `729·(2r − 1)³ ≤ 5·s²`, so R = 10 from s = 1001 up.
     pub const fn default_radius(width: u32, height: u32) -> u32 {
         let short = if width < height { width } else { height };
-        if short / 64 > MAX_RADIUS {
-            MAX_RADIUS
-        } else if short < 128 {
-            1
-        } else {
-            short / 64
+        // Every side from 1001 up gives R = 10; the clamp keeps `s²` far from overflowing.
+        let short = if short > 1080 { 1080 } else { short } as u64;
+        let mut radius = 1;
+        while radius < MAX_RADIUS && 729 * (2 * radius as u64 + 1).pow(3) <= 5 * short * short {
+            radius += 1;
         }
+        radius
     }
 
     /// Whether the TV filter leaves every pixel as it is: its widest Gaussian, `R/√N`
@@ -166,11 +172,22 @@ mod tests {
             (p.radius, p.atrous_iterations)
         };
         assert_eq!(footprint(1920, 1080), (MAX_RADIUS, 4), "the reference code's R = 10 at 1080p");
-        assert_eq!(footprint(640, 4000), (MAX_RADIUS, 4));
-        assert_eq!(footprint(128, 128), (2, 2));
+        assert_eq!(footprint(4000, 1001), (MAX_RADIUS, 4));
+        assert_eq!(footprint(1000, 1000), (9, 4));
+        assert_eq!(footprint(512, 512), (6, 4), "the render's default size");
+        assert_eq!(footprint(640, 4000), (7, 4));
         assert_eq!(footprint(256, 300), (4, 3));
+        assert_eq!(footprint(128, 128), (2, 2));
+        assert_eq!(footprint(64, 96), (2, 2));
+        assert_eq!(footprint(62, 5000), (1, 1));
         assert_eq!(footprint(1, 1), (1, 1));
-        assert_eq!(footprint(127, 5000), (1, 1));
+        assert_eq!(footprint(u32::MAX, u32::MAX), (MAX_RADIUS, 4));
+        // The rule it implements, in floating point, at every side up to 1100.
+        for side in 1..=1100u32 {
+            let exact = 10.0 * (side as f64 / 1080.0).powf(2.0 / 3.0);
+            let expected = (exact + 0.5).floor().clamp(1.0, MAX_RADIUS as f64) as u32;
+            assert_eq!(DenoiseParams::default_radius(side, side), expected, "side {side}: {exact}");
+        }
         let chosen = |radius| {
             let p = DenoiseParams::with_radius(1920, 1080, radius);
             (p.radius, p.atrous_iterations)
