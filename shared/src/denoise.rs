@@ -119,7 +119,7 @@ impl DenoiseParams {
     pub const fn default_radius(width: u32, height: u32) -> u32 {
         let short = if width < height { width } else { height };
         // Every side from 1001 up gives R = 10; the clamp keeps `s²` far from overflowing.
-        let short = if short > 1080 { 1080 } else { short } as u64;
+        let short = (if short > 1080 { 1080 } else { short }) as u64;
         let mut radius = 1;
         while radius < MAX_RADIUS && 729 * (2 * radius as u64 + 1).pow(3) <= 5 * short * short {
             radius += 1;
