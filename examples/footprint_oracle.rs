@@ -48,7 +48,6 @@ struct Args {
 }
 
 /// Relative-MSE parts of one input, summed over the frames.
-#[derive(Default)]
 struct Parts {
     /// Shadowed and unshadowed parts per candidate: no filter, then R = 1 … MAX_RADIUS.
     fixed: Vec<(f64, f64)>,
@@ -85,13 +84,15 @@ fn measure(args: &Args, name: &str, scene: &Scene) -> raywave::Result<()> {
     let reference = prepared.reference(&mut backend, args.reference_spp)?;
     let regions = ShadowRegions::new(&prepared.analytic, &reference);
     let blocks = tiles(&regions.shadow, side, args.tile);
-    let mut parts = [Parts::default(), Parts::default()];
+    // Candidates: no filter, then R = 1 … MAX_RADIUS.
+    let fixed = vec![(0.0, 0.0); 1 + MAX_RADIUS as usize];
+    let mut parts = [Parts { fixed: fixed.clone(), oracle: 0.0 }, Parts { fixed, oracle: 0.0 }];
     for seed in 0..args.reps {
         let (run, _) = accumulate(&mut backend, &prepared.gbuffer, &prepared.data, side, 1, seed)?;
         let ratio = DenoiseInput::new(&prepared.surfaces, &run);
-        for (input, parts) in [ratio.clone(), ratio.stochastic()].iter().zip(&mut parts) {
+        let stochastic = ratio.stochastic();
+        for (input, parts) in [&ratio, &stochastic].into_iter().zip(&mut parts) {
             let images = candidates(&mut backend, input, side, seed)?;
-            parts.fixed.resize(images.len(), (0.0, 0.0));
             for (sum, image) in parts.fixed.iter_mut().zip(&images) {
                 sum.0 += relmse_part(image, &reference, &regions.shadow);
                 sum.1 += relmse_part(image, &reference, &regions.lit);
