@@ -32,7 +32,7 @@
 
 use super::ggx::GgxLobe;
 use super::ltc::{self, LtcLobe, ShadingFrame};
-use crate::offset::offset_ray_origin;
+use crate::offset::{offset_ray_origin, ray_stop_before};
 use crate::sampling::light_select::{luminance, LightSet};
 use crate::sampling::{dims, sampler, warp};
 use glam::{UVec2, Vec3, Vec4, Vec4Swizzles};
@@ -273,13 +273,18 @@ pub fn shade_sample(
         return result;
     }
     let weight = f * light.radiance.xyz() / pdf;
-    if !weight.is_finite() {
+    let origin = offset_ray_origin(p, n);
+    // Stop short of the light — its own emitter geometry may be in the scene — by a margin that
+    // holds at grazing angles and far from the origin. A point within that margin of the light's
+    // plane (which sees the light edge-on) has no such stop and draws no sample.
+    let light_normal = eu.cross(ev).normalize_or_zero();
+    let t_max = ray_stop_before(origin, direction, p + distance * direction, light_normal);
+    if !weight.is_finite() || !(t_max > 0.0) {
         return result;
     }
     result.unshadowed = weight.extend(0.0);
-    result.shadow_origin = offset_ray_origin(p, n).extend(0.0);
-    // Stop just short of the light: its own emitter geometry may be in the scene.
-    result.shadow_direction = direction.extend(distance * (1.0 - 1.0e-4));
+    result.shadow_origin = origin.extend(0.0);
+    result.shadow_direction = direction.extend(t_max);
     result
 }
 
