@@ -187,8 +187,8 @@ pub fn light_bounds(light: &Light) -> LightBounds {
 /// Conservative importance of the lights inside `bounds` for the point `p` with surface normal
 /// `n` (Conty Estevez & Kulla 2018; pbrt-v4 `LightBounds::Importance`).
 ///
-/// With `pc` the box centre, `d² = max(|p − pc|², |diagonal|/2)` (pbrt clamps with the diagonal's
-/// length, not its square), `θw` the angle between the cone axis and `p − pc` (its absolute cosine
+/// With `pc` the box centre, `d² = max(|p − pc|², r²)`, `r` the radius of the box's bounding
+/// sphere (half its diagonal), `θw` the angle between the cone axis and `p − pc` (its absolute cosine
 /// for two-sided bounds), `θb` the half-angle of the cone from `p` around the box's bounding sphere
 /// (`θb = π` when `p` is inside that sphere), `θ' = max(0, θw − θo − θb)`:
 /// `I = Φ · cos θ' / d²`, and 0 when `cos θ' ≤ cos θe`.
@@ -215,7 +215,7 @@ pub fn importance(bounds: &LightBounds, p: Vec3, n: Vec3) -> f32 {
         // p is NaN or infinite.
         return 0.0;
     }
-    let d2 = dist2.max((hi - lo).length() * 0.5).max(f32::MIN_POSITIVE);
+    let d2 = dist2.max(radius * radius).max(f32::MIN_POSITIVE);
 
     let mut cos_theta_p = 1.0;
     let mut cos_theta_pi = 1.0;
@@ -735,6 +735,38 @@ mod tests {
             })
             .sum();
         assert!(chi2 < 20.515, "chi-square {chi2}, counts {counts:?}, pmfs {pmfs:?}");
+    }
+
+    /// Scaling a scene scales every distance and every light's area alike, so each importance
+    /// (power over squared distance) is unchanged, and with it the choice: at points inside,
+    /// near and far from the lights' bounding spheres, on surfaces and in media. (pbrt-v4 clamps
+    /// `d²` with half the diagonal's length, not its square, so near a light the importance
+    /// depended on the scene's unit: one here changed 380× at ×10⁻³.)
+    #[test]
+    fn importance_does_not_depend_on_the_scene_scale() {
+        let lights = [
+            Light::quad(Vec3::new(-0.06, 0.55, 0.1), Vec3::X * 0.12, Vec3::Z * 0.1, Vec3::splat(20.0), false),
+            Light::sphere(Vec3::new(0.3, 0.4, 0.2), 0.05, Vec3::splat(30.0)),
+        ];
+        let mut rng = crate::hash::CounterRng::new(5);
+        for _ in 0..2000 {
+            let p = rng.vec3(-0.1, 0.6);
+            let n = if rng.next_f32() < 0.5 { rng.unit_vec3() } else { Vec3::ZERO };
+            for light in &lights {
+                let at_unit_scale = importance(&light_bounds(light), p, n);
+                for scale in [1e-3f32, 1e-2, 10.0, 1e3] {
+                    let scaled = Light {
+                        position: light.position * scale,
+                        edge_u: light.edge_u * scale,
+                        edge_v: light.edge_v * scale,
+                        ..*light
+                    };
+                    let value = importance(&light_bounds(&scaled), p * scale, n);
+                    let close = (value - at_unit_scale).abs() <= 1e-4 * at_unit_scale.max(value) + 1e-30;
+                    assert!(close, "p {p}, n {n}, ×{scale}: {value} against {at_unit_scale}");
+                }
+            }
+        }
     }
 
     #[test]
