@@ -27,7 +27,7 @@
 //!
 //! | scene | spp | stochastic | stochastic+tv | ratio | ratio+tv | ratio+svgf |
 //! |---|---|---|---|---|---|---|
-//! | cornell-two-lights | 1 | 0.02898 | 0.00119 | 0.00821 | 0.00050 | 0.00167 |
+//! | cornell-two-lights | 1 | 0.02828 | 0.00118 | 0.00821 | 0.00050 | 0.00167 |
 //! | cornell-two-lights | 4 | 0.00245 | 0.00048 | 0.00110 | 0.00023 | 0.00039 |
 //! | cornell-two-lights | 8 | 0.00088 | 0.00042 | 0.00041 | 0.00023 | 0.00035 |
 //! | cornell-two-lights | 16 | 0.00032 | 0.00032 | 0.00017 | 0.00017 | 0.00035 |
@@ -36,7 +36,7 @@
 //! | cornell | 8 | 0.00015 | 0.00009 | 0.00006 | 0.00005 | 0.00027 |
 //! | cornell | 16 | 0.000055 | 0.000055 | 0.000020 | 0.000020 | 0.00027 |
 //!
-//! Mean FLIP at 1 spp (stochastic, stochastic+tv, ratio, ratio+tv, ratio+svgf): two lights 0.045,
+//! Mean FLIP at 1 spp (stochastic, stochastic+tv, ratio, ratio+tv, ratio+svgf): two lights 0.044,
 //! 0.039, 0.027, **0.013**, 0.025; Cornell 0.029, 0.027, 0.0093, **0.0083**, 0.014 — ratio+tv at
 //! 0.34× and 0.31× of stochastic+tv. From 4 spp on, ratio+tv and the raw ratio are within 2 % in
 //! FLIP (Cornell at 4 spp: 0.0046 vs 0.0045), so only the 1-spp ordering is asserted.
@@ -45,7 +45,7 @@
 //! ≈ 1·10⁻⁴ (Cornell) from 4 spp on, blurring shadow edges, so the raw ratio beat it from
 //! ~8 spp.
 //!
-//! Issue 6 asks for ratio+tv ≤ 0.25 × stochastic+tv at 1 spp; measured 0.42 (two lights) and 0.62
+//! Issue 6 asks for ratio+tv ≤ 0.25 × stochastic+tv at 1 spp; measured 0.43 (two lights) and 0.62
 //! (Cornell), so that target is printed, not asserted, until it is met. Where the error is: split
 //! by region (Cornell, 1 spp), ratio+tv is 20× better than stochastic+tv in unshadowed pixels
 //! (6·10⁻⁶ vs 1.1·10⁻⁴ of the image's relMSE) but equal in penumbrae (1.3·10⁻⁴ each) and umbrae
