@@ -99,29 +99,34 @@ fn variants() -> Vec<Variant> {
 }
 
 impl Change {
+    /// Where `p` goes: moved, scaled and turned by [`Change::Place`]; unchanged otherwise.
+    fn point(&self, p: Vec3) -> Vec3 {
+        match *self {
+            Change::Place { rotation, scale, offset } => rotation * (scale * p) + offset,
+            _ => p,
+        }
+    }
+
     /// `base` changed.
     fn apply(&self, base: &Scene) -> Scene {
-        let mut camera = *base.camera();
         let meshes = base.meshes().iter().map(|mesh| {
             let mut mesh = mesh.clone();
             let emits = mesh.material.emission != Vec3::ZERO;
             match *self {
-                Change::Place { rotation, scale, offset } => {
-                    mesh.positions.iter_mut().for_each(|p| *p = rotation * (scale * *p) + offset)
-                }
+                Change::Place { .. } => mesh.positions.iter_mut().for_each(|p| *p = self.point(*p)),
                 Change::FlipWinding if !emits => mesh.triangles.iter_mut().for_each(|t| t.swap(1, 2)),
                 Change::Subdivide(n) if !emits => mesh = subdivided(&mesh, n),
                 _ => {}
             }
             mesh
         });
-        let meshes = meshes.collect();
-        if let Change::Place { rotation, scale, offset } = *self {
-            camera.position = rotation * (scale * camera.position) + offset;
-            camera.look_at = rotation * (scale * camera.look_at) + offset;
+        let mut camera = *base.camera();
+        camera.position = self.point(camera.position);
+        camera.look_at = self.point(camera.look_at);
+        if let Change::Place { rotation, .. } = *self {
             camera.up = rotation * camera.up;
         }
-        Scene::new("changed scene", meshes, camera).expect("the changed scene is valid")
+        Scene::new("changed scene", meshes.collect(), camera).expect("the changed scene is valid")
     }
 }
 
