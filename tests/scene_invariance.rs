@@ -1,10 +1,11 @@
-//! The frame depends on the scene, not on where it is, how large, which way it is turned or how its
-//! surfaces are cut into triangles: the Cornell box (0.56 m across) and the two-light box moved
-//! with their camera by `k · (1, −0.5, 0.7)` m, scaled about the origin (radiance depends on
-//! directions only), rotated, with the winding of their non-emitting triangles flipped, or with
-//! each of those triangles split into 49, must render what they render as built — generate,
-//! trace, shade, the shadow rays' occlusion and both denoisers, on the CPU and every Vulkan device
-//! × trace method — up to the rounding of their coordinates.
+//! The frame depends on the scene, not on where it is, how large, which way it is turned, how its
+//! surfaces are cut into triangles or in which unit its lights are given: the Cornell box (0.56 m
+//! across) and the two-light box moved with their camera by `k · (1, −0.5, 0.7)` m, scaled about
+//! the origin (radiance depends on directions only), rotated, with the winding of their
+//! non-emitting triangles flipped, with each of those triangles split into 49, or with every
+//! emission multiplied by `k` (the image then `k` times as bright), must render what they render
+//! as built — generate, trace, shade, the shadow rays' occlusion and both denoisers, on the CPU
+//! and every Vulkan device × trace method — up to the rounding of their coordinates.
 //!
 //! What this caught:
 //! - A shadow ray stopped `10⁻⁴` of its length short of the point it was sent to on the light, a
@@ -18,7 +19,10 @@
 //! - The light choice clamped the squared distance to a light with half its bounds' diagonal (a
 //!   length; pbrt-v4's formula), so it depended on the scene's unit: the two-light box scaled by
 //!   10⁻² drew other lights (stochastic relMSE 2.5·10⁻³ against the box as built, 9.4·10⁻⁵ since
-//!   the clamp is the bounding sphere's squared radius).
+//!   the clamp is the squared bounding-sphere radius of the largest light inside).
+//! - The ratio fell back to `U` where `U_N ≤ 10⁻⁷` (an absolute radiance), so with every emission
+//!   ×10⁻⁶ the shadows of lights of radiance ~10⁻⁵ vanished (ratio relMSE 5.7·10⁻³ against the
+//!   box as built, divided back); "`U_N ≈ 0`" is now below the smallest normal `f32`.
 //!
 //! Measured (64², 4 spp, seed 7, CPU), the largest relMSE of the five methods' images over the two
 //! scenes against the scene as built, and the largest change of their means: moved 10 m 9.3·10⁻⁶
@@ -28,7 +32,8 @@
 //! 2⁻¹⁶ m, 3 % of the box) 1.1·10⁻³ (1.2·10⁻³), 10⁻² 9.4·10⁻⁵ (1.3·10⁻⁴), 10³ 5.0·10⁻⁵
 //! (9.8·10⁻⁴); rotated 1.8·10⁻⁴ (3·10⁻⁴) — on the Cornell box 10⁻¹², but the two-light box's light
 //! choice weighs the lights' axis-aligned bounds, which the rotation changes, so it draws other
-//! (equally valid) samples; winding flipped and subdivided 10⁻¹² (2·10⁻⁸). The bounds below sit
+//! (equally valid) samples; winding flipped and subdivided 10⁻¹² (2·10⁻⁸); emission ×10⁻⁶ and
+//! ×10⁶ 3·10⁻¹⁵ (8·10⁻⁹). The bounds below sit
 //! 3–10× above those. At 10 km the offset is 25 cm and the light (0.1 mm below the ceiling)
 //! shares the ceiling's float values: the scene no longer exists in `f32` there, so that is not
 //! tested.
@@ -56,6 +61,8 @@ enum Change {
     /// Every triangle of the surfaces that do not emit split into `n²` (the lights stay the
     /// parallelograms that make them quad lights).
     Subdivide(u32),
+    /// Every emission times `k`: the image times `k` (compared divided by it).
+    ScaleEmission(f32),
 }
 
 /// A variant of the scene, the largest relMSE any method's image may have against the scene as
@@ -95,6 +102,8 @@ fn variants() -> Vec<Variant> {
         },
         Variant { change: Change::FlipWinding, max_relmse: 1e-8, max_mean_change: 1e-6 },
         Variant { change: Change::Subdivide(7), max_relmse: 1e-8, max_mean_change: 1e-6 },
+        Variant { change: Change::ScaleEmission(1e-6), max_relmse: 1e-8, max_mean_change: 1e-6 },
+        Variant { change: Change::ScaleEmission(1e6), max_relmse: 1e-8, max_mean_change: 1e-6 },
     ]
 }
 
@@ -116,6 +125,7 @@ impl Change {
                 Change::Place { .. } => mesh.positions.iter_mut().for_each(|p| *p = self.point(*p)),
                 Change::FlipWinding if !emits => mesh.triangles.iter_mut().for_each(|t| t.swap(1, 2)),
                 Change::Subdivide(n) if !emits => mesh = subdivided(&mesh, n),
+                Change::ScaleEmission(k) => mesh.material.emission *= k,
                 _ => {}
             }
             mesh
@@ -179,7 +189,10 @@ fn assert_invariant(backend: &mut dyn Backend) {
         let base = Scene::load(name).expect("built-in scene loads");
         let as_built = images(backend, &base);
         for variant in variants() {
-            let changed = images(backend, &variant.change.apply(&base));
+            let mut changed = images(backend, &variant.change.apply(&base));
+            if let Change::ScaleEmission(k) = variant.change {
+                changed.iter_mut().flatten().for_each(|c| *c /= k);
+            }
             for ((method, image), reference) in METHODS.iter().zip(&changed).zip(&as_built) {
                 let what = format!("{} {name} {}, {method}", backend.name(), variant.change);
                 assert!(image.iter().all(|c| c.is_finite()), "{what}: a pixel is not finite");
@@ -201,6 +214,7 @@ impl std::fmt::Display for Change {
             }
             Change::FlipWinding => write!(f, "winding flipped"),
             Change::Subdivide(n) => write!(f, "subdivided {n}²"),
+            Change::ScaleEmission(k) => write!(f, "emission ×{k:e}"),
         }
     }
 }

@@ -192,7 +192,9 @@ impl DenoiseInput {
             .zip(&self.position)
             .filter(|(_, p)| p.w > 0.0)
             .fold((Vec4::ZERO, 0usize), |(sum, count), (&s, _)| (sum + s, count + 1));
-        let scale = (sum / count.max(1) as f32).max(Vec4::splat(1e-6)).truncate().extend(0.0);
+        let mean = sum / count.max(1) as f32;
+        // A channel no light reaches (mean 0) takes any constant: its S_N is 0 everywhere.
+        let scale = Vec4::select(mean.cmpge(Vec4::splat(f32::MIN_POSITIVE)), mean, Vec4::ONE).truncate().extend(0.0);
         Self {
             unshadowed: vec![scale; self.shadowed.len()],
             analytic: vec![scale; self.shadowed.len()],

@@ -206,6 +206,8 @@ fn cone_union(a: Cone, b: Cone) -> Cone {
 struct Bounds {
     lo: DVec3,
     hi: DVec3,
+    /// Bounding-sphere radius of the largest single light inside (`LightBounds::min.w`).
+    light_radius: f64,
     phi: f64,
     cone: Cone,
     cos_theta_e: f64,
@@ -217,6 +219,7 @@ impl Bounds {
         Bounds {
             lo: b.min.truncate().as_dvec3(),
             hi: b.max.truncate().as_dvec3(),
+            light_radius: b.min.w as f64,
             phi: b.phi as f64,
             cone: Cone { w: b.axis.truncate().as_dvec3(), cos_theta: b.cos_theta_o as f64 },
             cos_theta_e: b.cos_theta_e as f64,
@@ -228,6 +231,7 @@ impl Bounds {
         Bounds {
             lo: self.lo.min(other.lo),
             hi: self.hi.max(other.hi),
+            light_radius: self.light_radius.max(other.light_radius),
             phi: self.phi + other.phi,
             cone: cone_union(self.cone, other.cone),
             cos_theta_e: self.cos_theta_e.min(other.cos_theta_e),
@@ -261,7 +265,7 @@ impl Bounds {
         let axis = self.cone.w.as_vec3();
         let axis = if axis.is_finite() && axis.length_squared() > 0.0 { axis.normalize() } else { Vec3::Z };
         LightBounds {
-            min: self.lo.as_vec3().extend(0.0),
+            min: self.lo.as_vec3().extend(self.light_radius as f32),
             max: self.hi.as_vec3().extend(0.0),
             axis: axis.extend(0.0),
             phi: (self.phi.min(f32::MAX as f64)) as f32,
@@ -486,6 +490,7 @@ mod tests {
     fn contains(outer: &LightBounds, inner: &LightBounds) -> bool {
         outer.min.truncate().cmple(inner.min.truncate()).all()
             && outer.max.truncate().cmpge(inner.max.truncate()).all()
+            && outer.min.w >= inner.min.w
             && outer.phi >= inner.phi * (1.0 - 1e-6)
             && (outer.two_sided >= inner.two_sided)
             && outer.cos_theta_e <= inner.cos_theta_e
@@ -716,6 +721,40 @@ mod tests {
         let (chi2, dof) = chi_square(&bvh, &lights, p, n, 100_000, 3);
         assert_eq!(dof, 14);
         assert!(chi2 < 36.123, "chi-square {chi2}");
+    }
+
+    /// A scene scaled by 10⁻³ or 10³ (lights and point alike) gets the same choice: the clamp of
+    /// every node's importance is the bounding-sphere radius of its largest light, a length that
+    /// scales with the scene (pbrt-v4 clamps the squared distance with half the box diagonal's
+    /// length, which does not).
+    #[test]
+    fn lights_bvh_choice_does_not_depend_on_the_scene_scale() {
+        let lights = random_lights(5, 40, 2.0);
+        let bvh = LightBvh::build(&lights).unwrap();
+        let mut rng = CounterRng::new(9);
+        for scale in [1e-3f32, 1e3] {
+            let scaled: Vec<Light> = lights
+                .iter()
+                .map(|l| Light {
+                    position: l.position * scale,
+                    edge_u: l.edge_u * scale,
+                    edge_v: l.edge_v * scale,
+                    ..*l
+                })
+                .collect();
+            let scaled_bvh = LightBvh::build(&scaled).unwrap();
+            for _ in 0..20 {
+                let (p, n) = (rng.vec3(-2.0, 2.0), rng.unit_vec3());
+                for k in 0..40 {
+                    let pmf = bvh_pmf(bvh.nodes(), bvh.trails(), p, n, k);
+                    let scaled_pmf = bvh_pmf(scaled_bvh.nodes(), scaled_bvh.trails(), p * scale, n, k);
+                    assert!(
+                        (pmf - scaled_pmf).abs() <= 2e-3 * pmf.max(scaled_pmf) + 1e-9,
+                        "×{scale}, light {k} at {p}: {pmf} against {scaled_pmf}"
+                    );
+                }
+            }
+        }
     }
 
     #[test]

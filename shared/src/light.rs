@@ -72,7 +72,8 @@ const _: () = assert!(core::mem::align_of::<Light>() == 16);
 #[repr(C)]
 #[derive(Copy, Clone, Debug, PartialEq, Pod, Zeroable)]
 pub struct LightBounds {
-    /// Box minimum (xyz); w = 0.
+    /// Box minimum (xyz); w = the radius of the bounding sphere of the largest single light inside
+    /// (of its own box): the distance within which the importance stops growing as `1/d²`.
     pub min: Vec4,
     /// Box maximum (xyz); w = 0.
     pub max: Vec4,

@@ -31,9 +31,6 @@ const DEPTH_SCALE: f32 = 4.0;
 /// stop (the reference's `dist² < 0.001` in metres, made unit-free).
 const SAME_POINT: f32 = 1.0e-4;
 
-/// Analytic luminances below this (relative to the brighter of the two) count as equal.
-const DARK: f32 = 1.0e-12;
-
 /// The joint bilateral weight of `tap` seen from `center`, in `[0, 1]`: the product of the four
 /// edge stops of the reference code [H-DX, H-CPU], with `weights` = (depth `Wd`, normal `Wn`,
 /// plane `Wp`, analytic `Wa`):
@@ -41,7 +38,8 @@ const DARK: f32 = 1.0e-12;
 /// - normal `max(0, 1 − Wn·(1 − (n_c·n_t)⁴))`;
 /// - plane `max(0, 1 − 2·Wp·max(|dq·n_t|, |dq·n_c|)/|dq|)²` (1 for coincident points);
 /// - analytic `max(0, 1 − 10·Wa·|ΔL|/max(L_c, L_t))` — relative to the luminances so it does not
-///   depend on the lights' units (the reference uses absolute display-referred values).
+///   depend on the lights' units (the reference uses absolute display-referred values); 1 when
+///   both are 0 (below the smallest normal `f32`, which a device may flush to 0).
 ///
 /// 0 when the tap has no surface.
 ///
@@ -69,8 +67,11 @@ pub fn edge_stop(center: &Guide, tap: &Guide, weights: Vec4) -> f32 {
     };
     let (l_c, l_t) = (center.normal.w.max(0.0), tap.normal.w.max(0.0));
     let brighter = l_c.max(l_t);
-    let analytic =
-        if brighter <= DARK { 1.0 } else { (1.0 - 10.0 * weights.w * (l_c - l_t).abs() / brighter).max(0.0) };
+    let analytic = if brighter < f32::MIN_POSITIVE {
+        1.0
+    } else {
+        (1.0 - 10.0 * weights.w * (l_c - l_t).abs() / brighter).max(0.0)
+    };
     let w = depth * normal * plane * analytic;
     if w.is_finite() {
         w

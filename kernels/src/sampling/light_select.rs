@@ -181,14 +181,16 @@ pub fn light_bounds(light: &Light) -> LightBounds {
     if bounds.phi.is_nan() || bounds.phi <= 0.0 {
         bounds.phi = 0.0;
     }
+    let light_radius = 0.5 * (bounds.max - bounds.min).truncate().length();
+    bounds.min.w = if light_radius.is_finite() { light_radius } else { 0.0 };
     bounds
 }
 
 /// Conservative importance of the lights inside `bounds` for the point `p` with surface normal
 /// `n` (Conty Estevez & Kulla 2018; pbrt-v4 `LightBounds::Importance`).
 ///
-/// With `pc` the box centre, `d² = max(|p − pc|², r²)`, `r` the radius of the box's bounding
-/// sphere (half its diagonal), `θw` the angle between the cone axis and `p − pc` (its absolute cosine
+/// With `pc` the box centre, `d² = max(|p − pc|², r²)`, `r` the bounding-sphere radius of the
+/// largest single light inside (`bounds.min.w`; for one light, half its box's diagonal), `θw` the angle between the cone axis and `p − pc` (its absolute cosine
 /// for two-sided bounds), `θb` the half-angle of the cone from `p` around the box's bounding sphere
 /// (`θb = π` when `p` is inside that sphere), `θ' = max(0, θw − θo − θb)`:
 /// `I = Φ · cos θ' / d²`, and 0 when `cos θ' ≤ cos θe`.
@@ -215,7 +217,8 @@ pub fn importance(bounds: &LightBounds, p: Vec3, n: Vec3) -> f32 {
         // p is NaN or infinite.
         return 0.0;
     }
-    let d2 = dist2.max(radius * radius).max(f32::MIN_POSITIVE);
+    let light_radius = bounds.min.w;
+    let d2 = dist2.max(light_radius * light_radius).max(f32::MIN_POSITIVE);
 
     let mut cos_theta_p = 1.0;
     let mut cos_theta_pi = 1.0;
@@ -826,7 +829,7 @@ mod tests {
             padding: [0; 2],
         };
         let union = |a: &LightBounds, b: &LightBounds| LightBounds {
-            min: a.min.min(b.min),
+            min: a.min.truncate().min(b.min.truncate()).extend(a.min.w.max(b.min.w)),
             max: a.max.max(b.max),
             axis: Vec3::Z.extend(0.0),
             phi: a.phi + b.phi,
