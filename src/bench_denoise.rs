@@ -34,7 +34,7 @@ pub struct DenoiseBenchOptions {
     /// Peak memory bandwidth of the Vulkan device in GB/s (finite, > 0), if known to the caller.
     pub peak_gbps: Option<f64>,
     /// The filter radius R in pixels (`1..=MAX_RADIUS`); `None` follows the frame size
-    /// ([`DenoiseParams::default_radius`]: 10 at 1080p). The noise lines and the bilateral
+    /// ([`DenoiseParams::default_radius`]: 6 at 1080p). The noise lines and the bilateral
     /// passes tap `2R + 1` pixels each and SVGF's à-trous iterations follow R, so their time
     /// does too (their bytes, counted once per buffer, do not).
     pub denoise_radius: Option<u32>,

@@ -68,8 +68,8 @@ struct ErrorVsTimeArgs {
 /// The filters' footprint, an option of `render`, `bench denoise` and `report error-vs-time`.
 #[derive(clap::Args)]
 struct DenoiseRadiusArg {
-    /// Filter radius R in pixels, 1–10 (default: 10·(short side / 1080)^(2/3), rounded — 10 at
-    /// 1080p, 6 at 512², 2 at 128²).
+    /// Filter radius R in pixels, 1–10 (default: 10·(short side / 1080)^(2/3), rounded, at most
+    /// 6 — 6 at 512² and 1080p, 4 at 256², 2 at 128²).
     #[arg(long)]
     denoise_radius: Option<u32>,
 }

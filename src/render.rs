@@ -68,7 +68,7 @@ pub struct RenderOptions {
     pub denoise: DenoiseMethod,
     /// The filter radius R in pixels (`1..=MAX_RADIUS`; the TV filter's widest Gaussian, and the
     /// SVGF baseline's footprint); `None` follows the image size
-    /// ([`DenoiseParams::default_radius`]: 10 at 1080p, 2 at 128²).
+    /// ([`DenoiseParams::default_radius`]: 6 from a 441-pixel side up, 2 at 128²).
     pub denoise_radius: Option<u32>,
     /// Whether `U`'s specular term takes the quadrature residual towards GGX
     /// ([`ShadeData::analytic_residual`]).

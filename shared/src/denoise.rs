@@ -16,6 +16,10 @@ pub const MAX_RADIUS: u32 = 10;
 /// `WORKGROUP_SIZE` plus `MAX_RADIUS` on each side.
 pub const TILE_LEN: u32 = WORKGROUP_SIZE + 2 * MAX_RADIUS;
 
+/// The widest footprint [`DenoiseParams::default_radius`] picks: the ratio+tv relMSE minimum at
+/// 1 spp lies at R = 5–7 on the built-in scenes at 512² and 1024² (README, Denoising).
+pub const DEFAULT_MAX_RADIUS: u32 = 6;
+
 /// Number of randomly rotated lines the noise estimate measures total variation along: 4, at
 /// `angle0 + k·π/4` [H-PF, H-EST, H-CPU].
 pub const NOISE_LINES: u32 = 4;
@@ -105,23 +109,24 @@ impl DenoiseParams {
     }
 
     /// The filter radius that follows the image size: `R = 10 · (s / 1080)^(2/3)` for a short
-    /// side of `s` pixels, rounded, within 1 … 10 — the reference code's R = 10 at 1080p
-    /// [H-DX, H-SD], narrower on smaller frames, whose penumbrae span fewer pixels. The 2/3
-    /// power is measured (`raywave report error-vs-time --denoise-radius`, 1 spp, the README's
-    /// Denoising section): on the built-in scenes the relMSE minimum moves from R = 2 at 128² to
-    /// 3–4 at 256² and 5 at 512² — slower than the image, since every pixel still holds one
-    /// binary visibility sample. This gives 2, 4 and 6 there; the earlier `s / 64` gave R = 8 at
-    /// 512² (the render's default size), with 1.7× (Cornell box) and 1.4× (two lights) the
-    /// ratio+tv error of R = 6, and R = 10 from 640 pixels up.
+    /// side of `s` pixels, rounded, within 1 … [`DEFAULT_MAX_RADIUS`] = 6 — narrower on smaller
+    /// frames, whose penumbrae span fewer pixels. Measured (`raywave report error-vs-time
+    /// --denoise-radius`, `examples/footprint_oracle.rs`; 1 spp, the README's Denoising section):
+    /// on the built-in scenes the ratio+tv relMSE minimum moves from R = 2 at 128² to 3–4 at
+    /// 256² and 5 at 512², about as the 2/3 power of the image (the earlier `s / 64` gave R = 8 at
+    /// 512², with 1.7× (Cornell box) and 1.4× (two lights) the error of R = 6), but no further:
+    /// at 1024² it is 5 (Cornell) and 7 (two lights). There the reference code's R = 10 at 1080p
+    /// [H-DX, H-SD] leaves 2.5× and 1.3× the minimum's error, R = 6 1.1× and 1.03×; so the rule
+    /// stops at 6 (from s = 441 up), and R = 10 stays one option away.
     ///
-    /// In integers (no `powf` in `no_std` const code): the largest `r ≤ 10` with
-    /// `10·(s/1080)^(2/3) ≥ r − ½`, i.e. `729·(2r − 1)³ ≤ 5·s²`, so R = 10 from s = 1001 up.
+    /// In integers (no `powf` in `no_std` const code): the largest `r ≤ 6` with
+    /// `10·(s/1080)^(2/3) ≥ r − ½`, i.e. `729·(2r − 1)³ ≤ 5·s²`.
     pub const fn default_radius(width: u32, height: u32) -> u32 {
         let short = if width < height { width } else { height };
-        // Every side from 1001 up gives R = 10; the clamp keeps `s²` far from overflowing.
+        // Every side from 441 up gives the cap; the clamp keeps `s²` far from overflowing.
         let short = (if short > 1080 { 1080 } else { short }) as u64;
         let mut radius = 1;
-        while radius < MAX_RADIUS && 729 * (2 * radius as u64 + 1).pow(3) <= 5 * short * short {
+        while radius < DEFAULT_MAX_RADIUS && 729 * (2 * radius as u64 + 1).pow(3) <= 5 * short * short {
             radius += 1;
         }
         radius
@@ -171,21 +176,22 @@ mod tests {
             let p = DenoiseParams::new(w, h);
             (p.radius, p.atrous_iterations)
         };
-        assert_eq!(footprint(1920, 1080), (MAX_RADIUS, 4), "the reference code's R = 10 at 1080p");
-        assert_eq!(footprint(4000, 1001), (MAX_RADIUS, 4));
-        assert_eq!(footprint(1000, 1000), (9, 4));
+        assert_eq!(footprint(1920, 1080), (DEFAULT_MAX_RADIUS, 4), "6, not the reference code's 10, at 1080p");
+        assert_eq!(footprint(4000, 1001), (6, 4));
+        assert_eq!(footprint(1000, 1000), (6, 4));
         assert_eq!(footprint(512, 512), (6, 4), "the render's default size");
-        assert_eq!(footprint(640, 4000), (7, 4));
+        assert_eq!(footprint(441, 4000), (6, 4));
+        assert_eq!(footprint(440, 4000), (5, 4));
         assert_eq!(footprint(256, 300), (4, 3));
         assert_eq!(footprint(128, 128), (2, 2));
         assert_eq!(footprint(64, 96), (2, 2));
         assert_eq!(footprint(62, 5000), (1, 1));
         assert_eq!(footprint(1, 1), (1, 1));
-        assert_eq!(footprint(u32::MAX, u32::MAX), (MAX_RADIUS, 4));
+        assert_eq!(footprint(u32::MAX, u32::MAX), (DEFAULT_MAX_RADIUS, 4));
         // The rule it implements, in floating point, at every side up to 1100.
         for side in 1..=1100u32 {
             let exact = 10.0 * (side as f64 / 1080.0).powf(2.0 / 3.0);
-            let expected = (exact + 0.5).floor().clamp(1.0, MAX_RADIUS as f64) as u32;
+            let expected = (exact + 0.5).floor().clamp(1.0, DEFAULT_MAX_RADIUS as f64) as u32;
             assert_eq!(DenoiseParams::default_radius(side, side), expected, "side {side}: {exact}");
         }
         let chosen = |radius| {
