@@ -175,6 +175,7 @@ fn images(backend: &mut dyn Backend, scene: &Scene) -> Vec<Vec<Vec3>> {
     frame.into_iter().map(|(image, _)| image).collect()
 }
 
+/// Mean of the channel sum over the image.
 fn mean(image: &[Vec3]) -> f64 {
     image.iter().map(|c| f64::from(c.x + c.y + c.z)).sum::<f64>() / image.len() as f64
 }

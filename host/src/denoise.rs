@@ -6,7 +6,7 @@ use crate::error::{Error, Result};
 use crate::shading::ShadeAccumulator;
 use glam::{Vec3, Vec4};
 use raywave_kernels::sampling::light_select::luminance;
-use raywave_kernels::shade::stage::Surface;
+use raywave_kernels::shade::stage::{Surface, SMALLEST_RADIANCE};
 use raywave_shared::denoise::MAX_RADIUS;
 use raywave_shared::DenoiseParams;
 
@@ -194,7 +194,8 @@ impl DenoiseInput {
             .fold((Vec4::ZERO, 0usize), |(sum, count), (&s, _)| (sum + s, count + 1));
         let mean = sum / count.max(1) as f32;
         // A channel no light reaches (mean 0) takes any constant: its S_N is 0 everywhere.
-        let scale = Vec4::select(mean.cmpge(Vec4::splat(f32::MIN_POSITIVE)), mean, Vec4::ONE).truncate().extend(0.0);
+        let lit = mean.cmpge(Vec4::splat(SMALLEST_RADIANCE));
+        let scale = Vec4::select(lit, mean, Vec4::ONE).truncate().extend(0.0);
         Self {
             unshadowed: vec![scale; self.shadowed.len()],
             analytic: vec![scale; self.shadowed.len()],

@@ -1,5 +1,6 @@
 //! The G-buffer the denoiser's edge stops read, and the edge-stop weight itself.
 
+use crate::shade::stage::SMALLEST_RADIANCE;
 use glam::{Vec4, Vec4Swizzles};
 
 /// A pixel's surface as the edge stops see it.
@@ -39,7 +40,7 @@ const SAME_POINT: f32 = 1.0e-4;
 /// - plane `max(0, 1 − 2·Wp·max(|dq·n_t|, |dq·n_c|)/|dq|)²` (1 for coincident points);
 /// - analytic `max(0, 1 − 10·Wa·|ΔL|/max(L_c, L_t))` — relative to the luminances so it does not
 ///   depend on the lights' units (the reference uses absolute display-referred values); 1 when
-///   both are 0 (below the smallest normal `f32`, which a device may flush to 0).
+///   both are 0 (below [`SMALLEST_RADIANCE`]).
 ///
 /// 0 when the tap has no surface.
 ///
@@ -67,7 +68,7 @@ pub fn edge_stop(center: &Guide, tap: &Guide, weights: Vec4) -> f32 {
     };
     let (l_c, l_t) = (center.normal.w.max(0.0), tap.normal.w.max(0.0));
     let brighter = l_c.max(l_t);
-    let analytic = if brighter < f32::MIN_POSITIVE {
+    let analytic = if brighter < SMALLEST_RADIANCE {
         1.0
     } else {
         (1.0 - 10.0 * weights.w * (l_c - l_t).abs() / brighter).max(0.0)

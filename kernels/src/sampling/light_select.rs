@@ -190,9 +190,10 @@ pub fn light_bounds(light: &Light) -> LightBounds {
 /// `n` (Conty Estevez & Kulla 2018; pbrt-v4 `LightBounds::Importance`).
 ///
 /// With `pc` the box centre, `d² = max(|p − pc|², r²)`, `r` the bounding-sphere radius of the
-/// largest single light inside (`bounds.min.w`; for one light, half its box's diagonal), `θw` the angle between the cone axis and `p − pc` (its absolute cosine
-/// for two-sided bounds), `θb` the half-angle of the cone from `p` around the box's bounding sphere
-/// (`θb = π` when `p` is inside that sphere), `θ' = max(0, θw − θo − θb)`:
+/// largest single light inside (`bounds.min.w`; for one light, half its box's diagonal), `θw`
+/// the angle between the cone axis and `p − pc` (its absolute cosine for two-sided bounds), `θb`
+/// the half-angle of the cone from `p` around the box's bounding sphere (`θb = π` when `p` is
+/// inside that sphere), `θ' = max(0, θw − θo − θb)`:
 /// `I = Φ · cos θ' / d²`, and 0 when `cos θ' ≤ cos θe`.
 ///
 /// At a surface (`n ≠ 0`; need not be normalised) it is multiplied by `cos(max(0, θi − θb))`, θi

@@ -288,14 +288,17 @@ pub fn shade_sample(
     result
 }
 
-/// The shadow ratio `S_N / U_N` per channel, in `[0, 1]` for a pixel's means (`S_N ≤ U_N` sample
-/// by sample): 1 — "unshadowed" — where `U_N` is 0, i.e. no sample reached the light and the
-/// ratio is undefined, so the composite falls back to `U` [H-DX, H-CPU]. "0" is below the
-/// smallest normal `f32` (2⁻¹²⁶), which a device may flush to 0: the reference code's absolute
-/// thresholds (`U < 10⁻⁴` in display units) would make the ratio depend on the lights' units —
+/// Radiances (and their luminances) below this count as 0: the smallest normal `f32` (2⁻¹²⁶),
+/// since a device may flush smaller ones to 0. Not an absolute threshold like the reference
+/// code's (`U < 10⁻⁴` in display units), which would make the result depend on the lights' units:
 /// a light of radiance 10⁻⁵ (a lamp in a scene exposed for the sun) would lose its shadows.
+pub const SMALLEST_RADIANCE: f32 = f32::MIN_POSITIVE;
+
+/// The shadow ratio `S_N / U_N` per channel, in `[0, 1]` for a pixel's means (`S_N ≤ U_N` sample
+/// by sample): 1 — "unshadowed" — where `U_N` is 0 (below [`SMALLEST_RADIANCE`]), i.e. no sample
+/// reached the light and the ratio is undefined, so the composite falls back to `U` [H-DX, H-CPU].
 pub fn shadow_ratio(shadowed: Vec3, unshadowed: Vec3) -> Vec3 {
-    let ratio = |s: f32, u_n: f32| if u_n >= f32::MIN_POSITIVE { (s / u_n).clamp(0.0, 1.0e4) } else { 1.0 };
+    let ratio = |s: f32, u_n: f32| if u_n >= SMALLEST_RADIANCE { (s / u_n).clamp(0.0, 1.0e4) } else { 1.0 };
     Vec3::new(ratio(shadowed.x, unshadowed.x), ratio(shadowed.y, unshadowed.y), ratio(shadowed.z, unshadowed.z))
 }
 
