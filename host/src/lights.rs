@@ -208,6 +208,9 @@ struct Bounds {
     hi: DVec3,
     /// Bounding-sphere radius of the largest single light inside (`LightBounds::min.w`).
     light_radius: f64,
+    /// Radius of a sphere about [`Bounds::centre`] that holds every light inside
+    /// (`LightBounds::max.w`).
+    radius: f64,
     phi: f64,
     cone: Cone,
     cos_theta_e: f64,
@@ -220,6 +223,7 @@ impl Bounds {
             lo: b.min.truncate().as_dvec3(),
             hi: b.max.truncate().as_dvec3(),
             light_radius: b.min.w as f64,
+            radius: b.max.w as f64,
             phi: b.phi as f64,
             cone: Cone { w: b.axis.truncate().as_dvec3(), cos_theta: b.cos_theta_o as f64 },
             cos_theta_e: b.cos_theta_e as f64,
@@ -228,15 +232,28 @@ impl Bounds {
     }
 
     fn union(&self, other: &Bounds) -> Bounds {
-        Bounds {
+        let mut union = Bounds {
             lo: self.lo.min(other.lo),
             hi: self.hi.max(other.hi),
             light_radius: self.light_radius.max(other.light_radius),
+            radius: 0.0,
             phi: self.phi + other.phi,
             cone: cone_union(self.cone, other.cone),
             cos_theta_e: self.cos_theta_e.min(other.cos_theta_e),
             two_sided: self.two_sided || other.two_sided,
-        }
+        };
+        // The lights lie in both children's spheres and in the union's box.
+        let centre = union.centre();
+        let spheres = [self, other].map(|b| (b.centre() - centre).length() + b.radius);
+        let box_corner = (union.hi - centre).abs().max((centre - union.lo).abs()).length();
+        union.radius = spheres[0].max(spheres[1]).min(box_corner);
+        union
+    }
+
+    /// The box's centre as the kernels compute it from the `f32` corners (`importance`): the
+    /// centre of the sphere `radius` is about.
+    fn centre(&self) -> DVec3 {
+        ((self.lo.as_vec3() + self.hi.as_vec3()) * 0.5).as_dvec3()
     }
 
     fn surface_area(&self) -> f64 {
@@ -266,7 +283,7 @@ impl Bounds {
         let axis = if axis.is_finite() && axis.length_squared() > 0.0 { axis.normalize() } else { Vec3::Z };
         LightBounds {
             min: self.lo.as_vec3().extend(self.light_radius as f32),
-            max: self.hi.as_vec3().extend(0.0),
+            max: self.hi.as_vec3().extend(round_up(self.radius)),
             axis: axis.extend(0.0),
             phi: (self.phi.min(f32::MAX as f64)) as f32,
             cos_theta_o: round_down(self.cone.cos_theta),
@@ -282,6 +299,16 @@ fn round_down(x: f64) -> f32 {
     let y = x as f32;
     if y as f64 > x {
         y.next_down().max(-1.0)
+    } else {
+        y
+    }
+}
+
+/// The smallest `f32` ≥ `x` (a radius rounded towards the larger sphere).
+fn round_up(x: f64) -> f32 {
+    let y = x as f32;
+    if (y as f64) < x {
+        y.next_up()
     } else {
         y
     }
@@ -491,6 +518,16 @@ mod tests {
         outer.min.truncate().cmple(inner.min.truncate()).all()
             && outer.max.truncate().cmpge(inner.max.truncate()).all()
             && outer.min.w >= inner.min.w
+            && {
+                // The outer sphere holds the inner sphere or the inner box (up to the `f32`
+                // rounding of the inner radius).
+                let centre = |b: &LightBounds| ((b.min + b.max).truncate() * 0.5).as_dvec3();
+                let (c_o, c_i) = (centre(outer), centre(inner));
+                let (lo, hi) = (inner.min.truncate().as_dvec3(), inner.max.truncate().as_dvec3());
+                let sphere = (c_i - c_o).length() + inner.max.w as f64;
+                let box_corner = (hi - c_o).abs().max((c_o - lo).abs()).length();
+                outer.max.w as f64 >= sphere.min(box_corner) * (1.0 - 1e-6)
+            }
             && outer.phi >= inner.phi * (1.0 - 1e-6)
             && (outer.two_sided >= inner.two_sided)
             && outer.cos_theta_e <= inner.cos_theta_e
@@ -556,8 +593,8 @@ mod tests {
 
     /// pmfs sum to 1 at random points; the pmf `select_bvh` returns is `bvh_pmf` of its light;
     /// every light that contributes has positive pmf. (A light whose own importance is positive
-    /// may still get pmf 0 where it does not contribute: a cluster's bounding sphere does not
-    /// contain its children's bounding spheres, only their boxes.)
+    /// may still get pmf 0 where it does not contribute: a cluster's sphere holds its children's
+    /// boxes or their spheres, whichever is smaller, and its normal cone is a union's.)
     fn check_pmfs(bvh: &LightBvh, lights: &[Light], seed: u32, points: usize, extent: f32) {
         let mut rng = CounterRng::new(seed);
         for case in 0..points {

@@ -68,14 +68,19 @@ const _: () = assert!(core::mem::align_of::<Light>() == 16);
 /// & Kulla, "Importance Sampling of Many Lights with Adaptive Tree Splitting" (HPG 2018), in the
 /// form of pbrt-v4's `LightBounds`: an axis-aligned box, the emitted power, and an orientation cone
 /// (every surface normal lies within `θo` of `axis`, and every emitting normal emits only within
-/// `θe` of itself). 64 bytes.
+/// `θe` of itself) — plus a sphere about the box's centre that holds the lights, which pbrt-v4
+/// takes as the box's own bounding sphere: that one grows when a light turns off the axes (√3× a
+/// sphere light's radius), so the choice among lights depended on how the scene was rotated.
+/// 64 bytes.
 #[repr(C)]
 #[derive(Copy, Clone, Debug, PartialEq, Pod, Zeroable)]
 pub struct LightBounds {
-    /// Box minimum (xyz); w = the radius of the bounding sphere of the largest single light inside
-    /// (of its own box): the distance within which the importance stops growing as `1/d²`.
+    /// Box minimum (xyz); w = the bounding-sphere radius of the largest single light inside: the
+    /// distance within which the importance stops growing as `1/d²`.
     pub min: Vec4,
-    /// Box maximum (xyz); w = 0.
+    /// Box maximum (xyz); w = the radius of a sphere about the box's centre `(min + max) / 2`
+    /// that holds every light inside (for one light its own bounding sphere, which does not
+    /// change when the light rotates; never more than the box's half diagonal).
     pub max: Vec4,
     /// Unit axis of the normal cone (xyz); w = 0. Any unit vector when `cos_theta_o` is −1.
     pub axis: Vec4,
