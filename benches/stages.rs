@@ -1,11 +1,17 @@
-//! Criterion micro-benchmarks of the stages (generate, trace, shade) on the built-in Cornell box:
-//! the CPU executor and,
+//! Criterion micro-benchmarks of the stages (generate, trace, shade, denoise) on the built-in
+//! Cornell box: the CPU executor and,
 //! when a Vulkan device with ray query is present, the Vulkan backend (per call, including upload,
-//! dispatch and readback; the GPU-only time is what `raywave render` prints per stage).
+//! dispatch and readback; the GPU-only time is what `raywave render` prints per stage and
+//! `raywave bench denoise` per denoise pass) — and the `layout` group: the denoiser's first pass
+//! over the SoA streams the stages exchange against the same pass over one record per pixel.
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
+use glam::Vec4;
+use raywave::bench_denoise::{frame_input, DenoiseBenchOptions};
 use raywave::cpu::{self, CpuScene};
+use raywave::denoise::{frame_params, DenoiseMethod};
 use raywave::frame::{generate_params, sampler_params};
+use raywave::kernels::denoise::noise::ratio_pixel;
 use raywave::shading::ShadeData;
 use raywave::shared::sampling::sampler_kind;
 use raywave::shared::ShadeParams;
@@ -78,6 +84,93 @@ fn stages(c: &mut Criterion) {
         }
     }
     group.finish();
+
+    // Denoise: the TV filter and the SVGF baseline on a 1-spp frame, at the radius each image
+    // size gets by default (2 at 64², 6 at 512²).
+    let mut group = c.benchmark_group("denoise");
+    for (w, h) in SIZES {
+        let input = frame_input(&denoise_options(w, h)).expect("the frame shades");
+        let params = frame_params(w, h, None);
+        group.throughput(Throughput::Elements(u64::from(w * h)));
+        for method in [DenoiseMethod::Tv, DenoiseMethod::Svgf] {
+            let id = |backend: &str| BenchmarkId::new(format!("{backend}-{}", method.name()), w * h);
+            group.bench_function(id("cpu"), |b| {
+                b.iter(|| cpu_backend.denoise(method, black_box(&params), &input).expect("denoise"))
+            });
+            if let Some(v) = vulkan.as_mut() {
+                group.bench_function(id("vulkan"), |b| {
+                    b.iter(|| v.denoise(method, black_box(&params), &input).expect("denoise"))
+                });
+            }
+        }
+    }
+    group.finish();
+
+    // Layout (DESIGN rule 3): the ratio pass reads S_N and U_N, two of a pixel's six denoiser
+    // inputs. Over SoA streams it reads those 32 bytes per pixel; over one 96-byte record per
+    // pixel (array of structures) it reads the 64-byte cache line they sit in. One 1080p frame,
+    // one thread, the same kernel function.
+    let (w, h) = (1920, 1080);
+    let input = frame_input(&denoise_options(w, h)).expect("the frame shades");
+    let records: Vec<PixelRecord> = (0..input.len())
+        .map(|i| PixelRecord {
+            position: input.position[i],
+            normal: input.normal[i],
+            analytic: input.analytic[i],
+            emitted: input.emitted[i],
+            shadowed: input.shadowed[i],
+            unshadowed: input.unshadowed[i],
+        })
+        .collect();
+    let mut ratio = vec![Vec4::ZERO; input.len()];
+    let mut group = c.benchmark_group("layout");
+    group.throughput(Throughput::Elements(u64::from(w * h)));
+    group.bench_function(BenchmarkId::new("ratio-soa", w * h), |b| {
+        b.iter(|| {
+            let streams = input.shadowed.iter().zip(&input.unshadowed);
+            for (out, (&s, &u)) in ratio.iter_mut().zip(streams) {
+                *out = ratio_pixel(s, u);
+            }
+            black_box(&ratio);
+        })
+    });
+    group.bench_function(BenchmarkId::new("ratio-aos", w * h), |b| {
+        b.iter(|| {
+            for (out, record) in ratio.iter_mut().zip(black_box(&records)) {
+                *out = ratio_pixel(record.shadowed, record.unshadowed);
+            }
+            black_box(&ratio);
+        })
+    });
+    group.finish();
+}
+
+/// The denoise benchmark frame: the built-in Cornell box shaded with `spp` samples, at the
+/// default radius, `width × height` pixels.
+fn denoise_options(width: u32, height: u32) -> DenoiseBenchOptions {
+    DenoiseBenchOptions {
+        scene: "builtin:cornell".to_owned(),
+        width,
+        height,
+        spp: 1,
+        repeats: 1,
+        vulkan: false,
+        peak_gbps: None,
+        denoise_radius: None,
+    }
+}
+
+/// A pixel's six denoiser inputs as one record: the array-of-structures layout the `layout` group
+/// compares the SoA streams with.
+#[derive(Clone, Copy)]
+#[allow(dead_code, reason = "the fields the ratio pass does not read are the point: they share its cache lines")]
+struct PixelRecord {
+    position: Vec4,
+    normal: Vec4,
+    analytic: Vec4,
+    emitted: Vec4,
+    shadowed: Vec4,
+    unshadowed: Vec4,
 }
 
 criterion_group! {

@@ -101,8 +101,10 @@ pub fn known_peak_gbps(device_name: &str) -> Option<f64> {
     }
 }
 
-/// Shades the benchmark frame's inputs on the CPU.
-fn frame_input(options: &DenoiseBenchOptions) -> Result<DenoiseInput> {
+/// Shades the benchmark frame's inputs on the CPU (`options.scene` at `options.width` ×
+/// `options.height`, `options.spp` samples): what `raywave bench denoise` and the criterion
+/// bench's `denoise` group filter.
+pub fn frame_input(options: &DenoiseBenchOptions) -> Result<DenoiseInput> {
     let scene = Scene::load(&options.scene)?;
     let mut cpu = crate::cpu::CpuBackend::new();
     cpu.check_image_size(options.width, options.height)?;
