@@ -2,18 +2,28 @@
 //! Cornell box: the CPU executor and,
 //! when a Vulkan device with ray query is present, the Vulkan backend (per call, including upload,
 //! dispatch and readback; the GPU-only time is what `raywave render` prints per stage and
-//! `raywave bench denoise` per denoise pass) — and the `layout` group: the denoiser's first pass
-//! over the SoA streams the stages exchange against the same pass over one record per pixel.
+//! `raywave bench denoise` per denoise pass) — and two groups on the data layout (DESIGN's
+//! "SoA vs AoS, wavefront vs inline"): `layout`, the denoiser's first pass over the SoA streams
+//! the stages exchange against the same pass over one record per pixel, and `pipeline`, one
+//! sample per pixel through generate → trace → shade → occlusion as wavefront passes over
+//! streams against the same kernel functions called one after the other per pixel.
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
+use glam::UVec2;
 use glam::Vec4;
+use rayon::prelude::*;
 use raywave::bench_denoise::{frame_input, DenoiseBenchOptions};
 use raywave::cpu::{self, CpuScene};
 use raywave::denoise::{frame_params, DenoiseMethod};
 use raywave::frame::{generate_params, sampler_params};
 use raywave::kernels::denoise::noise::ratio_pixel;
+use raywave::kernels::generate::generate_ray;
+use raywave::kernels::shade::stage::{resolve_surface, shade_sample};
+use raywave::kernels::trace::{trace_closest, trace_occluded};
+use raywave::shading::ShadeAccumulator;
 use raywave::shading::ShadeData;
 use raywave::shared::sampling::sampler_kind;
+use raywave::shared::GenerateParams;
 use raywave::shared::ShadeParams;
 use raywave::{open_backend, Backend, BackendOptions, DeviceChoice, Scene};
 use std::hint::black_box;
@@ -110,6 +120,31 @@ fn stages(c: &mut Criterion) {
     // inputs. Over SoA streams it reads those 32 bytes per pixel; over one 96-byte record per
     // pixel (array of structures) it reads the 64-byte cache line they sit in. One 1080p frame,
     // one thread, the same kernel function.
+    // Wavefront against inline: the same kernel functions over one 512² sample pass, first
+    // checked to give the same estimates.
+    let (w, h) = (512, 512);
+    let generate = generate_params(&scene, w, h, 0, 1);
+    let shade_params = data.params(sampler_params(sampler_kind::ZSOBOL, 1, w, h, 1), w, h, 0);
+    let wavefront = |backend: &mut cpu::CpuBackend| {
+        let frame = backend.render(&generate).expect("generate and trace");
+        let mut accumulator = ShadeAccumulator::new((w * h) as usize);
+        accumulator.shade_pass(backend, &shade_params, &data, &frame.rays, &frame.hits).expect("shade");
+        accumulator
+    };
+    let sums = wavefront(&mut cpu_backend);
+    let inline = inline_pass(&cpu_scene, &data, &generate, &shade_params);
+    let streams = [sums.analytic(), sums.unshadowed(), sums.shadowed(), sums.emitted()];
+    for (i, pixel) in inline.iter().enumerate() {
+        assert!(pixel.iter().zip(&streams).all(|(v, stream)| v.truncate() == stream[i]), "pixel {i}");
+    }
+    let mut group = c.benchmark_group("pipeline");
+    group.throughput(Throughput::Elements(u64::from(w * h)));
+    group.bench_function(BenchmarkId::new("cpu-wavefront", w * h), |b| b.iter(|| wavefront(&mut cpu_backend)));
+    group.bench_function(BenchmarkId::new("cpu-inline", w * h), |b| {
+        b.iter(|| inline_pass(&cpu_scene, &data, black_box(&generate), &shade_params))
+    });
+    group.finish();
+
     let (w, h) = (1920, 1080);
     let input = frame_input(&denoise_options(w, h)).expect("the frame shades");
     let records: Vec<PixelRecord> = (0..input.len())
@@ -143,6 +178,29 @@ fn stages(c: &mut Criterion) {
         })
     });
     group.finish();
+}
+
+/// One sample per pixel of `scene` through every stage inline: per pixel, the kernels' generate,
+/// closest-hit trace, resolve, shade and occlusion trace one after the other, nothing stored in
+/// between. Returns per pixel `U`, `U_N`, `S_N` and the emitted radiance (rgb, w = 0) — what
+/// one wavefront pass adds to a `ShadeAccumulator`.
+fn inline_pass(scene: &CpuScene, data: &ShadeData, generate: &GenerateParams, shade: &ShadeParams) -> Vec<[Vec4; 4]> {
+    let shade_scene = data.view_for(shade);
+    (0..generate.ray_count())
+        .into_par_iter()
+        .map(|i| {
+            let ray = generate_ray(i, generate);
+            let hit = trace_closest(ray.origin, ray.direction, scene);
+            let direction = ray.direction.truncate();
+            let (triangles, first) = (&data.triangles, &data.first_triangle);
+            let surface =
+                resolve_surface(direction, hit.t, hit.instance, hit.primitive, hit.barycentrics, triangles, first);
+            let pixel = UVec2::new(i % shade.width, i / shade.width);
+            let s = shade_sample(shade, pixel, direction, &surface, &shade_scene);
+            let blocked = trace_occluded(s.shadow_origin, s.shadow_direction, scene);
+            [s.analytic, s.unshadowed, if blocked { Vec4::ZERO } else { s.unshadowed }, s.emitted]
+        })
+        .collect()
 }
 
 /// The denoise benchmark frame: the built-in Cornell box shaded with `spp` samples, at the
