@@ -9,8 +9,7 @@
 //! streams against the same kernel functions called one after the other per pixel.
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
-use glam::UVec2;
-use glam::Vec4;
+use glam::{UVec2, Vec4};
 use rayon::prelude::*;
 use raywave::bench_denoise::{frame_input, DenoiseBenchOptions};
 use raywave::cpu::{self, CpuScene};
@@ -20,83 +19,118 @@ use raywave::kernels::denoise::noise::ratio_pixel;
 use raywave::kernels::generate::generate_ray;
 use raywave::kernels::shade::stage::{resolve_surface, shade_sample};
 use raywave::kernels::trace::{trace_closest, trace_occluded};
-use raywave::shading::ShadeAccumulator;
-use raywave::shading::ShadeData;
+use raywave::shading::{ShadeAccumulator, ShadeData};
 use raywave::shared::sampling::sampler_kind;
-use raywave::shared::GenerateParams;
-use raywave::shared::ShadeParams;
+use raywave::shared::{GenerateParams, ShadeParams};
 use raywave::{open_backend, Backend, BackendOptions, DeviceChoice, Scene};
 use std::hint::black_box;
 
 /// Image sizes benchmarked: a small tile and a 512² frame.
 const SIZES: [(u32, u32); 2] = [(64, 64), (512, 512)];
 
-fn stages(c: &mut Criterion) {
-    let scene = Scene::load("builtin:cornell").expect("built-in scene");
-    let cpu_scene = CpuScene::build(&scene).expect("BVH builds");
-    let mut vulkan = open_backend(DeviceChoice::Vulkan(None), &BackendOptions::default()).ok();
-    match vulkan.as_mut() {
-        Some(v) => v.load_scene(&scene).expect("acceleration structures build"),
-        None => eprintln!("no Vulkan device with ray query: benchmarking the CPU backend only"),
+/// What every group measures on: the built-in Cornell box, laid out for the CPU and, where there
+/// is one, a Vulkan device with ray query.
+struct Setup {
+    scene: Scene,
+    cpu_scene: CpuScene,
+    cpu: cpu::CpuBackend,
+    vulkan: Option<Box<dyn Backend>>,
+    data: ShadeData,
+}
+
+impl Setup {
+    fn new() -> Self {
+        let scene = Scene::load("builtin:cornell").expect("built-in scene");
+        let mut cpu = cpu::CpuBackend::new();
+        cpu.load_scene(&scene).expect("BVH builds");
+        let mut vulkan = open_backend(DeviceChoice::Vulkan(None), &BackendOptions::default()).ok();
+        match vulkan.as_mut() {
+            Some(v) => v.load_scene(&scene).expect("acceleration structures build"),
+            None => eprintln!("no Vulkan device with ray query: benchmarking the CPU backend only"),
+        }
+        let (cpu_scene, data) =
+            (CpuScene::build(&scene).expect("BVH builds"), ShadeData::new(&scene).expect("shade data"));
+        Setup { scene, cpu_scene, cpu, vulkan, data }
     }
 
+    /// The shade parameters of sample 0 of a one-sample `w × h` frame.
+    fn shade_params(&self, w: u32, h: u32) -> ShadeParams {
+        self.data.params(sampler_params(sampler_kind::ZSOBOL, 1, w, h, 1), w, h, 0)
+    }
+}
+
+fn stages(c: &mut Criterion) {
+    let mut setup = Setup::new();
+    generate(c, &mut setup);
+    trace_primary(c, &mut setup);
+    shade(c, &mut setup);
+    denoise(c, &mut setup);
+    pipeline(c, &mut setup);
+    layout(c);
+}
+
+fn generate(c: &mut Criterion, setup: &mut Setup) {
     let mut group = c.benchmark_group("generate");
     for (w, h) in SIZES {
-        let params = generate_params(&scene, w, h, 0, 1);
+        let params = generate_params(&setup.scene, w, h, 0, 1);
         group.throughput(Throughput::Elements(u64::from(w * h)));
         group.bench_with_input(BenchmarkId::new("cpu", w * h), &params, |b, p| b.iter(|| cpu::generate(black_box(p))));
-        if let Some(v) = vulkan.as_mut() {
+        if let Some(v) = setup.vulkan.as_mut() {
             group.bench_with_input(BenchmarkId::new("vulkan", w * h), &params, |b, p| {
                 b.iter(|| v.generate(black_box(p)).expect("generate"))
             });
         }
     }
     group.finish();
+}
 
+fn trace_primary(c: &mut Criterion, setup: &mut Setup) {
     let mut group = c.benchmark_group("trace_primary");
     for (w, h) in SIZES {
-        let rays = cpu::generate(&generate_params(&scene, w, h, 0, 1));
+        let rays = cpu::generate(&generate_params(&setup.scene, w, h, 0, 1));
         group.throughput(Throughput::Elements(rays.len() as u64));
         group.bench_with_input(BenchmarkId::new("cpu", rays.len()), &rays, |b, r| {
-            b.iter(|| cpu::trace(&cpu_scene, black_box(r)))
+            b.iter(|| cpu::trace(&setup.cpu_scene, black_box(r)))
         });
-        if let Some(v) = vulkan.as_mut() {
+        if let Some(v) = setup.vulkan.as_mut() {
             group.bench_with_input(BenchmarkId::new("vulkan", rays.len()), &rays, |b, r| {
                 b.iter(|| v.trace(black_box(r)).expect("trace"))
             });
         }
     }
     group.finish();
+}
 
-    // Shade: resolve + U of every light + one MIS sample per camera ray (per call, on the hits of
-    // one primary pass).
-    let data = ShadeData::new(&scene).expect("shade data");
-    let mut cpu_backend = cpu::CpuBackend::new();
-    cpu_backend.load_scene(&scene).expect("BVH builds");
+/// Resolve + U of every light + one MIS sample per camera ray (per call, on the hits of one
+/// primary pass).
+fn shade(c: &mut Criterion, setup: &mut Setup) {
     let mut group = c.benchmark_group("shade");
     for (w, h) in SIZES {
-        let rays = cpu::generate(&generate_params(&scene, w, h, 0, 1));
-        let hits = cpu::trace(&cpu_scene, &rays);
-        let params = data.params(sampler_params(sampler_kind::ZSOBOL, 1, w, h, 1), w, h, 0);
-        group.throughput(Throughput::Elements(rays.len() as u64));
-        group.bench_function(BenchmarkId::new("cpu", rays.len()), |b| {
-            b.iter(|| cpu_backend.shade(black_box(&params), &data, &rays, &hits).expect("shade"))
-        });
+        let rays = cpu::generate(&generate_params(&setup.scene, w, h, 0, 1));
+        let hits = cpu::trace(&setup.cpu_scene, &rays);
+        let params = setup.shade_params(w, h);
         // With every light's U_S from the GGX lobe's integral (ShadeParams::analytic_residual).
         let residual_params = ShadeParams { analytic_residual: 1, ..params };
-        group.bench_function(BenchmarkId::new("cpu-residual", rays.len()), |b| {
-            b.iter(|| cpu_backend.shade(black_box(&residual_params), &data, &rays, &hits).expect("shade"))
+        let (cpu, data) = (&mut setup.cpu, &setup.data);
+        group.throughput(Throughput::Elements(rays.len() as u64));
+        group.bench_function(BenchmarkId::new("cpu", rays.len()), |b| {
+            b.iter(|| cpu.shade(black_box(&params), data, &rays, &hits).expect("shade"))
         });
-        if let Some(v) = vulkan.as_mut() {
+        group.bench_function(BenchmarkId::new("cpu-residual", rays.len()), |b| {
+            b.iter(|| cpu.shade(black_box(&residual_params), data, &rays, &hits).expect("shade"))
+        });
+        if let Some(v) = setup.vulkan.as_mut() {
             group.bench_function(BenchmarkId::new("vulkan", rays.len()), |b| {
-                b.iter(|| v.shade(black_box(&params), &data, &rays, &hits).expect("shade"))
+                b.iter(|| v.shade(black_box(&params), data, &rays, &hits).expect("shade"))
             });
         }
     }
     group.finish();
+}
 
-    // Denoise: the TV filter and the SVGF baseline on a 1-spp frame, at the radius each image
-    // size gets by default (2 at 64², 6 at 512²).
+/// The TV filter and the SVGF baseline on a 1-spp frame, at the radius each image size gets by
+/// default (2 at 64², 6 at 512²).
+fn denoise(c: &mut Criterion, setup: &mut Setup) {
     let mut group = c.benchmark_group("denoise");
     for (w, h) in SIZES {
         let input = frame_input(&denoise_options(w, h)).expect("the frame shades");
@@ -105,9 +139,9 @@ fn stages(c: &mut Criterion) {
         for method in [DenoiseMethod::Tv, DenoiseMethod::Svgf] {
             let id = |backend: &str| BenchmarkId::new(format!("{backend}-{}", method.name()), w * h);
             group.bench_function(id("cpu"), |b| {
-                b.iter(|| cpu_backend.denoise(method, black_box(&params), &input).expect("denoise"))
+                b.iter(|| setup.cpu.denoise(method, black_box(&params), &input).expect("denoise"))
             });
-            if let Some(v) = vulkan.as_mut() {
+            if let Some(v) = setup.vulkan.as_mut() {
                 group.bench_function(id("vulkan"), |b| {
                     b.iter(|| v.denoise(method, black_box(&params), &input).expect("denoise"))
                 });
@@ -115,36 +149,42 @@ fn stages(c: &mut Criterion) {
         }
     }
     group.finish();
+}
 
-    // Layout (DESIGN rule 3): the ratio pass reads S_N and U_N, two of a pixel's six denoiser
-    // inputs. Over SoA streams it reads those 32 bytes per pixel; over one 96-byte record per
-    // pixel (array of structures) it reads the 64-byte cache line they sit in. One 1080p frame,
-    // one thread, the same kernel function.
-    // Wavefront against inline: the same kernel functions over one 512² sample pass, first
-    // checked to give the same estimates.
+/// Wavefront against inline: one 512² sample pass through generate → trace → shade → occlusion
+/// as the CPU backend's passes over streams, and as the same kernel functions per pixel
+/// ([`inline_pass`]), first checked to give the same estimates.
+fn pipeline(c: &mut Criterion, setup: &mut Setup) {
     let (w, h) = (512, 512);
-    let generate = generate_params(&scene, w, h, 0, 1);
-    let shade_params = data.params(sampler_params(sampler_kind::ZSOBOL, 1, w, h, 1), w, h, 0);
-    let wavefront = |backend: &mut cpu::CpuBackend| {
-        let frame = backend.render(&generate).expect("generate and trace");
+    let generate = generate_params(&setup.scene, w, h, 0, 1);
+    let shade_params = setup.shade_params(w, h);
+    let (cpu, data, cpu_scene) = (&mut setup.cpu, &setup.data, &setup.cpu_scene);
+    let mut wavefront = || {
+        let frame = cpu.render(&generate).expect("generate and trace");
         let mut accumulator = ShadeAccumulator::new((w * h) as usize);
-        accumulator.shade_pass(backend, &shade_params, &data, &frame.rays, &frame.hits).expect("shade");
+        accumulator.shade_pass(cpu, &shade_params, data, &frame.rays, &frame.hits).expect("shade");
         accumulator
     };
-    let sums = wavefront(&mut cpu_backend);
-    let inline = inline_pass(&cpu_scene, &data, &generate, &shade_params);
+    let sums = wavefront();
+    let inline = inline_pass(cpu_scene, data, &generate, &shade_params);
     let streams = [sums.analytic(), sums.unshadowed(), sums.shadowed(), sums.emitted()];
     for (i, pixel) in inline.iter().enumerate() {
         assert!(pixel.iter().zip(&streams).all(|(v, stream)| v.truncate() == stream[i]), "pixel {i}");
     }
     let mut group = c.benchmark_group("pipeline");
     group.throughput(Throughput::Elements(u64::from(w * h)));
-    group.bench_function(BenchmarkId::new("cpu-wavefront", w * h), |b| b.iter(|| wavefront(&mut cpu_backend)));
+    group.bench_function(BenchmarkId::new("cpu-wavefront", w * h), |b| b.iter(&mut wavefront));
     group.bench_function(BenchmarkId::new("cpu-inline", w * h), |b| {
-        b.iter(|| inline_pass(&cpu_scene, &data, black_box(&generate), &shade_params))
+        b.iter(|| inline_pass(cpu_scene, data, black_box(&generate), &shade_params))
     });
     group.finish();
+}
 
+/// SoA against AoS (DESIGN rule 3): the ratio pass reads S_N and U_N, two of a pixel's six
+/// denoiser inputs. Over SoA streams it reads those 32 bytes per pixel; over one 96-byte record
+/// per pixel (array of structures) it reads the 64-byte cache line they sit in. One 1080p frame,
+/// one thread, the same kernel function.
+fn layout(c: &mut Criterion) {
     let (w, h) = (1920, 1080);
     let input = frame_input(&denoise_options(w, h)).expect("the frame shades");
     let records: Vec<PixelRecord> = (0..input.len())
@@ -203,8 +243,8 @@ fn inline_pass(scene: &CpuScene, data: &ShadeData, generate: &GenerateParams, sh
         .collect()
 }
 
-/// The denoise benchmark frame: the built-in Cornell box shaded with `spp` samples, at the
-/// default radius, `width × height` pixels.
+/// The denoise benchmark frame: the built-in Cornell box at `width × height` pixels, one sample
+/// per pixel, at the default radius.
 fn denoise_options(width: u32, height: u32) -> DenoiseBenchOptions {
     DenoiseBenchOptions {
         scene: "builtin:cornell".to_owned(),
