@@ -46,6 +46,10 @@ impl Setup {
         let mut vulkan = open_backend(DeviceChoice::Vulkan(None), &BackendOptions::default()).ok();
         match vulkan.as_mut() {
             Some(v) => v.load_scene(&scene).expect("acceleration structures build"),
+            // `cargo test` runs the benches once; in CI (lavapipe) the Vulkan rows must run too.
+            None if cfg!(feature = "vulkan") && std::env::var("CI").is_ok_and(|v| v == "true") => {
+                panic!("CI=true but no Vulkan device")
+            }
             None => eprintln!("no Vulkan device with ray query: benchmarking the CPU backend only"),
         }
         let (cpu_scene, data) =
