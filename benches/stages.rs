@@ -47,7 +47,7 @@ impl Setup {
         match vulkan.as_mut() {
             Some(v) => v.load_scene(&scene).expect("acceleration structures build"),
             // `cargo test` runs the benches once; in CI (lavapipe) the Vulkan rows must run too.
-            None if cfg!(feature = "vulkan") && std::env::var("CI").is_ok_and(|v| v == "true") => {
+            None if cfg!(feature = "vulkan") && std::env::var("CI").is_ok_and(|v| v == "true" || v == "1") => {
                 panic!("CI=true but no Vulkan device")
             }
             None => eprintln!("no Vulkan device with ray query: benchmarking the CPU backend only"),
