@@ -1,25 +1,23 @@
 //! The shade stage through the light BVH (more than 8 lights) keeps `U_N` an unbiased estimate of
-//! the analytic `U`: the Cornell box with its light cut into a 4 × 5 grid of coloured lights of
-//! different brightness, where every sample's light is chosen by the BVH walk and weighted by its
+//! the analytic `U`: `builtin:cornell-light-grid`, the Cornell box with its light cut into a 4 × 5
+//! grid of coloured lights of different brightness, where every sample's light is chosen by the BVH walk and weighted by its
 //! pmf. A pmf that disagrees with the choice (a wrong trail, a child probability computed twice
 //! differently) biases `U_N` by the disagreement; so does a light the walk can reach with
 //! pmf 0. The built-in scenes (one and two lights) take the linear scan instead.
 //!
 //! Per pixel, over 512 samples (CPU, fixed seed), the mean of `lum(U_N) − lum(U)` is compared with
-//! its standard error: every pixel's |z| ≤ 5.5 (measured: 2.91 at most over the 817 lit pixels;
+//! its standard error: every pixel's |z| ≤ 5.5 (measured: 3.37 at most over the 817 lit pixels;
 //! a normal |z| beyond 5.5 has probability 4·10⁻⁸), and the image's summed `U_N` matches its
-//! summed `U` within 4 standard errors and 0.5 % (measured: z 0.29, 6·10⁻⁵). Tried by hand: a
-//! pmf 2 % too small for one light of the 20 fails both z tests (a pixel at 6.2, the image at
-//! 6.6 for a bias of 1.4·10⁻³).
-
-mod common;
+//! summed `U` within 4 standard errors and 0.5 % (measured: z −0.06, −1.3·10⁻⁵). Tried by hand:
+//! a pmf 2 % too small for one light of the 20 fails the image's test (z 5.8 for a bias of
+//! 1.3·10⁻³; its worst pixel at 5.05).
 
 use raywave::cpu::CpuBackend;
 use raywave::frame::{generate_params_with, sampler_params};
 use raywave::kernels::sampling::light_select::luminance;
 use raywave::shading::ShadeData;
 use raywave::shared::sampling::sampler_kind;
-use raywave::Backend;
+use raywave::{Backend, Scene};
 
 const WIDTH: u32 = 40;
 const HEIGHT: u32 = 32;
@@ -27,7 +25,7 @@ const SAMPLES: u32 = 512;
 
 #[test]
 fn light_bvh_choice_keeps_u_n_unbiased() {
-    let scene = common::cornell_light_grid(4, 5);
+    let scene = Scene::load("builtin:cornell-light-grid").expect("built-in scene loads");
     let data = ShadeData::new(&scene).expect("shade data");
     assert!(!data.light_nodes.is_empty(), "20 lights are chosen through a light BVH");
     let mut cpu = CpuBackend::new();

@@ -29,15 +29,15 @@
 //!
 //! Measured (64², 4 spp, seed 7, CPU), the largest relMSE of the five methods' images over the
 //! scenes against the scene as built, and the largest change of their means: moved 10 m 9.3·10⁻⁶
-//! (5·10⁻⁵), 100 m 6.7·10⁻⁵ (2.8·10⁻⁴), 1 km 5.8·10⁻⁴ (2.5·10⁻³) — rays that pass within the
+//! (6.3·10⁻⁵), 100 m 6.7·10⁻⁵ (2.8·10⁻⁴), 1 km 5.8·10⁻⁴ (3.1·10⁻³) — rays that pass within the
 //! offset of an edge (256 ulps: 2 mm at 100 m, 1.6 cm at 1 km) change sides, so the error grows
 //! with the distance; scaled 10⁻³ (0.56 mm across, where the offset is its absolute floor
-//! 2⁻¹⁶ m, 3 % of the box) 1.1·10⁻³ (1.2·10⁻³), 10⁻² 9.4·10⁻⁵ (1.3·10⁻⁴), 10³ 5.0·10⁻⁵
-//! (9.8·10⁻⁴; 6.5·10⁻⁵ and 1.6·10⁻³ since the light bounds' spheres are the lights' own, which
-//! rounds differently at that scale, and with the light grid); rotated 2.5·10⁻¹² (2·10⁻⁷);
-//! winding flipped and subdivided 10⁻¹² (2·10⁻⁸); emission ×10⁻⁶ and ×10⁶ 3·10⁻¹⁵ (8·10⁻⁹) — the
-//! light grid's figures within these (1 km: its mean moved most). The bounds below sit
-//! 3–10× above those. At 10 km the offset is 25 cm and the light (0.1 mm below the ceiling)
+//! 2⁻¹⁶ m, 3 % of the box) 1.1·10⁻³ (2.4·10⁻³), 10⁻² 9.4·10⁻⁵ (1.3·10⁻⁴), 10³ 5.0·10⁻⁵
+//! (1.2·10⁻³); rotated 2.5·10⁻¹² (2·10⁻⁷); winding flipped and subdivided 10⁻¹² (2·10⁻⁸; with
+//! lavapipe's ray query the subdivided light grid 8·10⁻¹⁰ and 1.1·10⁻⁶);
+//! emission ×10⁻⁶ and ×10⁶ 3·10⁻¹⁵ (8·10⁻⁹). The light grid's 20 lights have the most edges, so
+//! its means moved most (the figures in brackets at 10 m, 1 km, 10⁻³ and 10³ are its). The bounds
+//! below sit 1.6–10× above those (closest: the grid's mean at 1 km). At 10 km the offset is 25 cm and the light (0.1 mm below the ceiling)
 //! shares the ceiling's float values: the scene no longer exists in `f32` there, so that is not
 //! tested.
 
@@ -104,7 +104,9 @@ fn variants() -> Vec<Variant> {
             max_mean_change: 1e-6,
         },
         Variant { change: Change::FlipWinding, max_relmse: 1e-8, max_mean_change: 1e-6 },
-        Variant { change: Change::Subdivide(7), max_relmse: 1e-8, max_mean_change: 1e-6 },
+        // The device's ray query may decide a ray along a shared edge of the split triangles
+        // otherwise: the light grid's stochastic mean moved 1.1·10⁻⁶ on lavapipe (relMSE 8·10⁻¹⁰).
+        Variant { change: Change::Subdivide(7), max_relmse: 1e-8, max_mean_change: 1e-5 },
         Variant { change: Change::ScaleEmission(1e-6), max_relmse: 1e-8, max_mean_change: 1e-6 },
         Variant { change: Change::ScaleEmission(1e6), max_relmse: 1e-8, max_mean_change: 1e-6 },
     ]
@@ -183,23 +185,19 @@ fn mean(image: &[Vec3]) -> f64 {
     image.iter().map(|c| f64::from(c.x + c.y + c.z)).sum::<f64>() / image.len() as f64
 }
 
-/// The scenes the variants are made of, and whether the rotation applies: the Cornell box
-/// (diffuse), the two-light box (coloured lights, a glossy and a metallic block) and the box with
-/// its light cut into a 4 × 5 grid (the light BVH, built again for each variant). The BVH's
-/// splits follow the coordinate axes (pbrt-v4's SAOH buckets), so the rotated grid builds another
-/// tree and draws other, equally valid, samples (stochastic relMSE 4.4·10⁻³ against the grid as
+/// The built-in scenes the variants are made of, and whether the rotation applies: the Cornell
+/// box (diffuse), the two-light box (coloured lights, a glossy and a metallic block) and the box
+/// lit by a grid of 20 lights (the light BVH, built again for each variant). The BVH's splits
+/// follow the coordinate axes (pbrt-v4's SAOH buckets), so the rotated grid builds another tree
+/// and draws other, equally valid, samples (stochastic relMSE 4.4·10⁻³ against the grid as
 /// built); its other variants keep the tree.
-fn scenes() -> Vec<(String, Scene, bool)> {
-    let built_in = ["builtin:cornell", "builtin:cornell-two-lights"]
-        .map(|name| (name.to_owned(), Scene::load(name).expect("built-in scene loads"), true));
-    let mut scenes = Vec::from(built_in);
-    scenes.push(("Cornell box, 4 × 5 lights".to_owned(), common::cornell_light_grid(4, 5), false));
-    scenes
-}
+const SCENES: [(&str, bool); 3] =
+    [("builtin:cornell", true), ("builtin:cornell-two-lights", true), ("builtin:cornell-light-grid", false)];
 
 /// Asserts that `backend` renders every variant of every scene like the scene as built.
 fn assert_invariant(backend: &mut dyn Backend) {
-    for (name, base, rotates) in scenes() {
+    for (name, rotates) in SCENES {
+        let base = Scene::load(name).expect("built-in scene loads");
         let as_built = images(backend, &base);
         let rotation = |v: &Variant| matches!(v.change, Change::Place { rotation, .. } if rotation != Quat::IDENTITY);
         for variant in variants().into_iter().filter(|v| rotates || !rotation(v)) {

@@ -23,46 +23,6 @@ pub fn cornell() -> Scene {
     Scene::load("builtin:cornell").expect("built-in scene loads")
 }
 
-/// The Cornell box with its ceiling light cut into a `columns × rows` grid of smaller lights
-/// (each 80 % of its cell, so they are separate quads) of varied colour and brightness. Beyond
-/// `raywave::lights::LINEAR_SCAN_MAX_LIGHTS` (8) lights the shade stage chooses among them
-/// with the light BVH, which the built-in scenes (one and two lights) never reach.
-pub fn cornell_light_grid(columns: u32, rows: u32) -> Scene {
-    use glam::Vec3;
-    use raywave::scene::Mesh;
-    let base = cornell();
-    let mut meshes: Vec<Mesh> = Vec::new();
-    for (index, mesh) in base.meshes().iter().enumerate() {
-        let Some(light) = base.mesh_light(index) else {
-            meshes.push(mesh.clone());
-            continue;
-        };
-        let light = base.lights()[light as usize];
-        let (corner, edge_u, edge_v) = (light.position.truncate(), light.edge_u.truncate(), light.edge_v.truncate());
-        let (cell_u, cell_v) = (edge_u / columns as f32, edge_v / rows as f32);
-        for k in 0..columns * rows {
-            let (i, j) = (k % columns, k / columns);
-            let start = corner + cell_u * (i as f32 + 0.1) + cell_v * (j as f32 + 0.1);
-            let (u, v) = (cell_u * 0.8, cell_v * 0.8);
-            // Hue by position, brightness 0.5…2 by index; both triangles keep the light's winding.
-            let tint = [Vec3::new(1.6, 0.7, 0.7), Vec3::new(0.7, 1.6, 0.7), Vec3::new(0.7, 0.7, 1.6)][(k % 3) as usize];
-            let brightness = 0.5 + 1.5 * (k * 7 % 11) as f32 / 10.0;
-            meshes.push(Mesh {
-                name: format!("{} {i},{j}", mesh.name),
-                positions: vec![start, start + u, start + u + v, start + v],
-                triangles: vec![[0, 1, 2], [0, 2, 3]],
-                material: raywave::scene::Material {
-                    emission: light.radiance.truncate() * tint * brightness,
-                    ..mesh.material
-                },
-            });
-        }
-    }
-    let scene = Scene::new("Cornell box, light grid", meshes, *base.camera()).expect("the light grid is a scene");
-    assert_eq!(scene.lights().len(), (columns * rows) as usize, "every grid cell is a quad light");
-    scene
-}
-
 /// Whether `a` and `b` agree within `rel` relative to `scale` (the magnitude the quantity is
 /// measured against, e.g. the length of the vector it belongs to), with `rel · scale` as the
 /// absolute floor for values near zero.

@@ -88,6 +88,28 @@ pub fn two_lights_meshes() -> Vec<Mesh> {
     meshes
 }
 
+/// The meshes of `cornell-light-grid`: the box of [`meshes`] with the published light's rectangle
+/// cut into a grid of 4 × 5 smaller lights, each 80 % of its cell (so they are separate quads),
+/// tinted red, green or blue in turn and 0.5…2 times as bright, together 0.8 times the published
+/// light's power. Beyond 8 lights the shade stage chooses among them through the light BVH, which
+/// the other Cornell scenes (one and two lights) never reach.
+pub fn light_grid_meshes() -> Vec<Mesh> {
+    const COLUMNS: usize = 4;
+    const ROWS: usize = 5;
+    let (x0, z0, width, depth) = (213.0, 227.0, 130.0, 105.0);
+    let (cell_x, cell_z) = (width / COLUMNS as f32, depth / ROWS as f32);
+    let tints = [Vec3::new(1.6, 0.7, 0.7), Vec3::new(0.7, 1.6, 0.7), Vec3::new(0.7, 0.7, 1.6)];
+    let mut meshes = room(Material::diffuse(WHITE), Material::diffuse(WHITE));
+    for k in 0..COLUMNS * ROWS {
+        let (i, j) = ((k % COLUMNS) as f32, (k / COLUMNS) as f32);
+        let x = [x0 + cell_x * (i + 0.1), x0 + cell_x * (i + 0.9)];
+        let z = [z0 + cell_z * (j + 0.1), z0 + cell_z * (j + 0.9)];
+        let brightness = 0.5 + 1.5 * (k * 7 % 11) as f32 / 10.0;
+        meshes.push(ceiling_light(&format!("light {i},{j}"), x, z, LIGHT * tints[k % 3] * brightness));
+    }
+    meshes
+}
+
 /// The box without its light: floor, ceiling, back, right and left walls, then the short and tall
 /// blocks in the given materials.
 fn room(short_block: Material, tall_block: Material) -> Vec<Mesh> {

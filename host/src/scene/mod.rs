@@ -113,9 +113,10 @@ pub struct Scene {
 }
 
 /// Names of the built-in scenes, usable as `builtin:NAME`: the Cornell box; the Cornell box lit by
-/// two smaller coloured ceiling lights, with a glossy and a metallic block; a field of 64
+/// two smaller coloured ceiling lights, with a glossy and a metallic block; the Cornell box lit
+/// by a grid of 20 small coloured lights (chosen through the light BVH); a field of 64
 /// icospheres (1.3 M triangles) and a hairball of 200 000 thin random triangles.
-pub const BUILTIN_SCENES: &[&str] = &["cornell", "cornell-two-lights", "spheres", "hairball"];
+pub const BUILTIN_SCENES: &[&str] = &["cornell", "cornell-two-lights", "cornell-light-grid", "spheres", "hairball"];
 
 impl Scene {
     /// Loads a scene: `builtin:NAME` for a built-in scene, otherwise a path to a Wavefront OBJ
@@ -125,6 +126,9 @@ impl Scene {
             Some("cornell") => Scene::new("builtin:cornell", cornell::meshes(), cornell::camera()),
             Some("cornell-two-lights") => {
                 Scene::new("builtin:cornell-two-lights", cornell::two_lights_meshes(), cornell::camera())
+            }
+            Some("cornell-light-grid") => {
+                Scene::new("builtin:cornell-light-grid", cornell::light_grid_meshes(), cornell::camera())
             }
             Some("spheres") => {
                 let (meshes, camera) = procedural::sphere_field(4, 5);
@@ -419,6 +423,31 @@ mod tests {
         assert_eq!(scene.mesh_light(scene.light_mesh(0)), Some(0));
         assert_eq!((0..scene.meshes().len()).filter(|&m| scene.mesh_light(m).is_some()).count(), 1);
         assert!(crate::lights::validate_lights(scene.lights()).is_ok());
+    }
+
+    #[test]
+    fn cornell_light_grid_has_twenty_lights_within_the_published_one() {
+        let scene = Scene::load("builtin:cornell-light-grid").unwrap();
+        let published = Scene::load("builtin:cornell").unwrap();
+        assert_eq!(scene.camera(), published.camera());
+        assert_eq!((scene.lights().len(), scene.unsupported_emitters()), (20, 0));
+        assert!(crate::lights::wants_bvh(scene.lights().len()));
+        assert!(crate::lights::validate_lights(scene.lights()).is_ok());
+        let power = |light: &Light| {
+            let area = light.edge_u.truncate().cross(light.edge_v.truncate()).length();
+            area * raywave_kernels::sampling::light_select::luminance(light.radiance.truncate())
+        };
+        let (outer_lo, outer_hi) = (Vec3::new(0.213, 0.5487, 0.227), Vec3::new(0.343, 0.5487, 0.332));
+        for (k, light) in scene.lights().iter().enumerate() {
+            assert!(facing(light).abs_diff_eq(Vec3::NEG_Y, 1e-6), "light {k}: {}", facing(light));
+            let corners =
+                [Vec3::ZERO, light.edge_u.truncate(), light.edge_v.truncate()].map(|e| light.position.truncate() + e);
+            for c in corners {
+                assert!(c.cmpge(outer_lo - 1e-6).all() && c.cmple(outer_hi + 1e-6).all(), "light {k}: {c}");
+            }
+        }
+        let ratio = scene.lights().iter().map(power).sum::<f32>() / power(&published.lights()[0]);
+        assert!((ratio - 0.8).abs() < 0.05, "{ratio}");
     }
 
     #[test]
