@@ -44,6 +44,9 @@ const GREEN: Vec3 = Vec3::new(0.14, 0.45, 0.091);
 /// The published light's radiance reduced to linear sRGB (the spectrum peaks near 18.4 at 700 nm).
 pub(super) const LIGHT: Vec3 = Vec3::new(17.0, 12.0, 4.0);
 
+/// The published light's extent in x and z, mm.
+const PUBLISHED_LIGHT: ([f32; 2], [f32; 2]) = ([213.0, 343.0], [227.0, 332.0]);
+
 /// Height of the lights' planes: 0.1 mm below the ceiling (548.8 mm).
 const LIGHT_Y: f32 = 548.7;
 
@@ -72,7 +75,7 @@ fn ceiling_light(name: &str, [x0, x1]: [f32; 2], [z0, z1]: [f32; 2], radiance: V
 /// short and tall blocks, and the light.
 pub fn meshes() -> Vec<Mesh> {
     let mut meshes = room(Material::diffuse(WHITE), Material::diffuse(WHITE));
-    meshes.push(ceiling_light("light", [213.0, 343.0], [227.0, 332.0], LIGHT));
+    meshes.push(ceiling_light("light", PUBLISHED_LIGHT.0, PUBLISHED_LIGHT.1, LIGHT));
     meshes
 }
 
@@ -96,8 +99,8 @@ pub fn two_lights_meshes() -> Vec<Mesh> {
 pub fn light_grid_meshes() -> Vec<Mesh> {
     const COLUMNS: usize = 4;
     const ROWS: usize = 5;
-    let (x0, z0, width, depth) = (213.0, 227.0, 130.0, 105.0);
-    let (cell_x, cell_z) = (width / COLUMNS as f32, depth / ROWS as f32);
+    let ([x0, x1], [z0, z1]) = PUBLISHED_LIGHT;
+    let (cell_x, cell_z) = ((x1 - x0) / COLUMNS as f32, (z1 - z0) / ROWS as f32);
     let tints = [Vec3::new(1.6, 0.7, 0.7), Vec3::new(0.7, 1.6, 0.7), Vec3::new(0.7, 0.7, 1.6)];
     let mut meshes = room(Material::diffuse(WHITE), Material::diffuse(WHITE));
     for k in 0..COLUMNS * ROWS {
