@@ -433,20 +433,16 @@ mod tests {
         assert_eq!((scene.lights().len(), scene.unsupported_emitters()), (20, 0));
         assert!(crate::lights::wants_bvh(scene.lights().len()));
         assert!(crate::lights::validate_lights(scene.lights()).is_ok());
-        let power = |light: &Light| {
-            let area = light.edge_u.truncate().cross(light.edge_v.truncate()).length();
-            area * raywave_kernels::sampling::light_select::luminance(light.radiance.truncate())
-        };
-        let (outer_lo, outer_hi) = (Vec3::new(0.213, 0.5487, 0.227), Vec3::new(0.343, 0.5487, 0.332));
+        let bounds = |light: &Light| raywave_kernels::sampling::light_select::light_bounds(light);
+        let outer = bounds(&published.lights()[0]);
         for (k, light) in scene.lights().iter().enumerate() {
             assert!(facing(light).abs_diff_eq(Vec3::NEG_Y, 1e-6), "light {k}: {}", facing(light));
-            let corners =
-                [Vec3::ZERO, light.edge_u.truncate(), light.edge_v.truncate()].map(|e| light.position.truncate() + e);
-            for c in corners {
-                assert!(c.cmpge(outer_lo - 1e-6).all() && c.cmple(outer_hi + 1e-6).all(), "light {k}: {c}");
-            }
+            let inner = bounds(light);
+            let inside = outer.min.truncate().cmple(inner.min.truncate() + 1e-6).all()
+                && outer.max.truncate().cmpge(inner.max.truncate() - 1e-6).all();
+            assert!(inside, "light {k}: {inner:?} outside {outer:?}");
         }
-        let ratio = scene.lights().iter().map(power).sum::<f32>() / power(&published.lights()[0]);
+        let ratio = scene.lights().iter().map(|l| bounds(l).phi).sum::<f32>() / outer.phi;
         assert!((ratio - 0.8).abs() < 0.05, "{ratio}");
     }
 
