@@ -234,14 +234,14 @@ fn inline_pass(scene: &CpuScene, data: &ShadeData, generate: &GenerateParams, sh
         .into_par_iter()
         .map(|i| {
             let ray = generate_ray(i, generate);
-            let hit = trace_closest(ray.origin, ray.direction, scene);
+            let hit = trace_closest(ray.origin, ray.direction, scene).value;
             let direction = ray.direction.truncate();
             let (triangles, first) = (&data.triangles, &data.first_triangle);
             let surface =
                 resolve_surface(direction, hit.t, hit.instance, hit.primitive, hit.barycentrics, triangles, first);
             let pixel = UVec2::new(i % shade.width, i / shade.width);
             let s = shade_sample(shade, pixel, direction, &surface, &shade_scene);
-            let blocked = trace_occluded(s.shadow_origin, s.shadow_direction, scene);
+            let blocked = trace_occluded(s.shadow_origin, s.shadow_direction, scene).value;
             [s.analytic, s.unshadowed, if blocked { Vec4::ZERO } else { s.unshadowed }, s.emitted]
         })
         .collect()

@@ -142,10 +142,10 @@ struct RaywaveCpu<'a>(&'a CpuScene);
 
 impl CpuTracer for RaywaveCpu<'_> {
     fn closest_t(&self, origin: Vec4, direction: Vec4) -> f32 {
-        trace_closest(origin, direction, self.0).t
+        trace_closest(origin, direction, self.0).value.t
     }
     fn occluded(&self, origin: Vec4, direction: Vec4) -> bool {
-        trace_occluded(origin, direction, self.0)
+        trace_occluded(origin, direction, self.0).value
     }
 }
 

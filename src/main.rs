@@ -422,7 +422,15 @@ fn render_command(args: RenderArgs) -> raywave::Result<()> {
     ));
     print_line(format!("streams  {} bytes/pixel", report.stream_bytes_per_pixel));
     for t in &report.timings {
-        print_line(format!("stage    {:<9} {:>10.3} ms", t.stage, t.seconds * 1e3));
+        let sanitized = if t.sanitized > 0 { format!("  ({} sanitized)", t.sanitized) } else { String::new() };
+        print_line(format!("stage    {:<9} {:>10.3} ms{sanitized}", t.stage, t.seconds * 1e3));
+    }
+    let sanitized: u64 = report.timings.iter().map(|t| t.sanitized).sum();
+    if sanitized > 0 {
+        eprintln!(
+            "warning: {sanitized} value(s) went non-finite and were replaced (rays or hits as misses, samples \
+             without their contribution, colours by the emitted radiance); see the stage lines"
+        );
     }
     Ok(())
 }

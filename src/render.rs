@@ -2,7 +2,7 @@
 //! on the chosen backend → TV-denoise of `S_N`, `U_N` and the ratio estimator's composite
 //! `U · den(S_N)/den(U_N)` (or another denoiser, or none) → image files.
 
-use crate::{open_backend, BackendOptions, DeviceChoice, Result, Scene, StageTiming};
+use crate::{open_backend, BackendOptions, DeviceChoice, Result, Scene, StageReport};
 use image::ImageFormat;
 use raywave_host::denoise::{check_radius, frame_params, rgb, DenoiseInput, DenoiseMethod};
 use raywave_host::frame::{check_samples_per_pixel, generate_params_with, sampler_params};
@@ -93,8 +93,8 @@ pub struct RenderReport {
     pub unsupported_emitters: usize,
     /// Samples per pixel traced: `spp` for the lit view, 1 for the normals view.
     pub samples_per_pixel: u32,
-    /// Per-stage times, summed over the samples.
-    pub timings: Vec<StageTiming>,
+    /// Per-stage times and sanitized counts, summed over the samples.
+    pub timings: Vec<StageReport>,
     /// Camera rays that hit geometry (over all samples).
     pub hits: usize,
     /// Bytes of SoA streams one sample pass uses per pixel (rays, hits, the shade stream, shadow
@@ -102,11 +102,14 @@ pub struct RenderReport {
     pub stream_bytes_per_pixel: u64,
 }
 
-/// Adds `seconds` to the timing of `stage` (appending it the first time).
-fn add_timing(timings: &mut Vec<StageTiming>, stage: &'static str, seconds: f64) {
-    match timings.iter_mut().find(|t| t.stage == stage) {
-        Some(t) => t.seconds += seconds,
-        None => timings.push(StageTiming { stage, seconds }),
+/// Adds `report` to the summed report of its stage (appending it the first time).
+fn add_report(timings: &mut Vec<StageReport>, report: &StageReport) {
+    match timings.iter_mut().find(|t| t.stage == report.stage) {
+        Some(t) => {
+            t.seconds += report.seconds;
+            t.sanitized += report.sanitized;
+        }
+        None => timings.push(report.clone()),
     }
 }
 
@@ -196,7 +199,7 @@ pub fn render(options: &RenderOptions) -> Result<RenderReport> {
         params.focus_distance = options.focus_distance.unwrap_or(params.focus_distance);
         let frame = backend.render(&params)?;
         for t in &frame.timings {
-            add_timing(&mut timings, t.stage, t.seconds);
+            add_report(&mut timings, t);
         }
         hits += frame.hits.primitive.iter().filter(|&&p| p != crate::shared::stream::NO_HIT).count();
         stream_bytes = frame.rays.bytes() + frame.hits.bytes();
@@ -211,7 +214,7 @@ pub fn render(options: &RenderOptions) -> Result<RenderReport> {
         let (pass_timings, pass_bytes) =
             accumulator.shade_pass(backend.as_mut(), &shade_params, data, &frame.rays, &frame.hits)?;
         for t in pass_timings {
-            add_timing(&mut timings, t.stage, t.seconds);
+            add_report(&mut timings, &t);
         }
         stream_bytes += pass_bytes;
     }
@@ -223,7 +226,7 @@ pub fn render(options: &RenderOptions) -> Result<RenderReport> {
     let (color, pass_timings) =
         backend.denoise(options.denoise, &params, &DenoiseInput::new(&surfaces, &accumulator))?;
     for t in pass_timings {
-        add_timing(&mut timings, t.stage, t.seconds);
+        add_report(&mut timings, &t);
     }
     let image = rgb(&color);
     let mut written = vec![output.write_image(&srgb_image(&image, width, height))?];

@@ -61,6 +61,8 @@ fn cpu_render_writes_a_png_and_reports_stages() {
     for stage in ["generate", "trace", "shade", "occlusion"] {
         assert!(stdout.contains(stage), "{stage} missing: {stdout}");
     }
+    // Nothing went non-finite: no stage line counts sanitized values, no warning.
+    assert!(!stdout.contains("sanitized") && !stderr(&out).contains("non-finite"), "{stdout}\n{}", stderr(&out));
     let image = image::open(&path).unwrap().to_rgb8();
     assert_eq!(image.dimensions(), (96, 64));
     // The lit box: the floor, the back and side walls (the ceiling faces away from the light and
@@ -84,6 +86,7 @@ fn vulkan_and_cpu_renders_agree() {
     }
     assert!(vk.status.success(), "{}", stderr(&vk));
     assert!(!stderr(&vk).contains("[vulkan"), "validation messages: {}", stderr(&vk));
+    assert!(!stderr(&vk).contains("non-finite"), "sanitized values: {}", stderr(&vk));
     let a = image::open(cpu_path).unwrap().to_rgb8();
     let b = image::open(vk_path).unwrap().to_rgb8();
     // The parity tolerance (≥ 99.99 % same primitive, t within 1e-5) allows a pixel in 10 000 to

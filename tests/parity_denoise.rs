@@ -168,6 +168,7 @@ fn raw_composite(input: &DenoiseInput) -> Vec<Vec3> {
                 input.shadowed[i].truncate(),
                 input.emitted[i].truncate(),
             )
+            .value
         })
         .collect()
 }
@@ -252,6 +253,7 @@ fn run(backend: &mut dyn Backend, case: &Case) -> Vec<Vec4> {
     }
     for t in &timings {
         assert!(t.seconds.is_finite() && t.seconds >= 0.0, "{who}: {} took {} s", t.stage, t.seconds);
+        assert_eq!(t.sanitized, 0, "{who}: {} replaced non-finite values of sound input", t.stage);
     }
     color
 }
@@ -369,6 +371,43 @@ fn assert_refuses_nan(backend: &mut dyn Backend, params: &DenoiseParams, input: 
             }
             other => panic!("{} {method:?}: expected the input error, got {:?}", backend.name(), other.map(|_| ())),
         }
+    }
+}
+
+/// Colours that overflow `f32` — emitted radiance and `U` each 0.6 × `f32::MAX` in the red
+/// channel of every seventh pixel, unshadowed (`S_N = U_N` everywhere, so the TV filter passes
+/// every pixel through) — are replaced by the emitted radiance and counted by the composite, the
+/// denoiser's boundary: the same count on the CPU and every device, for each method, and no
+/// other pass counts anything.
+#[test]
+fn overflowing_colours_are_replaced_and_counted_alike_on_the_cpu_and_every_vulkan_device() {
+    let (params, mut input) = synthetic(16, 12, 3);
+    input.shadowed = input.unshadowed.clone();
+    let huge = Vec4::new(0.6 * f32::MAX, 1.0, 1.0, 0.0);
+    let overflowing: Vec<usize> = (0..input.len()).step_by(7).collect();
+    for &i in &overflowing {
+        (input.analytic[i], input.emitted[i]) = (huge, huge);
+    }
+    let check = |backend: &mut dyn Backend| {
+        for method in [DenoiseMethod::Tv, DenoiseMethod::Svgf, DenoiseMethod::None] {
+            let who = format!("{} {method:?}", backend.name());
+            let (color, timings) = backend.denoise(method, &params, &input).expect("denoise");
+            assert!(color.iter().all(|c| c.is_finite()), "{who}: a non-finite colour left the stage");
+            for &i in &overflowing {
+                assert_eq!(color[i], huge.truncate().extend(1.0), "{who}: pixel {i} is not its emitted radiance");
+            }
+            let counts: Vec<(&str, u64)> = timings.iter().map(|t| (t.stage, t.sanitized)).collect();
+            let composite = if method == DenoiseMethod::Svgf { "svgf composite" } else { "denoise composite" };
+            for (stage, sanitized) in counts {
+                let expected = if stage == composite { overflowing.len() as u64 } else { 0 };
+                assert_eq!(sanitized, expected, "{who}: {stage}");
+            }
+        }
+    };
+    check(&mut CpuBackend::new());
+    for mut device in vulkan::each_device("denoise sanitized count") {
+        check(&mut device);
+        vulkan::assert_clean(&device);
     }
 }
 

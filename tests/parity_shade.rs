@@ -215,15 +215,16 @@ fn shade_matches_the_cpu_on_every_vulkan_device() {
                 let case = format!("{scene_name} {kind_name} sample {sample_index} residual {analytic_residual}");
                 let (rays, hits, sampler) = camera_pass(&mut cpu, &scene, kind, sample_index);
                 let params = ShadeParams { analytic_residual, ..data.params(sampler, WIDTH, HEIGHT, sample_index) };
-                let (expected, timing) = cpu.shade(&params, &data, &rays, &hits).expect("cpu shade");
-                assert_eq!((timing.stage, expected.len()), ("shade", (WIDTH * HEIGHT) as usize));
+                let (expected, report) = cpu.shade(&params, &data, &rays, &hits).expect("cpu shade");
+                assert_eq!((report.stage, expected.len()), ("shade", (WIDTH * HEIGHT) as usize));
+                assert_eq!(report.sanitized, 0, "cpu, {case}: computed values went non-finite");
                 assert_finite(&expected, &format!("cpu, {case}"));
                 let lit = expected.shadow_direction.iter().filter(|d| d.w > 0.0).count();
                 assert!(lit * 4 > expected.len(), "{case}: only {lit} shadow rays on the CPU");
                 for (device, total) in devices.iter_mut().zip(&mut totals) {
-                    let (shades, timing) = device.shade(&params, &data, &rays, &hits).expect("device shade");
-                    assert_eq!(timing.stage, "shade");
+                    let (shades, report) = device.shade(&params, &data, &rays, &hits).expect("device shade");
                     let who = format!("{}, {case}", device.name());
+                    assert_eq!((report.stage, report.sanitized), ("shade", 0), "{who}");
                     assert_finite(&shades, &who);
                     let diff = compare(&expected, &shades);
                     assert_eq!(
@@ -312,14 +313,70 @@ fn shade_without_lights_is_zero_and_traces_no_shadow_rays_on_every_vulkan_device
     }
 }
 
-#[test]
-fn shade_rejects_mismatched_streams_on_every_backend() {
+/// The Cornell box's camera pass (Z-Sobol sample 0) on a CPU backend that holds the scene, with
+/// its shade data and parameters.
+struct CornellPass {
+    cpu: CpuBackend,
+    data: ShadeData,
+    rays: RayStream,
+    hits: HitStream,
+    params: ShadeParams,
+    sampler: raywave::shared::SamplerParams,
+}
+
+fn cornell_pass() -> CornellPass {
     let scene = common::cornell();
     let data = ShadeData::new(&scene).expect("shade data");
     let mut cpu = CpuBackend::new();
     cpu.load_scene(&scene).expect("cpu scene");
     let (rays, hits, sampler) = camera_pass(&mut cpu, &scene, sampler_kind::ZSOBOL, 0);
     let params = data.params(sampler, WIDTH, HEIGHT, 0);
+    CornellPass { cpu, data, rays, hits, params, sampler }
+}
+
+/// Hit records that are not finite — a NaN distance, infinite barycentrics, as a linking engine's
+/// own trace might hand over — shade as misses (nothing lit, no shadow ray) and are counted as
+/// sanitized, the same records and count on the CPU and every device; the other pixels are
+/// shaded as before.
+#[test]
+fn non_finite_hit_records_are_misses_counted_alike_on_every_backend() {
+    let CornellPass { mut cpu, data, rays, mut hits, params, .. } = cornell_pass();
+    let (clean, _) = cpu.shade(&params, &data, &rays, &hits).expect("cpu shade");
+    let broken: Vec<usize> = (0..hits.len()).filter(|i| i % 31 == 5 && hits.instance[*i] != NO_HIT).collect();
+    assert!(broken.len() > 10, "{} broken records", broken.len());
+    for (k, &i) in broken.iter().enumerate() {
+        if k % 2 == 0 {
+            hits.t[i] = f32::NAN;
+        } else {
+            hits.barycentrics[i].y = f32::INFINITY;
+        }
+    }
+    let (expected, report) = cpu.shade(&params, &data, &rays, &hits).expect("cpu shade");
+    eprintln!("{} of {} hit records made non-finite", broken.len(), hits.len());
+    assert_eq!(report.sanitized, broken.len() as u64, "cpu");
+    for i in 0..hits.len() {
+        let miss = expected.analytic[i] == Vec4::ZERO && expected.shadow_direction[i].w == 0.0;
+        if broken.contains(&i) {
+            assert!(miss, "cpu: broken record {i} was shaded");
+        } else {
+            assert_eq!(expected.analytic[i], clean.analytic[i], "cpu: pixel {i} changed");
+        }
+    }
+    for mut device in vulkan::each_device("shade sanitized count") {
+        let (shades, report) = device.shade(&params, &data, &rays, &hits).expect("device shade");
+        assert_eq!(report.sanitized, broken.len() as u64, "{}", device.name());
+        assert_finite(&shades, &device.name());
+        for &i in &broken {
+            assert_eq!(shades.analytic[i], Vec4::ZERO, "{}: broken record {i} was shaded", device.name());
+            assert_eq!(shades.shadow_direction[i].w, 0.0, "{}: broken record {i} traces", device.name());
+        }
+        vulkan::assert_clean(&device);
+    }
+}
+
+#[test]
+fn shade_rejects_mismatched_streams_on_every_backend() {
+    let CornellPass { mut cpu, data, rays, hits, params, sampler } = cornell_pass();
     let mut short = hits.clone();
     short.t.pop();
     let mut wrong_count = params;

@@ -108,10 +108,14 @@ fn whole_frame_matches_cpu_on_every_vulkan_device() {
         assert_eq!(frame.rays.pixel, expected.rays.pixel);
         assert!(compare(&scene, &frame.rays, &expected.hits, &frame.hits) >= MIN_AGREEMENT);
         assert_eq!(frame.timings.iter().map(|t| t.stage).collect::<Vec<_>>(), ["generate", "trace"]);
+        assert!(frame.timings.iter().all(|t| t.sanitized == 0), "{}: {:?}", device.name(), frame.timings);
         vulkan::assert_clean(&device);
     }
 }
 
+/// Rays that cannot be traced miss and are not occluded on every backend; the two that are not
+/// finite (a NaN origin, an infinite tmax) — not the zero direction or the empty interval — are
+/// counted as sanitized by both the closest-hit and the occlusion trace.
 #[test]
 fn untraceable_rays_miss_on_every_backend() {
     let scene = cornell();
@@ -125,12 +129,20 @@ fn untraceable_rays_miss_on_every_backend() {
     ];
     rays.direction =
         vec![ok_dir, glam::Vec4::new(0.0, 0.0, 0.0, 10.0), ok_dir, glam::Vec4::new(0.0, 0.0, 1.0, f32::INFINITY)];
-    let expected = cpu::trace(&CpuScene::build(&scene).unwrap(), &rays);
+    let mut cpu_backend = raywave::cpu::CpuBackend::new();
+    cpu_backend.load_scene(&scene).unwrap();
+    let (expected, report) = cpu_backend.trace(&rays).unwrap();
     assert!(expected.primitive.iter().all(|&p| p == NO_HIT));
+    assert_eq!(report.sanitized, 2, "cpu trace");
+    let (occluded, report) = cpu_backend.trace_occlusion(&rays).unwrap();
+    assert_eq!((occluded, report.sanitized), (vec![0; 4], 2), "cpu occlusion");
     for mut device in vulkan::every_device("untraceable rays") {
         device.load_scene(&scene).unwrap();
-        let (hits, _) = device.trace(&rays).unwrap();
+        let (hits, report) = device.trace(&rays).unwrap();
         assert_eq!(hits, expected);
+        assert_eq!(report.sanitized, 2, "{} trace", device.name());
+        let (occluded, report) = device.trace_occlusion(&rays).unwrap();
+        assert_eq!((occluded, report.sanitized), (vec![0; 4], 2), "{} occlusion", device.name());
         vulkan::assert_clean(&device);
     }
 }
@@ -188,13 +200,14 @@ fn occlusion_matches_cpu_on_every_vulkan_device() {
         d.w = 1.0;
     }
     let cpu_scene = CpuScene::build(&scene).unwrap();
-    let expected = cpu::trace_occlusion(&cpu_scene, &rays);
+    let (expected, sanitized) = cpu::trace_occlusion_counted(&cpu_scene, &rays);
+    assert_eq!(sanitized, 0);
     let blocked = expected.iter().filter(|&&o| o == 1).count();
     assert!(blocked > rays.len() / 10 && blocked < rays.len() * 9 / 10, "a mix of blocked and free rays ({blocked})");
     for mut device in vulkan::every_device("occlusion parity") {
         device.load_scene(&scene).unwrap();
-        let (occluded, timing) = device.trace_occlusion(&rays).unwrap();
-        assert_eq!(timing.stage, "occlusion");
+        let (occluded, report) = device.trace_occlusion(&rays).unwrap();
+        assert_eq!((report.stage, report.sanitized), ("occlusion", 0));
         assert!(occluded.iter().all(|&o| o <= 1));
         let agree = occluded.iter().zip(&expected).filter(|(a, b)| a == b).count();
         let agreement = agree as f64 / rays.len() as f64;

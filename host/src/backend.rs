@@ -9,13 +9,28 @@ use crate::stream::{HitStream, RayStream, ShadeStream};
 use glam::{UVec2, Vec4};
 use raywave_shared::{DenoiseParams, GenerateParams, SamplerProbeParams, ShadeParams, WarpParams};
 
-/// Time one stage took on a backend.
+/// What one run of a stage (or denoise pass) on a backend reports: its time, and how many of its
+/// invocations had to replace a non-finite value (DESIGN rule 5).
 #[derive(Clone, Debug, PartialEq)]
-pub struct StageTiming {
+pub struct StageReport {
     /// Stage name (`generate`, `trace`, …).
     pub stage: &'static str,
     /// Seconds: GPU timestamps on Vulkan, wall clock of the parallel loop on the CPU.
     pub seconds: f64,
+    /// Invocations that replaced a non-finite value — read (a NaN ray, a NaN hit record) or
+    /// computed (an overflowing sum) — so that nothing non-finite left the stage: rays or hits
+    /// for trace and occlusion, samples for shade, pixels for the composites; always 0 for the
+    /// stages and passes that cannot meet one (generate's parameters are checked, the denoiser's
+    /// inputs too). Sound input gives 0, which the tests assert; the same input gives the same
+    /// count on every backend.
+    pub sanitized: u64,
+}
+
+impl StageReport {
+    /// A report of `stage` that took `seconds` and sanitized nothing.
+    pub fn clean(stage: &'static str, seconds: f64) -> Self {
+        Self { stage, seconds, sanitized: 0 }
+    }
 }
 
 /// The result of one frame: the streams the last stage produced and the time of each stage.
@@ -26,7 +41,7 @@ pub struct FrameOutput {
     /// The closest hit of each ray.
     pub hits: HitStream,
     /// Per-stage timings in execution order.
-    pub timings: Vec<StageTiming>,
+    pub timings: Vec<StageReport>,
 }
 
 /// An execution backend: the CPU executor or a Vulkan device.
@@ -41,14 +56,14 @@ pub trait Backend {
     fn load_scene(&mut self, scene: &Scene) -> Result<()>;
 
     /// Runs the generate stage.
-    fn generate(&mut self, params: &GenerateParams) -> Result<(RayStream, StageTiming)>;
+    fn generate(&mut self, params: &GenerateParams) -> Result<(RayStream, StageReport)>;
 
     /// Runs the trace stage on `rays` against the loaded scene.
-    fn trace(&mut self, rays: &RayStream) -> Result<(HitStream, StageTiming)>;
+    fn trace(&mut self, rays: &RayStream) -> Result<(HitStream, StageReport)>;
 
     /// Runs the occlusion variant of the trace stage on `rays`: 1 per ray blocked within its
     /// interval, 0 otherwise (shadow rays).
-    fn trace_occlusion(&mut self, rays: &RayStream) -> Result<(Vec<u32>, StageTiming)>;
+    fn trace_occlusion(&mut self, rays: &RayStream) -> Result<(Vec<u32>, StageReport)>;
 
     /// Runs the shade stage: resolves each camera ray's hit (`rays[i]`, `hits[i]`, pixel `i` of a
     /// `params.width`-wide image) into a surface of `data`'s scene and shades one sample of it.
@@ -61,7 +76,7 @@ pub trait Backend {
         data: &ShadeData,
         rays: &RayStream,
         hits: &HitStream,
-    ) -> Result<(ShadeStream, StageTiming)>;
+    ) -> Result<(ShadeStream, StageReport)>;
 
     /// Runs denoiser `method` on `input` (a `params.width × params.height` image): every pass
     /// on this backend. Returns the colour image (rgb; w = 1) and each pass's time.
@@ -70,7 +85,7 @@ pub trait Backend {
         method: DenoiseMethod,
         params: &DenoiseParams,
         input: &DenoiseInput,
-    ) -> Result<(Vec<Vec4>, Vec<StageTiming>)>;
+    ) -> Result<(Vec<Vec4>, Vec<StageReport>)>;
 
     /// Runs generate → trace as one frame, keeping the ray stream on the backend in between.
     fn render(&mut self, params: &GenerateParams) -> Result<FrameOutput>;

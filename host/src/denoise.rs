@@ -123,6 +123,12 @@ impl DenoisePass {
         }
     }
 
+    /// Whether the pass is a composite: a denoiser's last pass, its stage boundary, and the only
+    /// pass that counts sanitized values ([`crate::backend::StageReport::sanitized`]).
+    pub fn is_composite(self) -> bool {
+        matches!(self, Self::Composite | Self::SvgfComposite)
+    }
+
     /// Bytes the pass must move per pixel: each buffer it reads or writes, once (neighbourhood
     /// taps are assumed to hit the cache or, for the bilateral passes, workgroup memory). `Vec4`
     /// buffers are 16 bytes, the noise 4.

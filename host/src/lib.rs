@@ -19,7 +19,7 @@ pub mod visualize;
 #[cfg(feature = "vulkan")]
 pub mod vulkan;
 
-pub use backend::{Backend, FrameOutput, StageTiming};
+pub use backend::{Backend, FrameOutput, StageReport};
 pub use device::{open_backend, BackendOptions, DeviceChoice, TraceMethod};
 pub use error::{Error, Result};
 pub use scene::Scene;

@@ -2,7 +2,7 @@
 //! LTC table, triangles by (instance, primitive)), the CPU executor over the kernels' stage
 //! functions, and the per-pixel accumulation of `U`, `U_N`, `S_N` for the ratio estimator.
 
-use crate::backend::{Backend, StageTiming};
+use crate::backend::{Backend, StageReport};
 use crate::error::{Error, Result};
 use crate::lights::{wants_bvh, LightBvh};
 use crate::scene::{Material, Scene};
@@ -207,11 +207,13 @@ pub fn resolve(data: &ShadeData, rays: &RayStream, hits: &HitStream) -> Vec<Surf
 
 /// The shade stage on the CPU: one record of the kernels' `shade_sample` per camera ray (ray `i`
 /// is pixel `i`), written field by field into a [`ShadeStream`] — what the Vulkan entry point
-/// writes into its five output buffers. Panics, like slice indexing, if `rays` holds fewer rays
-/// than `surfaces` ([`Backend::shade`] checks its streams and `data` first).
-pub fn shade(params: &ShadeParams, data: &ShadeData, rays: &RayStream, surfaces: &[Surface]) -> ShadeStream {
+/// writes into its five output buffers — and the count of samples that replaced a non-finite
+/// value ([`crate::backend::StageReport::sanitized`]). Panics, like slice indexing, if `rays`
+/// holds fewer rays than `surfaces` ([`Backend::shade`] checks its streams and `data` first).
+pub fn shade(params: &ShadeParams, data: &ShadeData, rays: &RayStream, surfaces: &[Surface]) -> (ShadeStream, u64) {
     let scene = data.view_for(params);
     let width = params.width.max(1);
+    let sanitized = AtomicU64::new(0);
     let mut out = ShadeStream::zeroed(surfaces.len());
     (&mut out.analytic, &mut out.unshadowed, &mut out.emitted, &mut out.shadow_origin, &mut out.shadow_direction)
         .into_par_iter()
@@ -219,10 +221,13 @@ pub fn shade(params: &ShadeParams, data: &ShadeData, rays: &RayStream, surfaces:
         .for_each(|(i, (analytic, unshadowed, emitted, shadow_origin, shadow_direction))| {
             let pixel = UVec2::new(i as u32 % width, i as u32 / width);
             let s = shade_sample(params, pixel, rays.direction[i].xyz(), &surfaces[i], &scene);
+            if s.replaced {
+                sanitized.fetch_add(1, Ordering::Relaxed);
+            }
             (*analytic, *unshadowed, *emitted) = (s.analytic, s.unshadowed, s.emitted);
             (*shadow_origin, *shadow_direction) = (s.shadow_origin, s.shadow_direction);
         });
-    out
+    (out, sanitized.into_inner())
 }
 
 /// Shadow rays of a pass's shade stream, ready for the occlusion trace (ray `i` is pixel `i`).
@@ -239,6 +244,8 @@ pub fn shadow_rays(shades: &ShadeStream) -> RayStream {
 #[derive(Clone, Debug, Default)]
 pub struct ShadeAccumulator {
     samples: u32,
+    /// Samples and shadow rays the passes' stages sanitized ([`StageReport::sanitized`]).
+    sanitized: u64,
     /// Σ analytic `U` (the same every sample; averaged for robustness).
     analytic: Vec<Vec3>,
     /// Σ `U_N` contributions.
@@ -253,7 +260,14 @@ impl ShadeAccumulator {
     /// An empty accumulator for `pixels` pixels.
     pub fn new(pixels: usize) -> Self {
         let zero = vec![Vec3::ZERO; pixels];
-        Self { samples: 0, analytic: zero.clone(), unshadowed: zero.clone(), shadowed: zero.clone(), emitted: zero }
+        Self {
+            samples: 0,
+            sanitized: 0,
+            analytic: zero.clone(),
+            unshadowed: zero.clone(),
+            shadowed: zero.clone(),
+            emitted: zero,
+        }
     }
 
     /// Runs one shade pass on `backend` — shade `rays`/`hits`, trace the shadow rays for
@@ -266,11 +280,12 @@ impl ShadeAccumulator {
         data: &ShadeData,
         rays: &RayStream,
         hits: &HitStream,
-    ) -> Result<([StageTiming; 2], u64)> {
+    ) -> Result<([StageReport; 2], u64)> {
         let (shades, shade_time) = backend.shade(params, data, rays, hits)?;
         let shadow_rays = shadow_rays(&shades);
         let (occluded, occlusion_time) = backend.trace_occlusion(&shadow_rays)?;
         self.add(&shades, &occluded)?;
+        self.sanitized += shade_time.sanitized + occlusion_time.sanitized;
         let bytes = shades.bytes() + std::mem::size_of_val(occluded.as_slice()) as u64 + shadow_rays.bytes();
         Ok(([shade_time, occlusion_time], bytes))
     }
@@ -299,6 +314,12 @@ impl ShadeAccumulator {
             self.emitted[i] += e.xyz();
         }
         Ok(())
+    }
+
+    /// Values the stages of this accumulator's [`Self::shade_pass`]es sanitized — shade samples
+    /// and shadow rays that went non-finite ([`StageReport::sanitized`]); 0 on sound input.
+    pub fn sanitized(&self) -> u64 {
+        self.sanitized
     }
 
     /// Samples (shade passes) added so far: the `N` of `U_N` and `S_N`.
@@ -334,7 +355,7 @@ impl ShadeAccumulator {
     /// The ratio estimator's image: `emitted + U · S_N / U_N` (fallback `U` where `U_N ≈ 0`).
     pub fn ratio_image(&self) -> Vec<Vec3> {
         let (u, u_n, s_n, e) = (self.analytic(), self.unshadowed(), self.shadowed(), self.emitted());
-        (0..u.len()).map(|i| composite(u[i], u_n[i], s_n[i], e[i])).collect()
+        (0..u.len()).map(|i| composite(u[i], u_n[i], s_n[i], e[i]).value).collect()
     }
 
     /// The fully stochastic image: `emitted + S_N`.
@@ -367,7 +388,8 @@ mod tests {
         let rays = crate::cpu::generate(&params);
         let hits = crate::cpu::trace(&crate::cpu::CpuScene::build(&scene).unwrap(), &rays);
         let shade_params = data.params(params.sampler, 9, 7, 0);
-        let shades = shade(&shade_params, &data, &rays, &resolve(&data, &rays, &hits));
+        let (shades, sanitized) = shade(&shade_params, &data, &rays, &resolve(&data, &rays, &hits));
+        assert_eq!(sanitized, 0);
         assert_eq!(shades.len(), 63);
         assert_eq!(shades.bytes(), 63 * 80);
         let lit = shades.analytic.iter().filter(|u| u.max_element() > 0.0).count();

@@ -15,15 +15,35 @@ pub fn stream_index(global_id: UVec3, num_workgroups: UVec3) -> u32 {
     global_id.y * num_workgroups.x * WORKGROUP_SIZE + global_id.x
 }
 
+/// Counts one invocation that replaced a non-finite value in its stage's counter (DESIGN rule 5,
+/// [`crate::sanitized`]): element 0 of a one-`u32` storage buffer the host zeroes and reads back.
+fn count_replaced(counter: &mut [u32]) {
+    use spirv_std::memory::{Scope, Semantics};
+    // SAFETY: an atomic increment of a storage-buffer `u32` the host bound for this purpose;
+    // relaxed (no ordering needed: the host reads it after the dispatch completes). Queue-family
+    // scope covers every invocation of the dispatch; device scope would need the
+    // `VulkanMemoryModelDeviceScope` capability under the Vulkan memory model rust-gpu emits.
+    unsafe {
+        spirv_std::arch::atomic_i_increment::<u32, { Scope::QueueFamily as u32 }, { Semantics::NONE.bits() }>(
+            &mut counter[0],
+        );
+    }
+}
+
 /// Writes `hit` into the four hit-stream fields at index `i`.
 fn store_hit(
     i: usize,
-    hit: crate::trace::Hit,
+    hit: crate::sanitized::Sanitized<crate::trace::Hit>,
     hit_t: &mut [f32],
     hit_primitive: &mut [u32],
     hit_instance: &mut [u32],
     hit_barycentrics: &mut [glam::Vec2],
+    replaced: &mut [u32],
 ) {
+    if hit.replaced {
+        count_replaced(replaced);
+    }
+    let hit = hit.value;
     hit_t[i] = hit.t;
     hit_primitive[i] = hit.primitive;
     hit_instance[i] = hit.instance;
@@ -77,6 +97,14 @@ pub fn warp_probe(
     }
 }
 
+/// Writes an occlusion result (1 = blocked) at index `i`, counting a replaced ray.
+fn store_occlusion(i: usize, blocked: crate::sanitized::Sanitized<bool>, occluded: &mut [u32], replaced: &mut [u32]) {
+    if blocked.replaced {
+        count_replaced(replaced);
+    }
+    occluded[i] = u32::from(blocked.value);
+}
+
 /// Entry point of the trace stage with software CWBVH traversal: needs no ray-tracing extension.
 #[spirv(compute(threads(64)))]
 #[allow(clippy::too_many_arguments)]
@@ -93,12 +121,13 @@ pub fn trace_cwbvh(
     #[spirv(storage_buffer, descriptor_set = 0, binding = 6)] hit_barycentrics: &mut [glam::Vec2],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 7)] vertices: &[Vec4],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 8)] ids: &[glam::UVec2],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 9)] replaced: &mut [u32],
 ) {
     let i = stream_index(global_id, num_workgroups) as usize;
     if i < params.ray_count as usize {
         let scene = crate::trace::cwbvh::CwBvhScene { nodes, vertices, ids };
         let hit = crate::trace::trace_closest(ray_origin[i], ray_direction[i], &scene);
-        store_hit(i, hit, hit_t, hit_primitive, hit_instance, hit_barycentrics);
+        store_hit(i, hit, hit_t, hit_primitive, hit_instance, hit_barycentrics, replaced);
     }
 }
 
@@ -118,12 +147,13 @@ pub fn trace_ray_query(
     #[spirv(storage_buffer, descriptor_set = 0, binding = 4)] hit_primitive: &mut [u32],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 5)] hit_instance: &mut [u32],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 6)] hit_barycentrics: &mut [glam::Vec2],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 9)] replaced: &mut [u32],
 ) {
     let i = stream_index(global_id, num_workgroups) as usize;
     if i < params.ray_count as usize {
         let scene = crate::trace::ray_query::RayQueryScene { tlas };
         let hit = crate::trace::trace_closest(ray_origin[i], ray_direction[i], &scene);
-        store_hit(i, hit, hit_t, hit_primitive, hit_instance, hit_barycentrics);
+        store_hit(i, hit, hit_t, hit_primitive, hit_instance, hit_barycentrics, replaced);
     }
 }
 
@@ -144,8 +174,10 @@ pub fn trace_raygen(
     #[spirv(storage_buffer, descriptor_set = 0, binding = 4)] hit_primitive: &mut [u32],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 5)] hit_instance: &mut [u32],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 6)] hit_barycentrics: &mut [glam::Vec2],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 9)] replaced: &mut [u32],
     #[spirv(ray_payload)] payload: &mut crate::trace::Hit,
 ) {
+    use crate::sanitized::Sanitized;
     use crate::trace::{sanitize, Hit, Ray};
     let i = (launch_id.y * launch_size.x + launch_id.x) as usize;
     if i < params.ray_count as usize {
@@ -170,9 +202,9 @@ pub fn trace_raygen(
             }
             sanitize(*payload)
         } else {
-            Hit::MISS
+            Sanitized { value: Hit::MISS, replaced: !ray.is_finite() }
         };
-        store_hit(i, hit, hit_t, hit_primitive, hit_instance, hit_barycentrics);
+        store_hit(i, hit, hit_t, hit_primitive, hit_instance, hit_barycentrics, replaced);
     }
 }
 
@@ -209,11 +241,12 @@ pub fn occlusion_cwbvh(
     #[spirv(storage_buffer, descriptor_set = 0, binding = 3)] occluded: &mut [u32],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 7)] vertices: &[Vec4],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 8)] ids: &[glam::UVec2],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 9)] replaced: &mut [u32],
 ) {
     let i = stream_index(global_id, num_workgroups) as usize;
     if i < params.ray_count as usize {
         let scene = crate::trace::cwbvh::CwBvhScene { nodes, vertices, ids };
-        occluded[i] = u32::from(crate::trace::trace_occluded(ray_origin[i], ray_direction[i], &scene));
+        store_occlusion(i, crate::trace::trace_occluded(ray_origin[i], ray_direction[i], &scene), occluded, replaced);
     }
 }
 
@@ -228,11 +261,12 @@ pub fn occlusion_ray_query(
     #[spirv(storage_buffer, descriptor_set = 0, binding = 1)] ray_origin: &[Vec4],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 2)] ray_direction: &[Vec4],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 3)] occluded: &mut [u32],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 9)] replaced: &mut [u32],
 ) {
     let i = stream_index(global_id, num_workgroups) as usize;
     if i < params.ray_count as usize {
         let scene = crate::trace::ray_query::RayQueryScene { tlas };
-        occluded[i] = u32::from(crate::trace::trace_occluded(ray_origin[i], ray_direction[i], &scene));
+        store_occlusion(i, crate::trace::trace_occluded(ray_origin[i], ray_direction[i], &scene), occluded, replaced);
     }
 }
 
@@ -250,6 +284,7 @@ pub fn occlusion_raygen(
     #[spirv(storage_buffer, descriptor_set = 0, binding = 1)] ray_origin: &[Vec4],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 2)] ray_direction: &[Vec4],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 3)] occluded: &mut [u32],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 9)] replaced: &mut [u32],
     #[spirv(ray_payload)] payload: &mut u32,
 ) {
     use spirv_std::ray_tracing::RayFlags;
@@ -264,6 +299,9 @@ pub fn occlusion_raygen(
             unsafe {
                 tlas.trace_ray(flags, 0xff, 0, 0, 0, ray.origin, ray.tmin, ray.direction, ray.tmax, payload);
             }
+        }
+        if !ray.is_finite() {
+            count_replaced(replaced);
         }
         occluded[i] = *payload;
     }
@@ -302,6 +340,7 @@ pub fn shade(
     #[spirv(storage_buffer, descriptor_set = 0, binding = 14)] emitted: &mut [Vec4],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 15)] shadow_origin: &mut [Vec4],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 16)] shadow_direction: &mut [Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 17)] replaced: &mut [u32],
 ) {
     let i = stream_index(global_id, num_workgroups);
     if i < params.count {
@@ -330,6 +369,9 @@ pub fn shade(
         let width = if params.width > 0 { params.width } else { 1 };
         let pixel = glam::UVec2::new(i % width, i / width);
         let s = crate::shade::stage::shade_sample(params, pixel, direction, &surface, &scene);
+        if s.replaced {
+            count_replaced(replaced);
+        }
         analytic[k] = s.analytic;
         unshadowed[k] = s.unshadowed;
         emitted[k] = s.emitted;
@@ -345,6 +387,14 @@ fn denoise_pixel(params: &raywave_shared::DenoiseParams, i: u32) -> Option<glam:
     } else {
         None
     }
+}
+
+/// Writes a composite's colour (w = 1) at index `k`, counting a replaced one.
+fn store_color(k: usize, c: crate::sanitized::Sanitized<glam::Vec3>, color: &mut [Vec4], replaced: &mut [u32]) {
+    if c.replaced {
+        count_replaced(replaced);
+    }
+    color[k] = c.value.extend(1.0);
 }
 
 /// Entry point of the denoisers' ratio pass: `S_N/U_N` per pixel (one invocation per pixel).
@@ -501,6 +551,7 @@ pub fn denoise_composite(
     #[spirv(storage_buffer, descriptor_set = 0, binding = 2)] shadowed: &[Vec4],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 3)] unshadowed: &[Vec4],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 4)] color: &mut [Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 5)] replaced: &mut [u32],
 ) {
     use glam::Vec4Swizzles;
     let i = stream_index(global_id, num_workgroups);
@@ -508,7 +559,7 @@ pub fn denoise_composite(
         let k = i as usize;
         let c =
             crate::shade::stage::composite(analytic[k].xyz(), unshadowed[k].xyz(), shadowed[k].xyz(), emitted[k].xyz());
-        color[k] = c.extend(1.0);
+        store_color(k, c, color, replaced);
     }
 }
 
@@ -550,6 +601,7 @@ pub fn svgf_atrous(
 /// Entry point of the SVGF baseline's composite `emitted + U · den(ratio)` (one invocation per
 /// pixel).
 #[spirv(compute(threads(64)))]
+#[allow(clippy::too_many_arguments)]
 pub fn svgf_composite(
     #[spirv(global_invocation_id)] global_id: UVec3,
     #[spirv(num_workgroups)] num_workgroups: UVec3,
@@ -558,13 +610,14 @@ pub fn svgf_composite(
     #[spirv(storage_buffer, descriptor_set = 0, binding = 1)] emitted: &[Vec4],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 2)] ratio: &[Vec4],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 3)] color: &mut [Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 4)] replaced: &mut [u32],
 ) {
     use glam::Vec4Swizzles;
     let i = stream_index(global_id, num_workgroups);
     if denoise_pixel(params, i).is_some() {
         let k = i as usize;
         let c = crate::shade::stage::apply_visibility(analytic[k].xyz(), ratio[k].xyz(), emitted[k].xyz());
-        color[k] = c.extend(1.0);
+        store_color(k, c, color, replaced);
     }
 }
 

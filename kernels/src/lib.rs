@@ -16,6 +16,7 @@ pub mod generate;
 pub mod hash;
 pub mod offset;
 pub mod sampling;
+pub mod sanitized;
 pub mod shade;
 pub mod trace;
 pub mod triangle;

@@ -50,6 +50,10 @@ pub mod trace {
     pub const TRIANGLE_VERTICES: u32 = 7;
     /// Input, software traversal: (instance, primitive) per triangle in BVH order (`UVec2`).
     pub const TRIANGLE_IDS: u32 = 8;
+    /// Output, closest-hit and occlusion traces: the count of rays or hits the stage replaced
+    /// because they were not finite (one `u32`, zeroed by the host, atomically incremented;
+    /// DESIGN rule 5).
+    pub const REPLACED: u32 = 9;
 }
 
 /// Bindings of the sampling probes (set 0), which expose the sampler and the warps as streams for
@@ -96,10 +100,15 @@ pub mod shade {
     pub const SHADOW_ORIGIN: u32 = 15;
     /// Output: shadow-ray directions (`Vec4`, w = tmax; 0 = no ray).
     pub const SHADOW_DIRECTION: u32 = 16;
+    /// Output: the count of samples in which the stage replaced a non-finite value (one `u32`, as
+    /// [`super::trace::REPLACED`]).
+    pub const REPLACED: u32 = 17;
 }
 
 /// Bindings of the denoise passes (set 0): every pass binds storage buffers `0..n` in the order
 /// its entry point (`raywave_kernels::entry::denoise_*`, `svgf_*`) lists; these are the counts.
+/// The two composites, the denoisers' last passes, end with the count of colours they replaced
+/// because they were not finite (one `u32`, as [`trace::REPLACED`]).
 pub mod denoise {
     /// `denoise_ratio`: `S_N`, `U_N` in; ratio (`Vec4`) out.
     pub const RATIO: u32 = 3;
@@ -109,12 +118,12 @@ pub mod denoise {
     pub const NOISE_BLUR: u32 = 2;
     /// `denoise_bilateral`: position, normal, noise, `S_N`, `U_N` in; filtered `S_N`, `U_N` out.
     pub const BILATERAL: u32 = 7;
-    /// `denoise_composite`: `U`, emitted, `S_N`, `U_N` in; colour out.
-    pub const COMPOSITE: u32 = 5;
+    /// `denoise_composite`: `U`, emitted, `S_N`, `U_N` in; colour and replaced count out.
+    pub const COMPOSITE: u32 = 6;
     /// `svgf_variance`: ratio, position, normal in; ratio and variance out.
     pub const SVGF_VARIANCE: u32 = 4;
     /// `svgf_atrous`: ratio and variance, position, normal in; filtered ratio and variance out.
     pub const SVGF_ATROUS: u32 = 4;
-    /// `svgf_composite`: `U`, emitted, ratio in; colour out.
-    pub const SVGF_COMPOSITE: u32 = 4;
+    /// `svgf_composite`: `U`, emitted, ratio in; colour and replaced count out.
+    pub const SVGF_COMPOSITE: u32 = 5;
 }

@@ -135,6 +135,15 @@ pub struct PreparedScene {
     pub denoise_radius: u32,
 }
 
+/// One frame of every method ([`PreparedScene::frame`]).
+pub struct MethodFrames {
+    /// Each method's image and its milliseconds, in [`METHODS`] order.
+    pub images: Vec<(Vec<Vec3>, f64)>,
+    /// Values the frame's stages sanitized — the G-buffer's trace, the shade passes, the
+    /// denoisers' composites ([`crate::StageReport::sanitized`]); 0 on sound input.
+    pub sanitized: u64,
+}
+
 impl PreparedScene {
     /// Loads `scene` into `backend` and traces its G-buffer.
     pub fn new(backend: &mut dyn Backend, scene: &Scene, resolution: u32) -> Result<Self> {
@@ -154,9 +163,10 @@ impl PreparedScene {
     }
 
     /// One frame at `spp` samples with sampler seed `seed`: every method's image and its
-    /// milliseconds, in [`METHODS`] order.
-    pub fn frame(&self, backend: &mut dyn Backend, spp: u32, seed: u32) -> Result<Vec<(Vec<Vec3>, f64)>> {
+    /// milliseconds, in [`METHODS`] order, and what its stages sanitized.
+    pub fn frame(&self, backend: &mut dyn Backend, spp: u32, seed: u32) -> Result<MethodFrames> {
         let (run, shade_seconds) = accumulate(backend, &self.gbuffer, &self.data, self.resolution, spp, seed)?;
+        let mut sanitized = self.gbuffer.sanitized + run.sanitized();
         let base_ms = 1e3 * (self.gbuffer.seconds + shade_seconds);
         let input = DenoiseInput::new(&self.surfaces, &run);
         let params = DenoiseParams {
@@ -166,16 +176,18 @@ impl PreparedScene {
         };
         let mut denoised = |method, input: &DenoiseInput| -> Result<(Vec<Vec3>, f64)> {
             let (color, timings) = backend.denoise(method, &params, input)?;
+            sanitized += timings.iter().map(|t| t.sanitized).sum::<u64>();
             Ok((rgb(&color), base_ms + 1e3 * timings.iter().map(|t| t.seconds).sum::<f64>()))
         };
         let stochastic = input.stochastic();
-        Ok(vec![
+        let images = vec![
             denoised(DenoiseMethod::None, &stochastic)?,
             denoised(DenoiseMethod::Tv, &stochastic)?,
             denoised(DenoiseMethod::None, &input)?,
             denoised(DenoiseMethod::Tv, &input)?,
             denoised(DenoiseMethod::Svgf, &input)?,
-        ])
+        ];
+        Ok(MethodFrames { images, sanitized })
     }
 
     /// Every method's error against `reference` and time at `spp` samples, in [`METHODS`]
@@ -190,7 +202,7 @@ impl PreparedScene {
         let regions = ShadowRegions::new(&self.analytic, reference);
         let mut sums = [MethodError::default(); METHODS.len()];
         for &seed in seeds {
-            for (sum, (image, ms)) in sums.iter_mut().zip(self.frame(backend, spp, seed)?) {
+            for (sum, (image, ms)) in sums.iter_mut().zip(self.frame(backend, spp, seed)?.images) {
                 sum.relmse += relmse(&image, reference);
                 sum.relmse_shadow += relmse_part(&image, reference, &regions.shadow);
                 sum.relmse_lit += relmse_part(&image, reference, &regions.lit);

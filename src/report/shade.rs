@@ -62,6 +62,8 @@ pub struct GBuffer {
     hits: crate::HitStream,
     /// Seconds the backend took to generate and trace the camera rays.
     pub seconds: f64,
+    /// Rays or hits the trace sanitized ([`crate::StageReport::sanitized`]).
+    pub sanitized: u64,
 }
 
 impl GBuffer {
@@ -70,7 +72,8 @@ impl GBuffer {
         let sampler = sampler_params(sampler_kind::ZSOBOL, 0, resolution, resolution, 1);
         let frame = backend.render(&generate_params_with(scene, resolution, resolution, 0, sampler))?;
         let seconds = frame.timings.iter().map(|t| t.seconds).sum();
-        Ok(Self { rays: frame.rays, hits: frame.hits, seconds })
+        let sanitized = frame.timings.iter().map(|t| t.sanitized).sum();
+        Ok(Self { rays: frame.rays, hits: frame.hits, seconds, sanitized })
     }
 
     /// The surface each pixel's camera ray hit (the denoiser's G-buffer).

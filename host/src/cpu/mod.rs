@@ -8,7 +8,7 @@ pub use bvh::{BvhQuality, CpuScene, TraversalIsa};
 
 use crate::backend::{
     check_generate_params, check_image_size_common, check_shade_inputs, sampler_probe_len, warp_probe_len, Backend,
-    FrameOutput, StageTiming,
+    FrameOutput, StageReport,
 };
 use crate::denoise::{DenoiseInput, DenoiseMethod};
 use crate::error::{Error, Result};
@@ -18,11 +18,13 @@ use crate::stream::{HitStream, RayStream, ShadeStream};
 use glam::{UVec2, Vec4};
 use rayon::prelude::*;
 use raywave_kernels::sampling::probe;
+use raywave_kernels::sanitized::Sanitized;
 use raywave_kernels::{
     generate::generate_ray,
     trace::{trace_closest, trace_occluded},
 };
 use raywave_shared::{DenoiseParams, GenerateParams, SamplerProbeParams, ShadeParams, WarpParams};
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Instant;
 
 /// Largest image the CPU backend accepts: 2²⁶ pixels (≈ 3.8 GB of ray and hit streams).
@@ -60,32 +62,56 @@ pub fn generate(params: &GenerateParams) -> RayStream {
     rays
 }
 
-/// Runs the trace stage over every ray of `rays`.
-pub fn trace(scene: &CpuScene, rays: &RayStream) -> HitStream {
+/// Runs the trace stage over every ray of `rays`: the hit stream and how many rays or hits were
+/// not finite and became misses ([`StageReport::sanitized`]).
+pub fn trace_counted(scene: &CpuScene, rays: &RayStream) -> (HitStream, u64) {
     let mut hits = HitStream::zeroed(rays.len());
+    let sanitized = AtomicU64::new(0);
     (&mut hits.t, &mut hits.primitive, &mut hits.instance, &mut hits.barycentrics)
         .into_par_iter()
         .zip((&rays.origin, &rays.direction).into_par_iter())
         .for_each(|((t, primitive, instance, barycentrics), (origin, direction))| {
-            let hit = trace_closest(*origin, *direction, scene);
+            let hit = count(trace_closest(*origin, *direction, scene), &sanitized);
             (*t, *primitive, *instance, *barycentrics) = (hit.t, hit.primitive, hit.instance, hit.barycentrics);
         });
-    hits
+    (hits, sanitized.into_inner())
+}
+
+/// The hit stream of [`trace_counted`] alone.
+pub fn trace(scene: &CpuScene, rays: &RayStream) -> HitStream {
+    trace_counted(scene, rays).0
 }
 
 /// Runs the occlusion variant of the trace stage (shadow rays) over every ray of `rays`: 1 where
-/// the ray is blocked within its interval, 0 where it is not.
-pub fn trace_occlusion(scene: &CpuScene, rays: &RayStream) -> Vec<u32> {
-    (&rays.origin, &rays.direction)
+/// the ray is blocked within its interval, 0 where it is not; and how many rays were not finite
+/// (reported unblocked).
+pub fn trace_occlusion_counted(scene: &CpuScene, rays: &RayStream) -> (Vec<u32>, u64) {
+    let sanitized = AtomicU64::new(0);
+    let occluded = (&rays.origin, &rays.direction)
         .into_par_iter()
-        .map(|(origin, direction)| u32::from(trace_occluded(*origin, *direction, scene)))
-        .collect()
+        .map(|(origin, direction)| u32::from(count(trace_occluded(*origin, *direction, scene), &sanitized)))
+        .collect();
+    (occluded, sanitized.into_inner())
 }
 
-fn timed<T>(stage: &'static str, f: impl FnOnce() -> T) -> (T, StageTiming) {
+/// The occlusion results of [`trace_occlusion_counted`] alone.
+pub fn trace_occlusion(scene: &CpuScene, rays: &RayStream) -> Vec<u32> {
+    trace_occlusion_counted(scene, rays).0
+}
+
+/// The value of an invocation's result, adding it to `sanitized` if it replaced a non-finite value.
+fn count<T>(result: Sanitized<T>, sanitized: &AtomicU64) -> T {
+    if result.replaced {
+        sanitized.fetch_add(1, Ordering::Relaxed);
+    }
+    result.value
+}
+
+/// Runs `f`, which returns a value and its sanitized count, and reports both with its time.
+fn timed<T>(stage: &'static str, f: impl FnOnce() -> (T, u64)) -> (T, StageReport) {
     let start = Instant::now();
-    let value = f();
-    (value, StageTiming { stage, seconds: start.elapsed().as_secs_f64() })
+    let (value, sanitized) = f();
+    (value, StageReport { stage, seconds: start.elapsed().as_secs_f64(), sanitized })
 }
 
 impl Backend for CpuBackend {
@@ -102,22 +128,22 @@ impl Backend for CpuBackend {
         Ok(())
     }
 
-    fn generate(&mut self, params: &GenerateParams) -> Result<(RayStream, StageTiming)> {
+    fn generate(&mut self, params: &GenerateParams) -> Result<(RayStream, StageReport)> {
         self.check_image_size(params.width, params.height)?;
         check_generate_params(params)?;
-        Ok(timed("generate", || generate(params)))
+        Ok(timed("generate", || (generate(params), 0)))
     }
 
-    fn trace(&mut self, rays: &RayStream) -> Result<(HitStream, StageTiming)> {
+    fn trace(&mut self, rays: &RayStream) -> Result<(HitStream, StageReport)> {
         rays.check("trace")?;
         let scene = self.scene()?;
-        Ok(timed("trace", || trace(scene, rays)))
+        Ok(timed("trace", || trace_counted(scene, rays)))
     }
 
-    fn trace_occlusion(&mut self, rays: &RayStream) -> Result<(Vec<u32>, StageTiming)> {
+    fn trace_occlusion(&mut self, rays: &RayStream) -> Result<(Vec<u32>, StageReport)> {
         rays.check("trace_occlusion")?;
         let scene = self.scene()?;
-        Ok(timed("occlusion", || trace_occlusion(scene, rays)))
+        Ok(timed("occlusion", || trace_occlusion_counted(scene, rays)))
     }
 
     fn shade(
@@ -126,7 +152,7 @@ impl Backend for CpuBackend {
         data: &ShadeData,
         rays: &RayStream,
         hits: &HitStream,
-    ) -> Result<(ShadeStream, StageTiming)> {
+    ) -> Result<(ShadeStream, StageReport)> {
         check_shade_inputs(params, rays, hits)?;
         data.check()?;
         Ok(timed("shade", || {
@@ -146,7 +172,7 @@ impl Backend for CpuBackend {
         method: DenoiseMethod,
         params: &DenoiseParams,
         input: &DenoiseInput,
-    ) -> Result<(Vec<Vec4>, Vec<StageTiming>)> {
+    ) -> Result<(Vec<Vec4>, Vec<StageReport>)> {
         input.check(params)?;
         Ok(denoise::denoise(method, params, input))
     }

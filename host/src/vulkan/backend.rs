@@ -10,7 +10,7 @@ use super::pass::Resource;
 use super::rt_pipeline::{RtPipelineKernel, CLOSEST_HIT_SHADERS, OCCLUSION_SHADERS};
 use crate::backend::{
     check_generate_params, check_image_size_common, check_shade_inputs, sampler_probe_len, warp_probe_len, Backend,
-    FrameOutput, StageTiming,
+    FrameOutput, StageReport,
 };
 use crate::cpu::CpuScene;
 use crate::denoise::{DenoiseInput, DenoiseMethod};
@@ -230,8 +230,9 @@ pub struct VulkanBackend {
 }
 
 /// Descriptor layout of a trace kernel for `method` writing `outputs` (binding numbers from
-/// `raywave_shared`): the scene at binding 0, the rays, the outputs, and for software traversal
-/// the triangle buffers. [`VulkanBackend::run_trace_kernel`] binds resources in this order.
+/// `raywave_shared`): the scene at binding 0, the rays, the outputs, for software traversal the
+/// triangle buffers, and the sanitized counter. [`VulkanBackend::run_trace_kernel`] binds
+/// resources in this order.
 fn trace_bindings(method: TraceMethod, outputs: &[u32]) -> Vec<(u32, vk::DescriptorType)> {
     let storage = vk::DescriptorType::STORAGE_BUFFER;
     let scene = match method {
@@ -246,6 +247,7 @@ fn trace_bindings(method: TraceMethod, outputs: &[u32]) -> Vec<(u32, vk::Descrip
         layout.push((bindings::trace::TRIANGLE_VERTICES, storage));
         layout.push((bindings::trace::TRIANGLE_IDS, storage));
     }
+    layout.push((bindings::trace::REPLACED, storage));
     layout
 }
 
@@ -261,7 +263,7 @@ const HIT_OUTPUTS: [u32; 4] = [
 const OCCLUSION_OUTPUTS: [u32; 1] = [bindings::occlusion::OCCLUDED];
 
 /// Bindings of the shade stage, in the order [`VulkanBackend::shade`] binds its resources.
-const SHADE_BINDINGS: [u32; 17] = [
+const SHADE_BINDINGS: [u32; 18] = [
     bindings::shade::RAY_DIRECTION,
     bindings::shade::HIT_T,
     bindings::shade::HIT_PRIMITIVE,
@@ -279,6 +281,7 @@ const SHADE_BINDINGS: [u32; 17] = [
     bindings::shade::EMITTED,
     bindings::shade::SHADOW_ORIGIN,
     bindings::shade::SHADOW_DIRECTION,
+    bindings::shade::REPLACED,
 ];
 
 impl VulkanBackend {
@@ -389,7 +392,7 @@ impl VulkanBackend {
         by_buffer.min(by_grid).min(u64::from(u32::MAX))
     }
 
-    fn generate_on_device(&self, params: &GenerateParams) -> Result<(DeviceRays, StageTiming)> {
+    fn generate_on_device(&self, params: &GenerateParams) -> Result<(DeviceRays, StageReport)> {
         self.check_image_size(params.width, params.height)?;
         check_generate_params(params)?;
         let rays = DeviceRays::new(&self.core, params.ray_count())?;
@@ -398,12 +401,18 @@ impl VulkanBackend {
             bytemuck::bytes_of(params),
             rays.len,
         )?;
-        Ok((rays, StageTiming { stage: "generate", seconds }))
+        Ok((rays, StageReport::clean("generate", seconds)))
     }
 
     /// Runs `kernel` over `rays` with `outputs` bound after the rays (layout of
-    /// [`trace_bindings`]); returns its duration in seconds.
-    fn run_trace_kernel(&self, kernel: &TraceKernel, rays: &DeviceRays, outputs: &[&GpuBuffer]) -> Result<f64> {
+    /// [`trace_bindings`]); returns its report as `stage`.
+    fn run_trace_kernel(
+        &self,
+        stage: &'static str,
+        kernel: &TraceKernel,
+        rays: &DeviceRays,
+        outputs: &[&GpuBuffer],
+    ) -> Result<StageReport> {
         let scene = self
             .scene
             .as_ref()
@@ -415,18 +424,21 @@ impl VulkanBackend {
                 (Resource::Buffer(nodes), vec![Resource::Buffer(vertices), Resource::Buffer(ids)])
             }
         };
+        let counter = GpuBuffer::counter(&self.core, stage)?;
         let resources: Vec<Resource> =
             [scene_resource, Resource::Buffer(&rays.origin), Resource::Buffer(&rays.direction)]
                 .into_iter()
                 .chain(outputs.iter().map(|b| Resource::Buffer(b)))
                 .chain(triangles)
+                .chain([Resource::Buffer(&counter)])
                 .collect();
         let params = TraceParams { ray_count: rays.len, padding: [0; 3] };
         let push = bytemuck::bytes_of(&params);
-        match kernel {
+        let seconds = match kernel {
             TraceKernel::Compute(kernel) => kernel.dispatch(&resources, push, rays.len),
             TraceKernel::RtPipeline(kernel) => kernel.trace(&resources, push, rays.len),
-        }
+        }?;
+        Ok(StageReport { stage, seconds, sanitized: counter.read_count()? })
     }
 
     /// Checks that a stream of `len` elements fits one storage buffer and one dispatch.
@@ -451,11 +463,11 @@ impl VulkanBackend {
         Ok(())
     }
 
-    fn trace_on_device(&self, rays: &DeviceRays) -> Result<(DeviceHits, StageTiming)> {
+    fn trace_on_device(&self, rays: &DeviceRays) -> Result<(DeviceHits, StageReport)> {
         let hits = DeviceHits::new(&self.core, rays.len)?;
-        let seconds =
-            self.run_trace_kernel(&self.trace, rays, &[&hits.t, &hits.primitive, &hits.instance, &hits.barycentrics])?;
-        Ok((hits, StageTiming { stage: "trace", seconds }))
+        let outputs = [&hits.t, &hits.primitive, &hits.instance, &hits.barycentrics];
+        let report = self.run_trace_kernel("trace", &self.trace, rays, &outputs)?;
+        Ok((hits, report))
     }
 }
 
@@ -486,24 +498,24 @@ impl Backend for VulkanBackend {
         Ok(())
     }
 
-    fn generate(&mut self, params: &GenerateParams) -> Result<(RayStream, StageTiming)> {
+    fn generate(&mut self, params: &GenerateParams) -> Result<(RayStream, StageReport)> {
         let (rays, timing) = self.generate_on_device(params)?;
         Ok((rays.read()?, timing))
     }
 
-    fn trace(&mut self, rays: &RayStream) -> Result<(HitStream, StageTiming)> {
+    fn trace(&mut self, rays: &RayStream) -> Result<(HitStream, StageReport)> {
         rays.check("trace")?;
         let device_rays = DeviceRays::upload(&self.core, rays)?;
         let (hits, timing) = self.trace_on_device(&device_rays)?;
         Ok((hits.read()?, timing))
     }
 
-    fn trace_occlusion(&mut self, rays: &RayStream) -> Result<(Vec<u32>, StageTiming)> {
+    fn trace_occlusion(&mut self, rays: &RayStream) -> Result<(Vec<u32>, StageReport)> {
         rays.check("trace_occlusion")?;
         let device_rays = DeviceRays::upload(&self.core, rays)?;
         let occluded = stream_buffer::<u32>(&self.core, device_rays.len, "occluded")?;
-        let seconds = self.run_trace_kernel(&self.occlusion, &device_rays, &[&occluded])?;
-        Ok((occluded.read(rays.len())?, StageTiming { stage: "occlusion", seconds }))
+        let report = self.run_trace_kernel("occlusion", &self.occlusion, &device_rays, &[&occluded])?;
+        Ok((occluded.read(rays.len())?, report))
     }
 
     fn shade(
@@ -512,7 +524,7 @@ impl Backend for VulkanBackend {
         data: &ShadeData,
         rays: &RayStream,
         hits: &HitStream,
-    ) -> Result<(ShadeStream, StageTiming)> {
+    ) -> Result<(ShadeStream, StageReport)> {
         check_shade_inputs(params, rays, hits)?;
         data.check()?;
         let len = stream_len(hits.len())?;
@@ -525,6 +537,7 @@ impl Backend for VulkanBackend {
         let direction = GpuBuffer::with_data(core, &rays.direction, STREAM_USAGE, "ray direction")?;
         let hits = DeviceHits::upload(core, hits)?;
         let out = DeviceShades::new(core, len)?;
+        let counter = GpuBuffer::counter(core, "shade")?;
         let resources = [
             &direction,
             &hits.t,
@@ -543,10 +556,11 @@ impl Backend for VulkanBackend {
             &out.emitted,
             &out.shadow_origin,
             &out.shadow_direction,
+            &counter,
         ]
         .map(Resource::Buffer);
         let seconds = self.shade_kernel.dispatch(&resources, bytemuck::bytes_of(params), len)?;
-        Ok((out.read()?, StageTiming { stage: "shade", seconds }))
+        Ok((out.read()?, StageReport { stage: "shade", seconds, sanitized: counter.read_count()? }))
     }
 
     fn render(&mut self, params: &GenerateParams) -> Result<FrameOutput> {
@@ -560,7 +574,7 @@ impl Backend for VulkanBackend {
         method: DenoiseMethod,
         params: &DenoiseParams,
         input: &DenoiseInput,
-    ) -> Result<(Vec<Vec4>, Vec<StageTiming>)> {
+    ) -> Result<(Vec<Vec4>, Vec<StageReport>)> {
         input.check(params)?;
         self.check_stream(params.pixels())?;
         self.denoise_kernels.run(&self.core, method, params, input)

@@ -78,6 +78,18 @@ impl GpuBuffer {
         Ok(buffer)
     }
 
+    /// A stage's sanitized counter: one zeroed `u32` that its entry points increment atomically
+    /// (the `REPLACED` bindings of `raywave_shared::bindings`); [`Self::read_count`] reads it
+    /// once the dispatch has completed.
+    pub fn counter(core: &Arc<Core>, name: &str) -> Result<Self> {
+        Self::with_data(core, &[0u32], vk::BufferUsageFlags::STORAGE_BUFFER, name)
+    }
+
+    /// The value of a [`Self::counter`].
+    pub fn read_count(&self) -> Result<u64> {
+        Ok(self.read::<u32>(1)?.first().copied().map(u64::from).unwrap_or(0))
+    }
+
     /// Copies `bytes` into a host-visible buffer at byte `offset`.
     pub fn write_bytes(&mut self, offset: usize, bytes: &[u8]) -> Result<()> {
         let mapped = self.mapped_mut()?;

@@ -5,7 +5,7 @@ use super::buffer::GpuBuffer;
 use super::context::Core;
 use super::kernel::ComputeKernel;
 use super::pass::Resource;
-use crate::backend::StageTiming;
+use crate::backend::StageReport;
 use crate::denoise::{DenoiseInput, DenoiseMethod, DenoisePass};
 use crate::error::Result;
 use ash::vk;
@@ -68,7 +68,7 @@ impl DenoiseKernels {
         method: DenoiseMethod,
         params: &DenoiseParams,
         input: &DenoiseInput,
-    ) -> Result<(Vec<Vec4>, Vec<StageTiming>)> {
+    ) -> Result<(Vec<Vec4>, Vec<StageReport>)> {
         let pixels = params.pixels();
         let position = upload(core, &input.position, "denoise position")?;
         let normal = upload(core, &input.normal, "denoise normal")?;
@@ -81,6 +81,8 @@ impl DenoiseKernels {
         let noise_raw = image::<f32>(core, pixels, "noise raw")?;
         let noise = image::<f32>(core, pixels, "noise")?;
         let color = image::<Vec4>(core, pixels, "denoised colour")?;
+        // Only the composites, the denoiser's boundary, count (their last binding).
+        let counter = GpuBuffer::counter(core, "denoise")?;
         let mut timings = Vec::new();
         for pass in method.passes(params) {
             let b = Resource::Buffer;
@@ -117,7 +119,7 @@ impl DenoiseKernels {
                     seconds
                 }
                 DenoisePass::Composite => self.composite.dispatch(
-                    &[b(&analytic), b(&emitted), b(&shadowed[0]), b(&unshadowed[0]), b(&color)],
+                    &[b(&analytic), b(&emitted), b(&shadowed[0]), b(&unshadowed[0]), b(&color), b(&counter)],
                     bytemuck::bytes_of(params),
                     pixels,
                 )?,
@@ -141,12 +143,14 @@ impl DenoiseKernels {
                     seconds
                 }
                 DenoisePass::SvgfComposite => self.svgf_composite.dispatch(
-                    &[b(&analytic), b(&emitted), b(&ratio[0]), b(&color)],
+                    &[b(&analytic), b(&emitted), b(&ratio[0]), b(&color), b(&counter)],
                     bytemuck::bytes_of(params),
                     pixels,
                 )?,
             };
-            timings.push(StageTiming { stage: pass.name(), seconds });
+            // Each method has one composite, its last pass: the counter is that pass's count.
+            let sanitized = if pass.is_composite() { counter.read_count()? } else { 0 };
+            timings.push(StageReport { stage: pass.name(), seconds, sanitized });
         }
         Ok((color.read(pixels as usize)?, timings))
     }

@@ -35,6 +35,7 @@ use super::ltc::{self, LtcLobe, ShadingFrame};
 use crate::offset::{offset_ray_origin, ray_stop_before};
 use crate::sampling::light_select::{luminance, LightSet};
 use crate::sampling::{dims, sampler, warp};
+use crate::sanitized::Sanitized;
 use glam::{UVec2, Vec3, Vec4, Vec4Swizzles};
 use raywave_shared::stream::NO_HIT;
 use raywave_shared::{Light, MaterialParams, ShadeParams};
@@ -48,11 +49,14 @@ pub struct Surface {
     pub normal: Vec4,
     /// Instance (mesh) index of the hit, [`NO_HIT`] for a miss; selects the material.
     pub instance: u32,
+    /// The hit record was not finite and is read as a miss: the shade stage flags the sample as
+    /// replaced ([`crate::sanitized`]).
+    pub replaced: bool,
 }
 
 impl Surface {
     /// A camera ray that hit nothing.
-    pub const MISS: Surface = Surface { position: Vec4::ZERO, normal: Vec4::ZERO, instance: NO_HIT };
+    pub const MISS: Surface = Surface { position: Vec4::ZERO, normal: Vec4::ZERO, instance: NO_HIT, replaced: false };
 }
 
 /// Turns a hit into a surface: the point interpolated from the triangle's vertices (the most
@@ -60,7 +64,8 @@ impl Surface {
 /// the incoming `direction`. `triangles` holds three `Vec4` vertices per triangle in (instance,
 /// primitive) order, instance `m` starting at triangle `first_triangle[m]`. Malformed indices (an
 /// instance or primitive that is [`NO_HIT`] or beyond that instance's triangles) or a degenerate
-/// triangle give [`Surface::MISS`].
+/// triangle give [`Surface::MISS`]; a hit distance or barycentrics that are not finite give a
+/// miss flagged as [`Surface::replaced`].
 pub fn resolve_surface(
     direction: Vec3,
     hit_t: f32,
@@ -70,6 +75,9 @@ pub fn resolve_surface(
     triangles: &[Vec4],
     first_triangle: &[u32],
 ) -> Surface {
+    if !(hit_t.is_finite() && barycentrics.is_finite()) {
+        return Surface { replaced: true, ..Surface::MISS };
+    }
     if instance == NO_HIT || instance as usize >= first_triangle.len() {
         return Surface::MISS;
     }
@@ -93,7 +101,7 @@ pub fn resolve_surface(
         return Surface::MISS;
     }
     let normal = if normal.dot(direction) > 0.0 { -normal } else { normal };
-    Surface { position: position.extend(hit_t), normal: normal.extend(0.0), instance }
+    Surface { position: position.extend(hit_t), normal: normal.extend(0.0), instance, replaced: false }
 }
 
 /// The scene data the shade stage reads.
@@ -121,6 +129,9 @@ pub struct ShadeSample {
     pub shadow_origin: Vec4,
     /// Shadow-ray direction (xyz), w = tmax; tmax = 0 when there is nothing to trace.
     pub shadow_direction: Vec4,
+    /// A non-finite value — the surface's hit record, `U`, or the sample's weight — was replaced
+    /// (by a miss, zero, or no sample): the stage counts the invocation ([`crate::sanitized`]).
+    pub replaced: bool,
 }
 
 impl ShadeSample {
@@ -131,6 +142,7 @@ impl ShadeSample {
         emitted: Vec4::ZERO,
         shadow_origin: Vec4::ZERO,
         shadow_direction: Vec4::new(0.0, 0.0, 1.0, 0.0),
+        replaced: false,
     };
 }
 
@@ -214,7 +226,7 @@ pub fn shade_sample(
     scene: &ShadeScene<'_>,
 ) -> ShadeSample {
     if surface.instance == NO_HIT || surface.instance as usize >= scene.materials.len() {
-        return ShadeSample::NONE;
+        return ShadeSample { replaced: surface.replaced, ..ShadeSample::NONE };
     }
     let material = &scene.materials[surface.instance as usize];
     let p = surface.position.xyz();
@@ -245,7 +257,14 @@ pub fn shade_sample(
         k += 1;
     }
 
-    let mut result = ShadeSample { analytic: analytic.extend(0.0), emitted, ..ShadeSample::NONE };
+    // Lights are finite, but the sum of many bright ones may not be: no `U` at all then.
+    let analytic_finite = analytic.is_finite();
+    let mut result = ShadeSample {
+        analytic: if analytic_finite { analytic.extend(0.0) } else { Vec4::ZERO },
+        emitted,
+        replaced: !analytic_finite,
+        ..ShadeSample::NONE
+    };
     if !choice.is_valid() || choice.pmf <= 0.0 || (u_d <= 0.0 && u_s <= 0.0) {
         return result;
     }
@@ -279,7 +298,11 @@ pub fn shade_sample(
     // plane (which sees the light edge-on) has no such stop and draws no sample.
     let light_normal = eu.cross(ev).normalize_or_zero();
     let t_max = ray_stop_before(origin, direction, p + distance * direction, light_normal);
-    if !weight.is_finite() || !(t_max > 0.0) {
+    if !weight.is_finite() {
+        result.replaced = true;
+        return result;
+    }
+    if !(t_max > 0.0) {
         return result;
     }
     result.unshadowed = weight.extend(0.0);
@@ -303,21 +326,21 @@ pub fn shadow_ratio(shadowed: Vec3, unshadowed: Vec3) -> Vec3 {
 }
 
 /// A pixel's colour from its analytic unshadowed radiance `U` and its shadow `visibility` (a
-/// [`shadow_ratio`], raw or denoised): `emitted + U · visibility`, or `emitted` alone should
-/// that not be finite.
-pub fn apply_visibility(analytic: Vec3, visibility: Vec3, emitted: Vec3) -> Vec3 {
+/// [`shadow_ratio`], raw or denoised): `emitted + U · visibility`, or `emitted` alone (flagged
+/// as replaced) should that not be finite — the denoiser's final pass, its stage boundary.
+pub fn apply_visibility(analytic: Vec3, visibility: Vec3, emitted: Vec3) -> Sanitized<Vec3> {
     let color = emitted + analytic * visibility;
     if color.is_finite() {
-        color
+        Sanitized::clean(color)
     } else {
-        emitted
+        Sanitized::replacing(emitted)
     }
 }
 
 /// The ratio estimator's composite for one pixel: `U · S_N / U_N` per channel, falling back to
 /// `U` where `U_N` is (nearly) 0 (see [`shadow_ratio`]), plus the emitted radiance. All inputs
 /// are per-pixel means (or their denoised values).
-pub fn composite(analytic: Vec3, unshadowed: Vec3, shadowed: Vec3, emitted: Vec3) -> Vec3 {
+pub fn composite(analytic: Vec3, unshadowed: Vec3, shadowed: Vec3, emitted: Vec3) -> Sanitized<Vec3> {
     apply_visibility(analytic, shadow_ratio(shadowed, unshadowed), emitted)
 }
 
@@ -338,7 +361,12 @@ mod tests {
     }
 
     fn surface_at_origin() -> Surface {
-        Surface { position: Vec4::new(0.0, 0.0, 0.0, 1.0), normal: Vec4::new(0.0, 0.0, 1.0, 0.0), instance: 0 }
+        Surface {
+            position: Vec4::new(0.0, 0.0, 0.0, 1.0),
+            normal: Vec4::new(0.0, 0.0, 1.0, 0.0),
+            instance: 0,
+            replaced: false,
+        }
     }
 
     /// A downward-facing quad light of half-size `h` centred at `centre`.
@@ -518,8 +546,38 @@ mod tests {
     fn without_occluders_the_ratio_returns_u_exactly() {
         let u = Vec3::new(0.3, 1.7, 12.5);
         let u_n = Vec3::new(0.2, 3.0, 9.0);
-        assert_eq!(composite(u, u_n, u_n, Vec3::ZERO), u);
-        assert_eq!(composite(u, Vec3::ZERO, Vec3::ZERO, Vec3::ONE), u + Vec3::ONE, "U_N ≈ 0 falls back to U");
+        assert_eq!(composite(u, u_n, u_n, Vec3::ZERO), Sanitized::clean(u));
+        let fallback = composite(u, Vec3::ZERO, Vec3::ZERO, Vec3::ONE);
+        assert_eq!(fallback, Sanitized::clean(u + Vec3::ONE), "U_N ≈ 0 falls back to U, which is not a replacement");
+    }
+
+    /// What the stage cannot compute is replaced and flagged, never passed on: a hit record that
+    /// is not finite (a miss), lights whose summed `U` overflows `f32` (no `U`, no sample), and a
+    /// composite that overflows (the emitted radiance alone).
+    #[test]
+    fn non_finite_values_are_replaced_and_flagged() {
+        let triangles = [Vec4::ZERO, Vec4::X, Vec4::Y];
+        for (t, barycentrics) in [(f32::NAN, glam::Vec2::splat(0.25)), (1.0, glam::Vec2::new(f32::INFINITY, 0.0))] {
+            let s = resolve_surface(Vec3::Z, t, 0, 0, barycentrics, &triangles, &[0]);
+            assert_eq!(s, Surface { replaced: true, ..Surface::MISS });
+            let table = table();
+            let scene = ShadeScene { materials: &[], lights: LightSet::new(&[], &[], &[]), ltc: &table };
+            let shaded = shade_sample(&params(0, 0, 0), UVec2::ZERO, Vec3::Z, &s, &scene);
+            assert_eq!(shaded, ShadeSample { replaced: true, ..ShadeSample::NONE });
+        }
+
+        let table = table();
+        let bright = ceiling_light(Vec3::Z, 0.5, Vec3::splat(f32::MAX));
+        // Each light's `U` is finite (a fifth of f32::MAX); eight of them are not.
+        let lights = [bright; 8];
+        let materials = [material(Vec3::splat(0.9), 0.5, 0.0)];
+        let scene = ShadeScene { materials: &materials, lights: LightSet::new(&lights, &[], &[]), ltc: &table };
+        let s = shade_sample(&params(sampler_kind::SOBOL, 1, 0), UVec2::ZERO, -Vec3::Z, &surface_at_origin(), &scene);
+        assert!(s.replaced, "{s:?}");
+        assert_eq!((s.analytic, s.unshadowed, s.shadow_direction.w), (Vec4::ZERO, Vec4::ZERO, 0.0));
+
+        let overflow = apply_visibility(Vec3::splat(f32::MAX), Vec3::ONE, Vec3::new(f32::MAX, 1.0, 0.0));
+        assert_eq!(overflow, Sanitized::replacing(Vec3::new(f32::MAX, 1.0, 0.0)));
     }
 
     #[test]
@@ -558,9 +616,10 @@ mod tests {
                         let s = shade_sample(&p, UVec2::ZERO, -view, &surface, &scene);
                         let all = [s.analytic, s.unshadowed, s.emitted, s.shadow_origin, s.shadow_direction];
                         assert!(all.iter().all(|v| v.is_finite()), "{light:?} {m} {view}: {s:?}");
+                        assert!(!s.replaced, "computed, not sanitized: {light:?} {m} {view}: {s:?}");
                         assert!(s.analytic.min_element() >= 0.0 && s.unshadowed.min_element() >= 0.0);
                         let c = composite(s.analytic.xyz(), s.unshadowed.xyz(), Vec3::ZERO, Vec3::ZERO);
-                        assert!(c.is_finite());
+                        assert!(c.value.is_finite() && !c.replaced);
                     }
                 }
             }

@@ -8,6 +8,7 @@ pub mod cwbvh;
 #[cfg(all(target_arch = "spirv", feature = "ray-query"))]
 pub mod ray_query;
 
+use crate::sanitized::Sanitized;
 use glam::{Vec2, Vec3, Vec4, Vec4Swizzles};
 use raywave_shared::stream::NO_HIT;
 
@@ -40,6 +41,13 @@ impl Ray {
             && self.tmax.is_finite()
             && self.tmin >= 0.0
             && self.tmin <= self.tmax
+    }
+
+    /// Whether every component is finite: a ray that is not is an input the stage replaces by a
+    /// miss and counts ([`crate::sanitized`]); one that is finite but not traceable (a zero
+    /// direction, an empty interval) misses without being counted.
+    pub fn is_finite(&self) -> bool {
+        self.origin.is_finite() && self.direction.is_finite() && self.tmin.is_finite() && self.tmax.is_finite()
     }
 }
 
@@ -81,29 +89,31 @@ pub trait OcclusionQuery {
 }
 
 /// The occlusion variant of the trace stage for one invocation (shadow rays): whether the ray is
-/// blocked within its interval. Rays that are not traceable report "not occluded", like a miss.
-pub fn trace_occluded<Q: OcclusionQuery>(origin: Vec4, direction: Vec4, query: &Q) -> bool {
+/// blocked within its interval. Rays that are not traceable report "not occluded", like a miss;
+/// those that are not finite are also flagged as replaced.
+pub fn trace_occluded<Q: OcclusionQuery>(origin: Vec4, direction: Vec4, query: &Q) -> Sanitized<bool> {
     let ray = Ray::from_stream(origin, direction);
-    ray.is_traceable() && query.occluded(&ray)
+    Sanitized { value: ray.is_traceable() && query.occluded(&ray), replaced: !ray.is_finite() }
 }
 
 /// The trace stage for one invocation: reads the ray at its stream fields and returns its closest
 /// hit. Rays that are not traceable (NaN, Inf, zero direction, bad interval) miss, and a hit whose
-/// values are not finite is written as a miss, so no NaN or Inf leaves the stage.
-pub fn trace_closest<Q: ClosestHitQuery>(origin: Vec4, direction: Vec4, query: &Q) -> Hit {
+/// values are not finite is written as a miss, so no NaN or Inf leaves the stage; both are
+/// flagged as replaced (a non-finite ray, a non-finite hit).
+pub fn trace_closest<Q: ClosestHitQuery>(origin: Vec4, direction: Vec4, query: &Q) -> Sanitized<Hit> {
     let ray = Ray::from_stream(origin, direction);
     if !ray.is_traceable() {
-        return Hit::MISS;
+        return Sanitized { value: Hit::MISS, replaced: !ray.is_finite() };
     }
     sanitize(query.closest_hit(&ray))
 }
 
 /// A hit as it may leave the stage: one whose values are not all finite becomes a miss.
-pub fn sanitize(hit: Hit) -> Hit {
+pub fn sanitize(hit: Hit) -> Sanitized<Hit> {
     if hit.t.is_finite() && hit.barycentrics.is_finite() {
-        hit
+        Sanitized::clean(hit)
     } else {
-        Hit::MISS
+        Sanitized::replacing(Hit::MISS)
     }
 }
 
@@ -121,32 +131,46 @@ mod tests {
 
     const HIT: Hit = Hit { t: 2.0, primitive: 3, instance: 1, barycentrics: Vec2::new(0.25, 0.5) };
 
-    #[test]
-    fn traceable_rays_reach_the_query() {
-        let h = trace_closest(Vec4::new(0.0, 0.0, 0.0, 0.0), Vec4::new(0.0, 0.0, 1.0, 10.0), &Fixed(HIT));
-        assert_eq!(h, HIT);
-    }
-
-    #[test]
-    fn untraceable_rays_miss() {
-        let ok_origin = Vec4::ZERO;
-        let ok_dir = Vec4::new(0.0, 0.0, 1.0, 10.0);
-        let cases = [
-            (Vec4::new(f32::NAN, 0.0, 0.0, 0.0), ok_dir),
-            (Vec4::new(f32::INFINITY, 0.0, 0.0, 0.0), ok_dir),
-            (ok_origin, Vec4::new(0.0, 0.0, 0.0, 10.0)),
-            (ok_origin, Vec4::new(0.0, 0.0, 1.0, f32::INFINITY)),
-            (Vec4::new(0.0, 0.0, 0.0, -1.0), ok_dir),
-            (Vec4::new(0.0, 0.0, 0.0, 11.0), ok_dir),
-        ];
-        for (o, d) in cases {
-            assert_eq!(trace_closest(o, d, &Fixed(HIT)), Hit::MISS, "{o} {d}");
+    impl OcclusionQuery for Fixed {
+        fn occluded(&self, _ray: &Ray) -> bool {
+            self.0.is_hit()
         }
     }
 
     #[test]
-    fn non_finite_hits_are_sanitized_to_misses() {
-        let bad = Hit { t: f32::NAN, ..HIT };
-        assert_eq!(trace_closest(Vec4::ZERO, Vec4::new(0.0, 0.0, 1.0, 10.0), &Fixed(bad)), Hit::MISS);
+    fn traceable_rays_reach_the_query() {
+        let (o, d) = (Vec4::new(0.0, 0.0, 0.0, 0.0), Vec4::new(0.0, 0.0, 1.0, 10.0));
+        assert_eq!(trace_closest(o, d, &Fixed(HIT)), Sanitized::clean(HIT));
+        assert_eq!(trace_occluded(o, d, &Fixed(HIT)), Sanitized::clean(true));
+    }
+
+    /// Rays that cannot be traced miss (and are not occluded); only the non-finite ones — inputs
+    /// the stage had to replace — are flagged, not the finite but empty or zero-length ones.
+    #[test]
+    fn untraceable_rays_miss_and_non_finite_ones_are_flagged() {
+        let ok_origin = Vec4::ZERO;
+        let ok_dir = Vec4::new(0.0, 0.0, 1.0, 10.0);
+        let cases = [
+            (Vec4::new(f32::NAN, 0.0, 0.0, 0.0), ok_dir, true),
+            (Vec4::new(f32::INFINITY, 0.0, 0.0, 0.0), ok_dir, true),
+            (ok_origin, Vec4::new(0.0, f32::NAN, 1.0, 10.0), true),
+            (ok_origin, Vec4::new(0.0, 0.0, 1.0, f32::INFINITY), true),
+            (ok_origin, Vec4::new(0.0, 0.0, 0.0, 10.0), false),
+            (Vec4::new(0.0, 0.0, 0.0, -1.0), ok_dir, false),
+            (Vec4::new(0.0, 0.0, 0.0, 11.0), ok_dir, false),
+        ];
+        for (o, d, non_finite) in cases {
+            let expected = Sanitized { value: Hit::MISS, replaced: non_finite };
+            assert_eq!(trace_closest(o, d, &Fixed(HIT)), expected, "{o} {d}");
+            assert_eq!(trace_occluded(o, d, &Fixed(HIT)), Sanitized { value: false, replaced: non_finite }, "{o} {d}");
+        }
+    }
+
+    #[test]
+    fn non_finite_hits_are_sanitized_to_misses_and_flagged() {
+        let (o, d) = (Vec4::ZERO, Vec4::new(0.0, 0.0, 1.0, 10.0));
+        for bad in [Hit { t: f32::NAN, ..HIT }, Hit { barycentrics: Vec2::new(0.5, f32::INFINITY), ..HIT }] {
+            assert_eq!(trace_closest(o, d, &Fixed(bad)), Sanitized::replacing(Hit::MISS), "{bad:?}");
+        }
     }
 }
