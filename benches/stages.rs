@@ -240,7 +240,7 @@ fn inline_pass(scene: &CpuScene, data: &ShadeData, generate: &GenerateParams, sh
             let surface =
                 resolve_surface(direction, hit.t, hit.instance, hit.primitive, hit.barycentrics, triangles, first);
             let pixel = UVec2::new(i % shade.width, i / shade.width);
-            let s = shade_sample(shade, pixel, direction, &surface, &shade_scene);
+            let s = shade_sample(shade, pixel, direction, &surface, &shade_scene).value;
             let blocked = trace_occluded(s.shadow_origin, s.shadow_direction, scene).value;
             [s.analytic, s.unshadowed, if blocked { Vec4::ZERO } else { s.unshadowed }, s.emitted]
         })

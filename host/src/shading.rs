@@ -3,6 +3,7 @@
 //! functions, and the per-pixel accumulation of `U`, `U_N`, `S_N` for the ratio estimator.
 
 use crate::backend::{Backend, StageReport};
+use crate::cpu::count;
 use crate::error::{Error, Result};
 use crate::lights::{wants_bvh, LightBvh};
 use crate::scene::{Material, Scene};
@@ -220,10 +221,7 @@ pub fn shade(params: &ShadeParams, data: &ShadeData, rays: &RayStream, surfaces:
         .enumerate()
         .for_each(|(i, (analytic, unshadowed, emitted, shadow_origin, shadow_direction))| {
             let pixel = UVec2::new(i as u32 % width, i as u32 / width);
-            let s = shade_sample(params, pixel, rays.direction[i].xyz(), &surfaces[i], &scene);
-            if s.replaced {
-                sanitized.fetch_add(1, Ordering::Relaxed);
-            }
+            let s = count(shade_sample(params, pixel, rays.direction[i].xyz(), &surfaces[i], &scene), &sanitized);
             (*analytic, *unshadowed, *emitted) = (s.analytic, s.unshadowed, s.emitted);
             (*shadow_origin, *shadow_direction) = (s.shadow_origin, s.shadow_direction);
         });

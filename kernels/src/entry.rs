@@ -15,10 +15,14 @@ pub fn stream_index(global_id: UVec3, num_workgroups: UVec3) -> u32 {
     global_id.y * num_workgroups.x * WORKGROUP_SIZE + global_id.x
 }
 
-/// Counts one invocation that replaced a non-finite value in its stage's counter (DESIGN rule 5,
-/// [`crate::sanitized`]): element 0 of a one-`u32` storage buffer the host zeroes and reads back.
-fn count_replaced(counter: &mut [u32]) {
+/// The value of an invocation's result, counting the invocation in its stage's counter if it
+/// replaced a non-finite value (DESIGN rule 5, [`crate::sanitized`]): element 0 of a one-`u32`
+/// storage buffer the host zeroes and reads back.
+fn counted<T>(result: crate::sanitized::Sanitized<T>, counter: &mut [u32]) -> T {
     use spirv_std::memory::{Scope, Semantics};
+    if !result.replaced {
+        return result.value;
+    }
     // SAFETY: an atomic increment of a storage-buffer `u32` the host bound for this purpose;
     // relaxed (no ordering needed: the host reads it after the dispatch completes). Queue-family
     // scope covers every invocation of the dispatch; device scope would need the
@@ -28,22 +32,18 @@ fn count_replaced(counter: &mut [u32]) {
             &mut counter[0],
         );
     }
+    result.value
 }
 
 /// Writes `hit` into the four hit-stream fields at index `i`.
 fn store_hit(
     i: usize,
-    hit: crate::sanitized::Sanitized<crate::trace::Hit>,
+    hit: crate::trace::Hit,
     hit_t: &mut [f32],
     hit_primitive: &mut [u32],
     hit_instance: &mut [u32],
     hit_barycentrics: &mut [glam::Vec2],
-    replaced: &mut [u32],
 ) {
-    if hit.replaced {
-        count_replaced(replaced);
-    }
-    let hit = hit.value;
     hit_t[i] = hit.t;
     hit_primitive[i] = hit.primitive;
     hit_instance[i] = hit.instance;
@@ -97,14 +97,6 @@ pub fn warp_probe(
     }
 }
 
-/// Writes an occlusion result (1 = blocked) at index `i`, counting a replaced ray.
-fn store_occlusion(i: usize, blocked: crate::sanitized::Sanitized<bool>, occluded: &mut [u32], replaced: &mut [u32]) {
-    if blocked.replaced {
-        count_replaced(replaced);
-    }
-    occluded[i] = u32::from(blocked.value);
-}
-
 /// Entry point of the trace stage with software CWBVH traversal: needs no ray-tracing extension.
 #[spirv(compute(threads(64)))]
 #[allow(clippy::too_many_arguments)]
@@ -127,7 +119,7 @@ pub fn trace_cwbvh(
     if i < params.ray_count as usize {
         let scene = crate::trace::cwbvh::CwBvhScene { nodes, vertices, ids };
         let hit = crate::trace::trace_closest(ray_origin[i], ray_direction[i], &scene);
-        store_hit(i, hit, hit_t, hit_primitive, hit_instance, hit_barycentrics, replaced);
+        store_hit(i, counted(hit, replaced), hit_t, hit_primitive, hit_instance, hit_barycentrics);
     }
 }
 
@@ -153,7 +145,7 @@ pub fn trace_ray_query(
     if i < params.ray_count as usize {
         let scene = crate::trace::ray_query::RayQueryScene { tlas };
         let hit = crate::trace::trace_closest(ray_origin[i], ray_direction[i], &scene);
-        store_hit(i, hit, hit_t, hit_primitive, hit_instance, hit_barycentrics, replaced);
+        store_hit(i, counted(hit, replaced), hit_t, hit_primitive, hit_instance, hit_barycentrics);
     }
 }
 
@@ -204,7 +196,7 @@ pub fn trace_raygen(
         } else {
             Sanitized { value: Hit::MISS, replaced: !ray.is_finite() }
         };
-        store_hit(i, hit, hit_t, hit_primitive, hit_instance, hit_barycentrics, replaced);
+        store_hit(i, counted(hit, replaced), hit_t, hit_primitive, hit_instance, hit_barycentrics);
     }
 }
 
@@ -246,7 +238,8 @@ pub fn occlusion_cwbvh(
     let i = stream_index(global_id, num_workgroups) as usize;
     if i < params.ray_count as usize {
         let scene = crate::trace::cwbvh::CwBvhScene { nodes, vertices, ids };
-        store_occlusion(i, crate::trace::trace_occluded(ray_origin[i], ray_direction[i], &scene), occluded, replaced);
+        let blocked = crate::trace::trace_occluded(ray_origin[i], ray_direction[i], &scene);
+        occluded[i] = u32::from(counted(blocked, replaced));
     }
 }
 
@@ -266,7 +259,8 @@ pub fn occlusion_ray_query(
     let i = stream_index(global_id, num_workgroups) as usize;
     if i < params.ray_count as usize {
         let scene = crate::trace::ray_query::RayQueryScene { tlas };
-        store_occlusion(i, crate::trace::trace_occluded(ray_origin[i], ray_direction[i], &scene), occluded, replaced);
+        let blocked = crate::trace::trace_occluded(ray_origin[i], ray_direction[i], &scene);
+        occluded[i] = u32::from(counted(blocked, replaced));
     }
 }
 
@@ -300,10 +294,8 @@ pub fn occlusion_raygen(
                 tlas.trace_ray(flags, 0xff, 0, 0, 0, ray.origin, ray.tmin, ray.direction, ray.tmax, payload);
             }
         }
-        if !ray.is_finite() {
-            count_replaced(replaced);
-        }
-        occluded[i] = *payload;
+        let blocked = crate::sanitized::Sanitized { value: *payload, replaced: !ray.is_finite() };
+        occluded[i] = counted(blocked, replaced);
     }
 }
 
@@ -368,10 +360,7 @@ pub fn shade(
         };
         let width = if params.width > 0 { params.width } else { 1 };
         let pixel = glam::UVec2::new(i % width, i / width);
-        let s = crate::shade::stage::shade_sample(params, pixel, direction, &surface, &scene);
-        if s.replaced {
-            count_replaced(replaced);
-        }
+        let s = counted(crate::shade::stage::shade_sample(params, pixel, direction, &surface, &scene), replaced);
         analytic[k] = s.analytic;
         unshadowed[k] = s.unshadowed;
         emitted[k] = s.emitted;
@@ -387,14 +376,6 @@ fn denoise_pixel(params: &raywave_shared::DenoiseParams, i: u32) -> Option<glam:
     } else {
         None
     }
-}
-
-/// Writes a composite's colour (w = 1) at index `k`, counting a replaced one.
-fn store_color(k: usize, c: crate::sanitized::Sanitized<glam::Vec3>, color: &mut [Vec4], replaced: &mut [u32]) {
-    if c.replaced {
-        count_replaced(replaced);
-    }
-    color[k] = c.value.extend(1.0);
 }
 
 /// Entry point of the denoisers' ratio pass: `S_N/U_N` per pixel (one invocation per pixel).
@@ -559,7 +540,7 @@ pub fn denoise_composite(
         let k = i as usize;
         let c =
             crate::shade::stage::composite(analytic[k].xyz(), unshadowed[k].xyz(), shadowed[k].xyz(), emitted[k].xyz());
-        store_color(k, c, color, replaced);
+        color[k] = counted(c, replaced).extend(1.0);
     }
 }
 
@@ -617,7 +598,7 @@ pub fn svgf_composite(
     if denoise_pixel(params, i).is_some() {
         let k = i as usize;
         let c = crate::shade::stage::apply_visibility(analytic[k].xyz(), ratio[k].xyz(), emitted[k].xyz());
-        store_color(k, c, color, replaced);
+        color[k] = counted(c, replaced).extend(1.0);
     }
 }
 

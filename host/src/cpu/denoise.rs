@@ -1,16 +1,17 @@
 //! The denoise passes on the CPU: each pass is the kernel function over every pixel (rayon),
 //! exactly what the Vulkan entry points run per invocation.
 
+use super::count;
 use crate::backend::StageReport;
 use crate::denoise::{DenoiseInput, DenoiseMethod, DenoisePass};
-use glam::{IVec2, Vec3, Vec4};
+use glam::{IVec2, Vec4};
 use rayon::prelude::*;
 use raywave_kernels::denoise::bilateral::{bilateral_pass, ImageLine};
 use raywave_kernels::denoise::{noise, svgf};
-use raywave_kernels::sanitized::Sanitized;
 use raywave_kernels::shade::stage::{apply_visibility, composite};
 use raywave_shared::denoise::axis;
 use raywave_shared::DenoiseParams;
+use std::sync::atomic::AtomicU64;
 use std::time::Instant;
 
 /// The buffers a denoiser threads through its passes.
@@ -29,15 +30,10 @@ fn per_pixel<T: Send>(params: &DenoiseParams, f: impl Fn(IVec2) -> T + Sync) -> 
     (0..params.pixels()).into_par_iter().map(|i| f(IVec2::new((i % width) as i32, (i / width) as i32))).collect()
 }
 
-/// The colours of a composite pass and how many of them were replaced (not finite).
-fn colors(results: Vec<Sanitized<Vec3>>) -> (Vec<Vec4>, u64) {
-    let sanitized = results.iter().filter(|c| c.replaced).count() as u64;
-    (results.into_iter().map(|c| c.value.extend(1.0)).collect(), sanitized)
-}
-
 /// Runs `pass` on the CPU; returns how many invocations replaced a non-finite value (only the
 /// composites, the denoiser's boundary, can).
 fn run_pass(pass: DenoisePass, params: &DenoiseParams, input: &DenoiseInput, w: &mut Working) -> u64 {
+    let sanitized = AtomicU64::new(0);
     let index = |p: IVec2| (p.y as u32 * params.width + p.x as u32) as usize;
     match pass {
         DenoisePass::Ratio => {
@@ -62,17 +58,16 @@ fn run_pass(pass: DenoisePass, params: &DenoiseParams, input: &DenoiseInput, w: 
             (w.shadowed, w.unshadowed) = filtered.into_iter().unzip();
         }
         DenoisePass::Composite => {
-            let sanitized;
-            (w.color, sanitized) = colors(per_pixel(params, |p| {
+            w.color = per_pixel(params, |p| {
                 let i = index(p);
-                composite(
+                let c = composite(
                     input.analytic[i].truncate(),
                     w.unshadowed[i].truncate(),
                     w.shadowed[i].truncate(),
                     input.emitted[i].truncate(),
-                )
-            }));
-            return sanitized;
+                );
+                count(c, &sanitized).extend(1.0)
+            });
         }
         DenoisePass::SvgfVariance => {
             w.ratio =
@@ -83,15 +78,15 @@ fn run_pass(pass: DenoisePass, params: &DenoiseParams, input: &DenoiseInput, w: 
             w.ratio = per_pixel(&params, |p| svgf::atrous_step(&params, p, &w.ratio, &input.position, &input.normal));
         }
         DenoisePass::SvgfComposite => {
-            let sanitized;
-            (w.color, sanitized) = colors(per_pixel(params, |p| {
+            w.color = per_pixel(params, |p| {
                 let i = index(p);
-                apply_visibility(input.analytic[i].truncate(), w.ratio[i].truncate(), input.emitted[i].truncate())
-            }));
-            return sanitized;
+                let c =
+                    apply_visibility(input.analytic[i].truncate(), w.ratio[i].truncate(), input.emitted[i].truncate());
+                count(c, &sanitized).extend(1.0)
+            });
         }
     }
-    0
+    sanitized.into_inner()
 }
 
 /// Runs `method` on `input` (already checked against `params`): the colour image (rgb, w = 1)

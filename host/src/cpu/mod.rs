@@ -99,8 +99,9 @@ pub fn trace_occlusion(scene: &CpuScene, rays: &RayStream) -> Vec<u32> {
     trace_occlusion_counted(scene, rays).0
 }
 
-/// The value of an invocation's result, adding it to `sanitized` if it replaced a non-finite value.
-fn count<T>(result: Sanitized<T>, sanitized: &AtomicU64) -> T {
+/// The value of an invocation's result, adding it to `sanitized` if it replaced a non-finite value
+/// (what the SPIR-V entry points' atomic counter does on a device).
+pub(crate) fn count<T>(result: Sanitized<T>, sanitized: &AtomicU64) -> T {
     if result.replaced {
         sanitized.fetch_add(1, Ordering::Relaxed);
     }

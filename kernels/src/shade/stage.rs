@@ -129,9 +129,6 @@ pub struct ShadeSample {
     pub shadow_origin: Vec4,
     /// Shadow-ray direction (xyz), w = tmax; tmax = 0 when there is nothing to trace.
     pub shadow_direction: Vec4,
-    /// A non-finite value — the surface's hit record, `U`, or the sample's weight — was replaced
-    /// (by a miss, zero, or no sample): the stage counts the invocation ([`crate::sanitized`]).
-    pub replaced: bool,
 }
 
 impl ShadeSample {
@@ -142,7 +139,6 @@ impl ShadeSample {
         emitted: Vec4::ZERO,
         shadow_origin: Vec4::ZERO,
         shadow_direction: Vec4::new(0.0, 0.0, 1.0, 0.0),
-        replaced: false,
     };
 }
 
@@ -217,16 +213,17 @@ fn hit_probabilities(light: &Light, p: Vec3, lobes: &Lobes) -> (f32, f32) {
 
 /// The shade stage for one camera sample at `pixel` looking along `view_direction` (from the
 /// camera) at `surface`: `U` summed over all lights, and one MIS sample of the chosen light
-/// shared by `U_N` and `S_N`.
+/// shared by `U_N` and `S_N`. Flagged as replaced when a non-finite value was — the surface's
+/// hit record (a miss), `U` (zero) or the sample's weight (no sample).
 pub fn shade_sample(
     params: &ShadeParams,
     pixel: UVec2,
     view_direction: Vec3,
     surface: &Surface,
     scene: &ShadeScene<'_>,
-) -> ShadeSample {
+) -> Sanitized<ShadeSample> {
     if surface.instance == NO_HIT || surface.instance as usize >= scene.materials.len() {
-        return ShadeSample { replaced: surface.replaced, ..ShadeSample::NONE };
+        return Sanitized { value: ShadeSample::NONE, replaced: surface.replaced };
     }
     let material = &scene.materials[surface.instance as usize];
     let p = surface.position.xyz();
@@ -259,12 +256,9 @@ pub fn shade_sample(
 
     // Lights are finite, but the sum of many bright ones may not be: no `U` at all then.
     let analytic_finite = analytic.is_finite();
-    let mut result = ShadeSample {
-        analytic: if analytic_finite { analytic.extend(0.0) } else { Vec4::ZERO },
-        emitted,
-        replaced: !analytic_finite,
-        ..ShadeSample::NONE
-    };
+    let analytic = if analytic_finite { analytic.extend(0.0) } else { Vec4::ZERO };
+    let mut result =
+        Sanitized { value: ShadeSample { analytic, emitted, ..ShadeSample::NONE }, replaced: !analytic_finite };
     if !choice.is_valid() || choice.pmf <= 0.0 || (u_d <= 0.0 && u_s <= 0.0) {
         return result;
     }
@@ -305,9 +299,9 @@ pub fn shade_sample(
     if !(t_max > 0.0) {
         return result;
     }
-    result.unshadowed = weight.extend(0.0);
-    result.shadow_origin = origin.extend(0.0);
-    result.shadow_direction = direction.extend(t_max);
+    result.value.unshadowed = weight.extend(0.0);
+    result.value.shadow_origin = origin.extend(0.0);
+    result.value.shadow_direction = direction.extend(t_max);
     result
 }
 
@@ -432,7 +426,7 @@ mod tests {
         let (mut sums, mut analytic) = ([[0.0f64; 2]; 2], 0.0f64);
         for i in 0..n {
             let p = ShadeParams { analytic_residual, ..params(kind, 5, i) };
-            let s = shade_sample(&p, UVec2::ZERO, -view, &surface_at_origin(), &scene);
+            let s = shade_sample(&p, UVec2::ZERO, -view, &surface_at_origin(), &scene).value;
             let unshadowed = f64::from(luminance(s.unshadowed.xyz()));
             let has_ray = s.shadow_direction.w > 0.0;
             let shadowed = if has_ray && visible(s.shadow_origin, s.shadow_direction) { unshadowed } else { 0.0 };
@@ -563,7 +557,7 @@ mod tests {
             let table = table();
             let scene = ShadeScene { materials: &[], lights: LightSet::new(&[], &[], &[]), ltc: &table };
             let shaded = shade_sample(&params(0, 0, 0), UVec2::ZERO, Vec3::Z, &s, &scene);
-            assert_eq!(shaded, ShadeSample { replaced: true, ..ShadeSample::NONE });
+            assert_eq!(shaded, Sanitized::replacing(ShadeSample::NONE));
         }
 
         let table = table();
@@ -572,8 +566,10 @@ mod tests {
         let lights = [bright; 8];
         let materials = [material(Vec3::splat(0.9), 0.5, 0.0)];
         let scene = ShadeScene { materials: &materials, lights: LightSet::new(&lights, &[], &[]), ltc: &table };
-        let s = shade_sample(&params(sampler_kind::SOBOL, 1, 0), UVec2::ZERO, -Vec3::Z, &surface_at_origin(), &scene);
-        assert!(s.replaced, "{s:?}");
+        let shaded =
+            shade_sample(&params(sampler_kind::SOBOL, 1, 0), UVec2::ZERO, -Vec3::Z, &surface_at_origin(), &scene);
+        let s = shaded.value;
+        assert!(shaded.replaced, "{s:?}");
         assert_eq!((s.analytic, s.unshadowed, s.shadow_direction.w), (Vec4::ZERO, Vec4::ZERO, 0.0));
 
         let overflow = apply_visibility(Vec3::splat(f32::MAX), Vec3::ONE, Vec3::new(f32::MAX, 1.0, 0.0));
@@ -613,10 +609,11 @@ mod tests {
                 for (view, analytic_residual) in views.into_iter().flat_map(|v| [(v, 0), (v, 1)]) {
                     for i in 0..64 {
                         let p = ShadeParams { analytic_residual, ..params(sampler_kind::SOBOL, 1, i) };
-                        let s = shade_sample(&p, UVec2::ZERO, -view, &surface, &scene);
+                        let shaded = shade_sample(&p, UVec2::ZERO, -view, &surface, &scene);
+                        let s = shaded.value;
                         let all = [s.analytic, s.unshadowed, s.emitted, s.shadow_origin, s.shadow_direction];
                         assert!(all.iter().all(|v| v.is_finite()), "{light:?} {m} {view}: {s:?}");
-                        assert!(!s.replaced, "computed, not sanitized: {light:?} {m} {view}: {s:?}");
+                        assert!(!shaded.replaced, "computed, not sanitized: {light:?} {m} {view}: {s:?}");
                         assert!(s.analytic.min_element() >= 0.0 && s.unshadowed.min_element() >= 0.0);
                         let c = composite(s.analytic.xyz(), s.unshadowed.xyz(), Vec3::ZERO, Vec3::ZERO);
                         assert!(c.value.is_finite() && !c.replaced);
@@ -628,9 +625,10 @@ mod tests {
         let behind = [lights[1]];
         let scene = ShadeScene { materials: &materials, lights: LightSet::new(&behind, &[], &[]), ltc: &table };
         let s = shade_sample(&params(sampler_kind::SOBOL, 1, 0), UVec2::ZERO, -Vec3::Z, &surface_at_origin(), &scene);
-        assert_eq!((s.analytic, s.unshadowed, s.shadow_direction.w), (Vec4::ZERO, Vec4::ZERO, 0.0));
+        assert_eq!((s.value.analytic, s.value.unshadowed, s.value.shadow_direction.w), (Vec4::ZERO, Vec4::ZERO, 0.0));
         // A miss shades nothing.
-        assert_eq!(shade_sample(&params(0, 0, 0), UVec2::ZERO, Vec3::Z, &Surface::MISS, &scene), ShadeSample::NONE);
+        let miss = shade_sample(&params(0, 0, 0), UVec2::ZERO, Vec3::Z, &Surface::MISS, &scene);
+        assert_eq!(miss, Sanitized::clean(ShadeSample::NONE));
     }
 
     #[test]
