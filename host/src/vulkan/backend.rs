@@ -22,13 +22,13 @@ use crate::stream::{HitStream, RayStream, ShadeStream};
 use ash::vk;
 use bytemuck::Pod;
 use glam::{UVec2, Vec2, Vec4};
-use gpu_allocator::MemoryLocation;
 use raywave_shared::{
     bindings, DenoiseParams, GenerateParams, SamplerProbeParams, ShadeParams, TraceParams, WarpParams,
 };
 use std::sync::Arc;
 
-/// Storage buffers of the streams: read and written by shaders, mapped for upload and readback.
+/// Storage buffers of the streams: read and written by shaders, device-local, uploaded and read
+/// back through staging copies ([`GpuBuffer::device_local`]).
 const STREAM_USAGE: vk::BufferUsageFlags = vk::BufferUsageFlags::STORAGE_BUFFER;
 
 /// The ray stream on the device.
@@ -49,7 +49,7 @@ struct DeviceHits {
 }
 
 fn stream_buffer<T: Pod>(core: &Arc<Core>, len: u32, name: &str) -> Result<GpuBuffer> {
-    GpuBuffer::new(core, u64::from(len) * std::mem::size_of::<T>() as u64, STREAM_USAGE, MemoryLocation::GpuToCpu, name)
+    GpuBuffer::device_local(core, u64::from(len) * std::mem::size_of::<T>() as u64, STREAM_USAGE, name)
 }
 
 impl DeviceRays {

@@ -15,6 +15,9 @@ pub(crate) struct GpuBuffer {
     allocation: Option<Allocation>,
     /// Device address, or 0 when the buffer was created without `SHADER_DEVICE_ADDRESS`.
     pub address: u64,
+    /// Whether the memory was asked for as device-local ([`MemoryLocation::GpuOnly`]): the host
+    /// reaches it only through a staging buffer ([`Self::with_data`], [`Self::read`]).
+    pub device_local: bool,
 }
 
 impl Drop for GpuBuffer {
@@ -42,7 +45,8 @@ impl GpuBuffer {
         // SAFETY: valid create info; the buffer is destroyed in Drop.
         let buffer = unsafe { core.device.create_buffer(&info, None) }.map_err(vk_error("vkCreateBuffer"))?;
         // Constructed now so any failure below frees the buffer through Drop.
-        let mut this = Self { core: core.clone(), buffer, allocation: None, address: 0 };
+        let device_local = location == MemoryLocation::GpuOnly;
+        let mut this = Self { core: core.clone(), buffer, allocation: None, address: 0, device_local };
         // SAFETY: `buffer` is a live buffer of this device.
         let requirements = unsafe { core.device.get_buffer_memory_requirements(buffer) };
         let allocation = core
@@ -70,11 +74,33 @@ impl GpuBuffer {
         Ok(this)
     }
 
-    /// Creates a host-visible buffer holding `data`.
+    /// Creates a device-local buffer of `size` bytes for `usage`, which the host fills and reads
+    /// through staging copies. Every buffer a kernel binds is one: on a discrete GPU host-visible
+    /// memory is system memory (gpu-allocator's `GpuToCpu`) or a small BAR window (`CpuToGpu`,
+    /// falling back to system memory when it is full), which a kernel reaches over PCIe — tens
+    /// of GB/s against the several TB/s of an H100's or H200's HBM. On a device whose memory is
+    /// all host-visible (lavapipe, integrated GPUs) the staging copies cost a `memcpy` each.
+    pub fn device_local(core: &Arc<Core>, size: u64, usage: vk::BufferUsageFlags, name: &str) -> Result<Self> {
+        let usage = usage | vk::BufferUsageFlags::TRANSFER_SRC | vk::BufferUsageFlags::TRANSFER_DST;
+        Self::new(core, size, usage, MemoryLocation::GpuOnly, name)
+    }
+
+    /// Creates a device-local buffer ([`Self::device_local`]) holding `data`, copied in from a
+    /// host-visible staging buffer.
     pub fn with_data<T: Pod>(core: &Arc<Core>, data: &[T], usage: vk::BufferUsageFlags, name: &str) -> Result<Self> {
         let bytes: &[u8] = bytemuck::cast_slice(data);
-        let mut buffer = Self::new(core, bytes.len() as u64, usage, MemoryLocation::CpuToGpu, name)?;
-        buffer.mapped_mut()?[..bytes.len()].copy_from_slice(bytes);
+        let buffer = Self::device_local(core, bytes.len() as u64, usage, name)?;
+        if !bytes.is_empty() {
+            let mut staging = Self::new(
+                core,
+                bytes.len() as u64,
+                vk::BufferUsageFlags::TRANSFER_SRC,
+                MemoryLocation::CpuToGpu,
+                name,
+            )?;
+            staging.mapped_mut()?[..bytes.len()].copy_from_slice(bytes);
+            copy_buffer(core, &staging, &buffer, bytes.len() as u64)?;
+        }
         Ok(buffer)
     }
 
@@ -111,16 +137,47 @@ impl GpuBuffer {
             .ok_or(Error::Vulkan { call: "vkMapMemory", result: "buffer memory is not host-visible".into() })
     }
 
-    /// Copies the first `count` elements out of a host-visible buffer.
+    /// Copies the first `count` elements out of the buffer: through a host-visible staging buffer
+    /// when it is device-local, else from its mapping.
     pub fn read<T: Pod>(&self, count: usize) -> Result<Vec<T>> {
+        let len = count * std::mem::size_of::<T>();
+        if self.device_local && len > 0 {
+            let staging = Self::new(
+                &self.core,
+                len as u64,
+                vk::BufferUsageFlags::TRANSFER_DST,
+                MemoryLocation::GpuToCpu,
+                "readback staging",
+            )?;
+            copy_buffer(&self.core, self, &staging, len as u64)?;
+            return staging.read_mapped(len);
+        }
+        self.read_mapped(len)
+    }
+
+    /// The first `len` bytes of a host-visible buffer's mapping, as elements of `T`.
+    fn read_mapped<T: Pod>(&self, len: usize) -> Result<Vec<T>> {
         let bytes = self
             .allocation
             .as_ref()
             .and_then(|a| a.mapped_slice())
             .ok_or(Error::Vulkan { call: "vkMapMemory", result: "buffer memory is not host-visible".into() })?;
-        let len = count * std::mem::size_of::<T>();
-        Ok(bytemuck::pod_collect_to_vec(&bytes[..len]))
+        let bytes = bytes.get(..len).ok_or_else(|| Error::InvalidParameter {
+            name: "count",
+            reason: format!("read of {len} bytes past {}", bytes.len()),
+        })?;
+        Ok(bytemuck::pod_collect_to_vec(bytes))
     }
+}
+
+/// Copies the first `size` bytes of `source` to `destination` on the device and waits.
+fn copy_buffer(core: &Core, source: &GpuBuffer, destination: &GpuBuffer, size: u64) -> Result<()> {
+    submit_and_wait(core, |cmd| {
+        let region = [vk::BufferCopy::default().size(size)];
+        // SAFETY: `cmd` is recording; both buffers are live, hold at least `size` bytes and were
+        // created with TRANSFER_SRC / TRANSFER_DST usage.
+        unsafe { core.device.cmd_copy_buffer(cmd, source.buffer, destination.buffer, &region) };
+    })
 }
 
 /// Records commands with `record`, submits them and waits for completion.

@@ -11,7 +11,6 @@ use crate::error::Result;
 use ash::vk;
 use bytemuck::Pod;
 use glam::Vec4;
-use gpu_allocator::MemoryLocation;
 use raywave_shared::bindings::denoise as counts;
 use raywave_shared::denoise::axis;
 use raywave_shared::DenoiseParams;
@@ -32,7 +31,7 @@ pub(crate) struct DenoiseKernels {
 /// A device image of `pixels` elements of `T`.
 fn image<T: Pod>(core: &Arc<Core>, pixels: u32, name: &str) -> Result<GpuBuffer> {
     let bytes = u64::from(pixels.max(1)) * std::mem::size_of::<T>() as u64;
-    GpuBuffer::new(core, bytes, vk::BufferUsageFlags::STORAGE_BUFFER, MemoryLocation::GpuToCpu, name)
+    GpuBuffer::device_local(core, bytes, vk::BufferUsageFlags::STORAGE_BUFFER, name)
 }
 
 /// A device image holding `data`.

@@ -143,7 +143,8 @@ impl Pass {
             .map_err(vk_error("vkCreateShaderModule"))
     }
 
-    /// Binds `resources` (one per binding, in creation order), pushes `push`, records `work`
+    /// Binds `resources` (one per binding, in creation order; every buffer device-local, so no
+    /// kernel reads or writes host memory across the bus), pushes `push`, records `work`
     /// between two timestamps, submits and waits. Returns the work's duration in seconds, from GPU
     /// timestamps where the device has them, else from the host clock around the submission.
     pub fn run(&self, resources: &[Resource<'_>], push: &[u8], work: impl FnOnce(vk::CommandBuffer)) -> Result<f64> {
@@ -151,6 +152,12 @@ impl Pass {
             return Err(Error::InvalidParameter {
                 name: "resources",
                 reason: format!("{} takes {} bindings", self.name, self.bindings.len()),
+            });
+        }
+        if let Some(k) = resources.iter().position(|r| matches!(r, Resource::Buffer(b) if !b.device_local)) {
+            return Err(Error::InvalidParameter {
+                name: "resources",
+                reason: format!("{}: the buffer at binding {} is not device-local", self.name, self.bindings[k].0),
             });
         }
         let d = &self.core.device;
