@@ -6,6 +6,9 @@
 //! "Bytes" counts every buffer a pass reads or writes once ([`crate::denoise::DenoisePass::bytes_per_pixel`]) —
 //! the traffic of an ideal cache — so `gb_per_s` is the effective bandwidth, and on a GPU with a
 //! known peak (`--peak-gbps`, or the datasheet value of an NVIDIA H100/H200) its fraction.
+//! On every backend it is also set against that backend's copy probe ([`Backend::copy_probe`]):
+//! a pass that only reads and writes one `Vec4` per pixel of the same frame, the bandwidth a
+//! memory-bound pass can reach there.
 
 use crate::bench::median;
 use crate::denoise::{check_radius, frame_params, DenoiseInput, DenoiseMethod};
@@ -14,6 +17,7 @@ use crate::shading::{resolve, ShadeAccumulator, ShadeData};
 use crate::shared::sampling::sampler_kind;
 use crate::shared::DenoiseParams;
 use crate::{open_backend, Backend, BackendOptions, DeviceChoice, Result, Scene};
+use glam::Vec4;
 
 /// What to measure.
 #[derive(Clone, Debug)]
@@ -64,6 +68,12 @@ pub struct DenoiseMeasurement {
     pub gb_per_s: f64,
     /// `gb_per_s` as a fraction of the device's peak memory bandwidth, where known.
     pub bandwidth_fraction: Option<f64>,
+    /// The backend's copy bandwidth in GB/s: its copy probe on the frame's pixels, median of
+    /// `repeats` runs, each pixel's 16 bytes read once and written once.
+    pub copy_gb_per_s: f64,
+    /// `gb_per_s / copy_gb_per_s`: near 1, the pass is as fast as its bytes allow here; far
+    /// below, it is bound by arithmetic or by latency.
+    pub copy_fraction: f64,
 }
 
 impl DenoiseMeasurement {
@@ -76,13 +86,14 @@ impl DenoiseMeasurement {
     pub fn row(&self) -> String {
         let fraction = self.bandwidth_fraction.map_or(String::new(), |f| format!("  {:.1} % of peak", 100.0 * f));
         format!(
-            "{:<40} {:<5} R={:<3} {:<20} {:>9.3} ms  {:>7.2} GB/s{fraction}",
+            "{:<40} {:<5} R={:<3} {:<20} {:>9.3} ms  {:>7.2} GB/s  {:>5.1} % of copy{fraction}",
             self.implementation,
             self.method,
             self.radius,
             self.pass,
             1e3 * self.seconds,
-            self.gb_per_s
+            self.gb_per_s,
+            100.0 * self.copy_fraction
         )
     }
 }
@@ -126,6 +137,16 @@ pub fn frame_input(options: &DenoiseBenchOptions) -> Result<DenoiseInput> {
     Ok(DenoiseInput::new(&surfaces, &accumulator))
 }
 
+/// `backend`'s copy bandwidth in GB/s on `image` (one `Vec4` per pixel of `params`' frame): the
+/// median time of `repeats` copy probes after an untimed one, each pixel read once and written
+/// once.
+fn copy_bandwidth(backend: &mut dyn Backend, params: &DenoiseParams, image: &[Vec4], repeats: u32) -> Result<f64> {
+    backend.copy_probe(params, image)?;
+    let seconds = (0..repeats).map(|_| Ok(backend.copy_probe(params, image)?.1.seconds)).collect::<Result<Vec<_>>>()?;
+    let bytes = 2.0 * std::mem::size_of::<Vec4>() as f64 * f64::from(params.pixels());
+    Ok(bytes / median(seconds) / 1e9)
+}
+
 /// Measures `backend`, handing each line to `emit`.
 fn bench_backend(
     backend: &mut dyn Backend,
@@ -139,6 +160,7 @@ fn bench_backend(
         ..frame_params(options.width, options.height, options.denoise_radius)
     };
     let pixels = u64::from(params.pixels());
+    let copy_gb_per_s = copy_bandwidth(backend, &params, &input.shadowed, options.repeats)?;
     for method in [DenoiseMethod::Tv, DenoiseMethod::Svgf] {
         let passes = method.passes(&params);
         let mut seconds = vec![Vec::new(); passes.len()];
@@ -163,6 +185,8 @@ fn bench_backend(
                 bytes,
                 gb_per_s,
                 bandwidth_fraction: peak_gbps.map(|peak| gb_per_s / peak),
+                copy_gb_per_s,
+                copy_fraction: gb_per_s / copy_gb_per_s,
             }
         };
         let (mut total_seconds, mut total_bytes) = (0.0, 0);

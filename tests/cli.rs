@@ -409,9 +409,16 @@ fn denoise_bench_prints_each_pass_and_the_total() {
         (6 + 1) + (4 + 1),
         "tv and svgf (one à-trous iteration at this size) passes, each with a total"
     );
+    let copy_gb_per_s = lines[0]["copy_gb_per_s"].as_f64().unwrap();
+    assert!(copy_gb_per_s.is_finite() && copy_gb_per_s > 0.0, "{:?}", lines[0]);
     for line in &lines {
         assert_eq!((line["stage"].as_str(), line["pixels"].as_u64()), (Some("denoise"), Some(960)));
         assert!(line["seconds"].as_f64().unwrap() > 0.0 && line["bytes"].as_u64().unwrap() > 0);
+        // One copy probe per backend: every line of the CPU carries the same roof.
+        assert_eq!(line["copy_gb_per_s"].as_f64(), Some(copy_gb_per_s), "{line:?}");
+        let expected = line["gb_per_s"].as_f64().unwrap() / copy_gb_per_s;
+        let fraction = line["copy_fraction"].as_f64().unwrap();
+        assert!((fraction - expected).abs() <= 1e-12 * expected, "{line:?}");
     }
     let tv_total = lines.iter().find(|l| l["method"] == "tv" && l["pass"] == "total").unwrap();
     let tv_bytes: u64 = lines

@@ -87,6 +87,14 @@ pub trait Backend {
         input: &DenoiseInput,
     ) -> Result<(Vec<Vec4>, Vec<StageReport>)>;
 
+    /// Runs the copy probe: `image` (one `Vec4` per pixel of `params`' image, checked by
+    /// [`copy_probe_len`]) read and written to another buffer by a per-pixel pass that does
+    /// nothing else, run as the denoise passes are (`raywave_kernels::entry::copy_probe` on
+    /// Vulkan, the same parallel loop over pixels on the CPU). Returns the copy (bit-identical)
+    /// and its time: the least a per-pixel pass over `Vec4` images can take on this backend, the
+    /// memory roof `raywave bench denoise` compares each pass's bandwidth with.
+    fn copy_probe(&mut self, params: &DenoiseParams, image: &[Vec4]) -> Result<(Vec<Vec4>, StageReport)>;
+
     /// Runs generate → trace as one frame, keeping the ray stream on the backend in between.
     fn render(&mut self, params: &GenerateParams) -> Result<FrameOutput>;
 
@@ -125,6 +133,19 @@ pub fn warp_probe_len(params: &WarpParams) -> Result<u32> {
         Err(crate::error::Error::InvalidParameter {
             name: "warp probe",
             reason: format!("{} samples exceed {MAX_PROBE_SAMPLES}", params.count),
+        })
+    }
+}
+
+/// Number of pixels of the copy probe's `image`: `params`' image, not empty, one entry each.
+pub fn copy_probe_len(params: &DenoiseParams, image: &[Vec4]) -> Result<u32> {
+    let pixels = u64::from(params.width) * u64::from(params.height);
+    if pixels > 0 && image.len() as u64 == pixels {
+        Ok(pixels as u32)
+    } else {
+        Err(crate::error::Error::InvalidParameter {
+            name: "copy probe",
+            reason: format!("{}×{} pixels but an image of {} entries", params.width, params.height, image.len()),
         })
     }
 }

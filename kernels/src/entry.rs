@@ -378,6 +378,23 @@ fn denoise_pixel(params: &raywave_shared::DenoiseParams, i: u32) -> Option<glam:
     }
 }
 
+/// Entry point of the copy probe (one invocation per pixel): pixel `i`'s `Vec4` copied to
+/// another buffer, nothing else — the least a per-pixel pass over `Vec4` images can move, and so
+/// the memory roof `raywave bench denoise` measures the passes' bandwidth against.
+#[spirv(compute(threads(64)))]
+pub fn copy_probe(
+    #[spirv(global_invocation_id)] global_id: UVec3,
+    #[spirv(num_workgroups)] num_workgroups: UVec3,
+    #[spirv(push_constant)] params: &raywave_shared::DenoiseParams,
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 0)] source: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 1)] copy: &mut [Vec4],
+) {
+    let i = stream_index(global_id, num_workgroups);
+    if denoise_pixel(params, i).is_some() {
+        copy[i as usize] = source[i as usize];
+    }
+}
+
 /// Entry point of the denoisers' ratio pass: `S_N/U_N` per pixel (one invocation per pixel).
 #[spirv(compute(threads(64)))]
 pub fn denoise_ratio(

@@ -126,4 +126,6 @@ pub mod denoise {
     pub const SVGF_ATROUS: u32 = 4;
     /// `svgf_composite`: `U`, emitted, ratio in; colour and replaced count out.
     pub const SVGF_COMPOSITE: u32 = 5;
+    /// `copy_probe` (the bandwidth roof, not a pass of any denoiser): an image in; its copy out.
+    pub const COPY_PROBE: u32 = 2;
 }

@@ -37,7 +37,7 @@ fn run_pass(pass: DenoisePass, params: &DenoiseParams, input: &DenoiseInput, w: 
     let index = |p: IVec2| (p.y as u32 * params.width + p.x as u32) as usize;
     match pass {
         DenoisePass::Ratio => {
-            w.ratio = w.shadowed.iter().zip(&w.unshadowed).map(|(&s, &u)| noise::ratio_pixel(s, u)).collect();
+            w.ratio = w.shadowed.par_iter().zip(&w.unshadowed).map(|(&s, &u)| noise::ratio_pixel(s, u)).collect();
         }
         DenoisePass::Noise => w.noise_raw = per_pixel(params, |p| noise::noise_estimate(params, p, &w.ratio)),
         DenoisePass::NoiseBlur => w.noise = per_pixel(params, |p| noise::blurred_noise(params, p, &w.noise_raw)),
@@ -87,6 +87,14 @@ fn run_pass(pass: DenoisePass, params: &DenoiseParams, input: &DenoiseInput, w: 
         }
     }
     sanitized.into_inner()
+}
+
+/// The copy probe on the CPU ([`crate::Backend::copy_probe`]; `image` already checked against
+/// `params`): the loop every pass runs, copying each pixel.
+pub fn copy_probe(params: &DenoiseParams, image: &[Vec4]) -> (Vec<Vec4>, StageReport) {
+    let start = Instant::now();
+    let copy = per_pixel(params, |p| image[(p.y as u32 * params.width + p.x as u32) as usize]);
+    (copy, StageReport::clean("copy probe", start.elapsed().as_secs_f64()))
 }
 
 /// Runs `method` on `input` (already checked against `params`): the colour image (rgb, w = 1)

@@ -7,8 +7,8 @@ mod denoise;
 pub use bvh::{BvhQuality, CpuScene, TraversalIsa};
 
 use crate::backend::{
-    check_generate_params, check_image_size_common, check_shade_inputs, sampler_probe_len, warp_probe_len, Backend,
-    FrameOutput, StageReport,
+    check_generate_params, check_image_size_common, check_shade_inputs, copy_probe_len, sampler_probe_len,
+    warp_probe_len, Backend, FrameOutput, StageReport,
 };
 use crate::denoise::{DenoiseInput, DenoiseMethod};
 use crate::error::{Error, Result};
@@ -176,6 +176,11 @@ impl Backend for CpuBackend {
     ) -> Result<(Vec<Vec4>, Vec<StageReport>)> {
         input.check(params)?;
         Ok(denoise::denoise(method, params, input))
+    }
+
+    fn copy_probe(&mut self, params: &DenoiseParams, image: &[Vec4]) -> Result<(Vec<Vec4>, StageReport)> {
+        copy_probe_len(params, image)?;
+        Ok(denoise::copy_probe(params, image))
     }
 
     fn sampler_probe(&mut self, params: &SamplerProbeParams) -> Result<Vec<UVec2>> {

@@ -9,8 +9,8 @@ use super::kernel::{dispatch_grid, ComputeKernel};
 use super::pass::Resource;
 use super::rt_pipeline::{RtPipelineKernel, CLOSEST_HIT_SHADERS, OCCLUSION_SHADERS};
 use crate::backend::{
-    check_generate_params, check_image_size_common, check_shade_inputs, sampler_probe_len, warp_probe_len, Backend,
-    FrameOutput, StageReport,
+    check_generate_params, check_image_size_common, check_shade_inputs, copy_probe_len, sampler_probe_len,
+    warp_probe_len, Backend, FrameOutput, StageReport,
 };
 use crate::cpu::CpuScene;
 use crate::denoise::{DenoiseInput, DenoiseMethod};
@@ -578,6 +578,11 @@ impl Backend for VulkanBackend {
         input.check(params)?;
         self.check_stream(params.pixels())?;
         self.denoise_kernels.run(&self.core, method, params, input)
+    }
+
+    fn copy_probe(&mut self, params: &DenoiseParams, image: &[Vec4]) -> Result<(Vec<Vec4>, StageReport)> {
+        self.check_stream(copy_probe_len(params, image)?)?;
+        self.denoise_kernels.copy_probe(&self.core, params, image)
     }
 
     fn sampler_probe(&mut self, params: &SamplerProbeParams) -> Result<Vec<UVec2>> {

@@ -26,6 +26,7 @@ pub(crate) struct DenoiseKernels {
     svgf_variance: ComputeKernel,
     svgf_atrous: ComputeKernel,
     svgf_composite: ComputeKernel,
+    copy_probe: ComputeKernel,
 }
 
 /// A device image of `pixels` elements of `T`.
@@ -56,7 +57,27 @@ impl DenoiseKernels {
             svgf_variance: kernel("entry::svgf_variance", counts::SVGF_VARIANCE)?,
             svgf_atrous: kernel("entry::svgf_atrous", counts::SVGF_ATROUS)?,
             svgf_composite: kernel("entry::svgf_composite", counts::SVGF_COMPOSITE)?,
+            copy_probe: kernel("entry::copy_probe", counts::COPY_PROBE)?,
         })
+    }
+
+    /// Runs the copy probe on `source` (already checked against `params`) and reads the copy
+    /// back; the time is the dispatch's GPU time.
+    pub fn copy_probe(
+        &self,
+        core: &Arc<Core>,
+        params: &DenoiseParams,
+        source: &[Vec4],
+    ) -> Result<(Vec<Vec4>, StageReport)> {
+        let pixels = params.pixels();
+        let source = upload(core, source, "copy probe source")?;
+        let copy = image::<Vec4>(core, pixels, "copy probe copy")?;
+        let seconds = self.copy_probe.dispatch(
+            &[Resource::Buffer(&source), Resource::Buffer(&copy)],
+            bytemuck::bytes_of(params),
+            pixels,
+        )?;
+        Ok((copy.read(pixels as usize)?, StageReport::clean("copy probe", seconds)))
     }
 
     /// Runs `method` on `input` (already checked against `params`): uploads the inputs, runs
