@@ -85,23 +85,30 @@ impl GpuBuffer {
         Self::new(core, size, usage, MemoryLocation::GpuOnly, name)
     }
 
-    /// Creates a device-local buffer ([`Self::device_local`]) holding `data`, copied in from a
-    /// host-visible staging buffer.
+    /// Creates a device-local buffer ([`Self::device_local`]) holding `data`.
     pub fn with_data<T: Pod>(core: &Arc<Core>, data: &[T], usage: vk::BufferUsageFlags, name: &str) -> Result<Self> {
-        let bytes: &[u8] = bytemuck::cast_slice(data);
-        let buffer = Self::device_local(core, bytes.len() as u64, usage, name)?;
-        if !bytes.is_empty() {
-            let mut staging = Self::new(
-                core,
-                bytes.len() as u64,
-                vk::BufferUsageFlags::TRANSFER_SRC,
-                MemoryLocation::CpuToGpu,
-                name,
-            )?;
-            staging.mapped_mut()?[..bytes.len()].copy_from_slice(bytes);
-            copy_buffer(core, &staging, &buffer, bytes.len() as u64)?;
-        }
+        let buffer = Self::device_local(core, std::mem::size_of_val(data) as u64, usage, name)?;
+        buffer.upload(data)?;
         Ok(buffer)
+    }
+
+    /// Copies `data` to the start of this device-local buffer through a host-visible staging
+    /// buffer, and waits.
+    pub fn upload<T: Pod>(&self, data: &[T]) -> Result<()> {
+        let bytes: &[u8] = bytemuck::cast_slice(data);
+        if bytes.is_empty() {
+            return Ok(());
+        }
+        let size = bytes.len() as u64;
+        let mut staging = Self::new(
+            &self.core,
+            size,
+            vk::BufferUsageFlags::TRANSFER_SRC,
+            MemoryLocation::CpuToGpu,
+            "upload staging",
+        )?;
+        staging.mapped_mut()?[..bytes.len()].copy_from_slice(bytes);
+        copy_buffer(&self.core, &staging, self, size)
     }
 
     /// A stage's sanitized counter: one zeroed `u32` that its entry points increment atomically
@@ -114,20 +121,6 @@ impl GpuBuffer {
     /// The value of a [`Self::counter`].
     pub fn read_count(&self) -> Result<u64> {
         Ok(self.read::<u32>(1)?.first().copied().map(u64::from).unwrap_or(0))
-    }
-
-    /// Copies `bytes` into a host-visible buffer at byte `offset`.
-    pub fn write_bytes(&mut self, offset: usize, bytes: &[u8]) -> Result<()> {
-        let mapped = self.mapped_mut()?;
-        let end = offset + bytes.len();
-        if end > mapped.len() {
-            return Err(Error::InvalidParameter {
-                name: "offset",
-                reason: format!("write to {end} past {}", mapped.len()),
-            });
-        }
-        mapped[offset..end].copy_from_slice(bytes);
-        Ok(())
     }
 
     fn mapped_mut(&mut self) -> Result<&mut [u8]> {

@@ -8,7 +8,6 @@ use super::context::{vk_error, Core};
 use super::pass::{Pass, Resource};
 use crate::error::{Error, Result};
 use ash::vk;
-use gpu_allocator::MemoryLocation;
 use std::sync::Arc;
 
 /// The shaders of one ray-tracing pipeline: groups are raygen, miss and a triangle hit group
@@ -127,18 +126,21 @@ impl RtPipelineKernel {
         let stride = u64::from(props.handle_size.next_multiple_of(props.handle_alignment.max(1)));
         let region = stride.next_multiple_of(u64::from(props.base_alignment.max(1)));
         let alignment = u64::from(props.base_alignment.max(1));
-        let mut sbt = GpuBuffer::new(
+        // Device-local like every buffer the device reads per ray (see `GpuBuffer::device_local`).
+        let size = 3 * region + alignment;
+        let sbt = GpuBuffer::device_local(
             core,
-            3 * region + alignment,
+            size,
             vk::BufferUsageFlags::SHADER_BINDING_TABLE_KHR | vk::BufferUsageFlags::SHADER_DEVICE_ADDRESS,
-            MemoryLocation::CpuToGpu,
             "shader binding table",
         )?;
         let base = sbt.address.next_multiple_of(alignment);
+        let mut table = vec![0u8; size as usize];
         for group in 0..3usize {
             let at = (base - sbt.address + group as u64 * region) as usize;
-            sbt.write_bytes(at, &handles[group * handle_size..(group + 1) * handle_size])?;
+            table[at..at + handle_size].copy_from_slice(&handles[group * handle_size..(group + 1) * handle_size]);
         }
+        sbt.upload(&table)?;
         let record = |group: u64, size: u64| {
             vk::StridedDeviceAddressRegionKHR::default().device_address(base + group * region).stride(stride).size(size)
         };
