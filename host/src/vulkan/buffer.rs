@@ -18,6 +18,8 @@ pub(crate) struct GpuBuffer {
     /// Whether the memory was asked for as device-local ([`MemoryLocation::GpuOnly`]): the host
     /// reaches it only through a staging buffer ([`Self::with_data`], [`Self::read`]).
     pub device_local: bool,
+    /// Size in bytes.
+    pub size: u64,
 }
 
 impl Drop for GpuBuffer {
@@ -46,7 +48,7 @@ impl GpuBuffer {
         let buffer = unsafe { core.device.create_buffer(&info, None) }.map_err(vk_error("vkCreateBuffer"))?;
         // Constructed now so any failure below frees the buffer through Drop.
         let device_local = location == MemoryLocation::GpuOnly;
-        let mut this = Self { core: core.clone(), buffer, allocation: None, address: 0, device_local };
+        let mut this = Self { core: core.clone(), buffer, allocation: None, address: 0, device_local, size };
         // SAFETY: `buffer` is a live buffer of this device.
         let requirements = unsafe { core.device.get_buffer_memory_requirements(buffer) };
         let allocation = core
@@ -163,8 +165,15 @@ impl GpuBuffer {
     }
 }
 
-/// Copies the first `size` bytes of `source` to `destination` on the device and waits.
+/// Copies the first `size` bytes of `source` to `destination` on the device and waits; a copy
+/// past the end of either is a typed error.
 fn copy_buffer(core: &Core, source: &GpuBuffer, destination: &GpuBuffer, size: u64) -> Result<()> {
+    if size > source.size.min(destination.size) {
+        return Err(Error::InvalidParameter {
+            name: "size",
+            reason: format!("copy of {size} bytes between buffers of {} and {}", source.size, destination.size),
+        });
+    }
     submit_and_wait(core, |cmd| {
         let region = [vk::BufferCopy::default().size(size)];
         // SAFETY: `cmd` is recording; both buffers are live, hold at least `size` bytes and were
