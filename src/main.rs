@@ -425,7 +425,7 @@ fn render_command(args: RenderArgs) -> raywave::Result<()> {
         let sanitized = if t.sanitized > 0 { format!("  ({} sanitized)", t.sanitized) } else { String::new() };
         print_line(format!("stage    {:<9} {:>10.3} ms{sanitized}", t.stage, t.seconds * 1e3));
     }
-    let sanitized: u64 = report.timings.iter().map(|t| t.sanitized).sum();
+    let sanitized = raywave::StageReport::total_sanitized(&report.timings);
     if sanitized > 0 {
         eprintln!(
             "warning: {sanitized} value(s) went non-finite and were replaced (rays or hits as misses, samples \

@@ -31,6 +31,11 @@ impl StageReport {
     pub fn clean(stage: &'static str, seconds: f64) -> Self {
         Self { stage, seconds, sanitized: 0 }
     }
+
+    /// The sanitized counts of `reports` (a frame's stages, a denoiser's passes), summed.
+    pub fn total_sanitized(reports: &[StageReport]) -> u64 {
+        reports.iter().map(|r| r.sanitized).sum()
+    }
 }
 
 /// The result of one frame: the streams the last stage produced and the time of each stage.

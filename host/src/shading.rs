@@ -283,9 +283,10 @@ impl ShadeAccumulator {
         let shadow_rays = shadow_rays(&shades);
         let (occluded, occlusion_time) = backend.trace_occlusion(&shadow_rays)?;
         self.add(&shades, &occluded)?;
-        self.sanitized += shade_time.sanitized + occlusion_time.sanitized;
+        let reports = [shade_time, occlusion_time];
+        self.sanitized += StageReport::total_sanitized(&reports);
         let bytes = shades.bytes() + std::mem::size_of_val(occluded.as_slice()) as u64 + shadow_rays.bytes();
-        Ok(([shade_time, occlusion_time], bytes))
+        Ok((reports, bytes))
     }
 
     /// Adds one pass: its shade stream and the occlusion of its shadow rays (1 = blocked), both

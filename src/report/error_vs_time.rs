@@ -176,7 +176,7 @@ impl PreparedScene {
         };
         let mut denoised = |method, input: &DenoiseInput| -> Result<(Vec<Vec3>, f64)> {
             let (color, timings) = backend.denoise(method, &params, input)?;
-            sanitized += timings.iter().map(|t| t.sanitized).sum::<u64>();
+            sanitized += crate::StageReport::total_sanitized(&timings);
             Ok((rgb(&color), base_ms + 1e3 * timings.iter().map(|t| t.seconds).sum::<f64>()))
         };
         let stochastic = input.stochastic();

@@ -72,7 +72,7 @@ impl GBuffer {
         let sampler = sampler_params(sampler_kind::ZSOBOL, 0, resolution, resolution, 1);
         let frame = backend.render(&generate_params_with(scene, resolution, resolution, 0, sampler))?;
         let seconds = frame.timings.iter().map(|t| t.seconds).sum();
-        let sanitized = frame.timings.iter().map(|t| t.sanitized).sum();
+        let sanitized = crate::StageReport::total_sanitized(&frame.timings);
         Ok(Self { rays: frame.rays, hits: frame.hits, seconds, sanitized })
     }
 

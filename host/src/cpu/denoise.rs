@@ -30,11 +30,16 @@ fn per_pixel<T: Send>(params: &DenoiseParams, f: impl Fn(IVec2) -> T + Sync) -> 
     (0..params.pixels()).into_par_iter().map(|i| f(IVec2::new((i % width) as i32, (i / width) as i32))).collect()
 }
 
+/// The index of `pixel` in a row-major image of `params`' width.
+fn pixel_index(params: &DenoiseParams, pixel: IVec2) -> usize {
+    (pixel.y as u32 * params.width + pixel.x as u32) as usize
+}
+
 /// Runs `pass` on the CPU; returns how many invocations replaced a non-finite value (only the
 /// composites, the denoiser's boundary, can).
 fn run_pass(pass: DenoisePass, params: &DenoiseParams, input: &DenoiseInput, w: &mut Working) -> u64 {
     let sanitized = AtomicU64::new(0);
-    let index = |p: IVec2| (p.y as u32 * params.width + p.x as u32) as usize;
+    let index = |p: IVec2| pixel_index(params, p);
     match pass {
         DenoisePass::Ratio => {
             w.ratio = w.shadowed.par_iter().zip(&w.unshadowed).map(|(&s, &u)| noise::ratio_pixel(s, u)).collect();
@@ -93,7 +98,7 @@ fn run_pass(pass: DenoisePass, params: &DenoiseParams, input: &DenoiseInput, w: 
 /// `params`): the loop every pass runs, copying each pixel.
 pub fn copy_probe(params: &DenoiseParams, image: &[Vec4]) -> (Vec<Vec4>, StageReport) {
     let start = Instant::now();
-    let copy = per_pixel(params, |p| image[(p.y as u32 * params.width + p.x as u32) as usize]);
+    let copy = per_pixel(params, |p| image[pixel_index(params, p)]);
     (copy, StageReport::clean("copy probe", start.elapsed().as_secs_f64()))
 }
 
