@@ -125,18 +125,24 @@ impl GpuBuffer {
         Ok(self.read::<u32>(1)?.first().copied().map(u64::from).unwrap_or(0))
     }
 
+    /// The mapping of a host-visible (staging) buffer. A device-local buffer is refused even where
+    /// its memory happens to be host-visible (lavapipe, integrated GPUs), so that a path which
+    /// would fail on a discrete GPU fails in CI too.
     fn mapped_mut(&mut self) -> Result<&mut [u8]> {
-        self.allocation
-            .as_mut()
-            .and_then(|a| a.mapped_slice_mut())
-            .ok_or(Error::Vulkan { call: "vkMapMemory", result: "buffer memory is not host-visible".into() })
+        if self.device_local {
+            return Err(not_host_visible());
+        }
+        self.allocation.as_mut().and_then(|a| a.mapped_slice_mut()).ok_or_else(not_host_visible)
     }
 
     /// Copies the first `count` elements out of the buffer: through a host-visible staging buffer
     /// when it is device-local, else from its mapping.
     pub fn read<T: Pod>(&self, count: usize) -> Result<Vec<T>> {
         let len = count * std::mem::size_of::<T>();
-        if self.device_local && len > 0 {
+        if len == 0 {
+            return Ok(Vec::new());
+        }
+        if self.device_local {
             let staging = Self::new(
                 &self.core,
                 len as u64,
@@ -150,19 +156,24 @@ impl GpuBuffer {
         self.read_mapped(len)
     }
 
-    /// The first `len` bytes of a host-visible buffer's mapping, as elements of `T`.
+    /// The first `len` bytes of a host-visible (staging) buffer's mapping, as elements of `T`;
+    /// refused for a device-local buffer, as [`Self::mapped_mut`].
     fn read_mapped<T: Pod>(&self, len: usize) -> Result<Vec<T>> {
-        let bytes = self
-            .allocation
-            .as_ref()
-            .and_then(|a| a.mapped_slice())
-            .ok_or(Error::Vulkan { call: "vkMapMemory", result: "buffer memory is not host-visible".into() })?;
+        if self.device_local {
+            return Err(not_host_visible());
+        }
+        let bytes = self.allocation.as_ref().and_then(|a| a.mapped_slice()).ok_or_else(not_host_visible)?;
         let bytes = bytes.get(..len).ok_or_else(|| Error::InvalidParameter {
             name: "count",
             reason: format!("read of {len} bytes past {}", bytes.len()),
         })?;
         Ok(bytemuck::pod_collect_to_vec(bytes))
     }
+}
+
+/// The error of mapping a buffer the host may not reach directly.
+fn not_host_visible() -> Error {
+    Error::Vulkan { call: "vkMapMemory", result: "buffer memory is not host-visible".into() }
 }
 
 /// Copies the first `size` bytes of `source` to `destination` on the device and waits; a copy
