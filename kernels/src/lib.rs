@@ -20,5 +20,6 @@ pub mod sanitized;
 pub mod shade;
 pub mod trace;
 pub mod triangle;
+pub mod trig;
 
 pub use raywave_shared as shared;

@@ -5,8 +5,8 @@
 //! the maximum over the lines, normalized; then a 3×3 box blur.
 
 use crate::hash::{pcg3d, unit_float};
-use crate::sampling::warp::sin_cos_accurate;
 use crate::shade::stage::shadow_ratio;
+use crate::trig;
 use core::f32::consts::FRAC_PI_4;
 use glam::{IVec2, UVec3, Vec2, Vec3, Vec4, Vec4Swizzles};
 use raywave_shared::denoise::{DenoiseParams, MAX_RADIUS, NOISE_LINES};
@@ -82,7 +82,7 @@ pub fn noise_estimate(params: &DenoiseParams, pixel: IVec2, ratio: &[Vec4]) -> f
     let radius = params.radius.clamp(1, MAX_RADIUS) as i32;
     let (width, height) = (params.width.max(1), params.height.max(1));
     let bits = pcg3d(UVec3::new(pixel.x as u32, pixel.y as u32, params.seed)).x;
-    let (sin0, cos0) = sin_cos_accurate(unit_float(bits) * FRAC_PI_4);
+    let (sin0, cos0) = trig::sin_cos(unit_float(bits) * FRAC_PI_4);
     let d0 = Vec2::new(cos0, sin0);
     let d1 = rotate_quarter_pi(d0);
     let d2 = rotate_quarter_pi(d1);
@@ -171,7 +171,7 @@ mod tests {
     fn noise_one_line_at_a_time(params: &DenoiseParams, pixel: IVec2, ratio: &[Vec4]) -> f32 {
         let radius = params.radius.clamp(1, MAX_RADIUS) as i32;
         let bits = pcg3d(UVec3::new(pixel.x as u32, pixel.y as u32, params.seed)).x;
-        let (sin0, cos0) = sin_cos_accurate(unit_float(bits) * FRAC_PI_4);
+        let (sin0, cos0) = trig::sin_cos(unit_float(bits) * FRAC_PI_4);
         let mut direction = Vec2::new(cos0, sin0);
         let mut estimate: f32 = 0.0;
         for _ in 0..NOISE_LINES {

@@ -26,6 +26,7 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 use crate::hash::ONE_MINUS_EPSILON;
+use crate::trig;
 use core::f32::consts::{FRAC_PI_2, FRAC_PI_4, PI, TAU};
 use glam::{Mat3, Vec2, Vec3, Vec4, Vec4Swizzles};
 use raywave_shared::sampling::warp_kind;
@@ -113,12 +114,12 @@ pub fn clamp_unit_interval(x: f32) -> f32 {
 /// `asin` with its argument clamped to `[−1, 1]` (pbrt-v4 `SafeASin`, math.h); result in
 /// `[−π/2, π/2]`.
 pub fn safe_asin(x: f32) -> f32 {
-    clamp_unit_interval(x).asin()
+    trig::asin(clamp_unit_interval(x))
 }
 
 /// `acos` with its argument clamped to `[−1, 1]` (pbrt-v4 `SafeACos`, math.h); result in `[0, π]`.
 pub fn safe_acos(x: f32) -> f32 {
-    clamp_unit_interval(x).acos()
+    trig::acos(clamp_unit_interval(x))
 }
 
 /// One sample component clamped to `[0, 1 − 2⁻²⁴]` ([`ONE_MINUS_EPSILON`]); NaN maps to 0.
@@ -158,7 +159,7 @@ pub fn sanitize_pdf(pdf: f32) -> f32 {
 
 /// The unit vector with polar angle θ (given as sin θ, cos θ) and azimuth φ around +z.
 pub fn spherical_direction(sin_theta: f32, cos_theta: f32, phi: f32) -> Vec3 {
-    let (sin_phi, cos_phi) = phi.sin_cos();
+    let (sin_phi, cos_phi) = trig::sin_cos(phi);
     Vec3::new(sin_theta * cos_phi, sin_theta * sin_phi, cos_theta)
 }
 
@@ -201,7 +202,7 @@ pub fn sample_concentric_disk(u: Vec2) -> Vec2 {
     } else {
         (offset.y, FRAC_PI_2 - FRAC_PI_4 * (offset.x / offset.y))
     };
-    let (sin_theta, cos_theta) = theta.sin_cos();
+    let (sin_theta, cos_theta) = trig::sin_cos(theta);
     r * Vec2::new(cos_theta, sin_theta)
 }
 
@@ -524,37 +525,11 @@ pub fn quad_solid_angle(p: Vec3, o: Vec3, eu: Vec3, ev: Vec3) -> f32 {
     finite_or_zero(omega)
 }
 
-/// `(sin x, cos x)` for `x` in `[−2π, 2π]` to within a few `f32` ulps, from polynomials only, so
-/// every backend computes the same values: Cody–Waite reduction by π/2 (two-part constant) to
-/// `|r| ≤ π/4`, then Taylor polynomials to r⁹ and r⁸ (truncation below 3·10⁻⁹). Vulkan's built-in
-/// `sin`/`cos` are only bounded to 2⁻¹¹ absolute, which is no relative precision for small results.
-pub fn sin_cos_accurate(x: f32) -> (f32, f32) {
-    // π/2 = FRAC_PI_2 (the f32 nearest, 1.5707963705…) + PI_2_LO.
-    const PI_2_HI: f32 = FRAC_PI_2;
-    const PI_2_LO: f32 = -4.371_139e-8;
-    let k = (x * (2.0 / PI)).round();
-    let r = (x - k * PI_2_HI) - k * PI_2_LO;
-    let r2 = r * r;
-    let sin_r = r * (1.0 + r2 * (-1.0 / 6.0 + r2 * (1.0 / 120.0 + r2 * (-1.0 / 5040.0 + r2 * (1.0 / 362_880.0)))));
-    let cos_r = 1.0 + r2 * (-0.5 + r2 * (1.0 / 24.0 + r2 * (-1.0 / 720.0 + r2 * (1.0 / 40_320.0))));
-    // Quadrant k mod 4 (k may be negative).
-    let quadrant = (k as i32) & 3;
-    if quadrant == 0 {
-        (sin_r, cos_r)
-    } else if quadrant == 1 {
-        (cos_r, -sin_r)
-    } else if quadrant == 2 {
-        (-sin_r, -cos_r)
-    } else {
-        (-cos_r, sin_r)
-    }
-}
-
 /// Solid angle of the spherical triangle with unit corners `a`, `b`, `c` (Van Oosterom &
 /// Strackee; pbrt-v4 `SphericalTriangleArea`), in `[0, 2π]`.
 pub fn spherical_triangle_area(a: Vec3, b: Vec3, c: Vec3) -> f32 {
     let triple = a.dot(b.cross(c)).abs();
-    2.0 * triple.atan2(1.0 + a.dot(b) + a.dot(c) + b.dot(c))
+    2.0 * trig::atan2(triple, 1.0 + a.dot(b) + a.dot(c) + b.dot(c))
 }
 
 /// Ray from `p` along unit `d` against the quad: the ray parameter `t` of the hit, or 0 when the
@@ -672,13 +647,13 @@ pub fn sample_quad_spherical(p: Vec3, o: Vec3, eu: Vec3, ev: Vec3, u: Vec2) -> L
     // lavapipe that biased the sampler completely at Ω = 2.5·10⁻³. So e^{i·au} is assembled
     // without trigonometry on large angles: e^{−i·g} of each internal angle g comes exactly from
     // its plane normals (cos g = −nᵢ·nⱼ, sin g = |nᵢ × nⱼ|), and e^{i·u₀Ω} from
-    // [`sin_cos_accurate`], the same polynomial on every backend.
+    // [`trig::sin_cos`], the same polynomial on every backend.
     let b0 = n0.z;
     let b1 = n2.z;
     let (cos_g2, sin_g2) = (-n2.dot(n3), n2.cross(n3).length());
     let (cos_g3, sin_g3) = (-n3.dot(n0), n3.cross(n0).length());
     let (cos_g, sin_g) = (cos_g2 * cos_g3 - sin_g2 * sin_g3, sin_g2 * cos_g3 + cos_g2 * sin_g3);
-    let (sin_uo, cos_uo) = sin_cos_accurate(u.x * solid_angle);
+    let (sin_uo, cos_uo) = trig::sin_cos(u.x * solid_angle);
     let sin_au = sin_uo * cos_g - cos_uo * sin_g;
     let cos_au = cos_uo * cos_g + sin_uo * sin_g;
     let fu = (cos_au * b0 - b1) / sin_au;
@@ -849,7 +824,7 @@ pub fn sample_ggx_vndf(v: Vec3, alpha: Vec2, u: Vec2) -> Vec3 {
     let t2 = vh.cross(t1);
     // Uniform point on the disk, warped onto the visible half of the projected hemisphere.
     let r = u.x.sqrt();
-    let (sin_phi, cos_phi) = (TAU * u.y).sin_cos();
+    let (sin_phi, cos_phi) = trig::sin_cos(TAU * u.y);
     let p1 = r * cos_phi;
     let p2 = r * sin_phi;
     let s = 0.5 * (1.0 + vh.z);
@@ -1299,23 +1274,6 @@ mod tests {
             assert!(d.z >= cos_max, "{d}");
             let q = uniform_cone_pdf(d, cos_max);
             assert!(q.is_finite() && q > 1.0e6, "{q}");
-        }
-    }
-
-    #[test]
-    fn accurate_sin_cos_matches_libm() {
-        for i in -2000..=2000 {
-            let x = i as f32 * (TAU / 2000.0);
-            let (s, c) = sin_cos_accurate(x);
-            let (es, ec) = (f64::from(x).sin(), f64::from(x).cos());
-            assert!((f64::from(s) - es).abs() <= 4.0e-7 && (f64::from(c) - ec).abs() <= 4.0e-7, "{x}: {s} {c}");
-        }
-        for x in [1.0e-30f32, 1.0e-6, 3.0e-3] {
-            let (s, c) = sin_cos_accurate(x);
-            assert!(
-                ((s - x.sin()) / x).abs() <= 2.0 * f32::EPSILON && (c - x.cos()).abs() <= 2.0 * f32::EPSILON,
-                "{x}"
-            );
         }
     }
 

@@ -11,6 +11,7 @@
 #[cfg(target_arch = "spirv")]
 use spirv_std::num_traits::Float;
 
+use crate::trig;
 use core::f32::consts::PI;
 use glam::Vec3;
 
@@ -108,7 +109,7 @@ pub fn edge_integral(a: Vec3, b: Vec3) -> f32 {
     let cross = a.cross(b);
     let sin_theta = cross.length();
     let cos_theta = a.dot(b);
-    let theta = sin_theta.atan2(cos_theta);
+    let theta = trig::atan2(sin_theta, cos_theta);
     // θ / sin θ, with its limit 1 for a vanishing edge (sin θ = 0 with θ = 0).
     let theta_over_sin = if sin_theta > 1.0e-7 { theta / sin_theta } else { 1.0 };
     cross.z * theta_over_sin

@@ -48,6 +48,7 @@ use spirv_std::num_traits::Float;
 
 use super::ggx::GgxLobe;
 use super::polygon::{Polygon, MAX_CORNERS};
+use crate::trig;
 use core::f32::consts::{FRAC_PI_2, PI, TAU};
 use glam::Vec3;
 
@@ -137,7 +138,7 @@ impl Edges {
         let mut i = 0usize;
         while i < self.count {
             let w = v + self.corners[i];
-            breaks[count] = wrap(w.y.atan2(w.x));
+            breaks[count] = wrap(trig::atan2(w.y, w.x));
             count += 1;
             i += 1;
         }
@@ -163,13 +164,13 @@ impl Edges {
         if !(major > 0.0 && minor < 0.0) {
             return count;
         }
-        let principal = 0.5 * dcs.atan2(dcc - dss);
-        let beta = (major / -minor).sqrt().atan();
+        let principal = 0.5 * trig::atan2(dcs, dcc - dss);
+        let beta = trig::atan((major / -minor).sqrt());
         let candidates = [principal + beta, principal - beta, principal + beta + PI, principal - beta + PI];
         let mut j = 0usize;
         while j < 4 {
             let phi = candidates[j];
-            let (sin, cos) = phi.sin_cos();
+            let (sin, cos) = trig::sin_cos(phi);
             let (a, b, _) = quadratic.along(sin, cos);
             let r = -b / (2.0 * a);
             if r > 0.0 && r.is_finite() && count < MAX_BREAKS {
@@ -259,7 +260,7 @@ fn light_direction(v: Vec3, w: Vec3) -> Vec3 {
 /// the slope's angle `|s| = α tan ψ` (module documentation).
 fn radial_integral(edges: &Edges, ggx: &GgxLobe, phi: f32) -> f32 {
     let (v, alpha) = (ggx.view(), ggx.alpha());
-    let (sin, cos) = phi.sin_cos();
+    let (sin, cos) = trig::sin_cos(phi);
     let mut psi = [0.0f32; 2 * MAX_CORNERS + 2];
     psi[1] = FRAC_PI_2;
     let mut count = 2usize;
@@ -269,7 +270,7 @@ fn radial_integral(edges: &Edges, ggx: &GgxLobe, phi: f32) -> f32 {
         let mut j = 0usize;
         while j < 2 {
             if roots[j] > 0.0 {
-                psi[count] = (roots[j] / alpha).atan();
+                psi[count] = trig::atan(roots[j] / alpha);
                 count += 1;
             }
             j += 1;
@@ -279,7 +280,7 @@ fn radial_integral(edges: &Edges, ggx: &GgxLobe, phi: f32) -> f32 {
     sort(&mut psi, count);
     // The slope-space point `w = (s, 1)` at angle `ψ` of this azimuth, with `sin ψ`, `cos ψ`.
     let point = |psi: f32| {
-        let (sin_psi, cos_psi) = psi.sin_cos();
+        let (sin_psi, cos_psi) = trig::sin_cos(psi);
         let r = alpha * sin_psi / cos_psi;
         (Vec3::new(r * cos, r * sin, 1.0), sin_psi, cos_psi)
     };
