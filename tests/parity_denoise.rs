@@ -284,13 +284,12 @@ fn check_parity(test: &str, all: &[Case], min_changed: f64) {
                 "{who}: max relative difference {:.3e}, {} of {} pixels beyond {REL:e}",
                 diff.max_rel, diff.outliers, diff.pixels
             );
-            let budget = (OUTLIER_FRACTION * diff.pixels as f64).floor() as usize;
-            assert!(
-                diff.outliers <= budget,
-                "{who}: {} of {} pixels differ beyond {REL:e} (budget {budget}):\n{}",
+            common::assert_within_budget(
                 diff.outliers,
                 diff.pixels,
-                diff.examples.join("\n")
+                OUTLIER_FRACTION,
+                &format!("{who}: pixels differing beyond {REL:e}"),
+                &diff.examples,
             );
             assert!(
                 diff.max_rel <= REL_ALL,

@@ -85,14 +85,16 @@ fn sampler_bits_are_identical_on_every_vulkan_device() {
     }
 }
 
-/// Documented tolerance of the warp parity: Vulkan lets `sin`, `cos`, `atan2` and friends differ
-/// from the CPU's libm by up to 2⁻¹¹ absolute, so directions agree within 2·10⁻³ (components of a
-/// unit vector) and pdfs within 1 % relative — for all but 10⁻³ of the samples, which may sit on a
-/// pdf discontinuity (the rim of a cone, the edge of a quad) and legitimately flip sides.
+/// Documented tolerance of the warp parity: the warps' trigonometry is the kernels' own
+/// (`raywave_kernels::trig`), but a device rounds `+ − × ÷ √` its own way (an NVIDIA driver
+/// contracts `a·b + c` into one fused multiply-add), so directions agree within 2·10⁻³
+/// (components of a unit vector) and pdfs within 1 % relative — or, where the pdf is
+/// ill-conditioned in `f32`, within what the CPU's own pdf gives for directions a few ulps from
+/// its sample (`warp_cases::pdf_spread`) — for all but 10⁻³ of the samples, which may sit on a pdf
+/// discontinuity (the rim of a cone, the edge of a quad) and legitimately flip sides.
 const WARP_DIRECTION_TOLERANCE: f32 = 2.0e-3;
 const WARP_PDF_REL_TOLERANCE: f32 = 1.0e-2;
 const WARP_OUTLIER_FRACTION: f64 = 1.0e-3;
-
 #[test]
 fn every_warp_passes_its_statistical_check_on_every_vulkan_device() {
     let mut devices = vulkan::each_device("warp parity");
@@ -101,19 +103,28 @@ fn every_warp_passes_its_statistical_check_on_every_vulkan_device() {
         for device in &mut devices {
             let samples = device.warp_probe(&params).expect("warp probe runs");
             assert_eq!(samples.len(), expected.len());
-            let outliers = samples
-                .iter()
-                .zip(&expected)
-                .filter(|(g, c)| {
+            let outliers: Vec<usize> = (0..samples.len())
+                .filter(|&i| {
+                    let (g, c) = (samples[i], expected[i]);
                     let direction_off = (g.truncate() - c.truncate()).abs().max_element() > WARP_DIRECTION_TOLERANCE;
-                    let pdf_off = (g.w - c.w).abs() > WARP_PDF_REL_TOLERANCE * c.w.abs().max(1e-6);
+                    let pdf_off = (g.w - c.w).abs() > WARP_PDF_REL_TOLERANCE * c.w.abs().max(1e-6) && {
+                        let (lo, hi) = common::warp_cases::pdf_spread(&params, c.truncate(), c.w);
+                        g.w < lo * (1.0 - WARP_PDF_REL_TOLERANCE) || g.w > hi * (1.0 + WARP_PDF_REL_TOLERANCE)
+                    };
                     direction_off || pdf_off || !g.is_finite()
                 })
-                .count();
+                .collect();
             assert!(
-                outliers as f64 <= WARP_OUTLIER_FRACTION * samples.len() as f64,
-                "{name} on {}: {outliers} samples differ from the CPU",
-                device.name()
+                outliers.len() as f64 <= WARP_OUTLIER_FRACTION * samples.len() as f64,
+                "{name} on {}: {} of {} samples differ from the CPU, e.g. (device vs CPU){}",
+                device.name(),
+                outliers.len(),
+                samples.len(),
+                outliers
+                    .iter()
+                    .take(6)
+                    .map(|&i| format!("\n  {i}: {} vs {}", samples[i], expected[i]))
+                    .collect::<String>()
             );
             if let Err(report) = common::warp_cases::check_warp(&name, &params, &samples) {
                 panic!("{name} on {}:\n{report}", device.name());

@@ -3,7 +3,8 @@
 //! three passes with `U` from the LTC form factors and one with the quadrature residual added
 //! (`ShadeParams::analytic_residual`), under the same tolerances: with the residual's adaptive
 //! quadrature of the GGX lobe (whose refinement may take other turns on another device, within its
-//! 10⁻³ tolerance) `U` still agrees within 2.8·10⁻⁵ of the pass's largest on llvmpipe.
+//! 10⁻³ tolerance) `U` still agrees within 2.0·10⁻⁶ of the pass's largest on llvmpipe and
+//! 2.5·10⁻⁵ on an NVIDIA H200.
 //!
 //! **What is compared, and how tightly.**
 //! - The emitted radiance: every pixel within 1e-4 relative (to `max(|a|, |b|, 1e-3)`); it is
@@ -12,25 +13,35 @@
 //!   the pass's largest `U` in that channel — 1e-4 relative for the bright pixels, 1e-4 of the
 //!   image's brightness for the dim ones. Not 1e-4 of every pixel's own value: `U` is a sum of
 //!   form factors `Σ θᵢ·(â×b̂)_z/|â×b̂|/2π` over the edges of the (LTC-mapped, horizon-clipped)
-//!   quad, each `θᵢ = atan2(…)` may differ from the CPU's libm by up to 4096 ulp (≈ 2.4·10⁻⁴
-//!   relative, the Vulkan spec's bound for `atan2`), and where the edge terms nearly cancel — a
+//!   quad, each `θᵢ = atan2(…)` (the kernels' own, `raywave_kernels::trig`) and the cross
+//!   products beneath it carry a device's own rounding, and where the edge terms nearly cancel — a
 //!   light near a surface's horizon, and above all a sharp lobe whose `M⁻¹` stretches the quad
 //!   into long edges of opposite sign — the small remainder carries that absolute error. Measured
-//!   on llvmpipe: up to 8.9·10⁻⁵ of a dim rough pixel's own `U` and 1.2·10⁻² of a dim glossy
-//!   one's (the two-light box's metallic block), but at most 2.9·10⁻⁵ of the image's largest `U`.
+//!   (142 008 samples): on llvmpipe up to 8.4·10⁻⁵ of a pixel's own `U` and 2.0·10⁻⁶ of the pass's
+//!   largest (2.9·10⁻⁵ before the trigonometry was the kernels' own); on an H200 3.9·10⁻⁴ of a
+//!   pixel's own (879 pixels beyond 10⁻⁴ of their own) and 2.5·10⁻⁵ of the pass's largest.
 //!   A real defect — a wrong light, material or buffer — moves `U` by far more than that.
-//! - The stochastic sample (`U_N`'s contribution and the shadow ray): for ≥ 99.9 % of the pixels
-//!   within 1e-3 relative. Not bit-exact, for two reasons. The transcendental functions of the
-//!   warps (`sin`, `cos`, `atan2`, `acos`, … with Vulkan's error bounds, 2⁻¹¹ absolute for
-//!   `sin`/`cos`) and the LTC pdfs amplify last-bit differences, most at grazing angles where the
-//!   weight `f/pdf` is small and the relative error of a small cosine is large. And the sample makes
-//!   discrete choices — the MIS strategy `u < P_BRDF`, the lobe `u < P_Diff`, the light `u_select`
-//!   against the importance CDF, and whether the direction still meets the quad near its edge — so
-//!   a threshold that differs in its last ulp flips the choice of a sample lying within that ulp:
+//! - The stochastic sample (`U_N`'s contribution and the shadow ray): for ≥ 99.5 % of the pixels
+//!   within 1e-3 relative, for ≥ 99.9 % within 1e-2 and the same sample. Not bit-exact, for three
+//!   reasons. The warps' trigonometry is the kernels' own (`raywave_kernels::trig`), the same
+//!   polynomials everywhere, but a device rounds `+ − × ÷ √` its own way — an NVIDIA driver
+//!   contracts `a·b + c` into one fused multiply-add — and the LTC pdfs amplify last-bit
+//!   differences, most at grazing angles where the weight `f/pdf` is small and the relative error
+//!   of a small cosine is large. A quad light seen nearly edge-on amplifies them most: Ureña's
+//!   spherical-rectangle parametrization takes the sample's offset along the light from
+//!   `cu/√(1 − cu²)` with `cu` near 1, about `(x/z₀)²` times the rounding of `cu` — on an NVIDIA
+//!   H200, at the top of the walls, 5 mm below the Cornell light's plane, up to 7 of 5 917
+//!   samples (0.12 %) of a pass differed by 1·10⁻³…5·10⁻³, hence the 0.5 % budget between 1e-3 and
+//!   1e-2. And the sample makes discrete choices — the MIS strategy `u < P_BRDF`, the lobe
+//!   `u < P_Diff`, the light `u_select` against the importance CDF, and whether the direction
+//!   still meets the quad near its edge — so a threshold that differs in its last ulp flips the
+//!   choice of a sample lying within that ulp:
 //!   a different, equally valid sample. Such *choice flips* are counted separately (a direction
-//!   that differs by more than 1e-2, or a shadow ray on one side only) and bounded, with the other
-//!   outliers, by the 0.1 % budget; with thresholds that differ by ~10⁻⁷ their expected rate is
-//!   ~10⁻⁶ per sample, and none occurred on llvmpipe in 71 004 samples.
+//!   that differs by more than 1e-2, or a shadow ray on one side only) and bounded, with any
+//!   difference beyond 1e-2, by the 0.1 % budget; with thresholds that differ by ~10⁻⁷ their
+//!   expected rate is ~10⁻⁶ per sample: none occurred on llvmpipe or on the H200 in 142 008
+//!   samples, where llvmpipe had no sample beyond 1e-3 at all (U_N within 1.2·10⁻⁵) and the H200
+//!   61 between 1e-3 and 1e-2 and one beyond.
 //! - Everywhere, on every backend: no NaN or Inf in any of the five output streams.
 #![cfg(feature = "vulkan")]
 
@@ -63,8 +74,15 @@ const ANALYTIC_REL: f32 = 1.0e-4;
 const SAMPLE_REL: f32 = 1.0e-3;
 /// Floor of the scale the relative tolerances are measured against.
 const FLOOR: f32 = 1.0e-3;
-/// Fraction of pixels whose stochastic sample may differ beyond [`SAMPLE_REL`] (choice flips).
+/// Fraction of pixels whose stochastic sample may be a different sample (a choice flip) or
+/// differ beyond [`CONDITIONING_REL`].
 const OUTLIER_FRACTION: f64 = 1.0e-3;
+/// Tolerance of the stochastic sample where its computation is ill-conditioned (relative): a quad
+/// light seen nearly edge-on (module documentation).
+const CONDITIONING_REL: f32 = 1.0e-2;
+/// Fraction of pixels whose stochastic sample may differ beyond [`SAMPLE_REL`] but within
+/// [`CONDITIONING_REL`]: about four times the most measured (0.12 % on an NVIDIA H200).
+const CONDITIONING_FRACTION: f64 = 5.0e-3;
 
 /// The scenes compared: the Cornell box (one light: linear importance scan), its two-light
 /// variant (a glossy and a metallic block, light selection between two coloured lights) and the
@@ -103,10 +121,13 @@ struct Diff {
     shadow_max_rel: f32,
     /// Pixels whose `U` or emitted radiance is outside [`ANALYTIC_REL`].
     analytic_outside: usize,
-    /// Pixels whose stochastic sample is outside [`SAMPLE_REL`] (choice flips included).
+    /// Pixels whose stochastic sample is outside [`CONDITIONING_REL`] or a choice flip.
     sample_outliers: usize,
     /// Of those, pixels where the device drew a different sample: a choice flip.
     choice_flips: usize,
+    /// Pixels whose stochastic sample is outside [`SAMPLE_REL`] but within [`CONDITIONING_REL`],
+    /// and the same sample.
+    ill_conditioned: usize,
     /// Descriptions of the first few outliers.
     examples: Vec<String>,
 }
@@ -123,6 +144,7 @@ impl Diff {
         self.analytic_outside += other.analytic_outside;
         self.sample_outliers += other.sample_outliers;
         self.choice_flips += other.choice_flips;
+        self.ill_conditioned += other.ill_conditioned;
     }
 }
 
@@ -169,10 +191,14 @@ fn compare(cpu: &ShadeStream, device: &ShadeStream) -> Diff {
             diff.shadow_max_rel = diff.shadow_max_rel.max(shadow);
             continue;
         }
-        diff.sample_outliers += 1;
         let one_sided = (c_dir.w > 0.0) != (d_dir.w > 0.0);
         let flipped = one_sided || (c_dir.xyz() - d_dir.xyz()).abs().max_element() > 1.0e-2;
-        diff.choice_flips += usize::from(flipped);
+        if !flipped && unshadowed <= CONDITIONING_REL && shadow <= CONDITIONING_REL {
+            diff.ill_conditioned += 1;
+        } else {
+            diff.sample_outliers += 1;
+            diff.choice_flips += usize::from(flipped);
+        }
         if diff.examples.len() < 8 {
             diff.examples.push(format!(
                 "pixel {i}{}: U_N {:?} vs {:?}, shadow ray {:?} vs {:?}",
@@ -233,14 +259,22 @@ fn shade_matches_the_cpu_on_every_vulkan_device() {
                          emitted {:e})",
                         diff.analytic_max_rel_to_pass, diff.emitted_max_rel
                     );
-                    let budget = (OUTLIER_FRACTION * diff.pixels as f64).floor() as usize;
-                    assert!(
-                        diff.sample_outliers <= budget,
-                        "{who}: {} of {} samples differ beyond {SAMPLE_REL} ({} choice flips; budget {budget}):\n{}",
+                    common::assert_within_budget(
                         diff.sample_outliers,
                         diff.pixels,
-                        diff.choice_flips,
-                        diff.examples.join("\n")
+                        OUTLIER_FRACTION,
+                        &format!(
+                            "{who}: samples differing beyond {CONDITIONING_REL} or another sample ({} choice flips)",
+                            diff.choice_flips
+                        ),
+                        &diff.examples,
+                    );
+                    common::assert_within_budget(
+                        diff.ill_conditioned,
+                        diff.pixels,
+                        CONDITIONING_FRACTION,
+                        &format!("{who}: samples differing beyond {SAMPLE_REL}"),
+                        &diff.examples,
                     );
                     if !diff.examples.is_empty() {
                         eprintln!("{who}: outliers\n{}", diff.examples.join("\n"));
@@ -257,7 +291,7 @@ fn shade_matches_the_cpu_on_every_vulkan_device() {
         eprintln!(
             "{}: {} samples; max difference of U {:e} of the pass's largest U ({:e} of its own, {} pixels beyond \
              {ANALYTIC_REL} of their own), emitted {:e}, U_N {:e}, shadow ray {:e} (relative, within tolerance); \
-             {} outliers beyond {SAMPLE_REL}, of which {} choice flips",
+             {} beyond {SAMPLE_REL} within {CONDITIONING_REL}; {} outliers beyond, of which {} choice flips",
             device.name(),
             total.pixels,
             total.analytic_max_rel_to_pass,
@@ -266,6 +300,7 @@ fn shade_matches_the_cpu_on_every_vulkan_device() {
             total.emitted_max_rel,
             total.unshadowed_max_rel,
             total.shadow_max_rel,
+            total.ill_conditioned,
             total.sample_outliers,
             total.choice_flips
         );

@@ -30,6 +30,14 @@ pub fn close(a: f32, b: f32, rel: f32, scale: f32) -> bool {
     (a - b).abs() <= rel * scale.max(a.abs()).max(b.abs())
 }
 
+/// Fails unless at most `fraction` of `total` items are `outliers`, saying `what` they are and
+/// showing `examples` of them: how the parity tests bound the few values a device may round
+/// differently.
+pub fn assert_within_budget(outliers: usize, total: usize, fraction: f64, what: &str, examples: &[String]) {
+    let budget = (fraction * total as f64).floor() as usize;
+    assert!(outliers <= budget, "{what}: {outliers} of {total} (budget {budget}):\n{}", examples.join("\n"));
+}
+
 #[cfg(feature = "vulkan")]
 pub mod vulkan {
     use raywave::vulkan::{enumerate_devices, ContextOptions, DeviceInfo, VulkanBackend};
