@@ -2,7 +2,8 @@
 //! one frame (1920×1080 by default) of a built-in scene, on the CPU and on a Vulkan device.
 //!
 //! The frame's inputs (`U`, `U_N`, `S_N` at `spp` samples and the G-buffer) are shaded once on the
-//! CPU; then each backend runs each denoiser `repeats` times and the median per pass is reported.
+//! CPU; then each backend runs each denoiser untimed for half a second ([`warm_up`]) and timed
+//! `repeats` times, and the median per pass is reported.
 //! "Bytes" counts every buffer a pass reads or writes once ([`crate::denoise::DenoisePass::bytes_per_pixel`]) —
 //! the traffic of an ideal cache — so `gb_per_s` is the effective bandwidth, and on a GPU with a
 //! known peak (`--peak-gbps`, or the datasheet value of an NVIDIA H100/H200) its fraction.
@@ -18,6 +19,26 @@ use crate::shared::sampling::sampler_kind;
 use crate::shared::DenoiseParams;
 use crate::{open_backend, Backend, BackendOptions, DeviceChoice, Result, Scene};
 use glam::Vec4;
+use std::time::Instant;
+
+/// Untimed runs before each measurement, for at least this long (and at least one run): drivers
+/// compile pipelines lazily (lavapipe at the first dispatch), and a GPU raises its clocks only
+/// under sustained load. On an NVIDIA H200 (SM clock 345 MHz idle, 1980 MHz boost), with a single
+/// untimed run, the bench's passes took up to 5× as long as the same passes inside
+/// `raywave render` after the trace and shade stages; whether this warm-up is long enough there
+/// has not been measured yet.
+const WARM_UP_SECONDS: f64 = 0.5;
+
+/// Calls `run` until [`WARM_UP_SECONDS`] have passed, at least once.
+fn warm_up(mut run: impl FnMut() -> Result<()>) -> Result<()> {
+    let start = Instant::now();
+    loop {
+        run()?;
+        if start.elapsed().as_secs_f64() >= WARM_UP_SECONDS {
+            return Ok(());
+        }
+    }
+}
 
 /// What to measure.
 #[derive(Clone, Debug)]
@@ -138,10 +159,10 @@ pub fn frame_input(options: &DenoiseBenchOptions) -> Result<DenoiseInput> {
 }
 
 /// `backend`'s copy bandwidth in GB/s on `image` (one `Vec4` per pixel of `params`' frame): the
-/// median time of `repeats` copy probes after an untimed one, each pixel read once and written
+/// median time of `repeats` copy probes after the [`warm_up`], each pixel read once and written
 /// once.
 fn copy_bandwidth(backend: &mut dyn Backend, params: &DenoiseParams, image: &[Vec4], repeats: u32) -> Result<f64> {
-    backend.copy_probe(params, image)?;
+    warm_up(|| backend.copy_probe(params, image).map(drop))?;
     let seconds = (0..repeats).map(|_| Ok(backend.copy_probe(params, image)?.1.seconds)).collect::<Result<Vec<_>>>()?;
     let bytes = 2.0 * std::mem::size_of::<Vec4>() as f64 * f64::from(params.pixels());
     Ok(bytes / median(seconds) / 1e9)
@@ -164,8 +185,7 @@ fn bench_backend(
     for method in [DenoiseMethod::Tv, DenoiseMethod::Svgf] {
         let passes = method.passes(&params);
         let mut seconds = vec![Vec::new(); passes.len()];
-        // One untimed run first: drivers compile pipelines lazily (lavapipe at the first dispatch).
-        backend.denoise(method, &params, input)?;
+        warm_up(|| backend.denoise(method, &params, input).map(drop))?;
         for _ in 0..options.repeats {
             let (_, timings) = backend.denoise(method, &params, input)?;
             for (s, t) in seconds.iter_mut().zip(timings) {
