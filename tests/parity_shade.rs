@@ -27,12 +27,14 @@
 //!   polynomials everywhere, but a device rounds `+ − × ÷ √` its own way — an NVIDIA driver
 //!   contracts `a·b + c` into one fused multiply-add — and the LTC pdfs amplify last-bit
 //!   differences, most at grazing angles where the weight `f/pdf` is small and the relative error
-//!   of a small cosine is large. A quad light seen nearly edge-on amplifies them most: Ureña's
-//!   spherical-rectangle parametrization takes the sample's offset along the light from
-//!   `cu/√(1 − cu²)` with `cu` near 1, about `(x/z₀)²` times the rounding of `cu` — on an NVIDIA
-//!   H200, at the top of the walls, 5 mm below the Cornell light's plane, up to 7 of 5 917
-//!   samples (0.12 %) of a pass differed by 1·10⁻³…5·10⁻³, hence the 0.5 % budget between 1e-3 and
-//!   1e-2. And the sample makes discrete choices — the MIS strategy `u < P_BRDF`, the lobe
+//!   of a small cosine is large. A quad light seen nearly edge-on amplified them most: Ureña's
+//!   spherical-rectangle parametrization, as written, took the sample's offset along the light
+//!   from `cu/√(1 − cu²)` with `cu` near 1 — on an NVIDIA H200, at the top of the walls, 5 mm below
+//!   the Cornell light's plane, up to 7 of 5 917 samples (0.12 %) of a pass differed by
+//!   1·10⁻³…5·10⁻³, hence the 0.5 % budget between 1e-3 and 1e-2. `warp::sample_quad_spherical`
+//!   now computes those steps without the cancellation (the `f32` sample there moved from up to
+//!   2.6·10⁻³ off its `f64` value to within 2·10⁻⁶), not yet re-measured on the H200. And the
+//!   sample makes discrete choices — the MIS strategy `u < P_BRDF`, the lobe
 //!   `u < P_Diff`, the light `u_select` against the importance CDF, and whether the direction
 //!   still meets the quad near its edge — so a threshold that differs in its last ulp flips the
 //!   choice of a sample lying within that ulp:
