@@ -6,6 +6,7 @@
 mod common;
 
 use common::vulkan;
+use common::warp_cases::within_pdf_spread;
 use raywave::cpu::CpuBackend;
 use raywave::shared::sampling::{sampler_kind, SamplerParams};
 use raywave::shared::SamplerProbeParams;
@@ -90,11 +91,12 @@ fn sampler_bits_are_identical_on_every_vulkan_device() {
 /// contracts `a·b + c` into one fused multiply-add), so directions agree within 2·10⁻³
 /// (components of a unit vector) and pdfs within 1 % relative — or, where the pdf is
 /// ill-conditioned in `f32`, within what the CPU's own pdf gives for directions a few ulps from
-/// its sample (`warp_cases::pdf_spread`) — for all but 10⁻³ of the samples, which may sit on a pdf
+/// its sample (`warp_cases::within_pdf_spread`) — for all but 10⁻³ of the samples, which may sit on a pdf
 /// discontinuity (the rim of a cone, the edge of a quad) and legitimately flip sides.
 const WARP_DIRECTION_TOLERANCE: f32 = 2.0e-3;
 const WARP_PDF_REL_TOLERANCE: f32 = 1.0e-2;
 const WARP_OUTLIER_FRACTION: f64 = 1.0e-3;
+
 #[test]
 fn every_warp_passes_its_statistical_check_on_every_vulkan_device() {
     let mut devices = vulkan::each_device("warp parity");
@@ -107,10 +109,8 @@ fn every_warp_passes_its_statistical_check_on_every_vulkan_device() {
                 .filter(|&i| {
                     let (g, c) = (samples[i], expected[i]);
                     let direction_off = (g.truncate() - c.truncate()).abs().max_element() > WARP_DIRECTION_TOLERANCE;
-                    let pdf_off = (g.w - c.w).abs() > WARP_PDF_REL_TOLERANCE * c.w.abs().max(1e-6) && {
-                        let (lo, hi) = common::warp_cases::pdf_spread(&params, c.truncate(), c.w);
-                        g.w < lo * (1.0 - WARP_PDF_REL_TOLERANCE) || g.w > hi * (1.0 + WARP_PDF_REL_TOLERANCE)
-                    };
+                    let pdf_off = (g.w - c.w).abs() > WARP_PDF_REL_TOLERANCE * c.w.abs().max(1e-6)
+                        && !within_pdf_spread(&params, c.truncate(), c.w, g.w, WARP_PDF_REL_TOLERANCE, 0.0);
                     direction_off || pdf_off || !g.is_finite()
                 })
                 .collect();

@@ -528,6 +528,13 @@ pub fn pdf_spread(params: &WarpParams, d: Vec3, pdf: f32) -> (f32, f32) {
     }
 }
 
+/// Whether `pdf` lies within [`pdf_spread`] around direction `d` (whose own pdf is `reference`),
+/// widened by `rel` relative and `abs` absolute.
+pub fn within_pdf_spread(params: &WarpParams, d: Vec3, reference: f32, pdf: f32, rel: f32, abs: f32) -> bool {
+    let (lo, hi) = pdf_spread(params, d, reference);
+    pdf >= lo * (1.0 - rel) - abs && pdf <= hi * (1.0 + rel) + abs
+}
+
 /// Measures a sample set of warp `params` (`xyz` = direction, `w` = pdf, from any backend)
 /// against the assertions listed in the module documentation.
 pub fn warp_report(name: &str, params: &WarpParams, samples: &[Vec4]) -> WarpReport {
@@ -545,11 +552,8 @@ pub fn warp_report(name: &str, params: &WarpParams, samples: &[Vec4]) -> WarpRep
             let scale = s.w.max(q);
             let diff = (q - s.w).abs();
             // Beyond the tolerance of the pdf at `d`, and of the pdf a few ulps from `d` too.
-            let mismatch = diff > (PDF_REL_TOLERANCE * scale).max(PDF_ABS_TOLERANCE) && {
-                let (lo, hi) = pdf_spread(params, d, q);
-                let slack = PDF_ABS_TOLERANCE;
-                s.w < lo * (1.0 - PDF_REL_TOLERANCE) - slack || s.w > hi * (1.0 + PDF_REL_TOLERANCE) + slack
-            };
+            let mismatch = diff > (PDF_REL_TOLERANCE * scale).max(PDF_ABS_TOLERANCE)
+                && !within_pdf_spread(params, d, q, s.w, PDF_REL_TOLERANCE, PDF_ABS_TOLERANCE);
             let relative = if scale > 0.0 && diff > PDF_ABS_TOLERANCE { diff / scale } else { 0.0 };
             (0, not_unit, (s.w == 0.0) as usize, mismatch as usize, relative)
         })
