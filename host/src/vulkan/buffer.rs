@@ -135,25 +135,22 @@ impl GpuBuffer {
         self.allocation.as_mut().and_then(|a| a.mapped_slice_mut()).ok_or_else(not_host_visible)
     }
 
-    /// Copies the first `count` elements out of the buffer: through a host-visible staging buffer
-    /// when it is device-local, else from its mapping.
+    /// Copies the first `count` elements out of this device-local buffer through a host-visible
+    /// staging buffer.
     pub fn read<T: Pod>(&self, count: usize) -> Result<Vec<T>> {
         let len = count * std::mem::size_of::<T>();
         if len == 0 {
             return Ok(Vec::new());
         }
-        if self.device_local {
-            let staging = Self::new(
-                &self.core,
-                len as u64,
-                vk::BufferUsageFlags::TRANSFER_DST,
-                MemoryLocation::GpuToCpu,
-                "readback staging",
-            )?;
-            copy_buffer(&self.core, self, &staging, len as u64)?;
-            return staging.read_mapped(len);
-        }
-        self.read_mapped(len)
+        let staging = Self::new(
+            &self.core,
+            len as u64,
+            vk::BufferUsageFlags::TRANSFER_DST,
+            MemoryLocation::GpuToCpu,
+            "readback staging",
+        )?;
+        copy_buffer(&self.core, self, &staging, len as u64)?;
+        staging.read_mapped(len)
     }
 
     /// The first `len` bytes of a host-visible (staging) buffer's mapping, as elements of `T`;
