@@ -216,3 +216,35 @@ fn occlusion_matches_cpu_on_every_vulkan_device() {
         vulkan::assert_clean(&device);
     }
 }
+
+/// Several threads opening, tracing with and dropping their own backends at once, as an engine
+/// may, all finish and agree with the CPU. On NVIDIA's driver this hung until the backend ordered
+/// device creation and destruction against pipeline creation (`vulkan/driver_lock.rs`).
+#[test]
+fn backends_on_several_threads_at_once_match_cpu() {
+    const THREADS: usize = 4;
+    const ROUNDS: usize = 2;
+    let scene = cornell();
+    let cpu_scene = CpuScene::build(&scene).unwrap();
+    let rays = cpu::generate(&generate_params(&scene, 64, 48, 0, 1));
+    let expected = cpu::trace(&cpu_scene, &rays);
+    let start = std::sync::Barrier::new(THREADS);
+    std::thread::scope(|threads| {
+        for thread in 0..THREADS {
+            let (scene, rays, expected, start) = (&scene, &rays, &expected, &start);
+            threads.spawn(move || {
+                start.wait();
+                for round in 0..ROUNDS {
+                    for mut device in vulkan::every_device("threaded trace parity") {
+                        device.load_scene(scene).unwrap();
+                        let (hits, _) = device.trace(rays).unwrap();
+                        let agreement = compare(scene, rays, expected, &hits);
+                        let name = device.name();
+                        assert!(agreement >= MIN_AGREEMENT, "thread {thread} round {round} {name}: {agreement}");
+                        vulkan::assert_clean(&device);
+                    }
+                }
+            });
+        }
+    });
+}

@@ -4,6 +4,7 @@
 
 use super::buffer::{submit_and_wait, GpuBuffer};
 use super::context::{vk_error, Core};
+use super::driver_lock;
 use crate::error::{Error, Result};
 use crate::scene::Scene;
 use ash::vk;
@@ -20,6 +21,7 @@ pub(crate) struct AccelerationStructure {
 
 impl Drop for AccelerationStructure {
     fn drop(&mut self) {
+        let _driver = driver_lock::device_use();
         if let Some(accel) = &self.core.acceleration_structure {
             // SAFETY: the device is idle after every submission, so no command uses it.
             unsafe { accel.destroy_acceleration_structure(self.handle, None) };

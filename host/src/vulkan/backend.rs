@@ -5,6 +5,7 @@ use super::accel::{build_scene, SceneAccel};
 use super::buffer::GpuBuffer;
 use super::context::{open, ContextOptions, Core, DeviceInfo};
 use super::denoise::DenoiseKernels;
+use super::driver_lock;
 use super::kernel::{dispatch_grid, ComputeKernel};
 use super::pass::Resource;
 use super::rt_pipeline::{RtPipelineKernel, CLOSEST_HIT_SHADERS, OCCLUSION_SHADERS};
@@ -290,6 +291,8 @@ impl VulkanBackend {
     /// software traversal. A method the device lacks is [`Error::MissingFeatures`].
     pub fn open(index: usize, options: &ContextOptions, trace: Option<TraceMethod>) -> Result<Self> {
         let core = open(index, options)?;
+        // Declared after `core`, so released before a failed open drops it.
+        let _driver = driver_lock::device_use();
         let missing = |method: TraceMethod| match method {
             TraceMethod::Software => Vec::new(),
             TraceMethod::RayQuery => core.info.missing_for_ray_query(),
@@ -481,6 +484,7 @@ impl Backend for VulkanBackend {
     }
 
     fn load_scene(&mut self, scene: &Scene) -> Result<()> {
+        let _driver = driver_lock::device_use();
         self.scene = None;
         self.scene = Some(match self.trace_method {
             TraceMethod::RayQuery | TraceMethod::RtPipeline => {
@@ -499,11 +503,13 @@ impl Backend for VulkanBackend {
     }
 
     fn generate(&mut self, params: &GenerateParams) -> Result<(RayStream, StageReport)> {
+        let _driver = driver_lock::device_use();
         let (rays, timing) = self.generate_on_device(params)?;
         Ok((rays.read()?, timing))
     }
 
     fn trace(&mut self, rays: &RayStream) -> Result<(HitStream, StageReport)> {
+        let _driver = driver_lock::device_use();
         rays.check("trace")?;
         let device_rays = DeviceRays::upload(&self.core, rays)?;
         let (hits, timing) = self.trace_on_device(&device_rays)?;
@@ -511,6 +517,7 @@ impl Backend for VulkanBackend {
     }
 
     fn trace_occlusion(&mut self, rays: &RayStream) -> Result<(Vec<u32>, StageReport)> {
+        let _driver = driver_lock::device_use();
         rays.check("trace_occlusion")?;
         let device_rays = DeviceRays::upload(&self.core, rays)?;
         let occluded = stream_buffer::<u32>(&self.core, device_rays.len, "occluded")?;
@@ -525,6 +532,7 @@ impl Backend for VulkanBackend {
         rays: &RayStream,
         hits: &HitStream,
     ) -> Result<(ShadeStream, StageReport)> {
+        let _driver = driver_lock::device_use();
         check_shade_inputs(params, rays, hits)?;
         data.check()?;
         let len = stream_len(hits.len())?;
@@ -564,6 +572,7 @@ impl Backend for VulkanBackend {
     }
 
     fn render(&mut self, params: &GenerateParams) -> Result<FrameOutput> {
+        let _driver = driver_lock::device_use();
         let (rays, generate_time) = self.generate_on_device(params)?;
         let (hits, trace_time) = self.trace_on_device(&rays)?;
         Ok(FrameOutput { rays: rays.read()?, hits: hits.read()?, timings: vec![generate_time, trace_time] })
@@ -575,17 +584,20 @@ impl Backend for VulkanBackend {
         params: &DenoiseParams,
         input: &DenoiseInput,
     ) -> Result<(Vec<Vec4>, Vec<StageReport>)> {
+        let _driver = driver_lock::device_use();
         input.check(params)?;
         self.check_stream(params.pixels())?;
         self.denoise_kernels.run(&self.core, method, params, input)
     }
 
     fn copy_probe(&mut self, params: &DenoiseParams, image: &[Vec4]) -> Result<(Vec<Vec4>, StageReport)> {
+        let _driver = driver_lock::device_use();
         self.check_stream(copy_probe_len(params, image)?)?;
         self.denoise_kernels.copy_probe(&self.core, params, image)
     }
 
     fn sampler_probe(&mut self, params: &SamplerProbeParams) -> Result<Vec<UVec2>> {
+        let _driver = driver_lock::device_use();
         let count = sampler_probe_len(params)?;
         let samples = stream_buffer::<UVec2>(&self.core, count.max(1), "sampler probe")?;
         self.sampler_probe.dispatch(&[Resource::Buffer(&samples)], bytemuck::bytes_of(params), count)?;
@@ -593,6 +605,7 @@ impl Backend for VulkanBackend {
     }
 
     fn warp_probe(&mut self, params: &WarpParams) -> Result<Vec<Vec4>> {
+        let _driver = driver_lock::device_use();
         let count = warp_probe_len(params)?;
         let samples = stream_buffer::<Vec4>(&self.core, count.max(1), "warp probe")?;
         self.warp_probe.dispatch(&[Resource::Buffer(&samples)], bytemuck::bytes_of(params), count)?;

@@ -1,6 +1,7 @@
 //! Buffers and one-shot command submission.
 
 use super::context::{vk_error, Core};
+use super::driver_lock;
 use crate::error::{Error, Result};
 use ash::vk;
 use bytemuck::Pod;
@@ -24,6 +25,7 @@ pub(crate) struct GpuBuffer {
 
 impl Drop for GpuBuffer {
     fn drop(&mut self) {
+        let _driver = driver_lock::device_use();
         if let (Some(allocation), Ok(mut allocator)) = (self.allocation.take(), self.core.allocator.lock()) {
             let _ = allocator.free(allocation);
         }

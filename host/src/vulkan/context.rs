@@ -1,6 +1,7 @@
 //! The Vulkan instance and device: loading, validation-message capture, device enumeration with
 //! ray-tracing feature detection, and device creation.
 
+use super::driver_lock;
 use crate::error::{Error, Result};
 use ash::vk;
 use gpu_allocator::vulkan::{Allocator, AllocatorCreateDesc};
@@ -107,6 +108,7 @@ pub(crate) struct Core {
 
 impl Drop for Core {
     fn drop(&mut self) {
+        let _lifetime = driver_lock::device_lifetime();
         // SAFETY: every object created from this device holds an `Arc<Core>`, so none is alive now.
         unsafe {
             let _ = self.device.device_wait_idle();
@@ -244,6 +246,7 @@ fn describe(instance: &ash::Instance, physical: vk::PhysicalDevice, index: usize
 /// Lists every Vulkan device with the features raywave cares about. An absent Vulkan loader or
 /// driver is an [`Error::VulkanUnavailable`].
 pub fn enumerate_devices() -> Result<Vec<DeviceInfo>> {
+    let _lifetime = driver_lock::device_lifetime();
     let entry = load_entry()?;
     let instance = create_instance(&entry, false, None)?;
     let result = physical_devices(&instance)
@@ -255,6 +258,7 @@ pub fn enumerate_devices() -> Result<Vec<DeviceInfo>> {
 
 /// Opens Vulkan device `index` (as listed by [`enumerate_devices`]).
 pub(crate) fn open(index: usize, options: &ContextOptions) -> Result<Arc<Core>> {
+    let _lifetime = driver_lock::device_lifetime();
     let entry = load_entry()?;
     if options.validation {
         // SAFETY: plain query on a loaded entry.

@@ -7,6 +7,7 @@ mod backend;
 mod buffer;
 mod context;
 mod denoise;
+mod driver_lock;
 mod kernel;
 mod pass;
 mod rt_pipeline;

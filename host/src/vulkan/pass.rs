@@ -3,6 +3,7 @@
 
 use super::buffer::{submit_and_wait, GpuBuffer};
 use super::context::{vk_error, Core};
+use super::driver_lock;
 use crate::error::{Error, Result};
 use ash::vk;
 use std::sync::Arc;
@@ -35,6 +36,7 @@ pub(crate) struct Pass {
 
 impl Drop for Pass {
     fn drop(&mut self) {
+        let _driver = driver_lock::device_use();
         // SAFETY: the device is idle after every submission; these objects are owned by `self`
         // (null handles are ignored by the destroy calls).
         unsafe {
