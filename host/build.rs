@@ -68,6 +68,8 @@ mod spirv {
             let mut builder = backend.to_spirv_builder(&kernels, TARGET);
             builder.release = true;
             builder.multimodule = true;
+            // A warning in the kernels fails the build, as `clippy -D warnings` does for the host.
+            builder.deny_warnings = true;
             builder.spirv_metadata = SpirvMetadata::NameVariables;
             builder.capabilities.extend_from_slice(variant.capabilities);
             builder.extensions.extend(variant.extensions.iter().map(|e| e.to_string()));

@@ -8,9 +8,6 @@
 //! `atan2(|a × b|, a·b)`, accurate for both tiny and near-antipodal edges (the `acos` form loses
 //! all digits for short edges), and `θ/sin θ → 1` as the edge vanishes, so no NaN can appear.
 
-#[cfg(target_arch = "spirv")]
-use spirv_std::num_traits::Float;
-
 use crate::trig;
 use core::f32::consts::PI;
 use glam::Vec3;
