@@ -214,7 +214,10 @@ enum TraceKernel {
     RtPipeline(RtPipelineKernel),
 }
 
-/// A Vulkan device running raywave's stages.
+/// A Vulkan device running raywave's stages. Several threads may each open, use and drop their own
+/// at the same time: opening and dropping one wait until no other thread is inside a backend call,
+/// because NVIDIA's driver deadlocks when a device is created or destroyed during another thread's
+/// driver calls (measured; see `vulkan/driver_lock.rs`).
 pub struct VulkanBackend {
     generate: ComputeKernel,
     sampler_probe: ComputeKernel,

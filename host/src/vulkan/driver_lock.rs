@@ -6,8 +6,8 @@
 //! `vkDestroyDevice` thread waited on a mutex held by a thread compiling a ray-tracing pipeline,
 //! which waited on the driver-wide lock the first one held (stacks taken with eu-stack while test
 //! threads each opened, used and dropped their own backends); ordering only pipeline creation
-//! against them still hung in 2 of 4 parallel runs. The Vulkan loader
-//! also frees its device list without a lock in `vkDestroyDevice` while `vkCreateDevice` walks it
+//! against them still hung in 2 of 4 parallel runs. The Vulkan loader also frees its device list
+//! without a lock in `vkDestroyDevice` while `vkCreateDevice` walks it
 //! (KhronosGroup/Vulkan-Loader#2018), whatever the instance. Both are bugs below raywave, but an
 //! engine opening backends from several threads would hang or crash on them, so raywave orders
 //! these calls itself: a backend's start and end wait until no other thread is inside a backend
@@ -16,6 +16,7 @@
 use std::cell::Cell;
 use std::sync::{PoisonError, RwLock, RwLockReadGuard, RwLockWriteGuard};
 
+/// The lock itself: it guards no data, only the order of driver calls.
 static DRIVER: RwLock<()> = RwLock::new(());
 
 thread_local! {
