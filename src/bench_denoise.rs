@@ -23,10 +23,9 @@ use std::time::Instant;
 
 /// Untimed runs before each measurement, for at least this long (and at least one run): drivers
 /// compile pipelines lazily (lavapipe at the first dispatch), and a GPU raises its clocks only
-/// under sustained load. On an NVIDIA H200 (SM clock 345 MHz idle, 1980 MHz boost), with a single
-/// untimed run, the bench's passes took up to 5× as long as the same passes inside
-/// `raywave render` after the trace and shade stages; whether this warm-up is long enough there
-/// has not been measured yet.
+/// under sustained load. On an NVIDIA H200 (SM clock 345 MHz idle, 1980 MHz boost) the bench's
+/// passes took up to 5× as long as the same passes inside `raywave render` with a single untimed
+/// run, and as long with this warm-up: clocks are not what separates them (README).
 const WARM_UP_SECONDS: f64 = 0.5;
 
 /// Calls `run` until [`WARM_UP_SECONDS`] have passed, at least once.

@@ -219,7 +219,7 @@ fn occlusion_matches_cpu_on_every_vulkan_device() {
 
 /// Several threads opening, tracing with and dropping their own backends at once, as an engine
 /// may, all finish and agree with the CPU. On NVIDIA's driver this hung until the backend ordered
-/// device creation and destruction against pipeline creation (`vulkan/driver_lock.rs`).
+/// device creation and destruction against the other threads' driver calls (`vulkan/driver_lock.rs`).
 #[test]
 fn backends_on_several_threads_at_once_match_cpu() {
     const THREADS: usize = 4;
