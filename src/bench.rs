@@ -49,6 +49,13 @@ pub struct Measurement {
     pub seconds: f64,
     /// Millions of rays per second.
     pub mrays_per_s: f64,
+    /// Vulkan: how many traces ran back to back in each timed submission ([`SUSTAIN_SECONDS`];
+    /// the last repetition's), `seconds` being their mean; 1 on the CPU.
+    pub dispatches: u32,
+    /// Vulkan: seconds of the untimed [`warm_up`] before the measurement, long where the GPU had
+    /// to raise its clocks first; absent on the CPU, whose tracers take turns instead.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub warm_up_seconds: Option<f64>,
 }
 
 /// The BVH build line: build time and memory per triangle.
@@ -110,10 +117,65 @@ fn ray_sets(scene: &Scene, cpu_scene: &CpuScene, resolution: u32) -> RaySets {
     RaySets { primary, shadow, diffuse }
 }
 
-/// Median of `repeats` timings of `run`.
-#[cfg(feature = "vulkan")]
-fn median_seconds(repeats: u32, mut run: impl FnMut() -> f64) -> f64 {
-    median((0..repeats).map(|_| run()).collect())
+/// How long a benchmark's times must have stopped falling before it measures, on the CPU
+/// ([`warm_up`]): drivers compile pipelines lazily (lavapipe at the first dispatch), caches and
+/// branch predictors warm up.
+pub(crate) const CPU_SETTLE_SECONDS: f64 = 0.5;
+
+/// The same on a GPU, whose clocks follow its load slowly: an NVIDIA H200 that had fallen to its
+/// idle 345 MHz held them for ~3 s under the denoise bench's sustained submissions (30–70 %
+/// busy) and then rose by ~150 MHz a second (README) — where opening a device gives it its
+/// 1980 MHz boost at once, for a few seconds, which load then keeps.
+pub(crate) const GPU_SETTLE_SECONDS: f64 = 5.0;
+
+/// Longest warm-up: past it the measurement starts even if the times are still falling.
+pub(crate) const MAX_WARM_UP_SECONDS: f64 = 30.0;
+
+/// The warm-up runs in rounds of at least this long and at least [`WARM_UP_ROUND_RUNS`] runs.
+const WARM_UP_ROUND_SECONDS: f64 = 0.25;
+const WARM_UP_ROUND_RUNS: usize = 3;
+
+/// A round whose median time is more than this fraction below the best so far counts as still
+/// falling.
+const FALLING_FRACTION: f64 = 0.02;
+
+/// The GPU busy time, in seconds, each timed Vulkan submission of a benchmark is stretched to by
+/// repeating its dispatch ([`crate::BackendOptions::sustain_seconds`]). A GPU clocks down under
+/// sparse work: on an NVIDIA H200 (345 MHz idle, 1980 MHz boost) the single dispatches of
+/// `raywave bench denoise`, each submitted alone between uploads, kept it 5–10 % busy at 345 MHz,
+/// 2–5× slower than at boost, whenever they missed the few seconds of boost that opening the
+/// device gives — on a fresh machine, where compiling the pipelines outlasted them (README).
+/// 50 ms of back-to-back dispatches per submission keep it mostly busy, so that it raises its
+/// clocks ([`GPU_SETTLE_SECONDS`]) and holds them.
+pub(crate) const SUSTAIN_SECONDS: f64 = 0.05;
+
+/// Runs `run`, which returns the seconds it measured, untimed until those times have stopped
+/// falling for `settle_seconds` ([`CPU_SETTLE_SECONDS`], [`GPU_SETTLE_SECONDS`]): in rounds
+/// ([`WARM_UP_ROUND_SECONDS`], [`WARM_UP_ROUND_RUNS`]), each round's median against the best
+/// before it ([`FALLING_FRACTION`]), for at most [`MAX_WARM_UP_SECONDS`] (then with a note on
+/// stderr). Returns the warm-up's seconds.
+pub(crate) fn warm_up(settle_seconds: f64, mut run: impl FnMut() -> Result<f64>) -> Result<f64> {
+    let start = Instant::now();
+    let (mut best, mut last_fall) = (f64::INFINITY, 0.0);
+    loop {
+        let round_start = Instant::now();
+        let mut times = Vec::new();
+        while times.len() < WARM_UP_ROUND_RUNS || round_start.elapsed().as_secs_f64() < WARM_UP_ROUND_SECONDS {
+            times.push(run()?);
+        }
+        let (round, elapsed) = (median(times), start.elapsed().as_secs_f64());
+        if round < best * (1.0 - FALLING_FRACTION) {
+            last_fall = elapsed;
+        }
+        best = best.min(round);
+        if elapsed - last_fall >= settle_seconds {
+            return Ok(elapsed);
+        }
+        if elapsed >= MAX_WARM_UP_SECONDS {
+            eprintln!("note: times still falling after {elapsed:.0} s of warm-up (now {round:.3e} s)");
+            return Ok(elapsed);
+        }
+    }
 }
 
 /// The median of a list of timings (the upper one of an even count; NaN for none, which the
@@ -184,7 +246,15 @@ fn time_cpu(tracer: &dyn CpuTracer, kind: &str, rays: &RayStream) -> f64 {
     })
 }
 
-fn measurement(implementation: &str, kind: &'static str, threads: usize, rays: usize, seconds: f64) -> Measurement {
+fn measurement(
+    implementation: &str,
+    kind: &'static str,
+    threads: usize,
+    rays: usize,
+    seconds: f64,
+    dispatches: u32,
+    warm_up_seconds: Option<f64>,
+) -> Measurement {
     Measurement {
         stage: "trace",
         implementation: implementation.to_owned(),
@@ -193,6 +263,8 @@ fn measurement(implementation: &str, kind: &'static str, threads: usize, rays: u
         rays,
         seconds,
         mrays_per_s: rays as f64 / seconds.max(1e-12) / 1e6,
+        dispatches,
+        warm_up_seconds,
     }
 }
 
@@ -261,7 +333,7 @@ pub fn bench_trace(options: &TraceBenchOptions, mut emit: impl FnMut(&dyn BenchL
                 }
             }
             for ((name, _), times) in tracers.iter().zip(times) {
-                emit(&measurement(name, kind, threads, rays.len(), median(times)));
+                emit(&measurement(name, kind, threads, rays.len(), median(times), 1, None));
             }
         }
     }
@@ -273,7 +345,8 @@ pub fn bench_trace(options: &TraceBenchOptions, mut emit: impl FnMut(&dyn BenchL
 }
 
 /// Every Vulkan trace method of the best device: closest hit for primary and diffuse rays,
-/// occlusion for shadow rays.
+/// occlusion for shadow rays; each after the [`warm_up`], its submissions sustained
+/// ([`SUSTAIN_SECONDS`]).
 #[cfg(feature = "vulkan")]
 fn bench_vulkan(
     options: &TraceBenchOptions,
@@ -293,28 +366,23 @@ fn bench_vulkan(
     ];
     let methods: Vec<TraceMethod> = methods.iter().filter(|(_, available)| *available).map(|(m, _)| *m).collect();
     for method in methods {
-        let mut backend = VulkanBackend::open(index, &ContextOptions::default(), Some(method))?;
+        let context = ContextOptions { sustain_seconds: SUSTAIN_SECONDS, ..Default::default() };
+        let mut backend = VulkanBackend::open(index, &context, Some(method))?;
         backend.load_scene(scene)?;
         for &(kind, rays) in kinds {
-            let mut failure = None;
-            let seconds = median_seconds(options.repeats, || {
-                let timing = if kind == "shadow" {
+            let mut run = || {
+                if kind == "shadow" {
                     backend.trace_occlusion(rays).map(|(_, t)| t)
                 } else {
                     backend.trace(rays).map(|(_, t)| t)
-                };
-                match timing {
-                    Ok(timing) => timing.seconds,
-                    Err(e) => {
-                        failure = Some(e);
-                        f64::NAN
-                    }
                 }
-            });
-            if let Some(e) = failure {
-                return Err(e);
-            }
-            emit(&measurement(&format!("raywave-vk-{}", method.name()), kind, 1, rays.len(), seconds));
+            };
+            let warm_up_seconds = warm_up(GPU_SETTLE_SECONDS, || run().map(|report| report.seconds))?;
+            let reports = (0..options.repeats).map(|_| run()).collect::<Result<Vec<_>>>()?;
+            let dispatches = reports.last().map_or(1, |r| r.dispatches);
+            let seconds = median(reports.iter().map(|r| r.seconds).collect());
+            let name = format!("raywave-vk-{}", method.name());
+            emit(&measurement(&name, kind, 1, rays.len(), seconds, dispatches, Some(warm_up_seconds)));
         }
     }
     Ok(())
@@ -334,8 +402,8 @@ impl BenchLine for Measurement {
     }
     fn row(&self) -> String {
         format!(
-            "{:<20} {:<8} {:>2} threads {:>9} rays {:>9.4} s {:>8.2} Mrays/s",
-            self.implementation, self.kind, self.threads, self.rays, self.seconds, self.mrays_per_s
+            "{:<20} {:<8} {:>2} threads {:>9} rays {:>9.4} s {:>8.2} Mrays/s  ×{}",
+            self.implementation, self.kind, self.threads, self.rays, self.seconds, self.mrays_per_s, self.dispatches
         )
     }
 }
@@ -350,5 +418,32 @@ impl BenchLine for BuildMeasurement {
             "{:<20} {} triangles built in {:.3} s, {:.1} bytes/triangle{isa}",
             self.implementation, self.triangles, self.seconds, self.bytes_per_triangle
         )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Times that hold for 0.4 s, fall for 0.4 s and hold again, in runs of 10 ms — as a GPU's
+    /// that holds its idle clocks for a while under load before it raises them: a warm-up that
+    /// must see no fall for 0.6 s outlasts the first hold and the fall.
+    #[test]
+    fn the_warm_up_lasts_until_the_times_have_stopped_falling_for_its_settling_time() {
+        let mut calls = 0;
+        let run = || {
+            calls += 1;
+            std::thread::sleep(std::time::Duration::from_millis(10));
+            Ok(1.0 / calls.clamp(40, 80) as f64)
+        };
+        warm_up(0.6, run).expect("warm-up");
+        assert!(calls > 80 + WARM_UP_ROUND_RUNS, "ended after {calls} runs, before the times stopped falling");
+    }
+
+    /// Steady times end the warm-up (the test returns), not before its settling time.
+    #[test]
+    fn steady_times_end_the_warm_up_after_its_settling_time() {
+        let seconds = warm_up(0.3, || Ok(1e-3)).expect("warm-up");
+        assert!(seconds >= 0.3, "{seconds} s");
     }
 }

@@ -2,8 +2,10 @@
 //! one frame (1920×1080 by default) of a built-in scene, on the CPU and on a Vulkan device.
 //!
 //! The frame's inputs (`U`, `U_N`, `S_N` at `spp` samples and the G-buffer) are shaded once on the
-//! CPU; then each backend runs each denoiser untimed for half a second ([`warm_up`]) and timed
-//! `repeats` times, and the median per pass is reported.
+//! CPU; then each backend runs each denoiser untimed until its times stop falling ([`warm_up`])
+//! and timed `repeats` times, and the median per pass is reported. The Vulkan backend is opened in
+//! benchmark mode: each pass's timed submission repeats its dispatch to keep the GPU busy for
+//! [`SUSTAIN_SECONDS`], so that it holds its clocks.
 //! "Bytes" counts every buffer a pass reads or writes once ([`crate::denoise::DenoisePass::bytes_per_pixel`]) —
 //! the traffic of an ideal cache — so `gb_per_s` is the effective bandwidth, and on a GPU with a
 //! known peak (`--peak-gbps`, or the datasheet value of an NVIDIA H100/H200) its fraction.
@@ -11,7 +13,7 @@
 //! a pass that only reads and writes one `Vec4` per pixel of the same frame, the bandwidth a
 //! memory-bound pass can reach there.
 
-use crate::bench::median;
+use crate::bench::{median, warm_up, CPU_SETTLE_SECONDS, GPU_SETTLE_SECONDS, SUSTAIN_SECONDS};
 use crate::denoise::{check_radius, frame_params, DenoiseInput, DenoiseMethod};
 use crate::frame::{check_samples_per_pixel, generate_params_with, sampler_params};
 use crate::shading::{resolve, ShadeAccumulator, ShadeData};
@@ -19,25 +21,6 @@ use crate::shared::sampling::sampler_kind;
 use crate::shared::DenoiseParams;
 use crate::{open_backend, Backend, BackendOptions, DeviceChoice, Result, Scene};
 use glam::Vec4;
-use std::time::Instant;
-
-/// Untimed runs before each measurement, for at least this long (and at least one run): drivers
-/// compile pipelines lazily (lavapipe at the first dispatch), and a GPU raises its clocks only
-/// under sustained load. On an NVIDIA H200 (SM clock 345 MHz idle, 1980 MHz boost) the bench's
-/// passes took up to 5× as long as the same passes inside `raywave render` with a single untimed
-/// run, and as long with this warm-up: clocks are not what separates them (README).
-const WARM_UP_SECONDS: f64 = 0.5;
-
-/// Calls `run` until [`WARM_UP_SECONDS`] have passed, at least once.
-fn warm_up(mut run: impl FnMut() -> Result<()>) -> Result<()> {
-    let start = Instant::now();
-    loop {
-        run()?;
-        if start.elapsed().as_secs_f64() >= WARM_UP_SECONDS {
-            return Ok(());
-        }
-    }
-}
 
 /// What to measure.
 #[derive(Clone, Debug)]
@@ -82,6 +65,14 @@ pub struct DenoiseMeasurement {
     pub radius: u32,
     /// Median seconds (GPU timestamps on Vulkan, wall clock on the CPU).
     pub seconds: f64,
+    /// How many times the pass ran back to back in each timed submission (the last
+    /// repetition's), `seconds` being their mean: 1 on the CPU, more on Vulkan
+    /// ([`SUSTAIN_SECONDS`]); absent on the `total` line.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub dispatches: Option<u32>,
+    /// Seconds of the untimed [`warm_up`] of this denoiser before it was timed: long where the
+    /// device had to raise its clocks first.
+    pub warm_up_seconds: f64,
     /// Bytes the pass must move.
     pub bytes: u64,
     /// Effective bandwidth `bytes / seconds`, in GB/s (10⁹ bytes).
@@ -105,8 +96,9 @@ impl DenoiseMeasurement {
     /// A table row.
     pub fn row(&self) -> String {
         let fraction = self.bandwidth_fraction.map_or(String::new(), |f| format!("  {:.1} % of peak", 100.0 * f));
+        let dispatches = self.dispatches.map_or(String::new(), |d| format!("  ×{d}"));
         format!(
-            "{:<40} {:<5} R={:<3} {:<20} {:>9.3} ms  {:>7.2} GB/s  {:>5.1} % of copy{fraction}",
+            "{:<40} {:<5} R={:<3} {:<20} {:>9.3} ms  {:>7.2} GB/s  {:>5.1} % of copy{fraction}{dispatches}",
             self.implementation,
             self.method,
             self.radius,
@@ -158,21 +150,29 @@ pub fn frame_input(options: &DenoiseBenchOptions) -> Result<DenoiseInput> {
 }
 
 /// `backend`'s copy bandwidth in GB/s on `image` (one `Vec4` per pixel of `params`' frame): the
-/// median time of `repeats` copy probes after the [`warm_up`], each pixel read once and written
-/// once.
-fn copy_bandwidth(backend: &mut dyn Backend, params: &DenoiseParams, image: &[Vec4], repeats: u32) -> Result<f64> {
-    warm_up(|| backend.copy_probe(params, image).map(drop))?;
+/// median time of `repeats` copy probes after the [`warm_up`] (`settle_seconds`), each pixel read
+/// once and written once.
+fn copy_bandwidth(
+    backend: &mut dyn Backend,
+    params: &DenoiseParams,
+    image: &[Vec4],
+    repeats: u32,
+    settle_seconds: f64,
+) -> Result<f64> {
+    warm_up(settle_seconds, || backend.copy_probe(params, image).map(|(_, report)| report.seconds))?;
     let seconds = (0..repeats).map(|_| Ok(backend.copy_probe(params, image)?.1.seconds)).collect::<Result<Vec<_>>>()?;
     let bytes = 2.0 * std::mem::size_of::<Vec4>() as f64 * f64::from(params.pixels());
     Ok(bytes / median(seconds) / 1e9)
 }
 
-/// Measures `backend`, handing each line to `emit`.
+/// Measures `backend`, each measurement after a [`warm_up`] of `settle_seconds`, handing each
+/// line to `emit`.
 fn bench_backend(
     backend: &mut dyn Backend,
     input: &DenoiseInput,
     options: &DenoiseBenchOptions,
     peak_gbps: Option<f64>,
+    settle_seconds: f64,
     emit: &mut impl FnMut(&DenoiseMeasurement),
 ) -> Result<()> {
     let params = DenoiseParams {
@@ -180,18 +180,22 @@ fn bench_backend(
         ..frame_params(options.width, options.height, options.denoise_radius)
     };
     let pixels = u64::from(params.pixels());
-    let copy_gb_per_s = copy_bandwidth(backend, &params, &input.shadowed, options.repeats)?;
+    let copy_gb_per_s = copy_bandwidth(backend, &params, &input.shadowed, options.repeats, settle_seconds)?;
     for method in [DenoiseMethod::Tv, DenoiseMethod::Svgf] {
         let passes = method.passes(&params);
         let mut seconds = vec![Vec::new(); passes.len()];
-        warm_up(|| backend.denoise(method, &params, input).map(drop))?;
+        let mut dispatches = vec![1; passes.len()];
+        let run =
+            || backend.denoise(method, &params, input).map(|(_, reports)| reports.iter().map(|r| r.seconds).sum());
+        let warm_up_seconds = warm_up(settle_seconds, run)?;
         for _ in 0..options.repeats {
             let (_, timings) = backend.denoise(method, &params, input)?;
-            for (s, t) in seconds.iter_mut().zip(timings) {
+            for ((s, d), t) in seconds.iter_mut().zip(&mut dispatches).zip(timings) {
                 s.push(t.seconds);
+                *d = t.dispatches;
             }
         }
-        let line = |pass: &'static str, seconds: f64, bytes: u64| {
+        let line = |pass: &'static str, seconds: f64, dispatches: Option<u32>, bytes: u64| {
             let gb_per_s = bytes as f64 / seconds / 1e9;
             DenoiseMeasurement {
                 stage: "denoise",
@@ -201,6 +205,8 @@ fn bench_backend(
                 pixels,
                 radius: params.radius,
                 seconds,
+                dispatches,
+                warm_up_seconds,
                 bytes,
                 gb_per_s,
                 bandwidth_fraction: peak_gbps.map(|peak| gb_per_s / peak),
@@ -209,13 +215,13 @@ fn bench_backend(
             }
         };
         let (mut total_seconds, mut total_bytes) = (0.0, 0);
-        for (pass, s) in passes.iter().zip(seconds) {
+        for ((pass, s), d) in passes.iter().zip(seconds).zip(dispatches) {
             let (s, bytes) = (median(s), pass.bytes_per_pixel() * pixels);
             total_seconds += s;
             total_bytes += bytes;
-            emit(&line(pass.name(), s, bytes));
+            emit(&line(pass.name(), s, Some(d), bytes));
         }
-        emit(&line("total", total_seconds, total_bytes));
+        emit(&line("total", total_seconds, None, total_bytes));
     }
     Ok(())
 }
@@ -229,11 +235,12 @@ pub fn bench_denoise(options: &DenoiseBenchOptions, mut emit: impl FnMut(&Denois
     check_radius("denoise-radius", options.denoise_radius)?;
     let input = frame_input(options)?;
     let mut cpu = crate::cpu::CpuBackend::new();
-    bench_backend(&mut cpu, &input, options, None, &mut emit)?;
+    bench_backend(&mut cpu, &input, options, None, CPU_SETTLE_SECONDS, &mut emit)?;
     if options.vulkan {
-        if let Ok(mut vulkan) = open_backend(DeviceChoice::Vulkan(None), &BackendOptions::default()) {
+        let benchmark_mode = BackendOptions { sustain_seconds: SUSTAIN_SECONDS, ..Default::default() };
+        if let Ok(mut vulkan) = open_backend(DeviceChoice::Vulkan(None), &benchmark_mode) {
             let peak = options.peak_gbps.or_else(|| known_peak_gbps(&vulkan.name()));
-            bench_backend(vulkan.as_mut(), &input, options, peak, &mut emit)?;
+            bench_backend(vulkan.as_mut(), &input, options, peak, GPU_SETTLE_SECONDS, &mut emit)?;
         }
     }
     Ok(())

@@ -394,7 +394,7 @@ fn render_command(args: RenderArgs) -> raywave::Result<()> {
         denoise: args.denoise.parse()?,
         denoise_radius: args.radius.denoise_radius,
         analytic_residual: args.analytic_residual,
-        backend: BackendOptions { validation: args.validate, trace },
+        backend: BackendOptions { validation: args.validate, trace, ..Default::default() },
     };
     let report = render(&options)?;
     print_line(format!("backend  {}", report.backend));

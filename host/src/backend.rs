@@ -15,8 +15,13 @@ use raywave_shared::{DenoiseParams, GenerateParams, SamplerProbeParams, ShadePar
 pub struct StageReport {
     /// Stage name (`generate`, `trace`, …).
     pub stage: &'static str,
-    /// Seconds: GPU timestamps on Vulkan, wall clock of the parallel loop on the CPU.
+    /// Seconds per dispatch: GPU timestamps on Vulkan (the timed submission's time over
+    /// `dispatches`), wall clock of the parallel loop on the CPU.
     pub seconds: f64,
+    /// How many times the stage's kernel ran back to back in its timed submission: 1, except on
+    /// a Vulkan backend opened for benchmarking (`ContextOptions::sustain_seconds`), where the
+    /// repetitions keep the GPU busy enough to hold its clocks; always 1 on the CPU.
+    pub dispatches: u32,
     /// Invocations that replaced a non-finite value — read (a NaN ray, a NaN hit record) or
     /// computed (an overflowing sum) — so that nothing non-finite left the stage: rays or hits
     /// for trace and occlusion, samples for shade, pixels for the composites; always 0 for the
@@ -27,9 +32,14 @@ pub struct StageReport {
 }
 
 impl StageReport {
-    /// A report of `stage` that took `seconds` and sanitized nothing.
+    /// A report of one run of `stage` that took `seconds` and sanitized `sanitized` invocations.
+    pub fn once(stage: &'static str, seconds: f64, sanitized: u64) -> Self {
+        Self { stage, seconds, dispatches: 1, sanitized }
+    }
+
+    /// A report of one run of `stage` that took `seconds` and sanitized nothing.
     pub fn clean(stage: &'static str, seconds: f64) -> Self {
-        Self { stage, seconds, sanitized: 0 }
+        Self::once(stage, seconds, 0)
     }
 
     /// The sanitized counts of `reports` (a frame's stages, a denoiser's passes), summed.

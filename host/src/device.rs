@@ -83,6 +83,11 @@ pub struct BackendOptions {
     /// The trace method; `None` picks the best the backend has (ray query, else the ray-tracing
     /// pipeline, else software traversal).
     pub trace: Option<TraceMethod>,
+    /// Benchmark mode of a Vulkan backend, in seconds (`ContextOptions::sustain_seconds`: each
+    /// timed submission repeats its dispatch until it keeps the GPU busy about this long, so that
+    /// the GPU holds its clocks); 0 (the default) runs every stage once. The CPU backend ignores
+    /// it: its stages run once, timed by the wall clock.
+    pub sustain_seconds: f64,
 }
 
 /// Opens the backend `choice` names. `Auto` falls back to the CPU when no Vulkan device can be
@@ -112,7 +117,7 @@ fn open_vulkan(index: Option<usize>, options: &BackendOptions) -> Result<Box<dyn
         Some(i) => i,
         None => best_vulkan_device(&enumerate_devices()?)?,
     };
-    let context = ContextOptions { validation: options.validation };
+    let context = ContextOptions { validation: options.validation, sustain_seconds: options.sustain_seconds };
     Ok(Box::new(VulkanBackend::open(index, &context, options.trace)?))
 }
 
@@ -163,7 +168,7 @@ mod tests {
         assert_eq!("rayquery".parse::<TraceMethod>().unwrap(), TraceMethod::RayQuery);
         assert_eq!("rtpipe".parse::<TraceMethod>().unwrap(), TraceMethod::RtPipeline);
         assert!("rtx".parse::<TraceMethod>().is_err());
-        let options = BackendOptions { validation: false, trace: Some(TraceMethod::RayQuery) };
+        let options = BackendOptions { trace: Some(TraceMethod::RayQuery), ..Default::default() };
         let result = open_backend(DeviceChoice::Cpu, &options);
         assert!(matches!(result, Err(Error::InvalidParameter { name: "trace", .. })));
     }

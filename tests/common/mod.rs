@@ -47,7 +47,14 @@ pub mod vulkan {
     /// query and the ray-tracing pipeline where exposed), with validation layers on. Without devices this SKIPs loudly (fails
     /// under CI). Validation is required under CI; elsewhere it is used when installed.
     pub fn every_device(test: &str) -> Vec<VulkanBackend> {
+        every_device_sustained(test, 0.0)
+    }
+
+    /// [`every_device`] in benchmark mode: each timed submission repeats its dispatch to keep
+    /// the device busy for `sustain_seconds` (`ContextOptions::sustain_seconds`; 0 is off).
+    pub fn every_device_sustained(test: &str, sustain_seconds: f64) -> Vec<VulkanBackend> {
         let mut backends = Vec::new();
+        let open = |device, trace| open(device, trace, sustain_seconds);
         for device in &devices(test) {
             backends.push(open(device, TraceMethod::Software));
             if device.missing_for_ray_query().is_empty() {
@@ -63,7 +70,7 @@ pub mod vulkan {
     /// Opens every Vulkan device once (software trace), with validation layers on, for stages
     /// that do not trace. SKIPs loudly without devices (fails under CI).
     pub fn each_device(test: &str) -> Vec<VulkanBackend> {
-        devices(test).iter().map(|device| open(device, TraceMethod::Software)).collect()
+        devices(test).iter().map(|device| open(device, TraceMethod::Software, 0.0)).collect()
     }
 
     /// Every Vulkan device; none (after a loud SKIP, or a failure under CI) if there are none.
@@ -81,13 +88,14 @@ pub mod vulkan {
         }
     }
 
-    fn open(info: &DeviceInfo, trace: TraceMethod) -> VulkanBackend {
-        match VulkanBackend::open(info.index, &ContextOptions { validation: true }, Some(trace)) {
+    fn open(info: &DeviceInfo, trace: TraceMethod, sustain_seconds: f64) -> VulkanBackend {
+        let options = ContextOptions { validation: true, sustain_seconds };
+        match VulkanBackend::open(info.index, &options, Some(trace)) {
             Ok(b) => b,
             Err(e) if !super::in_ci() && e.to_string().contains("VK_LAYER_KHRONOS_validation") => {
                 eprintln!("*** validation layer missing: testing {} without it ***", info.name);
-                VulkanBackend::open(info.index, &ContextOptions { validation: false }, Some(trace))
-                    .expect("device opens")
+                let options = ContextOptions { validation: false, ..options };
+                VulkanBackend::open(info.index, &options, Some(trace)).expect("device opens")
             }
             Err(e) => panic!("cannot open {} with {}: {e}", info.name, trace.name()),
         }

@@ -119,7 +119,7 @@ pub fn denoise(method: DenoiseMethod, params: &DenoiseParams, input: &DenoiseInp
         .map(|pass| {
             let start = Instant::now();
             let sanitized = run_pass(pass, params, input, &mut working);
-            StageReport { stage: pass.name(), seconds: start.elapsed().as_secs_f64(), sanitized }
+            StageReport::once(pass.name(), start.elapsed().as_secs_f64(), sanitized)
         })
         .collect();
     (working.color, timings)

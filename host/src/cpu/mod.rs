@@ -112,7 +112,7 @@ pub(crate) fn count<T>(result: Sanitized<T>, sanitized: &AtomicU64) -> T {
 fn timed<T>(stage: &'static str, f: impl FnOnce() -> (T, u64)) -> (T, StageReport) {
     let start = Instant::now();
     let (value, sanitized) = f();
-    (value, StageReport { stage, seconds: start.elapsed().as_secs_f64(), sanitized })
+    (value, StageReport::once(stage, start.elapsed().as_secs_f64(), sanitized))
 }
 
 impl Backend for CpuBackend {

@@ -402,12 +402,12 @@ impl VulkanBackend {
         self.check_image_size(params.width, params.height)?;
         check_generate_params(params)?;
         let rays = DeviceRays::new(&self.core, params.ray_count())?;
-        let seconds = self.generate.dispatch(
+        let timing = self.generate.dispatch(
             &[Resource::Buffer(&rays.origin), Resource::Buffer(&rays.direction), Resource::Buffer(&rays.pixel)],
             bytemuck::bytes_of(params),
             rays.len,
         )?;
-        Ok((rays, StageReport::clean("generate", seconds)))
+        Ok((rays, timing.report("generate", 0)))
     }
 
     /// Runs `kernel` over `rays` with `outputs` bound after the rays (layout of
@@ -440,11 +440,11 @@ impl VulkanBackend {
                 .collect();
         let params = TraceParams { ray_count: rays.len, padding: [0; 3] };
         let push = bytemuck::bytes_of(&params);
-        let seconds = match kernel {
+        let timing = match kernel {
             TraceKernel::Compute(kernel) => kernel.dispatch(&resources, push, rays.len),
             TraceKernel::RtPipeline(kernel) => kernel.trace(&resources, push, rays.len),
         }?;
-        Ok(StageReport { stage, seconds, sanitized: counter.read_count()? })
+        Ok(timing.report(stage, counter.read_count()?))
     }
 
     /// Checks that a stream of `len` elements fits one storage buffer and one dispatch.
@@ -570,8 +570,8 @@ impl Backend for VulkanBackend {
             &counter,
         ]
         .map(Resource::Buffer);
-        let seconds = self.shade_kernel.dispatch(&resources, bytemuck::bytes_of(params), len)?;
-        Ok((out.read()?, StageReport { stage: "shade", seconds, sanitized: counter.read_count()? }))
+        let timing = self.shade_kernel.dispatch(&resources, bytemuck::bytes_of(params), len)?;
+        Ok((out.read()?, timing.report("shade", counter.read_count()?)))
     }
 
     fn render(&mut self, params: &GenerateParams) -> Result<FrameOutput> {

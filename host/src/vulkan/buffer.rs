@@ -21,6 +21,9 @@ pub(crate) struct GpuBuffer {
     pub device_local: bool,
     /// Size in bytes.
     pub size: u64,
+    /// Whether this is a stage's sanitized counter ([`Self::counter`]), which a submission that
+    /// repeats its dispatch zeroes before the last repetition.
+    pub is_counter: bool,
 }
 
 impl Drop for GpuBuffer {
@@ -50,7 +53,8 @@ impl GpuBuffer {
         let buffer = unsafe { core.device.create_buffer(&info, None) }.map_err(vk_error("vkCreateBuffer"))?;
         // Constructed now so any failure below frees the buffer through Drop.
         let device_local = location == MemoryLocation::GpuOnly;
-        let mut this = Self { core: core.clone(), buffer, allocation: None, address: 0, device_local, size };
+        let mut this =
+            Self { core: core.clone(), buffer, allocation: None, address: 0, device_local, size, is_counter: false };
         // SAFETY: `buffer` is a live buffer of this device.
         let requirements = unsafe { core.device.get_buffer_memory_requirements(buffer) };
         let allocation = core
@@ -119,7 +123,9 @@ impl GpuBuffer {
     /// (the `REPLACED` bindings of `raywave_shared::bindings`); [`Self::read_count`] reads it
     /// once the dispatch has completed.
     pub fn counter(core: &Arc<Core>, name: &str) -> Result<Self> {
-        Self::with_data(core, &[0u32], vk::BufferUsageFlags::STORAGE_BUFFER, name)
+        let mut counter = Self::with_data(core, &[0u32], vk::BufferUsageFlags::STORAGE_BUFFER, name)?;
+        counter.is_counter = true;
+        Ok(counter)
     }
 
     /// The value of a [`Self::counter`].

@@ -84,7 +84,21 @@ pub struct ContextOptions {
     /// Enable `VK_LAYER_KHRONOS_validation` and capture its warnings and errors. Fails with
     /// [`Error::VulkanUnavailable`] if the layer is not installed.
     pub validation: bool,
+    /// Benchmark mode, in seconds (finite, `0..=1`; 0, the default, is off): after a kernel's
+    /// first run, each of its timed submissions repeats the dispatch back to back — up to
+    /// [`MAX_SUSTAINED_DISPATCHES`] times — until it keeps the device busy for about this long,
+    /// and reports the mean per dispatch ([`crate::StageReport::dispatches`]). A GPU lowers its
+    /// clocks under sparse work: on an NVIDIA H200 the single dispatches of `raywave bench
+    /// denoise`, each submitted alone between uploads, ran at the idle 345 MHz instead of the
+    /// 1980 MHz boost, 2–5× slower, whenever they missed the few seconds of boost that opening
+    /// the device gives (README). Results do not change: no kernel reads what it writes, and a
+    /// stage's sanitized counter is zeroed before the last repetition.
+    pub sustain_seconds: f64,
 }
+
+/// Most dispatches one timed submission repeats in benchmark mode
+/// ([`ContextOptions::sustain_seconds`]).
+pub const MAX_SUSTAINED_DISPATCHES: u32 = 1024;
 
 /// Instance-level state shared by every object created from it; destroyed last.
 pub(crate) struct Core {
@@ -104,6 +118,8 @@ pub(crate) struct Core {
     pub limits: vk::PhysicalDeviceLimits,
     /// `minAccelerationStructureScratchOffsetAlignment`, bytes.
     pub scratch_alignment: u64,
+    /// [`ContextOptions::sustain_seconds`].
+    pub sustain_seconds: f64,
 }
 
 impl Drop for Core {
@@ -258,6 +274,12 @@ pub fn enumerate_devices() -> Result<Vec<DeviceInfo>> {
 
 /// Opens Vulkan device `index` (as listed by [`enumerate_devices`]).
 pub(crate) fn open(index: usize, options: &ContextOptions) -> Result<Arc<Core>> {
+    if !(0.0..=1.0).contains(&options.sustain_seconds) {
+        return Err(Error::InvalidParameter {
+            name: "sustain_seconds",
+            reason: format!("{} is not within 0..=1 s", options.sustain_seconds),
+        });
+    }
     let _lifetime = driver_lock::device_lifetime();
     let entry = load_entry()?;
     if options.validation {
@@ -362,6 +384,7 @@ pub(crate) fn open(index: usize, options: &ContextOptions) -> Result<Arc<Core>> 
                 info,
                 limits,
                 scratch_alignment,
+                sustain_seconds: options.sustain_seconds,
             }))
         }
         Err(e) => {

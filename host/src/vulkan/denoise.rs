@@ -72,12 +72,12 @@ impl DenoiseKernels {
         let pixels = params.pixels();
         let source = upload(core, source, "copy probe source")?;
         let copy = image::<Vec4>(core, pixels, "copy probe copy")?;
-        let seconds = self.copy_probe.dispatch(
+        let timing = self.copy_probe.dispatch(
             &[Resource::Buffer(&source), Resource::Buffer(&copy)],
             bytemuck::bytes_of(params),
             pixels,
         )?;
-        Ok((copy.read(pixels as usize)?, StageReport::clean("copy probe", seconds)))
+        Ok((copy.read(pixels as usize)?, timing.report("copy probe", 0)))
     }
 
     /// Runs `method` on `input` (already checked against `params`): uploads the inputs, runs
@@ -106,7 +106,7 @@ impl DenoiseKernels {
         let mut timings = Vec::new();
         for pass in method.passes(params) {
             let b = Resource::Buffer;
-            let seconds = match pass {
+            let timing = match pass {
                 DenoisePass::Ratio => self.ratio.dispatch(
                     &[b(&shadowed[0]), b(&unshadowed[0]), b(&ratio[0])],
                     bytemuck::bytes_of(params),
@@ -121,7 +121,7 @@ impl DenoiseKernels {
                 DenoisePass::BilateralX | DenoisePass::BilateralY => {
                     let along = if pass == DenoisePass::BilateralX { axis::X } else { axis::Y };
                     let params = DenoiseParams { axis: along, ..*params };
-                    let seconds = self.bilateral.dispatch(
+                    let timing = self.bilateral.dispatch(
                         &[
                             b(&position),
                             b(&normal),
@@ -136,7 +136,7 @@ impl DenoiseKernels {
                     )?;
                     shadowed.swap(0, 1);
                     unshadowed.swap(0, 1);
-                    seconds
+                    timing
                 }
                 DenoisePass::Composite => self.composite.dispatch(
                     &[b(&analytic), b(&emitted), b(&shadowed[0]), b(&unshadowed[0]), b(&color), b(&counter)],
@@ -144,23 +144,23 @@ impl DenoiseKernels {
                     pixels,
                 )?,
                 DenoisePass::SvgfVariance => {
-                    let seconds = self.svgf_variance.dispatch(
+                    let timing = self.svgf_variance.dispatch(
                         &[b(&ratio[0]), b(&position), b(&normal), b(&ratio[1])],
                         bytemuck::bytes_of(params),
                         pixels,
                     )?;
                     ratio.swap(0, 1);
-                    seconds
+                    timing
                 }
                 DenoisePass::SvgfAtrous { step } => {
                     let params = DenoiseParams { step, ..*params };
-                    let seconds = self.svgf_atrous.dispatch(
+                    let timing = self.svgf_atrous.dispatch(
                         &[b(&ratio[0]), b(&position), b(&normal), b(&ratio[1])],
                         bytemuck::bytes_of(&params),
                         pixels,
                     )?;
                     ratio.swap(0, 1);
-                    seconds
+                    timing
                 }
                 DenoisePass::SvgfComposite => self.svgf_composite.dispatch(
                     &[b(&analytic), b(&emitted), b(&ratio[0]), b(&color), b(&counter)],
@@ -170,7 +170,7 @@ impl DenoiseKernels {
             };
             // Each method has one composite, its last pass: the counter is that pass's count.
             let sanitized = if pass.is_composite() { counter.read_count()? } else { 0 };
-            timings.push(StageReport { stage: pass.name(), seconds, sanitized });
+            timings.push(timing.report(pass.name(), sanitized));
         }
         Ok((color.read(pixels as usize)?, timings))
     }

@@ -2,7 +2,7 @@
 //! of 1-D workgroups.
 
 use super::context::{vk_error, Core};
-use super::pass::{Pass, Resource};
+use super::pass::{Pass, Resource, Timing};
 use crate::error::{Error, Result};
 use ash::vk;
 use raywave_shared::bindings::WORKGROUP_SIZE;
@@ -43,8 +43,9 @@ impl ComputeKernel {
     }
 
     /// Binds `resources` (one per binding, in creation order), pushes `push`, runs `invocations`
-    /// invocations and waits; returns the dispatch's duration in seconds.
-    pub fn dispatch(&self, resources: &[Resource<'_>], push: &[u8], invocations: u32) -> Result<f64> {
+    /// invocations and waits ([`Pass::run`]: repeated in benchmark mode); returns the time per
+    /// dispatch.
+    pub fn dispatch(&self, resources: &[Resource<'_>], push: &[u8], invocations: u32) -> Result<Timing> {
         let (groups_x, groups_y) =
             dispatch_grid(&self.pass.core.limits, invocations).ok_or_else(|| Error::InvalidParameter {
                 name: "invocations",

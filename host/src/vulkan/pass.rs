@@ -1,13 +1,42 @@
 //! What every raywave pipeline shares, compute or ray tracing: descriptor set 0 laid out from the
-//! shared binding numbers, a push-constant range, and a timestamped one-shot submission.
+//! shared binding numbers, a push-constant range, and a timestamped one-shot submission that
+//! repeats its work in benchmark mode ([`super::ContextOptions::sustain_seconds`]).
 
-use super::buffer::{submit_and_wait, GpuBuffer};
-use super::context::{vk_error, Core};
+use super::buffer::{global_barrier, submit_and_wait, GpuBuffer};
+use super::context::{vk_error, Core, MAX_SUSTAINED_DISPATCHES};
 use super::driver_lock;
+use crate::backend::StageReport;
 use crate::error::{Error, Result};
 use ash::vk;
+use std::sync::atomic::{AtomicU32, Ordering};
 use std::sync::Arc;
 use std::time::Instant;
+
+/// What one timed submission of a pass measured.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Timing {
+    /// Seconds per dispatch: the submission's time over `dispatches`.
+    pub seconds: f64,
+    /// How many times the work ran back to back in the submission.
+    pub dispatches: u32,
+}
+
+impl Timing {
+    /// The report of `stage` run with this timing, `sanitized` invocations replaced.
+    pub fn report(self, stage: &'static str, sanitized: u64) -> StageReport {
+        StageReport { stage, seconds: self.seconds, dispatches: self.dispatches, sanitized }
+    }
+}
+
+/// How many dispatches keep a device busy for `sustain_seconds` when one takes `seconds`:
+/// at least 1, at most [`MAX_SUSTAINED_DISPATCHES`].
+fn sustained_dispatches(sustain_seconds: f64, seconds: f64) -> u32 {
+    if seconds > 0.0 {
+        (sustain_seconds / seconds).ceil().clamp(1.0, f64::from(MAX_SUSTAINED_DISPATCHES)) as u32
+    } else {
+        1
+    }
+}
 
 /// A resource bound to one binding of a pass's descriptor set.
 pub(crate) enum Resource<'a> {
@@ -32,6 +61,9 @@ pub(crate) struct Pass {
     descriptor_set: vk::DescriptorSet,
     query_pool: vk::QueryPool,
     bindings: Vec<(u32, vk::DescriptorType)>,
+    /// Dispatches the next submission repeats: 1, or in benchmark mode what the last one's time
+    /// per dispatch asks for.
+    next_dispatches: AtomicU32,
 }
 
 impl Drop for Pass {
@@ -75,6 +107,7 @@ impl Pass {
             descriptor_set: vk::DescriptorSet::null(),
             query_pool: vk::QueryPool::null(),
             bindings: bindings.to_vec(),
+            next_dispatches: AtomicU32::new(1),
         };
         let layout_bindings: Vec<_> = bindings
             .iter()
@@ -146,10 +179,12 @@ impl Pass {
     }
 
     /// Binds `resources` (one per binding, in creation order; every buffer device-local, so no
-    /// kernel reads or writes host memory across the bus), pushes `push`, records `work`
-    /// between two timestamps, submits and waits. Returns the work's duration in seconds, from GPU
+    /// kernel reads or writes host memory across the bus), pushes `push`, records `work` between
+    /// two timestamps — once, or in benchmark mode as many times as keep the device busy for
+    /// [`Core::sustain_seconds`], separated by barriers, with every counter among `resources`
+    /// zeroed before the last — submits and waits. Returns the time per dispatch, from GPU
     /// timestamps where the device has them, else from the host clock around the submission.
-    pub fn run(&self, resources: &[Resource<'_>], push: &[u8], work: impl FnOnce(vk::CommandBuffer)) -> Result<f64> {
+    pub fn run(&self, resources: &[Resource<'_>], push: &[u8], work: impl Fn(vk::CommandBuffer)) -> Result<Timing> {
         if resources.len() != self.bindings.len() {
             return Err(Error::InvalidParameter {
                 name: "resources",
@@ -199,6 +234,15 @@ impl Pass {
         // SAFETY: the set is not in use (every run waits for completion) and the writes reference
         // live resources.
         unsafe { d.update_descriptor_sets(&writes, &[]) };
+        let dispatches = self.next_dispatches.load(Ordering::Relaxed);
+        let counters: Vec<&GpuBuffer> = resources
+            .iter()
+            .filter_map(|r| match r {
+                Resource::Buffer(b) if b.is_counter => Some(*b),
+                _ => None,
+            })
+            .collect();
+        let all = vk::PipelineStageFlags::ALL_COMMANDS;
         let start = Instant::now();
         submit_and_wait(&self.core, |cmd| {
             // SAFETY: `cmd` is recording; pipeline, layout, set and query pool are live.
@@ -209,14 +253,37 @@ impl Pass {
                 d.cmd_bind_descriptor_sets(cmd, self.bind_point, self.pipeline_layout, 0, &[self.descriptor_set], &[]);
                 d.cmd_push_constants(cmd, self.pipeline_layout, self.stages, 0, push);
             }
-            work(cmd);
+            for repetition in 0..dispatches {
+                if repetition > 0 {
+                    // Each repetition writes what the last wrote: in order, as a frame's passes.
+                    global_barrier(&self.core, cmd, all, all);
+                }
+                if repetition > 0 && repetition + 1 == dispatches {
+                    // The counters count the last repetition alone, exactly one run's count.
+                    for counter in &counters {
+                        // SAFETY: a live device-local counter (TRANSFER_DST usage) of 4 bytes.
+                        unsafe { d.cmd_fill_buffer(cmd, counter.buffer, 0, vk::WHOLE_SIZE, 0) };
+                    }
+                    global_barrier(&self.core, cmd, all, all);
+                }
+                work(cmd);
+            }
             // SAFETY: as above.
             unsafe { d.cmd_write_timestamp(cmd, vk::PipelineStageFlags::BOTTOM_OF_PIPE, self.query_pool, 1) };
         })?;
         let host_seconds = start.elapsed().as_secs_f64();
-        if !self.core.info.timestamps {
-            return Ok(host_seconds);
+        let seconds = if self.core.info.timestamps { self.gpu_seconds()? } else { host_seconds };
+        let timing = Timing { seconds: seconds / f64::from(dispatches), dispatches };
+        if self.core.sustain_seconds > 0.0 {
+            let next = sustained_dispatches(self.core.sustain_seconds, timing.seconds);
+            self.next_dispatches.store(next, Ordering::Relaxed);
         }
+        Ok(timing)
+    }
+
+    /// The time between the two timestamps of the completed submission, in seconds.
+    fn gpu_seconds(&self) -> Result<f64> {
+        let d = &self.core.device;
         let mut stamps = [0u64; 2];
         // SAFETY: both queries were written by the completed submission.
         unsafe {
@@ -230,5 +297,19 @@ impl Pass {
         .map_err(vk_error("vkGetQueryPoolResults"))?;
         let ticks = stamps[1].wrapping_sub(stamps[0]);
         Ok(ticks as f64 * f64::from(self.core.limits.timestamp_period) * 1e-9)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sustained_dispatches_fill_the_busy_time_within_their_bounds() {
+        assert_eq!(sustained_dispatches(0.01, 0.001), 10);
+        assert_eq!(sustained_dispatches(0.01, 0.003), 4);
+        assert_eq!(sustained_dispatches(0.01, 0.02), 1);
+        assert_eq!(sustained_dispatches(0.01, 1e-9), MAX_SUSTAINED_DISPATCHES);
+        assert_eq!(sustained_dispatches(0.01, 0.0), 1);
     }
 }

@@ -5,7 +5,7 @@
 
 use super::buffer::GpuBuffer;
 use super::context::{vk_error, Core};
-use super::pass::{Pass, Resource};
+use super::pass::{Pass, Resource, Timing};
 use crate::error::{Error, Result};
 use ash::vk;
 use std::sync::Arc;
@@ -147,8 +147,9 @@ impl RtPipelineKernel {
         Ok(Self { raygen: record(0, stride), miss: record(1, stride), hit: record(2, stride), _sbt: sbt, pass })
     }
 
-    /// Traces `rays` rays (raygen launch `LAUNCH_WIDTH` wide) and waits; returns seconds.
-    pub fn trace(&self, resources: &[Resource<'_>], push: &[u8], rays: u32) -> Result<f64> {
+    /// Traces `rays` rays (raygen launch `LAUNCH_WIDTH` wide) and waits ([`Pass::run`]:
+    /// repeated in benchmark mode); returns the time per trace.
+    pub fn trace(&self, resources: &[Resource<'_>], push: &[u8], rays: u32) -> Result<Timing> {
         let core = &self.pass.core;
         if rays > core.rt_properties.max_dispatch_invocations {
             return Err(Error::InvalidParameter {
