@@ -31,9 +31,9 @@ const SUSTAIN_SECONDS: f64 = 0.05;
 const WIDTH: u32 = 32;
 const HEIGHT: u32 = 24;
 
-/// Runs `stage` on `single` (one dispatch per submission) and twice on `sustained` (the first
-/// run sets how many dispatches the second repeats) and checks that all three return the same
-/// result and sanitized counts, `single` timing one dispatch and `sustained`'s second run more.
+/// Runs `stage` on `single` (one dispatch per submission) and three times on `sustained` (each
+/// run sets how many dispatches the next repeats) and checks that all return the same result
+/// and sanitized counts, `single` timing one dispatch and `sustained`'s last run more.
 fn check_stage<T: PartialEq + Debug>(
     what: &str,
     single: &mut VulkanBackend,
@@ -42,10 +42,13 @@ fn check_stage<T: PartialEq + Debug>(
 ) {
     let who = format!("{} {what}", single.name());
     let (expected, single_reports) = stage(single);
+    // The first run in benchmark mode dispatches once and may include a lazy pipeline compile
+    // (lavapipe), the second is sized by it, the third by a warm run.
     let (first, _) = stage(sustained);
+    let (second, _) = stage(sustained);
     let (repeated, repeated_reports) = stage(sustained);
     assert!(first == expected, "{who}: the first run in benchmark mode differs");
-    assert!(repeated == expected, "{who}: the repeated dispatches' result differs");
+    assert!(second == expected && repeated == expected, "{who}: the repeated dispatches' result differs");
     let sanitized = |reports: &[StageReport]| reports.iter().map(|r| (r.stage, r.sanitized)).collect::<Vec<_>>();
     assert_eq!(sanitized(&repeated_reports), sanitized(&single_reports), "{who}: sanitized counts");
     for report in &single_reports {
@@ -156,6 +159,32 @@ fn repeated_dispatches_return_what_one_dispatch_returns_on_every_stage_and_devic
         check_stage("warp probe", a, b, |d| (d.warp_probe(&warp).expect("warp probe"), vec![]));
         vulkan::assert_clean(&single);
         vulkan::assert_clean(&sustained);
+    }
+}
+
+/// Benchmark mode sizes a submission by the time per invocation of the kernel's last one: a large
+/// call right after a one-ray call repeats `⌈sustain / (N × the ray's time)⌉` times, a few
+/// (a dispatch's fixed cost makes one ray's time per invocation large). Sized by the time per
+/// dispatch alone it would repeat as often as the one-ray call did — here 1024 times, minutes
+/// for a large enough stream.
+#[test]
+fn a_large_call_after_a_one_ray_call_is_sized_by_the_time_per_ray() {
+    let scene = cornell();
+    let sampler = sampler_params(sampler_kind::ZSOBOL, 3, WIDTH, HEIGHT, 4);
+    let rays = CpuBackend::new().generate(&generate_params_with(&scene, WIDTH, HEIGHT, 0, sampler)).expect("rays").0;
+    let mut one_ray = RayStream::zeroed(1);
+    (one_ray.origin[0], one_ray.direction[0]) = (rays.origin[0], rays.direction[0]);
+    for mut device in vulkan::every_device_sustained("benchmark mode sizing", SUSTAIN_SECONDS) {
+        device.load_scene(&scene).expect("scene loads");
+        let name = device.name();
+        let mut trace = |rays: &RayStream| device.trace(rays).expect("trace").1;
+        trace(&rays);
+        let one = trace(&one_ray);
+        let after = trace(&rays);
+        let expected = (SUSTAIN_SECONDS / (one.seconds * rays.len() as f64)).ceil();
+        let expected = expected.clamp(1.0, f64::from(MAX_SUSTAINED_DISPATCHES)) as u32;
+        assert_eq!(after.dispatches, expected, "{name}: {} rays after one ray ({one:?}): {after:?}", rays.len());
+        assert!(one.seconds > 0.0 && one.dispatches > 1, "{name}: the one-ray trace: {one:?}");
     }
 }
 

@@ -52,7 +52,7 @@ impl ComputeKernel {
                 reason: format!("{invocations} exceed the device's dispatch limits"),
             })?;
         let device = &self.pass.core.device;
-        self.pass.run(resources, push, |cmd| {
+        self.pass.run(resources, push, invocations, |cmd| {
             if groups_x > 0 {
                 // SAFETY: `cmd` is recording with this pass's pipeline and set bound.
                 unsafe { device.cmd_dispatch(cmd, groups_x, groups_y, 1) };

@@ -8,7 +8,7 @@ use super::driver_lock;
 use crate::backend::StageReport;
 use crate::error::{Error, Result};
 use ash::vk;
-use std::sync::atomic::{AtomicU32, Ordering};
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::Instant;
 
@@ -28,8 +28,8 @@ impl Timing {
     }
 }
 
-/// How many dispatches keep a device busy for `sustain_seconds` when one takes `seconds`:
-/// at least 1, at most [`MAX_SUSTAINED_DISPATCHES`].
+/// How many dispatches keep a device busy for `sustain_seconds` when one takes `seconds` (1 when
+/// that is not known yet, NaN): at least 1, at most [`MAX_SUSTAINED_DISPATCHES`].
 fn sustained_dispatches(sustain_seconds: f64, seconds: f64) -> u32 {
     if seconds > 0.0 {
         (sustain_seconds / seconds).ceil().clamp(1.0, f64::from(MAX_SUSTAINED_DISPATCHES)) as u32
@@ -61,9 +61,10 @@ pub(crate) struct Pass {
     descriptor_set: vk::DescriptorSet,
     query_pool: vk::QueryPool,
     bindings: Vec<(u32, vk::DescriptorType)>,
-    /// Dispatches the next submission repeats: 1, or in benchmark mode what the last one's time
-    /// per dispatch asks for.
-    next_dispatches: AtomicU32,
+    /// Benchmark mode: the last submission's seconds per dispatch per invocation (`f64` bits;
+    /// NaN before the first), from which the next submission, whatever its size, takes how many
+    /// dispatches it repeats — so that a large call after a small one does not run for minutes.
+    seconds_per_invocation: AtomicU64,
 }
 
 impl Drop for Pass {
@@ -107,7 +108,7 @@ impl Pass {
             descriptor_set: vk::DescriptorSet::null(),
             query_pool: vk::QueryPool::null(),
             bindings: bindings.to_vec(),
-            next_dispatches: AtomicU32::new(1),
+            seconds_per_invocation: AtomicU64::new(f64::NAN.to_bits()),
         };
         let layout_bindings: Vec<_> = bindings
             .iter()
@@ -179,12 +180,19 @@ impl Pass {
     }
 
     /// Binds `resources` (one per binding, in creation order; every buffer device-local, so no
-    /// kernel reads or writes host memory across the bus), pushes `push`, records `work` between
-    /// two timestamps — once, or in benchmark mode as many times as keep the device busy for
+    /// kernel reads or writes host memory across the bus), pushes `push`, records `work` (of
+    /// `invocations` invocations) between two timestamps — once, or in benchmark mode as many
+    /// times as the last submission's time per invocation says keep the device busy for
     /// [`Core::sustain_seconds`], separated by barriers, with every counter among `resources`
     /// zeroed before the last — submits and waits. Returns the time per dispatch, from GPU
     /// timestamps where the device has them, else from the host clock around the submission.
-    pub fn run(&self, resources: &[Resource<'_>], push: &[u8], work: impl Fn(vk::CommandBuffer)) -> Result<Timing> {
+    pub fn run(
+        &self,
+        resources: &[Resource<'_>],
+        push: &[u8],
+        invocations: u32,
+        work: impl Fn(vk::CommandBuffer),
+    ) -> Result<Timing> {
         if resources.len() != self.bindings.len() {
             return Err(Error::InvalidParameter {
                 name: "resources",
@@ -234,7 +242,13 @@ impl Pass {
         // SAFETY: the set is not in use (every run waits for completion) and the writes reference
         // live resources.
         unsafe { d.update_descriptor_sets(&writes, &[]) };
-        let dispatches = self.next_dispatches.load(Ordering::Relaxed);
+        let size = f64::from(invocations.max(1));
+        let dispatches = if self.core.sustain_seconds > 0.0 {
+            let per_invocation = f64::from_bits(self.seconds_per_invocation.load(Ordering::Relaxed));
+            sustained_dispatches(self.core.sustain_seconds, per_invocation * size)
+        } else {
+            1
+        };
         let counters: Vec<&GpuBuffer> = resources
             .iter()
             .filter_map(|r| match r {
@@ -274,10 +288,7 @@ impl Pass {
         let host_seconds = start.elapsed().as_secs_f64();
         let seconds = if self.core.info.timestamps { self.gpu_seconds()? } else { host_seconds };
         let timing = Timing { seconds: seconds / f64::from(dispatches), dispatches };
-        if self.core.sustain_seconds > 0.0 {
-            let next = sustained_dispatches(self.core.sustain_seconds, timing.seconds);
-            self.next_dispatches.store(next, Ordering::Relaxed);
-        }
+        self.seconds_per_invocation.store((timing.seconds / size).to_bits(), Ordering::Relaxed);
         Ok(timing)
     }
 
@@ -311,5 +322,6 @@ mod tests {
         assert_eq!(sustained_dispatches(0.01, 0.02), 1);
         assert_eq!(sustained_dispatches(0.01, 1e-9), MAX_SUSTAINED_DISPATCHES);
         assert_eq!(sustained_dispatches(0.01, 0.0), 1);
+        assert_eq!(sustained_dispatches(0.01, f64::NAN), 1);
     }
 }

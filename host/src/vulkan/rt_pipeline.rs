@@ -167,7 +167,7 @@ impl RtPipelineKernel {
         })?;
         let (width, height) = (rays.min(LAUNCH_WIDTH), rays.div_ceil(LAUNCH_WIDTH));
         let callable = vk::StridedDeviceAddressRegionKHR::default();
-        self.pass.run(resources, push, |cmd| {
+        self.pass.run(resources, push, rays, |cmd| {
             if rays > 0 {
                 // SAFETY: `cmd` is recording with this pass's pipeline and set bound; the SBT
                 // regions point into the live table buffer.
