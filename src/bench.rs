@@ -49,11 +49,12 @@ pub struct Measurement {
     pub seconds: f64,
     /// Millions of rays per second.
     pub mrays_per_s: f64,
-    /// Vulkan: how many traces ran back to back in each timed submission ([`SUSTAIN_SECONDS`];
-    /// the last repetition's), `seconds` being their mean; 1 on the CPU.
+    /// Vulkan: how many traces ran back to back in each timed submission (benchmark mode, 50 ms
+    /// a submission; the last repetition's), `seconds` being their mean; 1 on the CPU.
     pub dispatches: u32,
-    /// Vulkan: seconds of the untimed [`warm_up`] before the measurement, long where the GPU had
-    /// to raise its clocks first; absent on the CPU, whose tracers take turns instead.
+    /// Vulkan: seconds of the untimed warm-up before the measurement (until the times had not
+    /// fallen for 5 s), long where the GPU had to raise its clocks first; absent on the CPU,
+    /// whose tracers take turns instead.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub warm_up_seconds: Option<f64>,
 }
@@ -143,7 +144,7 @@ const FALLING_FRACTION: f64 = 0.02;
 /// repeating its dispatch ([`crate::BackendOptions::sustain_seconds`]). A GPU clocks down under
 /// sparse work: on an NVIDIA H200 (345 MHz idle, 1980 MHz boost) the single dispatches of
 /// `raywave bench denoise`, each submitted alone between uploads, kept it 5–10 % busy at 345 MHz,
-/// 2–5× slower than at boost, whenever they missed the few seconds of boost that opening the
+/// 2.5–5.5× slower than at boost, whenever they missed the few seconds of boost that opening the
 /// device gives — on a fresh machine, where compiling the pipelines outlasted them (README).
 /// 50 ms of back-to-back dispatches per submission keep it mostly busy, so that it raises its
 /// clocks ([`GPU_SETTLE_SECONDS`]) and holds them.

@@ -2,10 +2,11 @@
 //! one frame (1920×1080 by default) of a built-in scene, on the CPU and on a Vulkan device.
 //!
 //! The frame's inputs (`U`, `U_N`, `S_N` at `spp` samples and the G-buffer) are shaded once on the
-//! CPU; then each backend runs each denoiser untimed until its times stop falling ([`warm_up`])
+//! CPU; then each backend runs each denoiser untimed until its times stop falling (the bench's
+//! warm-up)
 //! and timed `repeats` times, and the median per pass is reported. The Vulkan backend is opened in
 //! benchmark mode: each pass's timed submission repeats its dispatch to keep the GPU busy for
-//! [`SUSTAIN_SECONDS`], so that it holds its clocks.
+//! 50 ms, so that it holds its clocks (`crate::BackendOptions::sustain_seconds`).
 //! "Bytes" counts every buffer a pass reads or writes once ([`crate::denoise::DenoisePass::bytes_per_pixel`]) —
 //! the traffic of an ideal cache — so `gb_per_s` is the effective bandwidth, and on a GPU with a
 //! known peak (`--peak-gbps`, or the datasheet value of an NVIDIA H100/H200) its fraction.
@@ -67,11 +68,12 @@ pub struct DenoiseMeasurement {
     pub seconds: f64,
     /// How many times the pass ran back to back in each timed submission (the last
     /// repetition's), `seconds` being their mean: 1 on the CPU, more on Vulkan
-    /// ([`SUSTAIN_SECONDS`]); absent on the `total` line.
+    /// (benchmark mode, 50 ms a submission); absent on the `total` line.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub dispatches: Option<u32>,
-    /// Seconds of the untimed [`warm_up`] of this denoiser before it was timed: long where the
-    /// device had to raise its clocks first.
+    /// Seconds of the untimed warm-up of this denoiser before it was timed (until its times had
+    /// not fallen for 5 s on Vulkan, 0.5 s on the CPU): long where the device had to raise its
+    /// clocks first.
     pub warm_up_seconds: f64,
     /// Bytes the pass must move.
     pub bytes: u64,

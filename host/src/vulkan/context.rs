@@ -88,12 +88,12 @@ pub struct ContextOptions {
     /// first run, each of its timed submissions repeats the dispatch back to back — up to
     /// [`MAX_SUSTAINED_DISPATCHES`] times, as many as the kernel's last time per invocation says
     /// keep the device busy for about this long — and reports the mean per dispatch
-    /// ([`crate::StageReport::dispatches`]). A GPU lowers its
-    /// clocks under sparse work: on an NVIDIA H200 the single dispatches of `raywave bench
-    /// denoise`, each submitted alone between uploads, ran at the idle 345 MHz instead of the
-    /// 1980 MHz boost, 2–5× slower, whenever they missed the few seconds of boost that opening
-    /// the device gives (README). Results do not change: no kernel reads what it writes, and a
-    /// stage's sanitized counter is zeroed before the last repetition.
+    /// ([`crate::StageReport::dispatches`]). A GPU lowers its clocks under sparse work: on an
+    /// NVIDIA H200 the single dispatches of `raywave bench denoise`, each submitted alone
+    /// between uploads, ran at the idle 345 MHz instead of the 1980 MHz boost, 2.5–5.5× slower,
+    /// whenever they missed the few seconds of boost that opening the device gives (README).
+    /// Results do not change: no kernel reads what it writes, and a stage's sanitized counter is
+    /// zeroed before the last repetition.
     pub sustain_seconds: f64,
 }
 
