@@ -57,7 +57,7 @@ fn atan_unit(t: f32) -> f32 {
 
 /// `atan2(y, x)`: the angle of the point `(x, y)` in `[−π, π]`, with the IEEE conventions of the
 /// standard library's for signed zeros and infinities (`atan2(±0, −0) = ±π`,
-/// `atan2(±∞, ±∞) = ±π/4` or `±3π/4`); NaN if either argument is. From [`atan_unit`] of the
+/// `atan2(±∞, ±∞) = ±π/4` or `±3π/4`); NaN if either argument is. From `atan_unit` of the
 /// smaller magnitude over the larger, so it keeps full relative precision for tiny angles.
 pub fn atan2(y: f32, x: f32) -> f32 {
     if x.is_nan() || y.is_nan() {

@@ -95,7 +95,7 @@ fn spread_bits(v: u32) -> u32 {
 const BASE4_PERMUTATIONS: [u32; 6] = [0x78d8_b4e4, 0xb1e1_6c9c, 0x2d8d_39c9, 0x36c6_72d2, 0x6393_1e4e, 0x1b4b_2787];
 
 /// Entry `digit` (0..4) of permutation `p` (0..24) of `{0, 1, 2, 3}`, the permutations in
-/// lexicographic order: one word of [`BASE4_PERMUTATIONS`], then two bits of it.
+/// lexicographic order: one word of `BASE4_PERMUTATIONS`, then two bits of it.
 pub fn permute_base4_digit(p: u32, digit: u32) -> u32 {
     let word = if p < 4 {
         BASE4_PERMUTATIONS[0]

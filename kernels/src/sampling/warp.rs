@@ -597,7 +597,7 @@ pub fn quad_area_pdf(p: Vec3, o: Vec3, eu: Vec3, ev: Vec3, dir: Vec3) -> f32 {
 /// `u₀(g₀ + g₁ − 2π) + (u₀ − 1)(g₂ + g₃)` without the cancellation; and for a quad seen nearly
 /// edge-on, where `cos au`, `b₀` and `b₁` all near ±1 and `cu` near ±1, neither
 /// `fu = (cos au·b₀ − b₁)/sin au` nor `xu = −cu·z₀/√(1 − cu²)` is computed as written:
-/// [`edge_on_numerator`] takes the numerator from the three factors' distances to ±1, and
+/// `edge_on_numerator` takes the numerator from the three factors' distances to ±1, and
 /// `xu = sign(fu)·|z₀|/√(fu² − (1 − b₀²))` with `1 − b₀² = n₀ₓ² + n₀ᵧ²`, the same value without
 /// `cu`. 1–5 mm below the Cornell light the `f32` sample was up to 2.6·10⁻³ from the `f64`
 /// evaluation of pbrt's formulas — and an NVIDIA GPU's fused multiply-adds moved it by as much —

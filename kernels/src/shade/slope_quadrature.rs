@@ -22,7 +22,7 @@
 //! `l = 2(v·h)h − v` — cross the ray where `2(v·w)(m·w) = (m·v)|w|²`, `w = (s, 1)`: a quadratic in
 //! `|s|`, solved in closed form. Between consecutive crossings the ray is wholly inside or outside
 //! the light (decided at the interval's middle); inside, a 3-point Gauss rule in `ψ` integrates
-//! `g·sin 2ψ` ([`radial_integral`]). Over `φ`, that radial integral is smooth except where a ray
+//! `g·sin 2ψ` (`radial_integral`). Over `φ`, that radial integral is smooth except where a ray
 //! passes a corner of the light's image or grazes one of its edges (the quadratic's discriminant
 //! vanishes: a quadratic form in `(cos φ, sin φ)`, also closed form), and near-singular where the
 //! image is a long thin strip seen end-on — the light's part near the horizon at grazing views,

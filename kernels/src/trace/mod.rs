@@ -2,7 +2,7 @@
 //!
 //! The stage is written against [`ClosestHitQuery`], so one function serves every backend: the
 //! CPU executor implements the query over obvhs's CWBVH with [`crate::triangle`]'s watertight
-//! test; the SPIR-V build implements it with `VK_KHR_ray_query` ([`ray_query`]).
+//! test; the SPIR-V build implements it with `VK_KHR_ray_query` (`trace::ray_query`, SPIR-V only).
 
 pub mod cwbvh;
 #[cfg(all(target_arch = "spirv", feature = "ray-query"))]
