@@ -9,7 +9,7 @@ use crate::kernels::offset::offset_ray_origin;
 use crate::kernels::sampling::warp::{local_to_world, sample_cosine_hemisphere};
 use crate::kernels::trace::{trace_closest, trace_occluded, Ray};
 use crate::shared::stream::NO_HIT;
-use crate::{Error, RayStream, Result, Scene};
+use crate::{Error, RayStream, Result, Scene, StageReport};
 use glam::{UVec3, Vec2, Vec3, Vec4, Vec4Swizzles};
 use rayon::prelude::*;
 use std::time::Instant;
@@ -177,6 +177,39 @@ pub(crate) fn warm_up(settle_seconds: f64, mut run: impl FnMut() -> Result<f64>)
             return Ok(elapsed);
         }
     }
+}
+
+/// One stage (or pass) of a [`measure`]ment: its median seconds over the timed runs and how many
+/// dispatches the last of them repeated.
+pub(crate) struct StageMedian {
+    pub seconds: f64,
+    pub dispatches: u32,
+}
+
+/// What [`measure`] took: each stage's median, in the order `run` reports them, and the seconds
+/// of the warm-up before.
+pub(crate) struct Measured {
+    pub stages: Vec<StageMedian>,
+    pub warm_up_seconds: f64,
+}
+
+/// Times `run` — one run of the stages it reports, on one backend — as every `raywave bench`
+/// does: a [`warm_up`] of `settle_seconds` on their summed times, then `repeats` timed runs.
+pub(crate) fn measure(
+    settle_seconds: f64,
+    repeats: u32,
+    mut run: impl FnMut() -> Result<Vec<StageReport>>,
+) -> Result<Measured> {
+    let warm_up_seconds = warm_up(settle_seconds, || Ok(run()?.iter().map(|r| r.seconds).sum()))?;
+    let runs = (0..repeats).map(|_| run()).collect::<Result<Vec<_>>>()?;
+    let stage_count = runs.first().map_or(0, Vec::len);
+    let stages = (0..stage_count)
+        .map(|i| StageMedian {
+            seconds: median(runs.iter().map(|r| r[i].seconds).collect()),
+            dispatches: runs.last().map_or(1, |r| r[i].dispatches),
+        })
+        .collect();
+    Ok(Measured { stages, warm_up_seconds })
 }
 
 /// The median of a list of timings (the upper one of an even count; NaN for none, which the
@@ -371,19 +404,18 @@ fn bench_vulkan(
         let mut backend = VulkanBackend::open(index, &context, Some(method))?;
         backend.load_scene(scene)?;
         for &(kind, rays) in kinds {
-            let mut run = || {
-                if kind == "shadow" {
+            let measured = measure(GPU_SETTLE_SECONDS, options.repeats, || {
+                let report = if kind == "shadow" {
                     backend.trace_occlusion(rays).map(|(_, t)| t)
                 } else {
                     backend.trace(rays).map(|(_, t)| t)
-                }
-            };
-            let warm_up_seconds = warm_up(GPU_SETTLE_SECONDS, || run().map(|report| report.seconds))?;
-            let reports = (0..options.repeats).map(|_| run()).collect::<Result<Vec<_>>>()?;
-            let dispatches = reports.last().map_or(1, |r| r.dispatches);
-            let seconds = median(reports.iter().map(|r| r.seconds).collect());
+                };
+                Ok(vec![report?])
+            })?;
+            let trace = &measured.stages[0];
             let name = format!("raywave-vk-{}", method.name());
-            emit(&measurement(&name, kind, 1, rays.len(), seconds, dispatches, Some(warm_up_seconds)));
+            let warm_up = Some(measured.warm_up_seconds);
+            emit(&measurement(&name, kind, 1, rays.len(), trace.seconds, trace.dispatches, warm_up));
         }
     }
     Ok(())

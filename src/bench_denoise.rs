@@ -14,7 +14,7 @@
 //! a pass that only reads and writes one `Vec4` per pixel of the same frame, the bandwidth a
 //! memory-bound pass can reach there.
 
-use crate::bench::{median, warm_up, CPU_SETTLE_SECONDS, GPU_SETTLE_SECONDS, SUSTAIN_SECONDS};
+use crate::bench::{measure, Measured, CPU_SETTLE_SECONDS, GPU_SETTLE_SECONDS, SUSTAIN_SECONDS};
 use crate::denoise::{check_radius, frame_params, DenoiseInput, DenoiseMethod};
 use crate::frame::{check_samples_per_pixel, generate_params_with, sampler_params};
 use crate::shading::{resolve, ShadeAccumulator, ShadeData};
@@ -152,7 +152,7 @@ pub fn frame_input(options: &DenoiseBenchOptions) -> Result<DenoiseInput> {
 }
 
 /// `backend`'s copy bandwidth in GB/s on `image` (one `Vec4` per pixel of `params`' frame): the
-/// median time of `repeats` copy probes after the [`warm_up`] (`settle_seconds`), each pixel read
+/// median time of `repeats` copy probes after a warm-up of `settle_seconds` ([`measure`]), each pixel read
 /// once and written once.
 fn copy_bandwidth(
     backend: &mut dyn Backend,
@@ -161,13 +161,12 @@ fn copy_bandwidth(
     repeats: u32,
     settle_seconds: f64,
 ) -> Result<f64> {
-    warm_up(settle_seconds, || backend.copy_probe(params, image).map(|(_, report)| report.seconds))?;
-    let seconds = (0..repeats).map(|_| Ok(backend.copy_probe(params, image)?.1.seconds)).collect::<Result<Vec<_>>>()?;
+    let measured = measure(settle_seconds, repeats, || Ok(vec![backend.copy_probe(params, image)?.1]))?;
     let bytes = 2.0 * std::mem::size_of::<Vec4>() as f64 * f64::from(params.pixels());
-    Ok(bytes / median(seconds) / 1e9)
+    Ok(bytes / measured.stages[0].seconds / 1e9)
 }
 
-/// Measures `backend`, each measurement after a [`warm_up`] of `settle_seconds`, handing each
+/// Measures `backend`, each measurement after a warm-up of `settle_seconds` ([`measure`]), handing each
 /// line to `emit`.
 fn bench_backend(
     backend: &mut dyn Backend,
@@ -185,18 +184,8 @@ fn bench_backend(
     let copy_gb_per_s = copy_bandwidth(backend, &params, &input.shadowed, options.repeats, settle_seconds)?;
     for method in [DenoiseMethod::Tv, DenoiseMethod::Svgf] {
         let passes = method.passes(&params);
-        let mut seconds = vec![Vec::new(); passes.len()];
-        let mut dispatches = vec![1; passes.len()];
-        let run =
-            || backend.denoise(method, &params, input).map(|(_, reports)| reports.iter().map(|r| r.seconds).sum());
-        let warm_up_seconds = warm_up(settle_seconds, run)?;
-        for _ in 0..options.repeats {
-            let (_, timings) = backend.denoise(method, &params, input)?;
-            for ((s, d), t) in seconds.iter_mut().zip(&mut dispatches).zip(timings) {
-                s.push(t.seconds);
-                *d = t.dispatches;
-            }
-        }
+        let Measured { stages, warm_up_seconds } =
+            measure(settle_seconds, options.repeats, || backend.denoise(method, &params, input).map(|(_, r)| r))?;
         let line = |pass: &'static str, seconds: f64, dispatches: Option<u32>, bytes: u64| {
             let gb_per_s = bytes as f64 / seconds / 1e9;
             DenoiseMeasurement {
@@ -217,11 +206,11 @@ fn bench_backend(
             }
         };
         let (mut total_seconds, mut total_bytes) = (0.0, 0);
-        for ((pass, s), d) in passes.iter().zip(seconds).zip(dispatches) {
-            let (s, bytes) = (median(s), pass.bytes_per_pixel() * pixels);
-            total_seconds += s;
+        for (pass, stage) in passes.iter().zip(stages) {
+            let bytes = pass.bytes_per_pixel() * pixels;
+            total_seconds += stage.seconds;
             total_bytes += bytes;
-            emit(&line(pass.name(), s, Some(d), bytes));
+            emit(&line(pass.name(), stage.seconds, Some(stage.dispatches), bytes));
         }
         emit(&line("total", total_seconds, None, total_bytes));
     }

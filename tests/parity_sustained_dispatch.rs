@@ -17,10 +17,10 @@ use raywave::denoise::{DenoiseInput, DenoiseMethod};
 use raywave::frame::{generate_params_with, sampler_params};
 use raywave::shading::{resolve, ShadeAccumulator, ShadeData};
 use raywave::shared::sampling::sampler_kind;
-use raywave::shared::{DenoiseParams, SamplerParams, SamplerProbeParams};
+use raywave::shared::{DenoiseParams, GenerateParams, SamplerParams, SamplerProbeParams};
 use raywave::stream::RayStream;
 use raywave::vulkan::{VulkanBackend, MAX_SUSTAINED_DISPATCHES};
-use raywave::{Backend, StageReport};
+use raywave::{Backend, Scene, StageReport};
 use std::fmt::Debug;
 
 /// The busy time benchmark mode stretches each submission to here: 50 ms, far above what any
@@ -71,6 +71,12 @@ fn check_stage<T: PartialEq + Debug>(
     }
 }
 
+/// The test frame's sampler and the generate parameters of its first sample.
+fn camera(scene: &Scene) -> (SamplerParams, GenerateParams) {
+    let sampler = sampler_params(sampler_kind::ZSOBOL, 3, WIDTH, HEIGHT, 4);
+    (sampler, generate_params_with(scene, WIDTH, HEIGHT, 0, sampler))
+}
+
 /// Rays that cannot be traced, appended to `rays`: a NaN origin and an infinite tmax, which
 /// every trace counts as sanitized.
 fn with_untraceable_rays(mut rays: RayStream) -> RayStream {
@@ -84,8 +90,7 @@ fn with_untraceable_rays(mut rays: RayStream) -> RayStream {
 fn repeated_dispatches_return_what_one_dispatch_returns_on_every_stage_and_device() {
     let scene = cornell();
     let data = ShadeData::new(&scene).expect("shade data");
-    let sampler = sampler_params(sampler_kind::ZSOBOL, 3, WIDTH, HEIGHT, 4);
-    let generate = generate_params_with(&scene, WIDTH, HEIGHT, 0, sampler);
+    let (sampler, generate) = camera(&scene);
     let mut cpu = CpuBackend::new();
     cpu.load_scene(&scene).expect("cpu scene");
     let (rays, _) = cpu.generate(&generate).expect("cpu generate");
@@ -170,8 +175,7 @@ fn repeated_dispatches_return_what_one_dispatch_returns_on_every_stage_and_devic
 #[test]
 fn a_large_call_after_a_one_ray_call_is_sized_by_the_time_per_ray() {
     let scene = cornell();
-    let sampler = sampler_params(sampler_kind::ZSOBOL, 3, WIDTH, HEIGHT, 4);
-    let rays = CpuBackend::new().generate(&generate_params_with(&scene, WIDTH, HEIGHT, 0, sampler)).expect("rays").0;
+    let rays = CpuBackend::new().generate(&camera(&scene).1).expect("rays").0;
     let mut one_ray = RayStream::zeroed(1);
     (one_ray.origin[0], one_ray.direction[0]) = (rays.origin[0], rays.direction[0]);
     for mut device in vulkan::every_device_sustained("benchmark mode sizing", SUSTAIN_SECONDS) {
