@@ -4,15 +4,17 @@
 //! [`raywave_shared::bindings::WORKGROUP_SIZE`].
 
 use glam::{UVec3, Vec4};
-use raywave_shared::bindings::WORKGROUP_SIZE;
+use raywave_shared::bindings::{STREAM_ROW, WORKGROUP_SIZE};
 use raywave_shared::GenerateParams;
 use spirv_std::spirv;
 
-/// The stream index of an invocation in a 2-D grid of 1-D workgroups: rows of
-/// `num_workgroups.x · WORKGROUP_SIZE` invocations. The host spreads large streams over y because
-/// `maxComputeWorkGroupCount[0]` may be as small as 65 535.
-pub fn stream_index(global_id: UVec3, num_workgroups: UVec3) -> u32 {
-    global_id.y * num_workgroups.x * WORKGROUP_SIZE + global_id.x
+/// The stream index of an invocation in a 2-D grid of 1-D workgroups: row `y` starts at
+/// `y · STREAM_ROW`. The host spreads a stream over more than one row only when it needs more
+/// workgroups than `maxComputeWorkGroupCount[0]` (at least 65 535), and then sends rows of exactly
+/// [`STREAM_ROW`] invocations, so the index does not depend on the workgroup size the host picked
+/// ([`raywave_shared::bindings::WORKGROUP_SIZE`] or another).
+pub fn stream_index(global_id: UVec3) -> u32 {
+    global_id.y * STREAM_ROW + global_id.x
 }
 
 /// The value of an invocation's result, counting the invocation in its stage's counter if it
@@ -54,13 +56,12 @@ fn store_hit(
 #[spirv(compute(threads(64)))]
 pub fn generate(
     #[spirv(global_invocation_id)] global_id: UVec3,
-    #[spirv(num_workgroups)] num_workgroups: UVec3,
     #[spirv(push_constant)] params: &GenerateParams,
     #[spirv(storage_buffer, descriptor_set = 0, binding = 0)] ray_origin: &mut [Vec4],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 1)] ray_direction: &mut [Vec4],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 2)] ray_pixel: &mut [u32],
 ) {
-    let i = stream_index(global_id, num_workgroups);
+    let i = stream_index(global_id);
     if i < params.ray_count() {
         let ray = crate::generate::generate_ray(i, params);
         ray_origin[i as usize] = ray.origin;
@@ -73,11 +74,10 @@ pub fn generate(
 #[spirv(compute(threads(64)))]
 pub fn sampler_probe(
     #[spirv(global_invocation_id)] global_id: UVec3,
-    #[spirv(num_workgroups)] num_workgroups: UVec3,
     #[spirv(push_constant)] params: &raywave_shared::SamplerProbeParams,
     #[spirv(storage_buffer, descriptor_set = 0, binding = 0)] bits: &mut [glam::UVec2],
 ) {
-    let i = stream_index(global_id, num_workgroups);
+    let i = stream_index(global_id);
     if i < params.sample_count() {
         bits[i as usize] = crate::sampling::probe::sampler_probe(i, params);
     }
@@ -87,11 +87,10 @@ pub fn sampler_probe(
 #[spirv(compute(threads(64)))]
 pub fn warp_probe(
     #[spirv(global_invocation_id)] global_id: UVec3,
-    #[spirv(num_workgroups)] num_workgroups: UVec3,
     #[spirv(push_constant)] params: &raywave_shared::WarpParams,
     #[spirv(storage_buffer, descriptor_set = 0, binding = 0)] samples: &mut [Vec4],
 ) {
-    let i = stream_index(global_id, num_workgroups);
+    let i = stream_index(global_id);
     if i < params.count {
         samples[i as usize] = crate::sampling::probe::warp_probe(i, params);
     }
@@ -102,7 +101,6 @@ pub fn warp_probe(
 #[allow(clippy::too_many_arguments)]
 pub fn trace_cwbvh(
     #[spirv(global_invocation_id)] global_id: UVec3,
-    #[spirv(num_workgroups)] num_workgroups: UVec3,
     #[spirv(push_constant)] params: &raywave_shared::TraceParams,
     #[spirv(storage_buffer, descriptor_set = 0, binding = 0)] nodes: &[raywave_shared::bvh::CwBvhNode],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 1)] ray_origin: &[Vec4],
@@ -115,7 +113,7 @@ pub fn trace_cwbvh(
     #[spirv(storage_buffer, descriptor_set = 0, binding = 8)] ids: &[glam::UVec2],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 9)] replaced: &mut [u32],
 ) {
-    let i = stream_index(global_id, num_workgroups) as usize;
+    let i = stream_index(global_id) as usize;
     if i < params.ray_count as usize {
         let scene = crate::trace::cwbvh::CwBvhScene { nodes, vertices, ids };
         let hit = crate::trace::trace_closest(ray_origin[i], ray_direction[i], &scene);
@@ -130,7 +128,6 @@ pub fn trace_cwbvh(
 #[allow(clippy::too_many_arguments)]
 pub fn trace_ray_query(
     #[spirv(global_invocation_id)] global_id: UVec3,
-    #[spirv(num_workgroups)] num_workgroups: UVec3,
     #[spirv(push_constant)] params: &raywave_shared::TraceParams,
     #[spirv(descriptor_set = 0, binding = 0)] tlas: &spirv_std::ray_tracing::AccelerationStructure,
     #[spirv(storage_buffer, descriptor_set = 0, binding = 1)] ray_origin: &[Vec4],
@@ -141,7 +138,7 @@ pub fn trace_ray_query(
     #[spirv(storage_buffer, descriptor_set = 0, binding = 6)] hit_barycentrics: &mut [glam::Vec2],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 9)] replaced: &mut [u32],
 ) {
-    let i = stream_index(global_id, num_workgroups) as usize;
+    let i = stream_index(global_id) as usize;
     if i < params.ray_count as usize {
         let scene = crate::trace::ray_query::RayQueryScene { tlas };
         let hit = crate::trace::trace_closest(ray_origin[i], ray_direction[i], &scene);
@@ -225,7 +222,6 @@ pub fn trace_closest_hit(
 #[allow(clippy::too_many_arguments)]
 pub fn occlusion_cwbvh(
     #[spirv(global_invocation_id)] global_id: UVec3,
-    #[spirv(num_workgroups)] num_workgroups: UVec3,
     #[spirv(push_constant)] params: &raywave_shared::TraceParams,
     #[spirv(storage_buffer, descriptor_set = 0, binding = 0)] nodes: &[raywave_shared::bvh::CwBvhNode],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 1)] ray_origin: &[Vec4],
@@ -235,7 +231,7 @@ pub fn occlusion_cwbvh(
     #[spirv(storage_buffer, descriptor_set = 0, binding = 8)] ids: &[glam::UVec2],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 9)] replaced: &mut [u32],
 ) {
-    let i = stream_index(global_id, num_workgroups) as usize;
+    let i = stream_index(global_id) as usize;
     if i < params.ray_count as usize {
         let scene = crate::trace::cwbvh::CwBvhScene { nodes, vertices, ids };
         let blocked = crate::trace::trace_occluded(ray_origin[i], ray_direction[i], &scene);
@@ -248,7 +244,6 @@ pub fn occlusion_cwbvh(
 #[spirv(compute(threads(64)))]
 pub fn occlusion_ray_query(
     #[spirv(global_invocation_id)] global_id: UVec3,
-    #[spirv(num_workgroups)] num_workgroups: UVec3,
     #[spirv(push_constant)] params: &raywave_shared::TraceParams,
     #[spirv(descriptor_set = 0, binding = 0)] tlas: &spirv_std::ray_tracing::AccelerationStructure,
     #[spirv(storage_buffer, descriptor_set = 0, binding = 1)] ray_origin: &[Vec4],
@@ -256,7 +251,7 @@ pub fn occlusion_ray_query(
     #[spirv(storage_buffer, descriptor_set = 0, binding = 3)] occluded: &mut [u32],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 9)] replaced: &mut [u32],
 ) {
-    let i = stream_index(global_id, num_workgroups) as usize;
+    let i = stream_index(global_id) as usize;
     if i < params.ray_count as usize {
         let scene = crate::trace::ray_query::RayQueryScene { tlas };
         let blocked = crate::trace::trace_occluded(ray_origin[i], ray_direction[i], &scene);
@@ -313,7 +308,6 @@ pub fn occlusion_miss(#[spirv(incoming_ray_payload)] payload: &mut u32) {
 #[allow(clippy::too_many_arguments)]
 pub fn shade(
     #[spirv(global_invocation_id)] global_id: UVec3,
-    #[spirv(num_workgroups)] num_workgroups: UVec3,
     #[spirv(push_constant)] params: &raywave_shared::ShadeParams,
     #[spirv(storage_buffer, descriptor_set = 0, binding = 0)] ray_direction: &[Vec4],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 1)] hit_t: &[f32],
@@ -334,7 +328,7 @@ pub fn shade(
     #[spirv(storage_buffer, descriptor_set = 0, binding = 16)] shadow_direction: &mut [Vec4],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 17)] replaced: &mut [u32],
 ) {
-    let i = stream_index(global_id, num_workgroups);
+    let i = stream_index(global_id);
     if i < params.count {
         let k = i as usize;
         let direction = glam::Vec4Swizzles::xyz(ray_direction[k]);
@@ -384,12 +378,11 @@ fn denoise_pixel(params: &raywave_shared::DenoiseParams, i: u32) -> Option<glam:
 #[spirv(compute(threads(64)))]
 pub fn copy_probe(
     #[spirv(global_invocation_id)] global_id: UVec3,
-    #[spirv(num_workgroups)] num_workgroups: UVec3,
     #[spirv(push_constant)] params: &raywave_shared::DenoiseParams,
     #[spirv(storage_buffer, descriptor_set = 0, binding = 0)] source: &[Vec4],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 1)] copy: &mut [Vec4],
 ) {
-    let i = stream_index(global_id, num_workgroups);
+    let i = stream_index(global_id);
     if denoise_pixel(params, i).is_some() {
         copy[i as usize] = source[i as usize];
     }
@@ -399,13 +392,12 @@ pub fn copy_probe(
 #[spirv(compute(threads(64)))]
 pub fn denoise_ratio(
     #[spirv(global_invocation_id)] global_id: UVec3,
-    #[spirv(num_workgroups)] num_workgroups: UVec3,
     #[spirv(push_constant)] params: &raywave_shared::DenoiseParams,
     #[spirv(storage_buffer, descriptor_set = 0, binding = 0)] shadowed: &[Vec4],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 1)] unshadowed: &[Vec4],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 2)] ratio: &mut [Vec4],
 ) {
-    let i = stream_index(global_id, num_workgroups);
+    let i = stream_index(global_id);
     if denoise_pixel(params, i).is_some() {
         let k = i as usize;
         ratio[k] = crate::denoise::noise::ratio_pixel(shadowed[k], unshadowed[k]);
@@ -416,12 +408,11 @@ pub fn denoise_ratio(
 #[spirv(compute(threads(64)))]
 pub fn denoise_noise(
     #[spirv(global_invocation_id)] global_id: UVec3,
-    #[spirv(num_workgroups)] num_workgroups: UVec3,
     #[spirv(push_constant)] params: &raywave_shared::DenoiseParams,
     #[spirv(storage_buffer, descriptor_set = 0, binding = 0)] ratio: &[Vec4],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 1)] noise: &mut [f32],
 ) {
-    let i = stream_index(global_id, num_workgroups);
+    let i = stream_index(global_id);
     if let Some(pixel) = denoise_pixel(params, i) {
         noise[i as usize] = crate::denoise::noise::noise_estimate(params, pixel, ratio);
     }
@@ -431,12 +422,11 @@ pub fn denoise_noise(
 #[spirv(compute(threads(64)))]
 pub fn denoise_noise_blur(
     #[spirv(global_invocation_id)] global_id: UVec3,
-    #[spirv(num_workgroups)] num_workgroups: UVec3,
     #[spirv(push_constant)] params: &raywave_shared::DenoiseParams,
     #[spirv(storage_buffer, descriptor_set = 0, binding = 0)] raw: &[f32],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 1)] blurred: &mut [f32],
 ) {
-    let i = stream_index(global_id, num_workgroups);
+    let i = stream_index(global_id);
     if let Some(pixel) = denoise_pixel(params, i) {
         blurred[i as usize] = crate::denoise::noise::blurred_noise(params, pixel, raw);
     }
@@ -542,7 +532,6 @@ pub fn denoise_bilateral(
 #[allow(clippy::too_many_arguments)]
 pub fn denoise_composite(
     #[spirv(global_invocation_id)] global_id: UVec3,
-    #[spirv(num_workgroups)] num_workgroups: UVec3,
     #[spirv(push_constant)] params: &raywave_shared::DenoiseParams,
     #[spirv(storage_buffer, descriptor_set = 0, binding = 0)] analytic: &[Vec4],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 1)] emitted: &[Vec4],
@@ -552,7 +541,7 @@ pub fn denoise_composite(
     #[spirv(storage_buffer, descriptor_set = 0, binding = 5)] replaced: &mut [u32],
 ) {
     use glam::Vec4Swizzles;
-    let i = stream_index(global_id, num_workgroups);
+    let i = stream_index(global_id);
     if denoise_pixel(params, i).is_some() {
         let k = i as usize;
         let c =
@@ -565,14 +554,13 @@ pub fn denoise_composite(
 #[spirv(compute(threads(64)))]
 pub fn svgf_variance(
     #[spirv(global_invocation_id)] global_id: UVec3,
-    #[spirv(num_workgroups)] num_workgroups: UVec3,
     #[spirv(push_constant)] params: &raywave_shared::DenoiseParams,
     #[spirv(storage_buffer, descriptor_set = 0, binding = 0)] ratio: &[Vec4],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 1)] position: &[Vec4],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 2)] normal: &[Vec4],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 3)] with_variance: &mut [Vec4],
 ) {
-    let i = stream_index(global_id, num_workgroups);
+    let i = stream_index(global_id);
     if let Some(pixel) = denoise_pixel(params, i) {
         with_variance[i as usize] = crate::denoise::svgf::ratio_and_variance(params, pixel, ratio, position, normal);
     }
@@ -583,14 +571,13 @@ pub fn svgf_variance(
 #[spirv(compute(threads(64)))]
 pub fn svgf_atrous(
     #[spirv(global_invocation_id)] global_id: UVec3,
-    #[spirv(num_workgroups)] num_workgroups: UVec3,
     #[spirv(push_constant)] params: &raywave_shared::DenoiseParams,
     #[spirv(storage_buffer, descriptor_set = 0, binding = 0)] ratio: &[Vec4],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 1)] position: &[Vec4],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 2)] normal: &[Vec4],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 3)] filtered: &mut [Vec4],
 ) {
-    let i = stream_index(global_id, num_workgroups);
+    let i = stream_index(global_id);
     if let Some(pixel) = denoise_pixel(params, i) {
         filtered[i as usize] = crate::denoise::svgf::atrous_step(params, pixel, ratio, position, normal);
     }
@@ -602,7 +589,6 @@ pub fn svgf_atrous(
 #[allow(clippy::too_many_arguments)]
 pub fn svgf_composite(
     #[spirv(global_invocation_id)] global_id: UVec3,
-    #[spirv(num_workgroups)] num_workgroups: UVec3,
     #[spirv(push_constant)] params: &raywave_shared::DenoiseParams,
     #[spirv(storage_buffer, descriptor_set = 0, binding = 0)] analytic: &[Vec4],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 1)] emitted: &[Vec4],
@@ -611,7 +597,7 @@ pub fn svgf_composite(
     #[spirv(storage_buffer, descriptor_set = 0, binding = 4)] replaced: &mut [u32],
 ) {
     use glam::Vec4Swizzles;
-    let i = stream_index(global_id, num_workgroups);
+    let i = stream_index(global_id);
     if denoise_pixel(params, i).is_some() {
         let k = i as usize;
         let c = crate::shade::stage::apply_visibility(analytic[k].xyz(), ratio[k].xyz(), emitted[k].xyz());
@@ -624,10 +610,11 @@ mod tests {
     use super::*;
 
     #[test]
-    fn stream_index_is_row_major_over_the_dispatch_grid() {
-        let groups = UVec3::new(3, 2, 1);
-        assert_eq!(stream_index(UVec3::new(5, 0, 0), groups), 5);
-        assert_eq!(stream_index(UVec3::new(0, 1, 0), groups), 3 * WORKGROUP_SIZE);
-        assert_eq!(stream_index(UVec3::new(7, 1, 0), groups), 3 * WORKGROUP_SIZE + 7);
+    fn stream_index_is_row_major_over_rows_of_stream_row_invocations() {
+        assert_eq!(stream_index(UVec3::new(5, 0, 0)), 5);
+        // A single-row dispatch may run past `STREAM_ROW` in x.
+        assert_eq!(stream_index(UVec3::new(STREAM_ROW + 3, 0, 0)), STREAM_ROW + 3);
+        assert_eq!(stream_index(UVec3::new(0, 1, 0)), STREAM_ROW);
+        assert_eq!(stream_index(UVec3::new(7, 2, 0)), 2 * STREAM_ROW + 7);
     }
 }

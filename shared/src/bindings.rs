@@ -6,9 +6,18 @@
 //! `#[spirv(binding = N)]` attributes; the Vulkan validation layers (on in every test) reject a
 //! pipeline whose layout disagrees with its shader, and the parity tests catch two swapped buffers.
 
-/// Threads per workgroup of every 1-D compute stage (generate, trace). 64 fills a wave on AMD and
-/// two warps on NVIDIA.
+/// Threads per workgroup every 1-D compute stage is compiled with (`threads(64)` in the kernels'
+/// entry points). 64 fills a wave on AMD and two warps on NVIDIA. The host may run the stream
+/// stages with another power of two (`ContextOptions::workgroup_size`); the bilateral denoise
+/// pass, whose workgroup-memory tile is sized by it ([`crate::denoise::TILE_LEN`]), always runs
+/// with this one.
 pub const WORKGROUP_SIZE: u32 = 64;
+
+/// Invocations per row of a stream stage's dispatch grid when the stream needs more than one
+/// row: 2^20, a multiple of every power-of-two workgroup size up to 1024 whose rows of
+/// `STREAM_ROW / size` workgroups stay within the 65 535 every Vulkan device allows in x for
+/// sizes from 32 up. Kernels index streams as `y · STREAM_ROW + x` (`entry::stream_index`).
+pub const STREAM_ROW: u32 = 1 << 20;
 
 /// Bindings of the generate stage (set 0).
 pub mod generate {

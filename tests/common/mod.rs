@@ -47,14 +47,14 @@ pub mod vulkan {
     /// query and the ray-tracing pipeline where exposed), with validation layers on. Without devices this SKIPs loudly (fails
     /// under CI). Validation is required under CI; elsewhere it is used when installed.
     pub fn every_device(test: &str) -> Vec<VulkanBackend> {
-        every_device_sustained(test, 0.0)
+        every_device_with(test, &ContextOptions::default())
     }
 
-    /// [`every_device`] in benchmark mode: each timed submission repeats its dispatch to keep
-    /// the device busy for `sustain_seconds` (`ContextOptions::sustain_seconds`; 0 is off).
-    pub fn every_device_sustained(test: &str, sustain_seconds: f64) -> Vec<VulkanBackend> {
+    /// [`every_device`] with `options` (benchmark mode, a workgroup size; validation is on
+    /// whatever `options` say).
+    pub fn every_device_with(test: &str, options: &ContextOptions) -> Vec<VulkanBackend> {
         let mut backends = Vec::new();
-        let open = |device, trace| open(device, trace, sustain_seconds);
+        let open = |device, trace| open(device, trace, options);
         for device in &devices(test) {
             backends.push(open(device, TraceMethod::Software));
             if device.missing_for_ray_query().is_empty() {
@@ -70,7 +70,12 @@ pub mod vulkan {
     /// Opens every Vulkan device once (software trace), with validation layers on, for stages
     /// that do not trace. SKIPs loudly without devices (fails under CI).
     pub fn each_device(test: &str) -> Vec<VulkanBackend> {
-        devices(test).iter().map(|device| open(device, TraceMethod::Software, 0.0)).collect()
+        each_device_with(test, &ContextOptions::default())
+    }
+
+    /// [`each_device`] with `options` (validation on whatever they say).
+    pub fn each_device_with(test: &str, options: &ContextOptions) -> Vec<VulkanBackend> {
+        devices(test).iter().map(|device| open(device, TraceMethod::Software, options)).collect()
     }
 
     /// Every Vulkan device; none (after a loud SKIP, or a failure under CI) if there are none.
@@ -88,8 +93,8 @@ pub mod vulkan {
         }
     }
 
-    fn open(info: &DeviceInfo, trace: TraceMethod, sustain_seconds: f64) -> VulkanBackend {
-        let options = ContextOptions { validation: true, sustain_seconds };
+    fn open(info: &DeviceInfo, trace: TraceMethod, options: &ContextOptions) -> VulkanBackend {
+        let options = ContextOptions { validation: true, ..options.clone() };
         match VulkanBackend::open(info.index, &options, Some(trace)) {
             Ok(b) => b,
             Err(e) if !super::in_ci() && e.to_string().contains("VK_LAYER_KHRONOS_validation") => {

@@ -5,6 +5,7 @@ use super::driver_lock;
 use crate::error::{Error, Result};
 use ash::vk;
 use gpu_allocator::vulkan::{Allocator, AllocatorCreateDesc};
+use raywave_shared::bindings::{STREAM_ROW, WORKGROUP_SIZE};
 use std::ffi::{c_void, CStr};
 use std::mem::ManuallyDrop;
 use std::sync::{Arc, Mutex};
@@ -95,6 +96,16 @@ pub struct ContextOptions {
     /// Results do not change: no kernel reads what it writes, and a stage's sanitized counter is
     /// zeroed before the last repetition.
     pub sustain_seconds: f64,
+    /// Invocations per workgroup of every 1-D stream stage — generate, compute trace and
+    /// occlusion (software and ray query), shade, the denoisers' per-pixel passes, the probes —
+    /// for occupancy tuning; `None` (the default) keeps the compiled
+    /// [`WORKGROUP_SIZE`](raywave_shared::bindings::WORKGROUP_SIZE), 64. A power of two within
+    /// the device's `maxComputeWorkGroupSize[0]` and `maxComputeWorkGroupInvocations` whose rows
+    /// of [`STREAM_ROW`](raywave_shared::bindings::STREAM_ROW) invocations fit
+    /// `maxComputeWorkGroupCount[0]` (32 and up on every device), else a typed error at open.
+    /// Results do not depend on it; the bilateral denoise pass, whose workgroup-memory tile the
+    /// size fixes, and the ray-tracing pipeline (no workgroups) keep theirs.
+    pub workgroup_size: Option<u32>,
 }
 
 /// Most dispatches one timed submission repeats in benchmark mode
@@ -121,6 +132,9 @@ pub(crate) struct Core {
     pub scratch_alignment: u64,
     /// [`ContextOptions::sustain_seconds`].
     pub sustain_seconds: f64,
+    /// Invocations per workgroup of the 1-D stream stages ([`ContextOptions::workgroup_size`],
+    /// checked against the device).
+    pub workgroup_size: u32,
 }
 
 impl Drop for Core {
@@ -343,6 +357,15 @@ pub(crate) fn open(index: usize, options: &ContextOptions) -> Result<Arc<Core>> 
             return Err(e);
         }
     };
+    // SAFETY: plain query of a physical device of this instance.
+    let device_limits = unsafe { instance.get_physical_device_properties(physical).limits };
+    let workgroup_size = match checked_workgroup_size(options.workgroup_size, &device_limits) {
+        Ok(size) => size,
+        Err(e) => {
+            destroy_instance(&instance, &debug);
+            return Err(e);
+        }
+    };
     match create_device(&instance, physical, index) {
         Ok((device, queue_family, info, limits, scratch_alignment, rt_properties)) => {
             // SAFETY: queue family `queue_family` with one queue was requested at device creation.
@@ -386,12 +409,35 @@ pub(crate) fn open(index: usize, options: &ContextOptions) -> Result<Arc<Core>> 
                 limits,
                 scratch_alignment,
                 sustain_seconds: options.sustain_seconds,
+                workgroup_size,
             }))
         }
         Err(e) => {
             destroy_instance(&instance, &debug);
             Err(e)
         }
+    }
+}
+
+/// The workgroup size of the 1-D stream stages: `requested` if it is a power of two the device
+/// can run ([`ContextOptions::workgroup_size`]), the compiled size if none is requested.
+fn checked_workgroup_size(requested: Option<u32>, limits: &vk::PhysicalDeviceLimits) -> Result<u32> {
+    let Some(size) = requested else { return Ok(WORKGROUP_SIZE) };
+    let most = limits.max_compute_work_group_size[0].min(limits.max_compute_work_group_invocations);
+    let refuse =
+        |why: String| Err(Error::InvalidParameter { name: "workgroup_size", reason: format!("{size}: {why}") });
+    if !size.is_power_of_two() {
+        refuse("not a power of two".into())
+    } else if size > most {
+        refuse(format!("above the device's {most} invocations per 1-D workgroup"))
+    } else if STREAM_ROW / size > limits.max_compute_work_group_count[0] {
+        refuse(format!(
+            "a row of {STREAM_ROW} invocations would take {} workgroups, above the device's {}",
+            STREAM_ROW / size,
+            limits.max_compute_work_group_count[0]
+        ))
+    } else {
+        Ok(size)
     }
 }
 
@@ -475,5 +521,38 @@ fn create_device(instance: &ash::Instance, physical: vk::PhysicalDevice, index: 
             };
         }
         Ok((device, queue_family, info, limits, scratch_alignment, rt_properties))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_workgroup_size_is_a_power_of_two_the_device_can_run_in_rows_of_stream_row() {
+        let limits = vk::PhysicalDeviceLimits {
+            max_compute_work_group_size: [1024, 1024, 64],
+            max_compute_work_group_invocations: 512,
+            max_compute_work_group_count: [65_535, 65_535, 65_535],
+            ..Default::default()
+        };
+        assert_eq!(checked_workgroup_size(None, &limits).ok(), Some(WORKGROUP_SIZE));
+        for size in [32, 64, 128, 256, 512] {
+            assert_eq!(checked_workgroup_size(Some(size), &limits).ok(), Some(size));
+        }
+        let refused = |size, limits: &vk::PhysicalDeviceLimits| {
+            matches!(
+                checked_workgroup_size(Some(size), limits),
+                Err(Error::InvalidParameter { name: "workgroup_size", .. })
+            )
+        };
+        // 1024 exceeds the invocations per workgroup, 16 makes rows of 65 536 workgroups.
+        for size in [0, 1, 16, 48, 96, 1024, 2048] {
+            assert!(refused(size, &limits), "{size}");
+        }
+        let wide = vk::PhysicalDeviceLimits { max_compute_work_group_count: [u32::MAX; 3], ..limits };
+        assert!(!refused(1, &wide) && !refused(16, &wide));
+        let narrow = vk::PhysicalDeviceLimits { max_compute_work_group_size: [128, 128, 64], ..limits };
+        assert!(refused(256, &narrow) && !refused(128, &narrow));
     }
 }

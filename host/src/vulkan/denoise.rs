@@ -12,6 +12,7 @@ use ash::vk;
 use bytemuck::Pod;
 use glam::Vec4;
 use raywave_shared::bindings::denoise as counts;
+use raywave_shared::bindings::WORKGROUP_SIZE;
 use raywave_shared::denoise::axis;
 use raywave_shared::DenoiseParams;
 use std::sync::Arc;
@@ -44,15 +45,17 @@ impl DenoiseKernels {
     /// Builds the pipelines.
     pub fn new(core: &Arc<Core>) -> Result<Self> {
         let push = std::mem::size_of::<DenoiseParams>() as u32;
-        let kernel = |entry, count: u32| {
+        let kernel_sized = |entry, count: u32, workgroup_size| {
             let layout: Vec<_> = (0..count).map(|b| (b, vk::DescriptorType::STORAGE_BUFFER)).collect();
-            ComputeKernel::new(core, entry, &layout, push)
+            ComputeKernel::new(core, entry, &layout, push, workgroup_size)
         };
+        let kernel = |entry, count| kernel_sized(entry, count, core.workgroup_size);
         Ok(Self {
             ratio: kernel("entry::denoise_ratio", counts::RATIO)?,
             noise: kernel("entry::denoise_noise", counts::NOISE)?,
             noise_blur: kernel("entry::denoise_noise_blur", counts::NOISE_BLUR)?,
-            bilateral: kernel("entry::denoise_bilateral", counts::BILATERAL)?,
+            // Its workgroup-memory tile is sized for the compiled workgroup size (`TILE_LEN`).
+            bilateral: kernel_sized("entry::denoise_bilateral", counts::BILATERAL, WORKGROUP_SIZE)?,
             composite: kernel("entry::denoise_composite", counts::COMPOSITE)?,
             svgf_variance: kernel("entry::svgf_variance", counts::SVGF_VARIANCE)?,
             svgf_atrous: kernel("entry::svgf_atrous", counts::SVGF_ATROUS)?,

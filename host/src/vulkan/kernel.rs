@@ -1,30 +1,35 @@
 //! Compute pipelines built from the embedded SPIR-V: one per entry point, dispatched as a 2-D grid
-//! of 1-D workgroups.
+//! of 1-D workgroups of the size the pipeline was built with.
 
 use super::context::{vk_error, Core};
 use super::pass::{Pass, Resource, Timing};
 use crate::error::{Error, Result};
 use ash::vk;
-use raywave_shared::bindings::WORKGROUP_SIZE;
+use raywave_shared::bindings::STREAM_ROW;
 use std::sync::Arc;
 
 /// A compute pipeline for one entry point.
 pub(crate) struct ComputeKernel {
     pass: Pass,
+    /// Invocations per workgroup.
+    workgroup_size: u32,
 }
 
 impl ComputeKernel {
     /// Builds the pipeline of SPIR-V entry point `entry` with descriptor set 0 laid out as
-    /// `bindings` and `push_constant_bytes` of push constants.
+    /// `bindings`, `push_constant_bytes` of push constants and workgroups of `workgroup_size`
+    /// invocations (a size other than the compiled `WORKGROUP_SIZE` only for stages indexed by
+    /// `entry::stream_index`, already checked against the device by [`super::context::open`]).
     pub fn new(
         core: &Arc<Core>,
         entry: &'static str,
         bindings: &[(u32, vk::DescriptorType)],
         push_constant_bytes: u32,
+        workgroup_size: u32,
     ) -> Result<Self> {
         let stages = vk::ShaderStageFlags::COMPUTE;
         let mut pass = Pass::new(core, entry, vk::PipelineBindPoint::COMPUTE, stages, bindings, push_constant_bytes)?;
-        let module = pass.shader_module(entry)?;
+        let module = pass.shader_module(entry, Some(workgroup_size))?;
         let name = std::ffi::CString::new(entry)
             .map_err(|_| Error::InvalidParameter { name: "entry", reason: entry.into() })?;
         let stage = vk::PipelineShaderStageCreateInfo::default().stage(stages).module(module).name(&name);
@@ -39,7 +44,7 @@ impl ComputeKernel {
             created
         };
         pass.pipeline = created.map_err(|(_, e)| vk_error("vkCreateComputePipelines")(e))?[0];
-        Ok(Self { pass })
+        Ok(Self { pass, workgroup_size })
     }
 
     /// Binds `resources` (one per binding, in creation order), pushes `push`, runs `invocations`
@@ -47,9 +52,11 @@ impl ComputeKernel {
     /// dispatch.
     pub fn dispatch(&self, resources: &[Resource<'_>], push: &[u8], invocations: u32) -> Result<Timing> {
         let (groups_x, groups_y) =
-            dispatch_grid(&self.pass.core.limits, invocations).ok_or_else(|| Error::InvalidParameter {
-                name: "invocations",
-                reason: format!("{invocations} exceed the device's dispatch limits"),
+            dispatch_grid(&self.pass.core.limits, invocations, self.workgroup_size).ok_or_else(|| {
+                Error::InvalidParameter {
+                    name: "invocations",
+                    reason: format!("{invocations} exceed the device's dispatch limits"),
+                }
             })?;
         let device = &self.pass.core.device;
         self.pass.run(resources, push, invocations, |cmd| {
@@ -61,16 +68,23 @@ impl ComputeKernel {
     }
 }
 
-/// Workgroup grid `(x, y)` covering `invocations` with rows of at most
-/// `maxComputeWorkGroupCount[0]` workgroups, or `None` if even that exceeds the y limit.
-pub(crate) fn dispatch_grid(limits: &vk::PhysicalDeviceLimits, invocations: u32) -> Option<(u32, u32)> {
-    let groups = invocations.div_ceil(WORKGROUP_SIZE);
-    if groups == 0 {
-        return Some((0, 0));
+/// Workgroup grid `(x, y)` covering `invocations` in workgroups of `workgroup_size`: one row
+/// where `maxComputeWorkGroupCount[0]` workgroups suffice, else rows of exactly [`STREAM_ROW`]
+/// invocations (`entry::stream_index`); `None` if that needs more rows than the y limit or more
+/// workgroups per row than the x limit.
+pub(crate) fn dispatch_grid(
+    limits: &vk::PhysicalDeviceLimits,
+    invocations: u32,
+    workgroup_size: u32,
+) -> Option<(u32, u32)> {
+    let groups = invocations.div_ceil(workgroup_size);
+    let [max_x, max_y, _] = limits.max_compute_work_group_count;
+    if groups <= max_x {
+        return Some(if groups == 0 { (0, 0) } else { (groups, 1) });
     }
-    let x = groups.min(limits.max_compute_work_group_count[0]);
-    let y = groups.div_ceil(x);
-    (y <= limits.max_compute_work_group_count[1]).then_some((x, y))
+    let x = STREAM_ROW / workgroup_size;
+    let y = invocations.div_ceil(STREAM_ROW);
+    (x <= max_x && y <= max_y).then_some((x, y))
 }
 
 #[cfg(test)]
@@ -78,13 +92,29 @@ mod tests {
     use super::*;
 
     #[test]
-    fn grid_spills_into_y_only_past_the_x_limit() {
-        let limits = vk::PhysicalDeviceLimits { max_compute_work_group_count: [100, 10, 1], ..Default::default() };
-        assert_eq!(dispatch_grid(&limits, 0), Some((0, 0)));
-        assert_eq!(dispatch_grid(&limits, 1), Some((1, 1)));
-        assert_eq!(dispatch_grid(&limits, 64 * 100), Some((100, 1)));
-        assert_eq!(dispatch_grid(&limits, 64 * 100 + 1), Some((100, 2)));
-        assert_eq!(dispatch_grid(&limits, 64 * 1000), Some((100, 10)));
-        assert_eq!(dispatch_grid(&limits, 64 * 1000 + 1), None);
+    fn grid_spills_into_rows_of_stream_row_invocations_only_past_the_x_limit() {
+        let limits = vk::PhysicalDeviceLimits { max_compute_work_group_count: [65_535, 3, 1], ..Default::default() };
+        assert_eq!(dispatch_grid(&limits, 0, 64), Some((0, 0)));
+        assert_eq!(dispatch_grid(&limits, 1, 64), Some((1, 1)));
+        // One row holds 65 535 workgroups of 64, more than `STREAM_ROW` invocations.
+        assert_eq!(dispatch_grid(&limits, 64 * 65_535, 64), Some((65_535, 1)));
+        assert_eq!(dispatch_grid(&limits, 32 * 65_535 + 1, 32), Some((STREAM_ROW / 32, 2)));
+        assert_eq!(dispatch_grid(&limits, 64 * 65_535 + 1, 64), None, "four rows");
+        assert_eq!(dispatch_grid(&limits, 3 * STREAM_ROW, 16), None, "2^16 workgroups of 16 per row");
+        let wide = vk::PhysicalDeviceLimits { max_compute_work_group_count: [u32::MAX, 65_535, 65_535], ..limits };
+        assert_eq!(dispatch_grid(&wide, u32::MAX, 1), Some((u32::MAX, 1)));
+    }
+
+    #[test]
+    fn every_invocation_of_a_multi_row_grid_has_its_own_stream_index() {
+        // The rows cover the stream exactly once: index y · STREAM_ROW + x over the grid.
+        let limits = vk::PhysicalDeviceLimits { max_compute_work_group_count: [4096, 65_535, 1], ..Default::default() };
+        for size in [256, 512, 1024] {
+            let invocations = 4096 * size + 1;
+            let (x, y) = dispatch_grid(&limits, invocations, size).expect("fits");
+            assert_eq!(x * size, STREAM_ROW, "rows of STREAM_ROW invocations");
+            assert!((y - 1) * STREAM_ROW < invocations && invocations <= y * STREAM_ROW, "{invocations}: {y} rows");
+            assert!(y > 1, "{invocations} invocations of {size}: one row");
+        }
     }
 }

@@ -169,11 +169,11 @@ impl Pass {
         Ok(pass)
     }
 
-    /// A shader module from the embedded SPIR-V of `entry`; the caller destroys it.
-    pub fn shader_module(&self, entry: &str) -> Result<vk::ShaderModule> {
-        let spirv = super::spirv::module(entry)?;
-        let code = ash::util::read_spv(&mut std::io::Cursor::new(spirv))
-            .map_err(|e| Error::Vulkan { call: "read_spv", result: format!("{entry}: {e}") })?;
+    /// A shader module from the embedded SPIR-V of `entry`, for a compute entry point with
+    /// workgroups of `local_size_x` invocations where given ([`super::spirv::words`]); the caller
+    /// destroys it.
+    pub fn shader_module(&self, entry: &str, local_size_x: Option<u32>) -> Result<vk::ShaderModule> {
+        let code = super::spirv::words(entry, local_size_x)?;
         // SAFETY: `code` is a valid SPIR-V word stream that outlives the call.
         unsafe { self.core.device.create_shader_module(&vk::ShaderModuleCreateInfo::default().code(&code), None) }
             .map_err(vk_error("vkCreateShaderModule"))

@@ -67,7 +67,7 @@ impl RtPipelineKernel {
         let mut modules = Vec::new();
         for (_, entry) in &entries {
             // The names are ASCII literals, so `to_string_lossy` is exact.
-            match pass.shader_module(&entry.to_string_lossy()) {
+            match pass.shader_module(&entry.to_string_lossy(), None) {
                 Ok(m) => modules.push(m),
                 Err(e) => {
                     destroy_modules(core, &modules);

@@ -1,6 +1,11 @@
-//! The SPIR-V modules of `raywave-kernels`, embedded at build time (one per entry point).
+//! The SPIR-V modules of `raywave-kernels`, embedded at build time (one per entry point), and the
+//! one edit the host makes to them: another workgroup size for a 1-D compute stage.
 
 use crate::error::{Error, Result};
+use raywave_shared::bindings::WORKGROUP_SIZE;
+use rspirv::binary::Assemble;
+use rspirv::dr::{Instruction, Operand};
+use rspirv::spirv::{BuiltIn, Decoration, ExecutionMode, Op};
 
 include!(concat!(env!("OUT_DIR"), "/kernels_spv.rs"));
 
@@ -10,5 +15,103 @@ pub fn module(entry: &str) -> Result<&'static [u8]> {
         .iter()
         .find(|(name, _)| *name == entry)
         .map(|(_, bytes)| *bytes)
-        .ok_or_else(|| Error::Vulkan { call: "embedded SPIR-V", result: format!("no module for entry point {entry}") })
+        .ok_or_else(|| embedded_error(entry, "no module for this entry point"))
+}
+
+/// The SPIR-V words of entry point `entry`; with `local_size_x`, a compute entry point's
+/// `LocalSize` execution mode set to `(local_size_x, 1, 1)` in place of the
+/// `(WORKGROUP_SIZE, 1, 1)` it was compiled with (`threads(64)`), so that the pipeline runs
+/// workgroups of that many invocations. Only stages whose code does not depend on the size may
+/// be given one (every 1-D stream stage: `entry::stream_index`); the kernel must not also carry
+/// a `WorkgroupSize` built-in, which would override the execution mode.
+pub fn words(entry: &str, local_size_x: Option<u32>) -> Result<Vec<u32>> {
+    let code = ash::util::read_spv(&mut std::io::Cursor::new(module(entry)?))
+        .map_err(|e| embedded_error(entry, &e.to_string()))?;
+    match local_size_x {
+        None | Some(WORKGROUP_SIZE) => Ok(code),
+        Some(x) => with_local_size_x(&code, entry, x),
+    }
+}
+
+/// `code` with entry point `entry`'s `LocalSize` x changed from `WORKGROUP_SIZE` to `x`.
+fn with_local_size_x(code: &[u32], entry: &str, x: u32) -> Result<Vec<u32>> {
+    let fail = |reason: &str| embedded_error(entry, reason);
+    let mut module = rspirv::dr::load_words(code).map_err(|e| fail(&e.to_string()))?;
+    let is_entry = |i: &Instruction| matches!(i.operands.get(2), Some(Operand::LiteralString(name)) if name == entry);
+    let function = match module.entry_points.iter().find(|i| is_entry(i)).map(|i| &i.operands[1]) {
+        Some(&Operand::IdRef(id)) => id,
+        _ => return Err(fail("no OpEntryPoint of this name")),
+    };
+    let sets_workgroup_size = |i: &Instruction| {
+        i.class.opcode == Op::Decorate
+            && i.operands.get(1) == Some(&Operand::Decoration(Decoration::BuiltIn))
+            && i.operands.get(2) == Some(&Operand::BuiltIn(BuiltIn::WorkgroupSize))
+    };
+    if module.annotations.iter().any(sets_workgroup_size) {
+        return Err(fail("a WorkgroupSize built-in fixes the workgroup size"));
+    }
+    let local_size = module.execution_modes.iter_mut().find(|i| {
+        i.operands.first() == Some(&Operand::IdRef(function))
+            && i.operands.get(1) == Some(&Operand::ExecutionMode(ExecutionMode::LocalSize))
+    });
+    let compiled = [WORKGROUP_SIZE, 1, 1].map(Operand::LiteralBit32);
+    match local_size {
+        Some(mode) if mode.operands[2..] == compiled => mode.operands[2] = Operand::LiteralBit32(x),
+        Some(mode) => return Err(fail(&format!("compiled with LocalSize {:?}, not (64, 1, 1)", &mode.operands[2..]))),
+        None => return Err(fail("no LocalSize execution mode")),
+    }
+    Ok(module.assemble())
+}
+
+fn embedded_error(entry: &str, reason: &str) -> Error {
+    Error::Vulkan { call: "embedded SPIR-V", result: format!("{entry}: {reason}") }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The `LocalSize` operands of `entry` in `code`.
+    fn local_size(code: &[u32], entry: &str) -> Vec<Operand> {
+        let module = rspirv::dr::load_words(code).expect("parses");
+        let is_local_size =
+            |i: &&Instruction| i.operands.get(1) == Some(&Operand::ExecutionMode(ExecutionMode::LocalSize));
+        module.execution_modes.iter().find(is_local_size).expect(entry).operands[2..].to_vec()
+    }
+
+    /// `code` with `entry`'s LocalSize x changed from `from` to `to` (the test's way back).
+    fn with_local_size_x_from(code: &[u32], entry: &str, from: u32, to: u32) -> Vec<u32> {
+        let mut module = rspirv::dr::load_words(code).expect("parses");
+        for mode in &mut module.execution_modes {
+            if mode.operands.get(1) == Some(&Operand::ExecutionMode(ExecutionMode::LocalSize)) {
+                assert_eq!(mode.operands[2], Operand::LiteralBit32(from), "{entry}");
+                mode.operands[2] = Operand::LiteralBit32(to);
+            }
+        }
+        module.assemble()
+    }
+
+    #[test]
+    fn another_workgroup_size_changes_only_the_local_size() {
+        let entry = "entry::trace_cwbvh";
+        let compiled = words(entry, None).expect("embedded");
+        assert_eq!(local_size(&compiled, entry), [64, 1, 1].map(Operand::LiteralBit32));
+        assert_eq!(words(entry, Some(WORKGROUP_SIZE)).expect("unchanged"), compiled);
+        let patched = words(entry, Some(256)).expect("patched");
+        assert_eq!(local_size(&patched, entry), [256, 1, 1].map(Operand::LiteralBit32));
+        // Everything else re-assembles to the same words: changing the operand back restores the
+        // module.
+        assert_eq!(with_local_size_x_from(&patched, entry, 256, WORKGROUP_SIZE), compiled);
+    }
+
+    #[test]
+    fn a_module_without_the_compiled_local_size_is_refused() {
+        // A ray-generation shader has no LocalSize.
+        assert!(matches!(words("entry::trace_raygen", Some(128)), Err(Error::Vulkan { .. })));
+        let compiled = words("entry::generate", None).expect("embedded");
+        let other = with_local_size_x_from(&compiled, "entry::generate", 64, 32);
+        let refused = with_local_size_x(&other, "entry::generate", 128).expect_err("compiled size differs");
+        assert!(refused.to_string().contains("not (64, 1, 1)"), "{refused}");
+        assert!(matches!(with_local_size_x(&compiled, "entry::nothing", 128), Err(Error::Vulkan { .. })));
+    }
 }
