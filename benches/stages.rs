@@ -6,7 +6,10 @@
 //! "SoA vs AoS, wavefront vs inline"): `layout`, the denoiser's first pass over the SoA streams
 //! the stages exchange against the same pass over one record per pixel, and `pipeline`, one
 //! sample per pixel through generate → trace → shade → occlusion as wavefront passes over
-//! streams against the same kernel functions called one after the other per pixel.
+//! streams against the same kernel functions called one after the other per pixel — and
+//! `workgroup_size`, for occupancy tuning: the Vulkan trace and shade stages on a 512² frame in
+//! workgroups of 32 to 256 invocations (`BackendOptions::workgroup_size`), timed by the GPU's
+//! timestamps around the dispatch alone.
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use glam::{UVec2, Vec4};
@@ -71,6 +74,7 @@ fn stages(c: &mut Criterion) {
     denoise(c, &mut setup);
     pipeline(c, &mut setup);
     layout(c);
+    workgroup_size(c, &setup);
 }
 
 fn generate(c: &mut Criterion, setup: &mut Setup) {
@@ -103,6 +107,43 @@ fn trace_primary(c: &mut Criterion, setup: &mut Setup) {
         }
     }
     group.finish();
+}
+
+/// Workgroup sizes the `workgroup_size` group compares: powers of two every Vulkan device runs
+/// (the compiled 64 among them).
+const WORKGROUP_SIZES: [u32; 4] = [32, 64, 128, 256];
+
+/// The Vulkan trace and shade stages on the 512² frame in each of [`WORKGROUP_SIZES`], each
+/// size a backend of its own. Criterion gets the GPU time of the dispatches (`StageReport`), not
+/// the wall clock around uploads and readbacks, which would hide what the size changes.
+fn workgroup_size(c: &mut Criterion, setup: &Setup) {
+    if setup.vulkan.is_none() {
+        return;
+    }
+    let mut group = c.benchmark_group("workgroup_size");
+    let (w, h) = SIZES[1];
+    let rays = cpu::generate(&generate_params(&setup.scene, w, h, 0, 1));
+    let hits = cpu::trace(&setup.cpu_scene, &rays);
+    let params = setup.shade_params(w, h);
+    group.throughput(Throughput::Elements(rays.len() as u64));
+    for size in WORKGROUP_SIZES {
+        let options = BackendOptions { workgroup_size: Some(size), ..Default::default() };
+        let mut v = open_backend(DeviceChoice::Vulkan(None), &options).expect("every device runs these sizes");
+        v.load_scene(&setup.scene).expect("acceleration structures build");
+        group.bench_function(BenchmarkId::new("vulkan-trace", size), |b| {
+            b.iter_custom(|iters| gpu_time(iters, || v.trace(black_box(&rays)).expect("trace").1))
+        });
+        group.bench_function(BenchmarkId::new("vulkan-shade", size), |b| {
+            let data = &setup.data;
+            b.iter_custom(|iters| gpu_time(iters, || v.shade(black_box(&params), data, &rays, &hits).expect("shade").1))
+        });
+    }
+    group.finish();
+}
+
+/// The summed GPU time of `iters` runs of a stage, as criterion's measured time.
+fn gpu_time(iters: u64, mut run: impl FnMut() -> raywave::StageReport) -> std::time::Duration {
+    std::time::Duration::from_secs_f64((0..iters).map(|_| run().seconds).sum())
 }
 
 /// Resolve + U of every light + one MIS sample per camera ray (per call, on the hits of one

@@ -29,6 +29,15 @@ pub struct TraceBenchOptions {
     pub vulkan: bool,
     /// obvhs build preset of the BVH that raywave and obvhs both traverse.
     pub bvh: crate::cpu::BvhQuality,
+    /// Workgroup sizes to measure each Vulkan compute trace method (`sw`, `rayquery`) with
+    /// ([`crate::BackendOptions::workgroup_size`], for occupancy tuning; each a power of two the
+    /// device runs, else a typed error); empty: the compiled 64 only. The ray-tracing pipeline
+    /// has no workgroups and is measured once.
+    pub workgroup_sizes: Vec<u32>,
+    /// How long the Vulkan times must have stopped falling before they are measured, in seconds
+    /// (finite, `0..=30`); `None`: 5 s, long enough for a GPU to raise its
+    /// clocks. Shorter only for a quick check of the output.
+    pub settle_seconds: Option<f64>,
 }
 
 /// One measurement, printed as one JSON line.
@@ -57,6 +66,10 @@ pub struct Measurement {
     /// whose tracers take turns instead.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub warm_up_seconds: Option<f64>,
+    /// Vulkan compute trace methods: invocations per workgroup; absent on the CPU and for the
+    /// ray-tracing pipeline, which have none.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub workgroup_size: Option<u32>,
 }
 
 /// The BVH build line: build time and memory per triangle.
@@ -299,6 +312,7 @@ fn measurement(
         mrays_per_s: rays as f64 / seconds.max(1e-12) / 1e6,
         dispatches,
         warm_up_seconds,
+        workgroup_size: None,
     }
 }
 
@@ -316,7 +330,21 @@ pub fn bench_trace(options: &TraceBenchOptions, mut emit: impl FnMut(&dyn BenchL
         return Err(Error::InvalidParameter { name: "threads", reason: "thread counts must be at least 1".into() });
     }
     check_repeats(options.repeats)?;
+    if let Some(settle) = options.settle_seconds.filter(|s| !(0.0..=MAX_WARM_UP_SECONDS).contains(s)) {
+        return Err(Error::InvalidParameter {
+            name: "settle-seconds",
+            reason: format!("{settle} is not within 0..={MAX_WARM_UP_SECONDS} s"),
+        });
+    }
     crate::Backend::check_image_size(&crate::cpu::CpuBackend::new(), options.resolution, options.resolution)?;
+    #[cfg(feature = "vulkan")]
+    let vulkan_device = options.vulkan.then(best_vulkan_device).flatten();
+    #[cfg(feature = "vulkan")]
+    if let Some(device) = &vulkan_device {
+        for &size in &options.workgroup_sizes {
+            device.checked_workgroup_size(Some(size))?;
+        }
+    }
     let scene = Scene::load(&options.scene)?;
     let cpu_scene = CpuScene::build_with(&scene, options.bvh)?;
     emit(&BuildMeasurement {
@@ -373,52 +401,71 @@ pub fn bench_trace(options: &TraceBenchOptions, mut emit: impl FnMut(&dyn BenchL
     }
     #[cfg(feature = "vulkan")]
     if options.vulkan {
-        bench_vulkan(options, &scene, &kinds, &mut emit)?;
+        bench_vulkan(options, vulkan_device, &scene, &kinds, &mut emit)?;
     }
     Ok(())
 }
 
 /// Every Vulkan trace method of the best device: closest hit for primary and diffuse rays,
 /// occlusion for shadow rays; each after the [`warm_up`], its submissions sustained
-/// ([`SUSTAIN_SECONDS`]).
+/// ([`SUSTAIN_SECONDS`]); the compute methods in each of the options' workgroup sizes.
 #[cfg(feature = "vulkan")]
 fn bench_vulkan(
     options: &TraceBenchOptions,
+    vulkan_device: Option<crate::vulkan::DeviceInfo>,
     scene: &Scene,
     kinds: &[(&'static str, &RayStream); 3],
     emit: &mut impl FnMut(&dyn BenchLine),
 ) -> Result<()> {
-    use crate::vulkan::{enumerate_devices, ContextOptions, VulkanBackend};
+    use crate::vulkan::{ContextOptions, VulkanBackend};
     use crate::{Backend, TraceMethod};
-    let Ok(devices) = enumerate_devices() else { return Ok(()) };
-    let Ok(index) = crate::device::best_vulkan_device(&devices) else { return Ok(()) };
-    let device = &devices[index];
+    let Some(device) = vulkan_device else { return Ok(()) };
+    let index = device.index;
     let methods = [
         (TraceMethod::Software, true),
         (TraceMethod::RayQuery, device.missing_for_ray_query().is_empty()),
         (TraceMethod::RtPipeline, device.missing_for_rt_pipeline().is_empty()),
     ];
     let methods: Vec<TraceMethod> = methods.iter().filter(|(_, available)| *available).map(|(m, _)| *m).collect();
+    let settle_seconds = options.settle_seconds.unwrap_or(GPU_SETTLE_SECONDS);
+    let sizes: Vec<Option<u32>> = match options.workgroup_sizes.as_slice() {
+        [] => vec![None],
+        sizes => sizes.iter().copied().map(Some).collect(),
+    };
     for method in methods {
-        let context = ContextOptions { sustain_seconds: SUSTAIN_SECONDS, ..Default::default() };
-        let mut backend = VulkanBackend::open(index, &context, Some(method))?;
-        backend.load_scene(scene)?;
-        for &(kind, rays) in kinds {
-            let measured = measure(GPU_SETTLE_SECONDS, options.repeats, || {
-                let report = if kind == "shadow" {
-                    backend.trace_occlusion(rays).map(|(_, t)| t)
-                } else {
-                    backend.trace(rays).map(|(_, t)| t)
-                };
-                Ok(vec![report?])
-            })?;
-            let trace = &measured.stages[0];
-            let name = format!("raywave-vk-{}", method.name());
-            let warm_up = Some(measured.warm_up_seconds);
-            emit(&measurement(&name, kind, 1, rays.len(), trace.seconds, trace.dispatches, warm_up));
+        let has_workgroups = method != TraceMethod::RtPipeline;
+        for &workgroup_size in if has_workgroups { &sizes[..] } else { &[None] } {
+            let context = ContextOptions { sustain_seconds: SUSTAIN_SECONDS, workgroup_size, ..Default::default() };
+            let mut backend = VulkanBackend::open(index, &context, Some(method))?;
+            backend.load_scene(scene)?;
+            for &(kind, rays) in kinds {
+                let measured = measure(settle_seconds, options.repeats, || {
+                    let report = if kind == "shadow" {
+                        backend.trace_occlusion(rays).map(|(_, t)| t)
+                    } else {
+                        backend.trace(rays).map(|(_, t)| t)
+                    };
+                    Ok(vec![report?])
+                })?;
+                let trace = &measured.stages[0];
+                let name = format!("raywave-vk-{}", method.name());
+                let warm_up = Some(measured.warm_up_seconds);
+                emit(&Measurement {
+                    workgroup_size: has_workgroups.then(|| backend.workgroup_size()),
+                    ..measurement(&name, kind, 1, rays.len(), trace.seconds, trace.dispatches, warm_up)
+                });
+            }
         }
     }
     Ok(())
+}
+
+/// The Vulkan device [`bench_vulkan`] measures, the one `--device auto` picks; `None` without one.
+#[cfg(feature = "vulkan")]
+fn best_vulkan_device() -> Option<crate::vulkan::DeviceInfo> {
+    let mut devices = crate::vulkan::enumerate_devices().ok()?;
+    let index = crate::device::best_vulkan_device(&devices).ok()?;
+    Some(devices.swap_remove(index))
 }
 
 /// A line the benchmark emits, printable as JSON or as a table row.
@@ -434,8 +481,9 @@ impl BenchLine for Measurement {
         serde_json::to_string(self).unwrap_or_default()
     }
     fn row(&self) -> String {
+        let workgroup = self.workgroup_size.map(|size| format!("  workgroup {size}")).unwrap_or_default();
         format!(
-            "{:<20} {:<8} {:>2} threads {:>9} rays {:>9.4} s {:>8.2} Mrays/s  ×{}",
+            "{:<20} {:<8} {:>2} threads {:>9} rays {:>9.4} s {:>8.2} Mrays/s  ×{}{workgroup}",
             self.implementation, self.kind, self.threads, self.rays, self.seconds, self.mrays_per_s, self.dispatches
         )
     }

@@ -200,6 +200,14 @@ struct TraceBenchArgs {
     /// obvhs build preset of the BVH: fast (default, chosen by this benchmark), medium or slow.
     #[arg(long, default_value = "fast")]
     bvh: String,
+    /// Workgroup sizes for the Vulkan compute trace methods (`sw`, `rayquery`), comma-separated
+    /// powers of two the device runs (default: the compiled 64).
+    #[arg(long, value_delimiter = ',')]
+    workgroup_sizes: Vec<u32>,
+    /// Seconds the Vulkan times must have stopped falling before they are measured (0..=30;
+    /// default 5, for the GPU's clocks to rise).
+    #[arg(long)]
+    settle_seconds: Option<f64>,
     /// Print one JSON object per line instead of a table.
     #[arg(long)]
     json: bool,
@@ -308,6 +316,8 @@ fn bench_trace_command(args: TraceBenchArgs) -> raywave::Result<()> {
         repeats: args.repeats,
         vulkan: !args.no_vulkan,
         bvh: args.bvh.parse()?,
+        workgroup_sizes: args.workgroup_sizes,
+        settle_seconds: args.settle_seconds,
     };
     bench_trace(&options, |line| print_line(if args.json { line.json() } else { line.row() }))
 }
@@ -446,7 +456,7 @@ fn vulkan_devices() -> Result<Vec<serde_json::Value>, String> {
                     "acceleration_structure": d.acceleration_structure,
                     "ray_tracing_pipeline": d.ray_tracing_pipeline,
                     "buffer_device_address": d.buffer_device_address, "timestamps": d.timestamps,
-                    "can_trace": d.missing_for_ray_query().is_empty(),
+                    "can_trace": d.missing_for_ray_query().is_empty(), "workgroup_sizes": d.workgroup_sizes,
                 })
             })
             .collect()

@@ -219,7 +219,7 @@ fn lightless_scenes_warn_in_render_and_are_refused_by_reports() {
 /// frame is shaded or the reference converged).
 #[test]
 fn bench_and_report_options_out_of_range_are_typed_errors() {
-    let cases: [(&[&str], &str); 9] = [
+    let cases: [(&[&str], &str); 11] = [
         (&["bench", "denoise", "--no-vulkan", "--repeats", "0"], "repeats: must be at least 1"),
         (&["bench", "denoise", "--no-vulkan", "--spp", "0"], "spp: 0 is outside"),
         (&["bench", "denoise", "--no-vulkan", "--spp", "8192"], "exceed the sampler's 32-bit index"),
@@ -228,6 +228,8 @@ fn bench_and_report_options_out_of_range_are_typed_errors() {
         (&["report", "error-vs-time", "--denoise-radius", "11"], "denoise-radius: radius 11 outside 1..=10"),
         (&["bench", "trace", "--no-vulkan", "--repeats", "0"], "repeats: must be at least 1"),
         (&["bench", "trace", "--no-vulkan", "--resolution", "0"], "at least 1"),
+        (&["bench", "trace", "--settle-seconds", "31"], "settle-seconds: 31 is not within 0..=30 s"),
+        (&["bench", "trace", "--settle-seconds", "NaN"], "settle-seconds: NaN is not within"),
         (&["report", "shade", "--resolution", "1024", "--reference-spp", "8192"], "reference-spp: 8192 samples"),
     ];
     for (args, needle) in cases {
@@ -431,6 +433,54 @@ fn denoise_bench_prints_each_pass_and_the_total() {
     let wider = json_lines(&raywave(&[&args[..], &["--denoise-radius", "3"]].concat()));
     assert!(wider.iter().all(|l| l["radius"] == 3), "{wider:?}");
     assert_eq!(wider.iter().filter(|l| l["pass"] == "svgf atrous").count(), 3, "three à-trous iterations at R = 3");
+}
+
+/// `bench trace --workgroup-sizes`: each Vulkan compute trace method (`sw`, `rayquery`) measured
+/// once per size and kind, every line naming its size; the ray-tracing pipeline and the CPU
+/// tracers once, without one. A size the device does not run fails before anything is measured.
+#[cfg(feature = "vulkan")]
+#[test]
+fn trace_bench_measures_each_workgroup_size_of_each_compute_method() {
+    let Some(device) = raywave::vulkan::enumerate_devices().ok().filter(|d| !d.is_empty()) else {
+        common::skip_or_fail("trace bench workgroup sizes", "no Vulkan device");
+        return;
+    };
+    let base =
+        ["bench", "trace", "--scene", "builtin:cornell", "--resolution", "8", "--repeats", "1", "--threads", "1"];
+    let quick = [&base[..], &["--settle-seconds", "0.05", "--json"]].concat();
+    let out = raywave(&[&quick[..], &["--workgroup-sizes", "32,128"]].concat());
+    assert!(out.status.success(), "{}", stderr(&out));
+    let lines: Vec<_> = json_lines(&out).into_iter().filter(|l| l["stage"] == "trace").collect();
+    let count = |implementation: &str, size: Option<u64>| {
+        let matches = |l: &&serde_json::Value| l["impl"] == implementation && l["workgroup_size"].as_u64() == size;
+        let kinds: Vec<_> = lines.iter().filter(matches).map(|l| l["kind"].as_str().unwrap().to_owned()).collect();
+        assert!(kinds.is_empty() || kinds == ["primary", "shadow", "diffuse"], "{implementation} {size:?}: {kinds:?}");
+        kinds.len()
+    };
+    assert_eq!(count("raywave-vk-sw", Some(32)), 3);
+    assert_eq!(count("raywave-vk-sw", Some(128)), 3);
+    assert_eq!(count("raywave-vk-sw", None), 0);
+    let ray_query = device.iter().any(|d| d.missing_for_ray_query().is_empty());
+    assert_eq!(
+        count("raywave-vk-rayquery", Some(32)) + count("raywave-vk-rayquery", Some(128)),
+        if ray_query { 6 } else { 0 }
+    );
+    assert_eq!(count("raywave-vk-rtpipe", Some(32)) + count("raywave-vk-rtpipe", Some(128)), 0);
+    assert_eq!(count("raywave-cpu", None), 3);
+    let measured = 2 * 3 * (1 + usize::from(ray_query)) + count("raywave-vk-rtpipe", None) + 2 * 3;
+    assert_eq!(lines.len(), measured, "{lines:?}");
+    let compiled = json_lines(&raywave(&quick));
+    assert!(
+        compiled.iter().filter(|l| l["impl"] == "raywave-vk-sw").all(|l| l["workgroup_size"] == 64),
+        "{compiled:?}"
+    );
+    let refused = raywave(&[&quick[..], &["--workgroup-sizes", "64,96"]].concat());
+    assert!(!refused.status.success() && refused.stdout.is_empty(), "{}", stderr(&refused));
+    assert!(
+        stderr(&refused).contains("workgroup_size: 96: this device runs the powers of two"),
+        "{}",
+        stderr(&refused)
+    );
 }
 
 #[test]

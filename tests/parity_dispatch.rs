@@ -299,32 +299,27 @@ fn first_device(test: &str) -> Option<raywave::vulkan::DeviceInfo> {
     device
 }
 
-/// Workgroup sizes to compare with the compiled 64: the smallest every device allows, a large
-/// one, and 1024, which not every device runs (then its refusal must be the typed error).
-const WORKGROUP_SIZES: [u32; 3] = [32, 256, 1024];
-
-/// Opens every device and trace method with workgroups of `size`, or `None` where a device
-/// refuses the size as `workgroup_size` (any other failure fails the test).
-fn every_device_in_workgroups_of(test: &str, size: u32) -> Option<Vec<VulkanBackend>> {
-    let options = ContextOptions { workgroup_size: Some(size), ..Default::default() };
-    let device = first_device(test)?;
-    match VulkanBackend::open(device.index, &options, None) {
-        Ok(_) => Some(vulkan::every_device_with(test, &options)),
-        Err(raywave::Error::InvalidParameter { name: "workgroup_size", reason }) => {
-            assert!(size > 256, "{}: workgroups of {size} refused: {reason}", device.name);
-            eprintln!("{}: no workgroups of {size}: {reason}", device.name);
-            None
-        }
-        Err(e) => panic!("{}: workgroups of {size}: {e}", device.name),
-    }
+/// Workgroup sizes to compare with the compiled 64: the smallest every device runs, 128, which
+/// every device runs, and the largest all of them run (lavapipe: 1024; `DeviceInfo::workgroup_sizes`).
+fn workgroup_sizes(test: &str) -> Vec<u32> {
+    let devices = raywave::vulkan::enumerate_devices().unwrap_or_default();
+    let largest = devices.iter().filter_map(|d| d.workgroup_sizes.last().copied()).min();
+    let Some(largest) = largest else {
+        common::skip_or_fail(test, "no Vulkan device");
+        return vec![];
+    };
+    let mut sizes = vec![32, 128, largest];
+    sizes.dedup();
+    sizes
 }
 
 #[test]
 fn every_stage_returns_the_same_in_workgroups_of_another_size_on_every_device() {
     let inputs = Inputs::new();
     let mut compiled = vulkan::every_device("workgroup size");
-    for size in WORKGROUP_SIZES {
-        let Some(resized) = every_device_in_workgroups_of("workgroup size", size) else { continue };
+    for size in workgroup_sizes("workgroup size") {
+        let options = ContextOptions { workgroup_size: Some(size), ..Default::default() };
+        let resized = vulkan::every_device_with("workgroup size", &options);
         assert_eq!(compiled.len(), resized.len());
         for (compiled, mut resized) in compiled.iter_mut().zip(resized) {
             assert_eq!(resized.workgroup_size(), size);
@@ -368,12 +363,13 @@ fn a_stream_spread_over_several_grid_rows_is_covered_exactly_once() {
     }
 }
 
-/// A workgroup size that is not a power of two, or that no device runs, is a typed error when
-/// the device is opened.
+/// A workgroup size that is not a power of two, or that the device does not run, is a typed
+/// error when the device is opened.
 #[test]
 fn an_unusable_workgroup_size_is_refused_when_the_device_opens() {
     let Some(device) = first_device("workgroup size check") else { return };
-    for size in [0, 3, 96, 1 << 16] {
+    let largest = *device.workgroup_sizes.last().expect("the device runs 64");
+    for size in [0, 3, 96, 2 * largest] {
         let options = ContextOptions { workgroup_size: Some(size), ..Default::default() };
         match VulkanBackend::open(device.index, &options, None) {
             Err(raywave::Error::InvalidParameter { name: "workgroup_size", .. }) => {}

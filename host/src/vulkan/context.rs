@@ -42,9 +42,22 @@ pub struct DeviceInfo {
     pub vulkan_memory_model: bool,
     /// Whether compute queues support timestamps (`timestampComputeAndGraphics`).
     pub timestamps: bool,
+    /// The workgroup sizes this device runs the 1-D stream stages with
+    /// ([`ContextOptions::workgroup_size`]), ascending: the powers of two within
+    /// `maxComputeWorkGroupSize[0]` and `maxComputeWorkGroupInvocations` whose rows of
+    /// [`STREAM_ROW`] invocations fit `maxComputeWorkGroupCount[0]`.
+    pub workgroup_sizes: Vec<u32>,
 }
 
 impl DeviceInfo {
+    /// The workgroup size of the 1-D stream stages a backend opened with
+    /// [`ContextOptions::workgroup_size`] = `requested` runs on this device: the compiled 64 for
+    /// `None`, `requested` if it is among [`Self::workgroup_sizes`], else
+    /// [`Error::InvalidParameter`] naming `workgroup_size`.
+    pub fn checked_workgroup_size(&self, requested: Option<u32>) -> Result<u32> {
+        checked_workgroup_size(requested, &self.workgroup_sizes)
+    }
+
     /// What the ray-query trace stage needs and this device lacks (empty when it can run).
     pub fn missing_for_ray_query(&self) -> Vec<String> {
         let mut missing = Vec::new();
@@ -270,6 +283,7 @@ fn describe(instance: &ash::Instance, physical: vk::PhysicalDevice, index: usize
             buffer_device_address: api_1_2 && v12.buffer_device_address == vk::TRUE,
             vulkan_memory_model: api_1_2 && v12.vulkan_memory_model == vk::TRUE,
             timestamps: props.limits.timestamp_compute_and_graphics == vk::TRUE,
+            workgroup_sizes: stream_workgroup_sizes(&props.limits),
         })
     }
 }
@@ -359,7 +373,7 @@ pub(crate) fn open(index: usize, options: &ContextOptions) -> Result<Arc<Core>> 
     };
     // SAFETY: plain query of a physical device of this instance.
     let device_limits = unsafe { instance.get_physical_device_properties(physical).limits };
-    let workgroup_size = match checked_workgroup_size(options.workgroup_size, &device_limits) {
+    let workgroup_size = match checked_workgroup_size(options.workgroup_size, &stream_workgroup_sizes(&device_limits)) {
         Ok(size) => size,
         Err(e) => {
             destroy_instance(&instance, &debug);
@@ -419,25 +433,29 @@ pub(crate) fn open(index: usize, options: &ContextOptions) -> Result<Arc<Core>> 
     }
 }
 
-/// The workgroup size of the 1-D stream stages: `requested` if it is a power of two the device
-/// can run ([`ContextOptions::workgroup_size`]), the compiled size if none is requested.
-fn checked_workgroup_size(requested: Option<u32>, limits: &vk::PhysicalDeviceLimits) -> Result<u32> {
-    let Some(size) = requested else { return Ok(WORKGROUP_SIZE) };
+/// The powers of two a device with `limits` runs the 1-D stream stages in
+/// ([`DeviceInfo::workgroup_sizes`]).
+fn stream_workgroup_sizes(limits: &vk::PhysicalDeviceLimits) -> Vec<u32> {
     let most = limits.max_compute_work_group_size[0].min(limits.max_compute_work_group_invocations);
-    let refuse =
-        |why: String| Err(Error::InvalidParameter { name: "workgroup_size", reason: format!("{size}: {why}") });
-    if !size.is_power_of_two() {
-        refuse("not a power of two".into())
-    } else if size > most {
-        refuse(format!("above the device's {most} invocations per 1-D workgroup"))
-    } else if STREAM_ROW / size > limits.max_compute_work_group_count[0] {
-        refuse(format!(
-            "a row of {STREAM_ROW} invocations would take {} workgroups, above the device's {}",
-            STREAM_ROW / size,
-            limits.max_compute_work_group_count[0]
-        ))
-    } else {
-        Ok(size)
+    (0..u32::BITS)
+        .map(|k| 1 << k)
+        .filter(|&size| size <= most && STREAM_ROW / size <= limits.max_compute_work_group_count[0])
+        .collect()
+}
+
+/// The workgroup size of the 1-D stream stages: `requested` if the device runs it (`sizes`, its
+/// [`DeviceInfo::workgroup_sizes`]), the compiled size if none is requested.
+fn checked_workgroup_size(requested: Option<u32>, sizes: &[u32]) -> Result<u32> {
+    match requested {
+        None => Ok(WORKGROUP_SIZE),
+        Some(size) if sizes.contains(&size) => Ok(size),
+        Some(size) => Err(Error::InvalidParameter {
+            name: "workgroup_size",
+            reason: match (sizes.first(), sizes.last()) {
+                (Some(least), Some(most)) => format!("{size}: this device runs the powers of two {least}..={most}"),
+                _ => format!("{size}: this device runs no 1-D workgroup of a stream stage"),
+            },
+        }),
     }
 }
 
@@ -536,23 +554,20 @@ mod tests {
             max_compute_work_group_count: [65_535, 65_535, 65_535],
             ..Default::default()
         };
-        assert_eq!(checked_workgroup_size(None, &limits).ok(), Some(WORKGROUP_SIZE));
-        for size in [32, 64, 128, 256, 512] {
-            assert_eq!(checked_workgroup_size(Some(size), &limits).ok(), Some(size));
+        // 1024 exceeds the invocations per workgroup; 16 would make rows of 65 536 workgroups.
+        let sizes = stream_workgroup_sizes(&limits);
+        assert_eq!(sizes, [32, 64, 128, 256, 512]);
+        assert_eq!(checked_workgroup_size(None, &sizes).ok(), Some(WORKGROUP_SIZE));
+        for &size in &sizes {
+            assert_eq!(checked_workgroup_size(Some(size), &sizes).ok(), Some(size));
         }
-        let refused = |size, limits: &vk::PhysicalDeviceLimits| {
-            matches!(
-                checked_workgroup_size(Some(size), limits),
-                Err(Error::InvalidParameter { name: "workgroup_size", .. })
-            )
-        };
-        // 1024 exceeds the invocations per workgroup, 16 makes rows of 65 536 workgroups.
         for size in [0, 1, 16, 48, 96, 1024, 2048] {
-            assert!(refused(size, &limits), "{size}");
+            let refused = checked_workgroup_size(Some(size), &sizes);
+            assert!(matches!(refused, Err(Error::InvalidParameter { name: "workgroup_size", .. })), "{size}");
         }
         let wide = vk::PhysicalDeviceLimits { max_compute_work_group_count: [u32::MAX; 3], ..limits };
-        assert!(!refused(1, &wide) && !refused(16, &wide));
+        assert_eq!(stream_workgroup_sizes(&wide), [1, 2, 4, 8, 16, 32, 64, 128, 256, 512]);
         let narrow = vk::PhysicalDeviceLimits { max_compute_work_group_size: [128, 128, 64], ..limits };
-        assert!(refused(256, &narrow) && !refused(128, &narrow));
+        assert_eq!(stream_workgroup_sizes(&narrow), [32, 64, 128]);
     }
 }
