@@ -8,7 +8,7 @@
 //! sample per pixel through generate → trace → shade → occlusion as wavefront passes over
 //! streams against the same kernel functions called one after the other per pixel — and
 //! `workgroup_size`, for occupancy tuning: the Vulkan trace and shade stages on a 512² frame in
-//! workgroups of 32 to 256 invocations (`BackendOptions::workgroup_size`), timed by the GPU's
+//! workgroups of 32 to 256 invocations (`BackendOptions::workgroup_sizes`), timed by the GPU's
 //! timestamps around the dispatch alone.
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
@@ -25,7 +25,7 @@ use raywave::kernels::trace::{trace_closest, trace_occluded};
 use raywave::shading::{ShadeAccumulator, ShadeData};
 use raywave::shared::sampling::sampler_kind;
 use raywave::shared::{GenerateParams, ShadeParams};
-use raywave::{open_backend, Backend, BackendOptions, DeviceChoice, Scene};
+use raywave::{open_backend, Backend, BackendOptions, DeviceChoice, Scene, WorkgroupSizes};
 use std::hint::black_box;
 
 /// Image sizes benchmarked: a small tile and a 512² frame.
@@ -127,7 +127,7 @@ fn workgroup_size(c: &mut Criterion, setup: &Setup) {
     let params = setup.shade_params(w, h);
     group.throughput(Throughput::Elements(rays.len() as u64));
     for size in WORKGROUP_SIZES {
-        let options = BackendOptions { workgroup_size: Some(size), ..Default::default() };
+        let options = BackendOptions { workgroup_sizes: WorkgroupSizes::all(size), ..Default::default() };
         let mut v = open_backend(DeviceChoice::Vulkan(None), &options).expect("every device runs these sizes");
         v.load_scene(&setup.scene).expect("acceleration structures build");
         group.bench_function(BenchmarkId::new("vulkan-trace", size), |b| {

@@ -30,8 +30,8 @@ pub struct TraceBenchOptions {
     /// obvhs build preset of the BVH that raywave and obvhs both traverse.
     pub bvh: crate::cpu::BvhQuality,
     /// Workgroup sizes to measure each Vulkan compute trace method (`sw`, `rayquery`) with
-    /// ([`crate::BackendOptions::workgroup_size`], for occupancy tuning; each a power of two the
-    /// device runs, else a typed error); empty: the compiled 64 only. The ray-tracing pipeline
+    /// ([`crate::WorkgroupSizes::trace`], for occupancy tuning; each a power of two the device
+    /// runs, else a typed error before anything is measured); empty: the compiled 64 only. The ray-tracing pipeline
     /// has no workgroups and is measured once.
     pub workgroup_sizes: Vec<u32>,
     /// How long the Vulkan times must have stopped falling before they are measured, in seconds
@@ -341,8 +341,8 @@ pub fn bench_trace(options: &TraceBenchOptions, mut emit: impl FnMut(&dyn BenchL
     let vulkan_device = options.vulkan.then(best_vulkan_device).flatten();
     #[cfg(feature = "vulkan")]
     if let Some(device) = &vulkan_device {
-        for &size in &options.workgroup_sizes {
-            device.checked_workgroup_size(Some(size))?;
+        for &trace in &options.workgroup_sizes {
+            crate::WorkgroupSizes { trace, ..Default::default() }.check(&device.workgroup_sizes)?;
         }
     }
     let scene = Scene::load(&options.scene)?;
@@ -428,14 +428,14 @@ fn bench_vulkan(
     ];
     let methods: Vec<TraceMethod> = methods.iter().filter(|(_, available)| *available).map(|(m, _)| *m).collect();
     let settle_seconds = options.settle_seconds.unwrap_or(GPU_SETTLE_SECONDS);
-    let sizes: Vec<Option<u32>> = match options.workgroup_sizes.as_slice() {
-        [] => vec![None],
-        sizes => sizes.iter().copied().map(Some).collect(),
-    };
+    let compiled = crate::WorkgroupSizes::default().trace;
+    let sizes = if options.workgroup_sizes.is_empty() { vec![compiled] } else { options.workgroup_sizes.clone() };
+    let no_workgroups = [compiled];
     for method in methods {
         let has_workgroups = method != TraceMethod::RtPipeline;
-        for &workgroup_size in if has_workgroups { &sizes[..] } else { &[None] } {
-            let context = ContextOptions { sustain_seconds: SUSTAIN_SECONDS, workgroup_size, ..Default::default() };
+        for &trace in if has_workgroups { &sizes[..] } else { &no_workgroups } {
+            let workgroup_sizes = crate::WorkgroupSizes { trace, ..Default::default() };
+            let context = ContextOptions { sustain_seconds: SUSTAIN_SECONDS, workgroup_sizes, ..Default::default() };
             let mut backend = VulkanBackend::open(index, &context, Some(method))?;
             backend.load_scene(scene)?;
             for &(kind, rays) in kinds {
@@ -451,7 +451,7 @@ fn bench_vulkan(
                 let name = format!("raywave-vk-{}", method.name());
                 let warm_up = Some(measured.warm_up_seconds);
                 emit(&Measurement {
-                    workgroup_size: has_workgroups.then(|| backend.workgroup_size()),
+                    workgroup_size: has_workgroups.then(|| backend.workgroup_sizes().trace),
                     ..measurement(&name, kind, 1, rays.len(), trace.seconds, trace.dispatches, warm_up)
                 });
             }

@@ -477,7 +477,7 @@ fn trace_bench_measures_each_workgroup_size_of_each_compute_method() {
     let refused = raywave(&[&quick[..], &["--workgroup-sizes", "64,96"]].concat());
     assert!(!refused.status.success() && refused.stdout.is_empty(), "{}", stderr(&refused));
     assert!(
-        stderr(&refused).contains("workgroup_size: 96: this device runs the powers of two"),
+        stderr(&refused).contains("workgroup_sizes.trace: 96: this device runs the powers of two"),
         "{}",
         stderr(&refused)
     );

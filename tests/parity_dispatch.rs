@@ -7,9 +7,9 @@
 //!   backend with): once a kernel has run, each of its timed submissions repeats the dispatch to
 //!   keep the GPU busy, so that the GPU holds its clocks; it reports how many dispatches it
 //!   timed: 1 without benchmark mode, more than 1 with it.
-//! - **Workgroup size** (`ContextOptions::workgroup_size`, for occupancy tuning): the 1-D stream
-//!   stages run in workgroups of another power of two, including streams spread over several
-//!   rows of the dispatch grid.
+//! - **Workgroup sizes** (`ContextOptions::workgroup_sizes`, for occupancy tuning): the 1-D
+//!   stream stages run in workgroups of another power of two, including streams spread over
+//!   several rows of the dispatch grid.
 #![cfg(feature = "vulkan")]
 
 mod common;
@@ -24,7 +24,7 @@ use raywave::shared::sampling::sampler_kind;
 use raywave::shared::{DenoiseParams, GenerateParams, SamplerParams, SamplerProbeParams, WarpParams};
 use raywave::stream::{HitStream, RayStream};
 use raywave::vulkan::{ContextOptions, VulkanBackend, MAX_SUSTAINED_DISPATCHES};
-use raywave::{Backend, Scene, StageReport};
+use raywave::{Backend, Scene, StageReport, WorkgroupSizes};
 use std::fmt::Debug;
 
 /// The busy time benchmark mode stretches each submission to here: 50 ms, far above what any
@@ -107,10 +107,10 @@ impl Comparison for Resized {
         resized: &mut VulkanBackend,
         mut stage: impl FnMut(&mut VulkanBackend) -> (T, Vec<StageReport>),
     ) {
-        let who = format!("{} {what} in workgroups of {}", resized.name(), resized.workgroup_size());
+        let who = format!("{} {what} in workgroups of {:?}", resized.name(), resized.workgroup_sizes());
         let (expected, expected_reports) = stage(compiled);
         let (result, reports) = stage(resized);
-        assert!(result == expected, "{who}: the result differs from workgroups of {}", compiled.workgroup_size());
+        assert!(result == expected, "{who}: the result differs from workgroups of {:?}", compiled.workgroup_sizes());
         assert_eq!(sanitized(&reports), sanitized(&expected_reports), "{who}: sanitized counts");
     }
 }
@@ -318,11 +318,11 @@ fn every_stage_returns_the_same_in_workgroups_of_another_size_on_every_device() 
     let inputs = Inputs::new();
     let mut compiled = vulkan::every_device("workgroup size");
     for size in workgroup_sizes("workgroup size") {
-        let options = ContextOptions { workgroup_size: Some(size), ..Default::default() };
+        let options = ContextOptions { workgroup_sizes: WorkgroupSizes::all(size), ..Default::default() };
         let resized = vulkan::every_device_with("workgroup size", &options);
         assert_eq!(compiled.len(), resized.len());
         for (compiled, mut resized) in compiled.iter_mut().zip(resized) {
-            assert_eq!(resized.workgroup_size(), size);
+            assert_eq!(resized.workgroup_sizes(), WorkgroupSizes::all(size));
             for backend in [&mut *compiled, &mut resized] {
                 backend.load_scene(&inputs.scene).expect("scene loads");
             }
@@ -346,7 +346,7 @@ fn a_stream_spread_over_several_grid_rows_is_covered_exactly_once() {
     let params = DenoiseParams::new(WIDE.0, WIDE.1);
     let image: Vec<Vec4> =
         (0..WIDE.0 * WIDE.1).map(|i| Vec4::new(i as f32, 1.0 / (i as f32 + 1.0), -3.0, 0.5)).collect();
-    let options = ContextOptions { workgroup_size: Some(32), ..Default::default() };
+    let options = ContextOptions { workgroup_sizes: WorkgroupSizes::all(32), ..Default::default() };
     let mut narrow = vulkan::each_device_with("grid rows", &options);
     for (compiled, narrow) in vulkan::each_device("grid rows").iter_mut().zip(&mut narrow) {
         let mut compare = Resized;
@@ -364,16 +364,29 @@ fn a_stream_spread_over_several_grid_rows_is_covered_exactly_once() {
 }
 
 /// A workgroup size that is not a power of two, or that the device does not run, is a typed
-/// error when the device is opened.
+/// error naming the stage when the device is opened; sizes it runs are what the backend reports,
+/// stage by stage.
 #[test]
 fn an_unusable_workgroup_size_is_refused_when_the_device_opens() {
     let Some(device) = first_device("workgroup size check") else { return };
     let largest = *device.workgroup_sizes.last().expect("the device runs 64");
-    for size in [0, 3, 96, 2 * largest] {
-        let options = ContextOptions { workgroup_size: Some(size), ..Default::default() };
+    let one_stage = |stage: usize, size: u32| {
+        let mut sizes = WorkgroupSizes::default();
+        let field = [&mut sizes.generate, &mut sizes.trace, &mut sizes.shade, &mut sizes.denoise];
+        *field.into_iter().nth(stage).expect("four stages") = size;
+        sizes
+    };
+    for (stage, size) in [(0, 0), (1, 3), (2, 96), (3, 2 * largest)] {
+        let workgroup_sizes = one_stage(stage, size);
+        let options = ContextOptions { workgroup_sizes, ..Default::default() };
+        let name = workgroup_sizes.named()[stage].0;
         match VulkanBackend::open(device.index, &options, None) {
-            Err(raywave::Error::InvalidParameter { name: "workgroup_size", .. }) => {}
-            other => panic!("workgroup_size = {size}: {:?}", other.map(|b| b.name())),
+            Err(raywave::Error::InvalidParameter { name: refused, .. }) if refused == name => {}
+            other => panic!("{name} = {size}: {:?}", other.map(|b| b.name())),
         }
     }
+    let mixed = WorkgroupSizes { generate: 32, trace: 128, shade: largest, denoise: 256.min(largest) };
+    let options = ContextOptions { workgroup_sizes: mixed, ..Default::default() };
+    let opened = VulkanBackend::open(device.index, &options, None).expect("every size runs");
+    assert_eq!(opened.workgroup_sizes(), mixed);
 }

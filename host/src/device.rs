@@ -88,10 +88,9 @@ pub struct BackendOptions {
     /// the GPU holds its clocks); 0 (the default) runs every stage once. The CPU backend ignores
     /// it: its stages run once, timed by the wall clock.
     pub sustain_seconds: f64,
-    /// Invocations per workgroup of a Vulkan backend's 1-D stream stages
-    /// (`ContextOptions::workgroup_size`: a power of two the device can run), for occupancy
-    /// tuning; `None` keeps the compiled 64. The CPU backend ignores it.
-    pub workgroup_size: Option<u32>,
+    /// Invocations per workgroup of each of a Vulkan backend's 1-D stream stages, for occupancy
+    /// tuning (default: the compiled 64). The CPU backend ignores them.
+    pub workgroup_sizes: crate::WorkgroupSizes,
 }
 
 /// Opens the backend `choice` names. `Auto` falls back to the CPU when no Vulkan device can be
@@ -124,7 +123,7 @@ fn open_vulkan(index: Option<usize>, options: &BackendOptions) -> Result<Box<dyn
     let context = ContextOptions {
         validation: options.validation,
         sustain_seconds: options.sustain_seconds,
-        workgroup_size: options.workgroup_size,
+        workgroup_sizes: options.workgroup_sizes,
     };
     Ok(Box::new(VulkanBackend::open(index, &context, options.trace)?))
 }

@@ -18,9 +18,11 @@ pub mod stream;
 pub mod visualize;
 #[cfg(feature = "vulkan")]
 pub mod vulkan;
+pub mod workgroup;
 
 pub use backend::{Backend, FrameOutput, StageReport};
 pub use device::{open_backend, BackendOptions, DeviceChoice, TraceMethod};
 pub use error::{Error, Result};
 pub use scene::Scene;
 pub use stream::{HitStream, RayStream};
+pub use workgroup::WorkgroupSizes;

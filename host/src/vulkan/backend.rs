@@ -20,6 +20,7 @@ use crate::error::{Error, Result};
 use crate::scene::Scene;
 use crate::shading::{ShadeData, ShadeDataIdentity};
 use crate::stream::{HitStream, RayStream, ShadeStream};
+use crate::workgroup::WorkgroupSizes;
 use ash::vk;
 use bytemuck::Pod;
 use glam::{UVec2, Vec2, Vec4};
@@ -324,7 +325,7 @@ impl VulkanBackend {
                 (bindings::generate::RAY_PIXEL, storage),
             ],
             std::mem::size_of::<GenerateParams>() as u32,
-            core.workgroup_size,
+            core.workgroup_sizes.generate,
         )?;
         let probe_layout = [(bindings::probe::SAMPLES, storage)];
         let sampler_probe = ComputeKernel::new(
@@ -332,18 +333,20 @@ impl VulkanBackend {
             "entry::sampler_probe",
             &probe_layout,
             std::mem::size_of::<SamplerProbeParams>() as u32,
-            core.workgroup_size,
+            core.workgroup_sizes.generate,
         )?;
         let warp_push = std::mem::size_of::<WarpParams>() as u32;
-        let warp_probe = ComputeKernel::new(&core, "entry::warp_probe", &probe_layout, warp_push, core.workgroup_size)?;
+        let warp_probe =
+            ComputeKernel::new(&core, "entry::warp_probe", &probe_layout, warp_push, core.workgroup_sizes.generate)?;
         let shade_layout: Vec<_> = SHADE_BINDINGS.iter().map(|&binding| (binding, storage)).collect();
         let shade_push = std::mem::size_of::<ShadeParams>() as u32;
-        let shade_kernel = ComputeKernel::new(&core, "entry::shade", &shade_layout, shade_push, core.workgroup_size)?;
+        let shade_kernel =
+            ComputeKernel::new(&core, "entry::shade", &shade_layout, shade_push, core.workgroup_sizes.shade)?;
         let push = std::mem::size_of::<TraceParams>() as u32;
         let hit_layout = trace_bindings(trace_method, &HIT_OUTPUTS);
         let occlusion_layout = trace_bindings(trace_method, &OCCLUSION_OUTPUTS);
         let compute = |entry, layout: &[(u32, vk::DescriptorType)]| -> Result<TraceKernel> {
-            Ok(TraceKernel::Compute(ComputeKernel::new(&core, entry, layout, push, core.workgroup_size)?))
+            Ok(TraceKernel::Compute(ComputeKernel::new(&core, entry, layout, push, core.workgroup_sizes.trace)?))
         };
         let rt = |shaders, layout: &[(u32, vk::DescriptorType)]| -> Result<TraceKernel> {
             Ok(TraceKernel::RtPipeline(RtPipelineKernel::new(&core, shaders, layout, push)?))
@@ -385,9 +388,9 @@ impl VulkanBackend {
         self.trace_method
     }
 
-    /// Invocations per workgroup of the 1-D stream stages ([`ContextOptions::workgroup_size`]).
-    pub fn workgroup_size(&self) -> u32 {
-        self.core.workgroup_size
+    /// Invocations per workgroup of each 1-D stream stage ([`ContextOptions::workgroup_sizes`]).
+    pub fn workgroup_sizes(&self) -> WorkgroupSizes {
+        self.core.workgroup_sizes
     }
 
     /// Validation-layer messages of warning or error severity received so far (empty unless
@@ -401,7 +404,7 @@ impl VulkanBackend {
         let by_buffer = u64::from(self.core.limits.max_storage_buffer_range) / std::mem::size_of::<Vec4>() as u64;
         // One row of workgroups, or rows of `STREAM_ROW` invocations (`kernel::dispatch_grid`).
         let [max_x, max_y, _] = self.core.limits.max_compute_work_group_count;
-        let by_grid = (u64::from(max_x) * u64::from(self.core.workgroup_size))
+        let by_grid = (u64::from(max_x) * u64::from(self.core.workgroup_sizes.smallest()))
             .max(u64::from(max_y) * u64::from(bindings::STREAM_ROW));
         by_buffer.min(by_grid).min(u64::from(u32::MAX))
     }
@@ -457,7 +460,8 @@ impl VulkanBackend {
 
     /// Checks that a stream of `len` elements fits one storage buffer and one dispatch.
     fn check_stream(&self, len: u32) -> Result<()> {
-        if dispatch_grid(&self.core.limits, len, self.core.workgroup_size).is_none() || u64::from(len) > self.max_rays()
+        if dispatch_grid(&self.core.limits, len, self.core.workgroup_sizes.trace).is_none()
+            || u64::from(len) > self.max_rays()
         {
             return Err(Error::InvalidParameter {
                 name: "rays",

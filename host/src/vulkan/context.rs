@@ -3,9 +3,10 @@
 
 use super::driver_lock;
 use crate::error::{Error, Result};
+use crate::workgroup::WorkgroupSizes;
 use ash::vk;
 use gpu_allocator::vulkan::{Allocator, AllocatorCreateDesc};
-use raywave_shared::bindings::{STREAM_ROW, WORKGROUP_SIZE};
+use raywave_shared::bindings::STREAM_ROW;
 use std::ffi::{c_void, CStr};
 use std::mem::ManuallyDrop;
 use std::sync::{Arc, Mutex};
@@ -43,21 +44,13 @@ pub struct DeviceInfo {
     /// Whether compute queues support timestamps (`timestampComputeAndGraphics`).
     pub timestamps: bool,
     /// The workgroup sizes this device runs the 1-D stream stages with
-    /// ([`ContextOptions::workgroup_size`]), ascending: the powers of two within
+    /// ([`ContextOptions::workgroup_sizes`]), ascending: the powers of two within
     /// `maxComputeWorkGroupSize[0]` and `maxComputeWorkGroupInvocations` whose rows of
     /// [`STREAM_ROW`] invocations fit `maxComputeWorkGroupCount[0]`.
     pub workgroup_sizes: Vec<u32>,
 }
 
 impl DeviceInfo {
-    /// The workgroup size of the 1-D stream stages a backend opened with
-    /// [`ContextOptions::workgroup_size`] = `requested` runs on this device: the compiled 64 for
-    /// `None`, `requested` if it is among [`Self::workgroup_sizes`], else
-    /// [`Error::InvalidParameter`] naming `workgroup_size`.
-    pub fn checked_workgroup_size(&self, requested: Option<u32>) -> Result<u32> {
-        checked_workgroup_size(requested, &self.workgroup_sizes)
-    }
-
     /// What the ray-query trace stage needs and this device lacks (empty when it can run).
     pub fn missing_for_ray_query(&self) -> Vec<String> {
         let mut missing = Vec::new();
@@ -109,16 +102,10 @@ pub struct ContextOptions {
     /// Results do not change: no kernel reads what it writes, and a stage's sanitized counter is
     /// zeroed before the last repetition.
     pub sustain_seconds: f64,
-    /// Invocations per workgroup of every 1-D stream stage — generate, compute trace and
-    /// occlusion (software and ray query), shade, the denoisers' per-pixel passes, the probes —
-    /// for occupancy tuning; `None` (the default) keeps the compiled
-    /// [`WORKGROUP_SIZE`](raywave_shared::bindings::WORKGROUP_SIZE), 64. A power of two within
-    /// the device's `maxComputeWorkGroupSize[0]` and `maxComputeWorkGroupInvocations` whose rows
-    /// of [`STREAM_ROW`](raywave_shared::bindings::STREAM_ROW) invocations fit
-    /// `maxComputeWorkGroupCount[0]` (32 and up on every device), else a typed error at open.
-    /// Results do not depend on it; the bilateral denoise pass, whose workgroup-memory tile the
-    /// size fixes, and the ray-tracing pipeline (no workgroups) keep theirs.
-    pub workgroup_size: Option<u32>,
+    /// Invocations per workgroup of each 1-D stream stage, for occupancy tuning (default: the
+    /// compiled 64 everywhere; each a power of two among [`DeviceInfo::workgroup_sizes`], else a
+    /// typed error at open naming the field).
+    pub workgroup_sizes: WorkgroupSizes,
 }
 
 /// Most dispatches one timed submission repeats in benchmark mode
@@ -145,9 +132,9 @@ pub(crate) struct Core {
     pub scratch_alignment: u64,
     /// [`ContextOptions::sustain_seconds`].
     pub sustain_seconds: f64,
-    /// Invocations per workgroup of the 1-D stream stages ([`ContextOptions::workgroup_size`],
+    /// Invocations per workgroup of the 1-D stream stages ([`ContextOptions::workgroup_sizes`],
     /// checked against the device).
-    pub workgroup_size: u32,
+    pub workgroup_sizes: WorkgroupSizes,
 }
 
 impl Drop for Core {
@@ -373,13 +360,10 @@ pub(crate) fn open(index: usize, options: &ContextOptions) -> Result<Arc<Core>> 
     };
     // SAFETY: plain query of a physical device of this instance.
     let device_limits = unsafe { instance.get_physical_device_properties(physical).limits };
-    let workgroup_size = match checked_workgroup_size(options.workgroup_size, &stream_workgroup_sizes(&device_limits)) {
-        Ok(size) => size,
-        Err(e) => {
-            destroy_instance(&instance, &debug);
-            return Err(e);
-        }
-    };
+    if let Err(e) = options.workgroup_sizes.check(&stream_workgroup_sizes(&device_limits)) {
+        destroy_instance(&instance, &debug);
+        return Err(e);
+    }
     match create_device(&instance, physical, index) {
         Ok((device, queue_family, info, limits, scratch_alignment, rt_properties)) => {
             // SAFETY: queue family `queue_family` with one queue was requested at device creation.
@@ -423,7 +407,7 @@ pub(crate) fn open(index: usize, options: &ContextOptions) -> Result<Arc<Core>> 
                 limits,
                 scratch_alignment,
                 sustain_seconds: options.sustain_seconds,
-                workgroup_size,
+                workgroup_sizes: options.workgroup_sizes,
             }))
         }
         Err(e) => {
@@ -441,22 +425,6 @@ fn stream_workgroup_sizes(limits: &vk::PhysicalDeviceLimits) -> Vec<u32> {
         .map(|k| 1 << k)
         .filter(|&size| size <= most && STREAM_ROW / size <= limits.max_compute_work_group_count[0])
         .collect()
-}
-
-/// The workgroup size of the 1-D stream stages: `requested` if the device runs it (`sizes`, its
-/// [`DeviceInfo::workgroup_sizes`]), the compiled size if none is requested.
-fn checked_workgroup_size(requested: Option<u32>, sizes: &[u32]) -> Result<u32> {
-    match requested {
-        None => Ok(WORKGROUP_SIZE),
-        Some(size) if sizes.contains(&size) => Ok(size),
-        Some(size) => Err(Error::InvalidParameter {
-            name: "workgroup_size",
-            reason: match (sizes.first(), sizes.last()) {
-                (Some(least), Some(most)) => format!("{size}: this device runs the powers of two {least}..={most}"),
-                _ => format!("{size}: this device runs no 1-D workgroup of a stream stage"),
-            },
-        }),
-    }
 }
 
 type CreatedDevice = (ash::Device, u32, DeviceInfo, vk::PhysicalDeviceLimits, u64, RtPipelineProperties);
@@ -547,7 +515,7 @@ mod tests {
     use super::*;
 
     #[test]
-    fn a_workgroup_size_is_a_power_of_two_the_device_can_run_in_rows_of_stream_row() {
+    fn a_device_runs_the_powers_of_two_within_its_limits_in_rows_of_stream_row() {
         let limits = vk::PhysicalDeviceLimits {
             max_compute_work_group_size: [1024, 1024, 64],
             max_compute_work_group_invocations: 512,
@@ -555,16 +523,7 @@ mod tests {
             ..Default::default()
         };
         // 1024 exceeds the invocations per workgroup; 16 would make rows of 65 536 workgroups.
-        let sizes = stream_workgroup_sizes(&limits);
-        assert_eq!(sizes, [32, 64, 128, 256, 512]);
-        assert_eq!(checked_workgroup_size(None, &sizes).ok(), Some(WORKGROUP_SIZE));
-        for &size in &sizes {
-            assert_eq!(checked_workgroup_size(Some(size), &sizes).ok(), Some(size));
-        }
-        for size in [0, 1, 16, 48, 96, 1024, 2048] {
-            let refused = checked_workgroup_size(Some(size), &sizes);
-            assert!(matches!(refused, Err(Error::InvalidParameter { name: "workgroup_size", .. })), "{size}");
-        }
+        assert_eq!(stream_workgroup_sizes(&limits), [32, 64, 128, 256, 512]);
         let wide = vk::PhysicalDeviceLimits { max_compute_work_group_count: [u32::MAX; 3], ..limits };
         assert_eq!(stream_workgroup_sizes(&wide), [1, 2, 4, 8, 16, 32, 64, 128, 256, 512]);
         let narrow = vk::PhysicalDeviceLimits { max_compute_work_group_size: [128, 128, 64], ..limits };

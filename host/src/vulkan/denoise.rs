@@ -49,7 +49,7 @@ impl DenoiseKernels {
             let layout: Vec<_> = (0..count).map(|b| (b, vk::DescriptorType::STORAGE_BUFFER)).collect();
             ComputeKernel::new(core, entry, &layout, push, workgroup_size)
         };
-        let kernel = |entry, count| kernel_sized(entry, count, core.workgroup_size);
+        let kernel = |entry, count| kernel_sized(entry, count, core.workgroup_sizes.denoise);
         Ok(Self {
             ratio: kernel("entry::denoise_ratio", counts::RATIO)?,
             noise: kernel("entry::denoise_noise", counts::NOISE)?,
