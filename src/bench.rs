@@ -163,6 +163,30 @@ const FALLING_FRACTION: f64 = 0.02;
 /// clocks ([`GPU_SETTLE_SECONDS`]) and holds them.
 pub(crate) const SUSTAIN_SECONDS: f64 = 0.05;
 
+/// The settling time of a bench's Vulkan warm-up: `requested` (finite, within
+/// `0..=MAX_WARM_UP_SECONDS`, else a typed error naming `settle-seconds`), by default
+/// [`GPU_SETTLE_SECONDS`].
+pub(crate) fn settle_seconds(requested: Option<f64>) -> Result<f64> {
+    match requested {
+        None => Ok(GPU_SETTLE_SECONDS),
+        Some(settle) if (0.0..=MAX_WARM_UP_SECONDS).contains(&settle) => Ok(settle),
+        Some(settle) => Err(Error::InvalidParameter {
+            name: "settle-seconds",
+            reason: format!("{settle} is not within 0..={MAX_WARM_UP_SECONDS} s"),
+        }),
+    }
+}
+
+/// The workgroup sizes a bench measures a stage in: those `requested`, else the compiled one.
+#[cfg(feature = "vulkan")]
+pub(crate) fn workgroup_size_list(requested: &[u32]) -> Vec<u32> {
+    if requested.is_empty() {
+        vec![crate::shared::bindings::WORKGROUP_SIZE]
+    } else {
+        requested.to_vec()
+    }
+}
+
 /// Runs `run`, which returns the seconds it measured, untimed until those times have stopped
 /// falling for `settle_seconds` ([`CPU_SETTLE_SECONDS`], [`GPU_SETTLE_SECONDS`]): in rounds
 /// ([`WARM_UP_ROUND_SECONDS`], [`WARM_UP_ROUND_RUNS`]), each round's median against the best
@@ -330,12 +354,8 @@ pub fn bench_trace(options: &TraceBenchOptions, mut emit: impl FnMut(&dyn BenchL
         return Err(Error::InvalidParameter { name: "threads", reason: "thread counts must be at least 1".into() });
     }
     check_repeats(options.repeats)?;
-    if let Some(settle) = options.settle_seconds.filter(|s| !(0.0..=MAX_WARM_UP_SECONDS).contains(s)) {
-        return Err(Error::InvalidParameter {
-            name: "settle-seconds",
-            reason: format!("{settle} is not within 0..={MAX_WARM_UP_SECONDS} s"),
-        });
-    }
+    #[cfg_attr(not(feature = "vulkan"), allow(unused_variables))]
+    let gpu_settle_seconds = settle_seconds(options.settle_seconds)?;
     crate::Backend::check_image_size(&crate::cpu::CpuBackend::new(), options.resolution, options.resolution)?;
     #[cfg(feature = "vulkan")]
     let vulkan_device = options.vulkan.then(best_vulkan_device).flatten();
@@ -401,7 +421,7 @@ pub fn bench_trace(options: &TraceBenchOptions, mut emit: impl FnMut(&dyn BenchL
     }
     #[cfg(feature = "vulkan")]
     if options.vulkan {
-        bench_vulkan(options, vulkan_device, &scene, &kinds, &mut emit)?;
+        bench_vulkan(options, vulkan_device, gpu_settle_seconds, &scene, &kinds, &mut emit)?;
     }
     Ok(())
 }
@@ -413,6 +433,7 @@ pub fn bench_trace(options: &TraceBenchOptions, mut emit: impl FnMut(&dyn BenchL
 fn bench_vulkan(
     options: &TraceBenchOptions,
     vulkan_device: Option<crate::vulkan::DeviceInfo>,
+    settle_seconds: f64,
     scene: &Scene,
     kinds: &[(&'static str, &RayStream); 3],
     emit: &mut impl FnMut(&dyn BenchLine),
@@ -427,10 +448,8 @@ fn bench_vulkan(
         (TraceMethod::RtPipeline, device.missing_for_rt_pipeline().is_empty()),
     ];
     let methods: Vec<TraceMethod> = methods.iter().filter(|(_, available)| *available).map(|(m, _)| *m).collect();
-    let settle_seconds = options.settle_seconds.unwrap_or(GPU_SETTLE_SECONDS);
-    let compiled = crate::WorkgroupSizes::default().trace;
-    let sizes = if options.workgroup_sizes.is_empty() { vec![compiled] } else { options.workgroup_sizes.clone() };
-    let no_workgroups = [compiled];
+    let sizes = workgroup_size_list(&options.workgroup_sizes);
+    let no_workgroups = [crate::WorkgroupSizes::default().trace];
     for method in methods {
         let has_workgroups = method != TraceMethod::RtPipeline;
         for &trace in if has_workgroups { &sizes[..] } else { &no_workgroups } {
@@ -460,9 +479,9 @@ fn bench_vulkan(
     Ok(())
 }
 
-/// The Vulkan device [`bench_vulkan`] measures, the one `--device auto` picks; `None` without one.
+/// The Vulkan device a bench measures, the one `--device auto` picks; `None` without one.
 #[cfg(feature = "vulkan")]
-fn best_vulkan_device() -> Option<crate::vulkan::DeviceInfo> {
+pub(crate) fn best_vulkan_device() -> Option<crate::vulkan::DeviceInfo> {
     let mut devices = crate::vulkan::enumerate_devices().ok()?;
     let index = crate::device::best_vulkan_device(&devices).ok()?;
     Some(devices.swap_remove(index))

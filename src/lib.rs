@@ -3,12 +3,13 @@
 //!
 //! This facade re-exports the three layers — [`shared`] (the host/kernel contract), [`kernels`]
 //! (the stages as plain `no_std` functions) and the host (scenes, CPU executor, Vulkan backend) —
-//! and adds [`render`], the whole-frame job behind `raywave render`, [`bench`](mod@bench) and
-//! [`bench_denoise`], the benchmarks behind `raywave bench trace|denoise`, and [`report`], the accuracy reports behind
-//! `raywave report`.
+//! and adds [`render`], the whole-frame job behind `raywave render`, [`bench`](mod@bench),
+//! [`bench_shade`] and [`bench_denoise`], the benchmarks behind `raywave bench trace|shade|denoise`,
+//! and [`report`], the accuracy reports behind `raywave report`.
 
 pub mod bench;
 pub mod bench_denoise;
+pub mod bench_shade;
 #[cfg(feature = "embree")]
 pub mod embree;
 pub mod render;

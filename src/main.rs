@@ -144,6 +144,8 @@ struct SamplingReportArgs {
 enum BenchStage {
     /// Trace throughput of raywave (CPU and each Vulkan method) and obvhs on the same rays.
     Trace(TraceBenchArgs),
+    /// Shading throughput (U of every light and one MIS sample per camera ray), CPU and Vulkan.
+    Shade(ShadeBenchArgs),
     /// Seconds and effective bandwidth of each denoise pass for one frame, on the CPU and Vulkan.
     Denoise(DenoiseBenchArgs),
 }
@@ -191,26 +193,45 @@ struct TraceBenchArgs {
     /// Primary rays per side (resolution² camera rays; shadow and diffuse rays start at their hits).
     #[arg(long, default_value_t = 512)]
     resolution: u32,
-    /// Timed repetitions per measurement (the median is reported).
-    #[arg(long, default_value_t = 3)]
-    repeats: u32,
-    /// Skip the Vulkan trace methods.
-    #[arg(long)]
-    no_vulkan: bool,
     /// obvhs build preset of the BVH: fast (default, chosen by this benchmark), medium or slow.
     #[arg(long, default_value = "fast")]
     bvh: String,
-    /// Workgroup sizes for the Vulkan compute trace methods (`sw`, `rayquery`), comma-separated
-    /// powers of two the device runs (default: the compiled 64).
+    #[command(flatten)]
+    common: BenchArgs,
+}
+
+/// What `bench trace` and `bench shade` share: repetitions, the Vulkan device and the output.
+#[derive(clap::Args)]
+struct BenchArgs {
+    /// Timed repetitions per measurement (the median is reported).
+    #[arg(long, default_value_t = 3)]
+    repeats: u32,
+    /// Skip the Vulkan device.
+    #[arg(long)]
+    no_vulkan: bool,
+    /// Print one JSON object per line instead of a table.
+    #[arg(long)]
+    json: bool,
+    /// Workgroup sizes of the measured Vulkan stage (trace: the compute methods `sw`, `rayquery`),
+    /// comma-separated powers of two the device runs (default: the compiled 64).
     #[arg(long, value_delimiter = ',')]
     workgroup_sizes: Vec<u32>,
     /// Seconds the Vulkan times must have stopped falling before they are measured (0..=30;
     /// default 5, for the GPU's clocks to rise).
     #[arg(long)]
     settle_seconds: Option<f64>,
-    /// Print one JSON object per line instead of a table.
-    #[arg(long)]
-    json: bool,
+}
+
+#[derive(clap::Args)]
+struct ShadeBenchArgs {
+    /// The scene shaded: `builtin:cornell`, `builtin:cornell-light-grid` (20 lights), … or a file.
+    #[arg(long, default_value = "builtin:cornell")]
+    scene: String,
+    /// Camera rays per side (resolution² samples, one per pixel).
+    #[arg(long, default_value_t = 512)]
+    resolution: u32,
+    #[command(flatten)]
+    common: BenchArgs,
 }
 
 #[derive(clap::Args)]
@@ -282,6 +303,7 @@ fn main() -> ExitCode {
         Command::Devices { json } => devices(json),
         Command::Render(args) => render_command(args),
         Command::Bench { stage: BenchStage::Trace(args) } => bench_trace_command(args),
+        Command::Bench { stage: BenchStage::Shade(args) } => bench_shade_command(args),
         Command::Bench { stage: BenchStage::Denoise(args) } => bench_denoise_command(args),
         Command::Report { topic: ReportTopic::Sampling(args) } => report_sampling_command(args),
         Command::Report { topic: ReportTopic::Shade(args) } => report_shade_command(args),
@@ -313,13 +335,29 @@ fn bench_trace_command(args: TraceBenchArgs) -> raywave::Result<()> {
         scene: args.scene,
         threads,
         resolution: args.resolution,
-        repeats: args.repeats,
-        vulkan: !args.no_vulkan,
+        repeats: args.common.repeats,
+        vulkan: !args.common.no_vulkan,
         bvh: args.bvh.parse()?,
-        workgroup_sizes: args.workgroup_sizes,
-        settle_seconds: args.settle_seconds,
+        workgroup_sizes: args.common.workgroup_sizes,
+        settle_seconds: args.common.settle_seconds,
     };
-    bench_trace(&options, |line| print_line(if args.json { line.json() } else { line.row() }))
+    let json = args.common.json;
+    bench_trace(&options, |line| print_line(if json { line.json() } else { line.row() }))
+}
+
+fn bench_shade_command(args: ShadeBenchArgs) -> raywave::Result<()> {
+    use raywave::bench::BenchLine;
+    use raywave::bench_shade::{bench_shade, ShadeBenchOptions};
+    let options = ShadeBenchOptions {
+        scene: args.scene,
+        resolution: args.resolution,
+        repeats: args.common.repeats,
+        vulkan: !args.common.no_vulkan,
+        workgroup_sizes: args.common.workgroup_sizes,
+        settle_seconds: args.common.settle_seconds,
+    };
+    let json = args.common.json;
+    bench_shade(&options, |line| print_line(if json { line.json() } else { line.row() }))
 }
 
 fn bench_denoise_command(args: DenoiseBenchArgs) -> raywave::Result<()> {

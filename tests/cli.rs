@@ -219,7 +219,7 @@ fn lightless_scenes_warn_in_render_and_are_refused_by_reports() {
 /// frame is shaded or the reference converged).
 #[test]
 fn bench_and_report_options_out_of_range_are_typed_errors() {
-    let cases: [(&[&str], &str); 11] = [
+    let cases: [(&[&str], &str); 14] = [
         (&["bench", "denoise", "--no-vulkan", "--repeats", "0"], "repeats: must be at least 1"),
         (&["bench", "denoise", "--no-vulkan", "--spp", "0"], "spp: 0 is outside"),
         (&["bench", "denoise", "--no-vulkan", "--spp", "8192"], "exceed the sampler's 32-bit index"),
@@ -230,6 +230,9 @@ fn bench_and_report_options_out_of_range_are_typed_errors() {
         (&["bench", "trace", "--no-vulkan", "--resolution", "0"], "at least 1"),
         (&["bench", "trace", "--settle-seconds", "31"], "settle-seconds: 31 is not within 0..=30 s"),
         (&["bench", "trace", "--settle-seconds", "NaN"], "settle-seconds: NaN is not within"),
+        (&["bench", "shade", "--no-vulkan", "--repeats", "0"], "repeats: must be at least 1"),
+        (&["bench", "shade", "--no-vulkan", "--resolution", "0"], "at least 1"),
+        (&["bench", "shade", "--settle-seconds=-1"], "settle-seconds: -1 is not within 0..=30 s"),
         (&["report", "shade", "--resolution", "1024", "--reference-spp", "8192"], "reference-spp: 8192 samples"),
     ];
     for (args, needle) in cases {
@@ -481,6 +484,37 @@ fn trace_bench_measures_each_workgroup_size_of_each_compute_method() {
         "{}",
         stderr(&refused)
     );
+}
+
+/// `bench shade --workgroup-sizes`: the CPU once and the Vulkan device once per shade workgroup
+/// size, each Vulkan line naming its size, every line the same samples and lights at a positive
+/// rate; a size the device does not run fails before anything is measured.
+#[cfg(feature = "vulkan")]
+#[test]
+fn shade_bench_measures_the_cpu_and_each_shade_workgroup_size() {
+    if raywave::vulkan::enumerate_devices().map_or(true, |d| d.is_empty()) {
+        common::skip_or_fail("shade bench", "no Vulkan device");
+        return;
+    }
+    let base = ["bench", "shade", "--scene", "builtin:cornell-light-grid", "--resolution", "16", "--repeats", "1"];
+    let quick = [&base[..], &["--settle-seconds", "0.05", "--json"]].concat();
+    let out = raywave(&[&quick[..], &["--workgroup-sizes", "32,256"]].concat());
+    assert!(out.status.success(), "{}", stderr(&out));
+    let lines = json_lines(&out);
+    let sizes: Vec<_> = lines.iter().map(|l| l["workgroup_size"].as_u64()).collect();
+    assert_eq!(sizes, [None, Some(32), Some(256)], "{lines:?}");
+    for line in &lines {
+        assert_eq!(
+            (line["stage"].as_str(), line["samples"].as_u64(), line["lights"].as_u64()),
+            (Some("shade"), Some(256), Some(20))
+        );
+        let rate = line["msamples_per_s"].as_f64().unwrap();
+        assert!(rate.is_finite() && rate > 0.0 && line["seconds"].as_f64().unwrap() > 0.0, "{line:?}");
+        assert!(line["dispatches"].as_u64().unwrap() >= 1 && line["warm_up_seconds"].as_f64().unwrap() >= 0.05);
+    }
+    let refused = raywave(&[&quick[..], &["--workgroup-sizes", "48"]].concat());
+    assert!(!refused.status.success() && refused.stdout.is_empty(), "{}", stderr(&refused));
+    assert!(stderr(&refused).contains("workgroup_sizes.shade: 48: this device runs"), "{}", stderr(&refused));
 }
 
 #[test]

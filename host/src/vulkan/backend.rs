@@ -458,9 +458,10 @@ impl VulkanBackend {
         Ok(timing.report(stage, counter.read_count()?))
     }
 
-    /// Checks that a stream of `len` elements fits one storage buffer and one dispatch.
+    /// Checks that a stream of `len` elements fits one storage buffer and one dispatch (in
+    /// workgroups of the smallest stage size: if those fit, every stage's do).
     fn check_stream(&self, len: u32) -> Result<()> {
-        if dispatch_grid(&self.core.limits, len, self.core.workgroup_sizes.trace).is_none()
+        if dispatch_grid(&self.core.limits, len, self.core.workgroup_sizes.smallest()).is_none()
             || u64::from(len) > self.max_rays()
         {
             return Err(Error::InvalidParameter {
