@@ -161,6 +161,7 @@ const FALLING_FRACTION: f64 = 0.02;
 /// device gives — on a fresh machine, where compiling the pipelines outlasted them (README).
 /// 50 ms of back-to-back dispatches per submission keep it mostly busy, so that it raises its
 /// clocks ([`GPU_SETTLE_SECONDS`]) and holds them.
+#[cfg(feature = "vulkan")]
 pub(crate) const SUSTAIN_SECONDS: f64 = 0.05;
 
 /// The settling time of a bench's Vulkan warm-up: `requested` (finite, within
@@ -358,13 +359,7 @@ pub fn bench_trace(options: &TraceBenchOptions, mut emit: impl FnMut(&dyn BenchL
     let gpu_settle_seconds = settle_seconds(options.settle_seconds)?;
     crate::Backend::check_image_size(&crate::cpu::CpuBackend::new(), options.resolution, options.resolution)?;
     #[cfg(feature = "vulkan")]
-    let vulkan_device = options.vulkan.then(best_vulkan_device).flatten();
-    #[cfg(feature = "vulkan")]
-    if let Some(device) = &vulkan_device {
-        for &trace in &options.workgroup_sizes {
-            crate::WorkgroupSizes { trace, ..Default::default() }.check(&device.workgroup_sizes)?;
-        }
-    }
+    let vulkan_device = bench_device(options.vulkan, &options.workgroup_sizes, trace_sized)?;
     let scene = Scene::load(&options.scene)?;
     let cpu_scene = CpuScene::build_with(&scene, options.bvh)?;
     emit(&BuildMeasurement {
@@ -438,10 +433,8 @@ fn bench_vulkan(
     kinds: &[(&'static str, &RayStream); 3],
     emit: &mut impl FnMut(&dyn BenchLine),
 ) -> Result<()> {
-    use crate::vulkan::{ContextOptions, VulkanBackend};
     use crate::{Backend, TraceMethod};
     let Some(device) = vulkan_device else { return Ok(()) };
-    let index = device.index;
     let methods = [
         (TraceMethod::Software, true),
         (TraceMethod::RayQuery, device.missing_for_ray_query().is_empty()),
@@ -453,9 +446,7 @@ fn bench_vulkan(
     for method in methods {
         let has_workgroups = method != TraceMethod::RtPipeline;
         for &trace in if has_workgroups { &sizes[..] } else { &no_workgroups } {
-            let workgroup_sizes = crate::WorkgroupSizes { trace, ..Default::default() };
-            let context = ContextOptions { sustain_seconds: SUSTAIN_SECONDS, workgroup_sizes, ..Default::default() };
-            let mut backend = VulkanBackend::open(index, &context, Some(method))?;
+            let mut backend = open_for_bench(&device, trace_sized(trace), Some(method))?;
             backend.load_scene(scene)?;
             for &(kind, rays) in kinds {
                 let measured = measure(settle_seconds, options.repeats, || {
@@ -479,12 +470,44 @@ fn bench_vulkan(
     Ok(())
 }
 
-/// The Vulkan device a bench measures, the one `--device auto` picks; `None` without one.
+/// The Vulkan device a bench measures — the one `--device auto` picks, if `vulkan` and there is
+/// one — after checking that it runs each of the `requested` sizes of the stage that `stage`
+/// places a size in: a size it does not run is a typed error before anything is measured.
 #[cfg(feature = "vulkan")]
-pub(crate) fn best_vulkan_device() -> Option<crate::vulkan::DeviceInfo> {
-    let mut devices = crate::vulkan::enumerate_devices().ok()?;
-    let index = crate::device::best_vulkan_device(&devices).ok()?;
-    Some(devices.swap_remove(index))
+pub(crate) fn bench_device(
+    vulkan: bool,
+    requested: &[u32],
+    stage: fn(u32) -> crate::WorkgroupSizes,
+) -> Result<Option<crate::vulkan::DeviceInfo>> {
+    let device = vulkan.then(|| {
+        let mut devices = crate::vulkan::enumerate_devices().ok()?;
+        let index = crate::device::best_vulkan_device(&devices).ok()?;
+        Some(devices.swap_remove(index))
+    });
+    let Some(device) = device.flatten() else { return Ok(None) };
+    for &size in requested {
+        stage(size).check(&device.workgroup_sizes)?;
+    }
+    Ok(Some(device))
+}
+
+/// `device` opened in benchmark mode ([`SUSTAIN_SECONDS`]) with `workgroup_sizes` and trace
+/// method `trace` (`None`: the best it has).
+#[cfg(feature = "vulkan")]
+pub(crate) fn open_for_bench(
+    device: &crate::vulkan::DeviceInfo,
+    workgroup_sizes: crate::WorkgroupSizes,
+    trace: Option<crate::TraceMethod>,
+) -> Result<crate::vulkan::VulkanBackend> {
+    let context =
+        crate::vulkan::ContextOptions { sustain_seconds: SUSTAIN_SECONDS, workgroup_sizes, ..Default::default() };
+    crate::vulkan::VulkanBackend::open(device.index, &context, trace)
+}
+
+/// Workgroup sizes with the trace stage's `trace`, the others compiled.
+#[cfg(feature = "vulkan")]
+fn trace_sized(trace: u32) -> crate::WorkgroupSizes {
+    crate::WorkgroupSizes { trace, ..Default::default() }
 }
 
 /// A line the benchmark emits, printable as JSON or as a table row.

@@ -14,13 +14,13 @@
 //! a pass that only reads and writes one `Vec4` per pixel of the same frame, the bandwidth a
 //! memory-bound pass can reach there.
 
-use crate::bench::{measure, Measured, CPU_SETTLE_SECONDS, GPU_SETTLE_SECONDS, SUSTAIN_SECONDS};
+use crate::bench::{measure, settle_seconds, Measured, CPU_SETTLE_SECONDS};
 use crate::denoise::{check_radius, frame_params, DenoiseInput, DenoiseMethod};
 use crate::frame::{check_samples_per_pixel, generate_params_with, sampler_params};
 use crate::shading::{resolve, ShadeAccumulator, ShadeData};
 use crate::shared::sampling::sampler_kind;
 use crate::shared::DenoiseParams;
-use crate::{open_backend, Backend, BackendOptions, DeviceChoice, Result, Scene};
+use crate::{Backend, Result, Scene};
 use glam::Vec4;
 
 /// What to measure.
@@ -46,6 +46,13 @@ pub struct DenoiseBenchOptions {
     /// passes tap `2R + 1` pixels each and SVGF's à-trous iterations follow R, so their time
     /// does too (their bytes, counted once per buffer, do not).
     pub denoise_radius: Option<u32>,
+    /// Workgroup sizes of the per-pixel denoise passes to measure the Vulkan device with
+    /// ([`crate::WorkgroupSizes::denoise`]; the bilateral passes keep 64), each a power of two
+    /// the device runs, else a typed error before anything is measured; empty: the compiled 64.
+    pub workgroup_sizes: Vec<u32>,
+    /// How long the Vulkan times must have stopped falling before they are measured, in seconds
+    /// (finite, `0..=30`); `None`: 5 s, for the GPU's clocks to rise.
+    pub settle_seconds: Option<f64>,
 }
 
 /// One pass (or a whole denoiser, `pass = "total"`) on one backend, printed as one JSON line.
@@ -87,6 +94,10 @@ pub struct DenoiseMeasurement {
     /// `gb_per_s / copy_gb_per_s`: near 1, the pass is as fast as its bytes allow here; far
     /// below, it is bound by arithmetic or by latency.
     pub copy_fraction: f64,
+    /// Vulkan: invocations per workgroup of the per-pixel passes (the bilateral passes run 64);
+    /// absent on the CPU.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub workgroup_size: Option<u32>,
 }
 
 impl DenoiseMeasurement {
@@ -166,16 +177,24 @@ fn copy_bandwidth(
     Ok(bytes / measured.stages[0].seconds / 1e9)
 }
 
-/// Measures `backend`, each measurement after a warm-up of `settle_seconds` ([`measure`]), handing each
-/// line to `emit`.
+/// How [`bench_backend`] measures a backend: the device's peak bandwidth if known, the warm-up's
+/// settling time ([`measure`]) and, on Vulkan, the per-pixel passes' workgroup size.
+#[derive(Clone, Copy)]
+struct Measuring {
+    peak_gbps: Option<f64>,
+    settle_seconds: f64,
+    workgroup_size: Option<u32>,
+}
+
+/// Measures `backend` as `measured_as` says, handing each line to `emit`.
 fn bench_backend(
     backend: &mut dyn Backend,
     input: &DenoiseInput,
     options: &DenoiseBenchOptions,
-    peak_gbps: Option<f64>,
-    settle_seconds: f64,
+    measured_as: &Measuring,
     emit: &mut impl FnMut(&DenoiseMeasurement),
 ) -> Result<()> {
+    let Measuring { peak_gbps, settle_seconds, workgroup_size } = *measured_as;
     let params = DenoiseParams {
         samples_per_pixel: options.spp,
         ..frame_params(options.width, options.height, options.denoise_radius)
@@ -203,6 +222,7 @@ fn bench_backend(
                 bandwidth_fraction: peak_gbps.map(|peak| gb_per_s / peak),
                 copy_gb_per_s,
                 copy_fraction: gb_per_s / copy_gb_per_s,
+                workgroup_size,
             }
         };
         let (mut total_seconds, mut total_bytes) = (0.0, 0);
@@ -224,14 +244,26 @@ pub fn bench_denoise(options: &DenoiseBenchOptions, mut emit: impl FnMut(&Denois
         return Err(crate::Error::InvalidParameter { name: "peak-gbps", reason: "must be finite and > 0".into() });
     }
     check_radius("denoise-radius", options.denoise_radius)?;
+    #[cfg_attr(not(feature = "vulkan"), allow(unused_variables))]
+    let gpu_settle_seconds = settle_seconds(options.settle_seconds)?;
+    #[cfg(feature = "vulkan")]
+    let denoise_sized = |denoise| crate::WorkgroupSizes { denoise, ..Default::default() };
+    #[cfg(feature = "vulkan")]
+    let vulkan_device = crate::bench::bench_device(options.vulkan, &options.workgroup_sizes, denoise_sized)?;
     let input = frame_input(options)?;
     let mut cpu = crate::cpu::CpuBackend::new();
-    bench_backend(&mut cpu, &input, options, None, CPU_SETTLE_SECONDS, &mut emit)?;
-    if options.vulkan {
-        let benchmark_mode = BackendOptions { sustain_seconds: SUSTAIN_SECONDS, ..Default::default() };
-        if let Ok(mut vulkan) = open_backend(DeviceChoice::Vulkan(None), &benchmark_mode) {
-            let peak = options.peak_gbps.or_else(|| known_peak_gbps(&vulkan.name()));
-            bench_backend(vulkan.as_mut(), &input, options, peak, GPU_SETTLE_SECONDS, &mut emit)?;
+    let on_the_cpu = Measuring { peak_gbps: None, settle_seconds: CPU_SETTLE_SECONDS, workgroup_size: None };
+    bench_backend(&mut cpu, &input, options, &on_the_cpu, &mut emit)?;
+    #[cfg(feature = "vulkan")]
+    if let Some(device) = vulkan_device {
+        for denoise in crate::bench::workgroup_size_list(&options.workgroup_sizes) {
+            let mut vulkan = crate::bench::open_for_bench(&device, denoise_sized(denoise), None)?;
+            let measuring = Measuring {
+                peak_gbps: options.peak_gbps.or_else(|| known_peak_gbps(&vulkan.name())),
+                settle_seconds: gpu_settle_seconds,
+                workgroup_size: Some(vulkan.workgroup_sizes().denoise),
+            };
+            bench_backend(&mut vulkan, &input, options, &measuring, &mut emit)?;
         }
     }
     Ok(())

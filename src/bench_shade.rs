@@ -82,13 +82,9 @@ pub fn bench_shade(options: &ShadeBenchOptions, mut emit: impl FnMut(&ShadeMeasu
     let (side, mut cpu) = (options.resolution, crate::cpu::CpuBackend::new());
     cpu.check_image_size(side, side)?;
     #[cfg(feature = "vulkan")]
-    let vulkan_device = options.vulkan.then(crate::bench::best_vulkan_device).flatten();
+    let shade_sized = |shade| crate::WorkgroupSizes { shade, ..Default::default() };
     #[cfg(feature = "vulkan")]
-    if let Some(device) = &vulkan_device {
-        for &shade in &options.workgroup_sizes {
-            crate::WorkgroupSizes { shade, ..Default::default() }.check(&device.workgroup_sizes)?;
-        }
-    }
+    let vulkan_device = crate::bench::bench_device(options.vulkan, &options.workgroup_sizes, shade_sized)?;
     let scene = Scene::load(&options.scene)?;
     let data = ShadeData::new(&scene)?;
     cpu.load_scene(&scene)?;
@@ -115,12 +111,8 @@ pub fn bench_shade(options: &ShadeBenchOptions, mut emit: impl FnMut(&ShadeMeasu
     shade_on(&mut cpu, CPU_SETTLE_SECONDS, None)?;
     #[cfg(feature = "vulkan")]
     if let Some(device) = vulkan_device {
-        use crate::bench::SUSTAIN_SECONDS;
-        use crate::vulkan::{ContextOptions, VulkanBackend};
         for shade in crate::bench::workgroup_size_list(&options.workgroup_sizes) {
-            let workgroup_sizes = crate::WorkgroupSizes { shade, ..Default::default() };
-            let context = ContextOptions { sustain_seconds: SUSTAIN_SECONDS, workgroup_sizes, ..Default::default() };
-            let mut backend = VulkanBackend::open(device.index, &context, None)?;
+            let mut backend = crate::bench::open_for_bench(&device, shade_sized(shade), None)?;
             let runs = backend.workgroup_sizes().shade;
             shade_on(&mut backend, gpu_settle_seconds, Some(runs))?;
         }

@@ -176,6 +176,8 @@ struct DenoiseBenchArgs {
     peak_gbps: Option<f64>,
     #[command(flatten)]
     radius: DenoiseRadiusArg,
+    #[command(flatten)]
+    vulkan: VulkanBenchArgs,
     /// Print one JSON object per line instead of a table.
     #[arg(long)]
     json: bool,
@@ -212,8 +214,16 @@ struct BenchArgs {
     /// Print one JSON object per line instead of a table.
     #[arg(long)]
     json: bool,
-    /// Workgroup sizes of the measured Vulkan stage (trace: the compute methods `sw`, `rayquery`),
-    /// comma-separated powers of two the device runs (default: the compiled 64).
+    #[command(flatten)]
+    vulkan: VulkanBenchArgs,
+}
+
+/// How a bench measures the Vulkan device.
+#[derive(clap::Args)]
+struct VulkanBenchArgs {
+    /// Workgroup sizes of the measured Vulkan stage (trace: the compute methods `sw`, `rayquery`;
+    /// denoise: the per-pixel passes, the bilateral ones keep 64), comma-separated powers of two
+    /// the device runs (default: the compiled 64).
     #[arg(long, value_delimiter = ',')]
     workgroup_sizes: Vec<u32>,
     /// Seconds the Vulkan times must have stopped falling before they are measured (0..=30;
@@ -338,8 +348,8 @@ fn bench_trace_command(args: TraceBenchArgs) -> raywave::Result<()> {
         repeats: args.common.repeats,
         vulkan: !args.common.no_vulkan,
         bvh: args.bvh.parse()?,
-        workgroup_sizes: args.common.workgroup_sizes,
-        settle_seconds: args.common.settle_seconds,
+        workgroup_sizes: args.common.vulkan.workgroup_sizes,
+        settle_seconds: args.common.vulkan.settle_seconds,
     };
     let json = args.common.json;
     bench_trace(&options, |line| print_line(if json { line.json() } else { line.row() }))
@@ -353,8 +363,8 @@ fn bench_shade_command(args: ShadeBenchArgs) -> raywave::Result<()> {
         resolution: args.resolution,
         repeats: args.common.repeats,
         vulkan: !args.common.no_vulkan,
-        workgroup_sizes: args.common.workgroup_sizes,
-        settle_seconds: args.common.settle_seconds,
+        workgroup_sizes: args.common.vulkan.workgroup_sizes,
+        settle_seconds: args.common.vulkan.settle_seconds,
     };
     let json = args.common.json;
     bench_shade(&options, |line| print_line(if json { line.json() } else { line.row() }))
@@ -371,6 +381,8 @@ fn bench_denoise_command(args: DenoiseBenchArgs) -> raywave::Result<()> {
         vulkan: !args.no_vulkan,
         peak_gbps: args.peak_gbps,
         denoise_radius: args.radius.denoise_radius,
+        workgroup_sizes: args.vulkan.workgroup_sizes,
+        settle_seconds: args.vulkan.settle_seconds,
     };
     bench_denoise(&options, |line| print_line(if args.json { line.json() } else { line.row() }))
 }

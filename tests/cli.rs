@@ -19,6 +19,18 @@ fn stderr(out: &Output) -> String {
     String::from_utf8_lossy(&out.stderr).into_owned()
 }
 
+/// Runs the command `args` and checks that it fails with a message saying `expected` (no panic)
+/// before printing any result.
+fn assert_refused_before_measuring(args: &[&str], expected: &str) {
+    let refused = raywave(args);
+    let message = stderr(&refused);
+    assert!(!refused.status.success() && refused.stdout.is_empty(), "{args:?} should fail at once: {message}");
+    assert!(
+        message.contains(expected) && !message.contains("panicked"),
+        "{args:?}: expected {expected:?} in {message:?}"
+    );
+}
+
 fn render(dir: &Path, name: &str, extra: &[&str]) -> (Output, std::path::PathBuf) {
     let path = dir.join(name);
     let mut args = vec!["render", "--out", path.to_str().unwrap()];
@@ -236,11 +248,7 @@ fn bench_and_report_options_out_of_range_are_typed_errors() {
         (&["report", "shade", "--resolution", "1024", "--reference-spp", "8192"], "reference-spp: 8192 samples"),
     ];
     for (args, needle) in cases {
-        let out = raywave(args);
-        assert!(!out.status.success(), "{args:?} should fail");
-        let message = stderr(&out);
-        assert!(message.contains(needle), "{args:?}: expected {needle:?} in {message:?}");
-        assert!(!message.contains("panicked") && out.stdout.is_empty(), "{args:?}: {message}");
+        assert_refused_before_measuring(args, needle);
     }
 }
 
@@ -438,16 +446,23 @@ fn denoise_bench_prints_each_pass_and_the_total() {
     assert_eq!(wider.iter().filter(|l| l["pass"] == "svgf atrous").count(), 3, "three à-trous iterations at R = 3");
 }
 
+/// The Vulkan devices, or `None` after a loud SKIP (a failure under CI) when there are none.
+#[cfg(feature = "vulkan")]
+fn vulkan_devices(test: &str) -> Option<Vec<raywave::vulkan::DeviceInfo>> {
+    let devices = raywave::vulkan::enumerate_devices().ok().filter(|d| !d.is_empty());
+    if devices.is_none() {
+        common::skip_or_fail(test, "no Vulkan device");
+    }
+    devices
+}
+
 /// `bench trace --workgroup-sizes`: each Vulkan compute trace method (`sw`, `rayquery`) measured
 /// once per size and kind, every line naming its size; the ray-tracing pipeline and the CPU
 /// tracers once, without one. A size the device does not run fails before anything is measured.
 #[cfg(feature = "vulkan")]
 #[test]
 fn trace_bench_measures_each_workgroup_size_of_each_compute_method() {
-    let Some(device) = raywave::vulkan::enumerate_devices().ok().filter(|d| !d.is_empty()) else {
-        common::skip_or_fail("trace bench workgroup sizes", "no Vulkan device");
-        return;
-    };
+    let Some(device) = vulkan_devices("trace bench workgroup sizes") else { return };
     let base =
         ["bench", "trace", "--scene", "builtin:cornell", "--resolution", "8", "--repeats", "1", "--threads", "1"];
     let quick = [&base[..], &["--settle-seconds", "0.05", "--json"]].concat();
@@ -477,13 +492,8 @@ fn trace_bench_measures_each_workgroup_size_of_each_compute_method() {
         compiled.iter().filter(|l| l["impl"] == "raywave-vk-sw").all(|l| l["workgroup_size"] == 64),
         "{compiled:?}"
     );
-    let refused = raywave(&[&quick[..], &["--workgroup-sizes", "64,96"]].concat());
-    assert!(!refused.status.success() && refused.stdout.is_empty(), "{}", stderr(&refused));
-    assert!(
-        stderr(&refused).contains("workgroup_sizes.trace: 96: this device runs the powers of two"),
-        "{}",
-        stderr(&refused)
-    );
+    let refused = [&quick[..], &["--workgroup-sizes", "64,96"]].concat();
+    assert_refused_before_measuring(&refused, "workgroup_sizes.trace: 96: this device runs the powers of two");
 }
 
 /// `bench shade --workgroup-sizes`: the CPU once and the Vulkan device once per shade workgroup
@@ -492,8 +502,7 @@ fn trace_bench_measures_each_workgroup_size_of_each_compute_method() {
 #[cfg(feature = "vulkan")]
 #[test]
 fn shade_bench_measures_the_cpu_and_each_shade_workgroup_size() {
-    if raywave::vulkan::enumerate_devices().map_or(true, |d| d.is_empty()) {
-        common::skip_or_fail("shade bench", "no Vulkan device");
+    if vulkan_devices("shade bench").is_none() {
         return;
     }
     let base = ["bench", "shade", "--scene", "builtin:cornell-light-grid", "--resolution", "16", "--repeats", "1"];
@@ -512,9 +521,30 @@ fn shade_bench_measures_the_cpu_and_each_shade_workgroup_size() {
         assert!(rate.is_finite() && rate > 0.0 && line["seconds"].as_f64().unwrap() > 0.0, "{line:?}");
         assert!(line["dispatches"].as_u64().unwrap() >= 1 && line["warm_up_seconds"].as_f64().unwrap() >= 0.05);
     }
-    let refused = raywave(&[&quick[..], &["--workgroup-sizes", "48"]].concat());
-    assert!(!refused.status.success() && refused.stdout.is_empty(), "{}", stderr(&refused));
-    assert!(stderr(&refused).contains("workgroup_sizes.shade: 48: this device runs"), "{}", stderr(&refused));
+    let refused = [&quick[..], &["--workgroup-sizes", "48"]].concat();
+    assert_refused_before_measuring(&refused, "workgroup_sizes.shade: 48: this device runs");
+}
+
+/// `bench denoise --workgroup-sizes`: every pass and total of both denoisers on the CPU once
+/// and on the Vulkan device once per size of the per-pixel passes, each Vulkan line naming it.
+#[cfg(feature = "vulkan")]
+#[test]
+fn denoise_bench_measures_each_workgroup_size_of_the_per_pixel_passes() {
+    if vulkan_devices("denoise bench").is_none() {
+        return;
+    }
+    let args = ["bench", "denoise", "--width", "40", "--height", "24", "--repeats", "1", "--json"];
+    let out = raywave(&[&args[..], &["--settle-seconds", "0.05", "--workgroup-sizes", "32,256"]].concat());
+    assert!(out.status.success(), "{}", stderr(&out));
+    let lines = json_lines(&out);
+    let per_backend = (6 + 1) + (4 + 1);
+    assert_eq!(lines.len(), 3 * per_backend, "{lines:?}");
+    let sizes: Vec<_> = lines.iter().map(|l| l["workgroup_size"].as_u64()).collect();
+    for (block, expected) in sizes.chunks(per_backend).zip([None, Some(32), Some(256)]) {
+        assert!(block.iter().all(|&size| size == expected), "{expected:?}: {block:?}");
+    }
+    let refused = [&args[..], &["--workgroup-sizes", "3"]].concat();
+    assert_refused_before_measuring(&refused, "workgroup_sizes.denoise: 3: this device runs");
 }
 
 #[test]
