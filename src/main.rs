@@ -542,8 +542,13 @@ fn devices(json: bool) -> raywave::Result<()> {
                         "no"
                     }
                 };
+                let sizes = d["workgroup_sizes"].as_array().map_or(&[][..], Vec::as_slice);
+                let sizes = match (sizes.first(), sizes.last()) {
+                    (Some(least), Some(most)) => format!("{least}..={most}"),
+                    _ => "none".to_owned(),
+                };
                 print_line(format!(
-                    "vulkan:{:<3} {} ({}, Vulkan {})  ray_query={} acceleration_structure={} ray_tracing_pipeline={} buffer_device_address={}",
+                    "vulkan:{:<3} {} ({}, Vulkan {})  ray_query={} acceleration_structure={} ray_tracing_pipeline={} buffer_device_address={} workgroup_sizes={sizes}",
                     d["index"], d["name"].as_str().unwrap_or("?"), d["type"].as_str().unwrap_or("?"), d["api_version"].as_str().unwrap_or("?"),
                     flag("ray_query"), flag("acceleration_structure"), flag("ray_tracing_pipeline"), flag("buffer_device_address"),
                 ));

@@ -48,7 +48,18 @@ fn devices_lists_the_cpu_and_json_is_valid() {
     let value: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(value["cpu"]["backend"], "cpu");
     let text = raywave(&["devices"]);
-    assert!(String::from_utf8_lossy(&text.stdout).contains("cpu"));
+    let text = String::from_utf8_lossy(&text.stdout);
+    assert!(text.contains("cpu"));
+    // Each Vulkan device lists the workgroup sizes it runs the stream stages in: ascending powers
+    // of two, the compiled 64 among them, as a range in the table.
+    for device in value["vulkan"].as_array().into_iter().flatten() {
+        let sizes: Vec<u64> =
+            device["workgroup_sizes"].as_array().unwrap().iter().map(|s| s.as_u64().unwrap()).collect();
+        assert!(sizes.contains(&64) && sizes.iter().all(|s| s.is_power_of_two()), "{device}");
+        assert!(sizes.windows(2).all(|w| w[0] < w[1]), "{device}");
+        let range = format!("workgroup_sizes={}..={}", sizes[0], sizes[sizes.len() - 1]);
+        assert!(text.contains(&range), "{range} in {text}");
+    }
 }
 
 #[cfg(feature = "vulkan")]
