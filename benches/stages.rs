@@ -300,8 +300,7 @@ fn denoise_options(width: u32, height: u32) -> DenoiseBenchOptions {
         vulkan: false,
         peak_gbps: None,
         denoise_radius: None,
-        workgroup_sizes: Vec::new(),
-        settle_seconds: None,
+        vulkan_options: Default::default(),
     }
 }
 

@@ -29,15 +29,10 @@ pub struct TraceBenchOptions {
     pub vulkan: bool,
     /// obvhs build preset of the BVH that raywave and obvhs both traverse.
     pub bvh: crate::cpu::BvhQuality,
-    /// Workgroup sizes to measure each Vulkan compute trace method (`sw`, `rayquery`) with
-    /// ([`crate::WorkgroupSizes::trace`], for occupancy tuning; each a power of two the device
-    /// runs, else a typed error before anything is measured); empty: the compiled 64 only. The ray-tracing pipeline
-    /// has no workgroups and is measured once.
-    pub workgroup_sizes: Vec<u32>,
-    /// How long the Vulkan times must have stopped falling before they are measured, in seconds
-    /// (finite, `0..=30`); `None`: 5 s, long enough for a GPU to raise its
-    /// clocks. Shorter only for a quick check of the output.
-    pub settle_seconds: Option<f64>,
+    /// The Vulkan device's workgroup sizes of the compute trace methods (`sw`, `rayquery`;
+    /// [`crate::WorkgroupSizes::trace`]; the ray-tracing pipeline has no workgroups and is
+    /// measured once) and warm-up.
+    pub vulkan_options: crate::bench_device::VulkanBenchOptions,
 }
 
 /// One measurement, printed as one JSON line.
@@ -163,30 +158,6 @@ const FALLING_FRACTION: f64 = 0.02;
 /// clocks ([`GPU_SETTLE_SECONDS`]) and holds them.
 #[cfg(feature = "vulkan")]
 pub(crate) const SUSTAIN_SECONDS: f64 = 0.05;
-
-/// The settling time of a bench's Vulkan warm-up: `requested` (finite, within
-/// `0..=MAX_WARM_UP_SECONDS`, else a typed error naming `settle-seconds`), by default
-/// [`GPU_SETTLE_SECONDS`].
-pub(crate) fn settle_seconds(requested: Option<f64>) -> Result<f64> {
-    match requested {
-        None => Ok(GPU_SETTLE_SECONDS),
-        Some(settle) if (0.0..=MAX_WARM_UP_SECONDS).contains(&settle) => Ok(settle),
-        Some(settle) => Err(Error::InvalidParameter {
-            name: "settle-seconds",
-            reason: format!("{settle} is not within 0..={MAX_WARM_UP_SECONDS} s"),
-        }),
-    }
-}
-
-/// The workgroup sizes a bench measures a stage in: those `requested`, else the compiled one.
-#[cfg(feature = "vulkan")]
-pub(crate) fn workgroup_size_list(requested: &[u32]) -> Vec<u32> {
-    if requested.is_empty() {
-        vec![crate::shared::bindings::WORKGROUP_SIZE]
-    } else {
-        requested.to_vec()
-    }
-}
 
 /// Runs `run`, which returns the seconds it measured, untimed until those times have stopped
 /// falling for `settle_seconds` ([`CPU_SETTLE_SECONDS`], [`GPU_SETTLE_SECONDS`]): in rounds
@@ -355,11 +326,10 @@ pub fn bench_trace(options: &TraceBenchOptions, mut emit: impl FnMut(&dyn BenchL
         return Err(Error::InvalidParameter { name: "threads", reason: "thread counts must be at least 1".into() });
     }
     check_repeats(options.repeats)?;
+    let trace_sized = |trace| crate::WorkgroupSizes { trace, ..Default::default() };
     #[cfg_attr(not(feature = "vulkan"), allow(unused_variables))]
-    let gpu_settle_seconds = settle_seconds(options.settle_seconds)?;
+    let vulkan_device = options.vulkan_options.device(options.vulkan, trace_sized)?;
     crate::Backend::check_image_size(&crate::cpu::CpuBackend::new(), options.resolution, options.resolution)?;
-    #[cfg(feature = "vulkan")]
-    let vulkan_device = bench_device(options.vulkan, &options.workgroup_sizes, trace_sized)?;
     let scene = Scene::load(&options.scene)?;
     let cpu_scene = CpuScene::build_with(&scene, options.bvh)?;
     emit(&BuildMeasurement {
@@ -415,8 +385,8 @@ pub fn bench_trace(options: &TraceBenchOptions, mut emit: impl FnMut(&dyn BenchL
         }
     }
     #[cfg(feature = "vulkan")]
-    if options.vulkan {
-        bench_vulkan(options, vulkan_device, gpu_settle_seconds, &scene, &kinds, &mut emit)?;
+    if let Some(device) = &vulkan_device {
+        bench_vulkan(options, device, &scene, &kinds, &mut emit)?;
     }
     Ok(())
 }
@@ -427,29 +397,26 @@ pub fn bench_trace(options: &TraceBenchOptions, mut emit: impl FnMut(&dyn BenchL
 #[cfg(feature = "vulkan")]
 fn bench_vulkan(
     options: &TraceBenchOptions,
-    vulkan_device: Option<crate::vulkan::DeviceInfo>,
-    settle_seconds: f64,
+    device: &crate::bench_device::BenchDevice,
     scene: &Scene,
     kinds: &[(&'static str, &RayStream); 3],
     emit: &mut impl FnMut(&dyn BenchLine),
 ) -> Result<()> {
     use crate::{Backend, TraceMethod};
-    let Some(device) = vulkan_device else { return Ok(()) };
     let methods = [
         (TraceMethod::Software, true),
-        (TraceMethod::RayQuery, device.missing_for_ray_query().is_empty()),
-        (TraceMethod::RtPipeline, device.missing_for_rt_pipeline().is_empty()),
+        (TraceMethod::RayQuery, device.info.missing_for_ray_query().is_empty()),
+        (TraceMethod::RtPipeline, device.info.missing_for_rt_pipeline().is_empty()),
     ];
     let methods: Vec<TraceMethod> = methods.iter().filter(|(_, available)| *available).map(|(m, _)| *m).collect();
-    let sizes = workgroup_size_list(&options.workgroup_sizes);
     let no_workgroups = [crate::WorkgroupSizes::default().trace];
     for method in methods {
         let has_workgroups = method != TraceMethod::RtPipeline;
-        for &trace in if has_workgroups { &sizes[..] } else { &no_workgroups } {
-            let mut backend = open_for_bench(&device, trace_sized(trace), Some(method))?;
+        for &size in if has_workgroups { &device.sizes[..] } else { &no_workgroups } {
+            let mut backend = device.open(size, Some(method))?;
             backend.load_scene(scene)?;
             for &(kind, rays) in kinds {
-                let measured = measure(settle_seconds, options.repeats, || {
+                let measured = measure(device.settle_seconds, options.repeats, || {
                     let report = if kind == "shadow" {
                         backend.trace_occlusion(rays).map(|(_, t)| t)
                     } else {
@@ -470,46 +437,6 @@ fn bench_vulkan(
     Ok(())
 }
 
-/// The Vulkan device a bench measures — the one `--device auto` picks, if `vulkan` and there is
-/// one — after checking that it runs each of the `requested` sizes of the stage that `stage`
-/// places a size in: a size it does not run is a typed error before anything is measured.
-#[cfg(feature = "vulkan")]
-pub(crate) fn bench_device(
-    vulkan: bool,
-    requested: &[u32],
-    stage: fn(u32) -> crate::WorkgroupSizes,
-) -> Result<Option<crate::vulkan::DeviceInfo>> {
-    let device = vulkan.then(|| {
-        let mut devices = crate::vulkan::enumerate_devices().ok()?;
-        let index = crate::device::best_vulkan_device(&devices).ok()?;
-        Some(devices.swap_remove(index))
-    });
-    let Some(device) = device.flatten() else { return Ok(None) };
-    for &size in requested {
-        stage(size).check(&device.workgroup_sizes)?;
-    }
-    Ok(Some(device))
-}
-
-/// `device` opened in benchmark mode ([`SUSTAIN_SECONDS`]) with `workgroup_sizes` and trace
-/// method `trace` (`None`: the best it has).
-#[cfg(feature = "vulkan")]
-pub(crate) fn open_for_bench(
-    device: &crate::vulkan::DeviceInfo,
-    workgroup_sizes: crate::WorkgroupSizes,
-    trace: Option<crate::TraceMethod>,
-) -> Result<crate::vulkan::VulkanBackend> {
-    let context =
-        crate::vulkan::ContextOptions { sustain_seconds: SUSTAIN_SECONDS, workgroup_sizes, ..Default::default() };
-    crate::vulkan::VulkanBackend::open(device.index, &context, trace)
-}
-
-/// Workgroup sizes with the trace stage's `trace`, the others compiled.
-#[cfg(feature = "vulkan")]
-fn trace_sized(trace: u32) -> crate::WorkgroupSizes {
-    crate::WorkgroupSizes { trace, ..Default::default() }
-}
-
 /// A line the benchmark emits, printable as JSON or as a table row.
 pub trait BenchLine {
     /// The line as one JSON object.
@@ -523,7 +450,7 @@ impl BenchLine for Measurement {
         serde_json::to_string(self).unwrap_or_default()
     }
     fn row(&self) -> String {
-        let workgroup = self.workgroup_size.map(|size| format!("  workgroup {size}")).unwrap_or_default();
+        let workgroup = crate::bench_device::workgroup_note(self.workgroup_size);
         format!(
             "{:<20} {:<8} {:>2} threads {:>9} rays {:>9.4} s {:>8.2} Mrays/s  ×{}{workgroup}",
             self.implementation, self.kind, self.threads, self.rays, self.seconds, self.mrays_per_s, self.dispatches

@@ -14,7 +14,7 @@
 //! a pass that only reads and writes one `Vec4` per pixel of the same frame, the bandwidth a
 //! memory-bound pass can reach there.
 
-use crate::bench::{measure, settle_seconds, Measured, CPU_SETTLE_SECONDS};
+use crate::bench::{measure, Measured, CPU_SETTLE_SECONDS};
 use crate::denoise::{check_radius, frame_params, DenoiseInput, DenoiseMethod};
 use crate::frame::{check_samples_per_pixel, generate_params_with, sampler_params};
 use crate::shading::{resolve, ShadeAccumulator, ShadeData};
@@ -46,13 +46,9 @@ pub struct DenoiseBenchOptions {
     /// passes tap `2R + 1` pixels each and SVGF's à-trous iterations follow R, so their time
     /// does too (their bytes, counted once per buffer, do not).
     pub denoise_radius: Option<u32>,
-    /// Workgroup sizes of the per-pixel denoise passes to measure the Vulkan device with
-    /// ([`crate::WorkgroupSizes::denoise`]; the bilateral passes keep 64), each a power of two
-    /// the device runs, else a typed error before anything is measured; empty: the compiled 64.
-    pub workgroup_sizes: Vec<u32>,
-    /// How long the Vulkan times must have stopped falling before they are measured, in seconds
-    /// (finite, `0..=30`); `None`: 5 s, for the GPU's clocks to rise.
-    pub settle_seconds: Option<f64>,
+    /// The Vulkan device's workgroup sizes of the per-pixel passes
+    /// ([`crate::WorkgroupSizes::denoise`]; the bilateral passes keep 64) and warm-up.
+    pub vulkan_options: crate::bench_device::VulkanBenchOptions,
 }
 
 /// One pass (or a whole denoiser, `pass = "total"`) on one backend, printed as one JSON line.
@@ -110,8 +106,9 @@ impl DenoiseMeasurement {
     pub fn row(&self) -> String {
         let fraction = self.bandwidth_fraction.map_or(String::new(), |f| format!("  {:.1} % of peak", 100.0 * f));
         let dispatches = self.dispatches.map_or(String::new(), |d| format!("  ×{d}"));
+        let workgroup = crate::bench_device::workgroup_note(self.workgroup_size);
         format!(
-            "{:<40} {:<5} R={:<3} {:<20} {:>9.3} ms  {:>7.2} GB/s  {:>5.1} % of copy{fraction}{dispatches}",
+            "{:<40} {:<5} R={:<3} {:<20} {:>9.3} ms  {:>7.2} GB/s  {:>5.1} % of copy{fraction}{dispatches}{workgroup}",
             self.implementation,
             self.method,
             self.radius,
@@ -244,23 +241,20 @@ pub fn bench_denoise(options: &DenoiseBenchOptions, mut emit: impl FnMut(&Denois
         return Err(crate::Error::InvalidParameter { name: "peak-gbps", reason: "must be finite and > 0".into() });
     }
     check_radius("denoise-radius", options.denoise_radius)?;
-    #[cfg_attr(not(feature = "vulkan"), allow(unused_variables))]
-    let gpu_settle_seconds = settle_seconds(options.settle_seconds)?;
-    #[cfg(feature = "vulkan")]
     let denoise_sized = |denoise| crate::WorkgroupSizes { denoise, ..Default::default() };
-    #[cfg(feature = "vulkan")]
-    let vulkan_device = crate::bench::bench_device(options.vulkan, &options.workgroup_sizes, denoise_sized)?;
+    #[cfg_attr(not(feature = "vulkan"), allow(unused_variables))]
+    let vulkan_device = options.vulkan_options.device(options.vulkan, denoise_sized)?;
     let input = frame_input(options)?;
     let mut cpu = crate::cpu::CpuBackend::new();
     let on_the_cpu = Measuring { peak_gbps: None, settle_seconds: CPU_SETTLE_SECONDS, workgroup_size: None };
     bench_backend(&mut cpu, &input, options, &on_the_cpu, &mut emit)?;
     #[cfg(feature = "vulkan")]
     if let Some(device) = vulkan_device {
-        for denoise in crate::bench::workgroup_size_list(&options.workgroup_sizes) {
-            let mut vulkan = crate::bench::open_for_bench(&device, denoise_sized(denoise), None)?;
+        for &size in &device.sizes {
+            let mut vulkan = device.open(size, None)?;
             let measuring = Measuring {
                 peak_gbps: options.peak_gbps.or_else(|| known_peak_gbps(&vulkan.name())),
-                settle_seconds: gpu_settle_seconds,
+                settle_seconds: device.settle_seconds,
                 workgroup_size: Some(vulkan.workgroup_sizes().denoise),
             };
             bench_backend(&mut vulkan, &input, options, &measuring, &mut emit)?;

@@ -8,7 +8,7 @@
 //! dispatch repeated to keep the GPU busy, `crate::BackendOptions::sustain_seconds`), timed by
 //! GPU timestamps around the dispatch, without the uploads and readbacks around it.
 
-use crate::bench::{check_repeats, measure, settle_seconds, CPU_SETTLE_SECONDS};
+use crate::bench::{check_repeats, measure, CPU_SETTLE_SECONDS};
 use crate::frame::{generate_params, sampler_params};
 use crate::shading::ShadeData;
 use crate::shared::sampling::sampler_kind;
@@ -25,12 +25,8 @@ pub struct ShadeBenchOptions {
     pub repeats: u32,
     /// Also measure the best Vulkan device, if there is one.
     pub vulkan: bool,
-    /// Shade workgroup sizes to measure the Vulkan device with (each a power of two it runs, else
-    /// a typed error before anything is measured); empty: the compiled 64 only.
-    pub workgroup_sizes: Vec<u32>,
-    /// How long the Vulkan times must have stopped falling before they are measured, in seconds
-    /// (finite, `0..=30`); `None`: 5 s, for the GPU's clocks to rise.
-    pub settle_seconds: Option<f64>,
+    /// The Vulkan device's shade workgroup sizes ([`crate::WorkgroupSizes::shade`]) and warm-up.
+    pub vulkan_options: crate::bench_device::VulkanBenchOptions,
 }
 
 /// One measurement, printed as one JSON line.
@@ -66,7 +62,7 @@ impl crate::bench::BenchLine for ShadeMeasurement {
         serde_json::to_string(self).unwrap_or_default()
     }
     fn row(&self) -> String {
-        let workgroup = self.workgroup_size.map(|size| format!("  workgroup {size}")).unwrap_or_default();
+        let workgroup = crate::bench_device::workgroup_note(self.workgroup_size);
         format!(
             "{:<48} {:>8} samples {:>3} lights {:>9.4} s {:>8.2} Msamples/s  ×{}{workgroup}",
             self.implementation, self.samples, self.lights, self.seconds, self.msamples_per_s, self.dispatches
@@ -77,14 +73,11 @@ impl crate::bench::BenchLine for ShadeMeasurement {
 /// Runs the benchmark, handing each line to `emit` as soon as it is measured.
 pub fn bench_shade(options: &ShadeBenchOptions, mut emit: impl FnMut(&ShadeMeasurement)) -> Result<()> {
     check_repeats(options.repeats)?;
-    #[cfg_attr(not(feature = "vulkan"), allow(unused_variables))]
-    let gpu_settle_seconds = settle_seconds(options.settle_seconds)?;
     let (side, mut cpu) = (options.resolution, crate::cpu::CpuBackend::new());
     cpu.check_image_size(side, side)?;
-    #[cfg(feature = "vulkan")]
     let shade_sized = |shade| crate::WorkgroupSizes { shade, ..Default::default() };
-    #[cfg(feature = "vulkan")]
-    let vulkan_device = crate::bench::bench_device(options.vulkan, &options.workgroup_sizes, shade_sized)?;
+    #[cfg_attr(not(feature = "vulkan"), allow(unused_variables))]
+    let vulkan_device = options.vulkan_options.device(options.vulkan, shade_sized)?;
     let scene = Scene::load(&options.scene)?;
     let data = ShadeData::new(&scene)?;
     cpu.load_scene(&scene)?;
@@ -111,10 +104,10 @@ pub fn bench_shade(options: &ShadeBenchOptions, mut emit: impl FnMut(&ShadeMeasu
     shade_on(&mut cpu, CPU_SETTLE_SECONDS, None)?;
     #[cfg(feature = "vulkan")]
     if let Some(device) = vulkan_device {
-        for shade in crate::bench::workgroup_size_list(&options.workgroup_sizes) {
-            let mut backend = crate::bench::open_for_bench(&device, shade_sized(shade), None)?;
+        for &size in &device.sizes {
+            let mut backend = device.open(size, None)?;
             let runs = backend.workgroup_sizes().shade;
-            shade_on(&mut backend, gpu_settle_seconds, Some(runs))?;
+            shade_on(&mut backend, device.settle_seconds, Some(runs))?;
         }
     }
     Ok(())

@@ -9,6 +9,7 @@
 
 pub mod bench;
 pub mod bench_denoise;
+pub mod bench_device;
 pub mod bench_shade;
 #[cfg(feature = "embree")]
 pub mod embree;

@@ -232,6 +232,15 @@ struct VulkanBenchArgs {
     settle_seconds: Option<f64>,
 }
 
+impl VulkanBenchArgs {
+    fn options(self) -> raywave::bench_device::VulkanBenchOptions {
+        raywave::bench_device::VulkanBenchOptions {
+            workgroup_sizes: self.workgroup_sizes,
+            settle_seconds: self.settle_seconds,
+        }
+    }
+}
+
 #[derive(clap::Args)]
 struct ShadeBenchArgs {
     /// The scene shaded: `builtin:cornell`, `builtin:cornell-light-grid` (20 lights), … or a file.
@@ -348,8 +357,7 @@ fn bench_trace_command(args: TraceBenchArgs) -> raywave::Result<()> {
         repeats: args.common.repeats,
         vulkan: !args.common.no_vulkan,
         bvh: args.bvh.parse()?,
-        workgroup_sizes: args.common.vulkan.workgroup_sizes,
-        settle_seconds: args.common.vulkan.settle_seconds,
+        vulkan_options: args.common.vulkan.options(),
     };
     let json = args.common.json;
     bench_trace(&options, |line| print_line(if json { line.json() } else { line.row() }))
@@ -363,8 +371,7 @@ fn bench_shade_command(args: ShadeBenchArgs) -> raywave::Result<()> {
         resolution: args.resolution,
         repeats: args.common.repeats,
         vulkan: !args.common.no_vulkan,
-        workgroup_sizes: args.common.vulkan.workgroup_sizes,
-        settle_seconds: args.common.vulkan.settle_seconds,
+        vulkan_options: args.common.vulkan.options(),
     };
     let json = args.common.json;
     bench_shade(&options, |line| print_line(if json { line.json() } else { line.row() }))
@@ -381,8 +388,7 @@ fn bench_denoise_command(args: DenoiseBenchArgs) -> raywave::Result<()> {
         vulkan: !args.no_vulkan,
         peak_gbps: args.peak_gbps,
         denoise_radius: args.radius.denoise_radius,
-        workgroup_sizes: args.vulkan.workgroup_sizes,
-        settle_seconds: args.vulkan.settle_seconds,
+        vulkan_options: args.vulkan.options(),
     };
     bench_denoise(&options, |line| print_line(if args.json { line.json() } else { line.row() }))
 }

@@ -1,0 +1,93 @@
+//! How every `raywave bench` measures a Vulkan device: which device (the one `--device auto`
+//! picks), the workgroup sizes of the stage the bench sweeps, benchmark mode, and how long the
+//! warm-up waits for the times to settle — all checked before anything is measured, so a bad
+//! option fails before the first line is printed.
+
+use crate::bench::{GPU_SETTLE_SECONDS, MAX_WARM_UP_SECONDS};
+use crate::{Error, Result, WorkgroupSizes};
+
+/// A bench's options for the Vulkan device.
+#[derive(Clone, Debug, Default)]
+pub struct VulkanBenchOptions {
+    /// Workgroup sizes of the stage the bench sweeps ([`WorkgroupSizes`], for occupancy tuning),
+    /// each a power of two the device runs, else a typed error before anything is measured; empty:
+    /// the compiled 64 only.
+    pub workgroup_sizes: Vec<u32>,
+    /// How long the Vulkan times must have stopped falling before they are measured, in seconds
+    /// (finite, `0..=30`); `None`: 5 s, long enough for a GPU to raise its clocks. Shorter only
+    /// for a quick check of the output.
+    pub settle_seconds: Option<f64>,
+}
+
+impl VulkanBenchOptions {
+    /// The device a bench measures — if `enabled` and there is one — with these options checked
+    /// against it; `stage` puts a size in the field of the stage the bench sweeps. The settling
+    /// time is checked with or without a device (or the `vulkan` feature).
+    #[cfg_attr(not(feature = "vulkan"), allow(unused_variables))]
+    pub(crate) fn device(&self, enabled: bool, stage: fn(u32) -> WorkgroupSizes) -> Result<Option<BenchDevice>> {
+        let settle_seconds = match self.settle_seconds {
+            None => GPU_SETTLE_SECONDS,
+            Some(settle) if (0.0..=MAX_WARM_UP_SECONDS).contains(&settle) => settle,
+            Some(settle) => {
+                return Err(Error::InvalidParameter {
+                    name: "settle-seconds",
+                    reason: format!("{settle} is not within 0..={MAX_WARM_UP_SECONDS} s"),
+                })
+            }
+        };
+        #[cfg(feature = "vulkan")]
+        {
+            let best = || {
+                let mut devices = crate::vulkan::enumerate_devices().ok()?;
+                let index = crate::device::best_vulkan_device(&devices).ok()?;
+                Some(devices.swap_remove(index))
+            };
+            let Some(info) = enabled.then(best).flatten() else { return Ok(None) };
+            for &size in &self.workgroup_sizes {
+                stage(size).check(&info.workgroup_sizes)?;
+            }
+            let sizes = match self.workgroup_sizes.as_slice() {
+                [] => vec![crate::shared::bindings::WORKGROUP_SIZE],
+                sizes => sizes.to_vec(),
+            };
+            Ok(Some(BenchDevice { info, settle_seconds, sizes, stage }))
+        }
+        #[cfg(not(feature = "vulkan"))]
+        Ok(None)
+    }
+}
+
+/// The Vulkan device a bench measures, and how ([`VulkanBenchOptions::device`]).
+#[cfg(feature = "vulkan")]
+pub(crate) struct BenchDevice {
+    /// The device.
+    pub info: crate::vulkan::DeviceInfo,
+    /// The warm-up's settling time, seconds.
+    pub settle_seconds: f64,
+    /// The swept stage's workgroup sizes, each checked against the device.
+    pub sizes: Vec<u32>,
+    stage: fn(u32) -> WorkgroupSizes,
+}
+
+/// Without the `vulkan` feature there is no device to measure.
+#[cfg(not(feature = "vulkan"))]
+pub(crate) enum BenchDevice {}
+
+#[cfg(feature = "vulkan")]
+impl BenchDevice {
+    /// The device opened in benchmark mode (`crate::bench::SUSTAIN_SECONDS`) with the swept
+    /// stage in workgroups of `size` and trace method `trace` (`None`: the best it has).
+    pub fn open(&self, size: u32, trace: Option<crate::TraceMethod>) -> Result<crate::vulkan::VulkanBackend> {
+        let context = crate::vulkan::ContextOptions {
+            sustain_seconds: crate::bench::SUSTAIN_SECONDS,
+            workgroup_sizes: (self.stage)(size),
+            ..Default::default()
+        };
+        crate::vulkan::VulkanBackend::open(self.info.index, &context, trace)
+    }
+}
+
+/// A table row's note of the workgroup size it was measured in (empty where there is none).
+pub(crate) fn workgroup_note(workgroup_size: Option<u32>) -> String {
+    workgroup_size.map(|size| format!("  workgroup {size}")).unwrap_or_default()
+}
