@@ -326,9 +326,8 @@ pub fn bench_trace(options: &TraceBenchOptions, mut emit: impl FnMut(&dyn BenchL
         return Err(Error::InvalidParameter { name: "threads", reason: "thread counts must be at least 1".into() });
     }
     check_repeats(options.repeats)?;
-    let trace_sized = |trace| crate::WorkgroupSizes { trace, ..Default::default() };
     #[cfg_attr(not(feature = "vulkan"), allow(unused_variables))]
-    let vulkan_device = options.vulkan_options.device(options.vulkan, trace_sized)?;
+    let vulkan_device = options.vulkan_options.device(options.vulkan, crate::StreamStage::Trace)?;
     crate::Backend::check_image_size(&crate::cpu::CpuBackend::new(), options.resolution, options.resolution)?;
     let scene = Scene::load(&options.scene)?;
     let cpu_scene = CpuScene::build_with(&scene, options.bvh)?;
@@ -409,7 +408,7 @@ fn bench_vulkan(
         (TraceMethod::RtPipeline, device.info.missing_for_rt_pipeline().is_empty()),
     ];
     let methods: Vec<TraceMethod> = methods.iter().filter(|(_, available)| *available).map(|(m, _)| *m).collect();
-    let no_workgroups = [crate::WorkgroupSizes::default().trace];
+    let no_workgroups = [device.preferred.trace];
     for method in methods {
         let has_workgroups = method != TraceMethod::RtPipeline;
         for &size in if has_workgroups { &device.sizes[..] } else { &no_workgroups } {

@@ -241,9 +241,8 @@ pub fn bench_denoise(options: &DenoiseBenchOptions, mut emit: impl FnMut(&Denois
         return Err(crate::Error::InvalidParameter { name: "peak-gbps", reason: "must be finite and > 0".into() });
     }
     check_radius("denoise-radius", options.denoise_radius)?;
-    let denoise_sized = |denoise| crate::WorkgroupSizes { denoise, ..Default::default() };
     #[cfg_attr(not(feature = "vulkan"), allow(unused_variables))]
-    let vulkan_device = options.vulkan_options.device(options.vulkan, denoise_sized)?;
+    let vulkan_device = options.vulkan_options.device(options.vulkan, crate::StreamStage::Denoise)?;
     let input = frame_input(options)?;
     let mut cpu = crate::cpu::CpuBackend::new();
     let on_the_cpu = Measuring { peak_gbps: None, settle_seconds: CPU_SETTLE_SECONDS, workgroup_size: None };

@@ -4,14 +4,14 @@
 //! option fails before the first line is printed.
 
 use crate::bench::{GPU_SETTLE_SECONDS, MAX_WARM_UP_SECONDS};
-use crate::{Error, Result, WorkgroupSizes};
+use crate::{Error, Result, StreamStage};
 
 /// A bench's options for the Vulkan device.
 #[derive(Clone, Debug, Default)]
 pub struct VulkanBenchOptions {
-    /// Workgroup sizes of the stage the bench sweeps ([`WorkgroupSizes`], for occupancy tuning),
-    /// each a power of two the device runs, else a typed error before anything is measured; empty:
-    /// the compiled 64 only.
+    /// Workgroup sizes of the stage the bench sweeps ([`crate::WorkgroupSizes`], for occupancy
+    /// tuning), each a power of two the device runs, else a typed error before anything is
+    /// measured; empty: the stage's preferred size only ([`crate::WorkgroupSizes::preferred_on`]).
     pub workgroup_sizes: Vec<u32>,
     /// How long the Vulkan times must have stopped falling before they are measured, in seconds
     /// (finite, `0..=30`); `None`: 5 s, long enough for a GPU to raise its clocks. Shorter only
@@ -21,10 +21,10 @@ pub struct VulkanBenchOptions {
 
 impl VulkanBenchOptions {
     /// The device a bench measures — if `enabled` and there is one — with these options checked
-    /// against it; `stage` puts a size in the field of the stage the bench sweeps. The settling
-    /// time is checked with or without a device (or the `vulkan` feature).
+    /// against it; `stage` is the stage the bench sweeps, the others run their preferred sizes.
+    /// The settling time is checked with or without a device (or the `vulkan` feature).
     #[cfg_attr(not(feature = "vulkan"), allow(unused_variables))]
-    pub(crate) fn device(&self, enabled: bool, stage: fn(u32) -> WorkgroupSizes) -> Result<Option<BenchDevice>> {
+    pub(crate) fn device(&self, enabled: bool, stage: StreamStage) -> Result<Option<BenchDevice>> {
         let settle_seconds = match self.settle_seconds {
             None => GPU_SETTLE_SECONDS,
             Some(settle) if (0.0..=MAX_WARM_UP_SECONDS).contains(&settle) => settle,
@@ -43,14 +43,15 @@ impl VulkanBenchOptions {
                 Some(devices.swap_remove(index))
             };
             let Some(info) = enabled.then(best).flatten() else { return Ok(None) };
+            let preferred = crate::WorkgroupSizes::preferred_on(&info.workgroup_sizes);
             for &size in &self.workgroup_sizes {
-                stage(size).check(&info.workgroup_sizes)?;
+                preferred.with(stage, size).check(&info.workgroup_sizes)?;
             }
             let sizes = match self.workgroup_sizes.as_slice() {
-                [] => vec![crate::shared::bindings::WORKGROUP_SIZE],
+                [] => vec![preferred.of(stage)],
                 sizes => sizes.to_vec(),
             };
-            Ok(Some(BenchDevice { info, settle_seconds, sizes, stage }))
+            Ok(Some(BenchDevice { info, settle_seconds, sizes, preferred, stage }))
         }
         #[cfg(not(feature = "vulkan"))]
         Ok(None)
@@ -66,7 +67,9 @@ pub(crate) struct BenchDevice {
     pub settle_seconds: f64,
     /// The swept stage's workgroup sizes, each checked against the device.
     pub sizes: Vec<u32>,
-    stage: fn(u32) -> WorkgroupSizes,
+    /// The device's preferred sizes, which the stages not swept run.
+    pub preferred: crate::WorkgroupSizes,
+    stage: StreamStage,
 }
 
 /// Without the `vulkan` feature there is no device to measure.
@@ -80,7 +83,7 @@ impl BenchDevice {
     pub fn open(&self, size: u32, trace: Option<crate::TraceMethod>) -> Result<crate::vulkan::VulkanBackend> {
         let context = crate::vulkan::ContextOptions {
             sustain_seconds: crate::bench::SUSTAIN_SECONDS,
-            workgroup_sizes: (self.stage)(size),
+            workgroup_sizes: Some(self.preferred.with(self.stage, size)),
             ..Default::default()
         };
         crate::vulkan::VulkanBackend::open(self.info.index, &context, trace)

@@ -75,9 +75,8 @@ pub fn bench_shade(options: &ShadeBenchOptions, mut emit: impl FnMut(&ShadeMeasu
     check_repeats(options.repeats)?;
     let (side, mut cpu) = (options.resolution, crate::cpu::CpuBackend::new());
     cpu.check_image_size(side, side)?;
-    let shade_sized = |shade| crate::WorkgroupSizes { shade, ..Default::default() };
     #[cfg_attr(not(feature = "vulkan"), allow(unused_variables))]
-    let vulkan_device = options.vulkan_options.device(options.vulkan, shade_sized)?;
+    let vulkan_device = options.vulkan_options.device(options.vulkan, crate::StreamStage::Shade)?;
     let scene = Scene::load(&options.scene)?;
     let data = ShadeData::new(&scene)?;
     cpu.load_scene(&scene)?;

@@ -223,7 +223,8 @@ struct BenchArgs {
 struct VulkanBenchArgs {
     /// Workgroup sizes of the measured Vulkan stage (trace: the compute methods `sw`, `rayquery`;
     /// denoise: the per-pixel passes, the bilateral ones keep 64), comma-separated powers of two
-    /// the device runs (default: the compiled 64).
+    /// the device runs (default: the stage's preferred size, `WorkgroupSizes::PREFERRED`: shade
+    /// 256, the others 64).
     #[arg(long, value_delimiter = ',')]
     workgroup_sizes: Vec<u32>,
     /// Seconds the Vulkan times must have stopped falling before they are measured (0..=30;

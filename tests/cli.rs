@@ -498,10 +498,10 @@ fn trace_bench_measures_each_workgroup_size_of_each_compute_method() {
     assert_eq!(count("raywave-cpu", None), 3);
     let measured = 2 * 3 * (1 + usize::from(ray_query)) + count("raywave-vk-rtpipe", None) + 2 * 3;
     assert_eq!(lines.len(), measured, "{lines:?}");
-    let compiled = json_lines(&raywave(&quick));
+    let preferred = json_lines(&raywave(&quick));
     assert!(
-        compiled.iter().filter(|l| l["impl"] == "raywave-vk-sw").all(|l| l["workgroup_size"] == 64),
-        "{compiled:?}"
+        preferred.iter().filter(|l| l["impl"] == "raywave-vk-sw").all(|l| l["workgroup_size"] == 64),
+        "{preferred:?}"
     );
     let refused = [&quick[..], &["--workgroup-sizes", "64,96"]].concat();
     assert_refused_before_measuring(&refused, "workgroup_sizes.trace: 96: this device runs the powers of two");
@@ -513,9 +513,7 @@ fn trace_bench_measures_each_workgroup_size_of_each_compute_method() {
 #[cfg(feature = "vulkan")]
 #[test]
 fn shade_bench_measures_the_cpu_and_each_shade_workgroup_size() {
-    if vulkan_devices("shade bench").is_none() {
-        return;
-    }
+    let Some(devices) = vulkan_devices("shade bench") else { return };
     let base = ["bench", "shade", "--scene", "builtin:cornell-light-grid", "--resolution", "16", "--repeats", "1"];
     let quick = [&base[..], &["--settle-seconds", "0.05", "--json"]].concat();
     let out = raywave(&[&quick[..], &["--workgroup-sizes", "32,256"]].concat());
@@ -532,6 +530,11 @@ fn shade_bench_measures_the_cpu_and_each_shade_workgroup_size() {
         assert!(rate.is_finite() && rate > 0.0 && line["seconds"].as_f64().unwrap() > 0.0, "{line:?}");
         assert!(line["dispatches"].as_u64().unwrap() >= 1 && line["warm_up_seconds"].as_f64().unwrap() >= 0.05);
     }
+    // Without sizes: the device's preferred shade size (256 where it runs 256, as lavapipe does).
+    let preferred = json_lines(&raywave(&quick));
+    let sizes: Vec<_> = preferred.iter().map(|l| l["workgroup_size"].as_u64()).collect();
+    let shade_size = |d: &raywave::vulkan::DeviceInfo| raywave::WorkgroupSizes::preferred_on(&d.workgroup_sizes).shade;
+    assert!(devices.iter().any(|d| sizes == [None, Some(u64::from(shade_size(d)))]), "{preferred:?}");
     let refused = [&quick[..], &["--workgroup-sizes", "48"]].concat();
     assert_refused_before_measuring(&refused, "workgroup_sizes.shade: 48: this device runs");
 }

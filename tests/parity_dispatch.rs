@@ -24,7 +24,7 @@ use raywave::shared::sampling::sampler_kind;
 use raywave::shared::{DenoiseParams, GenerateParams, SamplerParams, SamplerProbeParams, WarpParams};
 use raywave::stream::{HitStream, RayStream};
 use raywave::vulkan::{ContextOptions, VulkanBackend, MAX_SUSTAINED_DISPATCHES};
-use raywave::{Backend, Scene, StageReport, WorkgroupSizes};
+use raywave::{Backend, Scene, StageReport, StreamStage, WorkgroupSizes};
 use std::fmt::Debug;
 
 /// The busy time benchmark mode stretches each submission to here: 50 ms, far above what any
@@ -103,14 +103,14 @@ impl Comparison for Resized {
     fn check<T: PartialEq + Debug>(
         &mut self,
         what: &str,
-        compiled: &mut VulkanBackend,
+        preferred: &mut VulkanBackend,
         resized: &mut VulkanBackend,
         mut stage: impl FnMut(&mut VulkanBackend) -> (T, Vec<StageReport>),
     ) {
         let who = format!("{} {what} in workgroups of {:?}", resized.name(), resized.workgroup_sizes());
-        let (expected, expected_reports) = stage(compiled);
+        let (expected, expected_reports) = stage(preferred);
         let (result, reports) = stage(resized);
-        assert!(result == expected, "{who}: the result differs from workgroups of {:?}", compiled.workgroup_sizes());
+        assert!(result == expected, "{who}: the result differs from workgroups of {:?}", preferred.workgroup_sizes());
         assert_eq!(sanitized(&reports), sanitized(&expected_reports), "{who}: sanitized counts");
     }
 }
@@ -299,8 +299,9 @@ fn first_device(test: &str) -> Option<raywave::vulkan::DeviceInfo> {
     device
 }
 
-/// Workgroup sizes to compare with the compiled 64: the smallest every device runs, 128, which
-/// every device runs, and the largest all of them run (lavapipe: 1024; `DeviceInfo::workgroup_sizes`).
+/// Workgroup sizes to compare with the preferred ones (shade 256, the others 64): the smallest
+/// every device runs, 128, which every device runs, and the largest all of them run (lavapipe:
+/// 1024; `DeviceInfo::workgroup_sizes`).
 fn workgroup_sizes(test: &str) -> Vec<u32> {
     let devices = raywave::vulkan::enumerate_devices().unwrap_or_default();
     let largest = devices.iter().filter_map(|d| d.workgroup_sizes.last().copied()).min();
@@ -316,21 +317,21 @@ fn workgroup_sizes(test: &str) -> Vec<u32> {
 #[test]
 fn every_stage_returns_the_same_in_workgroups_of_another_size_on_every_device() {
     let inputs = Inputs::new();
-    let mut compiled = vulkan::every_device("workgroup size");
+    let mut preferred = vulkan::every_device("workgroup size");
     for size in workgroup_sizes("workgroup size") {
-        let options = ContextOptions { workgroup_sizes: WorkgroupSizes::all(size), ..Default::default() };
+        let options = ContextOptions { workgroup_sizes: Some(WorkgroupSizes::all(size)), ..Default::default() };
         let resized = vulkan::every_device_with("workgroup size", &options);
-        assert_eq!(compiled.len(), resized.len());
-        for (compiled, mut resized) in compiled.iter_mut().zip(resized) {
+        assert_eq!(preferred.len(), resized.len());
+        for (preferred, mut resized) in preferred.iter_mut().zip(resized) {
             assert_eq!(resized.workgroup_sizes(), WorkgroupSizes::all(size));
-            for backend in [&mut *compiled, &mut resized] {
+            for backend in [&mut *preferred, &mut resized] {
                 backend.load_scene(&inputs.scene).expect("scene loads");
             }
-            inputs.compare_every_stage(&mut Resized, compiled, &mut resized);
+            inputs.compare_every_stage(&mut Resized, preferred, &mut resized);
             vulkan::assert_clean(&resized);
         }
     }
-    compiled.iter().for_each(vulkan::assert_clean);
+    preferred.iter().for_each(vulkan::assert_clean);
 }
 
 /// A stream too long for one row of 65 535 workgroups of 32 — the x limit lavapipe and many
@@ -346,15 +347,15 @@ fn a_stream_spread_over_several_grid_rows_is_covered_exactly_once() {
     let params = DenoiseParams::new(WIDE.0, WIDE.1);
     let image: Vec<Vec4> =
         (0..WIDE.0 * WIDE.1).map(|i| Vec4::new(i as f32, 1.0 / (i as f32 + 1.0), -3.0, 0.5)).collect();
-    let options = ContextOptions { workgroup_sizes: WorkgroupSizes::all(32), ..Default::default() };
+    let options = ContextOptions { workgroup_sizes: Some(WorkgroupSizes::all(32)), ..Default::default() };
     let mut narrow = vulkan::each_device_with("grid rows", &options);
-    for (compiled, narrow) in vulkan::each_device("grid rows").iter_mut().zip(&mut narrow) {
+    for (preferred, narrow) in vulkan::each_device("grid rows").iter_mut().zip(&mut narrow) {
         let mut compare = Resized;
-        compare.check("generate", compiled, narrow, |d| {
+        compare.check("generate", preferred, narrow, |d| {
             let (rays, report) = d.generate(&generate).expect("generate");
             (rays, vec![report])
         });
-        compare.check("copy probe", compiled, narrow, |d| {
+        compare.check("copy probe", preferred, narrow, |d| {
             let (copy, report) = d.copy_probe(&params, &image).expect("copy probe");
             assert_eq!(copy, image, "{} copy probe", d.name());
             (copy, vec![report])
@@ -365,28 +366,28 @@ fn a_stream_spread_over_several_grid_rows_is_covered_exactly_once() {
 
 /// A workgroup size that is not a power of two, or that the device does not run, is a typed
 /// error naming the stage when the device is opened; sizes it runs are what the backend reports,
-/// stage by stage.
+/// stage by stage, and without sizes it runs the preferred ones.
 #[test]
 fn an_unusable_workgroup_size_is_refused_when_the_device_opens() {
     let Some(device) = first_device("workgroup size check") else { return };
     let largest = *device.workgroup_sizes.last().expect("the device runs 64");
-    let one_stage = |stage: usize, size: u32| {
-        let mut sizes = WorkgroupSizes::default();
-        let field = [&mut sizes.generate, &mut sizes.trace, &mut sizes.shade, &mut sizes.denoise];
-        *field.into_iter().nth(stage).expect("four stages") = size;
-        sizes
-    };
-    for (stage, size) in [(0, 0), (1, 3), (2, 96), (3, 2 * largest)] {
-        let workgroup_sizes = one_stage(stage, size);
-        let options = ContextOptions { workgroup_sizes, ..Default::default() };
-        let name = workgroup_sizes.named()[stage].0;
+    for (stage, size) in StreamStage::ALL.into_iter().zip([0, 3, 96, 2 * largest]) {
+        let workgroup_sizes = WorkgroupSizes::COMPILED.with(stage, size);
+        let options = ContextOptions { workgroup_sizes: Some(workgroup_sizes), ..Default::default() };
+        let name = stage.field_name();
         match VulkanBackend::open(device.index, &options, None) {
             Err(raywave::Error::InvalidParameter { name: refused, .. }) if refused == name => {}
             other => panic!("{name} = {size}: {:?}", other.map(|b| b.name())),
         }
     }
     let mixed = WorkgroupSizes { generate: 32, trace: 128, shade: largest, denoise: 256.min(largest) };
-    let options = ContextOptions { workgroup_sizes: mixed, ..Default::default() };
+    let options = ContextOptions { workgroup_sizes: Some(mixed), ..Default::default() };
     let opened = VulkanBackend::open(device.index, &options, None).expect("every size runs");
     assert_eq!(opened.workgroup_sizes(), mixed);
+    let preferred = VulkanBackend::open(device.index, &ContextOptions::default(), None).expect("opens");
+    assert_eq!(preferred.workgroup_sizes(), WorkgroupSizes::preferred_on(&device.workgroup_sizes));
+    if largest >= 256 {
+        assert_eq!(preferred.workgroup_sizes(), WorkgroupSizes::PREFERRED);
+        assert_eq!(preferred.workgroup_sizes().shade, 256);
+    }
 }

@@ -89,8 +89,9 @@ pub struct BackendOptions {
     /// it: its stages run once, timed by the wall clock.
     pub sustain_seconds: f64,
     /// Invocations per workgroup of each of a Vulkan backend's 1-D stream stages, for occupancy
-    /// tuning (default: the compiled 64). The CPU backend ignores them.
-    pub workgroup_sizes: crate::WorkgroupSizes,
+    /// tuning (`ContextOptions::workgroup_sizes`; `None`: the preferred sizes,
+    /// [`crate::WorkgroupSizes::PREFERRED`]). The CPU backend ignores them.
+    pub workgroup_sizes: Option<crate::WorkgroupSizes>,
 }
 
 /// Opens the backend `choice` names. `Auto` falls back to the CPU when no Vulkan device can be

@@ -25,4 +25,4 @@ pub use device::{open_backend, BackendOptions, DeviceChoice, TraceMethod};
 pub use error::{Error, Result};
 pub use scene::Scene;
 pub use stream::{HitStream, RayStream};
-pub use workgroup::WorkgroupSizes;
+pub use workgroup::{StreamStage, WorkgroupSizes};

@@ -102,10 +102,11 @@ pub struct ContextOptions {
     /// Results do not change: no kernel reads what it writes, and a stage's sanitized counter is
     /// zeroed before the last repetition.
     pub sustain_seconds: f64,
-    /// Invocations per workgroup of each 1-D stream stage, for occupancy tuning (default: the
-    /// compiled 64 everywhere; each a power of two among [`DeviceInfo::workgroup_sizes`], else a
-    /// typed error at open naming the field).
-    pub workgroup_sizes: WorkgroupSizes,
+    /// Invocations per workgroup of each 1-D stream stage, for occupancy tuning: each a power of
+    /// two among [`DeviceInfo::workgroup_sizes`], else a typed error at open naming the field;
+    /// `None` (the default): the sizes measured fastest, [`WorkgroupSizes::PREFERRED`], as far as
+    /// the device runs them ([`WorkgroupSizes::preferred_on`]).
+    pub workgroup_sizes: Option<WorkgroupSizes>,
 }
 
 /// Most dispatches one timed submission repeats in benchmark mode
@@ -132,8 +133,8 @@ pub(crate) struct Core {
     pub scratch_alignment: u64,
     /// [`ContextOptions::sustain_seconds`].
     pub sustain_seconds: f64,
-    /// Invocations per workgroup of the 1-D stream stages ([`ContextOptions::workgroup_sizes`],
-    /// checked against the device).
+    /// Invocations per workgroup of the 1-D stream stages ([`ContextOptions::workgroup_sizes`]
+    /// or the preferred ones, checked against the device).
     pub workgroup_sizes: WorkgroupSizes,
 }
 
@@ -360,7 +361,9 @@ pub(crate) fn open(index: usize, options: &ContextOptions) -> Result<Arc<Core>> 
     };
     // SAFETY: plain query of a physical device of this instance.
     let device_limits = unsafe { instance.get_physical_device_properties(physical).limits };
-    if let Err(e) = options.workgroup_sizes.check(&stream_workgroup_sizes(&device_limits)) {
+    let runnable = stream_workgroup_sizes(&device_limits);
+    let workgroup_sizes = options.workgroup_sizes.unwrap_or_else(|| WorkgroupSizes::preferred_on(&runnable));
+    if let Err(e) = workgroup_sizes.check(&runnable) {
         destroy_instance(&instance, &debug);
         return Err(e);
     }
@@ -407,7 +410,7 @@ pub(crate) fn open(index: usize, options: &ContextOptions) -> Result<Arc<Core>> 
                 limits,
                 scratch_alignment,
                 sustain_seconds: options.sustain_seconds,
-                workgroup_sizes: options.workgroup_sizes,
+                workgroup_sizes,
             }))
         }
         Err(e) => {
