@@ -507,6 +507,14 @@ fn vulkan_devices() -> Result<Vec<serde_json::Value>, String> {
     raywave::vulkan::enumerate_devices().map_err(|e| e.to_string()).map(|list| {
         list.into_iter()
             .map(|d| {
+                let preferred = raywave::WorkgroupSizes::preferred_on(&d.workgroup_sizes);
+                let preferred: serde_json::Map<_, _> = raywave::StreamStage::ALL
+                    .into_iter()
+                    .map(|stage| {
+                        let name = stage.field_name().trim_start_matches("workgroup_sizes.");
+                        (name.to_owned(), preferred.of(stage).into())
+                    })
+                    .collect();
                 serde_json::json!({
                     "backend": "vulkan", "index": d.index, "name": d.name, "type": d.device_type,
                     "api_version": d.api_version, "ray_query": d.ray_query,
@@ -514,6 +522,7 @@ fn vulkan_devices() -> Result<Vec<serde_json::Value>, String> {
                     "ray_tracing_pipeline": d.ray_tracing_pipeline,
                     "buffer_device_address": d.buffer_device_address, "timestamps": d.timestamps,
                     "can_trace": d.missing_for_ray_query().is_empty(), "workgroup_sizes": d.workgroup_sizes,
+                    "preferred_workgroup_sizes": preferred,
                 })
             })
             .collect()

@@ -59,6 +59,16 @@ fn devices_lists_the_cpu_and_json_is_valid() {
         assert!(sizes.windows(2).all(|w| w[0] < w[1]), "{device}");
         let range = format!("workgroup_sizes={}..={}", sizes[0], sizes[sizes.len() - 1]);
         assert!(text.contains(&range), "{range} in {text}");
+        // What a backend opened without sizes runs there, stage by stage.
+        let sizes: Vec<u32> = sizes.iter().map(|&s| s as u32).collect();
+        let preferred = raywave::WorkgroupSizes::preferred_on(&sizes);
+        let expected = serde_json::json!({
+            "generate": preferred.generate, "trace": preferred.trace, "shade": preferred.shade, "denoise": preferred.denoise,
+        });
+        assert_eq!(device["preferred_workgroup_sizes"], expected, "{device}");
+        if sizes.contains(&256) {
+            assert_eq!(device["preferred_workgroup_sizes"]["shade"], 256, "{device}");
+        }
     }
 }
 
