@@ -156,8 +156,20 @@ const FALLING_FRACTION: f64 = 0.02;
 /// device gives — on a fresh machine, where compiling the pipelines outlasted them (README).
 /// 50 ms of back-to-back dispatches per submission keep it mostly busy, so that it raises its
 /// clocks ([`GPU_SETTLE_SECONDS`]) and holds them.
-#[cfg(feature = "vulkan")]
 pub(crate) const SUSTAIN_SECONDS: f64 = 0.05;
+
+/// `settle_seconds` (`--settle-seconds`) if it is a settling time the warm-up takes:
+/// finite, within `0..=`[`MAX_WARM_UP_SECONDS`]; else a typed error naming `settle-seconds`.
+pub(crate) fn check_settle_seconds(settle_seconds: f64) -> Result<f64> {
+    if (0.0..=MAX_WARM_UP_SECONDS).contains(&settle_seconds) {
+        Ok(settle_seconds)
+    } else {
+        Err(Error::InvalidParameter {
+            name: "settle-seconds",
+            reason: format!("{settle_seconds} is not within 0..={MAX_WARM_UP_SECONDS} s"),
+        })
+    }
+}
 
 /// Runs `run`, which returns the seconds it measured, untimed until those times have stopped
 /// falling for `settle_seconds` ([`CPU_SETTLE_SECONDS`], [`GPU_SETTLE_SECONDS`]): in rounds

@@ -3,8 +3,8 @@
 //! warm-up waits for the times to settle — all checked before anything is measured, so a bad
 //! option fails before the first line is printed.
 
-use crate::bench::{GPU_SETTLE_SECONDS, MAX_WARM_UP_SECONDS};
-use crate::{Error, Result, StreamStage};
+use crate::bench::{check_settle_seconds, GPU_SETTLE_SECONDS};
+use crate::{Result, StreamStage};
 
 /// A bench's options for the Vulkan device.
 #[derive(Clone, Debug, Default)]
@@ -25,16 +25,7 @@ impl VulkanBenchOptions {
     /// The settling time is checked with or without a device (or the `vulkan` feature).
     #[cfg_attr(not(feature = "vulkan"), allow(unused_variables))]
     pub(crate) fn device(&self, enabled: bool, stage: StreamStage) -> Result<Option<BenchDevice>> {
-        let settle_seconds = match self.settle_seconds {
-            None => GPU_SETTLE_SECONDS,
-            Some(settle) if (0.0..=MAX_WARM_UP_SECONDS).contains(&settle) => settle,
-            Some(settle) => {
-                return Err(Error::InvalidParameter {
-                    name: "settle-seconds",
-                    reason: format!("{settle} is not within 0..={MAX_WARM_UP_SECONDS} s"),
-                })
-            }
-        };
+        let settle_seconds = self.settle_seconds.map(check_settle_seconds).transpose()?.unwrap_or(GPU_SETTLE_SECONDS);
         #[cfg(feature = "vulkan")]
         {
             let best = || {

@@ -312,6 +312,11 @@ struct RenderArgs {
     /// Enable the Vulkan validation layers (must be installed).
     #[arg(long)]
     validate: bool,
+    /// Steady-state stage times: render untimed frames, in benchmark mode, until their times
+    /// have not fallen for S seconds (0..=30), then time one more (default: one frame, whose
+    /// single dispatches a GPU may run at idle clocks). The image is the same.
+    #[arg(long, value_name = "S")]
+    settle_seconds: Option<f64>,
     /// Output PNG file.
     #[arg(long)]
     out: PathBuf,
@@ -462,6 +467,7 @@ fn render_command(args: RenderArgs) -> raywave::Result<()> {
         denoise_radius: args.radius.denoise_radius,
         analytic_residual: args.analytic_residual,
         backend: BackendOptions { validation: args.validate, trace, ..Default::default() },
+        settle_seconds: args.settle_seconds,
     };
     let report = render(&options)?;
     print_line(format!("backend  {}", report.backend));
@@ -488,9 +494,19 @@ fn render_command(args: RenderArgs) -> raywave::Result<()> {
         report.hits
     ));
     print_line(format!("streams  {} bytes/pixel", report.stream_bytes_per_pixel));
+    print_line(match report.warm_up_seconds {
+        None => "timing   one frame (a GPU may have run it at idle clocks: --settle-seconds S for steady state)".into(),
+        Some(warm_up) => {
+            format!("timing   steady state: the frame after {warm_up:.1} s of warm-up frames")
+        }
+    });
     for t in &report.timings {
         let sanitized = if t.sanitized > 0 { format!("  ({} sanitized)", t.sanitized) } else { String::new() };
-        print_line(format!("stage    {:<9} {:>10.3} ms{sanitized}", t.stage, t.seconds * 1e3));
+        let dispatches = match report.warm_up_seconds {
+            Some(_) => format!("  ({} dispatch{} timed)", t.dispatches, if t.dispatches == 1 { "" } else { "es" }),
+            None => String::new(),
+        };
+        print_line(format!("stage    {:<9} {:>10.3} ms{dispatches}{sanitized}", t.stage, t.seconds * 1e3));
     }
     let sanitized = raywave::StageReport::total_sanitized(&report.timings);
     if sanitized > 0 {

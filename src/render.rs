@@ -2,13 +2,16 @@
 //! on the chosen backend → TV-denoise of `S_N`, `U_N` and the ratio estimator's composite
 //! `U · den(S_N)/den(U_N)` (or another denoiser, or none) → image files.
 
-use crate::{open_backend, BackendOptions, DeviceChoice, Result, Scene, StageReport};
+use crate::bench::{check_settle_seconds, warm_up, SUSTAIN_SECONDS};
+use crate::{open_backend, Backend, BackendOptions, DeviceChoice, Result, Scene, StageReport};
+use glam::Vec3;
 use image::ImageFormat;
+use image::RgbImage;
 use raywave_host::denoise::{check_radius, frame_params, rgb, DenoiseInput, DenoiseMethod};
 use raywave_host::frame::{check_samples_per_pixel, generate_params_with, sampler_params};
 use raywave_host::shading::{resolve, ShadeAccumulator, ShadeData};
 use raywave_host::visualize::{normal_depth_image, persist_all, srgb_image, PendingOutput};
-use raywave_shared::DenoiseParams;
+use raywave_shared::{DenoiseParams, SamplerParams};
 use std::path::PathBuf;
 
 /// What the image shows.
@@ -75,6 +78,13 @@ pub struct RenderOptions {
     pub analytic_residual: bool,
     /// Backend options (validation layers).
     pub backend: BackendOptions,
+    /// Steady-state stage times: render untimed frames until their summed stage times have not
+    /// fallen for this many seconds (`0..=30`, else a typed error), in benchmark mode
+    /// ([`BackendOptions::sustain_seconds`] at least the benches' 50 ms), then report one more.
+    /// `None`: one frame, whose single dispatches a GPU may run at idle clocks — on an NVIDIA
+    /// H100 a render right after other work measured every stage 4–6× slower than one inside
+    /// the clocks' boost (README, "On an NVIDIA H100"). The image is the same either way.
+    pub settle_seconds: Option<f64>,
 }
 
 /// What a render did.
@@ -93,21 +103,28 @@ pub struct RenderReport {
     pub unsupported_emitters: usize,
     /// Samples per pixel traced: `spp` for the lit view, 1 for the normals view.
     pub samples_per_pixel: u32,
-    /// Per-stage times and sanitized counts, summed over the samples.
+    /// Per-stage times, sanitized counts and timed dispatches, summed over the samples (in
+    /// benchmark mode, [`RenderOptions::settle_seconds`], each time is the mean of its
+    /// dispatches).
     pub timings: Vec<StageReport>,
     /// Camera rays that hit geometry (over all samples).
     pub hits: usize,
     /// Bytes of SoA streams one sample pass uses per pixel (rays, hits, the shade stream, shadow
     /// rays, occlusion).
     pub stream_bytes_per_pixel: u64,
+    /// Seconds of untimed warm-up frames before the timed one ([`RenderOptions::settle_seconds`];
+    /// `None`: the one frame was timed).
+    pub warm_up_seconds: Option<f64>,
 }
 
-/// Adds `report` to the summed report of its stage (appending it the first time).
+/// Adds `report` to the summed report of its stage (appending it the first time): seconds,
+/// sanitized values and timed dispatches.
 fn add_report(timings: &mut Vec<StageReport>, report: &StageReport) {
     match timings.iter_mut().find(|t| t.stage == report.stage) {
         Some(t) => {
             t.seconds += report.seconds;
             t.sanitized += report.sanitized;
+            t.dispatches += report.dispatches;
         }
         None => timings.push(report.clone()),
     }
@@ -155,19 +172,25 @@ fn check_options(options: &RenderOptions) -> Result<()> {
 /// complete, or not at all.
 pub fn render(options: &RenderOptions) -> Result<RenderReport> {
     check_options(options)?;
+    let settle_seconds = options.settle_seconds.map(check_settle_seconds).transpose()?;
     let scene = Scene::load(&options.scene)?;
     let output = PendingOutput::create(&options.out, ImageFormat::Png)?;
     let exr = options.exr.as_deref().map(|path| PendingOutput::create(path, ImageFormat::OpenExr)).transpose()?;
     let stochastic =
         options.stochastic.as_deref().map(|path| PendingOutput::create(path, ImageFormat::Png)).transpose()?;
-    let mut backend = open_backend(options.device, &options.backend)?;
+    let backend_options = match settle_seconds {
+        Some(_) => BackendOptions {
+            sustain_seconds: options.backend.sustain_seconds.max(SUSTAIN_SECONDS),
+            ..options.backend.clone()
+        },
+        None => options.backend.clone(),
+    };
+    let mut backend = open_backend(options.device, &backend_options)?;
     backend.check_image_size(options.width, options.height)?;
     check_samples_per_pixel("spp", options.width, options.height, options.spp)?;
     backend.load_scene(&scene)?;
     let spp = if options.view == RenderView::Lit { options.spp } else { 1 };
     let sampler = sampler_params(options.sampler, options.seed, options.width, options.height, spp);
-    let (width, height) = (options.width, options.height);
-    let pixels = (width * height) as usize;
     let data = if options.view == RenderView::Lit {
         let mut data = ShadeData::new(&scene)?;
         data.analytic_residual = options.analytic_residual;
@@ -175,67 +198,125 @@ pub fn render(options: &RenderOptions) -> Result<RenderReport> {
     } else {
         None
     };
-    let backend_name = backend.name();
-    let report = |timings, hits, stream_bytes: u64| RenderReport {
-        backend: backend_name.clone(),
+    let frame = Frame { scene: &scene, options, data: data.as_ref(), sampler: &sampler };
+    let (rendered, warm_up_seconds) = match settle_seconds {
+        None => (frame.render(backend.as_mut())?, None),
+        Some(settle) => {
+            let warm_up_seconds = warm_up(settle, || Ok(frame.render(backend.as_mut())?.seconds()))?;
+            (frame.render(backend.as_mut())?, Some(warm_up_seconds))
+        }
+    };
+    let report = RenderReport {
+        backend: backend.name(),
         triangles: scene.triangle_count(),
         dropped_degenerate: scene.dropped_degenerate(),
         lights: scene.lights().len(),
         unsupported_emitters: scene.unsupported_emitters(),
         samples_per_pixel: spp,
-        timings,
-        hits,
-        stream_bytes_per_pixel: stream_bytes / pixels as u64,
+        hits: rendered.hits,
+        stream_bytes_per_pixel: rendered.stream_bytes / u64::from(options.width * options.height),
+        timings: rendered.timings,
+        warm_up_seconds,
     };
-    let mut accumulator = ShadeAccumulator::new(pixels);
-    // The denoiser's G-buffer: the surfaces of the first sample's camera rays.
-    let mut surfaces = Vec::new();
-    let mut timings = Vec::new();
-    let mut hits = 0;
-    let mut stream_bytes = 0;
-    for sample_index in 0..spp {
-        let mut params = generate_params_with(&scene, width, height, sample_index, sampler);
-        params.lens_radius = options.lens_radius;
-        params.focus_distance = options.focus_distance.unwrap_or(params.focus_distance);
-        let frame = backend.render(&params)?;
-        for t in &frame.timings {
-            add_report(&mut timings, t);
+    let (width, height) = (options.width, options.height);
+    match rendered.image {
+        FrameImage::Normals(image) => output.finish_image(&image)?,
+        FrameImage::Lit { color, accumulator } => {
+            let mut written = vec![output.write_image(&srgb_image(&color, width, height))?];
+            if let Some(exr) = exr {
+                written.push(exr.write_linear_rgb(&color, width, height)?);
+            }
+            if let Some(stochastic) = stochastic {
+                written.push(stochastic.write_image(&srgb_image(&accumulator.stochastic_image(), width, height))?);
+            }
+            persist_all(written)?;
         }
-        hits += frame.hits.primitive.iter().filter(|&&p| p != crate::shared::stream::NO_HIT).count();
-        stream_bytes = frame.rays.bytes() + frame.hits.bytes();
-        let Some(data) = &data else {
-            output.finish_image(&normal_depth_image(&scene, &frame.rays, &frame.hits, width, height))?;
-            return Ok(report(timings, hits, stream_bytes));
+    }
+    Ok(report)
+}
+
+/// One frame of a render: everything but the backend, which each run borrows.
+struct Frame<'a> {
+    scene: &'a Scene,
+    options: &'a RenderOptions,
+    /// The shading inputs of the lit view (`None`: the normals view).
+    data: Option<&'a ShadeData>,
+    sampler: &'a SamplerParams,
+}
+
+/// What one frame produced.
+struct RenderedFrame {
+    /// Per-stage times and sanitized counts, summed over the samples.
+    timings: Vec<StageReport>,
+    /// Camera rays that hit geometry, over all samples.
+    hits: usize,
+    /// Bytes of SoA streams one sample pass used.
+    stream_bytes: u64,
+    image: FrameImage,
+}
+
+impl RenderedFrame {
+    /// The frame's summed stage seconds, which the warm-up watches fall.
+    fn seconds(&self) -> f64 {
+        self.timings.iter().map(|t| t.seconds).sum()
+    }
+}
+
+/// The image of a frame, by view.
+enum FrameImage {
+    /// The normals view, one sample per pixel.
+    Normals(RgbImage),
+    /// The lit view: the denoised colour (linear RGB) and the accumulated estimates behind it.
+    Lit { color: Vec<Vec3>, accumulator: ShadeAccumulator },
+}
+
+impl Frame<'_> {
+    /// Renders the frame on `backend`: per sample generate → trace (→ shade → occlusion), then
+    /// the denoiser.
+    fn render(&self, backend: &mut dyn Backend) -> Result<RenderedFrame> {
+        let (width, height) = (self.options.width, self.options.height);
+        let pixels = (width * height) as usize;
+        let spp = if self.data.is_some() { self.options.spp } else { 1 };
+        let mut accumulator = ShadeAccumulator::new(pixels);
+        // The denoiser's G-buffer: the surfaces of the first sample's camera rays.
+        let mut surfaces = Vec::new();
+        let mut timings = Vec::new();
+        let (mut hits, mut stream_bytes) = (0, 0);
+        for sample_index in 0..spp {
+            let mut params = generate_params_with(self.scene, width, height, sample_index, *self.sampler);
+            params.lens_radius = self.options.lens_radius;
+            params.focus_distance = self.options.focus_distance.unwrap_or(params.focus_distance);
+            let frame = backend.render(&params)?;
+            for t in &frame.timings {
+                add_report(&mut timings, t);
+            }
+            hits += frame.hits.primitive.iter().filter(|&&p| p != crate::shared::stream::NO_HIT).count();
+            stream_bytes = frame.rays.bytes() + frame.hits.bytes();
+            let Some(data) = self.data else {
+                let image = normal_depth_image(self.scene, &frame.rays, &frame.hits, width, height);
+                return Ok(RenderedFrame { timings, hits, stream_bytes, image: FrameImage::Normals(image) });
+            };
+            if sample_index == 0 {
+                surfaces = resolve(data, &frame.rays, &frame.hits);
+            }
+            let shade_params = data.params(*self.sampler, width, height, sample_index);
+            let (pass_timings, pass_bytes) =
+                accumulator.shade_pass(backend, &shade_params, data, &frame.rays, &frame.hits)?;
+            for t in pass_timings {
+                add_report(&mut timings, &t);
+            }
+            stream_bytes += pass_bytes;
+        }
+        let params = DenoiseParams {
+            seed: self.options.seed,
+            samples_per_pixel: accumulator.samples(),
+            ..frame_params(width, height, self.options.denoise_radius)
         };
-        if sample_index == 0 {
-            surfaces = resolve(data, &frame.rays, &frame.hits);
-        }
-        let shade_params = data.params(sampler, width, height, sample_index);
-        let (pass_timings, pass_bytes) =
-            accumulator.shade_pass(backend.as_mut(), &shade_params, data, &frame.rays, &frame.hits)?;
+        let (color, pass_timings) =
+            backend.denoise(self.options.denoise, &params, &DenoiseInput::new(&surfaces, &accumulator))?;
         for t in pass_timings {
             add_report(&mut timings, &t);
         }
-        stream_bytes += pass_bytes;
+        Ok(RenderedFrame { timings, hits, stream_bytes, image: FrameImage::Lit { color: rgb(&color), accumulator } })
     }
-    let params = DenoiseParams {
-        seed: options.seed,
-        samples_per_pixel: accumulator.samples(),
-        ..frame_params(width, height, options.denoise_radius)
-    };
-    let (color, pass_timings) =
-        backend.denoise(options.denoise, &params, &DenoiseInput::new(&surfaces, &accumulator))?;
-    for t in pass_timings {
-        add_report(&mut timings, &t);
-    }
-    let image = rgb(&color);
-    let mut written = vec![output.write_image(&srgb_image(&image, width, height))?];
-    if let Some(exr) = exr {
-        written.push(exr.write_linear_rgb(&image, width, height)?);
-    }
-    if let Some(stochastic) = stochastic {
-        written.push(stochastic.write_image(&srgb_image(&accumulator.stochastic_image(), width, height))?);
-    }
-    persist_all(written)?;
-    Ok(report(timings, hits, stream_bytes))
 }

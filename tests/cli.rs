@@ -120,6 +120,19 @@ fn vulkan_and_cpu_renders_agree() {
     assert!(vk.status.success(), "{}", stderr(&vk));
     assert!(!stderr(&vk).contains("[vulkan"), "validation messages: {}", stderr(&vk));
     assert!(!stderr(&vk).contains("non-finite"), "sanitized values: {}", stderr(&vk));
+    let stdout = String::from_utf8_lossy(&vk.stdout);
+    assert!(stdout.contains("timing   one frame"), "{stdout}");
+    // Steady-state times (warm-up frames in benchmark mode) change the times, not the image.
+    let (steady, steady_path) = render(dir.path(), "steady.png", &["--device", "vulkan", "--settle-seconds", "0.05"]);
+    assert!(steady.status.success(), "{}", stderr(&steady));
+    let stdout = String::from_utf8_lossy(&steady.stdout);
+    assert!(stdout.contains("timing   steady state: the frame after"), "{stdout}");
+    // In benchmark mode: each stage's time the mean of dispatches repeated back to back, more
+    // than the one a sample of the 4 spp that one frame times.
+    let shade = stdout.lines().find(|l| l.starts_with("stage    shade")).unwrap_or_default();
+    let dispatches: u32 = shade.split("  (").nth(1).and_then(|s| s.split(' ').next()?.parse().ok()).unwrap_or(0);
+    assert!(dispatches > 4, "{stdout}");
+    assert_eq!(std::fs::read(&steady_path).unwrap(), std::fs::read(&vk_path).unwrap(), "the steady-state image");
     let a = image::open(cpu_path).unwrap().to_rgb8();
     let b = image::open(vk_path).unwrap().to_rgb8();
     // The parity tolerance (≥ 99.99 % same primitive, t within 1e-5) allows a pixel in 10 000 to
@@ -194,6 +207,8 @@ fn bad_input_is_a_typed_error_without_output() {
         "vertex 1 at [10000000000000000000, 0, 0] is out of range",
     );
     assert_rejected(&["--device", "cpu", "--aperture", "1e20"], "aperture: 100000000000000000000 is outside");
+    assert_rejected(&["--device", "cpu", "--settle-seconds", "31"], "settle-seconds: 31 is not within 0..=30 s");
+    assert_rejected(&["--device", "cpu", "--settle-seconds", "NaN"], "settle-seconds: NaN is not within");
     assert_rejected(&["--device", "cpu", "--aperture", "0.1", "--focus", "1e19"], "focus");
     let normals_exr = dir.path().join("normals.exr");
     assert_rejected(&["--device", "cpu", "--view", "normals", "--exr", normals_exr.to_str().unwrap()], "normals view");
