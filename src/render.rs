@@ -82,8 +82,8 @@ pub struct RenderOptions {
     /// fallen for this many seconds (`0..=30`, else a typed error), in benchmark mode
     /// ([`BackendOptions::sustain_seconds`] at least the benches' 50 ms), then report one more.
     /// `None`: one frame, whose single dispatches a GPU may run at idle clocks — on an NVIDIA
-    /// H100 a render right after other work measured every stage 4–6× slower than one inside
-    /// the clocks' boost (README, "On an NVIDIA H100"). The image is the same either way.
+    /// H100 two of three one-frame renders measured every stage about 5× slower than the steady
+    /// state (README, "On an NVIDIA H100"). The image is the same either way.
     pub settle_seconds: Option<f64>,
 }
 
