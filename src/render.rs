@@ -5,8 +5,7 @@
 use crate::bench::{check_settle_seconds, warm_up, SUSTAIN_SECONDS};
 use crate::{open_backend, Backend, BackendOptions, DeviceChoice, Result, Scene, StageReport};
 use glam::Vec3;
-use image::ImageFormat;
-use image::RgbImage;
+use image::{ImageFormat, RgbImage};
 use raywave_host::denoise::{check_radius, frame_params, rgb, DenoiseInput, DenoiseMethod};
 use raywave_host::frame::{check_samples_per_pixel, generate_params_with, sampler_params};
 use raywave_host::shading::{resolve, ShadeAccumulator, ShadeData};
@@ -198,7 +197,7 @@ pub fn render(options: &RenderOptions) -> Result<RenderReport> {
     } else {
         None
     };
-    let frame = Frame { scene: &scene, options, data: data.as_ref(), sampler: &sampler };
+    let frame = Frame { scene: &scene, options, data: data.as_ref(), sampler: &sampler, spp };
     let (rendered, warm_up_seconds) = match settle_seconds {
         None => (frame.render(backend.as_mut())?, None),
         Some(settle) => {
@@ -242,6 +241,8 @@ struct Frame<'a> {
     /// The shading inputs of the lit view (`None`: the normals view).
     data: Option<&'a ShadeData>,
     sampler: &'a SamplerParams,
+    /// Samples per pixel: the options' for the lit view, 1 for the normals view.
+    spp: u32,
 }
 
 /// What one frame produced.
@@ -276,13 +277,12 @@ impl Frame<'_> {
     fn render(&self, backend: &mut dyn Backend) -> Result<RenderedFrame> {
         let (width, height) = (self.options.width, self.options.height);
         let pixels = (width * height) as usize;
-        let spp = if self.data.is_some() { self.options.spp } else { 1 };
         let mut accumulator = ShadeAccumulator::new(pixels);
         // The denoiser's G-buffer: the surfaces of the first sample's camera rays.
         let mut surfaces = Vec::new();
         let mut timings = Vec::new();
         let (mut hits, mut stream_bytes) = (0, 0);
-        for sample_index in 0..spp {
+        for sample_index in 0..self.spp {
             let mut params = generate_params_with(self.scene, width, height, sample_index, *self.sampler);
             params.lens_radius = self.options.lens_radius;
             params.focus_distance = self.options.focus_distance.unwrap_or(params.focus_distance);
