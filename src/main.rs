@@ -61,6 +61,11 @@ struct ErrorVsTimeArgs {
     /// Also draw the curves into this PNG file.
     #[arg(long)]
     plot: Option<PathBuf>,
+    /// Steady-state milliseconds: per scene, after its reference, run 1-spp frames untimed in
+    /// benchmark mode until their times have not fallen for S seconds (0..=30), then measure in
+    /// benchmark mode (default: each stage once, as a GPU may run it at idle clocks).
+    #[arg(long, value_name = "S")]
+    settle_seconds: Option<f64>,
     #[command(flatten)]
     radius: DenoiseRadiusArg,
 }
@@ -427,7 +432,8 @@ fn report_error_vs_time_command(args: ErrorVsTimeArgs) -> raywave::Result<()> {
         .transpose()?;
     let json = args.common.json;
     let (report, mut backend) = args.common.open(args.resolution)?;
-    let options = ErrorVsTimeOptions { report, denoise_radius: args.radius.denoise_radius };
+    let options =
+        ErrorVsTimeOptions { report, denoise_radius: args.radius.denoise_radius, settle_seconds: args.settle_seconds };
     let lines = report_error_vs_time(backend.as_mut(), &options, |line| {
         print_line(if json { line.json() } else { line.row() })
     })?;

@@ -267,13 +267,14 @@ fn lightless_scenes_warn_in_render_and_are_refused_by_reports() {
 /// frame is shaded or the reference converged).
 #[test]
 fn bench_and_report_options_out_of_range_are_typed_errors() {
-    let cases: [(&[&str], &str); 14] = [
+    let cases: [(&[&str], &str); 15] = [
         (&["bench", "denoise", "--no-vulkan", "--repeats", "0"], "repeats: must be at least 1"),
         (&["bench", "denoise", "--no-vulkan", "--spp", "0"], "spp: 0 is outside"),
         (&["bench", "denoise", "--no-vulkan", "--spp", "8192"], "exceed the sampler's 32-bit index"),
         (&["bench", "denoise", "--no-vulkan", "--peak-gbps=-5"], "peak-gbps: must be finite and > 0"),
         (&["bench", "denoise", "--no-vulkan", "--denoise-radius", "0"], "denoise-radius: radius 0 outside 1..=10"),
         (&["report", "error-vs-time", "--denoise-radius", "11"], "denoise-radius: radius 11 outside 1..=10"),
+        (&["report", "error-vs-time", "--settle-seconds", "31"], "settle-seconds: 31 is not within 0..=30 s"),
         (&["bench", "trace", "--no-vulkan", "--repeats", "0"], "repeats: must be at least 1"),
         (&["bench", "trace", "--no-vulkan", "--resolution", "0"], "at least 1"),
         (&["bench", "trace", "--settle-seconds", "31"], "settle-seconds: 31 is not within 0..=30 s"),
@@ -384,6 +385,30 @@ fn shade_report_prints_json_lines() {
         assert!(["visibility-floor", "ratio", "stochastic"].contains(&line["estimator"].as_str().unwrap()));
         assert!(["all", "shadow", "lit"].contains(&line["region"].as_str().unwrap()));
         assert!(line["rmse"].as_f64().unwrap().is_finite());
+    }
+}
+
+/// `report error-vs-time --settle-seconds` on a Vulkan device: the same errors, bit for bit, with
+/// milliseconds measured in benchmark mode after a warm-up that each line states.
+#[cfg(feature = "vulkan")]
+#[test]
+fn error_vs_time_in_steady_state_measures_the_same_errors() {
+    if vulkan_devices("steady-state error-vs-time").is_none() {
+        return;
+    }
+    let args = ["report", "error-vs-time", "--scenes", "builtin:cornell", "--resolution", "16"];
+    let args = [&args[..], &["--reference-spp", "16", "--max-spp", "2", "--reps", "1", "--device", "vulkan", "--json"]];
+    let once = json_lines(&raywave(&args.concat()));
+    let steady = json_lines(&raywave(&[&args.concat()[..], &["--settle-seconds", "0.05"]].concat()));
+    assert_eq!(once.len(), 2 * 5, "{once:?}");
+    assert_eq!(steady.len(), once.len(), "{steady:?}");
+    for (once, steady) in once.iter().zip(&steady) {
+        for key in ["scene", "spp", "method", "relmse", "relmse_shadow", "relmse_lit", "flip"] {
+            assert_eq!(once[key], steady[key], "{key}: {once} against {steady}");
+        }
+        assert!(once.get("warm_up_seconds").is_none(), "{once}");
+        assert!(steady["warm_up_seconds"].as_f64().unwrap() >= 0.05, "{steady}");
+        assert!(steady["ms"].as_f64().unwrap() > 0.0, "{steady}");
     }
 }
 

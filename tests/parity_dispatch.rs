@@ -19,6 +19,8 @@ use glam::Vec4;
 use raywave::cpu::CpuBackend;
 use raywave::denoise::{DenoiseInput, DenoiseMethod};
 use raywave::frame::{generate_params_with, sampler_params};
+use raywave::report::error_vs_time::{report_error_vs_time, ErrorVsTimeOptions, MethodFrames, PreparedScene};
+use raywave::report::SceneReportOptions;
 use raywave::shading::{resolve, ShadeAccumulator, ShadeData};
 use raywave::shared::sampling::sampler_kind;
 use raywave::shared::{DenoiseParams, GenerateParams, SamplerParams, SamplerProbeParams, WarpParams};
@@ -287,6 +289,66 @@ fn an_unusable_sustain_time_is_refused_when_the_device_opens() {
             Err(raywave::Error::InvalidParameter { name: "sustain_seconds", .. }) => {}
             other => panic!("sustain_seconds = {sustain_seconds}: {:?}", other.map(|b| b.name())),
         }
+    }
+}
+
+/// Benchmark mode switched per call (`Backend::set_sustain_seconds`, what `report
+/// error-vs-time --settle-seconds` does after a reference): on from the next stage, off again,
+/// the same results either way; an unusable time refused without changing the mode.
+#[test]
+fn benchmark_mode_switches_on_and_off_between_calls() {
+    let scene = cornell();
+    let rays = CpuBackend::new().generate(&camera(&scene).1).expect("rays").0;
+    for mut device in vulkan::every_device("benchmark mode switch") {
+        device.load_scene(&scene).expect("scene loads");
+        let name = device.name();
+        let trace = |device: &mut VulkanBackend| device.trace(&rays).expect("trace");
+        let (single, first) = trace(&mut device);
+        assert_eq!(first.dispatches, 1, "{name}: opened without benchmark mode");
+        device.set_sustain_seconds(SUSTAIN_SECONDS).expect("a usable time");
+        let (sustained, on) = trace(&mut device);
+        assert!(on.dispatches > 1 && sustained == single, "{name}: benchmark mode on: {on:?}");
+        for unusable in [-1.0, 1.5, f64::NAN] {
+            match device.set_sustain_seconds(unusable) {
+                Err(raywave::Error::InvalidParameter { name: "sustain_seconds", .. }) => {}
+                other => panic!("{name}: sustain_seconds = {unusable}: {other:?}"),
+            }
+        }
+        assert!(trace(&mut device).1.dispatches > 1, "{name}: a refused time leaves benchmark mode on");
+        device.set_sustain_seconds(0.0).expect("off");
+        let (again, off) = trace(&mut device);
+        assert!(off.dispatches == 1 && again == single, "{name}: benchmark mode off: {off:?}");
+        vulkan::assert_clean(&device);
+    }
+}
+
+/// `report error-vs-time --settle-seconds`: the warm-up ([`PreparedScene::settle`]) leaves the
+/// backend in benchmark mode with the same images, and the report turns it off after each
+/// scene, so that the next reference runs every pass once.
+#[test]
+fn the_error_vs_time_warm_up_measures_in_benchmark_mode_and_the_report_ends_it() {
+    let scene = cornell();
+    let rays = CpuBackend::new().generate(&camera(&scene).1).expect("rays").0;
+    for mut device in vulkan::every_device("error-vs-time warm-up") {
+        let name = device.name();
+        let mut prepared = PreparedScene::new(&mut device, &scene, 16).expect("prepared");
+        let images = |frame: MethodFrames| frame.images.into_iter().map(|(image, _)| image).collect::<Vec<_>>();
+        let once = images(prepared.frame(&mut device, 2, 7).expect("frame"));
+        assert!(prepared.settle(&mut device, &scene, 0.05).expect("settles") >= 0.05, "{name}");
+        assert!(device.trace(&rays).expect("trace").1.dispatches > 1, "{name}: benchmark mode after the warm-up");
+        assert!(images(prepared.frame(&mut device, 2, 7).expect("frame")) == once, "{name}: the same images");
+        let report = SceneReportOptions {
+            scenes: vec!["builtin:cornell".into()],
+            resolution: 16,
+            reference_spp: 4,
+            max_spp: 1,
+            reps: 1,
+        };
+        let options = ErrorVsTimeOptions { report, denoise_radius: None, settle_seconds: Some(0.05) };
+        let lines = report_error_vs_time(&mut device, &options, |_| {}).expect("report");
+        assert!(lines.iter().all(|l| l.warm_up_seconds.is_some_and(|w| w >= 0.05)), "{name}: {lines:?}");
+        assert_eq!(device.trace(&rays).expect("trace").1.dispatches, 1, "{name}: benchmark mode after the report");
+        vulkan::assert_clean(&device);
     }
 }
 

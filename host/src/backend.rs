@@ -67,6 +67,12 @@ pub trait Backend {
     /// Checks that a `width × height` image fits this backend's limits.
     fn check_image_size(&self, width: u32, height: u32) -> Result<()>;
 
+    /// Benchmark mode from the next stage on, as `BackendOptions::sustain_seconds` sets it at
+    /// open: each timed Vulkan submission repeats its dispatch to keep the GPU busy about
+    /// `seconds` (0..=1; 0 runs every stage once), so that a measurement can be sustained while
+    /// the work around it (a many-sample reference image) runs once. The CPU backend ignores it.
+    fn set_sustain_seconds(&mut self, seconds: f64) -> Result<()>;
+
     /// Builds the acceleration structures for `scene`; later `trace` calls run against it.
     fn load_scene(&mut self, scene: &Scene) -> Result<()>;
 

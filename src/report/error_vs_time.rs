@@ -10,12 +10,15 @@
 //! on its frame: the G-buffer's camera rays, the shade and occlusion passes, and the passes that
 //! make its image from the accumulated estimates — the composite alone for the raw methods
 //! ([`DenoiseMethod::None`]), a filter and the composite for the others (GPU timestamps on
-//! Vulkan, wall clock on the CPU) — averaged over the repetitions. Each relMSE is split into the
+//! Vulkan, wall clock on the CPU) — averaged over the repetitions; with `settle_seconds`, in
+//! benchmark mode after a warm-up, the reference image still rendered once per pass
+//! ([`PreparedScene::settle`]). Each relMSE is split into the
 //! parts made in shadowed and in unshadowed pixels ([`ShadowRegions`]), which shows where a
 //! method's error is.
 
 use super::flip::mean_flip;
 use super::shade::{accumulate, GBuffer, ShadowRegions};
+use crate::bench::{check_settle_seconds, warm_up, SUSTAIN_SECONDS};
 use crate::denoise::{check_radius, frame_params, rgb, DenoiseInput, DenoiseMethod};
 use crate::shading::ShadeData;
 use crate::shared::DenoiseParams;
@@ -37,14 +40,21 @@ pub struct ErrorVsTimeOptions {
     /// The filters' radius R in pixels (`1..=MAX_RADIUS`; the TV filter's widest Gaussian, SVGF's
     /// footprint); `None` follows the image size ([`DenoiseParams::default_radius`]: 2 at 128²).
     pub denoise_radius: Option<u32>,
+    /// Steady-state milliseconds: measure in benchmark mode after 1-spp frames have run untimed
+    /// until their times have not fallen for this many seconds (`0..=30`), per scene
+    /// ([`PreparedScene::settle`]); `None`: each stage of a frame runs once, as a GPU may run it
+    /// at idle clocks (README, "On an NVIDIA H100": ~5× slower). Errors are the same either way.
+    pub settle_seconds: Option<f64>,
 }
 
 impl ErrorVsTimeOptions {
-    /// Checks the options before any measurement ([`super::SceneReportOptions::check`] and the
-    /// radius).
+    /// Checks the options before any measurement ([`super::SceneReportOptions::check`], the
+    /// radius and the settling time).
     pub fn check(&self) -> Result<()> {
         self.report.check("report error-vs-time")?;
-        check_radius("denoise-radius", self.denoise_radius)
+        check_radius("denoise-radius", self.denoise_radius)?;
+        self.settle_seconds.map(check_settle_seconds).transpose()?;
+        Ok(())
     }
 
     /// The radius the filters run with.
@@ -74,6 +84,10 @@ pub struct ErrorVsTimeLine {
     pub flip: f64,
     /// Milliseconds of backend time for the frame, mean over the repetitions.
     pub ms: f64,
+    /// Seconds of the scene's warm-up before steady-state measurements
+    /// ([`ErrorVsTimeOptions::settle_seconds`]); absent where each stage ran once.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub warm_up_seconds: Option<f64>,
 }
 
 impl ErrorVsTimeLine {
@@ -162,6 +176,20 @@ impl PreparedScene {
         Ok(accumulate(backend, &self.gbuffer, &self.data, self.resolution, spp, 0xfeed)?.0.ratio_image())
     }
 
+    /// Switches `backend` to benchmark mode (50 ms of back-to-back dispatches per timed
+    /// submission) and renders 1-spp frames untimed until their times have not fallen for
+    /// `settle_seconds`, then traces the G-buffer again — the same rays and hits — so that
+    /// its time, part of every method's, is a steady-state one too. Returns the warm-up's
+    /// seconds. Turn benchmark mode off again (`set_sustain_seconds(0.0)`) before work that
+    /// should run once, such as a reference of thousands of passes.
+    pub fn settle(&mut self, backend: &mut dyn Backend, scene: &Scene, settle_seconds: f64) -> Result<f64> {
+        backend.set_sustain_seconds(SUSTAIN_SECONDS)?;
+        let frame_seconds = |frame: MethodFrames| 1e-3 * frame.images.iter().map(|(_, ms)| ms).sum::<f64>();
+        let warm_up_seconds = warm_up(settle_seconds, || Ok(frame_seconds(self.frame(backend, 1, 0)?)))?;
+        self.gbuffer = GBuffer::new(backend, scene, self.resolution)?;
+        Ok(warm_up_seconds)
+    }
+
     /// One frame at `spp` samples with sampler seed `seed`: every method's image and its
     /// milliseconds, in [`METHODS`] order, and what its stages sanitized.
     pub fn frame(&self, backend: &mut dyn Backend, spp: u32, seed: u32) -> Result<MethodFrames> {
@@ -246,20 +274,36 @@ pub fn report_error_vs_time(
     let report = &options.report;
     let mut lines = Vec::new();
     for (name, scene) in report.scenes.iter().zip(report.load_scenes()?) {
-        let prepared = PreparedScene {
+        let mut prepared = PreparedScene {
             denoise_radius: options.radius(),
             ..PreparedScene::new(backend, &scene, report.resolution)?
         };
         let reference = prepared.reference(backend, report.reference_spp)?;
+        let warm_up_seconds =
+            options.settle_seconds.map(|settle| prepared.settle(backend, &scene, settle)).transpose()?;
         let seeds: Vec<u32> = (0..report.reps).collect();
         for spp in report.spp_steps() {
             for (method, error) in METHODS.into_iter().zip(prepared.errors(backend, &reference, spp, &seeds)?) {
                 let MethodError { relmse, relmse_shadow, relmse_lit, flip, ms } = error;
-                let line =
-                    ErrorVsTimeLine { scene: name.clone(), spp, method, relmse, relmse_shadow, relmse_lit, flip, ms };
+                let scene = name.clone();
+                let line = ErrorVsTimeLine {
+                    scene,
+                    spp,
+                    method,
+                    relmse,
+                    relmse_shadow,
+                    relmse_lit,
+                    flip,
+                    ms,
+                    warm_up_seconds,
+                };
                 emit(&line);
                 lines.push(line);
             }
+        }
+        if warm_up_seconds.is_some() {
+            // The next scene's reference runs once per pass again.
+            backend.set_sustain_seconds(0.0)?;
         }
     }
     Ok(lines)
@@ -443,6 +487,7 @@ mod tests {
             relmse_lit: 0.0,
             flip: 0.0,
             ms,
+            warm_up_seconds: None,
         }
     }
 

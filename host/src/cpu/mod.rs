@@ -124,6 +124,11 @@ impl Backend for CpuBackend {
         check_image_size_common(width, height, MAX_PIXELS, &self.name())
     }
 
+    /// Every CPU stage runs once, timed by the wall clock: nothing to sustain.
+    fn set_sustain_seconds(&mut self, _seconds: f64) -> Result<()> {
+        Ok(())
+    }
+
     fn load_scene(&mut self, scene: &Scene) -> Result<()> {
         self.scene = Some(CpuScene::build(scene)?);
         Ok(())

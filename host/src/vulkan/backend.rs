@@ -500,6 +500,10 @@ impl Backend for VulkanBackend {
         check_image_size_common(width, height, self.max_rays(), &self.name())
     }
 
+    fn set_sustain_seconds(&mut self, seconds: f64) -> Result<()> {
+        self.core.set_sustain_seconds(seconds)
+    }
+
     fn load_scene(&mut self, scene: &Scene) -> Result<()> {
         let _driver = driver_lock::device_use();
         self.scene = None;

@@ -9,6 +9,7 @@ use gpu_allocator::vulkan::{Allocator, AllocatorCreateDesc};
 use raywave_shared::bindings::STREAM_ROW;
 use std::ffi::{c_void, CStr};
 use std::mem::ManuallyDrop;
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 
 /// Name of the Khronos validation layer.
@@ -131,8 +132,9 @@ pub(crate) struct Core {
     pub limits: vk::PhysicalDeviceLimits,
     /// `minAccelerationStructureScratchOffsetAlignment`, bytes.
     pub scratch_alignment: u64,
-    /// [`ContextOptions::sustain_seconds`].
-    pub sustain_seconds: f64,
+    /// [`ContextOptions::sustain_seconds`], as `f64` bits: [`Core::sustain_seconds`], changed
+    /// by [`Core::set_sustain_seconds`].
+    sustain_seconds: AtomicU64,
     /// Invocations per workgroup of the 1-D stream stages ([`ContextOptions::workgroup_sizes`]
     /// or the preferred ones, checked against the device).
     pub workgroup_sizes: WorkgroupSizes,
@@ -291,12 +293,7 @@ pub fn enumerate_devices() -> Result<Vec<DeviceInfo>> {
 
 /// Opens Vulkan device `index` (as listed by [`enumerate_devices`]).
 pub(crate) fn open(index: usize, options: &ContextOptions) -> Result<Arc<Core>> {
-    if !(0.0..=1.0).contains(&options.sustain_seconds) {
-        return Err(Error::InvalidParameter {
-            name: "sustain_seconds",
-            reason: format!("{} is not within 0..=1 s", options.sustain_seconds),
-        });
-    }
+    check_sustain_seconds(options.sustain_seconds)?;
     let _lifetime = driver_lock::device_lifetime();
     let entry = load_entry()?;
     if options.validation {
@@ -409,7 +406,7 @@ pub(crate) fn open(index: usize, options: &ContextOptions) -> Result<Arc<Core>> 
                 info,
                 limits,
                 scratch_alignment,
-                sustain_seconds: options.sustain_seconds,
+                sustain_seconds: AtomicU64::new(options.sustain_seconds.to_bits()),
                 workgroup_sizes,
             }))
         }
@@ -417,6 +414,31 @@ pub(crate) fn open(index: usize, options: &ContextOptions) -> Result<Arc<Core>> 
             destroy_instance(&instance, &debug);
             Err(e)
         }
+    }
+}
+
+/// `seconds` if it is a benchmark-mode busy time ([`ContextOptions::sustain_seconds`]): within
+/// `0..=1` s, else [`Error::InvalidParameter`] naming `sustain_seconds`.
+fn check_sustain_seconds(seconds: f64) -> Result<f64> {
+    if (0.0..=1.0).contains(&seconds) {
+        Ok(seconds)
+    } else {
+        Err(Error::InvalidParameter { name: "sustain_seconds", reason: format!("{seconds} is not within 0..=1 s") })
+    }
+}
+
+impl Core {
+    /// Benchmark mode's busy time per timed submission, in seconds (0: off;
+    /// [`ContextOptions::sustain_seconds`]).
+    pub fn sustain_seconds(&self) -> f64 {
+        f64::from_bits(self.sustain_seconds.load(Ordering::Relaxed))
+    }
+
+    /// Turns benchmark mode on (`seconds` > 0) or off (0) for the passes run from now on;
+    /// `seconds` outside `0..=1` is [`Error::InvalidParameter`].
+    pub fn set_sustain_seconds(&self, seconds: f64) -> Result<()> {
+        self.sustain_seconds.store(check_sustain_seconds(seconds)?.to_bits(), Ordering::Relaxed);
+        Ok(())
     }
 }
 

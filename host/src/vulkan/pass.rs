@@ -243,9 +243,10 @@ impl Pass {
         // live resources.
         unsafe { d.update_descriptor_sets(&writes, &[]) };
         let size = f64::from(invocations.max(1));
-        let dispatches = if self.core.sustain_seconds > 0.0 {
+        let sustain_seconds = self.core.sustain_seconds();
+        let dispatches = if sustain_seconds > 0.0 {
             let per_invocation = f64::from_bits(self.seconds_per_invocation.load(Ordering::Relaxed));
-            sustained_dispatches(self.core.sustain_seconds, per_invocation * size)
+            sustained_dispatches(sustain_seconds, per_invocation * size)
         } else {
             1
         };
