@@ -1,5 +1,5 @@
 //! Criterion micro-benchmarks of the stages (generate, trace, shade, denoise) on the built-in
-//! Cornell box: the CPU executor and,
+//! Cornell box and of the samplers they draw from: the CPU executor and,
 //! when a Vulkan device with ray query is present, the Vulkan backend (per call, including upload,
 //! dispatch and readback; the GPU-only time is what `raywave render` prints per stage and
 //! `raywave bench denoise` per denoise pass) — and two groups on the data layout (DESIGN's
@@ -23,7 +23,7 @@ use raywave::kernels::generate::generate_ray;
 use raywave::kernels::shade::stage::{resolve_surface, shade_sample};
 use raywave::kernels::trace::{trace_closest, trace_occluded};
 use raywave::shading::{ShadeAccumulator, ShadeData};
-use raywave::shared::sampling::sampler_kind;
+use raywave::shared::sampling::{sampler_kind, SamplerProbeParams};
 use raywave::shared::{GenerateParams, ShadeParams};
 use raywave::{open_backend, Backend, BackendOptions, DeviceChoice, Scene, WorkgroupSizes};
 use std::hint::black_box;
@@ -68,6 +68,7 @@ impl Setup {
 
 fn stages(c: &mut Criterion) {
     let mut setup = Setup::new();
+    sampler(c, &mut setup);
     generate(c, &mut setup);
     trace_primary(c, &mut setup);
     shade(c, &mut setup);
@@ -75,6 +76,35 @@ fn stages(c: &mut Criterion) {
     pipeline(c, &mut setup);
     layout(c);
     workgroup_size(c, &setup);
+}
+
+/// The samplers alone: one 2-D slot of every sample of a 512² frame at 4 samples per pixel
+/// (the sampler probe), per sampler kind. ZSobol hashes each base-4 digit of its index, so it
+/// is the costly one; the generate and shade stages draw one such slot per number pair.
+fn sampler(c: &mut Criterion, setup: &mut Setup) {
+    let mut group = c.benchmark_group("sampler");
+    let (w, h) = SIZES[1];
+    for (name, kind) in
+        [("zsobol", sampler_kind::ZSOBOL), ("sobol", sampler_kind::SOBOL), ("random", sampler_kind::INDEPENDENT)]
+    {
+        let params = SamplerProbeParams {
+            sampler: sampler_params(kind, 0, w, h, 4),
+            width: w,
+            height: h,
+            dimension: 3,
+            padding: 0,
+        };
+        group.throughput(Throughput::Elements(u64::from(params.sample_count())));
+        group.bench_function(BenchmarkId::new(format!("cpu-{name}"), params.sample_count()), |b| {
+            b.iter(|| setup.cpu.sampler_probe(black_box(&params)).expect("probe"))
+        });
+        if let Some(v) = setup.vulkan.as_mut() {
+            group.bench_function(BenchmarkId::new(format!("vulkan-{name}"), params.sample_count()), |b| {
+                b.iter(|| v.sampler_probe(black_box(&params)).expect("probe"))
+            });
+        }
+    }
+    group.finish();
 }
 
 fn generate(c: &mut Criterion, setup: &mut Setup) {
