@@ -307,6 +307,11 @@ fn scan_select(lights: &[Light], count: u32, p: Vec3, n: Vec3, u: f32) -> LightC
     if count == 0 {
         return LightChoice::NONE;
     }
+    if count == 1 {
+        // What the scan returns for one light — `I / I` = 1 exactly ([`importance`] is finite),
+        // or the uniform fallback's 1 when `I` = 0 — without evaluating `I` twice per sample.
+        return LightChoice { index: 0, pmf: 1.0 };
+    }
     let total = total_importance(lights, count, p, n);
     if total.is_nan() || total <= 0.0 {
         return select_uniform(count, u);
@@ -334,6 +339,10 @@ fn scan_select(lights: &[Light], count: u32, p: Vec3, n: Vec3, u: f32) -> LightC
 fn scan_pmf(lights: &[Light], count: u32, p: Vec3, n: Vec3, index: u32) -> f32 {
     if index >= count {
         return 0.0;
+    }
+    if count == 1 {
+        // As in `scan_select`: `I / I` = 1 or the uniform fallback's 1.
+        return 1.0;
     }
     let total = total_importance(lights, count, p, n);
     if total.is_nan() || total <= 0.0 {
@@ -944,6 +953,30 @@ mod tests {
         let cycle = [LightBvhNode { bounds: light_bounds(&light), child_or_light: 0, is_leaf: 0, padding: [0; 2] }; 2];
         assert_eq!(select_bvh(&cycle, Vec3::X, Vec3::ZERO, 0.9), LightChoice::NONE);
         assert_eq!(bvh_pmf(&cycle, &[u32::MAX], Vec3::X, Vec3::ZERO, 0), 0.0);
+    }
+
+    #[test]
+    fn a_single_light_is_chosen_with_pmf_one_as_the_scan_would() {
+        // The scan's answer for one light, whatever its importance at (p, n): I / I or the
+        // all-zero fallback — for points in front of, behind and inside the light, NaN ones too.
+        let mut rng = CounterRng::new(41);
+        let lights = [random_light(&mut rng), Light::sphere(Vec3::ZERO, 1.0, Vec3::ONE)];
+        for light in lights {
+            let bounds = light_bounds(&light);
+            let mut zero_seen = false;
+            for k in 0..2000 {
+                let p = if k == 0 { Vec3::NAN } else { rng.vec3(-4.0, 4.0) };
+                let n = if k % 7 == 0 { Vec3::ZERO } else { rng.unit_vec3() };
+                let weight = importance(&bounds, p, n);
+                zero_seen |= weight == 0.0;
+                let scanned = if weight > 0.0 { weight / weight } else { uniform_pmf(1, 0) };
+                let choice = select_importance(&[light], p, n, rng.next_f32());
+                assert_eq!(choice, LightChoice { index: 0, pmf: scanned }, "p {p} n {n}");
+                assert_eq!(importance_pmf(&[light], p, n, 0), scanned, "p {p} n {n}");
+                assert_eq!(importance_pmf(&[light], p, n, 1), 0.0);
+            }
+            assert!(zero_seen, "some points see the light with importance 0");
+        }
     }
 
     #[test]
