@@ -177,13 +177,10 @@ pub fn render(options: &RenderOptions) -> Result<RenderReport> {
     let exr = options.exr.as_deref().map(|path| PendingOutput::create(path, ImageFormat::OpenExr)).transpose()?;
     let stochastic =
         options.stochastic.as_deref().map(|path| PendingOutput::create(path, ImageFormat::Png)).transpose()?;
-    let backend_options = match settle_seconds {
-        Some(_) => BackendOptions {
-            sustain_seconds: options.backend.sustain_seconds.max(SUSTAIN_SECONDS),
-            ..options.backend.clone()
-        },
-        None => options.backend.clone(),
-    };
+    let mut backend_options = options.backend.clone();
+    if settle_seconds.is_some() {
+        backend_options.sustain_seconds = backend_options.sustain_seconds.max(SUSTAIN_SECONDS);
+    }
     let mut backend = open_backend(options.device, &backend_options)?;
     backend.check_image_size(options.width, options.height)?;
     check_samples_per_pixel("spp", options.width, options.height, options.spp)?;

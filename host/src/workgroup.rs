@@ -113,18 +113,17 @@ impl WorkgroupSizes {
     /// Checks every size against `runnable`, the sizes a device runs (ascending): the first one
     /// it does not run is [`Error::InvalidParameter`] naming its field and what the device runs.
     pub fn check(&self, runnable: &[u32]) -> Result<()> {
-        match StreamStage::ALL.into_iter().find(|&stage| !runnable.contains(&self.of(stage))) {
-            None => Ok(()),
-            Some(stage) => Err(Error::InvalidParameter {
-                name: stage.field_name(),
-                reason: match (runnable.first(), runnable.last()) {
-                    (Some(least), Some(most)) => {
-                        format!("{}: this device runs the powers of two {least}..={most}", self.of(stage))
-                    }
-                    _ => format!("{}: this device runs no 1-D workgroup of a stream stage", self.of(stage)),
-                },
-            }),
-        }
+        let Some(stage) = StreamStage::ALL.into_iter().find(|&stage| !runnable.contains(&self.of(stage))) else {
+            return Ok(());
+        };
+        let size = self.of(stage);
+        Err(Error::InvalidParameter {
+            name: stage.field_name(),
+            reason: match (runnable.first(), runnable.last()) {
+                (Some(least), Some(most)) => format!("{size}: this device runs the powers of two {least}..={most}"),
+                _ => format!("{size}: this device runs no 1-D workgroup of a stream stage"),
+            },
+        })
     }
 }
 
