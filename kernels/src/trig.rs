@@ -17,7 +17,11 @@ use core::f32::consts::{FRAC_PI_2, FRAC_PI_4, PI};
 use spirv_std::num_traits::Float;
 
 /// tan(π/8) = √2 − 1: above it [`atan_unit`] reduces its argument by π/4.
-const TAN_PI_8: f32 = 0.414_213_57;
+pub(crate) const TAN_PI_8: f32 = 0.414_213_57;
+
+/// `[c₇, c₅, c₃, c₁]` of S. L. Moshier's Cephes `atanf` polynomial (see [`atan_unit`]):
+/// `atan t ≈ t + t·z·(((c₇·z + c₅)·z + c₃)·z + c₁)`, `z = t²`, on `|t| ≤ tan(π/8)`.
+pub(crate) const ATAN_POLYNOMIAL: [f32; 4] = [8.053_744_5e-2, -1.387_768_6e-1, 1.997_771_1e-1, -3.333_295e-1];
 
 /// `(sin x, cos x)` for `x` in `[−2π, 2π]` to within a few `f32` ulps: Cody–Waite reduction by
 /// π/2 (two-part constant) to `|r| ≤ π/4`, then Taylor polynomials to r⁹ and r⁸ (truncation below
@@ -51,7 +55,8 @@ pub fn sin_cos(x: f32) -> (f32, f32) {
 fn atan_unit(t: f32) -> f32 {
     let (offset, t) = if t > TAN_PI_8 { (FRAC_PI_4, (t - 1.0) / (t + 1.0)) } else { (0.0, t) };
     let z = t * t;
-    let poly = ((8.053_744_5e-2 * z - 1.387_768_6e-1) * z + 1.997_771_1e-1) * z - 3.333_295e-1;
+    let [c7, c5, c3, c1] = ATAN_POLYNOMIAL;
+    let poly = ((c7 * z + c5) * z + c3) * z + c1;
     offset + (poly * z * t + t)
 }
 

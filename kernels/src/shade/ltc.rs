@@ -139,6 +139,18 @@ pub fn diffuse_form_factor(quad: [Vec3; 4]) -> f32 {
     quad_form_factor(quad)
 }
 
+/// `(U_D, U_S)` of the quad (local corners `quad`): [`diffuse_form_factor`] and
+/// [`specular_form_factor`] — or [`specular_form_factor_corrected`] with `ggx` — the same values,
+/// with the quad clipped to the horizon once for both.
+pub fn lobe_form_factors(lobe: &LtcLobe, ggx: Option<GgxLobe>, quad: [Vec3; 4]) -> (f32, f32) {
+    let above = Polygon::quad(quad).clip_to_horizon();
+    let specular = match ggx {
+        Some(ggx) => corrected_form_factor(lobe, &ggx, &above),
+        None => mixture_form_factor(lobe, &above),
+    };
+    (above.form_factor_above_horizon(), specular)
+}
+
 /// `U_S`: the integral of the LTC mixture `lobe` over the quad (local corners `quad`). The quad
 /// is first clipped to the surface's horizon — the BRDF·cos the LTC stands for is zero below it,
 /// while the LTC itself is not (its support is the half-space `(M⁻¹ω).z > 0`), so a light
@@ -155,10 +167,16 @@ pub fn specular_form_factor(lobe: &LtcLobe, quad: [Vec3; 4]) -> f32 {
 /// the same albedo terms), in `[0, 1]`. Accurate also where the LTC is not — lights that catch
 /// only the lobe's far tail, grazing views — at the cost of 30–200 radial integrals per light.
 pub fn specular_form_factor_corrected(lobe: &LtcLobe, ggx: &GgxLobe, quad: [Vec3; 4]) -> f32 {
+    corrected_form_factor(lobe, ggx, &Polygon::quad(quad).clip_to_horizon())
+}
+
+/// [`specular_form_factor_corrected`] over `clipped` (local corners, already clipped to the
+/// horizon).
+fn corrected_form_factor(lobe: &LtcLobe, ggx: &GgxLobe, clipped: &Polygon) -> f32 {
     if lobe.magnitude.is_nan() || lobe.magnitude <= 0.0 {
         return 0.0;
     }
-    (ggx_integral(&Polygon::quad(quad).clip_to_horizon(), ggx) / lobe.magnitude).clamp(0.0, 1.0)
+    (ggx_integral(clipped, ggx) / lobe.magnitude).clamp(0.0, 1.0)
 }
 
 /// The LTC mixture's integral over `clipped` (local corners, already clipped to the horizon).

@@ -2,6 +2,8 @@
 //! cosines (analytic U), an optional quadrature residual towards the exact GGX lobe, and the
 //! stage that pairs them with stochastic shadows.
 
+#[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
+pub mod edge_lanes;
 pub mod ggx;
 pub mod ltc;
 pub mod polygon;

@@ -204,11 +204,7 @@ fn hit_probabilities(light: &Light, p: Vec3, lobes: &Lobes) -> (f32, f32) {
         return (0.0, 0.0);
     }
     let quad = ltc::local_quad(&lobes.frame, p, light.position.xyz(), light.edge_u.xyz(), light.edge_v.xyz());
-    let specular = match &lobes.ggx {
-        Some(ggx) => ltc::specular_form_factor_corrected(&lobes.ltc, ggx, quad),
-        None => ltc::specular_form_factor(&lobes.ltc, quad),
-    };
-    (ltc::diffuse_form_factor(quad), specular)
+    ltc::lobe_form_factors(&lobes.ltc, lobes.ggx, quad)
 }
 
 /// The shade stage for one camera sample at `pixel` looking along `view_direction` (from the
