@@ -614,8 +614,21 @@ pub fn quad_area_pdf(p: Vec3, o: Vec3, eu: Vec3, ev: Vec3, dir: Vec3) -> f32 {
 /// The edges must be perpendicular (the method's local frame is built from them); for a general
 /// parallelogram use [`sample_quad_area`] or two spherical triangles.
 pub fn sample_quad_spherical(p: Vec3, o: Vec3, eu: Vec3, ev: Vec3, u: Vec2) -> LightSample {
+    sample_quad_spherical_with_solid_angle(p, o, eu, ev, quad_solid_angle(p, o, eu, ev), u)
+}
+
+/// [`sample_quad_spherical`] given the quad's `solid_angle` at `p` ([`quad_solid_angle`]), for a
+/// caller that also needs its [`quad_spherical_pdf_with_solid_angle`]: the solid angle is the
+/// costliest part of each (two spherical triangles, two `atan2`s).
+pub fn sample_quad_spherical_with_solid_angle(
+    p: Vec3,
+    o: Vec3,
+    eu: Vec3,
+    ev: Vec3,
+    solid_angle: f32,
+    u: Vec2,
+) -> LightSample {
     let u = clamp_sample(u);
-    let solid_angle = quad_solid_angle(p, o, eu, ev);
     let exl = eu.length();
     let eyl = ev.length();
     if !(solid_angle > 0.0) || !(exl > 0.0) || !(eyl > 0.0) {
@@ -748,7 +761,12 @@ pub fn quad_ray_distance(p: Vec3, o: Vec3, eu: Vec3, ev: Vec3, dir: Vec3) -> f32
 /// along `dir` hits the quad (either side; edges widened by [`QUAD_EDGE_SLACK`]), else 0. Mirrors the sampler's special cases: 0 when Ω = 0, [`quad_area_pdf`]
 /// when Ω < [`QUAD_MIN_SPHERICAL_SOLID_ANGLE`].
 pub fn quad_spherical_pdf(p: Vec3, o: Vec3, eu: Vec3, ev: Vec3, dir: Vec3) -> f32 {
-    let solid_angle = quad_solid_angle(p, o, eu, ev);
+    quad_spherical_pdf_with_solid_angle(p, o, eu, ev, quad_solid_angle(p, o, eu, ev), dir)
+}
+
+/// [`quad_spherical_pdf`] given the quad's `solid_angle` at `p` ([`quad_solid_angle`]), for a
+/// caller that computed it already ([`sample_quad_spherical_with_solid_angle`]).
+pub fn quad_spherical_pdf_with_solid_angle(p: Vec3, o: Vec3, eu: Vec3, ev: Vec3, solid_angle: f32, dir: Vec3) -> f32 {
     if !(solid_angle > 0.0) || !(eu.length_squared() > 0.0) || !(ev.length_squared() > 0.0) {
         return 0.0;
     }

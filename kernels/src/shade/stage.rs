@@ -264,11 +264,15 @@ pub fn shade_sample(
     let p_diff = if e_d + e_s > 0.0 { e_d / (e_d + e_s) } else { 1.0 };
     let p_brdf = u_s + (u_d - u_s) * p_diff;
 
-    let direction = if strategy.x < p_brdf {
+    // The light's solid angle serves its sample and its pdf: computed here for a light sample,
+    // below for a BRDF direction that reaches the light.
+    let light_sampled = !(strategy.x < p_brdf);
+    let solid_angle = if light_sampled { warp::quad_solid_angle(p, corner, eu, ev) } else { 0.0 };
+    let direction = if light_sampled {
+        warp::sample_quad_spherical_with_solid_angle(p, corner, eu, ev, solid_angle, u).direction
+    } else {
         let local = if strategy.y < p_diff { warp::sample_cosine_hemisphere(u) } else { lobes.ltc.sample(u) };
         lobes.world_direction(local).normalize_or_zero()
-    } else {
-        warp::sample_quad_spherical(p, corner, eu, ev, u).direction
     };
     let distance = warp::quad_ray_distance(p, corner, eu, ev, direction);
     let (f, pdf_diffuse, pdf_specular) = lobes.eval_and_pdfs(direction);
@@ -276,7 +280,8 @@ pub fn shade_sample(
         return result;
     }
     let pdf_brdf = pdf_specular + (pdf_diffuse - pdf_specular) * p_diff;
-    let pdf_light = warp::quad_spherical_pdf(p, corner, eu, ev, direction);
+    let solid_angle = if light_sampled { solid_angle } else { warp::quad_solid_angle(p, corner, eu, ev) };
+    let pdf_light = warp::quad_spherical_pdf_with_solid_angle(p, corner, eu, ev, solid_angle, direction);
     let pdf = (pdf_light + (pdf_brdf - pdf_light) * p_brdf) * choice.pmf;
     if !(pdf > 0.0) {
         return result;
