@@ -93,23 +93,46 @@ fn spread_bits(v: u32) -> u32 {
 /// `permutations_of_four_digits_are_lexicographic` checks it.
 const BASE4_PERMUTATIONS: [u32; 6] = [0x78d8_b4e4, 0xb1e1_6c9c, 0x2d8d_39c9, 0x36c6_72d2, 0x6393_1e4e, 0x1b4b_2787];
 
-/// Entry `digit` (0..4) of permutation `p` (0..24) of `{0, 1, 2, 3}`, the permutations in
-/// lexicographic order: word `p / 4` of `BASE4_PERMUTATIONS`, then two bits of it.
-pub fn permute_base4_digit(p: u32, digit: u32) -> u32 {
-    (base4_permutation_word(p) >> (8 * (p % 4) + 2 * (digit & 3))) & 3
-}
-
-/// Word `min(p / 4, 5)` of `BASE4_PERMUTATIONS`, on the CPU by indexing: `zsobol_index` calls
-/// this once per base-4 digit with a random `p`, and the compare chain SPIR-V uses made the CPU
-/// mispredict (`zsobol_index` 35 % faster with the load).
+/// Permutation `b mod 24` of `{0, 1, 2, 3}` for a byte `b` (0..256) — how ZSobol picks a digit's
+/// permutation from a hash's top byte — as one byte whose bits `2d..2d+2` hold entry `d`. On the
+/// CPU one load from [`DIGIT_PERMUTATION_BY_BYTE`]: `zsobol_index` calls this once per base-4
+/// digit, and the table spares it the `mod 24` and the word and byte selection; SPIR-V selects the
+/// word by comparisons instead ([`base4_permutation_word_by_selects`]).
 #[cfg(not(target_arch = "spirv"))]
-fn base4_permutation_word(p: u32) -> u32 {
-    BASE4_PERMUTATIONS[(p / 4).min(5) as usize]
+fn digit_permutation(b: u32) -> u32 {
+    DIGIT_PERMUTATION_BY_BYTE[(b & 0xff) as usize] as u32
 }
 
-/// Word `min(p / 4, 5)` of `BASE4_PERMUTATIONS`, by comparisons: in SPIR-V a dynamically indexed
-/// array becomes a function-local copy in memory, while this chain compiles to selects between
-/// constants. The CPU build tests it against the table.
+/// [`digit_permutation`] in the SPIR-V build.
+#[cfg(target_arch = "spirv")]
+fn digit_permutation(b: u32) -> u32 {
+    digit_permutation_by_selects(b)
+}
+
+/// [`digit_permutation`] without a dynamically indexed array: in SPIR-V one becomes a
+/// function-local copy in memory, while this chain compiles to selects between constants. The
+/// CPU build tests it against the table.
+#[cfg(any(target_arch = "spirv", test))]
+fn digit_permutation_by_selects(b: u32) -> u32 {
+    let p = b % 24;
+    (base4_permutation_word_by_selects(p) >> (8 * (p % 4))) & 0xff
+}
+
+/// [`digit_permutation`] for every byte, built at compile time from [`BASE4_PERMUTATIONS`].
+#[cfg(not(target_arch = "spirv"))]
+const DIGIT_PERMUTATION_BY_BYTE: [u8; 256] = {
+    let mut table = [0u8; 256];
+    let mut b = 0usize;
+    while b < 256 {
+        let p = b % 24;
+        table[b] = (BASE4_PERMUTATIONS[p / 4] >> (8 * (p % 4))) as u8;
+        b += 1;
+    }
+    table
+};
+
+/// Word `min(p / 4, 5)` of `BASE4_PERMUTATIONS`, by comparisons (see
+/// [`digit_permutation_by_selects`]).
 #[cfg(any(target_arch = "spirv", test))]
 fn base4_permutation_word_by_selects(p: u32) -> u32 {
     if p < 4 {
@@ -125,12 +148,6 @@ fn base4_permutation_word_by_selects(p: u32) -> u32 {
     } else {
         BASE4_PERMUTATIONS[5]
     }
-}
-
-/// Word `min(p / 4, 5)` of `BASE4_PERMUTATIONS` in the SPIR-V build: by selects.
-#[cfg(target_arch = "spirv")]
-fn base4_permutation_word(p: u32) -> u32 {
-    base4_permutation_word_by_selects(p)
 }
 
 /// The ZSobol index of `(pixel, sample_index)`: the Morton code with the sample index below it,
@@ -151,8 +168,8 @@ pub fn zsobol_index(params: &SamplerParams, pixel: UVec2, sample_index: u32, dim
         if shift < 32 {
             let digit = (morton >> shift) & 3;
             let higher = if shift + 2 < 32 { morton >> (shift + 2) } else { 0 };
-            let p = (mix_bits(higher ^ salt) >> 24) % 24;
-            index |= permute_base4_digit(p, digit) << shift;
+            let permutation = digit_permutation(mix_bits(higher ^ salt) >> 24);
+            index |= ((permutation >> (2 * digit)) & 3) << shift;
         }
     }
     if odd == 1 {
@@ -244,9 +261,9 @@ mod tests {
     }
 
     #[test]
-    fn the_cpu_and_spirv_permutation_words_agree() {
-        for p in 0..64 {
-            assert_eq!(base4_permutation_word(p), base4_permutation_word_by_selects(p), "p {p}");
+    fn the_cpu_and_spirv_digit_permutations_agree() {
+        for b in 0..256 {
+            assert_eq!(digit_permutation(b), digit_permutation_by_selects(b), "byte {b}");
         }
     }
 
@@ -255,7 +272,7 @@ mod tests {
         // Every entry is a permutation of 0..4, and each is the lexicographic successor of the
         // one before: the 24 permutations in order, each once.
         let perms: std::vec::Vec<[u32; 4]> =
-            (0..24).map(|p| core::array::from_fn(|d| permute_base4_digit(p, d as u32))).collect();
+            (0..24).map(|p| core::array::from_fn(|d| (digit_permutation(p) >> (2 * d)) & 3)).collect();
         for (p, perm) in perms.iter().enumerate() {
             let mut sorted = *perm;
             sorted.sort();
