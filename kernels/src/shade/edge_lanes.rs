@@ -15,8 +15,8 @@ use super::polygon::MAX_CORNERS;
 use crate::trig::{ATAN_POLYNOMIAL, TAN_PI_8};
 use core::arch::x86_64::{
     __m128, _mm_add_ps, _mm_and_ps, _mm_andnot_ps, _mm_castps_si128, _mm_castsi128_ps, _mm_cmpeq_ps, _mm_cmpgt_ps,
-    _mm_cmplt_ps, _mm_div_ps, _mm_mul_ps, _mm_or_ps, _mm_set1_ps, _mm_setr_ps, _mm_setzero_ps, _mm_sqrt_ps,
-    _mm_srai_epi32, _mm_storeu_ps, _mm_sub_ps,
+    _mm_cmplt_ps, _mm_div_ps, _mm_mul_ps, _mm_or_ps, _mm_set1_ps, _mm_setr_ps, _mm_setzero_ps, _mm_shuffle_ps,
+    _mm_sqrt_ps, _mm_srai_epi32, _mm_storeu_ps, _mm_sub_ps,
 };
 use core::f32::consts::{FRAC_PI_2, FRAC_PI_4, PI};
 use glam::Vec3;
@@ -43,6 +43,21 @@ impl Lanes3 {
             }
         }
     }
+
+    /// Lane `i` takes lane `(i + 1) mod 4`.
+    #[inline(always)]
+    fn rotated(self) -> Self {
+        // Lanes (1, 2, 3, 0): the immediate's 2-bit fields, lowest first.
+        const NEXT: i32 = 0b00_11_10_01;
+        // SAFETY: SSE is part of every x86-64 target.
+        unsafe {
+            Self {
+                x: _mm_shuffle_ps::<NEXT>(self.x, self.x),
+                y: _mm_shuffle_ps::<NEXT>(self.y, self.y),
+                z: _mm_shuffle_ps::<NEXT>(self.z, self.z),
+            }
+        }
+    }
 }
 
 /// Σᵢ `edge_integral(ĉᵢ, ĉᵢ₊₁)` over the first `count` (≤ [`MAX_CORNERS`]) of `corners`, the
@@ -53,11 +68,19 @@ impl Lanes3 {
 pub fn edge_sum(corners: &[Vec3; MAX_CORNERS], count: usize) -> f32 {
     let n = count.min(MAX_CORNERS);
     // Edge i runs from corner i to the next (the first after the last); past `n` both ends are
-    // zero and the lane's integral is 0 (not summed anyway). Each end is normalized in its own
-    // lane — a corner normalizes to the same bits in any lane — rather than shuffled from the
-    // starts by a pattern that would depend on `n`.
+    // zero and the lane's integral is 0 (not summed anyway). A quad's ends are its starts rotated
+    // by one lane; otherwise each end is normalized in its own lane (a corner normalizes to the
+    // same bits in any lane) rather than shuffled from the starts by a pattern that depends on `n`.
     let start = |i: usize| if i < n { corners[i] } else { Vec3::ZERO };
-    let end = |i: usize| if i + 1 < n { corners[i + 1] } else { start(if i < n { 0 } else { i }) };
+    let end = |i: usize| {
+        if i + 1 < n {
+            corners[i + 1]
+        } else if i < n {
+            corners[0]
+        } else {
+            Vec3::ZERO
+        }
+    };
     let mut sum = 0.0f32;
     let mut first = 0usize;
     while first < n {
@@ -66,7 +89,11 @@ pub fn edge_sum(corners: &[Vec3; MAX_CORNERS], count: usize) -> f32 {
         unsafe {
             let a =
                 normalize_or_zero(Lanes3::gather([start(first), start(first + 1), start(first + 2), start(first + 3)]));
-            let b = normalize_or_zero(Lanes3::gather([end(first), end(first + 1), end(first + 2), end(first + 3)]));
+            let b = if n == 4 {
+                a.rotated()
+            } else {
+                normalize_or_zero(Lanes3::gather([end(first), end(first + 1), end(first + 2), end(first + 3)]))
+            };
             _mm_storeu_ps(integrals.as_mut_ptr(), edge_integrals(a, b));
         }
         // In edge order, as the portable loop adds them.

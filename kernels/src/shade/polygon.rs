@@ -109,7 +109,7 @@ impl Polygon {
 /// [`super::edge_lanes::edge_sum`], four edges at a time and the same bits.
 #[cfg(any(test, not(all(target_arch = "x86_64", target_feature = "sse2"))))]
 pub fn portable_edge_sum(corners: &[Vec3; MAX_CORNERS], count: usize) -> f32 {
-    let n = if count < MAX_CORNERS { count } else { MAX_CORNERS };
+    let n = count.min(MAX_CORNERS);
     let mut sum = 0.0f32;
     // Each corner's direction is normalized once and carried to the next edge as its start.
     let first = corners[0].normalize_or_zero();
