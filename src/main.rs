@@ -261,7 +261,8 @@ struct ShadeBenchArgs {
 
 #[derive(clap::Args)]
 struct RenderArgs {
-    /// `builtin:cornell|cornell-two-lights|spheres|hairball` or a Wavefront OBJ / glTF 2.0 (.gltf, .glb) file.
+    /// `builtin:cornell|cornell-two-lights|cornell-light-grid|spheres|hairball` or a Wavefront OBJ / glTF
+    /// 2.0 (.gltf, .glb) file.
     #[arg(long, default_value = "builtin:cornell")]
     scene: String,
     /// `auto` (Vulkan if usable, else CPU), `cpu`, `vulkan` or `vulkan:N`.

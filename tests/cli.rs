@@ -41,6 +41,19 @@ fn render(dir: &Path, name: &str, extra: &[&str]) -> (Output, std::path::PathBuf
     (raywave(&args), path)
 }
 
+/// `render --help` names every built-in scene, so the help stays true when one is added.
+#[test]
+fn render_help_names_every_builtin_scene() {
+    let out = raywave(&["render", "--help"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let help = String::from_utf8_lossy(&out.stdout);
+    let scene_help = help.split("--scene").nth(1).and_then(|s| s.split("--device").next()).unwrap_or_default();
+    for name in raywave::scene::BUILTIN_SCENES {
+        let listed = scene_help.split(|c: char| !(c.is_alphanumeric() || c == '-')).any(|word| word == *name);
+        assert!(listed, "`render --help` does not name builtin:{name}: {scene_help}");
+    }
+}
+
 #[test]
 fn devices_lists_the_cpu_and_json_is_valid() {
     let out = raywave(&["devices", "--json"]);
