@@ -6,6 +6,7 @@ use super::line_counter::LineCounter;
 use super::{framing_camera, Material, Mesh, Scene};
 use crate::error::{Error, Result};
 use glam::Vec3;
+use std::cell::RefCell;
 use std::path::Path;
 
 /// Albedo of meshes without a material (no `usemtl`, or an MTL entry without `Kd`).
@@ -23,12 +24,29 @@ pub fn load(path: &Path) -> Result<Scene> {
     // tobj reads line by line and stops at its first error, so the reader's line is the one at fault.
     let mut reader = LineCounter::new(file);
     let directory = path.parent().unwrap_or(Path::new(""));
-    let (models, materials) =
-        tobj::load_obj_buf(&mut reader, &options, |library| tobj::load_mtl(directory.join(library)))
-            .map_err(|e| load_error(locate(e, reader.line())))?;
+    // tobj's material-library errors carry no text of their own: the first one's is kept here.
+    let library_error = RefCell::new(None);
+    let (models, materials) = tobj::load_obj_buf(&mut reader, &options, |library| {
+        let library = directory.join(library);
+        let fail = |message: String| {
+            library_error.borrow_mut().get_or_insert_with(|| format!("{}: {message}", library.display()));
+        };
+        let text = match read_material_library(&library) {
+            Ok(text) => text,
+            Err(message) => {
+                fail(message);
+                return Err(tobj::LoadError::MaterialParseError);
+            }
+        };
+        let mut lines = LineCounter::new(text.as_bytes());
+        tobj::load_mtl_buf(&mut lines).inspect_err(|e| fail(format!("line {}: {e}", lines.line())))
+    })
+    .map_err(|e| load_error(locate(e, reader.line())))?;
     // A library that cannot be read would leave every mesh grey and every light dark.
-    let materials = materials
-        .map_err(|e| load_error(format!("the material library its `mtllib` line names cannot be loaded: {e}")))?;
+    let materials = materials.map_err(|e| {
+        let reason = library_error.take().unwrap_or_else(|| e.to_string());
+        load_error(format!("the material library its `mtllib` line names cannot be loaded: {reason}"))
+    })?;
     let meshes: Vec<Mesh> = models
         .into_iter()
         .enumerate()
@@ -48,6 +66,22 @@ pub fn load(path: &Path) -> Result<Scene> {
     let name = path.display().to_string();
     let camera = framing_camera(&meshes);
     Scene::new(&name, meshes, camera)
+}
+
+/// The text of the material library at `path`, or why it cannot be used: the OS's reason, or
+/// the line at fault. A colour (`Ka`, `Kd`, `Ks`, `Ke`) with fewer than three numbers is refused
+/// here, before tobj parses the text: tobj 4.0.5 panics on one (found by fuzzing the loader).
+fn read_material_library(path: &Path) -> std::result::Result<String, String> {
+    let text = std::fs::read_to_string(path).map_err(|e| e.to_string())?;
+    for (index, line) in text.lines().enumerate() {
+        let mut words = line.split_whitespace();
+        if let Some(key @ ("Ka" | "Kd" | "Ks" | "Ke")) = words.next() {
+            if words.count() < 3 {
+                return Err(format!("line {}: `{key}` needs three numbers", index + 1));
+            }
+        }
+    }
+    Ok(text)
 }
 
 /// tobj's error `error`, raised while its reader was in line `line`, with that line: the line at
@@ -159,6 +193,20 @@ mod tests {
         std::fs::write(dir.path().join("scene.mtl"), "newmtl floor\nKd 2 0 0\nnewmtl lamp\nnewmtl metal\n").unwrap();
         let err = load(&path).unwrap_err();
         assert!(err.to_string().contains("floor (floor)") && err.to_string().contains("base colour"), "{err}");
+        // A colour with fewer than three numbers (tobj 4.0.5 panics on one) or a number that does
+        // not parse names the library and its line.
+        let library = dir.path().join("scene.mtl");
+        for (text, expected) in [
+            ("newmtl floor\nKd 0.5\nnewmtl lamp\nnewmtl metal\n", "scene.mtl: line 2: `Kd` needs three numbers"),
+            ("newmtl floor\nnewmtl lamp\n  Ke 1 1\nnewmtl metal\n", "scene.mtl: line 3: `Ke` needs three numbers"),
+            ("newmtl floor\nKa\n", "scene.mtl: line 2: `Ka` needs three numbers"),
+            ("newmtl floor\nKs 1 2 x\n", "scene.mtl: line 2: material"),
+            ("newmtl floor\n\nNs many\n", "scene.mtl: line 3: material"),
+        ] {
+            std::fs::write(&library, text).unwrap();
+            let err = load(&path).unwrap_err().to_string();
+            assert!(err.contains("material library") && err.contains(expected), "{text:?}: {err}");
+        }
     }
 
     #[test]
