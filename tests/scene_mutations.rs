@@ -1,8 +1,8 @@
 //! Malformed scene files end in a scene or a typed error, never a panic or a hang: fixed-seed
 //! random mutations of the valid test scene `tests/data/emissive_quad.gltf` — numbers in its JSON
 //! replaced by edge values, bytes of its text overwritten, the same scene as a `.glb` container
-//! with bytes overwritten — and of a small `.obj`, each loaded with `Scene::load`; whatever loads
-//! also has its BVH built by the CPU backend.
+//! with bytes overwritten — and of a small `.obj` and of an `.obj`'s material library, each loaded
+//! with `Scene::load`; whatever loads also has its BVH built by the CPU backend.
 //!
 //! Before the glTF loader's own checks, mutations like these panicked inside the `gltf` crate
 //! (an out-of-range POSITION accessor, float indices), hung (node cycles) or aborted on a huge
@@ -176,4 +176,22 @@ fn obj_with_overwritten_bytes_loads_or_is_an_error() {
         outcomes.load(dir.path(), "mutated.obj", &overwrite_bytes(&mut rng, obj, b"0123456789-/ .\nfvne"));
     }
     outcomes.assert_mixed("OBJ bytes");
+}
+
+/// The material library of an OBJ scene with bytes overwritten: before the loader checked each
+/// colour's three numbers, a `Kd` or `Ke` line cut short panicked inside tobj.
+#[test]
+fn mtl_with_overwritten_bytes_loads_or_is_an_error() {
+    let obj = b"mtllib scene.mtl\nv 0 0 0\nv 1 0 0\nv 1 0 1\nv 0 0 1\nv 0 1 0\n\
+                o lamp\nusemtl lamp\nf 4 3 2 1\no floor\nusemtl floor\nf 1 2 5\n";
+    let mtl = b"newmtl floor\nKd 0.5 0.25 1\nKa 0 0 0\nKs 1 1 1\nNs 198\nPr 0.5\nPm 0\n\
+                newmtl lamp\nKd 0 0 0\nKe 4 2 1\n";
+    let dir = tempfile::tempdir().unwrap();
+    let (mut rng, mut outcomes) = (Rng(0x0bad_5eed_0bad_5eed), Outcomes::default());
+    for _ in 0..MUTATIONS {
+        std::fs::write(dir.path().join("scene.mtl"), overwrite_bytes(&mut rng, mtl, b"0123456789-. \nKdaesNPrm"))
+            .unwrap();
+        outcomes.load(dir.path(), "mutated.obj", obj);
+    }
+    outcomes.assert_mixed("MTL bytes");
 }
