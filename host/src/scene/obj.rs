@@ -69,10 +69,15 @@ pub fn load(path: &Path) -> Result<Scene> {
 }
 
 /// The text of the material library at `path`, or why it cannot be used: the OS's reason, or
-/// the line at fault. A colour (`Ka`, `Kd`, `Ks`, `Ke`) with fewer than three numbers is refused
-/// here, before tobj parses the text: tobj 4.0.5 panics on one (found by fuzzing the loader).
+/// the line at fault — one that is not UTF-8 text, or a colour (`Ka`, `Kd`, `Ks`, `Ke`) with
+/// fewer than three numbers, refused here before tobj parses the text: tobj 4.0.5 panics on one
+/// (found by fuzzing the loader).
 fn read_material_library(path: &Path) -> std::result::Result<String, String> {
-    let text = std::fs::read_to_string(path).map_err(|e| e.to_string())?;
+    let bytes = std::fs::read(path).map_err(|e| e.to_string())?;
+    let text = String::from_utf8(bytes).map_err(|e| {
+        let valid = &e.as_bytes()[..e.utf8_error().valid_up_to()];
+        format!("line {}: not UTF-8 text", 1 + valid.iter().filter(|&&b| b == b'\n').count())
+    })?;
     for (index, line) in text.lines().enumerate() {
         let mut words = line.split_whitespace();
         if let Some(key @ ("Ka" | "Kd" | "Ks" | "Ke")) = words.next() {
@@ -91,6 +96,7 @@ fn read_material_library(path: &Path) -> std::result::Result<String, String> {
 fn locate(error: tobj::LoadError, line: usize) -> String {
     use tobj::LoadError::{
         FaceColorOutOfBounds, FaceNormalOutOfBounds, FaceTexCoordOutOfBounds, FaceVertexOutOfBounds, InvalidPolygon,
+        ReadError,
     };
     match error {
         FaceVertexOutOfBounds
@@ -98,6 +104,9 @@ fn locate(error: tobj::LoadError, line: usize) -> String {
         | FaceNormalOutOfBounds
         | FaceColorOutOfBounds
         | InvalidPolygon => format!("{error} in a face of the object closed at line {line}"),
+        // tobj reads lines as UTF-8 and drops the I/O error, which for a file it could open is
+        // almost always that one.
+        ReadError => format!("line {line}: {error} (not UTF-8 text, or the file could not be read)"),
         _ => format!("line {line}: {error}"),
     }
 }
@@ -207,12 +216,19 @@ mod tests {
             let err = load(&path).unwrap_err().to_string();
             assert!(err.contains("material library") && err.contains(expected), "{text:?}: {err}");
         }
+        std::fs::write(&library, b"newmtl floor\nKd 1 1 1\n\nKs 1 1 \xff\n").unwrap();
+        let err = load(&path).unwrap_err().to_string();
+        assert!(err.contains("scene.mtl: line 4: not UTF-8 text"), "{err}");
     }
 
     #[test]
     fn parse_errors_name_the_line_at_fault() {
         let quad = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\n";
         let error = |text: &str| load(obj_file(text).path()).unwrap_err().to_string();
+        let mut not_utf8 = obj_file(quad);
+        not_utf8.write_all(b"f 1 2 3\nvn 0 1 \xff\n").unwrap();
+        let not_utf8 = load(not_utf8.path()).unwrap_err().to_string();
+        assert!(not_utf8.contains("line 6: read error (not UTF-8 text"), "{not_utf8}");
         let position = error(&format!("# a comment\n{quad}v 1 zero 2\nf 1 2 3\n"));
         assert!(position.contains("line 6: position parse error"), "{position}");
         let face = error(&format!("{quad}o quad\nf 1 2 x\nf 1 2 3\n"));
