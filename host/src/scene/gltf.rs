@@ -14,7 +14,8 @@ use glam::{Mat4, Vec3};
 use gltf::accessor::{DataType, Dimensions};
 use gltf::json::validation::Checked;
 use gltf::{buffer, Document, Semantic};
-use std::path::Path;
+use std::io::Read;
+use std::path::{Path, PathBuf};
 
 /// Loads and validates a `.gltf` or `.glb` file.
 pub fn load(path: &Path) -> Result<Scene> {
@@ -85,8 +86,13 @@ fn load_buffers(
             buffer::Source::Bin => "the GLB BIN chunk".to_owned(),
         };
         let field = format!("buffers[{}] ({source})", buffer.index());
-        let data = buffer::Data::from_source_and_blob(buffer.source(), base, &mut blob)
-            .map_err(|e| format!("{field}: {e}"))?;
+        let data = match buffer.source() {
+            buffer::Source::Uri(uri) if !uri.starts_with("data:") => {
+                external_buffer(uri, base, buffer.length()).map(buffer::Data)
+            }
+            source => buffer::Data::from_source_and_blob(source, base, &mut blob).map_err(|e| e.to_string()),
+        }
+        .map_err(|e| format!("{field}: {e}"))?;
         // `Data` is padded to a multiple of 4 bytes, as `gltf::import_buffers` checks it.
         if data.len() < buffer.length() {
             return Err(format!("{field}: byteLength is {} but the data has {} bytes", buffer.length(), data.len()));
@@ -94,6 +100,33 @@ fn load_buffers(
         Ok(data)
     };
     document.buffers().map(load).collect()
+}
+
+/// The first `length` bytes (its `byteLength`) of the external buffer file `uri` names, zero-padded
+/// to a multiple of 4 bytes as the `gltf` crate pads its buffers. The URI resolves as that crate
+/// resolves it — `file:` and `file://` take the path as written, a URI without a scheme is
+/// percent-decoded and joined to `base`, other schemes are unsupported — but the crate itself
+/// panics on a URI whose percent-decoded bytes are not UTF-8 (gltf 1.4.1 unwraps the decoding)
+/// and reads the whole file whatever the buffer's length, so `/dev/zero` filled memory and a FIFO
+/// blocked. Here the path must be a regular file and only `length` bytes are read.
+fn external_buffer(uri: &str, base: Option<&Path>, length: usize) -> std::result::Result<Vec<u8>, String> {
+    let path = if let Some(path) = uri.strip_prefix("file://").or_else(|| uri.strip_prefix("file:")) {
+        PathBuf::from(path)
+    } else if uri.contains(':') {
+        return Err("unsupported URI scheme (a buffer is a relative path, a file: URI or a data: URI)".into());
+    } else {
+        let decoded = urlencoding::decode(uri).map_err(|_| "the percent-decoded URI is not UTF-8 text".to_owned())?;
+        base.ok_or("a relative URI needs the scene file's folder")?.join(&*decoded)
+    };
+    let io_error = |e: std::io::Error| format!("{}: {e}", path.display());
+    // Checked before opening: opening a FIFO blocks until something writes to it.
+    if !std::fs::metadata(&path).map_err(io_error)?.is_file() {
+        return Err(format!("{} is not a regular file", path.display()));
+    }
+    let mut data = Vec::new();
+    std::fs::File::open(&path).and_then(|file| file.take(length as u64).read_to_end(&mut data)).map_err(io_error)?;
+    data.resize(data.len().next_multiple_of(4), 0);
+    Ok(data)
 }
 
 /// Checks that every primitive's POSITION attribute names an existing accessor, before the `gltf`
@@ -312,16 +345,7 @@ mod tests {
     /// (48 bytes) followed by 6 u16 indices (12 bytes), under a node translated by (0, 0, -2),
     /// with an emissive material and a camera node.
     fn quad_gltf(index_count: u32) -> String {
-        let mut bytes = Vec::new();
-        for p in [[0f32, 0., 0.], [1., 0., 0.], [1., 1., 0.], [0., 1., 0.]] {
-            for c in p {
-                bytes.extend_from_slice(&c.to_le_bytes());
-            }
-        }
-        for i in [0u16, 1, 2, 0, 2, 3] {
-            bytes.extend_from_slice(&i.to_le_bytes());
-        }
-        let data = base64_encode(&bytes);
+        let data = base64_encode(&quad_buffer());
         format!(
             r#"{{"asset":{{"version":"2.0"}},"scene":0,"scenes":[{{"nodes":[0,1]}}],
             "nodes":[{{"mesh":0,"translation":[0,0,-2]}},{{"camera":0,"translation":[0.5,0.5,3]}}],
@@ -333,6 +357,29 @@ mod tests {
             "accessors":[{{"bufferView":0,"componentType":5126,"count":4,"type":"VEC3","min":[0,0,0],"max":[1,1,0]}},
                          {{"bufferView":1,"componentType":5123,"count":{index_count},"type":"SCALAR"}}]}}"#
         )
+    }
+
+    /// [`quad_gltf`]'s 60-byte buffer.
+    fn quad_buffer() -> Vec<u8> {
+        let mut bytes = Vec::new();
+        for p in [[0f32, 0., 0.], [1., 0., 0.], [1., 1., 0.], [0., 1., 0.]] {
+            for c in p {
+                bytes.extend_from_slice(&c.to_le_bytes());
+            }
+        }
+        for i in [0u16, 1, 2, 0, 2, 3] {
+            bytes.extend_from_slice(&i.to_le_bytes());
+        }
+        bytes
+    }
+
+    /// [`quad_gltf`] with its buffer at `uri` instead of in a data URI.
+    fn quad_gltf_with_buffer_uri(uri: &str) -> String {
+        let mut text = quad_gltf(6);
+        let start = text.find("data:application").unwrap();
+        let end = start + text[start..].find('"').unwrap();
+        text.replace_range(start..end, uri);
+        text
     }
 
     fn base64_encode(bytes: &[u8]) -> String {
@@ -381,14 +428,46 @@ mod tests {
 
     #[test]
     fn missing_buffer_file_is_an_error() {
-        let mut text = quad_gltf(6);
-        let start = text.find("data:application").unwrap();
-        let end = start + text[start..].find('"').unwrap();
-        text.replace_range(start..end, "missing.bin");
-        let f = file(&text);
+        let f = file(&quad_gltf_with_buffer_uri("missing.bin"));
         let err = load(f.path()).unwrap_err();
         assert!(matches!(err, Error::SceneLoad { .. }), "{err}");
         assert!(err.to_string().contains(r#"buffers[0] ("missing.bin")"#), "{err}");
+    }
+
+    /// External buffers resolve as the `gltf` crate resolves them (percent-decoded relative
+    /// paths, `file:` URIs), and only their `byteLength` is read; what that crate panicked on (a
+    /// percent-decoded URI that is not UTF-8) or read without end (`/dev/zero`) is an error.
+    #[test]
+    fn external_buffers_are_read_up_to_their_length_from_regular_files_only() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut long = quad_buffer();
+        long.resize(1 << 20, 0xff);
+        std::fs::write(dir.path().join("quad data.bin"), &long).unwrap();
+        let scene_at = |uri: &str| {
+            let path = dir.path().join("scene.gltf");
+            std::fs::write(&path, quad_gltf_with_buffer_uri(uri)).unwrap();
+            load(&path)
+        };
+        let absolute = dir.path().join("quad data.bin").display().to_string();
+        for uri in ["quad%20data.bin".to_owned(), format!("file://{absolute}"), format!("file:{absolute}")] {
+            let scene = scene_at(&uri).unwrap_or_else(|e| panic!("{uri}: {e}"));
+            assert_eq!(scene.triangle_count(), 2, "{uri}");
+        }
+        let refused = [
+            ("%ff.bin", "the percent-decoded URI is not UTF-8 text"),
+            ("no%20such.bin", "no such.bin: No such file"),
+            (".", "is not a regular file"),
+            ("file:///dev/zero", "/dev/zero is not a regular file"),
+            ("https://example.invalid/quad.bin", "unsupported URI scheme"),
+        ];
+        for (uri, expected) in refused {
+            let err = scene_at(uri).unwrap_err().to_string();
+            assert!(err.contains(&format!("buffers[0] ({uri:?}): ")) && err.contains(expected), "{uri}: {err}");
+        }
+        // Padded to 52 bytes, as the `gltf` crate pads, which is less than the 60 of byteLength.
+        std::fs::write(dir.path().join("short.bin"), &quad_buffer()[..50]).unwrap();
+        let err = scene_at("short.bin").unwrap_err().to_string();
+        assert!(err.contains("byteLength is 60 but the data has 52 bytes"), "{err}");
     }
 
     /// Files the `gltf` crate accepts or panics on, each made from [`quad_gltf`] by replacing one
