@@ -68,11 +68,15 @@ pub fn load(path: &Path) -> Result<Scene> {
     Scene::new(&name, meshes, camera)
 }
 
-/// The text of the material library at `path`, or why it cannot be used: the OS's reason, or
-/// the line at fault — one that is not UTF-8 text, or a colour (`Ka`, `Kd`, `Ks`, `Ke`) with
+/// The text of the material library at `path`, or why it cannot be used: the OS's reason, not a
+/// regular file, or the line at fault — one that is not UTF-8 text, or a colour (`Ka`, `Kd`, `Ks`, `Ke`) with
 /// fewer than three numbers, refused here before tobj parses the text: tobj 4.0.5 panics on one
 /// (found by fuzzing the loader).
 fn read_material_library(path: &Path) -> std::result::Result<String, String> {
+    // Checked before reading: `mtllib /dev/zero` would fill memory, a FIFO block.
+    if !std::fs::metadata(path).map_err(|e| e.to_string())?.is_file() {
+        return Err("not a regular file".into());
+    }
     let bytes = std::fs::read(path).map_err(|e| e.to_string())?;
     let text = String::from_utf8(bytes).map_err(|e| {
         let valid = &e.as_bytes()[..e.utf8_error().valid_up_to()];
@@ -215,6 +219,13 @@ mod tests {
             std::fs::write(&library, text).unwrap();
             let err = load(&path).unwrap_err().to_string();
             assert!(err.contains("material library") && err.contains(expected), "{text:?}: {err}");
+        }
+        for (not_a_file, expected) in [("/dev/zero", "/dev/zero: not a regular file"), (".", "/.: not a regular file")]
+        {
+            let scene = dir.path().join("device.obj");
+            std::fs::write(&scene, format!("mtllib {not_a_file}\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")).unwrap();
+            let err = load(&scene).unwrap_err().to_string();
+            assert!(err.contains("material library") && err.contains(expected), "{err}");
         }
         std::fs::write(&library, b"newmtl floor\nKd 1 1 1\n\nKs 1 1 \xff\n").unwrap();
         let err = load(&path).unwrap_err().to_string();
