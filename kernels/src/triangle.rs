@@ -116,13 +116,17 @@ impl WatertightRay {
         // incoherent rays mispredict.
         let outside = ((u < 0.0) | (v < 0.0) | (w < 0.0)) & ((u > 0.0) | (v > 0.0) | (w > 0.0));
         let det = u + v + w;
-        if outside | (det == 0.0) {
+        let det_abs = det.abs();
+        // A subnormal determinant (a sliver a few units in the last place wide as seen from the
+        // ray) counts as degenerate, as 0 does: its reciprocal overflows to infinity, which made
+        // the hit's t and barycentrics non-finite (found by fuzzing a CPU render; a GPU that
+        // flushes subnormals to zero misses it too).
+        if outside | (det_abs < f32::MIN_POSITIVE) {
             return None;
         }
 
         let t_scaled = u * a.z + v * b.z + w * c.z;
         // Compare t·|det| against the range without dividing, sign-corrected for back faces.
-        let det_abs = det.abs();
         let t_scaled_abs = if det < 0.0 { -t_scaled } else { t_scaled };
         if t_scaled_abs < tmin * det_abs || t_scaled_abs > tmax * det_abs {
             return None;
@@ -199,6 +203,24 @@ mod tests {
         }
         // A ray in the triangle's plane sees a degenerate (zero-area) triangle.
         assert!(hit(Vec3::new(-1.0, 0.2, 0.0), Vec3::X).is_none());
+    }
+
+    /// Slivers whose determinant is subnormal in the ray's frame are misses, never a hit with an
+    /// infinite or NaN t or barycentrics; a tiny but normal triangle still hits.
+    #[test]
+    fn subnormal_slivers_miss_and_tiny_triangles_hit_finitely() {
+        for exponent in 15..=30 {
+            let size = 10f32.powi(-exponent);
+            let (v0, v1, v2) = (Vec3::new(0.0, 0.0, 1.0), Vec3::new(size, 0.0, 1.0), Vec3::new(0.0, size, 1.0));
+            let ray = WatertightRay::new(Vec3::new(0.2 * size, 0.2 * size, 0.0), Vec3::Z);
+            match ray.intersect(v0, v1, v2, 0.0, f32::MAX) {
+                Some(hit) => {
+                    assert!(hit.t.is_finite() && hit.barycentrics.is_finite(), "size {size:e}: {hit:?}");
+                    assert!((hit.t - 1.0).abs() < 1e-6, "size {size:e}: {hit:?}");
+                }
+                None => assert!(size * size < 2.0 * f32::MIN_POSITIVE, "size {size:e}: a normal triangle missed"),
+            }
+        }
     }
 
     #[test]
