@@ -139,7 +139,21 @@ impl WatertightRay {
 /// Unit geometric normal of triangle `(v0, v1, v2)` by the right-hand rule (counter-clockwise
 /// winding faces the viewer). Returns zero for a degenerate triangle rather than NaN.
 pub fn geometric_normal(v0: Vec3, v1: Vec3, v2: Vec3) -> Vec3 {
-    (v1 - v0).cross(v2 - v0).normalize_or_zero()
+    unit_normal((v1 - v0).cross(v2 - v0))
+}
+
+/// The unit vector along `cross` (a cross product of two edges, the normal of their plane),
+/// scaled by its largest component before it is normalized: `normalize` squares the components,
+/// so the normal of a triangle about 10⁻¹¹ across (a subnormal squared length) came out too long
+/// (by 23 % for one the offset tests met), and that of one under 10⁻¹² or over 10¹⁰ across as
+/// zero (a squared length that under- or overflowed). Zero for a zero or non-finite `cross`.
+pub fn unit_normal(cross: Vec3) -> Vec3 {
+    let largest = cross.abs().max_element();
+    if largest > 0.0 && largest.is_finite() {
+        (cross / largest).normalize_or_zero()
+    } else {
+        Vec3::ZERO
+    }
 }
 
 #[cfg(test)]
@@ -221,6 +235,26 @@ mod tests {
                 None => assert!(size * size < 2.0 * f32::MIN_POSITIVE, "size {size:e}: a normal triangle missed"),
             }
         }
+    }
+
+    /// A tilted triangle 10⁻¹⁸ to 10¹⁸ across has the unit normal it has at size 1: `normalize`
+    /// on the cross product gave one 2 % too long at 10⁻¹¹ (a subnormal squared length), and
+    /// zero from 10⁻¹² down and from 10¹⁰ up (a squared length that under- or overflowed).
+    #[test]
+    fn tiny_and_huge_triangles_have_unit_normals() {
+        let corners = [Vec3::new(0.1, -0.3, 0.2), Vec3::new(0.9, 0.2, -0.4), Vec3::new(-0.2, 0.7, 0.5)];
+        let expected = geometric_normal(corners[0], corners[1], corners[2]);
+        let old = |[a, b, c]: [Vec3; 3]| (b - a).cross(c - a).normalize_or_zero();
+        assert!((old(corners) - expected).length() < 1e-6);
+        for exponent in -18..=18 {
+            let scaled = corners.map(|v| v * 10f32.powi(exponent));
+            let n = geometric_normal(scaled[0], scaled[1], scaled[2]);
+            assert!((n - expected).length() < 1e-6, "10^{exponent}: {n} against {expected}");
+        }
+        let at = |exponent: i32| old(corners.map(|v| v * 10f32.powi(exponent)));
+        assert!(at(-11).length() > 1.02 && at(-12) == Vec3::ZERO && at(10) == Vec3::ZERO);
+        assert_eq!(unit_normal(Vec3::new(f32::INFINITY, 0.0, 0.0)), Vec3::ZERO);
+        assert_eq!(unit_normal(Vec3::NAN), Vec3::ZERO);
     }
 
     #[test]
