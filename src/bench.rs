@@ -5,7 +5,6 @@
 use crate::cpu::{self, CpuScene};
 use crate::frame::generate_params;
 use crate::kernels::hash::{pcg3d, unit_float};
-use crate::kernels::offset::offset_ray_origin;
 use crate::kernels::sampling::warp::{local_to_world, sample_cosine_hemisphere};
 use crate::kernels::trace::{trace_closest, trace_occluded, Ray};
 use crate::shared::stream::NO_HIT;
@@ -110,8 +109,7 @@ fn ray_sets(scene: &Scene, cpu_scene: &CpuScene, resolution: u32) -> RaySets {
         }
         let view = primary.direction[i].xyz();
         let surface = scene.hit_surface(hits.instance[i], hits.primitive[i], hits.barycentrics[i], view);
-        let (p, n) = (surface.position, surface.normal);
-        let origin = offset_ray_origin(p, n);
+        let (origin, n) = (surface.secondary_ray_origin(), surface.normal);
         let to_light = light - origin;
         shadow.origin.push(origin.extend(0.0));
         shadow.direction.push(to_light.normalize().extend(to_light.length() * (1.0 - 1e-4)));

@@ -7,7 +7,7 @@ mod common;
 use glam::{UVec3, Vec3};
 use raywave::cpu::{self, CpuScene};
 use raywave::kernels::hash::{pcg3d, unit_float};
-use raywave::kernels::offset::offset_ray_origin;
+use raywave::kernels::offset::{offset_ray_origin, triangle_extent};
 use raywave::kernels::triangle::geometric_normal;
 use raywave::scene::procedural::icosphere;
 use raywave::scene::{Camera, Mesh};
@@ -172,13 +172,53 @@ fn offset_secondary_rays_never_hit_their_own_convex_surface() {
             let d = if d.dot(n) < 0.0 { d - 2.0 * d.dot(n) * n } else { d };
             // Every 8th ray grazes: 1e-4 rad above the tangent plane.
             let d = if i % 8 == 0 { (d - d.dot(n) * n).normalize_or(n.any_orthonormal_vector()) + n * 1e-4 } else { d };
-            origins.push(offset_ray_origin(p, n));
+            origins.push(offset_ray_origin(p, n, triangle_extent(a, b, c)));
             directions.push(d);
         }
         let rays = rays_from(&origins, &directions, radius * 10.0);
         for traced in trace_everywhere("self-intersection", &scene, &rays) {
             let false_hits = traced.hits.primitive.iter().filter(|&&p| p != NO_HIT).count();
             assert_eq!(false_hits, 0, "{}: {false_hits} self-hits at distance {distance}", traced.backend);
+        }
+    }
+}
+
+/// A ground plane through the origin (two triangles, 2·10^k across), left from points within 30 %
+/// of its size of the origin by rays into the upper hemisphere, most of them grazing: the plane
+/// is flat, so any hit is a false self-intersection. With the offset counted in ulps of each of
+/// the point's coordinates, whose height is 0 (Wächter & Binder), about 5 % of such rays met a
+/// 2 km plane again and a third a 20 km one (`raywave_kernels::offset`); the offset now scales
+/// with the triangle's extent.
+#[test]
+fn rays_leaving_large_planes_through_the_origin_never_meet_them() {
+    const RAYS_PER_SIZE: u32 = 50_000;
+    for (size_index, half_size) in [1.0f32, 1e3, 1e4, 1e6].into_iter().enumerate() {
+        let corners = [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)];
+        let ground = Mesh {
+            name: "ground".into(),
+            positions: corners.iter().map(|&(x, z)| Vec3::new(x, 0.0, z) * half_size).collect(),
+            triangles: vec![[0, 2, 1], [0, 3, 2]],
+            material: raywave::scene::Material::diffuse(Vec3::splat(0.5)),
+        };
+        let extent = triangle_extent(ground.positions[0], ground.positions[1], ground.positions[2]);
+        let scene = scene_of(vec![ground]);
+        let stream = 40 + size_index as u32;
+        let origins: Vec<Vec3> = (0..RAYS_PER_SIZE)
+            .map(|i| {
+                let u = random3(i, stream) - 0.5;
+                offset_ray_origin(Vec3::new(u.x, 0.0, u.z) * 0.6 * half_size, Vec3::Y, extent)
+            })
+            .collect();
+        let directions: Vec<Vec3> = (0..RAYS_PER_SIZE)
+            .map(|i| {
+                let u = random3(i, stream + 10);
+                Vec3::new(u.x - 0.5, u.y * u.y * u.y * 0.3 + 1e-4, u.z - 0.5)
+            })
+            .collect();
+        let rays = rays_from(&origins, &directions, 4.0 * half_size);
+        for traced in trace_everywhere("large planes", &scene, &rays) {
+            let false_hits = traced.hits.primitive.iter().filter(|&&p| p != NO_HIT).count();
+            assert_eq!(false_hits, 0, "{}: {false_hits} self-hits on a plane {half_size} across", traced.backend);
         }
     }
 }

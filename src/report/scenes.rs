@@ -1,7 +1,6 @@
 //! The lit scenes of the reports: the built-in Cornell box geometry with analytic lights placed
 //! for each experiment of seed 002, and the shading points its camera sees.
 
-use crate::kernels::offset::offset_ray_origin;
 use crate::kernels::sampling::light_select::luminance;
 use crate::shared::stream::NO_HIT;
 use crate::shared::Light;
@@ -34,7 +33,8 @@ pub fn skinny_quad_light() -> Light {
 pub struct ShadingPoint {
     /// Linear pixel index.
     pub pixel: u32,
-    /// Ray origin for secondary rays: the hit point offset along the normal (Wächter & Binder).
+    /// Ray origin for secondary rays: the hit point offset along the normal
+    /// ([`crate::scene::SurfaceHit::secondary_ray_origin`]).
     pub origin: Vec3,
     /// Unit geometric normal, facing the camera.
     pub normal: Vec3,
@@ -55,7 +55,7 @@ pub fn shading_points(scene: &Scene, backend: &mut dyn Backend, rays: &RayStream
             scene.hit_surface(hits.instance[i], hits.primitive[i], hits.barycentrics[i], rays.direction[i].xyz());
         points.push(ShadingPoint {
             pixel: rays.pixel[i],
-            origin: offset_ray_origin(surface.position, surface.normal),
+            origin: surface.secondary_ray_origin(),
             normal: surface.normal,
             albedo: luminance(surface.material.base_color),
         });

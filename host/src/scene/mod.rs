@@ -97,8 +97,19 @@ pub struct SurfaceHit {
     pub position: Vec3,
     /// Unit geometric normal facing the side the ray came from.
     pub normal: Vec3,
+    /// The hit triangle's largest absolute vertex coordinate, in scene units
+    /// ([`raywave_kernels::offset::triangle_extent`]).
+    pub extent: f32,
     /// The hit mesh's material.
     pub material: Material,
+}
+
+impl SurfaceHit {
+    /// Where a ray leaving the surface towards the side the hitting ray came from starts: the
+    /// point offset along the normal by [`raywave_kernels::offset::offset_ray_origin`].
+    pub fn secondary_ray_origin(&self) -> Vec3 {
+        raywave_kernels::offset::offset_ray_origin(self.position, self.normal, self.extent)
+    }
 }
 
 /// A validated scene: meshes, a camera and the quad lights derived from the emissive meshes.
@@ -250,7 +261,8 @@ impl Scene {
         let position = a * (1.0 - barycentrics.x - barycentrics.y) + b * barycentrics.x + c * barycentrics.y;
         let normal = raywave_kernels::triangle::geometric_normal(a, b, c);
         let normal = if normal.dot(incoming) > 0.0 { -normal } else { normal };
-        SurfaceHit { position, normal, material: mesh.material }
+        let extent = raywave_kernels::offset::triangle_extent(a, b, c);
+        SurfaceHit { position, normal, extent, material: mesh.material }
     }
 
     /// Axis-aligned bounds (min, max) of every vertex used by a triangle.

@@ -32,7 +32,7 @@
 
 use super::ggx::GgxLobe;
 use super::ltc::{self, LtcLobe, ShadingFrame};
-use crate::offset::{offset_ray_origin, ray_stop_before};
+use crate::offset::{offset_ray_origin, ray_stop_before, triangle_extent};
 use crate::sampling::light_select::{luminance, LightSet};
 use crate::sampling::{dims, sampler, warp};
 use crate::sanitized::Sanitized;
@@ -47,6 +47,9 @@ pub struct Surface {
     pub position: Vec4,
     /// Unit geometric normal facing the camera (xyz); w = 0.
     pub normal: Vec4,
+    /// The hit triangle's largest absolute vertex coordinate (scene units), which the shadow
+    /// ray's origin offset scales with ([`crate::offset::triangle_extent`]); 0 for a miss.
+    pub extent: f32,
     /// Instance (mesh) index of the hit, [`NO_HIT`] for a miss; selects the material.
     pub instance: u32,
     /// The hit record was not finite and is read as a miss: the shade stage flags the sample as
@@ -56,7 +59,8 @@ pub struct Surface {
 
 impl Surface {
     /// A camera ray that hit nothing.
-    pub const MISS: Surface = Surface { position: Vec4::ZERO, normal: Vec4::ZERO, instance: NO_HIT, replaced: false };
+    pub const MISS: Surface =
+        Surface { position: Vec4::ZERO, normal: Vec4::ZERO, extent: 0.0, instance: NO_HIT, replaced: false };
 }
 
 /// Turns a hit into a surface: the point interpolated from the triangle's vertices (the most
@@ -101,7 +105,13 @@ pub fn resolve_surface(
         return Surface::MISS;
     }
     let normal = if normal.dot(direction) > 0.0 { -normal } else { normal };
-    Surface { position: position.extend(hit_t), normal: normal.extend(0.0), instance, replaced: false }
+    Surface {
+        position: position.extend(hit_t),
+        normal: normal.extend(0.0),
+        extent: triangle_extent(a, b, c),
+        instance,
+        replaced: false,
+    }
 }
 
 /// The scene data the shade stage reads.
@@ -287,12 +297,14 @@ pub fn shade_sample(
         return result;
     }
     let weight = f * light.radiance.xyz() / pdf;
-    let origin = offset_ray_origin(p, n);
+    let origin = offset_ray_origin(p, n, surface.extent);
     // Stop short of the light — its own emitter geometry may be in the scene — by a margin that
     // holds at grazing angles and far from the origin. A point within that margin of the light's
     // plane (which sees the light edge-on) has no such stop and draws no sample.
-    let light_normal = eu.cross(ev).normalize_or_zero();
-    let t_max = ray_stop_before(origin, direction, p + distance * direction, light_normal);
+    let light_normal = crate::triangle::unit_normal(eu.cross(ev));
+    // The extent of the light's two triangles: its four corners' largest coordinate.
+    let light_extent = triangle_extent(corner, corner + eu, corner + ev).max((corner + eu + ev).abs().max_element());
+    let t_max = ray_stop_before(origin, direction, p + distance * direction, light_normal, light_extent);
     if !weight.is_finite() {
         result.replaced = true;
         return result;
@@ -359,6 +371,8 @@ mod tests {
         Surface {
             position: Vec4::new(0.0, 0.0, 0.0, 1.0),
             normal: Vec4::new(0.0, 0.0, 1.0, 0.0),
+            // On a triangle about a unit across.
+            extent: 1.0,
             instance: 0,
             replaced: false,
         }
