@@ -212,7 +212,7 @@ fn bad_input_is_a_typed_error_without_output() {
     assert_rejected(&["--device", "cpu", "--exr", hdr_png.to_str().unwrap()], "must end in .exr");
     assert!(!jpg.exists() && !hdr_png.exists());
     assert_rejected(&["--device", "cpu", "--aperture", "0.1", "--focus", "0"], "focus");
-    // Beyond ±10¹⁸ the squared distances the kernels form overflow, and obvhs' BVH build panicked.
+    // Beyond ±10⁸ the powers of lengths the kernels form may overflow (MAX_COORDINATE).
     let far = dir.path().join("far.obj");
     std::fs::write(&far, "v 0 0 0\nv 1e19 0 0\nv 0 1 0\nf 1 2 3\n").unwrap();
     assert_rejected(

@@ -157,7 +157,7 @@ mod tests {
 
     #[test]
     fn far_focus_planes_and_wide_apertures_keep_unit_directions() {
-        // 10¹⁸ is the host's limit for both; with a wide field of view (179°: right and up about
+        // 10¹⁸, far beyond the host's limit for both (10⁸); with a wide field of view (179°: right and up about
         // a hundred times forward) the focus point lies near 10²⁰ and its squared distance
         // overflows f32.
         let mut p = params(4, 4);
