@@ -1,5 +1,11 @@
-//! What the fuzz targets share: turning the fuzzer's bytes into scene files.
+//! What the fuzz targets share: turning the fuzzer's bytes into scene files, and rendering a
+//! scene file with the checks every render must pass.
 
+pub mod shapes;
+
+use raywave::denoise::DenoiseMethod;
+use raywave::render::{render, RenderOptions, RenderView};
+use raywave::{BackendOptions, DeviceChoice, StageReport};
 use std::path::{Path, PathBuf};
 
 /// Writes `bytes` as a scene into `dir` and returns the path to load: `bytes[0] % 3` picks an OBJ
@@ -24,6 +30,44 @@ pub fn write_scene(dir: &Path, bytes: &[u8]) -> Option<PathBuf> {
     let path = dir.join(name);
     std::fs::write(&path, main).expect("the fuzz directory is writable");
     Some(path)
+}
+
+/// Renders the scene file `scene` on the CPU (12×8 pixels) into `dir`, with the estimator options
+/// `choices` picks (bit 0: `--analytic-residual`; the next bits: the denoiser — TV, SVGF or none
+/// — and 1, 2 or 4 samples per pixel), and asserts what every render must give: a typed error (a
+/// scene that does not load, or one without a light), or no stage replacing a non-finite value
+/// (sound input sanitizes nothing) and a finite HDR image.
+pub fn render_checked(dir: &Path, scene: &Path, choices: u8) {
+    let denoise = [DenoiseMethod::Tv, DenoiseMethod::Svgf, DenoiseMethod::None][(choices as usize >> 1) % 3];
+    let options = RenderOptions {
+        scene: scene.to_str().expect("a UTF-8 temporary path").to_owned(),
+        device: DeviceChoice::Cpu,
+        width: 12,
+        height: 8,
+        spp: 1 << ((choices >> 3) % 3),
+        seed: 1,
+        sampler: 0,
+        lens_radius: 0.0,
+        focus_distance: None,
+        view: RenderView::Lit,
+        out: dir.join("out.png"),
+        exr: Some(dir.join("out.exr")),
+        stochastic: Some(dir.join("stochastic.png")),
+        denoise,
+        denoise_radius: None,
+        analytic_residual: choices & 1 == 1,
+        backend: BackendOptions::default(),
+        settle_seconds: None,
+    };
+    // `render` loads the scene first: what does not load is refused there, as by `Scene::load`.
+    match render(&options) {
+        Ok(report) => {
+            assert_eq!(StageReport::total_sanitized(&report.timings), 0, "{:?}", report.timings);
+            let hdr = image::open(dir.join("out.exr")).expect("the EXR reads back").into_rgba32f();
+            assert!(hdr.pixels().all(|p| p.0.iter().all(|v| v.is_finite())), "a non-finite pixel");
+        }
+        Err(err) => assert!(!err.to_string().is_empty()),
+    }
 }
 
 /// A temporary directory for one fuzzing process, created on first use and reused by every input.
