@@ -34,8 +34,7 @@ impl Numbers<'_> {
 
     /// A point: `origin` plus a vector (the sum rounded as the scene file will hold it).
     fn point(&mut self, origin: [f32; 3]) -> [f32; 3] {
-        let offset = self.vector();
-        [origin[0] + offset[0], origin[1] + offset[1], origin[2] + offset[2]]
+        add(origin, self.vector())
     }
 
     /// Emitted radiance: three components in [0, 1] times one power-of-two scale in [2⁻⁴⁰, 2⁵⁹]

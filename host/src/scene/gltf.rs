@@ -8,13 +8,13 @@
 //! against their buffer views and buffers) and that the node hierarchy is a tree. Images are not
 //! loaded (textures are not sampled), so a missing texture file is no error.
 
+use super::regular_file::{read_regular_file, ReadError};
 use super::{framing_camera, Camera, Material, Mesh, Scene};
 use crate::error::{Error, Result};
 use glam::{Mat4, Vec3};
 use gltf::accessor::{DataType, Dimensions};
 use gltf::json::validation::Checked;
 use gltf::{buffer, Document, Semantic};
-use std::io::Read;
 use std::path::{Path, PathBuf};
 
 /// Loads and validates a `.gltf` or `.glb` file.
@@ -118,13 +118,10 @@ fn external_buffer(uri: &str, base: Option<&Path>, length: usize) -> std::result
         let decoded = urlencoding::decode(uri).map_err(|_| "the percent-decoded URI is not UTF-8 text".to_owned())?;
         base.ok_or("a relative URI needs the scene file's folder")?.join(&*decoded)
     };
-    let io_error = |e: std::io::Error| format!("{}: {e}", path.display());
-    // Checked before opening: opening a FIFO blocks until something writes to it.
-    if !std::fs::metadata(&path).map_err(io_error)?.is_file() {
-        return Err(format!("{} is not a regular file", path.display()));
-    }
-    let mut data = Vec::new();
-    std::fs::File::open(&path).and_then(|file| file.take(length as u64).read_to_end(&mut data)).map_err(io_error)?;
+    let mut data = read_regular_file(&path, length as u64).map_err(|e| match e {
+        ReadError::NotRegular => format!("{} is not a regular file", path.display()),
+        ReadError::Io(e) => format!("{}: {e}", path.display()),
+    })?;
     data.resize(data.len().next_multiple_of(4), 0);
     Ok(data)
 }

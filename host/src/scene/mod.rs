@@ -7,6 +7,7 @@ mod gltf;
 mod line_counter;
 mod obj;
 pub mod procedural;
+mod regular_file;
 
 use crate::error::{Error, Result};
 use glam::{Vec2, Vec3};

@@ -3,6 +3,7 @@
 //! frames the scene's bounds.
 
 use super::line_counter::LineCounter;
+use super::regular_file::{read_regular_file, ReadError};
 use super::{framing_camera, Material, Mesh, Scene};
 use crate::error::{Error, Result};
 use glam::Vec3;
@@ -73,11 +74,10 @@ pub fn load(path: &Path) -> Result<Scene> {
 /// fewer than three numbers, refused here before tobj parses the text: tobj 4.0.5 panics on one
 /// (found by fuzzing the loader).
 fn read_material_library(path: &Path) -> std::result::Result<String, String> {
-    // Checked before reading: `mtllib /dev/zero` would fill memory, a FIFO block.
-    if !std::fs::metadata(path).map_err(|e| e.to_string())?.is_file() {
-        return Err("not a regular file".into());
-    }
-    let bytes = std::fs::read(path).map_err(|e| e.to_string())?;
+    let bytes = read_regular_file(path, u64::MAX).map_err(|e| match e {
+        ReadError::NotRegular => "not a regular file".to_owned(),
+        ReadError::Io(e) => e.to_string(),
+    })?;
     let text = String::from_utf8(bytes).map_err(|e| {
         let valid = &e.as_bytes()[..e.utf8_error().valid_up_to()];
         format!("line {}: not UTF-8 text", 1 + valid.iter().filter(|&&b| b == b'\n').count())
