@@ -16,9 +16,8 @@
 
 use crate::bench::{measure, Measured, CPU_SETTLE_SECONDS};
 use crate::denoise::{check_radius, frame_params, DenoiseInput, DenoiseMethod};
-use crate::frame::{check_samples_per_pixel, generate_params_with, sampler_params};
-use crate::shading::{resolve, ShadeAccumulator, ShadeData};
-use crate::shared::sampling::sampler_kind;
+use crate::lit_frame::{shade_samples, LitFrameSettings};
+use crate::shading::ShadeData;
 use crate::shared::DenoiseParams;
 use crate::{Backend, Result, Scene};
 use glam::Vec4;
@@ -33,7 +32,7 @@ pub struct DenoiseBenchOptions {
     /// Image height in pixels.
     pub height: u32,
     /// Samples per pixel of the shaded input (the TV filter narrows as `1/√N`), checked by
-    /// [`check_samples_per_pixel`].
+    /// [`crate::frame::check_samples_per_pixel`].
     pub spp: u32,
     /// Timed repetitions per denoiser (≥ 1); the median per pass is reported.
     pub repeats: u32,
@@ -140,23 +139,11 @@ pub fn known_peak_gbps(device_name: &str) -> Option<f64> {
 pub fn frame_input(options: &DenoiseBenchOptions) -> Result<DenoiseInput> {
     let scene = Scene::load(&options.scene)?;
     let mut cpu = crate::cpu::CpuBackend::new();
-    cpu.check_image_size(options.width, options.height)?;
-    check_samples_per_pixel("spp", options.width, options.height, options.spp)?;
+    let settings = LitFrameSettings::new(options.width, options.height, options.spp);
+    settings.check_on(&cpu)?;
     cpu.load_scene(&scene)?;
     let data = ShadeData::new(&scene)?;
-    let (width, height) = (options.width, options.height);
-    let sampler = sampler_params(sampler_kind::ZSOBOL, 0, width, height, options.spp);
-    let mut accumulator = ShadeAccumulator::new((width * height) as usize);
-    let mut surfaces = Vec::new();
-    for sample_index in 0..options.spp {
-        let frame = cpu.render(&generate_params_with(&scene, width, height, sample_index, sampler))?;
-        if sample_index == 0 {
-            surfaces = resolve(&data, &frame.rays, &frame.hits);
-        }
-        let params = data.params(sampler, width, height, sample_index);
-        accumulator.shade_pass(&mut cpu, &params, &data, &frame.rays, &frame.hits)?;
-    }
-    Ok(DenoiseInput::new(&surfaces, &accumulator))
+    Ok(shade_samples(&mut cpu, &scene, &data, &settings)?.denoise_input())
 }
 
 /// `backend`'s copy bandwidth in GB/s on `image` (one `Vec4` per pixel of `params`' frame): the

@@ -6,11 +6,11 @@ use crate::bench::{check_settle_seconds, warm_up, SUSTAIN_SECONDS};
 use crate::{open_backend, Backend, BackendOptions, DeviceChoice, Result, Scene, StageReport};
 use glam::Vec3;
 use image::{ImageFormat, RgbImage};
-use raywave_host::denoise::{check_radius, frame_params, rgb, DenoiseInput, DenoiseMethod};
-use raywave_host::frame::{check_samples_per_pixel, generate_params_with, sampler_params};
-use raywave_host::shading::{resolve, ShadeAccumulator, ShadeData};
+use raywave_host::denoise::DenoiseMethod;
+use raywave_host::frame::check_samples_per_pixel;
+use raywave_host::lit_frame::{render_lit, LitFrameSettings};
+use raywave_host::shading::{ShadeAccumulator, ShadeData};
 use raywave_host::visualize::{normal_depth_image, persist_all, srgb_image, PendingOutput};
-use raywave_shared::{DenoiseParams, SamplerParams};
 use std::path::PathBuf;
 
 /// What the image shows.
@@ -70,7 +70,7 @@ pub struct RenderOptions {
     pub denoise: DenoiseMethod,
     /// The filter radius R in pixels (`1..=MAX_RADIUS`; the TV filter's widest Gaussian, and the
     /// SVGF baseline's footprint); `None` follows the image size
-    /// ([`DenoiseParams::default_radius`]: 6 from a 441-pixel side up, 2 at 128²).
+    /// ([`raywave_shared::DenoiseParams::default_radius`]: 6 from a 441-pixel side up, 2 at 128²).
     pub denoise_radius: Option<u32>,
     /// Whether `U`'s specular term takes the quadrature residual towards GGX
     /// ([`ShadeData::analytic_residual`]).
@@ -116,37 +116,29 @@ pub struct RenderReport {
     pub warm_up_seconds: Option<f64>,
 }
 
-/// Adds `report` to the summed report of its stage (appending it the first time): seconds,
-/// sanitized values and timed dispatches.
-fn add_report(timings: &mut Vec<StageReport>, report: &StageReport) {
-    match timings.iter_mut().find(|t| t.stage == report.stage) {
-        Some(t) => {
-            t.seconds += report.seconds;
-            t.sanitized += report.sanitized;
-            t.dispatches += report.dispatches;
+impl RenderOptions {
+    /// The frame these options describe: the lit view's samples per pixel, or one sample for the
+    /// normals view.
+    fn frame_settings(&self) -> LitFrameSettings {
+        LitFrameSettings {
+            samples_per_pixel: if self.view == RenderView::Lit { self.spp } else { 1 },
+            sampler_kind: self.sampler,
+            seed: self.seed,
+            lens_radius: self.lens_radius,
+            focus_distance: self.focus_distance,
+            denoise: self.denoise,
+            denoise_radius: self.denoise_radius,
+            ..LitFrameSettings::new(self.width, self.height, self.spp)
         }
-        None => timings.push(report.clone()),
     }
 }
 
-/// The largest thin-lens aperture radius and focus distance accepted, in scene units, as for
-/// the scene's coordinates ([`raywave_host::scene::MAX_COORDINATE`]): ray origins on the lens
-/// stay in the range the trace and shade stages handle (an aperture of 10²⁰ rendered black).
-pub const MAX_LENS_DISTANCE: f32 = raywave_host::scene::MAX_COORDINATE;
-
-/// Checks the options that do not need the scene: lens values and filter radius in range,
-/// outputs that the view writes, and no file named twice.
+/// Checks the options that need neither the scene nor the backend: the frame's settings
+/// ([`LitFrameSettings::check`]: lens values and filter radius in range), outputs that the view
+/// writes, and no file named twice.
 fn check_options(options: &RenderOptions) -> Result<()> {
     let invalid = |name, reason: String| Err(crate::Error::InvalidParameter { name, reason });
-    check_radius("denoise-radius", options.denoise_radius)?;
-    if !(0.0..=MAX_LENS_DISTANCE).contains(&options.lens_radius) {
-        return invalid("aperture", format!("{} is outside [0, {MAX_LENS_DISTANCE:e}]", options.lens_radius));
-    }
-    if let Some(focus) = options.focus_distance {
-        if !(focus > 0.0 && focus <= MAX_LENS_DISTANCE) {
-            return invalid("focus", format!("{focus} is outside (0, {MAX_LENS_DISTANCE:e}]"));
-        }
-    }
+    options.frame_settings().check()?;
     if options.view == RenderView::Normals {
         for (name, given) in [("exr", options.exr.is_some()), ("stochastic", options.stochastic.is_some())] {
             if given {
@@ -183,10 +175,10 @@ pub fn render(options: &RenderOptions) -> Result<RenderReport> {
     }
     let mut backend = open_backend(options.device, &backend_options)?;
     backend.check_image_size(options.width, options.height)?;
+    // The view's frame has one sample for the normals, but `--spp` is checked for either.
     check_samples_per_pixel("spp", options.width, options.height, options.spp)?;
     backend.load_scene(&scene)?;
-    let spp = if options.view == RenderView::Lit { options.spp } else { 1 };
-    let sampler = sampler_params(options.sampler, options.seed, options.width, options.height, spp);
+    let settings = options.frame_settings();
     let data = if options.view == RenderView::Lit {
         let mut data = ShadeData::new(&scene)?;
         data.analytic_residual = options.analytic_residual;
@@ -194,7 +186,7 @@ pub fn render(options: &RenderOptions) -> Result<RenderReport> {
     } else {
         None
     };
-    let frame = Frame { scene: &scene, options, data: data.as_ref(), sampler: &sampler, spp };
+    let frame = Frame { scene: &scene, settings: &settings, data: data.as_ref() };
     let (rendered, warm_up_seconds) = match settle_seconds {
         None => (frame.render(backend.as_mut())?, None),
         Some(settle) => {
@@ -208,7 +200,7 @@ pub fn render(options: &RenderOptions) -> Result<RenderReport> {
         dropped_degenerate: scene.dropped_degenerate(),
         lights: scene.lights().len(),
         unsupported_emitters: scene.unsupported_emitters(),
-        samples_per_pixel: spp,
+        samples_per_pixel: settings.samples_per_pixel,
         hits: rendered.hits,
         stream_bytes_per_pixel: rendered.stream_bytes / u64::from(options.width * options.height),
         timings: rendered.timings,
@@ -234,12 +226,9 @@ pub fn render(options: &RenderOptions) -> Result<RenderReport> {
 /// One frame of a render: everything but the backend, which each run borrows.
 struct Frame<'a> {
     scene: &'a Scene,
-    options: &'a RenderOptions,
+    settings: &'a LitFrameSettings,
     /// The shading inputs of the lit view (`None`: the normals view).
     data: Option<&'a ShadeData>,
-    sampler: &'a SamplerParams,
-    /// Samples per pixel: the options' for the lit view, 1 for the normals view.
-    spp: u32,
 }
 
 /// What one frame produced.
@@ -269,51 +258,24 @@ enum FrameImage {
 }
 
 impl Frame<'_> {
-    /// Renders the frame on `backend`: per sample generate → trace (→ shade → occlusion), then
-    /// the denoiser.
+    /// Renders the frame on `backend`: the lit view through [`render_lit`] (per sample generate →
+    /// trace → shade → occlusion, then the denoiser), the normals view from one sample's hits.
     fn render(&self, backend: &mut dyn Backend) -> Result<RenderedFrame> {
-        let (width, height) = (self.options.width, self.options.height);
-        let pixels = (width * height) as usize;
-        let mut accumulator = ShadeAccumulator::new(pixels);
-        // The denoiser's G-buffer: the surfaces of the first sample's camera rays.
-        let mut surfaces = Vec::new();
-        let mut timings = Vec::new();
-        let (mut hits, mut stream_bytes) = (0, 0);
-        for sample_index in 0..self.spp {
-            let mut params = generate_params_with(self.scene, width, height, sample_index, *self.sampler);
-            params.lens_radius = self.options.lens_radius;
-            params.focus_distance = self.options.focus_distance.unwrap_or(params.focus_distance);
-            let frame = backend.render(&params)?;
-            for t in &frame.timings {
-                add_report(&mut timings, t);
-            }
-            hits += frame.hits.primitive.iter().filter(|&&p| p != crate::shared::stream::NO_HIT).count();
-            stream_bytes = frame.rays.bytes() + frame.hits.bytes();
-            let Some(data) = self.data else {
-                let image = normal_depth_image(self.scene, &frame.rays, &frame.hits, width, height);
-                return Ok(RenderedFrame { timings, hits, stream_bytes, image: FrameImage::Normals(image) });
-            };
-            if sample_index == 0 {
-                surfaces = resolve(data, &frame.rays, &frame.hits);
-            }
-            let shade_params = data.params(*self.sampler, width, height, sample_index);
-            let (pass_timings, pass_bytes) =
-                accumulator.shade_pass(backend, &shade_params, data, &frame.rays, &frame.hits)?;
-            for t in pass_timings {
-                add_report(&mut timings, &t);
-            }
-            stream_bytes += pass_bytes;
-        }
-        let params = DenoiseParams {
-            seed: self.options.seed,
-            samples_per_pixel: accumulator.samples(),
-            ..frame_params(width, height, self.options.denoise_radius)
+        let (width, height) = (self.settings.width, self.settings.height);
+        let Some(data) = self.data else {
+            let frame = backend.render(&self.settings.generate_params(self.scene, 0))?;
+            let hits = frame.hits.primitive.iter().filter(|&&p| p != crate::shared::stream::NO_HIT).count();
+            let image = normal_depth_image(self.scene, &frame.rays, &frame.hits, width, height);
+            let stream_bytes = frame.rays.bytes() + frame.hits.bytes();
+            return Ok(RenderedFrame { timings: frame.timings, hits, stream_bytes, image: FrameImage::Normals(image) });
         };
-        let (color, pass_timings) =
-            backend.denoise(self.options.denoise, &params, &DenoiseInput::new(&surfaces, &accumulator))?;
-        for t in pass_timings {
-            add_report(&mut timings, &t);
-        }
-        Ok(RenderedFrame { timings, hits, stream_bytes, image: FrameImage::Lit { color: rgb(&color), accumulator } })
+        let lit = render_lit(backend, self.scene, data, self.settings)?;
+        let samples = lit.samples;
+        Ok(RenderedFrame {
+            timings: samples.timings,
+            hits: samples.hits,
+            stream_bytes: samples.stream_bytes,
+            image: FrameImage::Lit { color: lit.color, accumulator: samples.accumulator },
+        })
     }
 }

@@ -46,6 +46,20 @@ impl StageReport {
     pub fn total_sanitized(reports: &[StageReport]) -> u64 {
         reports.iter().map(|r| r.sanitized).sum()
     }
+
+    /// Adds `report` to its stage's entry of `totals` — seconds, sanitized values and timed
+    /// dispatches — appending the entry the first time its stage appears: a frame's reports
+    /// summed over its samples, in execution order.
+    pub fn add_to(totals: &mut Vec<StageReport>, report: &StageReport) {
+        match totals.iter_mut().find(|t| t.stage == report.stage) {
+            Some(total) => {
+                total.seconds += report.seconds;
+                total.sanitized += report.sanitized;
+                total.dispatches += report.dispatches;
+            }
+            None => totals.push(report.clone()),
+        }
+    }
 }
 
 /// The result of one frame: the streams the last stage produced and the time of each stage.

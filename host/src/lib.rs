@@ -10,6 +10,7 @@ pub mod device;
 pub mod error;
 pub mod frame;
 pub mod lights;
+pub mod lit_frame;
 pub mod ltc_fit;
 pub mod scene;
 pub mod shading;

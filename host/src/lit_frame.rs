@@ -1,0 +1,331 @@
+//! A lit frame of a scene in memory on any backend: per sample generate → trace → shade →
+//! occlusion trace, then a denoiser and the ratio estimator's composite
+//! `emitted + U · den(S_N)/den(U_N)`. This is what `raywave render` runs; an engine that builds its
+//! own [`Scene`] ([`Scene::new`]) calls [`render_lit`] and gets the image in memory.
+
+use crate::backend::{Backend, StageReport};
+use crate::denoise::{check_radius, frame_params, rgb, DenoiseInput, DenoiseMethod};
+use crate::error::{Error, Result};
+use crate::frame::{check_samples_per_pixel, generate_params_with, sampler_params};
+use crate::scene::{Scene, MAX_COORDINATE};
+use crate::shading::{resolve, ShadeAccumulator, ShadeData};
+use glam::Vec3;
+use raywave_kernels::shade::stage::Surface;
+use raywave_shared::sampling::sampler_kind;
+use raywave_shared::stream::NO_HIT;
+use raywave_shared::{DenoiseParams, GenerateParams, SamplerParams};
+
+/// The largest thin-lens aperture radius and focus distance accepted, in scene units, as for
+/// the scene's coordinates ([`MAX_COORDINATE`]): ray origins on the lens stay in the range the
+/// trace and shade stages handle (an aperture of 10²⁰ rendered black).
+pub const MAX_LENS_DISTANCE: f32 = MAX_COORDINATE;
+
+/// How a lit frame is sampled and filtered.
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub struct LitFrameSettings {
+    /// Image width in pixels (≥ 1, within the backend's limits: [`Backend::check_image_size`]).
+    pub width: u32,
+    /// Image height in pixels (≥ 1, within the backend's limits).
+    pub height: u32,
+    /// Samples per pixel: camera rays, and one shadow ray each ([`check_samples_per_pixel`]).
+    pub samples_per_pixel: u32,
+    /// The sampler (one of [`sampler_kind`]; the blue-noise `ZSOBOL` by default).
+    pub sampler_kind: u32,
+    /// Seed of the sampler and of the noise estimate's line angles.
+    pub seed: u32,
+    /// Thin-lens aperture radius in scene units, in `[0, MAX_LENS_DISTANCE]` (0: a pinhole).
+    pub lens_radius: f32,
+    /// Distance of the plane in focus, in `(0, MAX_LENS_DISTANCE]`; `None` focuses on the
+    /// camera's look-at point.
+    pub focus_distance: Option<f32>,
+    /// The denoiser of the shadow ratio ([`DenoiseMethod::Tv`] by default;
+    /// [`DenoiseMethod::None`] composites the raw `U · S_N/U_N`).
+    pub denoise: DenoiseMethod,
+    /// The filter radius R in pixels (`1..=MAX_RADIUS`); `None` follows the image size
+    /// ([`DenoiseParams::default_radius`]).
+    pub denoise_radius: Option<u32>,
+}
+
+impl LitFrameSettings {
+    /// A `width × height` frame of `samples_per_pixel` samples: the blue-noise sampler with seed 0,
+    /// a pinhole camera, the TV denoiser with the radius that follows the image.
+    pub fn new(width: u32, height: u32, samples_per_pixel: u32) -> Self {
+        Self {
+            width,
+            height,
+            samples_per_pixel,
+            sampler_kind: sampler_kind::ZSOBOL,
+            seed: 0,
+            lens_radius: 0.0,
+            focus_distance: None,
+            denoise: DenoiseMethod::Tv,
+            denoise_radius: None,
+        }
+    }
+
+    /// Checks the settings that need neither the backend nor the image size: the sampler kind,
+    /// the lens and the filter radius. Errors name the setting as `raywave render` spells its
+    /// option (`sampler`, `aperture`, `focus`, `denoise-radius`).
+    pub fn check(&self) -> Result<()> {
+        let invalid = |name, reason: String| Err(Error::InvalidParameter { name, reason });
+        if self.sampler_kind >= sampler_kind::COUNT {
+            return invalid("sampler", format!("kind {} is not one of 0..{}", self.sampler_kind, sampler_kind::COUNT));
+        }
+        check_radius("denoise-radius", self.denoise_radius)?;
+        if !(0.0..=MAX_LENS_DISTANCE).contains(&self.lens_radius) {
+            return invalid("aperture", format!("{} is outside [0, {MAX_LENS_DISTANCE:e}]", self.lens_radius));
+        }
+        if let Some(focus) = self.focus_distance {
+            if !(focus > 0.0 && focus <= MAX_LENS_DISTANCE) {
+                return invalid("focus", format!("{focus} is outside (0, {MAX_LENS_DISTANCE:e}]"));
+            }
+        }
+        Ok(())
+    }
+
+    /// Checks every setting for a frame on `backend`: [`Self::check`], then the image size
+    /// against the backend's limits ([`Backend::check_image_size`]), then the samples per pixel
+    /// for that size ([`check_samples_per_pixel`], named `spp`).
+    pub fn check_on(&self, backend: &dyn Backend) -> Result<()> {
+        self.check()?;
+        backend.check_image_size(self.width, self.height)?;
+        check_samples_per_pixel("spp", self.width, self.height, self.samples_per_pixel)
+    }
+
+    /// The sampler of this frame's samples.
+    pub fn sampler(&self) -> SamplerParams {
+        sampler_params(self.sampler_kind, self.seed, self.width, self.height, self.samples_per_pixel)
+    }
+
+    /// The generate stage's parameters for sample `sample_index` of `scene`'s camera, with this
+    /// frame's lens.
+    pub fn generate_params(&self, scene: &Scene, sample_index: u32) -> GenerateParams {
+        let mut params = generate_params_with(scene, self.width, self.height, sample_index, self.sampler());
+        params.lens_radius = self.lens_radius;
+        params.focus_distance = self.focus_distance.unwrap_or(params.focus_distance);
+        params
+    }
+
+    /// The denoiser's parameters for a frame of `samples` samples per pixel.
+    pub fn denoise_params(&self, samples: u32) -> DenoiseParams {
+        DenoiseParams {
+            seed: self.seed,
+            samples_per_pixel: samples,
+            ..frame_params(self.width, self.height, self.denoise_radius)
+        }
+    }
+}
+
+/// The shading samples of a frame, before any filter.
+#[derive(Clone, Debug)]
+pub struct LitSamples {
+    /// Per-pixel sums of `U`, `U_N`, `S_N` and the emitted radiance over the samples.
+    pub accumulator: ShadeAccumulator,
+    /// The denoiser's G-buffer: the surface each pixel's first camera ray hit.
+    pub surfaces: Vec<Surface>,
+    /// Each stage's report, summed over the samples ([`StageReport::add_to`]) in execution order.
+    pub timings: Vec<StageReport>,
+    /// Camera rays that hit geometry, over all samples.
+    pub hits: usize,
+    /// Bytes of the SoA streams one sample used: rays, hits, the shade stream, shadow rays and
+    /// occlusion results.
+    pub stream_bytes: u64,
+}
+
+impl LitSamples {
+    /// The denoiser's inputs: the G-buffer and the accumulated estimates.
+    pub fn denoise_input(&self) -> DenoiseInput {
+        DenoiseInput::new(&self.surfaces, &self.accumulator)
+    }
+}
+
+/// Runs `settings.samples_per_pixel` samples of `scene` on `backend`, each generate → trace →
+/// shade → occlusion trace, and accumulates them. `backend` must have loaded `scene`
+/// ([`Backend::load_scene`]) and `data` must be `scene`'s ([`ShadeData::new`]); the settings and
+/// the image size are checked first, so a bad value is a typed error before any work.
+pub fn shade_samples(
+    backend: &mut dyn Backend,
+    scene: &Scene,
+    data: &ShadeData,
+    settings: &LitFrameSettings,
+) -> Result<LitSamples> {
+    settings.check_on(backend)?;
+    let (width, height) = (settings.width, settings.height);
+    let mut samples = LitSamples {
+        accumulator: ShadeAccumulator::new(width as usize * height as usize),
+        surfaces: Vec::new(),
+        timings: Vec::new(),
+        hits: 0,
+        stream_bytes: 0,
+    };
+    for sample_index in 0..settings.samples_per_pixel {
+        let frame = backend.render(&settings.generate_params(scene, sample_index))?;
+        for report in &frame.timings {
+            StageReport::add_to(&mut samples.timings, report);
+        }
+        samples.hits += frame.hits.primitive.iter().filter(|&&p| p != NO_HIT).count();
+        if sample_index == 0 {
+            samples.surfaces = resolve(data, &frame.rays, &frame.hits);
+        }
+        let params = data.params(settings.sampler(), width, height, sample_index);
+        let (reports, pass_bytes) = samples.accumulator.shade_pass(backend, &params, data, &frame.rays, &frame.hits)?;
+        for report in &reports {
+            StageReport::add_to(&mut samples.timings, report);
+        }
+        samples.stream_bytes = frame.rays.bytes() + frame.hits.bytes() + pass_bytes;
+    }
+    Ok(samples)
+}
+
+/// A lit frame: the image and the samples behind it.
+#[derive(Clone, Debug)]
+pub struct LitFrame {
+    /// Linear RGB radiance per pixel, rows from the top: `emitted + U · den(S_N)/den(U_N)`
+    /// (falling back to `U` where `den(U_N) ≈ 0`), every value finite.
+    pub color: Vec<Vec3>,
+    /// The accumulated estimates; their `timings` also hold the denoiser's passes, after the
+    /// stages.
+    pub samples: LitSamples,
+}
+
+/// Renders a lit frame of `scene` on `backend`: [`shade_samples`], then `settings.denoise` and
+/// the composite, all on `backend`. The same preconditions and checks as [`shade_samples`].
+///
+/// ```
+/// use raywave_host::denoise::DenoiseMethod;
+/// use raywave_host::lit_frame::{render_lit, LitFrameSettings};
+/// use raywave_host::scene::{Camera, Material, Mesh};
+/// use raywave_host::shading::ShadeData;
+/// use raywave_host::{open_backend, BackendOptions, DeviceChoice, Scene};
+/// use glam::Vec3;
+///
+/// // An engine's own geometry: a floor, a block standing on it and a square lamp above,
+/// // facing down (counter-clockwise seen from below); emissive parallelograms are quad lights.
+/// let quad = |name: &str, corners: [Vec3; 4], material| Mesh {
+///     name: name.into(),
+///     positions: corners.to_vec(),
+///     triangles: vec![[0, 1, 2], [0, 2, 3]],
+///     material,
+/// };
+/// let floor = quad(
+///     "floor",
+///     [Vec3::new(-2.0, 0.0, -2.0), Vec3::new(-2.0, 0.0, 2.0), Vec3::new(2.0, 0.0, 2.0), Vec3::new(2.0, 0.0, -2.0)],
+///     Material::diffuse(Vec3::splat(0.7)),
+/// );
+/// let block = quad(
+///     "block",
+///     [Vec3::new(-0.3, 0.5, -0.3), Vec3::new(-0.3, 0.5, 0.3), Vec3::new(0.3, 0.5, 0.3), Vec3::new(0.3, 0.5, -0.3)],
+///     Material { roughness: 0.3, ..Material::diffuse(Vec3::new(0.8, 0.2, 0.2)) },
+/// );
+/// let lamp = quad(
+///     "lamp",
+///     [Vec3::new(-0.2, 2.0, -0.2), Vec3::new(0.2, 2.0, -0.2), Vec3::new(0.2, 2.0, 0.2), Vec3::new(-0.2, 2.0, 0.2)],
+///     Material { emission: Vec3::splat(20.0), ..Material::diffuse(Vec3::ZERO) },
+/// );
+/// let camera = Camera {
+///     position: Vec3::new(0.0, 3.0, 4.0),
+///     look_at: Vec3::ZERO,
+///     up: Vec3::Y,
+///     vertical_fov_degrees: 45.0,
+/// };
+/// let scene = Scene::new("engine scene", vec![floor, block, lamp], camera)?;
+/// assert_eq!(scene.lights().len(), 1);
+///
+/// let mut backend = open_backend(DeviceChoice::Cpu, &BackendOptions::default())?;
+/// backend.load_scene(&scene)?;
+/// let data = ShadeData::new(&scene)?;
+/// let settings = LitFrameSettings { denoise: DenoiseMethod::Tv, ..LitFrameSettings::new(48, 32, 2) };
+/// let frame = render_lit(backend.as_mut(), &scene, &data, &settings)?;
+/// assert_eq!(frame.color.len(), 48 * 32);
+/// assert!(frame.color.iter().all(|c| c.is_finite()));
+/// // The floor under the block, at the image's centre, lies in the block's shadow.
+/// let lit_floor = frame.color[28 * 48 + 4];
+/// let shadowed_floor = frame.color[16 * 48 + 24];
+/// assert!(shadowed_floor.length() < 0.5 * lit_floor.length());
+/// # Ok::<(), raywave_host::Error>(())
+/// ```
+pub fn render_lit(
+    backend: &mut dyn Backend,
+    scene: &Scene,
+    data: &ShadeData,
+    settings: &LitFrameSettings,
+) -> Result<LitFrame> {
+    let mut samples = shade_samples(backend, scene, data, settings)?;
+    let params = settings.denoise_params(samples.accumulator.samples());
+    let (color, reports) = backend.denoise(settings.denoise, &params, &samples.denoise_input())?;
+    samples.timings.extend(reports);
+    Ok(LitFrame { color: rgb(&color), samples })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::cpu::CpuBackend;
+
+    fn rejected_setting(settings: LitFrameSettings) -> &'static str {
+        match settings.check_on(&CpuBackend::new()) {
+            Err(Error::InvalidParameter { name, .. }) => name,
+            other => panic!("expected a typed error, got {other:?}"),
+        }
+    }
+
+    #[test]
+    fn each_bad_setting_is_named() {
+        let good = LitFrameSettings::new(64, 32, 4);
+        good.check_on(&CpuBackend::new()).unwrap();
+        let empty = LitFrameSettings::new(0, 32, 4).check_on(&CpuBackend::new());
+        assert!(matches!(empty, Err(Error::ImageSize { width: 0, .. })), "{empty:?}");
+        assert_eq!(rejected_setting(LitFrameSettings { samples_per_pixel: 0, ..good }), "spp");
+        assert_eq!(rejected_setting(LitFrameSettings::new(4096, 4096, 1024)), "spp");
+        assert_eq!(rejected_setting(LitFrameSettings { sampler_kind: sampler_kind::COUNT, ..good }), "sampler");
+        assert_eq!(rejected_setting(LitFrameSettings { denoise_radius: Some(0), ..good }), "denoise-radius");
+        for lens_radius in [-1.0, f32::NAN, 2.0 * MAX_LENS_DISTANCE] {
+            assert_eq!(rejected_setting(LitFrameSettings { lens_radius, ..good }), "aperture");
+        }
+        for focus in [0.0, f32::INFINITY, f32::NAN] {
+            assert_eq!(rejected_setting(LitFrameSettings { focus_distance: Some(focus), ..good }), "focus");
+        }
+    }
+
+    #[test]
+    fn a_backend_without_the_scene_is_an_error_not_a_panic() {
+        let scene = Scene::load("builtin:cornell").unwrap();
+        let data = ShadeData::new(&scene).unwrap();
+        let mut cpu = CpuBackend::new();
+        assert!(render_lit(&mut cpu, &scene, &data, &LitFrameSettings::new(8, 8, 1)).is_err());
+    }
+
+    #[test]
+    fn reports_add_up_by_stage_in_first_seen_order() {
+        let mut totals = Vec::new();
+        for report in [
+            StageReport::once("trace", 1.0, 2),
+            StageReport::clean("shade", 0.5),
+            StageReport { dispatches: 3, ..StageReport::once("trace", 0.25, 1) },
+        ] {
+            StageReport::add_to(&mut totals, &report);
+        }
+        assert_eq!(
+            totals,
+            [StageReport { dispatches: 4, ..StageReport::once("trace", 1.25, 3) }, StageReport::clean("shade", 0.5)]
+        );
+    }
+
+    #[test]
+    fn samples_count_hits_and_resolve_the_first_sample() {
+        let scene = Scene::load("builtin:cornell").unwrap();
+        let data = ShadeData::new(&scene).unwrap();
+        let mut cpu = CpuBackend::new();
+        cpu.load_scene(&scene).unwrap();
+        let settings = LitFrameSettings::new(16, 12, 3);
+        let samples = shade_samples(&mut cpu, &scene, &data, &settings).unwrap();
+        assert_eq!(samples.accumulator.samples(), 3);
+        assert_eq!(samples.surfaces.len(), 16 * 12);
+        let first = cpu.render(&settings.generate_params(&scene, 0)).unwrap();
+        assert_eq!(samples.surfaces, resolve(&data, &first.rays, &first.hits));
+        assert!(samples.hits > 0 && samples.hits <= 3 * 16 * 12);
+        let stages: Vec<_> = samples.timings.iter().map(|t| t.stage).collect();
+        assert_eq!(stages, ["generate", "trace", "shade", "occlusion"]);
+        assert!(samples.timings.iter().all(|t| t.dispatches == 3 && t.sanitized == 0));
+    }
+}
