@@ -348,7 +348,9 @@ fn the_kernels_ggx_lobe_is_the_fitted_one() {
 }
 
 /// Random quad lights, views and roughnesses (fixed seed): with the residual towards GGX no
-/// light's `U_S` is worse than the LTC's, and none is beyond 5 % of the reference.
+/// light's `U_S` is worse than the LTC's by more than 1 % of the reference (where the LTC happens
+/// to be exact the residual keeps its own quadrature error, up to about 0.1 %), and none is beyond
+/// 5 % of the reference.
 #[test]
 fn the_residual_helps_on_random_lights() {
     let table: Vec<Vec4> = packed_entries().map(Vec4::from_array).collect();

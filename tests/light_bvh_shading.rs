@@ -67,7 +67,13 @@ fn light_bvh_choice_keeps_u_n_unbiased() {
         }
         lit += 1;
         // A pixel whose every sample equals U exactly has no spread: any mean but 0 is a bias.
-        let z = if variance > 0.0 { mean / (variance / n).sqrt() } else { mean.abs() * f64::INFINITY };
+        let z = if variance > 0.0 {
+            mean / (variance / n).sqrt()
+        } else if mean == 0.0 {
+            0.0
+        } else {
+            f64::INFINITY
+        };
         if z.abs() > worst.0 || z.is_nan() {
             worst = (z.abs(), i);
         }

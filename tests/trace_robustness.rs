@@ -79,11 +79,12 @@ fn trace_on_vulkan(_test: &str, _scene: &Scene, _rays: &RayStream) -> Vec<Traced
     Vec::new()
 }
 
-/// Largest leak rate accepted from a driver's own ray–triangle test on a closed mesh. The Vulkan
-/// spec requires watertightness on closed fans, but lavapipe (mesa 25.0.7) leaks about 0.3 % of rays
-/// aimed exactly at edges and vertices; this bound catches a regression from that, and raywave's own
-/// traversal (`--trace sw`) is held to zero.
-const DRIVER_LEAK_RATE_BOUND: f64 = 0.005;
+/// Largest leak rates accepted from a driver's own ray–triangle test on a closed mesh, of rays aimed
+/// exactly at a vertex and at a point on an edge. The Vulkan spec requires watertightness on closed
+/// fans, but lavapipe (mesa 25.0.7, ray query) leaks 1.1 % of the rays aimed at vertices (5 404 of
+/// 500 000, from inside and from outside alike) and 0.009 % of those aimed at edges (45); these
+/// bounds catch a regression from that, and raywave's own traversal (`--trace sw`) is held to zero.
+const DRIVER_LEAK_RATE_BOUND: [f64; 2] = [0.02, 0.0005];
 
 #[test]
 fn no_ray_leaks_through_shared_edges_and_vertices_of_closed_spheres() {
@@ -94,11 +95,12 @@ fn no_ray_leaks_through_shared_edges_and_vertices_of_closed_spheres() {
     let mut origins = Vec::with_capacity(RAYS as usize);
     let mut directions = Vec::with_capacity(RAYS as usize);
     for i in 0..RAYS {
-        // Aim at a vertex or at a point on an edge (shared by two triangles) of a random triangle.
+        // Aim at a vertex (i % 4 = 0, 1) or at a point on an edge (shared by two triangles;
+        // i % 4 = 2, 3) of a random triangle, from inside (even i) or outside (odd i).
         let t = triangles[(pcg3d(UVec3::new(i, 1, 3)).x % triangles.len() as u32) as usize];
         let r = random3(i, 2);
         let (a, b) = (positions[t[(i % 3) as usize] as usize], positions[t[((i + 1) % 3) as usize] as usize]);
-        let target = if i % 4 == 0 { a } else { a.lerp(b, r.x) };
+        let target = if i % 4 < 2 { a } else { a.lerp(b, r.x) };
         // Half the rays start inside; half start outside and come in steeply (within 30° of the
         // inward radial direction), so every ray must cross the surface at or before the target.
         // (Rays grazing the silhouette can legitimately miss a convex mesh: they are not leaks.)
@@ -114,10 +116,14 @@ fn no_ray_leaks_through_shared_edges_and_vertices_of_closed_spheres() {
     }
     let rays = rays_from(&origins, &directions, 10.0);
     for traced in trace_everywhere("watertightness", &scene, &rays) {
-        // Leaks by category: [inside, outside] × [vertex, edge].
+        // Leaks by category: [inside, outside] × [vertex, edge]. An inside ray that slips through
+        // misses (nothing is outside the sphere); an outside ray that slips through at its target
+        // goes on to the far side, so it leaks if it meets nothing at or before the target.
         let mut leaks = [[0u32; 2]; 2];
-        for (i, &p) in traced.hits.primitive.iter().enumerate() {
-            if p == NO_HIT {
+        for (i, (&p, &t)) in traced.hits.primitive.iter().zip(&traced.hits.t).enumerate() {
+            let to_target = directions[i].length();
+            let leaked = p == NO_HIT || (i % 2 == 1 && t > to_target * (1.0 + 1e-4));
+            if leaked {
                 leaks[i % 2][usize::from(i % 4 >= 2)] += 1;
             }
         }
@@ -128,7 +134,10 @@ fn no_ray_leaks_through_shared_edges_and_vertices_of_closed_spheres() {
         );
         eprintln!("{report}");
         if traced.driver_intersection {
-            assert!(f64::from(total) / f64::from(RAYS) <= DRIVER_LEAK_RATE_BOUND, "{report}");
+            for (kind, bound) in DRIVER_LEAK_RATE_BOUND.iter().enumerate() {
+                let rate = f64::from(leaks[0][kind] + leaks[1][kind]) / f64::from(RAYS / 2);
+                assert!(rate <= *bound, "{report}");
+            }
         } else {
             assert_eq!(total, 0, "{report}");
         }

@@ -113,10 +113,20 @@ mod tests {
 
     #[test]
     fn image_corners_map_to_the_frustum_corners() {
-        let p = params(1, 1);
-        // With one pixel the jitter spans the whole frustum; direction/z stays within ±right, ±up.
-        let d = generate_ray(0, &p).direction.xyz();
-        assert!((d.x / d.z).abs() <= 0.5 && (d.y / d.z).abs() <= 0.25);
+        // With one pixel the jitter spans the whole frustum: over its samples, direction/z stays
+        // within ±right, ±up and comes near every corner.
+        let mut p = params(1, 1);
+        p.sampler.spp_log2 = 8;
+        let mut near_corner = [false; 4];
+        for sample_index in 0..256 {
+            let d = generate_ray(0, &GenerateParams { sample_index, ..p }).direction.xyz();
+            let (x, y) = (d.x / d.z / 0.5, d.y / d.z / 0.25);
+            assert!(x.abs() <= 1.0 && y.abs() <= 1.0, "sample {sample_index}: ({x}, {y}) outside the frustum");
+            if x.abs() > 0.8 && y.abs() > 0.8 {
+                near_corner[usize::from(x > 0.0) + 2 * usize::from(y > 0.0)] = true;
+            }
+        }
+        assert_eq!(near_corner, [true; 4], "256 stratified samples reach within 10 % of each corner");
     }
 
     #[test]
@@ -134,25 +144,25 @@ mod tests {
         let mut p = params(4, 4);
         p.lens_radius = 0.1;
         p.focus_distance = 5.0;
+        let mut widest: f32 = 0.0;
         for i in 0..p.ray_count() {
-            let pinhole = generate_ray(i, &GenerateParams { lens_radius: 0.0, ..p });
-            let mut focus_points = std::vec::Vec::new();
             for sample_index in 0..4 {
                 let ray = generate_ray(i, &GenerateParams { sample_index, ..p });
                 let offset = ray.origin.xyz() - p.origin.xyz();
                 assert!(offset.length() <= 0.1 + 1e-6 && offset.z.abs() < 1e-6, "origin off the lens");
+                widest = widest.max(offset.length());
                 let d = ray.direction.xyz();
                 assert!((d.length() - 1.0).abs() < 1e-5);
-                // Where the ray crosses the focal plane z = 3 + 5.
-                let t = (8.0 - ray.origin.z) / d.z;
-                focus_points.push(ray.origin.xyz() + t * d);
+                // Where the ray crosses the focal plane z = 3 + 5: where the pinhole ray of the
+                // same sample (the same pixel jitter) crosses it.
+                let focus_point = ray.origin.xyz() + ((8.0 - ray.origin.z) / d.z) * d;
+                let pinhole = generate_ray(i, &GenerateParams { sample_index, lens_radius: 0.0, ..p });
+                let d = pinhole.direction.xyz();
+                let expected = pinhole.origin.xyz() + (5.0 / d.z) * d;
+                assert!((focus_point - expected).length() < 1e-4, "{focus_point:?} vs {expected:?}");
             }
-            // The pinhole ray (same jitter for sample 0 only) and every lens ray of one jitter
-            // meet the focal plane at their pinhole point: check sample 0 against the pinhole.
-            let d = pinhole.direction.xyz();
-            let expected = pinhole.origin.xyz() + (5.0 / d.z) * d;
-            assert!((focus_points[0] - expected).length() < 1e-4, "{:?} vs {expected:?}", focus_points[0]);
         }
+        assert!(widest > 0.05, "the lens samples its aperture (widest offset {widest})");
     }
 
     #[test]
