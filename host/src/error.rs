@@ -79,8 +79,10 @@ pub enum Error {
         /// Number of vertices in the mesh.
         vertex_count: usize,
     },
-    /// The scene is larger than the 32-bit indices of the streams allow.
-    #[error("scene {scene}: {what} exceeds the 32-bit limit")]
+    /// The scene is larger than raywave handles: more vertices than [`crate::scene::MAX_VERTICES`],
+    /// more triangles or meshes than the streams' 32-bit indices, or a BVH deeper than the
+    /// traversal stack.
+    #[error("scene {scene} is too large: {what}")]
     SceneTooLarge {
         /// The scene (file path or built-in name).
         scene: String,

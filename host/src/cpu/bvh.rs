@@ -139,7 +139,7 @@ impl CpuScene {
         if depth >= STACK_SIZE as u32 {
             return Err(Error::SceneTooLarge {
                 scene: scene.name().to_owned(),
-                what: format!("BVH depth {depth} (traversal stack holds {STACK_SIZE})"),
+                what: format!("its BVH is {depth} levels deep, and the traversal stack holds {STACK_SIZE}"),
             });
         }
         let order = &obvhs.primitive_indices;

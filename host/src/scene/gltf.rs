@@ -9,7 +9,7 @@
 //! loaded (textures are not sampled), so a missing texture file is no error.
 
 use super::regular_file::{read_regular_file, ReadError};
-use super::{framing_camera, Camera, Material, Mesh, Scene};
+use super::{framing_camera, Camera, Material, Mesh, Scene, MAX_VERTICES};
 use crate::error::{Error, Result};
 use glam::{Mat4, Vec3};
 use gltf::accessor::{DataType, Dimensions};
@@ -20,56 +20,110 @@ use std::path::{Path, PathBuf};
 /// Loads and validates a `.gltf` or `.glb` file.
 pub fn load(path: &Path) -> Result<Scene> {
     let load_error = |message: String| Error::SceneLoad { path: path.to_owned(), message };
-    let bytes = std::fs::read(path).map_err(|e| load_error(e.to_string()))?;
+    let bytes = read_regular_file(path, u64::MAX).map_err(|e| match e {
+        ReadError::NotRegular => load_error("not a regular file".into()),
+        ReadError::Io(e) => load_error(e.to_string()),
+    })?;
     let (document, buffers) = parse(&bytes, path.parent()).map_err(load_error)?;
     let scene = document
         .default_scene()
         .or_else(|| document.scenes().next())
         .ok_or_else(|| load_error("the file defines no scene".into()))?;
+    let nodes = scene_nodes(&document, &scene).map_err(load_error)?;
+    // Counted before any is read: nodes may instance one large accessor many times over.
+    let mut vertices: u64 = 0;
+    for mesh in nodes.iter().filter_map(|(node, _)| node.mesh()) {
+        for (index, primitive) in mesh.primitives().enumerate() {
+            if let Some(position) = primitive.get(&Semantic::Positions) {
+                let field = format!("{}.attributes.POSITION", primitive_field(&mesh, index));
+                check_accessor(&position, &buffers, &field, Dimensions::Vec3, &[DataType::F32]).map_err(load_error)?;
+                vertices += position.count() as u64;
+            }
+        }
+    }
+    if vertices > MAX_VERTICES as u64 {
+        return Err(Error::SceneTooLarge {
+            scene: path.display().to_string(),
+            what: format!("its nodes instance {vertices} vertices, more than {MAX_VERTICES}"),
+        });
+    }
     let mut meshes = Vec::new();
     let mut scene_camera = None;
-    // Depth-first over the node tree, carrying each node's world transform.
-    let mut pending: Vec<(gltf::Node, Mat4)> = scene.nodes().map(|n| (n, Mat4::IDENTITY)).collect();
-    let mut visited = vec![false; document.nodes().len()];
-    while let Some((node, parent)) = pending.pop() {
-        if std::mem::replace(&mut visited[node.index()], true) {
-            return Err(load_error(format!(
-                "nodes[{}] is reached twice from scenes[{}] (a cycle, or a node with two parents; \
-                 glTF node hierarchies must be trees)",
-                node.index(),
-                scene.index()
-            )));
-        }
-        let world = parent * Mat4::from_cols_array_2d(&node.transform().matrix());
+    for (node, world) in &nodes {
         if let (None, Some(node_camera)) = (&scene_camera, node.camera()) {
             if let gltf::camera::Projection::Perspective(p) = node_camera.projection() {
-                scene_camera = Some(camera(&node, &node_camera, &p, world).map_err(load_error)?);
+                scene_camera = Some(camera(node, &node_camera, &p, *world).map_err(load_error)?);
             }
         }
         if let Some(mesh) = node.mesh() {
             for (index, primitive) in mesh.primitives().enumerate() {
                 let name = format!("{} primitive {index}", mesh.name().unwrap_or("mesh"));
-                let field = format!("meshes[{}].primitives[{index}]", mesh.index());
-                let (positions, triangles) = triangles(&primitive, &buffers, world, &field)
+                let field = primitive_field(&mesh, index);
+                let (positions, triangles) = triangles(&primitive, &buffers, *world, &field)
                     .map_err(|e| load_error(format!("{e} (in {name:?})")))?;
                 let material = material(&primitive.material()).map_err(load_error)?;
                 meshes.push(Mesh { name, positions, triangles, material });
             }
         }
-        pending.extend(node.children().map(|child| (child, world)));
     }
     let camera = scene_camera.unwrap_or_else(|| framing_camera(&meshes));
     Scene::new(&path.display().to_string(), meshes, camera)
 }
 
+/// The JSON path of primitive `index` of `mesh`, which errors name.
+fn primitive_field(mesh: &gltf::Mesh, index: usize) -> String {
+    format!("meshes[{}].primitives[{index}]", mesh.index())
+}
+
+/// The nodes of `scene` with their world transforms, depth-first in document order (a node's
+/// subtree before its next sibling): an error if a node is reached twice.
+fn scene_nodes<'a>(
+    document: &'a Document,
+    scene: &gltf::Scene<'a>,
+) -> std::result::Result<Vec<(gltf::Node<'a>, Mat4)>, String> {
+    let mut nodes = Vec::new();
+    // The stack pops the first pending node first.
+    let mut pending: Vec<(gltf::Node, Mat4)> = scene.nodes().map(|n| (n, Mat4::IDENTITY)).collect();
+    pending.reverse();
+    let mut visited = vec![false; document.nodes().len()];
+    while let Some((node, parent)) = pending.pop() {
+        if std::mem::replace(&mut visited[node.index()], true) {
+            return Err(format!(
+                "nodes[{}] is reached twice from scenes[{}] (a cycle, or a node with two parents; \
+                 glTF node hierarchies must be trees)",
+                node.index(),
+                scene.index()
+            ));
+        }
+        let world = parent * Mat4::from_cols_array_2d(&node.transform().matrix());
+        let children: Vec<_> = node.children().map(|child| (child, world)).collect();
+        pending.extend(children.into_iter().rev());
+        nodes.push((node, world));
+    }
+    Ok(nodes)
+}
+
 /// Parses and validates a `.gltf` or `.glb` file's bytes and loads its buffers, resolving
 /// external URIs against `base` (the file's folder).
 fn parse(bytes: &[u8], base: Option<&Path>) -> std::result::Result<(Document, Vec<buffer::Data>), String> {
+    check_glb_length(bytes)?;
     let gltf::Gltf { document, blob } = gltf::Gltf::from_slice_without_validation(bytes).map_err(|e| e.to_string())?;
     check_position_accessor_indices(document.as_json())?;
     let document = Document::from_json(document.into_json()).map_err(|e| e.to_string())?;
     let buffers = load_buffers(&document, base, blob)?;
     Ok((document, buffers))
+}
+
+/// Checks a GLB header's total length (bytes 8–11) against its own 12 bytes: gltf 1.4.1's
+/// `Glb::from_slice` subtracts 12 from it unchecked, which panics with overflow checks on (debug
+/// and test builds) and wraps without them. Text glTF (no `glTF` magic) passes untouched.
+fn check_glb_length(bytes: &[u8]) -> std::result::Result<(), String> {
+    match bytes {
+        [b'g', b'l', b'T', b'F', _, _, _, _, l0, l1, l2, l3, ..] if u32::from_le_bytes([*l0, *l1, *l2, *l3]) < 12 => {
+            Err(format!("GLB header: length {} is shorter than the header", u32::from_le_bytes([*l0, *l1, *l2, *l3])))
+        }
+        _ => Ok(()),
+    }
 }
 
 /// Every buffer's data (`gltf::import_buffers`, with errors that name the buffer and its source);
@@ -147,7 +201,8 @@ fn check_position_accessor_indices(root: &gltf::json::Root) -> std::result::Resu
     Ok(())
 }
 
-/// The positions (moved to world space by `world`) and triangles of one primitive, whose JSON
+/// The positions (moved to world space by `world`) and triangles (counter-clockwise in world
+/// space seen from the front, reversed where `world` mirrors) of one primitive, whose JSON
 /// path `field` the errors name: triangle mode, POSITION a VEC3 float accessor and indices (if
 /// any) a SCALAR unsigned integer one, as glTF 2.0 requires (the `gltf` crate's reader would panic
 /// on float indices and read other types as garbage), each inside its buffer ([`check_accessor`]).
@@ -181,7 +236,12 @@ fn triangles(
     if !indices.len().is_multiple_of(3) {
         return Err(format!("{field}: {} indices is not a whole number of triangles", indices.len()));
     }
-    Ok((positions, indices.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect()))
+    // A mirroring transform makes the clockwise face the front one (glTF 2.0, 3.7.4): reversing
+    // each triangle keeps the counter-clockwise front face every mesh has here, which decides
+    // the side a quad light emits from.
+    let mirrored = world.determinant() < 0.0;
+    let triangle = |t: &[u32]| if mirrored { [t[0], t[2], t[1]] } else { [t[0], t[1], t[2]] };
+    Ok((positions, indices.chunks_exact(3).map(triangle).collect()))
 }
 
 /// Checks what the `gltf` crate's reader trusts of an accessor read at `field`: its element type
@@ -576,7 +636,8 @@ mod tests {
         assert_eq!(scene.meshes()[light_mesh].name, "lamp primitive 0");
         assert_eq!(scene.mesh_light(light_mesh), Some(0));
         assert_eq!(scene.mesh_light(1 - light_mesh), None);
-        let facing = lamp.edge_u.truncate().cross(lamp.edge_v.truncate());
+        let built = scene.lights()[0];
+        let facing = built.edge_u.truncate().cross(built.edge_v.truncate());
         assert!(facing.normalize().abs_diff_eq(Vec3::NEG_Y, 1e-6), "emits down, towards the floor: {facing}");
         assert!(crate::lights::validate_lights(scene.lights()).is_ok());
     }
@@ -599,5 +660,99 @@ mod tests {
         let f = file(&quad_gltf(5));
         let err = load(f.path()).unwrap_err();
         assert!(err.to_string().contains("whole number of triangles"), "{err}");
+    }
+
+    #[test]
+    fn a_mirrored_lamp_still_emits_towards_the_floor() {
+        // glTF 2.0 §3.7.4: under a transform with a negative determinant the clockwise face is
+        // the front. Mirrored in x (or in y, which also moves it below the floor's plane: only
+        // its facing is checked), the lamp keeps facing down; mirrored in y, its front turns up.
+        let lamp =
+            std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../tests/data/emissive_quad.gltf")).unwrap();
+        for scale in ["[-1, 1, 1]", "[1, -1, 1]", "[-1, -1, -1]"] {
+            let text = lamp.replacen(r#""mesh": 1,"#, &format!(r#""mesh": 1, "scale": {scale},"#), 1);
+            assert_ne!(text, lamp);
+            let f = file(&text);
+            let scene = load(f.path()).unwrap();
+            let light = scene.lights()[0];
+            let facing = light.edge_u.truncate().cross(light.edge_v.truncate()).normalize();
+            // Mirrored in y (alone or with x and z: a point reflection) the lamp's front turns up.
+            let expected = if scale == "[-1, 1, 1]" { Vec3::NEG_Y } else { Vec3::Y };
+            assert!(facing.abs_diff_eq(expected, 1e-6), "scale {scale}: faces {facing}");
+        }
+    }
+
+    #[test]
+    fn the_first_camera_in_document_order_is_the_scene_camera() {
+        // Two camera nodes: the first root, then a child of the second root (the mesh its other).
+        let text = quad_gltf(6).replacen(r#""nodes":[0,1]}],"#, r#""nodes":[1,2]}],"#, 1).replacen(
+            r#"{"camera":0,"translation":[0.5,0.5,3]}]"#,
+            r#"{"camera":0,"translation":[0.5,0.5,3]},{"children":[3,0]},{"camera":0,"translation":[0,0,9]}]"#,
+            1,
+        );
+        let f = file(&text);
+        let scene = load(f.path()).unwrap();
+        assert_eq!(scene.camera().position, Vec3::new(0.5, 0.5, 3.0));
+    }
+
+    #[test]
+    fn a_glb_header_shorter_than_itself_is_an_error() {
+        for length in [0u32, 11] {
+            let mut glb = b"glTF".to_vec();
+            glb.extend_from_slice(&2u32.to_le_bytes());
+            glb.extend_from_slice(&length.to_le_bytes());
+            let mut f = tempfile::Builder::new().suffix(".glb").tempfile().unwrap();
+            f.write_all(&glb).unwrap();
+            let err = load(f.path()).unwrap_err();
+            assert!(err.to_string().contains("shorter than the header"), "{err}");
+        }
+    }
+
+    #[test]
+    fn instancing_beyond_the_vertex_limit_is_refused_before_reading() {
+        // POSITION a sparse accessor of 2²⁰ elements (the file's second buffer, 1 MiB, allows it),
+        // instanced by 257 nodes: 2²⁸ + 2²⁰ vertices, refused before any is read — without
+        // allocating the 3 GiB it asks for.
+        let per_instance = 1 << 20;
+        let instances = MAX_VERTICES / per_instance + 1;
+        let nodes: Vec<String> = (0..instances).map(|_| r#"{"mesh":0}"#.to_owned()).collect();
+        let roots: Vec<String> = (0..instances).map(|i| i.to_string()).collect();
+        let text = quad_gltf(6)
+            .replacen(r#""nodes":[0,1]}],"#, &format!(r#""nodes":[{}]}}],"#, roots.join(",")), 1)
+            .replacen(
+                r#""nodes":[{"mesh":0,"translation":[0,0,-2]},{"camera":0,"translation":[0.5,0.5,3]}],"#,
+                &format!(r#""nodes":[{}],"#, nodes.join(",")),
+                1,
+            )
+            .replacen(
+                r#"{"bufferView":0,"componentType":5126,"count":4"#,
+                &format!(
+                    r#"{{"componentType":5126,"count":{per_instance},"sparse":{{"count":3,"indices":{{"bufferView":1,"componentType":5123}},"values":{{"bufferView":0}}}}"#
+                ),
+                1,
+            )
+            .replacen(r#""buffers":[{"byteLength":60,"#, r#""buffers":[{"byteLength":1048576,"uri":"zeros.bin"},{"byteLength":60,"#, 1)
+            .replace(r#"{"buffer":0,"#, r#"{"buffer":1,"#);
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::write(dir.path().join("zeros.bin"), vec![0u8; per_instance]).unwrap();
+        let path = dir.path().join("instanced.gltf");
+        std::fs::write(&path, text).unwrap();
+        match load(&path) {
+            Err(err @ Error::SceneTooLarge { .. }) => {
+                assert!(err.to_string().contains("instance 269484032 vertices, more than 268435456"), "{err}")
+            }
+            other => panic!("expected SceneTooLarge, got {other:?}"),
+        }
+    }
+
+    #[test]
+    fn a_scene_path_that_is_not_a_regular_file_is_an_error() {
+        let dir = tempfile::tempdir().unwrap();
+        for name in ["zero.gltf", "zero.glb"] {
+            let link = dir.path().join(name);
+            std::os::unix::fs::symlink("/dev/zero", &link).unwrap();
+            let err = load(&link).unwrap_err();
+            assert!(err.to_string().contains("not a regular file"), "{err}");
+        }
     }
 }

@@ -173,8 +173,8 @@ impl Scene {
     /// are removed; a non-finite vertex or one beyond [`MAX_COORDINATE`], an out-of-range index, a
     /// degenerate camera (or one beyond [`MAX_COORDINATE`]), an emission outside
     /// `[0, MAX_EMISSION]` ([`MAX_EMISSION`]), a base colour, roughness or metalness outside
-    /// `[0, 1]`, a derived light whose power overflows `f32` or a scene without any triangle of
-    /// non-zero area is an error.
+    /// `[0, 1]`, a derived light whose power overflows `f32`, more than [`MAX_VERTICES`] vertices
+    /// or a scene without any triangle of non-zero area is an error.
     ///
     /// Every remaining mesh whose material emits (non-zero emission) and whose triangles form one
     /// planar parallelogram becomes one quad light ([`Scene::lights`]); other emissive meshes are
@@ -284,7 +284,13 @@ impl Scene {
             return Err(Error::EmptyScene { scene: self.name.clone(), dropped_degenerate: self.dropped_degenerate });
         }
         if u32::try_from(self.triangle_count()).is_err() || u32::try_from(self.meshes.len()).is_err() {
-            return Err(Error::SceneTooLarge { scene: self.name.clone(), what: "the triangle count".into() });
+            let what = "its triangles or meshes exceed the streams' 32-bit indices".into();
+            return Err(Error::SceneTooLarge { scene: self.name.clone(), what });
+        }
+        let vertices: usize = self.meshes.iter().map(|m| m.positions.len()).sum();
+        if vertices > MAX_VERTICES {
+            let what = format!("its {vertices} vertices exceed {MAX_VERTICES}");
+            return Err(Error::SceneTooLarge { scene: self.name.clone(), what });
         }
         let c = &self.camera;
         let fov_ok = c.vertical_fov_degrees > 0.0 && c.vertical_fov_degrees < 180.0;
@@ -327,6 +333,14 @@ impl Scene {
 /// where those overflowed: fuzzing found the trace stage replacing the infinite `t` of a scene
 /// 10¹⁶ across, and the Cornell box scaled to 10¹⁸ was refused as a light whose power overflows.
 pub const MAX_COORDINATE: f32 = 1.0e8;
+
+/// The most vertices a scene holds, over all its meshes: 2²⁸ (268 M, 3 GiB of positions). The
+/// streams' 32-bit indices would address 2³² triangles, but a GPU storage buffer holds at most
+/// 4 GiB on NVIDIA's drivers (the software trace's 48 bytes per triangle reach that at 89 M
+/// triangles), and the glTF loader counts the meshes its nodes instance against this limit before
+/// reading them, so that a small file cannot make it allocate without bound (one 10⁶-vertex
+/// sparse accessor instanced by 10⁴ nodes asked for 10¹⁰ vertices).
+pub const MAX_VERTICES: usize = 1 << 28;
 
 /// The largest emitted radiance component accepted, in W/(m²·sr): 10⁶ times the sun's disc
 /// (≈ 2·10⁷), and small enough that sums over every sample of a pixel
@@ -377,7 +391,11 @@ fn check_indices_and_vertices(scene: &str, meshes: &[Mesh]) -> Result<()> {
 }
 
 /// A camera on the +z side of the bounds' centre that sees the whole bounding sphere with a 45°
-/// vertical field of view. Non-finite bounds are left for validation to report.
+/// vertical field of view. Where that camera would lie beyond [`MAX_COORDINATE`] (a scene more
+/// than 3.8·10⁷ across), it goes to the −z side if it fits there, else to the side with more room,
+/// just inside the limit, with the field of view widened to still see the sphere (at most
+/// 2·atan(√3) ≈ 120° for bounds at the limit). Non-finite bounds are left for validation to
+/// report.
 pub(crate) fn framing_camera(meshes: &[Mesh]) -> Camera {
     let (lo, hi) = meshes
         .iter()
@@ -385,12 +403,22 @@ pub(crate) fn framing_camera(meshes: &[Mesh]) -> Camera {
         .fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(lo, hi), p| (lo.min(*p), hi.max(*p)));
     let centre = (lo + hi) * 0.5;
     let radius = ((hi - lo).length() * 0.5).max(1e-3);
-    let fov = 45.0f32;
-    let distance = radius / (fov.to_radians() * 0.5).sin();
-    let position = centre + Vec3::Z * distance;
+    let wanted = radius / 22.5f32.to_radians().sin();
+    // The room between the centre and the coordinate limit along +z and along −z.
+    // (0.999 of it: the camera's coordinate must not round past the limit.)
+    let (plus_room, minus_room) = (0.999 * (MAX_COORDINATE - centre.z), 0.999 * (MAX_COORDINATE + centre.z));
+    let (side, distance, vertical_fov_degrees) = if wanted <= plus_room {
+        (1.0, wanted, 45.0)
+    } else if wanted <= minus_room {
+        (-1.0, wanted, 45.0)
+    } else {
+        let (side, room) = if plus_room >= minus_room { (1.0, plus_room) } else { (-1.0, minus_room) };
+        (side, room, 2.0 * (radius / room).atan().to_degrees())
+    };
+    let position = centre + Vec3::Z * (side * distance);
     let position = if position.is_finite() { position } else { Vec3::Z };
     let centre = if centre.is_finite() { centre } else { Vec3::ZERO };
-    Camera { position, look_at: centre, up: Vec3::Y, vertical_fov_degrees: fov }
+    Camera { position, look_at: centre, up: Vec3::Y, vertical_fov_degrees }
 }
 
 #[cfg(test)]

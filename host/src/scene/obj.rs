@@ -16,9 +16,13 @@ const DEFAULT_ALBEDO: Vec3 = Vec3::splat(0.7);
 /// Loads and validates an OBJ file and the material library (`mtllib`) it names.
 pub fn load(path: &Path) -> Result<Scene> {
     let load_error = |message: String| Error::SceneLoad { path: path.to_owned(), message };
-    // Opened here first: tobj reports any failure to open as a bare "open file failed".
+    // Opened here first: tobj reports any failure to open as a bare "open file failed". Only a
+    // regular file: opening a FIFO blocks, and a device such as /dev/zero never ends.
     if path.is_dir() {
         return Err(load_error("is a directory".into()));
+    }
+    if !std::fs::metadata(path).map_err(|e| load_error(e.to_string()))?.is_file() {
+        return Err(load_error("not a regular file".into()));
     }
     let file = std::fs::File::open(path).map_err(|e| load_error(e.to_string()))?;
     let options = tobj::LoadOptions { triangulate: true, single_index: true, ..Default::default() };
@@ -162,6 +166,32 @@ mod tests {
         let dir = tempfile::Builder::new().suffix(".obj").tempdir().unwrap();
         let err = load(dir.path()).unwrap_err();
         assert!(err.to_string().contains("is a directory"), "{err}");
+        let zero = dir.path().join("zero.obj");
+        std::os::unix::fs::symlink("/dev/zero", &zero).unwrap();
+        let err = load(&zero).unwrap_err();
+        assert!(err.to_string().contains("not a regular file"), "{err}");
+    }
+
+    #[test]
+    fn scenes_up_to_the_coordinate_limit_get_a_framing_camera() {
+        // The 45° camera would sit 2.6 radii from the centre, beyond MAX_COORDINATE for these.
+        for (obj, centre_z) in [
+            ("v -6e7 -6e7 0\nv 6e7 -6e7 0\nv 0 6e7 0\nf 1 2 3\n", 0.0),
+            ("v -1e8 -1e8 -1e8\nv 1e8 -1e8 1e8\nv 0 1e8 1e8\nf 1 2 3\n", 0.0),
+            ("v -1e8 -1e8 9e7\nv 1e8 -1e8 1e8\nv 0 1e8 1e8\nf 1 2 3\n", 9.5e7),
+        ] {
+            let f = obj_file(obj);
+            let scene = load(f.path()).unwrap_or_else(|e| panic!("{obj}: {e}"));
+            let camera = scene.camera();
+            assert!(camera.position.abs().max_element() <= super::super::MAX_COORDINATE, "{camera:?}");
+            assert_eq!(camera.look_at.z, centre_z);
+            // It still sees the bounding sphere.
+            let (lo, hi) = scene.bounds();
+            let radius = (hi - lo).length() * 0.5;
+            let distance = (camera.position - camera.look_at).length();
+            let half_fov = (camera.vertical_fov_degrees * 0.5).to_radians();
+            assert!(distance * half_fov.tan() >= radius * 0.999, "{camera:?} radius {radius}");
+        }
     }
 
     /// A floor and a lamp quad wound to face down, with an MTL library: the lamp's `Ke` makes it
