@@ -7,7 +7,7 @@ use crate::shading::ShadeAccumulator;
 use glam::{Vec3, Vec4};
 use raywave_kernels::sampling::light_select::luminance;
 use raywave_kernels::shade::stage::{Surface, SMALLEST_RADIANCE};
-use raywave_shared::denoise::MAX_RADIUS;
+use raywave_shared::denoise::{axis, MAX_RADIUS};
 use raywave_shared::DenoiseParams;
 
 /// A denoiser of the shadow term.
@@ -219,9 +219,11 @@ impl DenoiseInput {
         self.position.is_empty()
     }
 
-    /// Checks the inputs against `params`: every buffer holds `width · height` entries, the
-    /// radius is within `1..=MAX_RADIUS`, the estimates average at least one sample, and every
-    /// value is finite, with the radiances (`U`, emitted, `S_N`, `U_N`: rgb) and the analytic
+    /// Checks the inputs against `params`: the bilateral passes' invocation counts fit 32 bits
+    /// ([`DenoiseParams::bilateral_invocations`]; for every method, so that every backend and
+    /// method accept the same images), every buffer holds `width · height` entries, the radius
+    /// is within `1..=MAX_RADIUS`, the estimates average at least one sample, and every value
+    /// is finite, with the radiances (`U`, emitted, `S_N`, `U_N`: rgb) and the analytic
     /// luminance (`normal.w`) not negative. One NaN or
     /// negative pixel would otherwise spread through the noise estimate and the filter taps to
     /// its neighbours (a 7 × 7 block at R = 3), or leave the stage as NaN (an emitted NaN).
@@ -232,6 +234,8 @@ impl DenoiseInput {
         let lengths = self.buffers().map(|(_, buffer, _)| buffer.len());
         let reason = if pixels == 0 {
             Some("the image is empty".to_owned())
+        } else if let Some(reason) = bilateral_problem(params) {
+            Some(reason)
         } else if lengths.iter().any(|&len| len as u64 != pixels) {
             Some(format!("{}×{} pixels but buffers of {lengths:?} entries", params.width, params.height))
         } else if let Some(reason) = radius_problem(params.radius) {
@@ -304,6 +308,29 @@ fn radius_problem(radius: u32) -> Option<String> {
     (!(1..=MAX_RADIUS).contains(&radius)).then(|| format!("radius {radius} outside 1..={MAX_RADIUS}"))
 }
 
+/// The invocations of `params`' bilateral pass along `params.axis`
+/// ([`DenoiseParams::bilateral_invocations`]), or why no dispatch covers them: more than
+/// `u32::MAX`, as along y for a 2^26 × 1 image, whose 2^26 columns take one workgroup each.
+pub(crate) fn bilateral_invocations(params: &DenoiseParams) -> std::result::Result<u32, String> {
+    params.bilateral_invocations().ok_or_else(|| {
+        let along = if params.axis == axis::Y { "y" } else { "x" };
+        format!(
+            "{}×{} pixels need more than {} invocations in the bilateral pass along {along}",
+            params.width,
+            params.height,
+            u32::MAX
+        )
+    })
+}
+
+/// Why the bilateral passes along x or y cannot be dispatched for `params`' image, or `None`
+/// if both can ([`bilateral_invocations`]).
+fn bilateral_problem(params: &DenoiseParams) -> Option<String> {
+    [axis::X, axis::Y]
+        .into_iter()
+        .find_map(|along| bilateral_invocations(&DenoiseParams { axis: along, ..*params }).err())
+}
+
 /// Checks a filter radius given as option `name` (`--denoise-radius`) before any work is done:
 /// a typed error naming the option if it is outside `1..=MAX_RADIUS`.
 pub fn check_radius(name: &'static str, radius: Option<u32>) -> Result<()> {
@@ -371,6 +398,12 @@ mod tests {
         assert!(reason(input(12), DenoiseParams { radius: 0, ..params }).contains("radius 0"));
         assert!(reason(input(12), DenoiseParams { radius: MAX_RADIUS + 1, ..params }).contains("radius 11"));
         assert!(reason(input(12), DenoiseParams { samples_per_pixel: 0, ..params }).contains("samples per pixel"));
+        // Refused before the buffers are looked at, so no 2^26-pixel image is needed here.
+        let row = reason(input(1), DenoiseParams::new(1 << 26, 1));
+        assert!(row.contains("67108864×1 pixels") && row.contains("bilateral pass along y"), "{row}");
+        assert!(reason(input(1), DenoiseParams::new(1, 1 << 26)).contains("along x"));
+        let widest = DenoiseParams::new((1 << 26) - 1, 1);
+        assert!(reason(input(1), widest).contains("pixels but buffers"), "a dispatch of 2^32 − 64 fits");
     }
 
     #[test]

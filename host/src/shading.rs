@@ -21,8 +21,10 @@ use std::sync::atomic::{AtomicU64, Ordering};
 ///
 /// Backends that keep this data on a device (Vulkan) upload it on the first `shade` call and reuse
 /// it while the same `ShadeData` is passed: its identity ([`ShadeData::identity`]) is a number
-/// unique to the value plus the address and length of every buffer. Editing the vectors' lengths
-/// or replacing them is noticed; to change values in place, build a new `ShadeData`.
+/// unique to the value plus the address and length of every buffer. Only a new `ShadeData` (a new
+/// number) is sure to be uploaded again: a vector whose length changed is noticed, but one
+/// replaced by another of the same length may sit at the old one's freed address, and values
+/// edited in place change neither. To change any buffer's contents, build a new `ShadeData`.
 pub struct ShadeData {
     /// Material per instance (mesh).
     pub materials: Vec<MaterialParams>,

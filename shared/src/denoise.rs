@@ -160,9 +160,12 @@ impl DenoiseParams {
         self.lines().0.div_ceil(WORKGROUP_SIZE)
     }
 
-    /// Invocations of a bilateral pass: every line padded to whole workgroups.
-    pub const fn bilateral_invocations(&self) -> u32 {
-        self.lines().1 * self.segments_per_line() * WORKGROUP_SIZE
+    /// Invocations of a bilateral pass: every line padded to whole workgroups; `None` where that
+    /// exceeds `u32::MAX`, which no dispatch covers, although the image's pixels may fit (a
+    /// 2^26 × 1 image along y: 2^26 lines of one workgroup each, 2^32 invocations). The host's
+    /// denoiser refuses such images; kernels do not call this.
+    pub fn bilateral_invocations(&self) -> Option<u32> {
+        self.lines().1.checked_mul(self.segments_per_line())?.checked_mul(WORKGROUP_SIZE)
     }
 }
 
@@ -217,8 +220,20 @@ mod tests {
     fn bilateral_dispatch_pads_every_line_to_whole_workgroups() {
         let p = DenoiseParams { axis: axis::Y, ..DenoiseParams::new(70, 130) };
         assert_eq!((p.lines(), p.segments_per_line()), ((130, 70), 3));
-        assert_eq!(p.bilateral_invocations(), 70 * 3 * WORKGROUP_SIZE);
+        assert_eq!(p.bilateral_invocations(), Some(70 * 3 * WORKGROUP_SIZE));
         let p = DenoiseParams { axis: axis::X, ..p };
-        assert_eq!(p.bilateral_invocations(), 130 * 2 * WORKGROUP_SIZE);
+        assert_eq!(p.bilateral_invocations(), Some(130 * 2 * WORKGROUP_SIZE));
+    }
+
+    #[test]
+    fn a_bilateral_dispatch_past_32_bits_has_no_invocation_count() {
+        let along = |axis, width, height| DenoiseParams { axis, ..DenoiseParams::new(width, height) };
+        // 2^26 pixels in one row: 2^26 invocations along x, 2^26 one-pixel columns of one
+        // workgroup each (2^32 invocations) along y.
+        assert_eq!(along(axis::X, 1 << 26, 1).bilateral_invocations(), Some(1 << 26));
+        assert_eq!(along(axis::Y, 1 << 26, 1).bilateral_invocations(), None);
+        assert_eq!(along(axis::Y, (1 << 26) - 1, 1).bilateral_invocations(), Some(u32::MAX - (WORKGROUP_SIZE - 1)));
+        assert_eq!(along(axis::X, u32::MAX, 1).bilateral_invocations(), None, "the last segment's padding");
+        assert_eq!(along(axis::X, 1 << 16, 1 << 16).bilateral_invocations(), None);
     }
 }

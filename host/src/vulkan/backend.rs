@@ -2,7 +2,7 @@
 //! device-resident SoA streams.
 
 use super::accel::{build_scene, SceneAccel};
-use super::buffer::GpuBuffer;
+use super::buffer::{check_storage_range, GpuBuffer};
 use super::context::{open, ContextOptions, Core, DeviceInfo};
 use super::denoise::DenoiseKernels;
 use super::driver_lock;
@@ -50,8 +50,25 @@ struct DeviceHits {
     len: u32,
 }
 
+/// Bytes of `len` elements of `T`.
+fn stream_bytes<T: Pod>(len: u32) -> u64 {
+    u64::from(len) * std::mem::size_of::<T>() as u64
+}
+
+/// A device buffer for a stream of `len` elements of `T`. Not checked against the storage-buffer
+/// range: every stage checks its stream against [`VulkanBackend::max_rays`] first, which keeps
+/// a stream of the widest element, `Vec4`, within it.
 fn stream_buffer<T: Pod>(core: &Arc<Core>, len: u32, name: &str) -> Result<GpuBuffer> {
-    GpuBuffer::device_local(core, u64::from(len) * std::mem::size_of::<T>() as u64, STREAM_USAGE, name)
+    GpuBuffer::device_local(core, stream_bytes::<T>(len), STREAM_USAGE, name)
+}
+
+/// A device buffer for the `count` samples of `T` of probe `name` (at least one: a binding
+/// cannot be empty), refused where the device could not bind it whole ([`check_storage_range`]):
+/// a probe is bounded by its sample count, not by [`VulkanBackend::max_rays`].
+fn probe_buffer<T: Pod>(core: &Arc<Core>, count: u32, name: &'static str) -> Result<GpuBuffer> {
+    let len = count.max(1);
+    check_storage_range(&core.limits, stream_bytes::<T>(len), name, name)?;
+    stream_buffer::<T>(core, len, name)
 }
 
 impl DeviceRays {
@@ -174,22 +191,14 @@ impl DeviceShadeData {
     }
 }
 
-/// A read-only storage buffer holding `data`, or one zeroed element when `data` is empty (a
-/// binding cannot be empty; the stage's parameters carry the valid counts). Fails when the
-/// buffer exceeds the device's storage-buffer range, which a binding could not cover.
+/// A read-only storage buffer holding scene data `data` (the shade stage's, the software
+/// trace's), or one zeroed element when `data` is empty (a binding cannot be empty; the stage's
+/// parameters carry the valid counts). Fails, naming the buffer, when it exceeds the device's
+/// storage-buffer range, which a binding could not cover ([`check_storage_range`]).
 fn input_buffer<T: Pod>(core: &Arc<Core>, data: &[T], name: &str) -> Result<GpuBuffer> {
     let dummy = [T::zeroed()];
     let data = if data.is_empty() { &dummy[..] } else { data };
-    let bytes = std::mem::size_of_val(data) as u64;
-    if bytes > u64::from(core.limits.max_storage_buffer_range) {
-        return Err(Error::InvalidParameter {
-            name: "scene",
-            reason: format!(
-                "{name}: {bytes} bytes exceed the device's storage-buffer range of {} bytes",
-                core.limits.max_storage_buffer_range
-            ),
-        });
-    }
+    check_storage_range(&core.limits, std::mem::size_of_val(data) as u64, "scene", name)?;
     GpuBuffer::with_data(core, data, STREAM_USAGE, name)
 }
 
@@ -514,9 +523,9 @@ impl Backend for VulkanBackend {
             TraceMethod::Software => {
                 let cpu = CpuScene::build(scene)?;
                 DeviceScene::Software {
-                    nodes: GpuBuffer::with_data(&self.core, cpu.nodes(), STREAM_USAGE, "cwbvh nodes")?,
-                    vertices: GpuBuffer::with_data(&self.core, cpu.vertices(), STREAM_USAGE, "cwbvh vertices")?,
-                    ids: GpuBuffer::with_data(&self.core, cpu.ids(), STREAM_USAGE, "cwbvh triangle ids")?,
+                    nodes: input_buffer(&self.core, cpu.nodes(), "cwbvh nodes")?,
+                    vertices: input_buffer(&self.core, cpu.vertices(), "cwbvh vertices")?,
+                    ids: input_buffer(&self.core, cpu.ids(), "cwbvh triangle ids")?,
                 }
             }
         });
@@ -620,7 +629,7 @@ impl Backend for VulkanBackend {
     fn sampler_probe(&mut self, params: &SamplerProbeParams) -> Result<Vec<UVec2>> {
         let _driver = driver_lock::device_use();
         let count = sampler_probe_len(params)?;
-        let samples = stream_buffer::<UVec2>(&self.core, count.max(1), "sampler probe")?;
+        let samples = probe_buffer::<UVec2>(&self.core, count, "sampler probe")?;
         self.sampler_probe.dispatch(&[Resource::Buffer(&samples)], bytemuck::bytes_of(params), count)?;
         samples.read(count as usize)
     }
@@ -628,7 +637,7 @@ impl Backend for VulkanBackend {
     fn warp_probe(&mut self, params: &WarpParams) -> Result<Vec<Vec4>> {
         let _driver = driver_lock::device_use();
         let count = warp_probe_len(params)?;
-        let samples = stream_buffer::<Vec4>(&self.core, count.max(1), "warp probe")?;
+        let samples = probe_buffer::<Vec4>(&self.core, count, "warp probe")?;
         self.warp_probe.dispatch(&[Resource::Buffer(&samples)], bytemuck::bytes_of(params), count)?;
         samples.read(count as usize)
     }

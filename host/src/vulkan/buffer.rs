@@ -69,10 +69,11 @@ impl GpuBuffer {
                 allocation_scheme: AllocationScheme::GpuAllocatorManaged,
             })
             .map_err(|e| Error::Vulkan { call: "gpu_allocator::allocate", result: e.to_string() })?;
+        // Stored before binding, so a failed bind frees the allocation through Drop too.
+        let allocation = this.allocation.insert(allocation);
         // SAFETY: the allocation satisfies `requirements` and is not bound elsewhere.
         unsafe { core.device.bind_buffer_memory(buffer, allocation.memory(), allocation.offset()) }
             .map_err(vk_error("vkBindBufferMemory"))?;
-        this.allocation = Some(allocation);
         if wants_address {
             // SAFETY: the buffer was created with SHADER_DEVICE_ADDRESS and has memory bound.
             this.address = unsafe {
@@ -176,6 +177,26 @@ impl GpuBuffer {
     }
 }
 
+/// Checks that `what`, a storage buffer of `bytes` bytes, fits the device's
+/// `maxStorageBufferRange`: every kernel binds its buffers whole ([`super::pass::Pass::run`]),
+/// and a binding past that range is invalid — the kernel would not see all of the buffer. A
+/// buffer over it is [`Error::InvalidParameter`] naming `parameter`, `what` and both sizes.
+pub(crate) fn check_storage_range(
+    limits: &vk::PhysicalDeviceLimits,
+    bytes: u64,
+    parameter: &'static str,
+    what: &str,
+) -> Result<()> {
+    let range = limits.max_storage_buffer_range;
+    if bytes > u64::from(range) {
+        return Err(Error::InvalidParameter {
+            name: parameter,
+            reason: format!("{what}: {bytes} bytes exceed the device's storage-buffer range of {range} bytes"),
+        });
+    }
+    Ok(())
+}
+
 /// The error of mapping a buffer the host may not reach directly.
 fn not_host_visible() -> Error {
     Error::Vulkan { call: "vkMapMemory", result: "buffer memory is not host-visible".into() }
@@ -261,4 +282,25 @@ pub(crate) fn global_barrier(
         .dst_access_mask(vk::AccessFlags::MEMORY_READ | vk::AccessFlags::MEMORY_WRITE)];
     // SAFETY: `cmd` is in the recording state.
     unsafe { core.device.cmd_pipeline_barrier(cmd, src, dst, vk::DependencyFlags::empty(), &barrier, &[], &[]) };
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_storage_buffer_past_the_device_range_is_refused_by_name() {
+        let limits = vk::PhysicalDeviceLimits { max_storage_buffer_range: 1 << 27, ..Default::default() };
+        assert!(check_storage_range(&limits, 1 << 27, "scene", "cwbvh vertices").is_ok());
+        match check_storage_range(&limits, (1 << 27) + 1, "scene", "cwbvh vertices") {
+            Err(Error::InvalidParameter { name: "scene", reason }) => assert_eq!(
+                reason,
+                "cwbvh vertices: 134217729 bytes exceed the device's storage-buffer range of 134217728 bytes"
+            ),
+            other => panic!("expected a scene parameter error, got {other:?}"),
+        }
+        let widest = vk::PhysicalDeviceLimits { max_storage_buffer_range: u32::MAX, ..limits };
+        assert!(check_storage_range(&widest, u64::from(u32::MAX), "warp probe", "warp probe").is_ok());
+        assert!(check_storage_range(&widest, 1 << 32, "warp probe", "warp probe").is_err());
+    }
 }

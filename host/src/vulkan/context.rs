@@ -42,8 +42,13 @@ pub struct DeviceInfo {
     /// The Vulkan 1.2 `vulkanMemoryModel` feature: every rust-gpu module uses the Vulkan memory
     /// model, so no kernel runs without it.
     pub vulkan_memory_model: bool,
-    /// Whether compute queues support timestamps (`timestampComputeAndGraphics`).
+    /// Whether raywave's compute queue writes GPU timestamps: `timestampComputeAndGraphics` and a
+    /// `timestampValidBits` above 0. Without them every pass is timed by the host clock, since
+    /// writing a timestamp on a queue without valid bits is invalid usage.
     pub timestamps: bool,
+    /// `timestampValidBits` of the compute queue family raywave runs on (0: no timestamps): the
+    /// counter wraps at `2^bits`, so an elapsed time is taken modulo that.
+    pub timestamp_valid_bits: u32,
     /// The workgroup sizes this device runs the 1-D stream stages with
     /// ([`ContextOptions::workgroup_sizes`]), ascending: the powers of two within
     /// `maxComputeWorkGroupSize[0]` and `maxComputeWorkGroupInvocations` whose rows of
@@ -256,6 +261,7 @@ fn describe(instance: &ash::Instance, physical: vk::PhysicalDevice, index: usize
             features = features.push_next(&mut rtp_features);
         }
         instance.get_physical_device_features2(physical, &mut features);
+        let timestamp_valid_bits = compute_queue_family(instance, physical).map_or(0, |(_, f)| f.timestamp_valid_bits);
         let v = props.api_version;
         Ok(DeviceInfo {
             index,
@@ -272,10 +278,22 @@ fn describe(instance: &ash::Instance, physical: vk::PhysicalDevice, index: usize
             ray_tracing_pipeline: has_rtp && rtp_features.ray_tracing_pipeline == vk::TRUE,
             buffer_device_address: api_1_2 && v12.buffer_device_address == vk::TRUE,
             vulkan_memory_model: api_1_2 && v12.vulkan_memory_model == vk::TRUE,
-            timestamps: props.limits.timestamp_compute_and_graphics == vk::TRUE,
+            timestamps: props.limits.timestamp_compute_and_graphics == vk::TRUE && timestamp_valid_bits > 0,
+            timestamp_valid_bits,
             workgroup_sizes: stream_workgroup_sizes(&props.limits),
         })
     }
+}
+
+/// The queue family raywave runs on — the first with compute — with its index, or `None` when
+/// the device has no compute queue.
+fn compute_queue_family(
+    instance: &ash::Instance,
+    physical: vk::PhysicalDevice,
+) -> Option<(u32, vk::QueueFamilyProperties)> {
+    // SAFETY: `physical` was enumerated from `instance`.
+    let families = unsafe { instance.get_physical_device_queue_family_properties(physical) };
+    (0u32..).zip(families).find(|(_, family)| family.queue_flags.contains(vk::QueueFlags::COMPUTE))
 }
 
 /// Lists every Vulkan device with the features raywave cares about. An absent Vulkan loader or
@@ -467,15 +485,11 @@ fn create_device(instance: &ash::Instance, physical: vk::PhysicalDevice, index: 
     }
     // SAFETY: `physical` belongs to `instance`; all create-info pointers borrow locals.
     unsafe {
-        let families = instance.get_physical_device_queue_family_properties(physical);
-        let queue_family =
-            families.iter().position(|f| f.queue_flags.contains(vk::QueueFlags::COMPUTE)).ok_or_else(|| {
-                Error::MissingFeatures {
-                    device: info.name.clone(),
-                    stage: "compute".into(),
-                    missing: vec!["a compute queue".into()],
-                }
-            })? as u32;
+        let (queue_family, _) = compute_queue_family(instance, physical).ok_or_else(|| Error::MissingFeatures {
+            device: info.name.clone(),
+            stage: "compute".into(),
+            missing: vec!["a compute queue".into()],
+        })?;
         let priorities = [1.0];
         let queues =
             [vk::DeviceQueueCreateInfo::default().queue_family_index(queue_family).queue_priorities(&priorities)];

@@ -6,8 +6,8 @@ use super::context::Core;
 use super::kernel::ComputeKernel;
 use super::pass::Resource;
 use crate::backend::StageReport;
-use crate::denoise::{DenoiseInput, DenoiseMethod, DenoisePass};
-use crate::error::Result;
+use crate::denoise::{bilateral_invocations, DenoiseInput, DenoiseMethod, DenoisePass};
+use crate::error::{Error, Result};
 use ash::vk;
 use bytemuck::Pod;
 use glam::Vec4;
@@ -124,6 +124,9 @@ impl DenoiseKernels {
                 DenoisePass::BilateralX | DenoisePass::BilateralY => {
                     let along = if pass == DenoisePass::BilateralX { axis::X } else { axis::Y };
                     let params = DenoiseParams { axis: along, ..*params };
+                    // Already checked by `DenoiseInput::check`: a count past 32 bits would wrap.
+                    let invocations = bilateral_invocations(&params)
+                        .map_err(|reason| Error::InvalidParameter { name: "denoise", reason })?;
                     let timing = self.bilateral.dispatch(
                         &[
                             b(&position),
@@ -135,7 +138,7 @@ impl DenoiseKernels {
                             b(&unshadowed[1]),
                         ],
                         bytemuck::bytes_of(&params),
-                        params.bilateral_invocations(),
+                        invocations,
                     )?;
                     shadowed.swap(0, 1);
                     unshadowed.swap(0, 1);

@@ -38,6 +38,18 @@ fn sustained_dispatches(sustain_seconds: f64, seconds: f64) -> u32 {
     }
 }
 
+/// Ticks from timestamp `start` to `end` of a counter of `valid_bits` bits, which wraps at
+/// `2^valid_bits` (the bits above are undefined): the difference modulo that, so that a wrap
+/// between the two stamps still gives the short time between them.
+fn elapsed_ticks(start: u64, end: u64, valid_bits: u32) -> u64 {
+    let ticks = end.wrapping_sub(start);
+    if valid_bits < u64::BITS {
+        ticks & ((1 << valid_bits) - 1)
+    } else {
+        ticks
+    }
+}
+
 /// A resource bound to one binding of a pass's descriptor set.
 pub(crate) enum Resource<'a> {
     /// A storage buffer.
@@ -181,7 +193,8 @@ impl Pass {
 
     /// Binds `resources` (one per binding, in creation order; every buffer device-local, so no
     /// kernel reads or writes host memory across the bus), pushes `push`, records `work` (of
-    /// `invocations` invocations) between two timestamps — once, or in benchmark mode as many
+    /// `invocations` invocations) — between two timestamps where the device writes them
+    /// ([`super::DeviceInfo::timestamps`]) — once, or in benchmark mode as many
     /// times as the last submission's time per invocation says keep the device busy for
     /// [`Core::sustain_seconds`], separated by barriers, with every counter among `resources`
     /// zeroed before the last — submits and waits. Returns the time per dispatch, from GPU
@@ -258,12 +271,16 @@ impl Pass {
             })
             .collect();
         let all = vk::PipelineStageFlags::ALL_COMMANDS;
+        let timed = self.core.info.timestamps;
         let start = Instant::now();
         submit_and_wait(&self.core, |cmd| {
-            // SAFETY: `cmd` is recording; pipeline, layout, set and query pool are live.
+            // SAFETY: `cmd` is recording; pipeline, layout, set and query pool are live; the
+            // queue family has timestamp valid bits wherever `timed`.
             unsafe {
-                d.cmd_reset_query_pool(cmd, self.query_pool, 0, 2);
-                d.cmd_write_timestamp(cmd, vk::PipelineStageFlags::TOP_OF_PIPE, self.query_pool, 0);
+                if timed {
+                    d.cmd_reset_query_pool(cmd, self.query_pool, 0, 2);
+                    d.cmd_write_timestamp(cmd, vk::PipelineStageFlags::TOP_OF_PIPE, self.query_pool, 0);
+                }
                 d.cmd_bind_pipeline(cmd, self.bind_point, self.pipeline);
                 d.cmd_bind_descriptor_sets(cmd, self.bind_point, self.pipeline_layout, 0, &[self.descriptor_set], &[]);
                 d.cmd_push_constants(cmd, self.pipeline_layout, self.stages, 0, push);
@@ -283,17 +300,20 @@ impl Pass {
                 }
                 work(cmd);
             }
-            // SAFETY: as above.
-            unsafe { d.cmd_write_timestamp(cmd, vk::PipelineStageFlags::BOTTOM_OF_PIPE, self.query_pool, 1) };
+            if timed {
+                // SAFETY: as above.
+                unsafe { d.cmd_write_timestamp(cmd, vk::PipelineStageFlags::BOTTOM_OF_PIPE, self.query_pool, 1) };
+            }
         })?;
         let host_seconds = start.elapsed().as_secs_f64();
-        let seconds = if self.core.info.timestamps { self.gpu_seconds()? } else { host_seconds };
+        let seconds = if timed { self.gpu_seconds()? } else { host_seconds };
         let timing = Timing { seconds: seconds / f64::from(dispatches), dispatches };
         self.seconds_per_invocation.store((timing.seconds / size).to_bits(), Ordering::Relaxed);
         Ok(timing)
     }
 
-    /// The time between the two timestamps of the completed submission, in seconds.
+    /// The time between the two timestamps of the completed submission, in seconds (only where
+    /// the device writes them, [`super::DeviceInfo::timestamps`]).
     fn gpu_seconds(&self) -> Result<f64> {
         let d = &self.core.device;
         let mut stamps = [0u64; 2];
@@ -307,7 +327,7 @@ impl Pass {
             )
         }
         .map_err(vk_error("vkGetQueryPoolResults"))?;
-        let ticks = stamps[1].wrapping_sub(stamps[0]);
+        let ticks = elapsed_ticks(stamps[0], stamps[1], self.core.info.timestamp_valid_bits);
         Ok(ticks as f64 * f64::from(self.core.limits.timestamp_period) * 1e-9)
     }
 }
@@ -324,5 +344,15 @@ mod tests {
         assert_eq!(sustained_dispatches(0.01, 1e-9), MAX_SUSTAINED_DISPATCHES);
         assert_eq!(sustained_dispatches(0.01, 0.0), 1);
         assert_eq!(sustained_dispatches(0.01, f64::NAN), 1);
+    }
+
+    #[test]
+    fn elapsed_ticks_survive_a_wrap_of_a_narrow_counter() {
+        assert_eq!(elapsed_ticks(10, 25, 64), 15);
+        assert_eq!(elapsed_ticks(u64::MAX - 4, 10, 64), 15, "a 64-bit counter wraps at 2^64");
+        assert_eq!(elapsed_ticks((1 << 36) - 5, 10, 36), 15, "not 2^64 − 2^36 + 15 ticks");
+        assert_eq!(elapsed_ticks(10, 25, 36), 15);
+        // Bits above the valid ones are undefined and ignored.
+        assert_eq!(elapsed_ticks(0xFF00_0000_0000_0010, 0x0A00_0000_0000_0025, 36), 0x15);
     }
 }
