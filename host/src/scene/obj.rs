@@ -21,18 +21,21 @@ pub fn load(path: &Path) -> Result<Scene> {
     if path.is_dir() {
         return Err(load_error("is a directory".into()));
     }
-    if !std::fs::metadata(path).map_err(|e| load_error(e.to_string()))?.is_file() {
-        return Err(load_error("not a regular file".into()));
-    }
-    let file = std::fs::File::open(path).map_err(|e| load_error(e.to_string()))?;
+    let text = read_regular_file(path, u64::MAX).map_err(|e| match e {
+        ReadError::NotRegular => load_error("not a regular file".into()),
+        ReadError::Io(e) => load_error(e.to_string()),
+    })?;
     let options = tobj::LoadOptions { triangulate: true, single_index: true, ..Default::default() };
     // tobj reads line by line and stops at its first error, so the reader's line is the one at fault.
-    let mut reader = LineCounter::new(file);
+    let mut reader = LineCounter::new(&text[..]);
     let directory = path.parent().unwrap_or(Path::new(""));
-    // tobj's material-library errors carry no text of their own: the first one's is kept here.
+    // tobj's material-library errors carry no text of their own: the first one's is kept here,
+    // and the last library read, which the materials' errors name.
     let library_error = RefCell::new(None);
+    let library_read = RefCell::new(None);
     let (models, materials) = tobj::load_obj_buf(&mut reader, &options, |library| {
         let library = directory.join(library);
+        library_read.replace(Some(library.clone()));
         let fail = |message: String| {
             library_error.borrow_mut().get_or_insert_with(|| format!("{}: {message}", library.display()));
         };
@@ -52,6 +55,14 @@ pub fn load(path: &Path) -> Result<Scene> {
         let reason = library_error.take().unwrap_or_else(|| e.to_string());
         load_error(format!("the material library its `mtllib` line names cannot be loaded: {reason}"))
     })?;
+    if let Some(library) = library_read.take() {
+        let in_library = |reason: String| load_error(format!("{}: {reason}", library.display()));
+        check_material_names(&text, &materials)
+            .map_err(|reason| load_error(format!("{reason} {}", library.display())))?;
+        for m in &materials {
+            mtl_material(m).map_err(|reason| in_library(format!("material `{}`: {reason}", m.name)))?;
+        }
+    }
     let meshes: Vec<Mesh> = models
         .into_iter()
         .enumerate()
@@ -64,7 +75,8 @@ pub fn load(path: &Path) -> Result<Scene> {
                 name: entry.map_or_else(|| object.clone(), |m| format!("{object} ({})", m.name)),
                 positions: model.mesh.positions.chunks_exact(3).map(|p| Vec3::new(p[0], p[1], p[2])).collect(),
                 triangles: model.mesh.indices.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect(),
-                material: entry.map_or(Material::diffuse(DEFAULT_ALBEDO), material),
+                // Checked above, with the library's name.
+                material: entry.and_then(|m| mtl_material(m).ok()).unwrap_or(Material::diffuse(DEFAULT_ALBEDO)),
             }
         })
         .collect();
@@ -119,21 +131,53 @@ fn locate(error: tobj::LoadError, line: usize) -> String {
     }
 }
 
+/// Checks that every `usemtl` line of the OBJ `text` names a material of its library: tobj
+/// leaves a mesh whose name it does not find without a material, so a typo (`usemtl lmap`) made
+/// a grey mesh and no light. Errors name the line; the caller adds the library.
+fn check_material_names(text: &[u8], materials: &[tobj::Material]) -> std::result::Result<(), String> {
+    for (index, line) in text.split(|&b| b == b'\n').enumerate() {
+        let line = String::from_utf8_lossy(line);
+        let mut words = line.split_whitespace();
+        if words.next() == Some("usemtl") {
+            let name = line.trim_start().trim_start_matches("usemtl").trim();
+            if !materials.iter().any(|m| m.name == name) {
+                return Err(format!("line {}: `usemtl {name}` names no material of", index + 1));
+            }
+        }
+    }
+    Ok(())
+}
+
 /// The material of an MTL entry: `Kd` is the base colour ([`DEFAULT_ALBEDO`] without it), `Ke`
 /// the emitted radiance, and the PBR extension's `Pr`/`Pm` (as Blender and 3ds Max write it)
 /// the perceptual roughness and metalness. Without `Pr` the roughness follows the Phong exponent
 /// `Ns` by Walter et al. 2007's correspondence `α = √(2/(Ns + 2))` (§5.2; roughness = √α), and
-/// is 1 without either; without `Pm` the surface is a dielectric. Values are checked with the
-/// scene (`Scene::new`), which names the mesh.
-fn material(m: &tobj::Material) -> Material {
-    let pbr = |key: &str| m.unknown_param.get(key).and_then(|v| v.trim().parse::<f32>().ok());
-    let roughness = pbr("Pr").or_else(|| m.shininess.map(|ns| (2.0 / (ns.max(0.0) + 2.0)).sqrt().sqrt()));
-    Material {
+/// is 1 without either; without `Pm` the surface is a dielectric. A `Pr` or `Pm` that is not a
+/// number, or a value out of range ([`Material::check`]), is an error naming the MTL keyword.
+fn mtl_material(m: &tobj::Material) -> std::result::Result<Material, String> {
+    let pbr = |key: &str| {
+        m.unknown_param
+            .get(key)
+            .map(|v| v.trim().parse::<f32>().map_err(|_| format!("`{key} {v}` is not a number")))
+            .transpose()
+    };
+    let roughness = pbr("Pr")?.or_else(|| m.shininess.map(|ns| (2.0 / (ns.max(0.0) + 2.0)).sqrt().sqrt()));
+    let material = Material {
         base_color: m.diffuse.map_or(DEFAULT_ALBEDO, Vec3::from_array),
         roughness: roughness.unwrap_or(1.0),
-        metallic: pbr("Pm").unwrap_or(0.0),
+        metallic: pbr("Pm")?.unwrap_or(0.0),
         emission: m.emissive.map_or(Vec3::ZERO, Vec3::from_array),
-    }
+    };
+    material.check().map_err(|(field, reason)| {
+        let keyword = match field {
+            "material.base_color" => "Kd",
+            "material.emission" => "Ke",
+            "material.roughness" => "Pr (or Ns)",
+            _ => "Pm",
+        };
+        format!("{keyword}: {reason}")
+    })?;
+    Ok(material)
 }
 
 #[cfg(test)]
@@ -229,13 +273,26 @@ mod tests {
         let facing = lamp.edge_u.truncate().cross(lamp.edge_v.truncate());
         assert!(facing.y < 0.0, "counter-clockwise seen from below: emits down, {facing}");
 
-        // A library that is missing, or a base colour out of range, is an error naming the file.
+        // A library that is missing is an error naming the file; a value out of range or a `Pr`,
+        // `Pm` that is not a number names the library, the material and its keyword; a `usemtl`
+        // of a material the library lacks names the OBJ's line and the library.
         std::fs::remove_file(dir.path().join("scene.mtl")).unwrap();
         let err = load(&path).unwrap_err();
         assert!(err.to_string().contains("material library") && err.to_string().contains("scene.obj"), "{err}");
-        std::fs::write(dir.path().join("scene.mtl"), "newmtl floor\nKd 2 0 0\nnewmtl lamp\nnewmtl metal\n").unwrap();
-        let err = load(&path).unwrap_err();
-        assert!(err.to_string().contains("floor (floor)") && err.to_string().contains("base colour"), "{err}");
+        for (text, expected) in [
+            ("newmtl floor\nKd 2 0 0\nnewmtl lamp\nnewmtl metal\n", "scene.mtl: material `floor`: Kd: has base colour"),
+            ("newmtl floor\nnewmtl lamp\nKe -1 0 0\nnewmtl metal\n", "scene.mtl: material `lamp`: Ke: emits"),
+            (
+                "newmtl floor\nnewmtl lamp\nnewmtl metal\nPr 0.5x\n",
+                "scene.mtl: material `metal`: `Pr 0.5x` is not a number",
+            ),
+            ("newmtl floor\nnewmtl lamp\nnewmtl metal\nPm 2\n", "scene.mtl: material `metal`: Pm: has 2"),
+            ("newmtl floor\nnewmtl lmap\nnewmtl metal\n", "line 19: `usemtl lamp` names no material of"),
+        ] {
+            std::fs::write(dir.path().join("scene.mtl"), text).unwrap();
+            let err = load(&path).unwrap_err().to_string();
+            assert!(err.contains(expected) && err.contains("scene.mtl"), "{text:?}: {err}");
+        }
         // A colour with fewer than three numbers (tobj 4.0.5 panics on one) or a number that does
         // not parse names the library and its line.
         let library = dir.path().join("scene.mtl");
