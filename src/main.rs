@@ -333,7 +333,7 @@ fn main() -> ExitCode {
     #[cfg(all(target_os = "linux", target_env = "gnu"))]
     let _accepted = keep_freed_stream_memory();
     let cli = Cli::parse();
-    let result = match cli.command {
+    let run = || match cli.command {
         Command::Devices { json } => devices(json),
         Command::Render(args) => render_command(args),
         Command::Bench { stage: BenchStage::Trace(args) } => bench_trace_command(args),
@@ -343,14 +343,19 @@ fn main() -> ExitCode {
         Command::Report { topic: ReportTopic::Shade(args) } => report_shade_command(args),
         Command::Report { topic: ReportTopic::ErrorVsTime(args) } => report_error_vs_time_command(args),
     };
-    match result {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
+    match std::panic::catch_unwind(std::panic::AssertUnwindSafe(run)) {
+        Ok(Ok(())) => ExitCode::SUCCESS,
+        Ok(Err(e)) => {
             eprintln!("error: {e}");
             ExitCode::FAILURE
         }
+        Err(payload) if payload.is::<StdoutClosed>() => ExitCode::SUCCESS,
+        Err(payload) => std::panic::resume_unwind(payload),
     }
 }
+
+/// What [`print_line`] unwinds with when stdout has closed, for `main` to catch.
+struct StdoutClosed;
 
 /// Keeps the memory of freed streams in the process for the next pass (glibc). Each stage of the
 /// CPU backend returns new stream buffers, megabytes a pass, and glibc's malloc by default maps
@@ -371,11 +376,14 @@ fn keep_freed_stream_memory() -> bool {
 }
 
 /// Prints one measurement line as soon as it exists; a closed stdout (e.g. piped into `head`)
-/// ends the program quietly instead of panicking.
+/// ends the program quietly, with success, instead of panicking. It unwinds to `main` rather
+/// than exiting on the spot, so that what is on the stack is dropped on the way — a pending
+/// output file (`report error-vs-time --plot`) deletes its temporary file, a Vulkan backend
+/// releases its device; `resume_unwind` prints no panic message.
 fn print_line(line: String) {
     use std::io::Write;
     if writeln!(std::io::stdout().lock(), "{line}").is_err() {
-        std::process::exit(0);
+        std::panic::resume_unwind(Box::new(StdoutClosed));
     }
 }
 

@@ -257,6 +257,28 @@ fn closed_stdout_is_not_a_panic() {
     assert!(path.exists(), "the image is written before anything is printed");
 }
 
+/// A report whose reader goes away (`raywave report error-vs-time --plot p.png | head -2`) ends
+/// quietly and takes its plot's temporary file with it: the pending output was left behind when
+/// a closed stdout exited on the spot.
+#[test]
+fn closed_stdout_leaves_no_temporary_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let plot = dir.path().join("plot.png");
+    let args = ["report", "error-vs-time", "--scenes", "builtin:cornell", "--resolution", "16", "--reference-spp", "4"];
+    let mut child = Command::new(env!("CARGO_BIN_EXE_raywave"))
+        .args(args)
+        .args(["--max-spp", "1", "--reps", "1", "--device", "cpu", "--plot", plot.to_str().unwrap()])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    drop(child.stdout.take());
+    let out = child.wait_with_output().unwrap();
+    assert!(out.status.success() && !stderr(&out).contains("panicked"), "{:?}: {}", out.status, stderr(&out));
+    let left: Vec<_> = std::fs::read_dir(dir.path()).unwrap().map(|e| e.unwrap().file_name()).collect();
+    assert!(left.is_empty(), "left behind: {left:?}");
+}
+
 /// A scene without quad lights renders (emitters glow, nothing is lit) with a warning; the
 /// reports, which measure direct light, refuse it instead of printing errors of 0.
 #[test]
