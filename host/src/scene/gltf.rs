@@ -57,7 +57,9 @@ pub fn load(path: &Path) -> Result<Scene> {
         }
         if let Some(mesh) = node.mesh() {
             for (index, primitive) in mesh.primitives().enumerate() {
-                let name = format!("{} primitive {index}", mesh.name().unwrap_or("mesh"));
+                // An unnamed mesh is named by its JSON path, so errors that name the mesh find it.
+                let mesh_name = mesh.name().map_or_else(|| format!("meshes[{}]", mesh.index()), str::to_owned);
+                let name = format!("{mesh_name} primitive {index}");
                 let field = primitive_field(&mesh, index);
                 let (positions, triangles) = triangles(&primitive, &buffers, *world, &field)
                     .map_err(|e| load_error(format!("{e} (in {name:?})")))?;
@@ -693,6 +695,17 @@ mod tests {
         let f = file(&text);
         let scene = load(f.path()).unwrap();
         assert_eq!(scene.camera().position, Vec3::new(0.5, 0.5, 3.0));
+    }
+
+    #[test]
+    fn an_unnamed_mesh_is_named_by_its_json_path() {
+        let text = quad_gltf(6).replacen(r#""name":"quad","#, "", 1);
+        let f = file(&text);
+        assert_eq!(load(f.path()).unwrap().meshes()[0].name, "meshes[0] primitive 0");
+        // So is an error about it, raised when the scene is validated.
+        let far = text.replacen(r#""translation":[0,0,-2]"#, r#""translation":[0,0,2e8]"#, 1);
+        let err = load(file(&far).path()).unwrap_err().to_string();
+        assert!(err.contains("meshes[0] primitive 0"), "{err}");
     }
 
     #[test]

@@ -25,6 +25,7 @@ pub fn load(path: &Path) -> Result<Scene> {
         ReadError::NotRegular => load_error("not a regular file".into()),
         ReadError::Io(e) => load_error(e.to_string()),
     })?;
+    check_face_indices(&text).map_err(load_error)?;
     let options = tobj::LoadOptions { triangulate: true, single_index: true, ..Default::default() };
     // tobj reads line by line and stops at its first error, so the reader's line is the one at fault.
     let mut reader = LineCounter::new(&text[..]);
@@ -129,6 +130,40 @@ fn locate(error: tobj::LoadError, line: usize) -> String {
         ReadError => format!("line {line}: {error} (not UTF-8 text, or the file could not be read)"),
         _ => format!("line {line}: {error}"),
     }
+}
+
+/// Checks every index of the OBJ `text`'s faces and lines (`f`, `l`) before tobj reads them:
+/// not 0 (indices are 1-based), not past 2³², and a negative (relative) one within the vertex
+/// data (`v`, `vt`, `vn`) defined before it. tobj 4.0.5 turns `0` and relative indices past the
+/// start into indices near `usize::MAX` and multiplies them, which overflows — a panic where
+/// overflow checks are on (debug and test builds). Tokens that are not integers are left to
+/// tobj, which reports them. Errors name the line.
+fn check_face_indices(text: &[u8]) -> std::result::Result<(), String> {
+    let mut defined = [0i64; 3];
+    for (index, line) in text.split(|&b| b == b'\n').enumerate() {
+        let line = String::from_utf8_lossy(line);
+        let mut words = line.split_whitespace();
+        match words.next() {
+            Some("v") => defined[0] += 1,
+            Some("vt") => defined[1] += 1,
+            Some("vn") => defined[2] += 1,
+            Some("f" | "l") => {
+                for vertex in words {
+                    for (kind, part) in vertex.split('/').enumerate().take(3) {
+                        let Ok(value) = part.parse::<i64>() else { continue };
+                        if value == 0 || value > i64::from(u32::MAX) || value < -defined[kind] {
+                            return Err(format!(
+                                "line {}: `{vertex}` holds index {value}, which names no vertex data defined before it",
+                                index + 1
+                            ));
+                        }
+                    }
+                }
+            }
+            _ => {}
+        }
+    }
+    Ok(())
 }
 
 /// Checks that every `usemtl` line of the OBJ `text` names a material of its library: tobj
@@ -333,6 +368,17 @@ mod tests {
         assert!(face.contains("line 6: face parse error"), "{face}");
         let last = error(&format!("{quad}f 1 2 3\nvn 0 1"));
         assert!(last.contains("line 6: normal parse error"), "the last line, without a line break: {last}");
+        // Indices that are 0, past 2³² or relative past the data defined so far (tobj 4.0.5
+        // overflowed on them) name their line.
+        for (face, line) in [("f 1 2 0", 5), ("f 1 2 4294967297", 5), ("f -5 -1 -2", 5), ("vt 0 0\nf 1/1 2/-2 3/1", 6)]
+        {
+            let refused = error(&format!("{quad}{face}\n"));
+            assert!(
+                refused.contains(&format!("line {line}: ")) && refused.contains("names no vertex data"),
+                "{refused}"
+            );
+        }
+        assert_eq!(load(obj_file(&format!("{quad}vt 0 0\nf -4/-1 -3/1 -2/-1\n")).path()).unwrap().triangle_count(), 1);
         // Faces are checked as their object closes: at the next `o` line, here line 7.
         let closed = error(&format!("{quad}o a\nf 1 2 7\no b\nf 1 2 3\n"));
         assert!(
