@@ -133,7 +133,9 @@ impl ShadeData {
         Ok(())
     }
 
-    /// This value's identity for upload caches: equal identities mean the same buffers.
+    /// This value's identity for upload caches: the same `ShadeData` value with buffers of the
+    /// same addresses and lengths. A different identity means the buffers must be uploaded again;
+    /// an equal one means the same value, not necessarily the same contents (see [`ShadeData`]).
     pub fn identity(&self) -> ShadeDataIdentity {
         fn buffer<T>(v: &[T]) -> (usize, usize) {
             (v.as_ptr() as usize, v.len())
