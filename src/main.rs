@@ -517,6 +517,13 @@ fn render_command(args: RenderArgs) -> raywave::Result<()> {
             report.unsupported_emitters, options.scene
         );
     }
+    if report.textured_meshes > 0 {
+        eprintln!(
+            "warning: {} mesh(es) of {} have textures, which raywave does not sample: their materials' factors alone \
+             apply (an emissive texture's mesh emits its factor everywhere)",
+            report.textured_meshes, options.scene
+        );
+    }
     if report.lights == 0 && options.view == RenderView::Lit {
         eprintln!("warning: {} has no quad light, so nothing is lit (emitters glow where seen)", options.scene);
     }

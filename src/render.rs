@@ -100,6 +100,9 @@ pub struct RenderReport {
     /// Emissive meshes that are not one planar parallelogram: they glow where seen but light
     /// nothing ([`Scene::unsupported_emitters`]).
     pub unsupported_emitters: usize,
+    /// Meshes whose file gave their materials textures, which raywave does not sample
+    /// ([`Scene::textured_meshes`]).
+    pub textured_meshes: usize,
     /// Samples per pixel traced: `spp` for the lit view, 1 for the normals view.
     pub samples_per_pixel: u32,
     /// Per-stage times, sanitized counts and timed dispatches, summed over the samples (in
@@ -200,6 +203,7 @@ pub fn render(options: &RenderOptions) -> Result<RenderReport> {
         dropped_degenerate: scene.dropped_degenerate(),
         lights: scene.lights().len(),
         unsupported_emitters: scene.unsupported_emitters(),
+        textured_meshes: scene.textured_meshes(),
         samples_per_pixel: settings.samples_per_pixel,
         hits: rendered.hits,
         stream_bytes_per_pixel: rendered.stream_bytes / u64::from(options.width * options.height),

@@ -295,6 +295,18 @@ fn lightless_scenes_warn_in_render_and_are_refused_by_reports() {
     }
 }
 
+/// A scene whose materials have textures renders with a warning that they are not sampled.
+#[test]
+fn textured_materials_are_rendered_flat_with_a_warning() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("t.mtl"), "newmtl wood\nKd 0.5 0.4 0.3\nmap_Kd wood.png\n").unwrap();
+    let obj = dir.path().join("t.obj");
+    std::fs::write(&obj, "mtllib t.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl wood\nf 1 2 3\n").unwrap();
+    let (out, path) = render(dir.path(), "t.png", &["--device", "cpu", "--scene", obj.to_str().unwrap()]);
+    assert!(out.status.success() && path.exists(), "{}", stderr(&out));
+    assert!(stderr(&out).contains("1 mesh(es) of") && stderr(&out).contains("have textures"), "{}", stderr(&out));
+}
+
 /// Benchmark and report options out of range: each command fails at once with the option named
 /// (before, `--repeats 0` measured one repetition, `--spp 0` failed inside the denoiser, a
 /// negative `--peak-gbps` gave negative bandwidth fractions, and a reference past the sampler's index

@@ -48,6 +48,7 @@ pub fn load(path: &Path) -> Result<Scene> {
         });
     }
     let mut meshes = Vec::new();
+    let mut textured = 0;
     let mut scene_camera = None;
     for (node, world) in &nodes {
         if let (None, Some(node_camera)) = (&scene_camera, node.camera()) {
@@ -64,12 +65,20 @@ pub fn load(path: &Path) -> Result<Scene> {
                 let (positions, triangles) = triangles(&primitive, &buffers, *world, &field)
                     .map_err(|e| load_error(format!("{e} (in {name:?})")))?;
                 let material = material(&primitive.material()).map_err(load_error)?;
+                textured += usize::from(has_textures(&primitive.material()));
                 meshes.push(Mesh { name, positions, triangles, material });
             }
         }
     }
     let camera = scene_camera.unwrap_or_else(|| framing_camera(&meshes));
-    Scene::new(&path.display().to_string(), meshes, camera)
+    Ok(Scene::new(&path.display().to_string(), meshes, camera)?.with_textured_meshes(textured))
+}
+
+/// Whether material `m` has a texture that would change its colour, roughness, metalness or
+/// emission — which raywave does not sample ([`Scene::textured_meshes`]).
+fn has_textures(m: &gltf::Material) -> bool {
+    let pbr = m.pbr_metallic_roughness();
+    pbr.base_color_texture().is_some() || pbr.metallic_roughness_texture().is_some() || m.emissive_texture().is_some()
 }
 
 /// The JSON path of primitive `index` of `mesh`, which errors name.
@@ -695,6 +704,24 @@ mod tests {
         let f = file(&text);
         let scene = load(f.path()).unwrap();
         assert_eq!(scene.camera().position, Vec3::new(0.5, 0.5, 3.0));
+    }
+
+    #[test]
+    fn meshes_with_textures_are_counted() {
+        assert_eq!(load(file(&quad_gltf(6)).path()).unwrap().textured_meshes(), 0);
+        let textures = r#""scene":0,"textures":[{"source":0}],"images":[{"uri":"no_such_texture.png"}],"#;
+        // The mesh's material (index 0) is a new one with a texture, ahead of the file's own.
+        for texture in
+            [r#""emissiveTexture":{"index":0},"#, r#""pbrMetallicRoughness":{"baseColorTexture":{"index":0}},"#]
+        {
+            let text = quad_gltf(6).replacen(r#""scene":0,"#, textures, 1).replacen(
+                r#""materials":[{"pbrMetallicRoughness""#,
+                &format!(r#""materials":[{{{texture}"extras":{{}}}},{{"pbrMetallicRoughness""#),
+                1,
+            );
+            let scene = load(file(&text).path()).unwrap_or_else(|e| panic!("{texture}: {e}"));
+            assert_eq!(scene.textured_meshes(), 1, "{texture}");
+        }
     }
 
     #[test]

@@ -121,6 +121,7 @@ pub struct Scene {
     meshes: Vec<Mesh>,
     camera: Camera,
     dropped_degenerate: usize,
+    textured_meshes: usize,
     lights: emitters::DerivedLights,
 }
 
@@ -192,7 +193,7 @@ impl Scene {
         meshes.retain(|m| !m.triangles.is_empty());
         let dropped_degenerate = before - meshes.iter().map(|m| m.triangles.len()).sum::<usize>();
         let lights = if u32::try_from(meshes.len()).is_ok() { emitters::derive(&meshes) } else { Default::default() };
-        let scene = Scene { name: name.to_owned(), meshes, camera, dropped_degenerate, lights };
+        let scene = Scene { name: name.to_owned(), meshes, camera, dropped_degenerate, textured_meshes: 0, lights };
         scene.validate()?;
         Ok(scene)
     }
@@ -224,6 +225,20 @@ impl Scene {
     /// parallelogram. They still emit where a ray hits them, but are never sampled as lights.
     pub fn unsupported_emitters(&self) -> usize {
         self.lights.unsupported
+    }
+
+    /// Meshes whose file gave their material textures (glTF base colour, metallic-roughness or
+    /// emissive textures; an MTL `map_Kd`, `map_Ke`, `map_Pr` or `map_Pm`). raywave samples no
+    /// texture: their materials' factors alone apply, so such a mesh is one colour — and an
+    /// emissive texture's mesh emits its factor (Blender writes 1) over its whole surface.
+    /// `raywave render` warns about them.
+    pub fn textured_meshes(&self) -> usize {
+        self.textured_meshes
+    }
+
+    /// This scene, noting that `count` of its meshes came with textures ([`Scene::textured_meshes`]).
+    pub(crate) fn with_textured_meshes(self, count: usize) -> Self {
+        Self { textured_meshes: count, ..self }
     }
 
     /// Zero-area triangles removed when the scene was built.

@@ -64,6 +64,10 @@ pub fn load(path: &Path) -> Result<Scene> {
             mtl_material(m).map_err(|reason| in_library(format!("material `{}`: {reason}", m.name)))?;
         }
     }
+    let textured = models
+        .iter()
+        .filter(|model| model.mesh.material_id.and_then(|id| materials.get(id)).is_some_and(has_textures))
+        .count();
     let meshes: Vec<Mesh> = models
         .into_iter()
         .enumerate()
@@ -83,7 +87,7 @@ pub fn load(path: &Path) -> Result<Scene> {
         .collect();
     let name = path.display().to_string();
     let camera = framing_camera(&meshes);
-    Scene::new(&name, meshes, camera)
+    Ok(Scene::new(&name, meshes, camera)?.with_textured_meshes(textured))
 }
 
 /// The text of the material library at `path`, or why it cannot be used: the OS's reason, not a
@@ -130,6 +134,13 @@ fn locate(error: tobj::LoadError, line: usize) -> String {
         ReadError => format!("line {line}: {error} (not UTF-8 text, or the file could not be read)"),
         _ => format!("line {line}: {error}"),
     }
+}
+
+/// Whether MTL entry `m` has a texture that would change its colour, roughness, metalness or
+/// emission (`map_Kd`, `map_Ke`, `map_Pr`, `map_Pm`), which raywave does not sample
+/// ([`Scene::textured_meshes`]).
+fn has_textures(m: &tobj::Material) -> bool {
+    m.diffuse_texture.is_some() || ["map_Ke", "map_Pr", "map_Pm"].iter().any(|key| m.unknown_param.contains_key(*key))
 }
 
 /// Checks every index of the OBJ `text`'s faces and lines (`f`, `l`) before tobj reads them:
@@ -299,6 +310,7 @@ mod tests {
         let floor = by_name("floor (floor)").material;
         assert_eq!(floor.base_color, Vec3::new(0.5, 0.25, 1.0));
         assert!((floor.roughness - 0.1f32.sqrt()).abs() < 1e-6, "Ns 198: α = √(2/200) = 0.1, {}", floor.roughness);
+        assert_eq!(scene.textured_meshes(), 0);
         let metal = by_name("chip (metal)").material;
         assert_eq!((metal.roughness, metal.metallic), (0.3, 1.0));
         assert_eq!(by_name("plain").material, Material::diffuse(DEFAULT_ALBEDO));
@@ -349,6 +361,13 @@ mod tests {
             let err = load(&scene).unwrap_err().to_string();
             assert!(err.contains("material library") && err.contains(expected), "{err}");
         }
+        // Meshes whose materials have textures (which raywave does not sample) are counted.
+        std::fs::write(
+            &library,
+            "newmtl floor\nmap_Kd wood.png\nnewmtl lamp\nKe 1 1 1\nmap_Ke screen.png\nnewmtl metal\n",
+        )
+        .unwrap();
+        assert_eq!(load(&path).unwrap().textured_meshes(), 2);
         std::fs::write(&library, b"newmtl floor\nKd 1 1 1\n\nKs 1 1 \xff\n").unwrap();
         let err = load(&path).unwrap_err().to_string();
         assert!(err.contains("scene.mtl: line 4: not UTF-8 text"), "{err}");
