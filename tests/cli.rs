@@ -244,16 +244,17 @@ fn bad_input_is_a_typed_error_without_output() {
 fn closed_stdout_is_not_a_panic() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("piped.png");
-    let mut child = Command::new(env!("CARGO_BIN_EXE_raywave"))
-        .args(["render", "--device", "cpu", "--width", "16", "--height", "16", "--out", path.to_str().unwrap()])
-        .stdout(std::process::Stdio::piped())
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .unwrap();
-    // Closed before the render finishes and prints.
-    drop(child.stdout.take());
-    let out = child.wait_with_output().unwrap();
-    assert!(out.status.success() && !stderr(&out).contains("panicked"), "{:?}: {}", out.status, stderr(&out));
+    run_with_closed_stdout(&[
+        "render",
+        "--device",
+        "cpu",
+        "--width",
+        "16",
+        "--height",
+        "16",
+        "--out",
+        path.to_str().unwrap(),
+    ]);
     assert!(path.exists(), "the image is written before anything is printed");
 }
 
@@ -265,9 +266,17 @@ fn closed_stdout_leaves_no_temporary_file() {
     let dir = tempfile::tempdir().unwrap();
     let plot = dir.path().join("plot.png");
     let args = ["report", "error-vs-time", "--scenes", "builtin:cornell", "--resolution", "16", "--reference-spp", "4"];
+    let more = ["--max-spp", "1", "--reps", "1", "--device", "cpu", "--plot", plot.to_str().unwrap()];
+    run_with_closed_stdout(&[&args[..], &more[..]].concat());
+    let left: Vec<_> = std::fs::read_dir(dir.path()).unwrap().map(|e| e.unwrap().file_name()).collect();
+    assert!(left.is_empty(), "left behind: {left:?}");
+}
+
+/// Runs raywave with `args`, its standard output closed before it prints anything, and checks
+/// that it ends with success and without a panic.
+fn run_with_closed_stdout(args: &[&str]) {
     let mut child = Command::new(env!("CARGO_BIN_EXE_raywave"))
         .args(args)
-        .args(["--max-spp", "1", "--reps", "1", "--device", "cpu", "--plot", plot.to_str().unwrap()])
         .stdout(std::process::Stdio::piped())
         .stderr(std::process::Stdio::piped())
         .spawn()
@@ -275,8 +284,6 @@ fn closed_stdout_leaves_no_temporary_file() {
     drop(child.stdout.take());
     let out = child.wait_with_output().unwrap();
     assert!(out.status.success() && !stderr(&out).contains("panicked"), "{:?}: {}", out.status, stderr(&out));
-    let left: Vec<_> = std::fs::read_dir(dir.path()).unwrap().map(|e| e.unwrap().file_name()).collect();
-    assert!(left.is_empty(), "left behind: {left:?}");
 }
 
 /// A scene without quad lights renders (emitters glow, nothing is lit) with a warning; the
