@@ -10,7 +10,7 @@ use raywave::kernels::hash::{pcg3d, unit_float};
 use raywave::kernels::offset::{offset_ray_origin, triangle_extent};
 use raywave::kernels::triangle::geometric_normal;
 use raywave::scene::procedural::icosphere;
-use raywave::scene::{Camera, Mesh};
+use raywave::scene::{Camera, Material, Mesh};
 use raywave::shared::stream::NO_HIT;
 use raywave::{HitStream, RayStream, Scene};
 
@@ -357,4 +357,44 @@ fn occlusion_agrees_with_closest_hit_and_exits_early() {
     // first hit must save tests (how many depends on how well front-to-back order already prunes).
     assert!(any_tests < closest_tests, "any-hit {any_tests} vs closest-hit {closest_tests} triangle tests");
     eprintln!("triangle tests: closest-hit {closest_tests}, any-hit {any_tests}");
+}
+
+/// A small quad just above a plane of the BVH's frame, beside a triangle 9·10⁴ across (found by
+/// fuzzing `scene_shapes` with debug assertions): obvhs quantizes a child box relative to its
+/// node's corner in `f32` (`(child.max − node.min) / e`), where 45 568 + 0.000427 rounds to
+/// 45 568, so the box stops at y = 0 while the quad reaches y = 0.000427. obvhs's own debug
+/// validation (which the workspace turns off for obvhs: see Cargo.toml) panicked on it; the
+/// traversals expand every child box by one quantization cell, so every ray onto that strip above
+/// y = 0 must still hit the quad, on every backend.
+#[test]
+fn boxes_quantized_in_a_wide_frame_still_hold_what_they_bound() {
+    let quad = |name: &str, corners: [[f32; 3]; 4]| Mesh {
+        name: name.into(),
+        positions: corners.map(Vec3::from_array).to_vec(),
+        triangles: vec![[0, 1, 2], [0, 2, 3]],
+        material: Material::diffuse(Vec3::splat(0.5)),
+    };
+    let strip =
+        quad("strip", [[-0.25, 0.000427, 0.0], [0.25, 0.000427, 0.0], [0.25, -0.156, 0.5], [-0.25, -0.156, 0.5]]);
+    let floor = quad("floor", [[-1.0, 0.0, -0.234], [1.0, 0.0, -0.234], [1.0, -2.0, -0.235], [-1.0, -2.0, -0.235]]);
+    let wide = Mesh {
+        name: "wide".into(),
+        positions: vec![
+            Vec3::new(-6238.0, -45568.0, -47282.0),
+            Vec3::new(-45234.0, 5966.0, 0.0),
+            Vec3::splat(-45234.0),
+        ],
+        triangles: vec![[0, 1, 2]],
+        material: Material::diffuse(Vec3::splat(0.5)),
+    };
+    let scene = scene_of(vec![strip, floor, wide]);
+    // Straight down onto the strip where it lies above y = 0 (z < 0.0014).
+    let origins: Vec<Vec3> = (0..4000)
+        .map(|i| Vec3::new(-0.24 + 0.48 * (i / 4) as f32 / 999.0, 1.0, [1e-5, 1e-4, 5e-4, 1e-3][i % 4]))
+        .collect();
+    let rays = rays_from(&origins, &vec![Vec3::NEG_Y; origins.len()], 10.0);
+    for traced in trace_everywhere("wide-frame quantization", &scene, &rays) {
+        let missed = traced.hits.instance.iter().zip(&traced.hits.primitive).filter(|(&i, &p)| p == NO_HIT || i != 0);
+        assert_eq!(missed.count(), 0, "{}: rays onto the strip above y = 0 missed it", traced.backend);
+    }
 }
