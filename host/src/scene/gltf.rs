@@ -296,6 +296,39 @@ fn check_accessor(
         if let Err(what) = check_span(Some(values.view()), values.offset(), sparse.count(), size, buffers) {
             return error(format!("sparse.values: {what}"));
         }
+        if let Err(what) = check_sparse_indices(&indices, sparse.count(), count, buffers) {
+            return error(format!("sparse.indices: {what}"));
+        }
+    }
+    Ok(())
+}
+
+/// Checks that the `sparse_count` indices of a sparse accessor of `count` elements (tightly packed
+/// from their view, as glTF 2.0 stores them, and inside it: [`check_span`] first) increase strictly
+/// and stay below `count`, as glTF 2.0 requires: the `gltf` crate's reader skips an index past the
+/// end without a word, leaving that element at its base value.
+fn check_sparse_indices(
+    indices: &gltf::accessor::sparse::Indices,
+    sparse_count: usize,
+    count: usize,
+    buffers: &[buffer::Data],
+) -> std::result::Result<(), String> {
+    let view = indices.view();
+    let size = indices.index_type().size();
+    let start = view.offset() + indices.offset();
+    let bytes = buffers
+        .get(view.buffer().index())
+        .and_then(|data| data.get(start..start + sparse_count * size))
+        .ok_or("the indices lie outside their buffer")?;
+    let mut previous: Option<usize> = None;
+    for (k, index) in bytes.chunks_exact(size).enumerate() {
+        let value = index.iter().rev().fold(0usize, |value, &byte| value << 8 | usize::from(byte));
+        if value >= count || previous.is_some_and(|p| value <= p) {
+            return Err(format!(
+                "index {k} is {value}; sparse indices must increase strictly and stay below the count {count}"
+            ));
+        }
+        previous = Some(value);
     }
     Ok(())
 }
@@ -704,6 +737,29 @@ mod tests {
         let f = file(&text);
         let scene = load(f.path()).unwrap();
         assert_eq!(scene.camera().position, Vec3::new(0.5, 0.5, 3.0));
+    }
+
+    #[test]
+    fn sparse_indices_past_the_count_or_out_of_order_are_errors() {
+        // quad_gltf's index view holds the u16 indices 0, 1, 2, 0, 2, 3: as 3 sparse indices
+        // (0, 1, 2) of a 4-element accessor they are valid, and from the view's 4th index on
+        // (0, 2, 3) too; of a 3-element accessor, 3 is past the end; from the 3rd index on
+        // (2, 0, 2) they are out of order.
+        let sparse = |count: u32, byte_offset: u32| {
+            quad_gltf(6).replacen(
+                r#"{"bufferView":0,"componentType":5126,"count":4"#,
+                &format!(
+                    r#"{{"componentType":5126,"count":{count},"sparse":{{"count":3,"indices":{{"bufferView":1,"byteOffset":{byte_offset},"componentType":5123}},"values":{{"bufferView":0}}}}"#
+                ),
+                1,
+            )
+        };
+        assert!(load(file(&sparse(4, 0)).path()).is_ok());
+        assert!(load(file(&sparse(4, 6)).path()).is_ok());
+        for (count, offset, expected) in [(3, 6, "index 2 is 3"), (4, 4, "index 1 is 0")] {
+            let err = load(file(&sparse(count, offset)).path()).unwrap_err().to_string();
+            assert!(err.contains("sparse.indices: index") && err.contains(expected), "{err}");
+        }
     }
 
     #[test]
