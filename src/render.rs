@@ -268,7 +268,7 @@ impl Frame<'_> {
         let (width, height) = (self.settings.width, self.settings.height);
         let Some(data) = self.data else {
             let frame = backend.render(&self.settings.generate_params(self.scene, 0))?;
-            let hits = frame.hits.primitive.iter().filter(|&&p| p != crate::shared::stream::NO_HIT).count();
+            let hits = frame.hits.hit_count();
             let image = normal_depth_image(self.scene, &frame.rays, &frame.hits, width, height);
             let stream_bytes = frame.rays.bytes() + frame.hits.bytes();
             return Ok(RenderedFrame { timings: frame.timings, hits, stream_bytes, image: FrameImage::Normals(image) });

@@ -12,7 +12,6 @@ use crate::shading::{resolve, ShadeAccumulator, ShadeData};
 use glam::Vec3;
 use raywave_kernels::shade::stage::Surface;
 use raywave_shared::sampling::sampler_kind;
-use raywave_shared::stream::NO_HIT;
 use raywave_shared::{DenoiseParams, GenerateParams, SamplerParams};
 
 /// The largest thin-lens aperture radius and focus distance accepted, in scene units, as for
@@ -163,7 +162,7 @@ pub fn shade_samples(
         for report in &frame.timings {
             StageReport::add_to(&mut samples.timings, report);
         }
-        samples.hits += frame.hits.primitive.iter().filter(|&&p| p != NO_HIT).count();
+        samples.hits += frame.hits.hit_count();
         if sample_index == 0 {
             samples.surfaces = resolve(data, &frame.rays, &frame.hits);
         }

@@ -3,7 +3,7 @@
 
 use crate::error::{Error, Result};
 use glam::{Vec2, Vec4};
-use raywave_shared::stream::{HIT_STREAM_BYTES_PER_RAY, RAY_STREAM_BYTES_PER_RAY};
+use raywave_shared::stream::{HIT_STREAM_BYTES_PER_RAY, NO_HIT, RAY_STREAM_BYTES_PER_RAY};
 
 /// The ray stream: what generate writes and trace reads.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -84,6 +84,11 @@ impl HitStream {
     /// Whether the stream holds no records.
     pub fn is_empty(&self) -> bool {
         self.t.is_empty()
+    }
+
+    /// Records whose ray hit something (primitive not `NO_HIT`).
+    pub fn hit_count(&self) -> usize {
+        self.primitive.iter().filter(|&&p| p != NO_HIT).count()
     }
 
     /// Bytes the stream occupies.

@@ -20,10 +20,7 @@ use std::path::{Path, PathBuf};
 /// Loads and validates a `.gltf` or `.glb` file.
 pub fn load(path: &Path) -> Result<Scene> {
     let load_error = |message: String| Error::SceneLoad { path: path.to_owned(), message };
-    let bytes = read_regular_file(path, u64::MAX).map_err(|e| match e {
-        ReadError::NotRegular => load_error("not a regular file".into()),
-        ReadError::Io(e) => load_error(e.to_string()),
-    })?;
+    let bytes = read_regular_file(path, u64::MAX).map_err(|e| load_error(e.to_string()))?;
     let (document, buffers) = parse(&bytes, path.parent()).map_err(load_error)?;
     let scene = document
         .default_scene()
@@ -129,10 +126,9 @@ fn parse(bytes: &[u8], base: Option<&Path>) -> std::result::Result<(Document, Ve
 /// `Glb::from_slice` subtracts 12 from it unchecked, which panics with overflow checks on (debug
 /// and test builds) and wraps without them. Text glTF (no `glTF` magic) passes untouched.
 fn check_glb_length(bytes: &[u8]) -> std::result::Result<(), String> {
-    match bytes {
-        [b'g', b'l', b'T', b'F', _, _, _, _, l0, l1, l2, l3, ..] if u32::from_le_bytes([*l0, *l1, *l2, *l3]) < 12 => {
-            Err(format!("GLB header: length {} is shorter than the header", u32::from_le_bytes([*l0, *l1, *l2, *l3])))
-        }
+    let [b'g', b'l', b'T', b'F', _, _, _, _, l0, l1, l2, l3, ..] = *bytes else { return Ok(()) };
+    match u32::from_le_bytes([l0, l1, l2, l3]) {
+        length @ 0..12 => Err(format!("GLB header: length {length} is shorter than the header")),
         _ => Ok(()),
     }
 }

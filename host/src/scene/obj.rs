@@ -3,7 +3,7 @@
 //! frames the scene's bounds.
 
 use super::line_counter::LineCounter;
-use super::regular_file::{read_regular_file, ReadError};
+use super::regular_file::read_regular_file;
 use super::{framing_camera, Material, Mesh, Scene};
 use crate::error::{Error, Result};
 use glam::Vec3;
@@ -21,10 +21,7 @@ pub fn load(path: &Path) -> Result<Scene> {
     if path.is_dir() {
         return Err(load_error("is a directory".into()));
     }
-    let text = read_regular_file(path, u64::MAX).map_err(|e| match e {
-        ReadError::NotRegular => load_error("not a regular file".into()),
-        ReadError::Io(e) => load_error(e.to_string()),
-    })?;
+    let text = read_regular_file(path, u64::MAX).map_err(|e| load_error(e.to_string()))?;
     check_face_indices(&text).map_err(load_error)?;
     let options = tobj::LoadOptions { triangulate: true, single_index: true, ..Default::default() };
     // tobj reads line by line and stops at its first error, so the reader's line is the one at fault.
@@ -56,12 +53,14 @@ pub fn load(path: &Path) -> Result<Scene> {
         let reason = library_error.take().unwrap_or_else(|| e.to_string());
         load_error(format!("the material library its `mtllib` line names cannot be loaded: {reason}"))
     })?;
+    // Each MTL entry as a material, checked once, naming the library (materials come from one).
+    let mut converted = Vec::with_capacity(materials.len());
     if let Some(library) = library_read.take() {
         let in_library = |reason: String| load_error(format!("{}: {reason}", library.display()));
         check_material_names(&text, &materials)
             .map_err(|reason| load_error(format!("{reason} {}", library.display())))?;
         for m in &materials {
-            mtl_material(m).map_err(|reason| in_library(format!("material `{}`: {reason}", m.name)))?;
+            converted.push(mtl_material(m).map_err(|reason| in_library(format!("material `{}`: {reason}", m.name)))?);
         }
     }
     let textured = models
@@ -75,13 +74,12 @@ pub fn load(path: &Path) -> Result<Scene> {
             // tobj names objects without an `o`/`g` line "unnamed_object".
             let object =
                 if model.name.is_empty() || model.name == "unnamed_object" { format!("mesh {i}") } else { model.name };
-            let entry = model.mesh.material_id.and_then(|id| materials.get(id));
+            let entry = model.mesh.material_id.and_then(|id| Some((&materials.get(id)?.name, *converted.get(id)?)));
             Mesh {
-                name: entry.map_or_else(|| object.clone(), |m| format!("{object} ({})", m.name)),
+                name: entry.map_or_else(|| object.clone(), |(name, _)| format!("{object} ({name})")),
                 positions: model.mesh.positions.chunks_exact(3).map(|p| Vec3::new(p[0], p[1], p[2])).collect(),
                 triangles: model.mesh.indices.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect(),
-                // Checked above, with the library's name.
-                material: entry.and_then(|m| mtl_material(m).ok()).unwrap_or(Material::diffuse(DEFAULT_ALBEDO)),
+                material: entry.map_or(Material::diffuse(DEFAULT_ALBEDO), |(_, material)| material),
             }
         })
         .collect();
@@ -95,10 +93,7 @@ pub fn load(path: &Path) -> Result<Scene> {
 /// fewer than three numbers, refused here before tobj parses the text: tobj 4.0.5 panics on one
 /// (found by fuzzing the loader).
 fn read_material_library(path: &Path) -> std::result::Result<String, String> {
-    let bytes = read_regular_file(path, u64::MAX).map_err(|e| match e {
-        ReadError::NotRegular => "not a regular file".to_owned(),
-        ReadError::Io(e) => e.to_string(),
-    })?;
+    let bytes = read_regular_file(path, u64::MAX).map_err(|e| e.to_string())?;
     let text = String::from_utf8(bytes).map_err(|e| {
         let valid = &e.as_bytes()[..e.utf8_error().valid_up_to()];
         format!("line {}: not UTF-8 text", 1 + valid.iter().filter(|&&b| b == b'\n').count())

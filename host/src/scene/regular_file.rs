@@ -15,6 +15,15 @@ pub(super) enum ReadError {
     Io(std::io::Error),
 }
 
+impl std::fmt::Display for ReadError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::NotRegular => f.write_str("not a regular file"),
+            Self::Io(e) => e.fmt(f),
+        }
+    }
+}
+
 /// The first `limit` bytes of the regular file at `path`. Whether it is one is checked before
 /// opening it, since opening a FIFO blocks.
 pub(super) fn read_regular_file(path: &Path, limit: u64) -> Result<Vec<u8>, ReadError> {
