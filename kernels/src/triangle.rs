@@ -4,8 +4,9 @@
 //! The ray is sheared so it runs along +z from the origin; the 2-D edge functions of the projected
 //! triangle are then evaluated on the same operands for both triangles sharing an edge, which
 //! traverse it in opposite directions, and come out exactly opposite — in the kernels by ordering
-//! the edge's endpoints canonically, which a GPU compiler's fused multiply-adds cannot break — so
-//! a ray through an edge or vertex hits at least one of them. An edge function that is exactly 0
+//! the edge's endpoints canonically, so that a GPU compiler that fuses the products into
+//! multiply-adds fuses the same operands in both — so a ray through an edge or vertex hits at
+//! least one of them. An edge function that is exactly 0
 //! counts as inside, which keeps the test watertight without the paper's f64 fallback (that
 //! fallback only breaks ties consistently; SPIR-V cannot assume `Float64`). Both faces are hit,
 //! matching Vulkan ray query without culling flags.
@@ -107,9 +108,10 @@ impl WatertightRay {
     #[inline(always)]
     pub fn intersect_a(&self, v0: Vec3A, v1: Vec3A, v2: Vec3A, tmin: f32, tmax: f32) -> Option<TriangleHit> {
         // Rust never fuses a product into an addition, so on the CPU the plain cross product is
-        // exactly antisymmetric and equals the canonical one bit for bit (tested); skipping the
-        // ordering there keeps the CPU traversal 13–15 % faster (`raywave bench trace`, sphere
-        // field, one thread). A SPIR-V driver may fuse, so the kernels order the endpoints.
+        // exactly antisymmetric and equals the canonical one up to the sign of a zero, which no
+        // comparison here sees (tested); skipping the ordering there keeps the CPU traversal
+        // 13–15 % faster (`raywave bench trace`, sphere field, one thread). A SPIR-V driver may
+        // fuse, so the kernels order the endpoints.
         if cfg!(target_arch = "spirv") {
             self.intersect_with(v0, v1, v2, tmin, tmax, |p, q| edge_function(p, q, &cross_2d))
         } else {
@@ -170,9 +172,12 @@ fn cross_2d(p: Vec3A, q: Vec3A) -> f32 {
 
 /// The edge function of the directed edge `p → q` as seen from the ray, `cross(p, q)`, evaluated
 /// on the edge's endpoints in one canonical order (by x, then y) and negated when the edge runs
-/// the other way. The two triangles sharing an edge traverse it in opposite directions, so they
-/// get exactly opposite values however `cross` rounds — which watertightness rests on. Evaluated
-/// as written, `p.x·q.y − p.y·q.x` is exactly antisymmetric already, but SPIR-V lets a driver fuse
+/// the other way; exactly 0 when the endpoints coincide as seen from the ray (an edge along it),
+/// as the unfused product is. The two triangles sharing an edge traverse it in opposite
+/// directions, so they get exactly opposite values as long as `cross` rounds the same operands
+/// the same way — which watertightness rests on. That holds for any one evaluation, fused or not;
+/// SPIR-V does not promise that a driver fuses the three inlined copies in `intersect_with` alike,
+/// but NVIDIA's did (0 leaks on an H100). Evaluated as written, `p.x·q.y − p.y·q.x` is exactly antisymmetric already, but SPIR-V lets a driver fuse
 /// a product into the subtraction unless the result is decorated `NoContraction` (rust-gpu 0.11
 /// does not decorate), and a fused `fma(p.x, q.y, −p.y·q.x)` is not the negation of
 /// `fma(q.x, p.y, −q.y·p.x)`: on an NVIDIA H100 (driver 580.159.04) 1 276 of 10⁶ rays aimed at
@@ -181,8 +186,9 @@ fn cross_2d(p: Vec3A, q: Vec3A) -> f32 {
 #[inline(always)]
 fn edge_function<F: Fn(Vec3A, Vec3A) -> f32>(p: Vec3A, q: Vec3A, cross: &F) -> f32 {
     let reversed = (q.x < p.x) | ((q.x == p.x) & (q.y < p.y));
+    let coincident = (q.x == p.x) & (q.y == p.y);
     let (first, second) = if reversed { (q, p) } else { (p, q) };
-    let value = cross(first, second);
+    let value = if coincident { 0.0 } else { cross(first, second) };
     if reversed {
         -value
     } else {
@@ -280,7 +286,7 @@ mod tests {
         let mut rng = crate::hash::CounterRng::new(17);
         let (mut leaks, mut asymmetric, mut canonical_asymmetric) = (0, 0, 0);
         const PAIRS: u32 = 20_000;
-        for _ in 0..PAIRS {
+        for i in 0..PAIRS {
             let (e0, e1) = (rng.vec3(-1.0, 1.0), rng.vec3(-1.0, 1.0));
             let side = (e1 - e0).cross(rng.unit_vec3()).normalize();
             let mid = e0.lerp(e1, rng.next_f32());
@@ -291,10 +297,16 @@ mod tests {
             let [e0, e1, apex_a, apex_b] = [e0, e1, apex_a, apex_b].map(Vec3A::from);
             let fused_edge = |p, q| edge_function(p, q, &fused_cross);
             let first = ray.intersect_with(e0, e1, apex_a, 0.0, 1e30, fused_edge);
-            let second = ray.intersect_with(e1, e0, apex_b, 0.0, 1e30, fused_edge);
+            // The shared edge in the same slot of both triangles (w), or in another (u).
+            let second = if i.is_multiple_of(2) {
+                ray.intersect_with(e1, e0, apex_b, 0.0, 1e30, fused_edge)
+            } else {
+                ray.intersect_with(apex_b, e1, e0, 0.0, 1e30, fused_edge)
+            };
             leaks += u32::from(first.is_none() && second.is_none());
             let (p, q) = (ray.transform(e0), ray.transform(e1));
             asymmetric += u32::from(fused_cross(p, q) != -fused_cross(q, p));
+            assert_eq!(edge_function(p, p, &fused_cross), 0.0, "an edge along the ray");
             canonical_asymmetric += u32::from(edge_function(p, q, &fused_cross) != -edge_function(q, p, &fused_cross));
         }
         assert_eq!((leaks, canonical_asymmetric), (0, 0), "leaks, asymmetric canonical edge functions");

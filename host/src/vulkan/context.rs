@@ -9,7 +9,7 @@ use gpu_allocator::vulkan::{Allocator, AllocatorCreateDesc};
 use raywave_shared::bindings::STREAM_ROW;
 use std::ffi::{c_void, CStr};
 use std::mem::ManuallyDrop;
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, OnceLock};
 
 /// Name of the Khronos validation layer.
@@ -191,29 +191,35 @@ unsafe extern "system" fn debug_callback(
 /// The Vulkan loader, loaded once for the process and never unloaded, with the drivers it found
 /// kept loaded too ([`keep_drivers_loaded`]). The caller holds [`driver_lock::device_lifetime`].
 fn load_entry() -> Result<ash::Entry> {
+    // A loader that failed to load stays failed: a missing libvulkan does not come back.
     static LOADER: OnceLock<std::result::Result<ash::Entry, String>> = OnceLock::new();
-    LOADER
-        .get_or_init(|| {
-            // SAFETY: loading the system Vulkan loader library; no Vulkan call is in flight.
-            let entry = unsafe { ash::Entry::load() }.map_err(|e| e.to_string())?;
-            keep_drivers_loaded(&entry);
-            Ok(entry)
-        })
+    let entry = LOADER
+        // SAFETY: loading the system Vulkan loader library; no Vulkan call is in flight.
+        .get_or_init(|| unsafe { ash::Entry::load() }.map_err(|e| e.to_string()))
         .clone()
-        .map_err(|e| Error::VulkanUnavailable { reason: format!("cannot load the Vulkan loader: {e}") })
+        .map_err(|e| Error::VulkanUnavailable { reason: format!("cannot load the Vulkan loader: {e}") })?;
+    keep_drivers_loaded(&entry);
+    Ok(entry)
 }
 
-/// Creates an instance without layers that is never destroyed, so that the loader never unloads
-/// the drivers' libraries. Why: the loader unloads a driver's library when the last instance
-/// using it is destroyed, and NVIDIA's driver (580.159.04 on an H100, measured) can still have a
-/// thread of its own running in that library then: `trace_robustness`, whose test threads open
-/// and close backends in turn, died in 2 of 5 runs with a segmentation fault at an instruction
-/// address no longer mapped, in a thread named after one of the tests. An engine that opens and
-/// closes backends would meet the same. Without a driver (no instance can be created) this does
-/// nothing; opening a device then reports why.
+/// Creates, once, an instance that is never destroyed, so that the loader never unloads the
+/// drivers' libraries; tried again on the next call until it succeeds (a driver the loader could
+/// not start this time is not held). It enables no layer of its own (layers the environment
+/// forces, `VK_INSTANCE_LAYERS` or implicit ones, still load, harmlessly). Why: the loader
+/// unloads a driver's library when the last instance using it is destroyed, and NVIDIA's driver
+/// (580.159.04 on an H100, measured) can still have a thread of its own running in that library
+/// then: `trace_robustness`, whose test threads open and close backends in turn, died in 2 of 5
+/// runs with a segmentation fault at an instruction address no longer mapped, in a thread named
+/// after one of the tests. An engine that opens and closes backends would meet the same. While no
+/// instance can be created this does nothing; opening a device then reports why. The caller holds
+/// [`driver_lock::device_lifetime`].
 fn keep_drivers_loaded(entry: &ash::Entry) {
-    // `ash::Instance` has no destructor: dropping the handle leaves the instance alive.
-    let _kept = create_instance(entry, false, None);
+    static KEPT: AtomicBool = AtomicBool::new(false);
+    if !KEPT.load(Ordering::Acquire) {
+        // `ash::Instance` has no destructor: dropping the handle leaves the instance alive.
+        let kept = create_instance(entry, false, None).is_ok();
+        KEPT.store(kept, Ordering::Release);
+    }
 }
 
 fn create_instance(
