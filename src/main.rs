@@ -332,6 +332,8 @@ fn main() -> ExitCode {
     // A refused setting leaves malloc's default: slower, the same results.
     #[cfg(all(target_os = "linux", target_env = "gnu"))]
     let _accepted = keep_freed_stream_memory();
+    #[cfg(unix)]
+    remove_pending_outputs_when_interrupted();
     let cli = Cli::parse();
     let run = || match cli.command {
         Command::Devices { json } => devices(json),
@@ -351,6 +353,48 @@ fn main() -> ExitCode {
         }
         Err(payload) if payload.is::<StdoutClosed>() => ExitCode::SUCCESS,
         Err(payload) => std::panic::resume_unwind(payload),
+    }
+}
+
+/// Interrupted by SIGINT (Ctrl-C), SIGTERM or SIGHUP, the process would end at once, without
+/// unwinding, and leave a `.raywave-…` temporary file beside each output of the unfinished job. A
+/// thread waits for these signals instead: it deletes those files
+/// ([`raywave::visualize::remove_pending_outputs`], whose guard keeps others from being created)
+/// and ends the process by the same signal, with its default action — so that the caller sees
+/// what it sent (a shell loop stops on Ctrl-C) and no exit handler runs while another thread may
+/// be inside the Vulkan driver. A signal the caller left ignored (`nohup`'s SIGHUP, a background
+/// job's SIGINT) stays ignored. Should the handlers fail to install, the signals keep their
+/// default action: only the cleanup is lost.
+#[cfg(unix)]
+fn remove_pending_outputs_when_interrupted() {
+    use signal_hook::consts::{SIGHUP, SIGINT, SIGTERM};
+    let handled: Vec<i32> = [SIGINT, SIGTERM, SIGHUP].into_iter().filter(|&signal| !ignored(signal)).collect();
+    let mut signals = match signal_hook::iterator::Signals::new(&handled) {
+        Ok(signals) => signals,
+        Err(e) => {
+            eprintln!("warning: no interrupt handling ({e}): an interrupted render may leave .raywave-… files");
+            return;
+        }
+    };
+    std::thread::spawn(move || {
+        if let Some(signal) = signals.forever().next() {
+            let _outputs_held = raywave::visualize::remove_pending_outputs();
+            // Returns only for a signal signal-hook does not know, which these are not.
+            let _ = signal_hook::low_level::emulate_default_handler(signal);
+            // SAFETY: `_exit` ends the process at once, running nothing, as the signal would have.
+            unsafe { libc::_exit(128 + signal) }
+        }
+    });
+}
+
+/// Whether `signal` is ignored (`SIG_IGN`) in this process, as its parent may have left it.
+#[cfg(unix)]
+fn ignored(signal: i32) -> bool {
+    // SAFETY: `sigaction` with no new action only reads the current one into `current`, a plain
+    // C struct for which all zeros is a valid value.
+    unsafe {
+        let mut current: libc::sigaction = std::mem::zeroed();
+        libc::sigaction(signal, std::ptr::null(), &mut current) == 0 && current.sa_sigaction == libc::SIG_IGN
     }
 }
 

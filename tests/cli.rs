@@ -272,6 +272,64 @@ fn closed_stdout_leaves_no_temporary_file() {
     assert!(left.is_empty(), "left behind: {left:?}");
 }
 
+/// Interrupted — SIGINT as Ctrl-C sends it, SIGTERM, SIGHUP — a render ends by that signal and
+/// leaves neither its output nor the temporary file it was to be written to (the handler deletes
+/// it; without one, a `.raywave-…` file stayed beside the output). A signal its parent ignores,
+/// as `nohup` does SIGHUP, stays ignored.
+#[cfg(unix)]
+#[test]
+fn an_interrupted_render_leaves_no_file() {
+    use std::os::unix::process::{CommandExt, ExitStatusExt};
+    use std::time::{Duration, Instant};
+    for (signal, number) in [("INT", libc::SIGINT), ("TERM", libc::SIGTERM), ("HUP", libc::SIGHUP)] {
+        let dir = tempfile::tempdir().unwrap();
+        let mut render = Command::new(env!("CARGO_BIN_EXE_raywave"));
+        render
+            .args(["render", "--device", "cpu", "--width", "1920", "--height", "1080", "--spp", "64", "--out"])
+            .arg(dir.path().join("frame.png"))
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::null());
+        let nohup = number == libc::SIGHUP;
+        if nohup {
+            // SAFETY: `signal` is async-signal-safe, as a `pre_exec` closure must be.
+            unsafe {
+                render.pre_exec(|| {
+                    libc::signal(libc::SIGHUP, libc::SIG_IGN);
+                    Ok(())
+                });
+            }
+        }
+        let mut child = render.spawn().unwrap();
+        // The temporary file appears before any work is done (a minute of it on this machine).
+        let give_up = Instant::now() + Duration::from_secs(60);
+        while std::fs::read_dir(dir.path()).unwrap().count() == 0 {
+            assert!(child.try_wait().unwrap().is_none(), "SIG{signal}: the render ended before its output began");
+            assert!(Instant::now() < give_up, "SIG{signal}: no temporary file appeared");
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        let pid = child.id().to_string();
+        let kill = |name: &str| {
+            let status = Command::new("kill").args([format!("-{name}"), pid.clone()]).status().unwrap();
+            assert!(status.success(), "kill -{name}");
+        };
+        kill(signal);
+        let expected = if nohup {
+            // Still rendering half a second later (handled, it would have ended at once); then
+            // SIGTERM ends it.
+            std::thread::sleep(Duration::from_millis(500));
+            assert!(child.try_wait().unwrap().is_none(), "an ignored SIGHUP ended the render");
+            kill("TERM");
+            libc::SIGTERM
+        } else {
+            number
+        };
+        let status = child.wait().unwrap();
+        assert_eq!(status.signal(), Some(expected), "SIG{signal}: {status:?}");
+        let left: Vec<_> = std::fs::read_dir(dir.path()).unwrap().map(|entry| entry.unwrap().file_name()).collect();
+        assert!(left.is_empty(), "SIG{signal}: left {left:?}");
+    }
+}
+
 /// Runs raywave with `args`, its standard output closed before it prints anything, and checks
 /// that it ends with success and without a panic.
 fn run_with_closed_stdout(args: &[&str]) {

@@ -7,7 +7,8 @@ use crate::stream::{HitStream, RayStream};
 use glam::{Vec3, Vec4Swizzles};
 use image::{EncodableLayout, ImageBuffer, ImageFormat, PixelWithColorType, RgbImage};
 use std::io::Write;
-use std::path::Path;
+use std::path::{Path, PathBuf};
+use std::sync::{Mutex, MutexGuard, PoisonError};
 
 /// The normal/depth view: each hit pixel shows its face-forward geometric normal mapped to colour
 /// (`0.5 + 0.5·n`), darkened with distance so depth edges read; misses are black. `rays` and
@@ -50,9 +51,9 @@ pub fn srgb_image(colors: &[Vec3], width: u32, height: u32) -> RgbImage {
 /// An image file that appears only when complete: it is created as a temporary file beside the
 /// destination (so an unwritable path fails before any work) and renamed over it when finished.
 pub struct PendingOutput {
-    path: std::path::PathBuf,
+    path: PathBuf,
     format: ImageFormat,
-    temp: tempfile::NamedTempFile,
+    temp: PendingFile,
 }
 
 impl PendingOutput {
@@ -80,7 +81,7 @@ impl PendingOutput {
             let reason = format!("directory {} does not exist", dir.display());
             return Err(output_error(std::io::Error::new(std::io::ErrorKind::NotFound, reason)));
         }
-        let temp = tempfile::Builder::new().prefix(".raywave-").tempfile_in(dir).map_err(output_error)?;
+        let temp = PendingFile::create_in(dir).map_err(output_error)?;
         Ok(Self { path: path.to_owned(), format, temp })
     }
 
@@ -121,13 +122,14 @@ impl PendingOutput {
     fn write(mut self, bytes: &[u8]) -> Result<WrittenOutput> {
         let path = self.path.clone();
         let output_error = |source| Error::Output { path: path.clone(), source };
-        self.temp.write_all(bytes).map_err(output_error)?;
-        self.temp.as_file().sync_all().map_err(output_error)?;
+        let temp = &mut self.temp.temp;
+        temp.write_all(bytes).map_err(output_error)?;
+        temp.as_file().sync_all().map_err(output_error)?;
         // The temporary file is private (0600); a finished image is an ordinary file.
         #[cfg(unix)]
         {
             use std::os::unix::fs::PermissionsExt;
-            self.temp.as_file().set_permissions(std::fs::Permissions::from_mode(0o644)).map_err(output_error)?;
+            temp.as_file().set_permissions(std::fs::Permissions::from_mode(0o644)).map_err(output_error)?;
         }
         Ok(WrittenOutput { path: self.path, temp: self.temp })
     }
@@ -139,27 +141,37 @@ impl PendingOutput {
 /// of them behind. Dropped, it deletes its temporary file.
 #[derive(Debug)]
 pub struct WrittenOutput {
-    path: std::path::PathBuf,
-    temp: tempfile::NamedTempFile,
+    path: PathBuf,
+    temp: PendingFile,
 }
 
 impl WrittenOutput {
     /// Renames the temporary file over the destination.
     pub fn persist(self) -> Result<()> {
+        let _placing = lock(&PLACING);
+        self.rename()
+    }
+
+    /// [`persist`](Self::persist), with [`PLACING`] held by the caller.
+    fn rename(self) -> Result<()> {
+        let PendingFile { temp, listed } = self.temp;
         let path = self.path;
-        self.temp.persist(&path).map_err(|e| Error::Output { path: path.clone(), source: e.error })?;
+        temp.persist(&path).map_err(|e| Error::Output { path: path.clone(), source: e.error })?;
+        drop(listed);
         Ok(())
     }
 }
 
 /// Moves every output into place, in order. Should a rename fail, the outputs this call already
 /// moved are removed again (the remaining temporary files are deleted when dropped), so a job's
-/// outputs appear all together or not at all.
+/// outputs appear all together or not at all — also when the process is interrupted meanwhile
+/// ([`remove_pending_outputs`] waits until this returns).
 pub fn persist_all(outputs: Vec<WrittenOutput>) -> Result<()> {
+    let _placing = lock(&PLACING);
     let mut placed = Vec::new();
     for output in outputs {
         let path = output.path.clone();
-        if let Err(err) = output.persist() {
+        if let Err(err) = output.rename() {
             for done in &placed {
                 // Best effort: the error that matters is the one being returned.
                 let _ = std::fs::remove_file(done);
@@ -169,6 +181,76 @@ pub fn persist_all(outputs: Vec<WrittenOutput>) -> Result<()> {
         placed.push(path);
     }
     Ok(())
+}
+
+/// The temporary files of this process's outputs that are not in place yet, by path.
+static PENDING: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
+
+/// Held while outputs move into place, so that [`remove_pending_outputs`] never sees a job's
+/// outputs half moved.
+static PLACING: Mutex<()> = Mutex::new(());
+
+/// Locks one of this module's registries. They hold only paths, which a panic elsewhere cannot
+/// leave inconsistent, so a poisoned lock is used as it is.
+fn lock<T>(mutex: &Mutex<T>) -> MutexGuard<'_, T> {
+    mutex.lock().unwrap_or_else(PoisonError::into_inner)
+}
+
+/// An output's temporary file, listed in [`PENDING`] for as long as it exists.
+#[derive(Debug)]
+struct PendingFile {
+    /// Declared first, so that a dropped file is deleted before it leaves the list.
+    temp: tempfile::NamedTempFile,
+    listed: Listed,
+}
+
+impl PendingFile {
+    /// A new temporary file in `dir`, listed before anyone can see it: the list stays locked
+    /// while the file is created, so [`remove_pending_outputs`] finds every file that exists.
+    fn create_in(dir: &Path) -> std::io::Result<Self> {
+        let mut pending = lock(&PENDING);
+        let temp = tempfile::Builder::new().prefix(".raywave-").tempfile_in(dir)?;
+        let path = temp.path().to_owned();
+        pending.push(path.clone());
+        Ok(Self { temp, listed: Listed(path) })
+    }
+}
+
+/// A path in [`PENDING`], taken out of it when dropped.
+#[derive(Debug)]
+struct Listed(PathBuf);
+
+impl Drop for Listed {
+    fn drop(&mut self) {
+        let mut pending = lock(&PENDING);
+        if let Some(index) = pending.iter().position(|path| *path == self.0) {
+            pending.swap_remove(index);
+        }
+    }
+}
+
+/// Deletes the temporary files of every output not yet in place — after waiting for outputs being
+/// moved into place to get there — for a program about to end without unwinding: `raywave`
+/// calls it when interrupted (Ctrl-C, `SIGTERM`, `SIGHUP`), which would otherwise leave a
+/// `.raywave-…` file beside each output of the interrupted job. Until the returned guard is
+/// dropped, no output can be created or moved into place (other threads trying wait): hold it
+/// until the process ends.
+#[must_use = "outputs may be created again once the guard is dropped"]
+pub fn remove_pending_outputs() -> OutputsHeld {
+    let placing = lock(&PLACING);
+    let mut pending = lock(&PENDING);
+    for path in pending.drain(..) {
+        // Best effort: a file already gone is what was wanted.
+        let _ = std::fs::remove_file(path);
+    }
+    OutputsHeld { _placing: placing, _pending: pending }
+}
+
+/// Returned by [`remove_pending_outputs`]: while it lives, no output is created or moved into
+/// place.
+pub struct OutputsHeld {
+    _placing: MutexGuard<'static, ()>,
+    _pending: MutexGuard<'static, Vec<PathBuf>>,
 }
 
 #[cfg(test)]
@@ -251,6 +333,30 @@ mod tests {
         assert_eq!(image.get_pixel(0, 0).0, [0, 255, 188]); // 0.5 → 0.7354 → 188
         assert_eq!(image.get_pixel(1, 0).0, [0, 255, 0]);
         assert_eq!(image.get_pixel(0, 1).0, [7, 7, 7]); // linear segment: 12.92·0.002 → 6.6
+    }
+
+    /// Whether the temporary file at `path` is listed for [`remove_pending_outputs`].
+    fn listed(path: &Path) -> bool {
+        lock(&PENDING).iter().any(|pending| pending == path)
+    }
+
+    /// A temporary file is listed from its creation until it is moved into place or dropped, and
+    /// no longer (other tests list their own files meanwhile, so only these are checked).
+    #[test]
+    fn temporary_files_are_listed_while_they_exist() {
+        let dir = tempfile::tempdir().unwrap();
+        let create = |name: &str| PendingOutput::create(&dir.path().join(name), ImageFormat::Png).unwrap();
+        let (kept, dropped, failed) = (create("kept.png"), create("dropped.png"), create("failed.png"));
+        let paths = [&kept, &dropped, &failed].map(|output| output.temp.temp.path().to_owned());
+        assert!(paths.iter().all(|path| listed(path)));
+        let written = kept.write_image(&RgbImage::new(2, 2)).unwrap();
+        assert!(listed(&paths[0]), "written, not yet in place");
+        written.persist().unwrap();
+        drop(dropped);
+        let failed = failed.write_image(&RgbImage::new(2, 2)).unwrap();
+        std::fs::remove_dir_all(dir.path()).unwrap();
+        assert!(failed.persist().is_err(), "its directory is gone");
+        assert!(!paths.iter().any(|path| listed(path)), "unlisted once moved, dropped or failed");
     }
 
     #[test]
