@@ -61,10 +61,7 @@ impl PendingOutput {
     /// extension is not that format's (a `.jpg` holding PNG bytes would mislead every viewer), or
     /// if its directory is missing or not writable.
     pub fn create(path: &Path, format: ImageFormat) -> Result<Self> {
-        let dir = match path.parent() {
-            Some(p) if !p.as_os_str().is_empty() => p,
-            _ => Path::new("."),
-        };
+        let dir = directory_of(path);
         let output_error = |source| Error::Output { path: path.to_owned(), source };
         if ImageFormat::from_path(path).ok() != Some(format) {
             let extensions = format.extensions_str();
@@ -163,24 +160,47 @@ impl WrittenOutput {
 }
 
 /// Moves every output into place, in order. Should a rename fail, the outputs this call already
-/// moved are removed again (the remaining temporary files are deleted when dropped), so a job's
-/// outputs appear all together or not at all — also when the process is interrupted meanwhile
+/// moved are removed again and the files they replaced put back (the remaining temporary files
+/// are deleted when dropped), so a job's outputs appear all together or not at all — also when the process is interrupted meanwhile
 /// ([`remove_pending_outputs`] waits until this returns).
 pub fn persist_all(outputs: Vec<WrittenOutput>) -> Result<()> {
     let _placing = lock(&PLACING);
-    let mut placed = Vec::new();
+    let mut placed: Vec<(PathBuf, Option<tempfile::TempPath>)> = Vec::new();
     for output in outputs {
         let path = output.path.clone();
+        let previous = keep_previous(&path);
         if let Err(err) = output.rename() {
-            for done in &placed {
-                // Best effort: the error that matters is the one being returned.
-                let _ = std::fs::remove_file(done);
+            // Best effort: the error that matters is the one being returned.
+            for (done, previous) in placed.into_iter().rev() {
+                let _ = match previous {
+                    Some(previous) => previous.persist(&done).map_err(|e| e.error),
+                    None => std::fs::remove_file(&done),
+                };
             }
             return Err(err);
         }
-        placed.push(path);
+        placed.push((path, previous));
     }
+    // Dropping `placed` deletes the second names of the replaced files.
     Ok(())
+}
+
+/// A second name, beside it, for the file now at `path` (a hard link, deleted when dropped), so
+/// that [`persist_all`] can put it back should a later output fail to move into place; `None`
+/// where there is no file or the file system makes no hard links — the previous file is then
+/// removed with the new one, as before.
+fn keep_previous(path: &Path) -> Option<tempfile::TempPath> {
+    let link =
+        tempfile::Builder::new().prefix(".raywave-").make_in(directory_of(path), |link| std::fs::hard_link(path, link));
+    link.ok().map(tempfile::NamedTempFile::into_temp_path)
+}
+
+/// The directory a file at `path` goes in (`.` for a bare file name).
+fn directory_of(path: &Path) -> &Path {
+    match path.parent() {
+        Some(parent) if !parent.as_os_str().is_empty() => parent,
+        _ => Path::new("."),
+    }
 }
 
 /// The temporary files of this process's outputs that are not in place yet, by path.
@@ -288,6 +308,35 @@ mod tests {
         let second = dir.path().join("b.png");
         persist_all(vec![write(&first), write(&second)]).unwrap();
         assert!(first.exists() && second.exists());
+    }
+
+    /// A job that fails part-way leaves the files its outputs were to replace as they were —
+    /// the one already replaced put back — and no temporary file or second name.
+    #[test]
+    fn a_failed_job_puts_back_the_files_it_replaced() {
+        let dir = tempfile::tempdir().unwrap();
+        let (first, second, later) = (dir.path().join("a.png"), dir.path().join("b.png"), dir.path().join("sub"));
+        std::fs::write(&first, b"previous a").unwrap();
+        std::fs::write(&second, b"previous b").unwrap();
+        std::fs::create_dir(&later).unwrap();
+        let write = |path: &Path| {
+            PendingOutput::create(path, ImageFormat::Png).unwrap().write_image(&RgbImage::new(2, 2)).unwrap()
+        };
+        let outputs = vec![write(&first), write(&second), write(&later.join("c.png"))];
+        std::fs::remove_dir_all(&later).unwrap();
+        assert!(persist_all(outputs).is_err());
+        assert_eq!(std::fs::read(&first).unwrap(), b"previous a");
+        assert_eq!(std::fs::read(&second).unwrap(), b"previous b");
+        let names = |dir: &Path| {
+            let mut names: Vec<_> = std::fs::read_dir(dir).unwrap().map(|e| e.unwrap().file_name()).collect();
+            names.sort();
+            names
+        };
+        assert_eq!(names(dir.path()), ["a.png", "b.png"]);
+        // Succeeding, the job replaces them and leaves no second name behind.
+        persist_all(vec![write(&first), write(&second)]).unwrap();
+        assert!(std::fs::read(&first).unwrap().starts_with(b"\x89PNG"));
+        assert_eq!(names(dir.path()), ["a.png", "b.png"]);
     }
 
     #[test]
