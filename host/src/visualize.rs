@@ -161,8 +161,8 @@ impl WrittenOutput {
 
 /// Moves every output into place, in order. Should a rename fail, the outputs this call already
 /// moved are removed again and the files they replaced put back (the remaining temporary files
-/// are deleted when dropped), so a job's outputs appear all together or not at all — also when the process is interrupted meanwhile
-/// ([`remove_pending_outputs`] waits until this returns).
+/// are deleted when dropped), so a job's outputs appear all together or not at all — also when
+/// the process is interrupted meanwhile ([`remove_pending_outputs`] waits until this returns).
 pub fn persist_all(outputs: Vec<WrittenOutput>) -> Result<()> {
     let _placing = lock(&PLACING);
     let mut placed: Vec<(PathBuf, Option<tempfile::TempPath>)> = Vec::new();
@@ -190,9 +190,16 @@ pub fn persist_all(outputs: Vec<WrittenOutput>) -> Result<()> {
 /// where there is no file or the file system makes no hard links — the previous file is then
 /// removed with the new one, as before.
 fn keep_previous(path: &Path) -> Option<tempfile::TempPath> {
-    let link =
-        tempfile::Builder::new().prefix(".raywave-").make_in(directory_of(path), |link| std::fs::hard_link(path, link));
+    let link = temporary_names().make_in(directory_of(path), |link| std::fs::hard_link(path, link));
     link.ok().map(tempfile::NamedTempFile::into_temp_path)
+}
+
+/// How this module names its temporary files beside an output: `.raywave-` and a random suffix,
+/// hidden from directory listings.
+fn temporary_names() -> tempfile::Builder<'static, 'static> {
+    let mut builder = tempfile::Builder::new();
+    builder.prefix(".raywave-");
+    builder
 }
 
 /// The directory a file at `path` goes in (`.` for a bare file name).
@@ -229,7 +236,7 @@ impl PendingFile {
     /// while the file is created, so [`remove_pending_outputs`] finds every file that exists.
     fn create_in(dir: &Path) -> std::io::Result<Self> {
         let mut pending = lock(&PENDING);
-        let temp = tempfile::Builder::new().prefix(".raywave-").tempfile_in(dir)?;
+        let temp = temporary_names().tempfile_in(dir)?;
         let path = temp.path().to_owned();
         pending.push(path.clone());
         Ok(Self { temp, listed: Listed(path) })

@@ -6,10 +6,10 @@
 //! traverse it in opposite directions, and come out exactly opposite — in the kernels by ordering
 //! the edge's endpoints canonically, so that a GPU compiler that fuses the products into
 //! multiply-adds fuses the same operands in both — so a ray through an edge or vertex hits at
-//! least one of them. An edge function that is exactly 0
-//! counts as inside, which keeps the test watertight without the paper's f64 fallback (that
-//! fallback only breaks ties consistently; SPIR-V cannot assume `Float64`). Both faces are hit,
-//! matching Vulkan ray query without culling flags.
+//! least one of them. An edge function that is exactly 0 counts as inside, which keeps the test
+//! watertight without the paper's f64 fallback (that fallback only breaks ties consistently;
+//! SPIR-V cannot assume `Float64`). Both faces are hit, matching Vulkan ray query without culling
+//! flags.
 
 use glam::{Vec2, Vec3, Vec3A};
 
@@ -177,16 +177,17 @@ fn cross_2d(p: Vec3A, q: Vec3A) -> f32 {
 /// directions, so they get exactly opposite values as long as `cross` rounds the same operands
 /// the same way — which watertightness rests on. That holds for any one evaluation, fused or not;
 /// SPIR-V does not promise that a driver fuses the three inlined copies in `intersect_with` alike,
-/// but NVIDIA's did (0 leaks on an H100). Evaluated as written, `p.x·q.y − p.y·q.x` is exactly antisymmetric already, but SPIR-V lets a driver fuse
-/// a product into the subtraction unless the result is decorated `NoContraction` (rust-gpu 0.11
-/// does not decorate), and a fused `fma(p.x, q.y, −p.y·q.x)` is not the negation of
-/// `fma(q.x, p.y, −q.y·p.x)`: on an NVIDIA H100 (driver 580.159.04) 1 276 of 10⁶ rays aimed at
-/// the shared edges and vertices of a closed sphere went through it, all at edges
-/// (`trace_robustness`).
+/// but NVIDIA's did (0 leaks on an H100). Evaluated as written, `p.x·q.y − p.y·q.x` is exactly
+/// antisymmetric already, but SPIR-V lets a driver fuse a product into the subtraction unless the
+/// result is decorated `NoContraction` (rust-gpu 0.11 does not decorate), and a fused
+/// `fma(p.x, q.y, −p.y·q.x)` is not the negation of `fma(q.x, p.y, −q.y·p.x)`: on an NVIDIA H100
+/// (driver 580.159.04) 1 276 of 10⁶ rays aimed at the shared edges and vertices of a closed
+/// sphere went through it, all at edges (`trace_robustness`).
 #[inline(always)]
 fn edge_function<F: Fn(Vec3A, Vec3A) -> f32>(p: Vec3A, q: Vec3A, cross: &F) -> f32 {
-    let reversed = (q.x < p.x) | ((q.x == p.x) & (q.y < p.y));
-    let coincident = (q.x == p.x) & (q.y == p.y);
+    let same_x = q.x == p.x;
+    let reversed = (q.x < p.x) | (same_x & (q.y < p.y));
+    let coincident = same_x & (q.y == p.y);
     let (first, second) = if reversed { (q, p) } else { (p, q) };
     let value = if coincident { 0.0 } else { cross(first, second) };
     if reversed {
