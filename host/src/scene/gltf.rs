@@ -9,7 +9,7 @@
 //! loaded (textures are not sampled), so a missing texture file is no error.
 
 use super::regular_file::{read_regular_file, ReadError};
-use super::{framing_camera, Camera, Material, Mesh, Scene, MAX_VERTICES};
+use super::{framing_camera, in_range, Camera, Material, Mesh, Scene, MAX_COORDINATE, MAX_VERTICES};
 use crate::error::{Error, Result};
 use glam::{Mat4, Vec3};
 use gltf::accessor::{DataType, Dimensions};
@@ -59,7 +59,7 @@ pub fn load(path: &Path) -> Result<Scene> {
                 let mesh_name = mesh.name().map_or_else(|| format!("meshes[{}]", mesh.index()), str::to_owned);
                 let name = format!("{mesh_name} primitive {index}");
                 let field = primitive_field(&mesh, index);
-                let (positions, triangles) = triangles(&primitive, &buffers, *world, &field)
+                let (positions, triangles) = triangles(&primitive, &buffers, (node.index(), *world), &field)
                     .map_err(|e| load_error(format!("{e} (in {name:?})")))?;
                 let material = material(&primitive.material()).map_err(load_error)?;
                 textured += usize::from(has_textures(&primitive.material()));
@@ -208,15 +208,18 @@ fn check_position_accessor_indices(root: &gltf::json::Root) -> std::result::Resu
     Ok(())
 }
 
-/// The positions (moved to world space by `world`) and triangles (counter-clockwise in world
-/// space seen from the front, reversed where `world` mirrors) of one primitive, whose JSON
-/// path `field` the errors name: triangle mode, POSITION a VEC3 float accessor and indices (if
-/// any) a SCALAR unsigned integer one, as glTF 2.0 requires (the `gltf` crate's reader would panic
-/// on float indices and read other types as garbage), each inside its buffer ([`check_accessor`]).
+/// The positions (moved to world space by `world`, node `node`'s transform) and triangles
+/// (counter-clockwise in world space seen from the front, reversed where `world` mirrors) of one
+/// primitive, whose JSON path `field` the errors name: triangle mode, POSITION a VEC3 float
+/// accessor and indices (if any) a SCALAR unsigned integer one, as glTF 2.0 requires (the `gltf`
+/// crate's reader would panic on float indices and read other types as garbage), each inside
+/// its buffer ([`check_accessor`]); every world position finite and within
+/// [`MAX_COORDINATE`] and every index below the POSITION count (which [`Scene::new`]
+/// would report without the JSON path).
 fn triangles(
     primitive: &gltf::Primitive,
     buffers: &[buffer::Data],
-    world: Mat4,
+    (node, world): (usize, Mat4),
     field: &str,
 ) -> std::result::Result<(Vec<Vec3>, Vec<[u32; 3]>), String> {
     if primitive.mode() != gltf::mesh::Mode::Triangles {
@@ -231,6 +234,12 @@ fn triangles(
         .ok_or_else(|| unreadable(&position, &position_field))?
         .map(|p| world.transform_point3(Vec3::from_array(p)))
         .collect();
+    if let Some((element, p)) = positions.iter().enumerate().find(|(_, p)| !in_range(**p)) {
+        return Err(format!(
+            "{position_field} element {element} is at {p} in world space under nodes[{node}]'s transform; each \
+             coordinate must be finite and within ±{MAX_COORDINATE:e}"
+        ));
+    }
     let indices: Vec<u32> = match primitive.indices() {
         Some(accessor) => {
             let indices_field = format!("{field}.indices");
@@ -240,6 +249,12 @@ fn triangles(
         }
         None => (0..positions.len() as u32).collect(),
     };
+    if let Some((element, index)) = indices.iter().enumerate().find(|(_, &i)| i as usize >= positions.len()) {
+        return Err(format!(
+            "{field}.indices element {element} is {index}, but attributes.POSITION has {} elements",
+            positions.len()
+        ));
+    }
     if !indices.len().is_multiple_of(3) {
         return Err(format!("{field}: {} indices is not a whole number of triangles", indices.len()));
     }
@@ -396,16 +411,29 @@ fn material(m: &gltf::Material) -> std::result::Result<Material, String> {
         ));
     }
     let [r, g, b, _alpha] = base_color;
-    Ok(Material {
+    let material = Material {
         base_color: Vec3::new(r, g, b),
         roughness: pbr.roughness_factor(),
         metallic: pbr.metallic_factor(),
         emission: Vec3::from_array(m.emissive_factor()) * strength,
-    })
+    };
+    // Each factor was checked above against glTF's range; the emission's upper limit is left,
+    // which only the product of the factor and the strength can pass.
+    material.check().map_err(|(name, reason)| {
+        let json = match name {
+            "material.emission" => "emissiveFactor × extensions.KHR_materials_emissive_strength.emissiveStrength",
+            "material.base_color" => "pbrMetallicRoughness.baseColorFactor",
+            "material.roughness" => "pbrMetallicRoughness.roughnessFactor",
+            _ => "pbrMetallicRoughness.metallicFactor",
+        };
+        format!("{field}.{json}: {reason}")
+    })?;
+    Ok(material)
 }
 
 /// The camera of node `node` (world transform `world`) with perspective projection `p`: the
-/// node looks along its −z with +y up; an error names the field that leaves it degenerate.
+/// node looks along its −z with +y up; an error names the node whose transform leaves it degenerate
+/// or beyond [`MAX_COORDINATE`], or the field.
 fn camera(
     node: &gltf::Node,
     camera: &gltf::Camera,
@@ -422,6 +450,16 @@ fn camera(
         up: world.transform_vector3(Vec3::Y),
         vertical_fov_degrees: yfov.to_degrees(),
     };
+    if !(in_range(camera_at.position) && in_range(camera_at.look_at)) {
+        return Err(format!(
+            "nodes[{}] (camera {}): its world transform puts the camera at {} looking at {}; each coordinate \
+             must be finite and within ±{MAX_COORDINATE:e}",
+            node.index(),
+            camera.index(),
+            camera_at.position,
+            camera_at.look_at
+        ));
+    }
     if !camera_at.has_view_basis() {
         return Err(format!(
             "nodes[{}] (camera {}): its world transform collapses the camera's view or up axis (a zero scale?)",
@@ -594,6 +632,12 @@ mod tests {
             ),
             (r#"{"mesh":0,"translation""#, r#"{"mesh":0,"children":[0],"translation""#, "nodes[0] is reached twice"),
             (r#""nodes":[0,1]"#, r#""nodes":[0,1,0]"#, "nodes[0] is reached twice"),
+            // Three positions for indices up to 3: once a generic error naming the mesh's triangle.
+            (
+                r#""count":4,"type":"VEC3""#,
+                r#""count":3,"type":"VEC3""#,
+                "meshes[0].primitives[0].indices element 5 is 3, but attributes.POSITION has 3 elements",
+            ),
         ];
         for (from, to, expected) in cases {
             let text = quad_gltf(6);
@@ -644,6 +688,30 @@ mod tests {
                 "\"camera\": 0,",
                 "\"camera\": 0, \"scale\": [0, 0, 0],",
                 "nodes[2] (camera 0): its world transform collapses",
+            ),
+            // Each factor in range, their product beyond MAX_EMISSION: once a generic error naming
+            // the mesh's `material.emission`.
+            (
+                "\"emissiveStrength\": 4",
+                "\"emissiveStrength\": 1e21",
+                "materials[1].emissiveFactor × extensions.KHR_materials_emissive_strength.emissiveStrength: emits",
+            ),
+            // A node transform that moves a vertex or the camera beyond MAX_COORDINATE, or makes it
+            // not finite: once errors naming the mesh's vertex or the scene's camera, not the node.
+            (
+                "\"mesh\": 1,",
+                "\"mesh\": 1, \"scale\": [1e9, 1, 1],",
+                "meshes[1].primitives[0].attributes.POSITION element 0 is at [-250000000, 1.5, -0.125] in world space under nodes[1]",
+            ),
+            (
+                "\"mesh\": 1,",
+                "\"mesh\": 1, \"scale\": [1e39, 1, 1],",
+                "meshes[1].primitives[0].attributes.POSITION element 0 is at [NaN, NaN, NaN] in world space under nodes[1]",
+            ),
+            (
+                "\"camera\": 0,",
+                "\"camera\": 0, \"scale\": [1e9, 1e9, 1e9],",
+                "nodes[2] (camera 0): its world transform puts the camera at",
             ),
         ];
         for (from, to, field) in cases {

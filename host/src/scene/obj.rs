@@ -4,7 +4,7 @@
 
 use super::line_counter::LineCounter;
 use super::regular_file::read_regular_file;
-use super::{framing_camera, Material, Mesh, Scene};
+use super::{framing_camera, Material, Mesh, Scene, MAX_COORDINATE};
 use crate::error::{Error, Result};
 use glam::Vec3;
 use std::cell::RefCell;
@@ -22,7 +22,7 @@ pub fn load(path: &Path) -> Result<Scene> {
         return Err(load_error("is a directory".into()));
     }
     let text = read_regular_file(path, u64::MAX).map_err(|e| load_error(e.to_string()))?;
-    check_face_indices(&text).map_err(load_error)?;
+    check_vertices_and_indices(&text).map_err(load_error)?;
     let options = tobj::LoadOptions { triangulate: true, single_index: true, ..Default::default() };
     // tobj reads line by line and stops at its first error, so the reader's line is the one at fault.
     let mut reader = LineCounter::new(&text[..]);
@@ -138,19 +138,34 @@ fn has_textures(m: &tobj::Material) -> bool {
     m.diffuse_texture.is_some() || ["map_Ke", "map_Pr", "map_Pm"].iter().any(|key| m.unknown_param.contains_key(*key))
 }
 
-/// Checks every index of the OBJ `text`'s faces and lines (`f`, `l`) before tobj reads them:
-/// not 0 (indices are 1-based), not past 2³², and a negative (relative) one within the vertex
-/// data (`v`, `vt`, `vn`) defined before it. tobj 4.0.5 turns `0` and relative indices past the
-/// start into indices near `usize::MAX` and multiplies them, which overflows — a panic where
-/// overflow checks are on (debug and test builds). Tokens that are not integers are left to
-/// tobj, which reports them. Errors name the line.
-fn check_face_indices(text: &[u8]) -> std::result::Result<(), String> {
+/// Checks the OBJ `text` before tobj reads it, naming the line at fault (tobj's vertex numbers
+/// are not the file's, so [`Scene::new`]'s errors could not name it):
+/// - every vertex position (`v`) coordinate is finite and within [`MAX_COORDINATE`];
+/// - every index of the faces and lines (`f`, `l`) is not 0 (indices are 1-based), not past 2³²,
+///   and a negative (relative) one within the vertex data (`v`, `vt`, `vn`) defined before it.
+///   tobj 4.0.5 turns `0` and relative indices past the start into indices near `usize::MAX` and
+///   multiplies them, which overflows — a panic where overflow checks are on (debug and test
+///   builds).
+///
+/// Tokens that are not numbers are left to tobj, which reports them.
+fn check_vertices_and_indices(text: &[u8]) -> std::result::Result<(), String> {
     let mut defined = [0i64; 3];
     for (index, line) in text.split(|&b| b == b'\n').enumerate() {
         let line = String::from_utf8_lossy(line);
         let mut words = line.split_whitespace();
         match words.next() {
-            Some("v") => defined[0] += 1,
+            Some("v") => {
+                defined[0] += 1;
+                // Parsed as tobj parses them: a number too large for f32 becomes infinite.
+                let mut coordinates = words.take(3).filter_map(|word| word.parse::<f32>().ok());
+                if let Some(c) = coordinates.find(|c| !(c.is_finite() && c.abs() <= MAX_COORDINATE)) {
+                    return Err(format!(
+                        "line {}: `{}` has coordinate {c}; each must be finite and within ±{MAX_COORDINATE:e}",
+                        index + 1,
+                        line.trim()
+                    ));
+                }
+            }
             Some("vt") => defined[1] += 1,
             Some("vn") => defined[2] += 1,
             Some("f" | "l") => {
@@ -402,10 +417,21 @@ mod tests {
     }
 
     #[test]
-    fn nan_vertex_and_zero_area_faces_are_rejected() {
-        let f = obj_file("v 0 0 0\nv 1 0 0\nv nan 1 0\nf 1 2 3\n");
-        let err = load(f.path()).unwrap_err();
-        assert!(matches!(err, Error::NonFiniteVertex { vertex: 2, .. }), "{err}");
+    fn vertices_out_of_range_and_zero_area_faces_are_rejected() {
+        // Once `NonFiniteVertex` / `VertexOutOfRange` errors numbering the vertex as tobj does
+        // (not the file's order once faces reuse or skip vertices), without the line.
+        for (vertex, expected) in [
+            ("v nan 1 0", "line 4: `v nan 1 0` has coordinate NaN"),
+            ("v 1 inf 0", "line 4: `v 1 inf 0` has coordinate inf"),
+            ("v 1 1 1e39", "line 4: `v 1 1 1e39` has coordinate inf"),
+            ("v 0 -1.5e8 0", "line 4: `v 0 -1.5e8 0` has coordinate -150000000; each must be finite and within ±1e8"),
+        ] {
+            let f = obj_file(&format!("v 0 0 0\nv 1 0 0\nv 0 1 0\n{vertex}\nf 1 2 3\nf 4 2 3\n"));
+            let err = load(f.path()).unwrap_err();
+            assert!(matches!(err, Error::SceneLoad { .. }) && err.to_string().contains(expected), "{err}");
+        }
+        let at_the_limit = obj_file("v 0 0 0\nv 1e8 0 0\nv 0 -1e8 0\nf 1 2 3\n");
+        assert!(load(at_the_limit.path()).is_ok());
         let f = obj_file("v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n");
         assert!(matches!(load(f.path()).unwrap_err(), Error::EmptyScene { dropped_degenerate: 1, .. }));
     }
