@@ -587,13 +587,14 @@ fn render_command(args: RenderArgs) -> raywave::Result<()> {
             format!("timing   steady state: the frame after {warm_up:.1} s of warm-up frames")
         }
     });
+    let name_width = report.timings.iter().map(|t| t.stage.chars().count()).max().unwrap_or(0);
     for t in &report.timings {
         let sanitized = if t.sanitized > 0 { format!("  ({} sanitized)", t.sanitized) } else { String::new() };
         let dispatches = match report.warm_up_seconds {
             Some(_) => format!("  ({} dispatch{} timed)", t.dispatches, if t.dispatches == 1 { "" } else { "es" }),
             None => String::new(),
         };
-        print_line(format!("stage    {:<9} {:>10.3} ms{dispatches}{sanitized}", t.stage, t.seconds * 1e3));
+        print_line(format!("stage    {:<name_width$} {:>10.3} ms{dispatches}{sanitized}", t.stage, t.seconds * 1e3));
     }
     let sanitized = raywave::StageReport::total_sanitized(&report.timings);
     if sanitized > 0 {

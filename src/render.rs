@@ -10,7 +10,7 @@ use raywave_host::denoise::DenoiseMethod;
 use raywave_host::frame::check_samples_per_pixel;
 use raywave_host::lit_frame::{render_lit, LitFrameSettings};
 use raywave_host::shading::{ShadeAccumulator, ShadeData};
-use raywave_host::visualize::{normal_depth_image, persist_all, srgb_image, PendingOutput};
+use raywave_host::visualize::{normal_depth_image, output_destination, persist_all, srgb_image, PendingOutput};
 use std::path::PathBuf;
 
 /// What the image shows.
@@ -151,10 +151,10 @@ fn check_options(options: &RenderOptions) -> Result<()> {
     }
     let named =
         [("out", Some(&options.out)), ("exr", options.exr.as_ref()), ("stochastic", options.stochastic.as_ref())];
-    let absolute = |path: &PathBuf| std::path::absolute(path).unwrap_or_else(|_| path.clone());
+    let same_file = |a: &PathBuf, b: &PathBuf| output_destination(a) == output_destination(b);
     for (k, (name, path)) in named.iter().enumerate() {
         let Some(path) = path else { continue };
-        if let Some((other, _)) = named[..k].iter().find(|(_, p)| p.is_some_and(|p| absolute(p) == absolute(path))) {
+        if let Some((other, _)) = named[..k].iter().find(|(_, p)| p.is_some_and(|p| same_file(p, path))) {
             return invalid(name, format!("{} is also --{other}'s file; each output needs its own", path.display()));
         }
     }
@@ -167,11 +167,11 @@ fn check_options(options: &RenderOptions) -> Result<()> {
 pub fn render(options: &RenderOptions) -> Result<RenderReport> {
     check_options(options)?;
     let settle_seconds = options.settle_seconds.map(check_settle_seconds).transpose()?;
-    let scene = Scene::load(&options.scene)?;
     let output = PendingOutput::create(&options.out, ImageFormat::Png)?;
     let exr = options.exr.as_deref().map(|path| PendingOutput::create(path, ImageFormat::OpenExr)).transpose()?;
     let stochastic =
         options.stochastic.as_deref().map(|path| PendingOutput::create(path, ImageFormat::Png)).transpose()?;
+    let scene = Scene::load(&options.scene)?;
     let mut backend_options = options.backend.clone();
     if settle_seconds.is_some() {
         backend_options.sustain_seconds = backend_options.sustain_seconds.max(SUSTAIN_SECONDS);

@@ -189,7 +189,7 @@ fn bad_input_is_a_typed_error_without_output() {
     let empty = dir.path().join("empty.obj");
     std::fs::write(&empty, "# no geometry\n").unwrap();
 
-    assert_rejected(&["--device", "cpu", "--scene", nan.to_str().unwrap()], "non-finite position");
+    assert_rejected(&["--device", "cpu", "--scene", nan.to_str().unwrap()], "line 3: `v 0 nan 0` has coordinate NaN");
     assert_rejected(&["--device", "cpu", "--scene", flat.to_str().unwrap()], "zero-area triangles dropped");
     assert_rejected(&["--device", "cpu", "--scene", empty.to_str().unwrap()], "no triangles");
     assert_rejected(&["--device", "cpu", "--scene", "/no/such/scene.obj"], "/no/such/scene.obj");
@@ -217,7 +217,7 @@ fn bad_input_is_a_typed_error_without_output() {
     std::fs::write(&far, "v 0 0 0\nv 1e19 0 0\nv 0 1 0\nf 1 2 3\n").unwrap();
     assert_rejected(
         &["--device", "cpu", "--scene", far.to_str().unwrap()],
-        "vertex 1 at [10000000000000000000, 0, 0] is out of range",
+        "line 2: `v 1e19 0 0` has coordinate 10000000000000000000; each must be finite and within ±1e8",
     );
     assert_rejected(&["--device", "cpu", "--aperture", "1e20"], "aperture: 100000000000000000000 is outside");
     assert_rejected(&["--device", "cpu", "--settle-seconds", "31"], "settle-seconds: 31 is not within 0..=30 s");
@@ -236,6 +236,59 @@ fn bad_input_is_a_typed_error_without_output() {
     let (out, _) = render(dir.path(), "twice.png", &["--device", "cpu", "--stochastic", twice.to_str().unwrap()]);
     assert!(!out.status.success() && stderr(&out).contains("is also --out's file"), "{}", stderr(&out));
     assert!(!twice.exists());
+    // The same file spelt through `..` or a symbolic link to its folder: compared as given, these
+    // passed, and the stochastic image replaced the main one without a word.
+    std::fs::create_dir(dir.path().join("sub")).unwrap();
+    let mut spellings = vec![dir.path().join("sub/../twice.png")];
+    #[cfg(unix)]
+    {
+        std::os::unix::fs::symlink(dir.path(), dir.path().join("link")).unwrap();
+        spellings.push(dir.path().join("link/twice.png"));
+    }
+    for other in spellings {
+        let (out, _) = render(dir.path(), "twice.png", &["--device", "cpu", "--stochastic", other.to_str().unwrap()]);
+        assert!(!out.status.success() && stderr(&out).contains("is also --out's file"), "{other:?}: {}", stderr(&out));
+        assert!(!twice.exists());
+    }
+    // A trailing separator names a directory: the rename failed only after the render.
+    let slash = format!("{}/", dir.path().join("slash.png").display());
+    let out = raywave(&["render", "--device", "cpu", "--out", &slash]);
+    assert!(!out.status.success() && stderr(&out).contains("names a directory"), "{}", stderr(&out));
+    // A folder that is a file is not a missing folder.
+    let file = dir.path().join("file.txt");
+    std::fs::write(&file, "").unwrap();
+    let inside_file = file.join("out.png");
+    let out = raywave(&["render", "--device", "cpu", "--out", inside_file.to_str().unwrap()]);
+    assert!(!out.status.success() && stderr(&out).contains("file.txt is not a directory"), "{}", stderr(&out));
+}
+
+/// With `--device auto` (the default), options only Vulkan has — validation, a hardware trace
+/// method — make a Vulkan failure an error: the CPU fallback dropped `--validate` without a word
+/// and answered `--trace rtpipe` with "the CPU backend traces in software only".
+#[cfg(feature = "vulkan")]
+#[test]
+fn vulkan_only_options_do_not_fall_back_to_the_cpu() {
+    let dir = tempfile::tempdir().unwrap();
+    let out_path = dir.path().join("out.png");
+    let out = out_path.to_str().unwrap();
+    let small = ["render", "--width", "16", "--height", "16", "--out", out];
+    let run = |env: (&str, &Path), extra: &[&str]| {
+        Command::new(env!("CARGO_BIN_EXE_raywave")).env(env.0, env.1).args(small).args(extra).output().unwrap()
+    };
+    // No validation layer where the loader looks for one.
+    let no_layers = run(("VK_LAYER_PATH", dir.path()), &["--validate"]);
+    assert!(!no_layers.status.success(), "{}", String::from_utf8_lossy(&no_layers.stdout));
+    assert!(stderr(&no_layers).contains("VK_LAYER_KHRONOS_validation"), "{}", stderr(&no_layers));
+    // No Vulkan driver at all.
+    let no_driver = run(("VK_DRIVER_FILES", &dir.path().join("none.json")), &["--trace", "rtpipe"]);
+    assert!(!no_driver.status.success() && !stderr(&no_driver).contains("CPU backend"), "{}", stderr(&no_driver));
+    assert!(stderr(&no_driver).contains("Vulkan"), "{}", stderr(&no_driver));
+    // Without them, auto still falls back.
+    let fallback = run(("VK_DRIVER_FILES", &dir.path().join("none.json")), &["--spp", "1"]);
+    let on_the_cpu =
+        String::from_utf8_lossy(&fallback.stdout).lines().any(|l| l.starts_with("backend") && l.contains("cpu"));
+    assert!(fallback.status.success() && on_the_cpu, "{}", stderr(&fallback));
+    assert!(out_path.exists());
 }
 
 /// A closed standard output (`raywave render … | head -1`) ends the command quietly; `println!`
@@ -379,7 +432,7 @@ fn textured_materials_are_rendered_flat_with_a_warning() {
 /// frame is shaded or the reference converged).
 #[test]
 fn bench_and_report_options_out_of_range_are_typed_errors() {
-    let cases: [(&[&str], &str); 15] = [
+    let cases: [(&[&str], &str); 17] = [
         (&["bench", "denoise", "--no-vulkan", "--repeats", "0"], "repeats: must be at least 1"),
         (&["bench", "denoise", "--no-vulkan", "--spp", "0"], "spp: 0 is outside"),
         (&["bench", "denoise", "--no-vulkan", "--spp", "8192"], "exceed the sampler's 32-bit index"),
@@ -389,6 +442,9 @@ fn bench_and_report_options_out_of_range_are_typed_errors() {
         (&["report", "error-vs-time", "--settle-seconds", "31"], "settle-seconds: 31 is not within 0..=30 s"),
         (&["bench", "trace", "--no-vulkan", "--repeats", "0"], "repeats: must be at least 1"),
         (&["bench", "trace", "--no-vulkan", "--resolution", "0"], "at least 1"),
+        (&["bench", "trace", "--no-vulkan", "--threads", "0"], "threads: 0 is outside 1..="),
+        // rayon caps its pools at 65 535 threads without a word; the report named the count asked.
+        (&["bench", "trace", "--no-vulkan", "--threads", "70000"], "threads: 70000 is outside 1..=65535"),
         (&["bench", "trace", "--settle-seconds", "31"], "settle-seconds: 31 is not within 0..=30 s"),
         (&["bench", "trace", "--settle-seconds", "NaN"], "settle-seconds: NaN is not within"),
         (&["bench", "shade", "--no-vulkan", "--repeats", "0"], "repeats: must be at least 1"),

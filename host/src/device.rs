@@ -95,8 +95,10 @@ pub struct BackendOptions {
 }
 
 /// Opens the backend `choice` names. `Auto` falls back to the CPU when no Vulkan device can be
-/// opened; an explicit Vulkan choice that cannot be honoured, or a trace method the backend lacks,
-/// is an error.
+/// opened, unless `options` ask for what only Vulkan has (validation, a hardware trace method):
+/// then, as for an explicit Vulkan choice that cannot be honoured, the error says why Vulkan
+/// failed (a CPU run would silently drop what was asked). A trace method the backend lacks is an
+/// error.
 pub fn open_backend(choice: DeviceChoice, options: &BackendOptions) -> Result<Box<dyn Backend>> {
     let cpu = || -> Result<Box<dyn Backend>> {
         match options.trace {
@@ -109,7 +111,14 @@ pub fn open_backend(choice: DeviceChoice, options: &BackendOptions) -> Result<Bo
     };
     match choice {
         DeviceChoice::Cpu => cpu(),
-        DeviceChoice::Auto => open_vulkan(None, options).or_else(|_| cpu()),
+        DeviceChoice::Auto => open_vulkan(None, options).or_else(|vulkan_error| {
+            let hardware_trace = options.trace.is_some_and(|method| method != TraceMethod::Software);
+            if options.validation || hardware_trace {
+                Err(vulkan_error)
+            } else {
+                cpu()
+            }
+        }),
         DeviceChoice::Vulkan(index) => open_vulkan(index, options),
     }
 }

@@ -70,13 +70,19 @@ impl PendingOutput {
                 format!("the file name must end in .{} (the image is written as {kind})", extensions.join(", ."));
             return Err(output_error(std::io::Error::new(std::io::ErrorKind::InvalidInput, reason)));
         }
-        if path.is_dir() {
-            return Err(output_error(std::io::Error::new(std::io::ErrorKind::IsADirectory, "is a directory")));
+        // `Path` drops a trailing separator (`y.png/` has the file name `y.png`), but the rename
+        // at the end would fail on it, after all the work.
+        if path.is_dir() || path.as_os_str().to_string_lossy().ends_with(std::path::is_separator) {
+            return Err(output_error(std::io::Error::new(std::io::ErrorKind::IsADirectory, "names a directory")));
         }
         // Checked here: tempfile's error would name its random temporary file, not the output.
         if !dir.is_dir() {
-            let reason = format!("directory {} does not exist", dir.display());
-            return Err(output_error(std::io::Error::new(std::io::ErrorKind::NotFound, reason)));
+            let (kind, reason) = if dir.exists() {
+                (std::io::ErrorKind::NotADirectory, format!("{} is not a directory", dir.display()))
+            } else {
+                (std::io::ErrorKind::NotFound, format!("directory {} does not exist", dir.display()))
+            };
+            return Err(output_error(std::io::Error::new(kind, reason)));
         }
         let temp = PendingFile::create_in(dir).map_err(output_error)?;
         Ok(Self { path: path.to_owned(), format, temp })
@@ -185,13 +191,22 @@ pub fn persist_all(outputs: Vec<WrittenOutput>) -> Result<()> {
     Ok(())
 }
 
-/// A second name, beside it, for the file now at `path` (a hard link, deleted when dropped), so
-/// that [`persist_all`] can put it back should a later output fail to move into place; `None`
-/// where there is no file or the file system makes no hard links — the previous file is then
-/// removed with the new one, as before.
+/// A second name, beside it, for the file now at `path` (deleted when dropped), so that
+/// [`persist_all`] can put it back should a later output fail to move into place: a hard link,
+/// or where the file system makes none, a copy of a regular file. `None` where there is no file
+/// or neither works — the previous file is then removed with the new one.
 fn keep_previous(path: &Path) -> Option<tempfile::TempPath> {
-    let link = temporary_names().make_in(directory_of(path), |link| std::fs::hard_link(path, link));
-    link.ok().map(tempfile::NamedTempFile::into_temp_path)
+    keep_previous_by(path, |from, to| std::fs::hard_link(from, to))
+}
+
+/// [`keep_previous`], making the second name with `link`.
+fn keep_previous_by(path: &Path, link: impl Fn(&Path, &Path) -> std::io::Result<()>) -> Option<tempfile::TempPath> {
+    // A copy of a symbolic link would put back its target's contents as a file in its place.
+    let regular = path.symlink_metadata().is_ok_and(|metadata| metadata.is_file());
+    let kept = temporary_names().make_in(directory_of(path), |second| {
+        link(path, second).or_else(|err| if regular { std::fs::copy(path, second).map(drop) } else { Err(err) })
+    });
+    kept.ok().map(tempfile::NamedTempFile::into_temp_path)
 }
 
 /// How this module names its temporary files beside an output: `.raywave-` and a random suffix,
@@ -203,6 +218,19 @@ fn temporary_names() -> tempfile::Builder<'static, 'static> {
 }
 
 /// The directory a file at `path` goes in (`.` for a bare file name).
+/// The file an output `path` names, for telling whether two outputs name one file: its
+/// directory resolved (`..`, symbolic links) joined with its file name, or the absolute path as
+/// given where the directory cannot be resolved (it does not exist, and
+/// [`PendingOutput::create`] refuses it). The file name itself is not resolved: moving the output
+/// into place replaces a symbolic link there, not its target.
+pub fn output_destination(path: &Path) -> PathBuf {
+    let absolute = || std::path::absolute(path).unwrap_or_else(|_| path.to_owned());
+    match (std::fs::canonicalize(directory_of(path)), path.file_name()) {
+        (Ok(directory), Some(name)) => directory.join(name),
+        _ => absolute(),
+    }
+}
+
 fn directory_of(path: &Path) -> &Path {
     match path.parent() {
         Some(parent) if !parent.as_os_str().is_empty() => parent,
@@ -344,6 +372,29 @@ mod tests {
         persist_all(vec![write(&first), write(&second)]).unwrap();
         assert!(std::fs::read(&first).unwrap().starts_with(b"\x89PNG"));
         assert_eq!(names(dir.path()), ["a.png", "b.png"]);
+    }
+
+    /// Where the file system makes no hard links (FAT, some network shares), the previous file
+    /// is kept as a copy: a failed job then removed it with the new one.
+    #[test]
+    fn the_previous_file_is_copied_where_no_hard_link_can_be_made() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("a.png");
+        let no_links = |_: &Path, _: &Path| Err(std::io::Error::from(std::io::ErrorKind::Unsupported));
+        assert!(keep_previous_by(&path, no_links).is_none(), "no file, nothing to keep");
+        std::fs::write(&path, b"previous").unwrap();
+        let kept = keep_previous_by(&path, no_links).expect("a copy");
+        std::fs::write(&path, b"new").unwrap();
+        assert_eq!(std::fs::read(&kept).unwrap(), b"previous", "a copy, not a second name of the new file");
+        kept.persist(&path).unwrap();
+        assert_eq!(std::fs::read(&path).unwrap(), b"previous");
+        #[cfg(unix)]
+        {
+            // Not a symbolic link, whose copy would be its target's contents.
+            let link = dir.path().join("link.png");
+            std::os::unix::fs::symlink(&path, &link).unwrap();
+            assert!(keep_previous_by(&link, no_links).is_none());
+        }
     }
 
     #[test]

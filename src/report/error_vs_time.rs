@@ -18,6 +18,7 @@
 
 use super::flip::mean_flip;
 use super::shade::{accumulate, GBuffer, ShadowRegions};
+use super::sum_from_zero;
 use crate::bench::{check_settle_seconds, warm_up, SUSTAIN_SECONDS};
 use crate::denoise::{check_radius, frame_params, rgb, DenoiseInput, DenoiseMethod};
 use crate::shading::ShadeData;
@@ -119,7 +120,7 @@ pub fn relmse(image: &[Vec3], reference: &[Vec3]) -> f64 {
 /// length or an index is out of range.
 pub fn relmse_part(image: &[Vec3], reference: &[Vec3], pixels: &[usize]) -> f64 {
     assert_eq!(image.len(), reference.len(), "relmse_part: image and reference differ in size");
-    let sum: f64 = pixels.iter().map(|&i| relative_squared_error(image[i], reference[i])).sum();
+    let sum = sum_from_zero(pixels.iter().map(|&i| relative_squared_error(image[i], reference[i])));
     0.5 * sum / (3 * reference.len().max(1)) as f64
 }
 

@@ -72,3 +72,9 @@ pub fn check_resolution(resolution: u32) -> crate::Result<()> {
         Err(crate::Error::InvalidParameter { name: "resolution", reason: "must be within 4..=1024".into() })
     }
 }
+
+/// The sum of `values`, +0 for none: `Iterator::sum` of no `f64` is −0, which an empty region's
+/// RMSE printed as `-0.0`.
+pub(crate) fn sum_from_zero(values: impl Iterator<Item = f64>) -> f64 {
+    values.fold(0.0, |sum, value| sum + value)
+}

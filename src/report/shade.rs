@@ -11,6 +11,7 @@
 //! 1-spp ratio estimate is up to its small bias. Emitters seen directly add the same radiance to
 //! every sample of a fixed surface, so they cancel in the error.
 
+use super::sum_from_zero;
 use crate::frame::{generate_params_with, sampler_params};
 use crate::kernels::sampling::light_select::luminance;
 use crate::shading::{ShadeAccumulator, ShadeData};
@@ -137,13 +138,10 @@ pub fn accumulate(
 
 /// Mean squared error over `pixels` (mean over RGB).
 fn mse(image: &[Vec3], reference: &[Vec3], pixels: &[usize]) -> f64 {
-    let sum: f64 = pixels
-        .iter()
-        .map(|&i| {
-            let d = (image[i] - reference[i]).as_dvec3();
-            d.length_squared() / 3.0
-        })
-        .sum();
+    let sum = sum_from_zero(pixels.iter().map(|&i| {
+        let d = (image[i] - reference[i]).as_dvec3();
+        d.length_squared() / 3.0
+    }));
     sum / pixels.len().max(1) as f64
 }
 
@@ -160,16 +158,13 @@ fn mse(image: &[Vec3], reference: &[Vec3], pixels: &[usize]) -> f64 {
 /// channel's mean. Stratified samples (ZSobol) beat `floor/√N` at `N` > 1, so only the 1-spp
 /// floor is reported.
 pub fn visibility_floor(analytic: &[Vec3], reference: &[Vec3], emitted: &[Vec3], pixels: &[usize]) -> f64 {
-    let sum: f64 = pixels
-        .iter()
-        .map(|&i| {
-            let u = analytic[i].as_dvec3();
-            let shadowed = (reference[i] - emitted[i]).as_dvec3();
-            let v = (shadowed / u).clamp(DVec3::ZERO, DVec3::ONE);
-            let v = DVec3::select(u.cmpgt(DVec3::ZERO), v, DVec3::ONE);
-            (u * u * v * (DVec3::ONE - v)).element_sum() / 3.0
-        })
-        .sum();
+    let sum = sum_from_zero(pixels.iter().map(|&i| {
+        let u = analytic[i].as_dvec3();
+        let shadowed = (reference[i] - emitted[i]).as_dvec3();
+        let v = (shadowed / u).clamp(DVec3::ZERO, DVec3::ONE);
+        let v = DVec3::select(u.cmpgt(DVec3::ZERO), v, DVec3::ONE);
+        (u * u * v * (DVec3::ONE - v)).element_sum() / 3.0
+    }));
     (sum / pixels.len().max(1) as f64).sqrt()
 }
 
@@ -248,6 +243,9 @@ mod tests {
         assert!((floor(&[0, 1]) - 0.5f64.sqrt()).abs() < 1e-12, "a mean over the pixels");
         let expected = ((0.09 + 0.25 + 0.09) / 3.0f64).sqrt();
         assert!((floor(&[4]) - expected).abs() < 1e-6, "{} vs {expected}", floor(&[4]));
-        assert_eq!(floor(&[]), 0.0);
+        // +0: `Iterator::sum` of no f64 is −0, printed as an RMSE of -0.0.
+        assert!(floor(&[]) == 0.0 && floor(&[]).is_sign_positive());
+        let empty = mse(&analytic, &reference, &[]);
+        assert!(empty == 0.0 && empty.is_sign_positive());
     }
 }
