@@ -9,7 +9,7 @@
 //! loaded (textures are not sampled), so a missing texture file is no error.
 
 use super::regular_file::{read_regular_file, ReadError};
-use super::{framing_camera, in_range, Camera, Material, Mesh, Scene, MAX_COORDINATE, MAX_VERTICES};
+use super::{framing_camera, in_range, Camera, Material, Mesh, Scene, MAX_COORDINATE, MAX_TRIANGLES, MAX_VERTICES};
 use crate::error::{Error, Result};
 use glam::{Mat4, Vec3};
 use gltf::accessor::{DataType, Dimensions};
@@ -28,21 +28,25 @@ pub fn load(path: &Path) -> Result<Scene> {
         .ok_or_else(|| load_error("the file defines no scene".into()))?;
     let nodes = scene_nodes(&document, &scene).map_err(load_error)?;
     // Counted before any is read: nodes may instance one large accessor many times over.
-    let mut vertices: u64 = 0;
+    let (mut vertices, mut triangle_count): (u64, u64) = (0, 0);
     for mesh in nodes.iter().filter_map(|(node, _)| node.mesh()) {
         for (index, primitive) in mesh.primitives().enumerate() {
             if let Some(position) = primitive.get(&Semantic::Positions) {
                 let field = format!("{}.attributes.POSITION", primitive_field(&mesh, index));
                 check_accessor(&position, &buffers, &field, Dimensions::Vec3, &[DataType::F32]).map_err(load_error)?;
                 vertices += position.count() as u64;
+                let corners = primitive.indices().map_or(position.count(), |indices| indices.count());
+                triangle_count += corners as u64 / 3;
             }
         }
     }
-    if vertices > MAX_VERTICES as u64 {
-        return Err(Error::SceneTooLarge {
-            scene: path.display().to_string(),
-            what: format!("its nodes instance {vertices} vertices, more than {MAX_VERTICES}"),
-        });
+    for (count, limit, what) in [(vertices, MAX_VERTICES, "vertices"), (triangle_count, MAX_TRIANGLES, "triangles")] {
+        if count > limit as u64 {
+            return Err(Error::SceneTooLarge {
+                scene: path.display().to_string(),
+                what: format!("its nodes instance {count} {what}, more than {limit}"),
+            });
+        }
     }
     let mut meshes = Vec::new();
     let mut textured = 0;
@@ -299,6 +303,16 @@ fn check_accessor(
         let (indices, values) = (sparse.indices(), sparse.values());
         if !(1..=count).contains(&sparse.count()) {
             return error(format!("sparse.count {} is outside 1..={count}", sparse.count()));
+        }
+        // The reader steps through a strided view, this check and glTF 2.0 (which forbids the
+        // stride there) do not: with one, the check passed indices the reader never read.
+        for (part, view) in [("sparse.indices", indices.view()), ("sparse.values", values.view())] {
+            if let Some(stride) = view.stride() {
+                return error(format!(
+                    "{part}: bufferViews[{}] has byteStride {stride}, which glTF 2.0 forbids for sparse data",
+                    view.index()
+                ));
+            }
         }
         let index_size = indices.index_type().size();
         if let Err(what) = check_span(Some(indices.view()), indices.offset(), sparse.count(), index_size, buffers) {
@@ -824,6 +838,11 @@ mod tests {
             let err = load(file(&sparse(count, offset)).path()).unwrap_err().to_string();
             assert!(err.contains("sparse.indices: index") && err.contains(expected), "{err}");
         }
+        // A strided index view, which glTF 2.0 forbids for sparse data: the check read the
+        // indices packed (0, 1, 2: valid), the reader strided (0, 2, 2: never checked).
+        let strided = sparse(4, 0).replacen(r#""byteLength":12}"#, r#""byteLength":12,"byteStride":4}"#, 1);
+        let err = load(file(&strided).path()).unwrap_err().to_string();
+        assert!(err.contains("sparse.indices: bufferViews[1] has byteStride 4, which glTF 2.0 forbids"), "{err}");
     }
 
     #[test]
@@ -903,6 +922,52 @@ mod tests {
             }
             other => panic!("expected SceneTooLarge, got {other:?}"),
         }
+    }
+
+    #[test]
+    fn instancing_beyond_the_triangle_limit_is_refused_before_reading() {
+        // A few vertices but 999 999 u8 indices from a 1 MB buffer of zeros, instanced by enough
+        // nodes to pass 2²⁸ triangles: counting only the vertices, the loader read them all (8·10⁸
+        // indices, 3 GiB) before dropping them as degenerate.
+        let per_instance = 999_999;
+        let instances = MAX_TRIANGLES / (per_instance / 3) + 1;
+        let nodes: Vec<String> = (0..instances).map(|_| r#"{"mesh":0}"#.to_owned()).collect();
+        let roots: Vec<String> = (0..instances).map(|i| i.to_string()).collect();
+        let text = quad_gltf(6)
+            .replacen(r#""nodes":[0,1]}],"#, &format!(r#""nodes":[{}]}}],"#, roots.join(",")), 1)
+            .replacen(
+                r#""nodes":[{"mesh":0,"translation":[0,0,-2]},{"camera":0,"translation":[0.5,0.5,3]}],"#,
+                &format!(r#""nodes":[{}],"#, nodes.join(",")),
+                1,
+            )
+            .replace(r#"{"buffer":0,"#, r#"{"buffer":1,"#)
+            .replacen(r#""byteLength":12}]"#, r#""byteLength":12},{"buffer":0,"byteLength":999999}]"#, 1)
+            .replacen(
+                r#"{"bufferView":1,"componentType":5123,"count":6,"type":"SCALAR"}"#,
+                &format!(r#"{{"bufferView":2,"componentType":5121,"count":{per_instance},"type":"SCALAR"}}"#),
+                1,
+            )
+            .replacen(
+                r#""buffers":[{"byteLength":60,"#,
+                r#""buffers":[{"byteLength":1048576,"uri":"zeros.bin"},{"byteLength":60,"#,
+                1,
+            );
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::write(dir.path().join("zeros.bin"), vec![0u8; 1 << 20]).unwrap();
+        let path = dir.path().join("instanced.gltf");
+        std::fs::write(&path, text).unwrap();
+        match load(&path) {
+            Err(err @ Error::SceneTooLarge { .. }) => {
+                let expected =
+                    format!("instance {} triangles, more than {MAX_TRIANGLES}", instances * (per_instance / 3));
+                assert!(err.to_string().contains(&expected), "{err}");
+            }
+            other => panic!("expected SceneTooLarge, got {other:?}"),
+        }
+        // One instance of it loads (every triangle degenerate: an empty scene, but read).
+        let one = std::fs::read_to_string(&path).unwrap().replacen(&format!("[{}]", roots.join(",")), "[0]", 1);
+        std::fs::write(&path, one).unwrap();
+        assert!(matches!(load(&path), Err(Error::EmptyScene { dropped_degenerate: 333_333, .. })));
     }
 
     #[test]

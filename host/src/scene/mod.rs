@@ -307,6 +307,10 @@ impl Scene {
             let what = format!("its {vertices} vertices exceed {MAX_VERTICES}");
             return Err(Error::SceneTooLarge { scene: self.name.clone(), what });
         }
+        if self.triangle_count() > MAX_TRIANGLES {
+            let what = format!("its {} triangles exceed {MAX_TRIANGLES}", self.triangle_count());
+            return Err(Error::SceneTooLarge { scene: self.name.clone(), what });
+        }
         let c = &self.camera;
         let fov_ok = c.vertical_fov_degrees > 0.0 && c.vertical_fov_degrees < 180.0;
         let finite = in_range(c.position) && in_range(c.look_at) && c.up.is_finite();
@@ -357,6 +361,12 @@ pub const MAX_COORDINATE: f32 = 1.0e8;
 /// sparse accessor instanced by 10⁴ nodes asked for 10¹⁰ vertices).
 pub const MAX_VERTICES: usize = 1 << 28;
 
+/// The most triangles a scene holds, over all its meshes: 2²⁸ (3 GiB of vertex indices), for the
+/// reasons of [`MAX_VERTICES`]; the glTF loader counts its nodes' instances against it before
+/// reading them too (one 10⁶-index accessor of a 1 MB buffer instanced by 10⁴ nodes asked for
+/// 10¹⁰ indices while it counted only their few vertices).
+pub const MAX_TRIANGLES: usize = 1 << 28;
+
 /// The largest emitted radiance component accepted, in W/(m²·sr): 10⁶ times the sun's disc
 /// (≈ 2·10⁷), and small enough that sums over every sample of a pixel
 /// ([`crate::frame::MAX_SAMPLES_PER_PIXEL`] = 65 536) and over thousands of lights stay finite in
@@ -406,7 +416,8 @@ fn check_indices_and_vertices(scene: &str, meshes: &[Mesh]) -> Result<()> {
 }
 
 /// A camera on the +z side of the bounds' centre that sees the whole bounding sphere with a 45°
-/// vertical field of view. Where that camera would lie beyond [`MAX_COORDINATE`] (a scene more
+/// vertical field of view — from farther, with a narrower one, where that camera would lie within
+/// 64 steps of `f32` of the centre (a small scene far from the origin). Where that camera would lie beyond [`MAX_COORDINATE`] (a scene more
 /// than 3.8·10⁷ across), it goes to the −z side if it fits there, else to the side with more room,
 /// just inside the limit, with the field of view widened to still see the sphere (at most
 /// 2·atan(√3) ≈ 120° for bounds at the limit). Non-finite bounds are left for validation to
@@ -418,19 +429,35 @@ pub(crate) fn framing_camera(meshes: &[Mesh]) -> Camera {
         .fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(lo, hi), p| (lo.min(*p), hi.max(*p)));
     let centre = (lo + hi) * 0.5;
     let radius = ((hi - lo).length() * 0.5).max(1e-3);
-    let wanted = radius / 22.5f32.to_radians().sin();
+    // At least 64 steps of f32 from the centre: far from the origin, the 45° camera of a small
+    // scene (a 1 mm triangle at z = 10⁵) rounded onto its look-at point and was refused as
+    // degenerate. Farther away, the field of view narrows to keep the scene framed.
+    let resolvable = 64.0 * f32::EPSILON * centre.abs().max_element();
+    let at_45_degrees = radius / 22.5f32.to_radians().sin();
+    let wanted = at_45_degrees.max(resolvable);
     // The room between the centre and the coordinate limit along +z and along −z.
     // (0.999 of it: the camera's coordinate must not round past the limit.)
     let (plus_room, minus_room) = (0.999 * (MAX_COORDINATE - centre.z), 0.999 * (MAX_COORDINATE + centre.z));
-    let (side, distance, vertical_fov_degrees) = if wanted <= plus_room {
-        (1.0, wanted, 45.0)
+    let (side, distance) = if wanted <= plus_room {
+        (1.0, wanted)
     } else if wanted <= minus_room {
-        (-1.0, wanted, 45.0)
+        (-1.0, wanted)
+    } else if plus_room >= minus_room {
+        (1.0, plus_room)
     } else {
-        let (side, room) = if plus_room >= minus_room { (1.0, plus_room) } else { (-1.0, minus_room) };
-        (side, room, 2.0 * (radius / room).atan().to_degrees())
+        (-1.0, minus_room)
     };
     let position = centre + Vec3::Z * (side * distance);
+    let vertical_fov_degrees = if distance < wanted {
+        // Against the coordinate limit: wider, to still see the sphere.
+        2.0 * (radius / distance).atan().to_degrees()
+    } else if wanted > at_45_degrees {
+        // Moved out to be resolvable: narrower, from where the camera lies after rounding (up to
+        // half a step closer).
+        2.0 * (radius / (position.z - centre.z).abs()).min(1.0).asin().to_degrees()
+    } else {
+        45.0
+    };
     let position = if position.is_finite() { position } else { Vec3::Z };
     let centre = if centre.is_finite() { centre } else { Vec3::ZERO };
     Camera { position, look_at: centre, up: Vec3::Y, vertical_fov_degrees }

@@ -55,10 +55,10 @@ pub fn load(path: &Path) -> Result<Scene> {
     })?;
     // Each MTL entry as a material, checked once, naming the library (materials come from one).
     let mut converted = Vec::with_capacity(materials.len());
-    if let Some(library) = library_read.take() {
+    let library = library_read.take();
+    check_material_names(&text, library.as_deref(), &materials).map_err(load_error)?;
+    if let Some(library) = library {
         let in_library = |reason: String| load_error(format!("{}: {reason}", library.display()));
-        check_material_names(&text, &materials)
-            .map_err(|reason| load_error(format!("{reason} {}", library.display())))?;
         for m in &materials {
             converted.push(mtl_material(m).map_err(|reason| in_library(format!("material `{}`: {reason}", m.name)))?);
         }
@@ -140,7 +140,8 @@ fn has_textures(m: &tobj::Material) -> bool {
 
 /// Checks the OBJ `text` before tobj reads it, naming the line at fault (tobj's vertex numbers
 /// are not the file's, so [`Scene::new`]'s errors could not name it):
-/// - every vertex position (`v`) coordinate is finite and within [`MAX_COORDINATE`];
+/// - every vertex position (`v`) coordinate is finite and within [`MAX_COORDINATE`], after the
+///   division by its `w` if it has one;
 /// - every index of the faces and lines (`f`, `l`) is not 0 (indices are 1-based), not past 2³²,
 ///   and a negative (relative) one within the vertex data (`v`, `vt`, `vn`) defined before it.
 ///   tobj 4.0.5 turns `0` and relative indices past the start into indices near `usize::MAX` and
@@ -156,8 +157,11 @@ fn check_vertices_and_indices(text: &[u8]) -> std::result::Result<(), String> {
         match words.next() {
             Some("v") => {
                 defined[0] += 1;
-                // Parsed as tobj parses them: a number too large for f32 becomes infinite.
-                let mut coordinates = words.take(3).filter_map(|word| word.parse::<f32>().ok());
+                // Read as tobj reads them: a number too large for f32 becomes infinite, and a
+                // fourth number is a `w` that divides the three (`v x y z w`; a zero is its error).
+                let numbers: Vec<f32> = words.map_while(|word| word.parse().ok()).collect();
+                let w = if numbers.len() == 4 && numbers[3] != 0.0 { numbers[3] } else { 1.0 };
+                let mut coordinates = numbers.iter().take(3).map(|c| c / w);
                 if let Some(c) = coordinates.find(|c| !(c.is_finite() && c.abs() <= MAX_COORDINATE)) {
                     return Err(format!(
                         "line {}: `{}` has coordinate {c}; each must be finite and within ±{MAX_COORDINATE:e}",
@@ -187,18 +191,47 @@ fn check_vertices_and_indices(text: &[u8]) -> std::result::Result<(), String> {
     Ok(())
 }
 
-/// Checks that every `usemtl` line of the OBJ `text` names a material of its library: tobj
-/// leaves a mesh whose name it does not find without a material, so a typo (`usemtl lmap`) made
-/// a grey mesh and no light. Errors name the line; the caller adds the library.
-fn check_material_names(text: &[u8], materials: &[tobj::Material]) -> std::result::Result<(), String> {
+/// Checks that every `usemtl` line of the OBJ `text` names a material of the `library` read
+/// before it, as tobj reads the name: tobj leaves a mesh whose material it does not find without
+/// one, so a typo (`usemtl lmap`), a `usemtl` before the `mtllib` line or without any, or one
+/// indented (tobj then reads `usemtl lamp` as the name) made a grey mesh and no light. Errors
+/// name the line and the library.
+fn check_material_names(
+    text: &[u8],
+    library: Option<&Path>,
+    materials: &[tobj::Material],
+) -> std::result::Result<(), String> {
+    let mut library_read = false;
     for (index, line) in text.split(|&b| b == b'\n').enumerate() {
         let line = String::from_utf8_lossy(line);
-        let mut words = line.split_whitespace();
-        if words.next() == Some("usemtl") {
-            let name = line.trim_start().trim_start_matches("usemtl").trim();
-            if !materials.iter().any(|m| m.name == name) {
-                return Err(format!("line {}: `usemtl {name}` names no material of", index + 1));
+        match line.split_whitespace().next() {
+            Some("mtllib") => library_read = true,
+            Some("usemtl") => {
+                // tobj 4.0.5 takes everything after the line's first space.
+                let name = line.split_once(' ').unwrap_or_default().1.trim();
+                let (line_number, written) = (index + 1, line.trim());
+                match library {
+                    Some(library) if library_read => {
+                        if !materials.iter().any(|m| m.name == name) {
+                            let read_as = if written == format!("usemtl {name}") {
+                                String::new()
+                            } else {
+                                format!(" (read as the name `{name}`: start the line with `usemtl `)")
+                            };
+                            return Err(format!(
+                                "line {line_number}: `{written}` names no material of {}{read_as}",
+                                library.display()
+                            ));
+                        }
+                    }
+                    _ => {
+                        return Err(format!(
+                            "line {line_number}: `{written}` comes before any `mtllib` line, so it names no material"
+                        ))
+                    }
+                }
             }
+            _ => {}
         }
     }
     Ok(())
@@ -279,6 +312,11 @@ mod tests {
             ("v -6e7 -6e7 0\nv 6e7 -6e7 0\nv 0 6e7 0\nf 1 2 3\n", 0.0),
             ("v -1e8 -1e8 -1e8\nv 1e8 -1e8 1e8\nv 0 1e8 1e8\nf 1 2 3\n", 0.0),
             ("v -1e8 -1e8 9e7\nv 1e8 -1e8 1e8\nv 0 1e8 1e8\nf 1 2 3\n", 9.5e7),
+            // Small scenes far from the origin: the 45° camera rounded onto its look-at point
+            // (z + 0.0026 = z in f32 at 10⁵) and the scene was refused as a degenerate camera.
+            ("v 0 0 1e5\nv 0.001 0 1e5\nv 0 0.001 1e5\nf 1 2 3\n", 1e5),
+            ("v 0 0 1e8\nv 1 0 1e8\nv 0 1 1e8\nf 1 2 3\n", 1e8),
+            ("v 0 0 -1e8\nv 1 0 -1e8\nv 0 1 -1e8\nf 1 2 3\n", -1e8),
         ] {
             let f = obj_file(obj);
             let scene = load(f.path()).unwrap_or_else(|e| panic!("{obj}: {e}"));
@@ -350,6 +388,27 @@ mod tests {
             let err = load(&path).unwrap_err().to_string();
             assert!(err.contains(expected) && err.contains("scene.mtl"), "{text:?}: {err}");
         }
+        // A `usemtl` tobj cannot resolve though the name is in the library: without an `mtllib`
+        // line, before it, or indented (tobj reads the name after the first space). Each once
+        // loaded a grey lamp and no light.
+        std::fs::write(dir.path().join("scene.mtl"), "newmtl floor\nnewmtl lamp\nKe 1 1 1\nnewmtl metal\n").unwrap();
+        assert_eq!(load(&path).unwrap().lights().len(), 1);
+        for (obj, expected) in [
+            (obj.replace("mtllib scene.mtl\n", ""), "line 15: `usemtl floor` comes before any `mtllib` line"),
+            (
+                obj.replace("mtllib scene.mtl\n", "") + "mtllib scene.mtl\n",
+                "line 15: `usemtl floor` comes before any `mtllib` line",
+            ),
+            (obj.replace("usemtl lamp", " usemtl lamp"), "line 19: `usemtl lamp` names no material of"),
+        ] {
+            std::fs::write(&path, &obj).unwrap();
+            let err = load(&path).unwrap_err().to_string();
+            assert!(err.contains(expected), "{obj:?}: {err}");
+        }
+        std::fs::write(&path, obj.replace("usemtl lamp", " usemtl lamp")).unwrap();
+        let err = load(&path).unwrap_err().to_string();
+        assert!(err.contains("(read as the name `usemtl lamp`: start the line with `usemtl `)"), "{err}");
+        std::fs::write(&path, obj).unwrap();
         // A colour with fewer than three numbers (tobj 4.0.5 panics on one) or a number that does
         // not parse names the library and its line.
         let library = dir.path().join("scene.mtl");
@@ -425,6 +484,9 @@ mod tests {
             ("v 1 inf 0", "line 4: `v 1 inf 0` has coordinate inf"),
             ("v 1 1 1e39", "line 4: `v 1 1 1e39` has coordinate inf"),
             ("v 0 -1.5e8 0", "line 4: `v 0 -1.5e8 0` has coordinate -150000000; each must be finite and within ±1e8"),
+            // tobj divides by a fourth number, `w`.
+            ("v 0 1 0 1e-9", "line 4: `v 0 1 0 1e-9` has coordinate 1000000000"),
+            ("v 0 1 0 nan", "line 4: `v 0 1 0 nan` has coordinate NaN"),
         ] {
             let f = obj_file(&format!("v 0 0 0\nv 1 0 0\nv 0 1 0\n{vertex}\nf 1 2 3\nf 4 2 3\n"));
             let err = load(f.path()).unwrap_err();
