@@ -1,6 +1,6 @@
 //! Wavefront OBJ scenes (through the `tobj` crate): every OBJ model (object, or part of one with
 //! its own `usemtl` material) becomes a mesh with the material of its MTL entry, and the camera
-//! frames the scene's bounds.
+//! frames the scene's bounds. Polylines (`l`) are skipped: they have no area.
 
 use super::line_counter::LineCounter;
 use super::regular_file::read_regular_file;
@@ -8,7 +8,7 @@ use super::{framing_camera, Material, Mesh, Scene, MAX_COORDINATE};
 use crate::error::{Error, Result};
 use glam::Vec3;
 use std::cell::RefCell;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 /// Albedo of meshes without a material (no `usemtl`, or an MTL entry without `Kd`).
 const DEFAULT_ALBEDO: Vec3 = Vec3::splat(0.7);
@@ -25,15 +25,16 @@ pub fn load(path: &Path) -> Result<Scene> {
     check_vertices_and_indices(&text).map_err(load_error)?;
     let options = tobj::LoadOptions { triangulate: true, single_index: true, ..Default::default() };
     // tobj reads line by line and stops at its first error, so the reader's line is the one at fault.
-    let mut reader = LineCounter::new(&text[..]);
+    let surfaces = without_polylines(&text);
+    let mut reader = LineCounter::new(&surfaces[..]);
     let directory = path.parent().unwrap_or(Path::new(""));
-    // tobj's material-library errors carry no text of their own: the first one's is kept here,
-    // and the last library read, which the materials' errors name.
+    // tobj's material-library errors carry no text of their own: the first one's is kept here.
+    // And each library read with the number of materials it added, in order, which the
+    // materials' errors name.
     let library_error = RefCell::new(None);
-    let library_read = RefCell::new(None);
+    let libraries: RefCell<Vec<(PathBuf, usize)>> = RefCell::new(Vec::new());
     let (models, materials) = tobj::load_obj_buf(&mut reader, &options, |library| {
         let library = directory.join(library);
-        library_read.replace(Some(library.clone()));
         let fail = |message: String| {
             library_error.borrow_mut().get_or_insert_with(|| format!("{}: {message}", library.display()));
         };
@@ -45,23 +46,30 @@ pub fn load(path: &Path) -> Result<Scene> {
             }
         };
         let mut lines = LineCounter::new(text.as_bytes());
-        tobj::load_mtl_buf(&mut lines).inspect_err(|e| fail(format!("line {}: {e}", lines.line())))
+        let loaded = tobj::load_mtl_buf(&mut lines).inspect_err(|e| fail(format!("line {}: {e}", lines.line())))?;
+        libraries.borrow_mut().push((library.clone(), loaded.0.len()));
+        Ok(loaded)
     })
     .map_err(|e| load_error(locate(e, reader.line())))?;
-    // A library that cannot be read would leave every mesh grey and every light dark.
-    let materials = materials.map_err(|e| {
-        let reason = library_error.take().unwrap_or_else(|| e.to_string());
-        load_error(format!("the material library its `mtllib` line names cannot be loaded: {reason}"))
-    })?;
-    // Each MTL entry as a material, checked once, naming the library (materials come from one).
-    let mut converted = Vec::with_capacity(materials.len());
-    let library = library_read.take();
-    check_material_names(&text, library.as_deref(), &materials).map_err(load_error)?;
-    if let Some(library) = library {
-        let in_library = |reason: String| load_error(format!("{}: {reason}", library.display()));
-        for m in &materials {
-            converted.push(mtl_material(m).map_err(|reason| in_library(format!("material `{}`: {reason}", m.name)))?);
+    // A library that cannot be read would leave every mesh grey and every light dark — also when
+    // another library loads, whose materials tobj then returns without a word.
+    let materials = match (materials, library_error.take()) {
+        (Ok(materials), None) => materials,
+        (result, reason) => {
+            let reason = reason.or_else(|| result.err().map(|e| e.to_string())).unwrap_or_default();
+            return Err(load_error(format!("the material library its `mtllib` line names cannot be loaded: {reason}")));
         }
+    };
+    let libraries = libraries.into_inner();
+    check_material_names(&text, &libraries, &materials).map_err(load_error)?;
+    // Each MTL entry as a material, checked once, naming its library (tobj appends each
+    // library's materials in the order read).
+    let library_of = libraries.iter().flat_map(|(library, count)| std::iter::repeat_n(library, *count));
+    let mut converted = Vec::with_capacity(materials.len());
+    for (m, library) in materials.iter().zip(library_of) {
+        let material = mtl_material(m)
+            .map_err(|reason| load_error(format!("{}: material `{}`: {reason}", library.display(), m.name)))?;
+        converted.push(material);
     }
     let textured = models
         .iter()
@@ -86,6 +94,19 @@ pub fn load(path: &Path) -> Result<Scene> {
     let name = path.display().to_string();
     let camera = framing_camera(&meshes);
     Ok(Scene::new(&name, meshes, camera)?.with_textured_meshes(textured))
+}
+
+/// The OBJ `text` with its polylines (`l`) blanked, line numbers kept: tobj 4.0.5 reads them as
+/// faces, so `l 1 2 3 4` around a square became a filled quad (under an emissive material, a
+/// quad light). A polyline has no area for a ray to hit.
+fn without_polylines(text: &[u8]) -> std::borrow::Cow<'_, [u8]> {
+    let is_polyline = |line: &[u8]| String::from_utf8_lossy(line).split_whitespace().next() == Some("l");
+    if !text.split(|&b| b == b'\n').any(is_polyline) {
+        return std::borrow::Cow::Borrowed(text);
+    }
+    let lines: Vec<&[u8]> =
+        text.split(|&b| b == b'\n').map(|line| if is_polyline(line) { &[][..] } else { line }).collect();
+    std::borrow::Cow::Owned(lines.join(&b'\n'))
 }
 
 /// The text of the material library at `path`, or why it cannot be used: the OS's reason, not a
@@ -191,16 +212,17 @@ fn check_vertices_and_indices(text: &[u8]) -> std::result::Result<(), String> {
     Ok(())
 }
 
-/// Checks that every `usemtl` line of the OBJ `text` names a material of the `library` read
-/// before it, as tobj reads the name: tobj leaves a mesh whose material it does not find without
+/// Checks that every `usemtl` line of the OBJ `text` names a material of the `libraries` (and
+/// the number of materials each added), after an `mtllib` line, as tobj reads the name: tobj leaves a mesh whose material it does not find without
 /// one, so a typo (`usemtl lmap`), a `usemtl` before the `mtllib` line or without any, or one
 /// indented (tobj then reads `usemtl lamp` as the name) made a grey mesh and no light. Errors
 /// name the line and the library.
 fn check_material_names(
     text: &[u8],
-    library: Option<&Path>,
+    libraries: &[(PathBuf, usize)],
     materials: &[tobj::Material],
 ) -> std::result::Result<(), String> {
+    let names: Vec<String> = libraries.iter().map(|(library, _)| library.display().to_string()).collect();
     let mut library_read = false;
     for (index, line) in text.split(|&b| b == b'\n').enumerate() {
         let line = String::from_utf8_lossy(line);
@@ -210,25 +232,21 @@ fn check_material_names(
                 // tobj 4.0.5 takes everything after the line's first space.
                 let name = line.split_once(' ').unwrap_or_default().1.trim();
                 let (line_number, written) = (index + 1, line.trim());
-                match library {
-                    Some(library) if library_read => {
-                        if !materials.iter().any(|m| m.name == name) {
-                            let read_as = if written == format!("usemtl {name}") {
-                                String::new()
-                            } else {
-                                format!(" (read as the name `{name}`: start the line with `usemtl `)")
-                            };
-                            return Err(format!(
-                                "line {line_number}: `{written}` names no material of {}{read_as}",
-                                library.display()
-                            ));
-                        }
-                    }
-                    _ => {
-                        return Err(format!(
-                            "line {line_number}: `{written}` comes before any `mtllib` line, so it names no material"
-                        ))
-                    }
+                if !library_read {
+                    return Err(format!(
+                        "line {line_number}: `{written}` comes before any `mtllib` line, so it names no material"
+                    ));
+                }
+                if !materials.iter().any(|m| m.name == name) {
+                    let read_as = if written == format!("usemtl {name}") {
+                        String::new()
+                    } else {
+                        format!(" (read as the name `{name}`: start the line with `usemtl `)")
+                    };
+                    return Err(format!(
+                        "line {line_number}: `{written}` names no material of {}{read_as}",
+                        names.join(", ")
+                    ));
                 }
             }
             _ => {}
@@ -440,6 +458,45 @@ mod tests {
         std::fs::write(&library, b"newmtl floor\nKd 1 1 1\n\nKs 1 1 \xff\n").unwrap();
         let err = load(&path).unwrap_err().to_string();
         assert!(err.contains("scene.mtl: line 4: not UTF-8 text"), "{err}");
+    }
+
+    /// With two `mtllib` lines, a material's error named the last library read, and a library
+    /// that failed was dropped without a word when the other loaded (tobj returns what loaded).
+    #[test]
+    fn each_material_library_answers_for_its_own_materials() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("scene.obj");
+        std::fs::write(
+            &path,
+            "mtllib a.mtl\nmtllib b.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl red\nf 1 2 3\nusemtl blue\nf 1 3 2\n",
+        )
+        .unwrap();
+        std::fs::write(dir.path().join("b.mtl"), "newmtl blue\nKd 0 0 1\n").unwrap();
+        std::fs::write(dir.path().join("a.mtl"), "newmtl red\nKd 1 0 0\n").unwrap();
+        assert_eq!(load(&path).unwrap().meshes().len(), 2);
+        std::fs::write(dir.path().join("a.mtl"), "newmtl red\nKd 2 0 0\n").unwrap();
+        let err = load(&path).unwrap_err().to_string();
+        assert!(err.contains("a.mtl: material `red`: Kd"), "{err}");
+        std::fs::remove_file(dir.path().join("a.mtl")).unwrap();
+        let err = load(&path).unwrap_err().to_string();
+        assert!(err.contains("material library") && err.contains("a.mtl"), "{err}");
+    }
+
+    #[test]
+    fn polylines_are_not_surfaces() {
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::write(dir.path().join("lamp.mtl"), "newmtl lamp\nKe 1 1 1\n").unwrap();
+        let path = dir.path().join("scene.obj");
+        let square = "mtllib lamp.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nusemtl lamp\n";
+        std::fs::write(&path, format!("{square}f 1 2 3\nl 1 2 3 4\n  l 4 3\n")).unwrap();
+        let scene = load(&path).unwrap();
+        assert_eq!((scene.triangle_count(), scene.lights().len()), (1, 0), "the face alone, no quad light");
+        std::fs::write(&path, format!("{square}l 1 2 3 4\n")).unwrap();
+        assert!(matches!(load(&path), Err(Error::EmptyScene { dropped_degenerate: 0, .. })));
+        // Line numbers still name the line at fault.
+        std::fs::write(&path, format!("{square}l 1 2\nf 1 2 x\n")).unwrap();
+        let err = load(&path).unwrap_err().to_string();
+        assert!(err.contains("line 8: face parse error"), "{err}");
     }
 
     #[test]
