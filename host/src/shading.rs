@@ -110,6 +110,7 @@ impl ShadeData {
                 roughness: m.base_color_roughness.w,
                 metallic: m.emission_metallic.w,
                 emission: m.emission_metallic.xyz(),
+                double_sided: false,
             };
             if let Err((name, reason)) = material.check() {
                 return invalid(name, format!("shade data materials[{index}] {reason}"));

@@ -84,7 +84,7 @@ pub fn meshes() -> Vec<Mesh> {
 /// light replaced by a warm and a cool light ([`WARM_LIGHT`], [`COOL_LIGHT`]).
 pub fn two_lights_meshes() -> Vec<Mesh> {
     let glossy = Material { roughness: 0.25, ..Material::diffuse(WHITE) };
-    let metal = Material { base_color: SILVER, roughness: 0.3, metallic: 1.0, emission: Vec3::ZERO };
+    let metal = Material { base_color: SILVER, roughness: 0.3, metallic: 1.0, ..Material::diffuse(SILVER) };
     let mut meshes = room(glossy, metal);
     meshes.push(ceiling_light("warm light", [330.0, 450.0], [120.0, 220.0], WARM_LIGHT));
     meshes.push(ceiling_light("cool light", [105.0, 195.0], [335.0, 425.0], COOL_LIGHT));

@@ -20,7 +20,8 @@
 //! edges run from `p` to the triangle's next and previous corners in the triangle's own order.
 //! Then `edge_u × edge_v` is the first triangle's counter-clockwise normal, the side glTF and OBJ
 //! call the front face, and the light emits there (one-sided; the kernels' quad lights emit
-//! towards `edge_u × edge_v`). The second triangle must agree.
+//! towards `edge_u × edge_v`) — or from both faces where the material is
+//! [`Material::double_sided`](super::Material::double_sided). The second triangle must agree.
 //!
 //! Everything else that emits (more or fewer triangles, non-planar or non-parallelogram shapes,
 //! inconsistent winding) is counted as an unsupported emitter and stays plain geometry.
@@ -61,7 +62,8 @@ pub(super) fn derive(meshes: &[Mesh]) -> DerivedLights {
             Some(quad) => {
                 derived.mesh_lights[index] = Some(derived.lights.len() as u32);
                 derived.light_meshes.push(index as u32);
-                derived.lights.push(Light::quad(quad.corner, quad.edge_u, quad.edge_v, emission, false));
+                let two_sided = mesh.material.double_sided;
+                derived.lights.push(Light::quad(quad.corner, quad.edge_u, quad.edge_v, emission, two_sided));
             }
             None => derived.unsupported += 1,
         }

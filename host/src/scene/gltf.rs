@@ -1,6 +1,7 @@
 //! glTF 2.0 scenes (through the `gltf` crate): the default scene's node hierarchy with its
 //! transforms, every triangle primitive as a mesh, metallic-roughness materials with emission
-//! (and `KHR_materials_emissive_strength`), and the first perspective camera, if any.
+//! (and `KHR_materials_emissive_strength`; `doubleSided` makes an emissive rectangle a two-sided
+//! light), and the first perspective camera, if any.
 //!
 //! Bad files give an [`Error::SceneLoad`] naming the file and the JSON field, never a panic or a
 //! hang: on top of the `gltf` crate's validation this checks what that crate trusts (POSITION
@@ -430,6 +431,7 @@ fn material(m: &gltf::Material) -> std::result::Result<Material, String> {
         roughness: pbr.roughness_factor(),
         metallic: pbr.metallic_factor(),
         emission: Vec3::from_array(m.emissive_factor()) * strength,
+        double_sided: m.double_sided(),
     };
     // Each factor was checked above against glTF's range; the emission's upper limit is left,
     // which only the product of the factor and the strength can pass.
@@ -762,6 +764,28 @@ mod tests {
         let facing = built.edge_u.truncate().cross(built.edge_v.truncate());
         assert!(facing.normalize().abs_diff_eq(Vec3::NEG_Y, 1e-6), "emits down, towards the floor: {facing}");
         assert!(crate::lights::validate_lights(scene.lights()).is_ok());
+    }
+
+    /// A `doubleSided` emissive rectangle lights both sides, as it is seen glowing from both:
+    /// it was a one-sided light, leaving what lay behind it dark.
+    #[test]
+    fn a_double_sided_lamp_is_a_two_sided_light() {
+        let lamp =
+            std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../tests/data/emissive_quad.gltf")).unwrap();
+        let text = lamp.replacen(
+            r#""name": "lamp",
+   "pbrMetallicRoughness""#,
+            r#""name": "lamp", "doubleSided": true,
+   "pbrMetallicRoughness""#,
+            1,
+        );
+        assert_ne!(text, lamp);
+        let single = load(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../tests/data/emissive_quad.gltf"))).unwrap();
+        let double = load(file(&text).path()).unwrap();
+        assert_eq!(single.lights()[0].two_sided, 0);
+        assert_eq!(double.lights()[0], Light { two_sided: 1, ..single.lights()[0] });
+        assert!(double.meshes()[double.light_mesh(0)].material.double_sided);
+        assert!(crate::lights::validate_lights(double.lights()).is_ok());
     }
 
     #[test]

@@ -38,12 +38,16 @@ pub struct Material {
     pub metallic: f32,
     /// Emitted radiance (linear RGB; zero for non-emitters).
     pub emission: Vec3,
+    /// Emits from both faces (glTF's `doubleSided`): an emissive parallelogram with this material
+    /// becomes a two-sided quad light, as the camera already sees it glowing from either side.
+    /// Otherwise it lights only the side its counter-clockwise winding faces.
+    pub double_sided: bool,
 }
 
 impl Material {
     /// A rough, non-metallic, non-emissive surface of the given albedo.
     pub const fn diffuse(albedo: Vec3) -> Self {
-        Self { base_color: albedo, roughness: 1.0, metallic: 0.0, emission: Vec3::ZERO }
+        Self { base_color: albedo, roughness: 1.0, metallic: 0.0, emission: Vec3::ZERO, double_sided: false }
     }
 
     /// Checks each parameter's range — base colour, roughness and metalness in `[0, 1]`, emission
@@ -198,10 +202,11 @@ impl Scene {
         Ok(scene)
     }
 
-    /// The analytic lights: one one-sided [`Light::quad`] per emissive mesh whose triangles form
+    /// The analytic lights: one [`Light::quad`] per emissive mesh whose triangles form
     /// one planar parallelogram (two triangles sharing a diagonal, matched within a relative
     /// tolerance of 10⁻⁴), in mesh order, with the mesh's emission as radiance. Each emits on
-    /// the side its triangles' counter-clockwise winding faces (the glTF and OBJ front face):
+    /// the side its triangles' counter-clockwise winding faces (the glTF and OBJ front face), or
+    /// from both where its material is [`Material::double_sided`]:
     /// the light's corner is the first triangle's corner off the diagonal and its edges run to
     /// that triangle's next and previous corners, so `edge_u × edge_v` is the triangle's
     /// counter-clockwise normal. The meshes stay in [`Scene::meshes`], so rays still hit them.

@@ -274,6 +274,7 @@ fn mtl_material(m: &tobj::Material) -> std::result::Result<Material, String> {
         roughness: roughness.unwrap_or(1.0),
         metallic: pbr("Pm")?.unwrap_or(0.0),
         emission: m.emissive.map_or(Vec3::ZERO, Vec3::from_array),
+        double_sided: false,
     };
     material.check().map_err(|(field, reason)| {
         let keyword = match field {
