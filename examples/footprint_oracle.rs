@@ -133,7 +133,7 @@ fn scenes(args: &Args) -> raywave::Result<Vec<Scene>> {
         max_spp: 1,
         reps: args.reps,
     };
-    report.check("footprint_oracle")?;
+    report.check()?;
     report.load_scenes()
 }
 

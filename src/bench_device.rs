@@ -22,10 +22,20 @@ pub struct VulkanBenchOptions {
 impl VulkanBenchOptions {
     /// The device a bench measures — if `enabled` and there is one — with these options checked
     /// against it; `stage` is the stage the bench sweeps, the others run their preferred sizes.
-    /// The settling time is checked with or without a device (or the `vulkan` feature).
+    /// The settling time is checked with or without a device (or the `vulkan` feature);
+    /// workgroup sizes without a device to run them are an error, not ignored.
     #[cfg_attr(not(feature = "vulkan"), allow(unused_variables))]
     pub(crate) fn device(&self, enabled: bool, stage: StreamStage) -> Result<Option<BenchDevice>> {
         let settle_seconds = self.settle_seconds.map(check_settle_seconds).transpose()?.unwrap_or(GPU_SETTLE_SECONDS);
+        let no_device = || -> Result<Option<BenchDevice>> {
+            if self.workgroup_sizes.is_empty() {
+                return Ok(None);
+            }
+            Err(crate::Error::InvalidParameter {
+                name: "workgroup-sizes",
+                reason: "no Vulkan device is measured (--no-vulkan, or none opens), so none runs them".into(),
+            })
+        };
         #[cfg(feature = "vulkan")]
         {
             let best = || {
@@ -33,10 +43,16 @@ impl VulkanBenchOptions {
                 let index = crate::device::best_vulkan_device(&devices).ok()?;
                 Some(devices.swap_remove(index))
             };
-            let Some(info) = enabled.then(best).flatten() else { return Ok(None) };
+            let Some(info) = enabled.then(best).flatten() else { return no_device() };
             let preferred = crate::WorkgroupSizes::preferred_on(&info.workgroup_sizes);
             for &size in &self.workgroup_sizes {
-                preferred.with(stage, size).check(&info.workgroup_sizes)?;
+                preferred.with(stage, size).check(&info.workgroup_sizes).map_err(|err| match err {
+                    // The option, not the field of `WorkgroupSizes` it sets.
+                    crate::Error::InvalidParameter { reason, .. } => {
+                        crate::Error::InvalidParameter { name: "workgroup-sizes", reason }
+                    }
+                    other => other,
+                })?;
             }
             let sizes = match self.workgroup_sizes.as_slice() {
                 [] => vec![preferred.of(stage)],
@@ -45,7 +61,7 @@ impl VulkanBenchOptions {
             Ok(Some(BenchDevice { info, settle_seconds, sizes, preferred, stage }))
         }
         #[cfg(not(feature = "vulkan"))]
-        Ok(None)
+        no_device()
     }
 }
 

@@ -108,7 +108,6 @@ impl SceneReportArgs {
         self,
         resolution: u32,
     ) -> raywave::Result<(raywave::report::SceneReportOptions, Box<dyn raywave::Backend>)> {
-        let backend = raywave::open_backend(self.device.parse()?, &BackendOptions::default())?;
         let options = raywave::report::SceneReportOptions {
             scenes: self.scenes,
             resolution,
@@ -116,6 +115,9 @@ impl SceneReportArgs {
             max_spp: self.max_spp,
             reps: self.reps,
         };
+        // Before the backend opens, which takes a second on a software Vulkan device.
+        options.check()?;
+        let backend = raywave::open_backend(self.device.parse()?, &BackendOptions::default())?;
         Ok((options, backend))
     }
 }

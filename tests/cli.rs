@@ -432,7 +432,7 @@ fn textured_materials_are_rendered_flat_with_a_warning() {
 /// frame is shaded or the reference converged).
 #[test]
 fn bench_and_report_options_out_of_range_are_typed_errors() {
-    let cases: [(&[&str], &str); 17] = [
+    let cases: [(&[&str], &str); 21] = [
         (&["bench", "denoise", "--no-vulkan", "--repeats", "0"], "repeats: must be at least 1"),
         (&["bench", "denoise", "--no-vulkan", "--spp", "0"], "spp: 0 is outside"),
         (&["bench", "denoise", "--no-vulkan", "--spp", "8192"], "exceed the sampler's 32-bit index"),
@@ -443,6 +443,11 @@ fn bench_and_report_options_out_of_range_are_typed_errors() {
         (&["bench", "trace", "--no-vulkan", "--repeats", "0"], "repeats: must be at least 1"),
         (&["bench", "trace", "--no-vulkan", "--resolution", "0"], "at least 1"),
         (&["bench", "trace", "--no-vulkan", "--threads", "0"], "threads: 0 is outside 1..="),
+        // Sizes no device runs were ignored without a word.
+        (
+            &["bench", "shade", "--no-vulkan", "--workgroup-sizes", "64"],
+            "workgroup-sizes: no Vulkan device is measured",
+        ),
         // rayon caps its pools at 65 535 threads without a word; the report named the count asked.
         (&["bench", "trace", "--no-vulkan", "--threads", "70000"], "threads: 70000 is outside 1..=65535"),
         (&["bench", "trace", "--settle-seconds", "31"], "settle-seconds: 31 is not within 0..=30 s"),
@@ -451,6 +456,13 @@ fn bench_and_report_options_out_of_range_are_typed_errors() {
         (&["bench", "shade", "--no-vulkan", "--resolution", "0"], "at least 1"),
         (&["bench", "shade", "--settle-seconds=-1"], "settle-seconds: -1 is not within 0..=30 s"),
         (&["report", "shade", "--resolution", "1024", "--reference-spp", "8192"], "reference-spp: 8192 samples"),
+        // Each named: one message named the report and listed every condition.
+        (&["report", "shade", "--reps", "0"], "reps: 0 is below 1"),
+        (&["report", "shade", "--max-spp", "0"], "max-spp: 0 is below 1"),
+        (
+            &["report", "error-vs-time", "--reference-spp", "4", "--max-spp", "8"],
+            "reference-spp: 4 is below max-spp (8)",
+        ),
     ];
     for (args, needle) in cases {
         assert_refused_before_measuring(args, needle);
@@ -722,7 +734,7 @@ fn trace_bench_measures_each_workgroup_size_of_each_compute_method() {
         "{preferred:?}"
     );
     let refused = [&quick[..], &["--workgroup-sizes", "64,96"]].concat();
-    assert_refused_before_measuring(&refused, "workgroup_sizes.trace: 96: this device runs the powers of two");
+    assert_refused_before_measuring(&refused, "workgroup-sizes: 96: this device runs the powers of two");
 }
 
 /// `bench shade --workgroup-sizes`: the CPU once and the Vulkan device once per shade workgroup
@@ -754,7 +766,7 @@ fn shade_bench_measures_the_cpu_and_each_shade_workgroup_size() {
     let shade_size = |d: &raywave::vulkan::DeviceInfo| raywave::WorkgroupSizes::preferred_on(&d.workgroup_sizes).shade;
     assert!(devices.iter().any(|d| sizes == [None, Some(u64::from(shade_size(d)))]), "{preferred:?}");
     let refused = [&quick[..], &["--workgroup-sizes", "48"]].concat();
-    assert_refused_before_measuring(&refused, "workgroup_sizes.shade: 48: this device runs");
+    assert_refused_before_measuring(&refused, "workgroup-sizes: 48: this device runs");
 }
 
 /// `bench denoise --workgroup-sizes`: every pass and total of both denoisers on the CPU once
@@ -776,7 +788,7 @@ fn denoise_bench_measures_each_workgroup_size_of_the_per_pixel_passes() {
         assert!(block.iter().all(|&size| size == expected), "{expected:?}: {block:?}");
     }
     let refused = [&args[..], &["--workgroup-sizes", "3"]].concat();
-    assert_refused_before_measuring(&refused, "workgroup_sizes.denoise: 3: this device runs");
+    assert_refused_before_measuring(&refused, "workgroup-sizes: 3: this device runs");
 }
 
 #[test]

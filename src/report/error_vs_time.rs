@@ -52,7 +52,7 @@ impl ErrorVsTimeOptions {
     /// Checks the options before any measurement ([`super::SceneReportOptions::check`], the
     /// radius and the settling time).
     pub fn check(&self) -> Result<()> {
-        self.report.check("report error-vs-time")?;
+        self.report.check()?;
         check_radius("denoise-radius", self.denoise_radius)?;
         self.settle_seconds.map(check_settle_seconds).transpose()?;
         Ok(())

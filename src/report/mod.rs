@@ -25,15 +25,24 @@ pub struct SceneReportOptions {
 }
 
 impl SceneReportOptions {
-    /// Checks the options of report `name`: reps ≥ 1, max-spp ≥ 1, reference-spp ≥ max-spp, the
-    /// resolution ([`check_resolution`]) and the reference's sample count
-    /// ([`check_samples_per_pixel`](crate::frame::check_samples_per_pixel)).
-    pub fn check(&self, name: &'static str) -> crate::Result<()> {
-        if self.reps < 1 || self.max_spp < 1 || self.reference_spp < self.max_spp {
-            return Err(crate::Error::InvalidParameter {
-                name,
-                reason: "needs reps ≥ 1, max-spp ≥ 1 and reference-spp ≥ max-spp".into(),
-            });
+    /// Checks the options: reps ≥ 1, max-spp ≥ 1, reference-spp ≥ max-spp, the resolution
+    /// ([`check_resolution`]) and the reference's sample count
+    /// ([`check_samples_per_pixel`](crate::frame::check_samples_per_pixel)); an error names the
+    /// option.
+    pub fn check(&self) -> crate::Result<()> {
+        let invalid = |name, reason: String| Err(crate::Error::InvalidParameter { name, reason });
+        if self.reps < 1 {
+            return invalid("reps", format!("{} is below 1", self.reps));
+        }
+        if self.max_spp < 1 {
+            return invalid("max-spp", format!("{} is below 1", self.max_spp));
+        }
+        if self.reference_spp < self.max_spp {
+            let reason = format!(
+                "{} is below max-spp ({}): the reference must converge further",
+                self.reference_spp, self.max_spp
+            );
+            return invalid("reference-spp", reason);
         }
         check_resolution(self.resolution)?;
         crate::frame::check_samples_per_pixel("reference-spp", self.resolution, self.resolution, self.reference_spp)

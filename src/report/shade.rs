@@ -174,7 +174,7 @@ pub fn report_shade(
     options: &ShadeReportOptions,
     mut emit: impl FnMut(&ShadeLine),
 ) -> Result<()> {
-    options.check("report shade")?;
+    options.check()?;
     for (name, scene) in options.scenes.iter().zip(options.load_scenes()?) {
         backend.load_scene(&scene)?;
         let data = ShadeData::new(&scene)?;
