@@ -481,9 +481,11 @@ fn bench_denoise_command(args: DenoiseBenchArgs) -> raywave::Result<()> {
 }
 
 fn report_sampling_command(args: SamplingReportArgs) -> raywave::Result<()> {
-    use raywave::report::sampling::{report_sampling, ReportLine, SamplingReportOptions};
-    let mut backend = raywave::open_backend(args.device.parse()?, &BackendOptions::default())?;
+    use raywave::report::sampling::{report_sampling, validate, ReportLine, SamplingReportOptions};
     let options = SamplingReportOptions { resolution: args.resolution, reps: args.reps };
+    // Before the backend opens, which takes a second on a software Vulkan device.
+    validate(&options)?;
+    let mut backend = raywave::open_backend(args.device.parse()?, &BackendOptions::default())?;
     report_sampling(backend.as_mut(), &options, |line| match line {
         ReportLine::Case(case, result) => print_line(if args.json { result.json() } else { result.row(case) }),
         ReportLine::Spectrum(spectrum) => print_line(if args.json { spectrum.json() } else { spectrum.row() }),
@@ -568,6 +570,13 @@ fn render_command(args: RenderArgs) -> raywave::Result<()> {
             "warning: {} mesh(es) of {} have textures, which raywave does not sample: their materials' factors alone \
              apply (an emissive texture's mesh emits its factor everywhere)",
             report.textured_meshes, options.scene
+        );
+    }
+    if report.orthographic_camera_skipped {
+        eprintln!(
+            "warning: the cameras of {} are orthographic, which raywave does not render: it frames the scene with a \
+             perspective camera instead",
+            options.scene
         );
     }
     if report.lights == 0 && options.view == RenderView::Lit {

@@ -103,6 +103,9 @@ pub struct RenderReport {
     /// Meshes whose file gave their materials textures, which raywave does not sample
     /// ([`Scene::textured_meshes`]).
     pub textured_meshes: usize,
+    /// The file's only cameras were orthographic, which raywave does not render: the scene is
+    /// seen through the camera that frames it ([`Scene::orthographic_camera_skipped`]).
+    pub orthographic_camera_skipped: bool,
     /// Samples per pixel traced: `spp` for the lit view, 1 for the normals view.
     pub samples_per_pixel: u32,
     /// Per-stage times, sanitized counts and timed dispatches, summed over the samples (in
@@ -204,6 +207,7 @@ pub fn render(options: &RenderOptions) -> Result<RenderReport> {
         lights: scene.lights().len(),
         unsupported_emitters: scene.unsupported_emitters(),
         textured_meshes: scene.textured_meshes(),
+        orthographic_camera_skipped: scene.orthographic_camera_skipped(),
         samples_per_pixel: settings.samples_per_pixel,
         hits: rendered.hits,
         stream_bytes_per_pixel: rendered.stream_bytes / u64::from(options.width * options.height),

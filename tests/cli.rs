@@ -425,6 +425,22 @@ fn textured_materials_are_rendered_flat_with_a_warning() {
     assert!(stderr(&out).contains("1 mesh(es) of") && stderr(&out).contains("have textures"), "{}", stderr(&out));
 }
 
+#[test]
+fn an_orthographic_camera_is_framed_with_a_warning() {
+    let dir = tempfile::tempdir().unwrap();
+    let lamp = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/emissive_quad.gltf")).unwrap();
+    let perspective =
+        "\"type\": \"perspective\",\n   \"perspective\": {\n    \"yfov\": 0.9,\n    \"znear\": 0.01\n   }";
+    let orthographic = r#""type": "orthographic", "orthographic": {"xmag": 1, "ymag": 1, "znear": 0.01, "zfar": 10}"#;
+    let text = lamp.replacen(perspective, orthographic, 1);
+    assert_ne!(text, lamp);
+    let scene = dir.path().join("ortho.gltf");
+    std::fs::write(&scene, text).unwrap();
+    let (out, path) = render(dir.path(), "o.png", &["--device", "cpu", "--scene", scene.to_str().unwrap()]);
+    assert!(out.status.success() && path.exists(), "{}", stderr(&out));
+    assert!(stderr(&out).contains("are orthographic, which raywave does not render"), "{}", stderr(&out));
+}
+
 /// Benchmark and report options out of range: each command fails at once with the option named
 /// (before, `--repeats 0` measured one repetition, `--spp 0` failed inside the denoiser, a
 /// negative `--peak-gbps` gave negative bandwidth fractions, and a reference past the sampler's index
@@ -432,7 +448,7 @@ fn textured_materials_are_rendered_flat_with_a_warning() {
 /// frame is shaded or the reference converged).
 #[test]
 fn bench_and_report_options_out_of_range_are_typed_errors() {
-    let cases: [(&[&str], &str); 21] = [
+    let cases: [(&[&str], &str); 22] = [
         (&["bench", "denoise", "--no-vulkan", "--repeats", "0"], "repeats: must be at least 1"),
         (&["bench", "denoise", "--no-vulkan", "--spp", "0"], "spp: 0 is outside"),
         (&["bench", "denoise", "--no-vulkan", "--spp", "8192"], "exceed the sampler's 32-bit index"),
@@ -458,6 +474,7 @@ fn bench_and_report_options_out_of_range_are_typed_errors() {
         (&["report", "shade", "--resolution", "1024", "--reference-spp", "8192"], "reference-spp: 8192 samples"),
         // Each named: one message named the report and listed every condition.
         (&["report", "shade", "--reps", "0"], "reps: 0 is below 1"),
+        (&["report", "sampling", "--reps", "1"], "reps: at least 2 repetitions are needed for a variance"),
         (&["report", "shade", "--max-spp", "0"], "max-spp: 0 is below 1"),
         (
             &["report", "error-vs-time", "--reference-spp", "4", "--max-spp", "8"],

@@ -1,7 +1,8 @@
 //! glTF 2.0 scenes (through the `gltf` crate): the default scene's node hierarchy with its
 //! transforms, every triangle primitive as a mesh, metallic-roughness materials with emission
 //! (and `KHR_materials_emissive_strength`; `doubleSided` makes an emissive rectangle a two-sided
-//! light), and the first perspective camera, if any.
+//! light), and the first perspective camera, if any (orthographic cameras are skipped, and
+//! noted: [`Scene::orthographic_camera_skipped`]).
 //!
 //! Bad files give an [`Error::SceneLoad`] naming the file and the JSON field, never a panic or a
 //! hang: on top of the `gltf` crate's validation this checks what that crate trusts (POSITION
@@ -51,11 +52,14 @@ pub fn load(path: &Path) -> Result<Scene> {
     }
     let mut meshes = Vec::new();
     let mut textured = 0;
-    let mut scene_camera = None;
+    let (mut scene_camera, mut orthographic) = (None, false);
     for (node, world) in &nodes {
         if let (None, Some(node_camera)) = (&scene_camera, node.camera()) {
-            if let gltf::camera::Projection::Perspective(p) = node_camera.projection() {
-                scene_camera = Some(camera(node, &node_camera, &p, *world).map_err(load_error)?);
+            match node_camera.projection() {
+                gltf::camera::Projection::Perspective(p) => {
+                    scene_camera = Some(camera(node, &node_camera, &p, *world).map_err(load_error)?);
+                }
+                gltf::camera::Projection::Orthographic(_) => orthographic = true,
             }
         }
         if let Some(mesh) = node.mesh() {
@@ -72,8 +76,11 @@ pub fn load(path: &Path) -> Result<Scene> {
             }
         }
     }
+    let orthographic_camera_skipped = orthographic && scene_camera.is_none();
     let camera = scene_camera.unwrap_or_else(|| framing_camera(&meshes));
-    Ok(Scene::new(&path.display().to_string(), meshes, camera)?.with_textured_meshes(textured))
+    Ok(Scene::new(&path.display().to_string(), meshes, camera)?
+        .with_textured_meshes(textured)
+        .with_orthographic_camera_skipped(orthographic_camera_skipped))
 }
 
 /// Whether material `m` has a texture that would change its colour, roughness, metalness or
@@ -826,6 +833,33 @@ mod tests {
             let expected = if scale == "[-1, 1, 1]" { Vec3::NEG_Y } else { Vec3::Y };
             assert!(facing.abs_diff_eq(expected, 1e-6), "scale {scale}: faces {facing}");
         }
+    }
+
+    /// raywave renders no orthographic projection: a file whose cameras are all orthographic is
+    /// framed as one without a camera, which the scene notes (it was silent); beside a
+    /// perspective camera, an orthographic one changes nothing.
+    #[test]
+    fn an_orthographic_camera_is_skipped_and_noted() {
+        let orthographic = r#"{"type":"orthographic","orthographic":{"xmag":1,"ymag":1,"znear":0.01,"zfar":10}}"#;
+        let perspective = r#"{"type":"perspective","perspective":{"yfov":0.8,"znear":0.01}}"#;
+        let only = quad_gltf(6).replacen(perspective, orthographic, 1);
+        assert_ne!(only, quad_gltf(6));
+        let scene = load(file(&only).path()).unwrap();
+        assert!(scene.orthographic_camera_skipped());
+        assert_eq!(*scene.camera(), framing_camera(scene.meshes()));
+        // cameras[0] orthographic on a new node 2, met first; cameras[1] perspective on node 1.
+        let both = quad_gltf(6)
+            .replacen(perspective, &format!("{orthographic},{perspective}"), 1)
+            .replacen(
+                r#"{"camera":0,"translation":[0.5,0.5,3]}]"#,
+                r#"{"camera":1,"translation":[0.5,0.5,3]},{"camera":0}]"#,
+                1,
+            )
+            .replacen(r#""nodes":[0,1]}],"#, r#""nodes":[2,0,1]}],"#, 1);
+        let scene = load(file(&both).path()).unwrap();
+        assert!(!scene.orthographic_camera_skipped());
+        assert_eq!(scene.camera().position, Vec3::new(0.5, 0.5, 3.0));
+        assert!(!load(file(&quad_gltf(6)).path()).unwrap().orthographic_camera_skipped());
     }
 
     #[test]

@@ -126,6 +126,7 @@ pub struct Scene {
     camera: Camera,
     dropped_degenerate: usize,
     textured_meshes: usize,
+    orthographic_camera_skipped: bool,
     lights: emitters::DerivedLights,
 }
 
@@ -197,7 +198,15 @@ impl Scene {
         meshes.retain(|m| !m.triangles.is_empty());
         let dropped_degenerate = before - meshes.iter().map(|m| m.triangles.len()).sum::<usize>();
         let lights = if u32::try_from(meshes.len()).is_ok() { emitters::derive(&meshes) } else { Default::default() };
-        let scene = Scene { name: name.to_owned(), meshes, camera, dropped_degenerate, textured_meshes: 0, lights };
+        let scene = Scene {
+            name: name.to_owned(),
+            meshes,
+            camera,
+            dropped_degenerate,
+            textured_meshes: 0,
+            orthographic_camera_skipped: false,
+            lights,
+        };
         scene.validate()?;
         Ok(scene)
     }
@@ -244,6 +253,19 @@ impl Scene {
     /// This scene, noting that `count` of its meshes came with textures ([`Scene::textured_meshes`]).
     pub(crate) fn with_textured_meshes(self, count: usize) -> Self {
         Self { textured_meshes: count, ..self }
+    }
+
+    /// Whether the file's only cameras were orthographic, which raywave does not render (its
+    /// cameras are a pinhole or a thin lens): the scene is then seen through the camera that
+    /// frames its bounds, as for a file without a camera. `raywave render` warns about it.
+    pub fn orthographic_camera_skipped(&self) -> bool {
+        self.orthographic_camera_skipped
+    }
+
+    /// This scene, noting whether an orthographic camera was skipped
+    /// ([`Scene::orthographic_camera_skipped`]).
+    pub(crate) fn with_orthographic_camera_skipped(self, skipped: bool) -> Self {
+        Self { orthographic_camera_skipped: skipped, ..self }
     }
 
     /// Zero-area triangles removed when the scene was built.
