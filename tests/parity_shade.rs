@@ -309,6 +309,40 @@ fn shade_matches_the_cpu_on_every_vulkan_device() {
     }
 }
 
+/// The Cornell box with its lamp wound the other way, so the camera sees the lamp's back: black
+/// where the lamp is one-sided (it glowed, though it lit nothing on that side), glowing where it
+/// is double-sided, alike on the CPU and every device.
+#[test]
+fn a_lamp_seen_from_behind_is_black_unless_double_sided_on_every_vulkan_device() {
+    let mut cpu = CpuBackend::new();
+    let mut devices = vulkan::each_device("shade parity, lamp backs");
+    let cornell = Scene::load("builtin:cornell").expect("built-in scene loads");
+    let lamp = cornell.light_mesh(0);
+    for double_sided in [false, true] {
+        let mut meshes = cornell.meshes().to_vec();
+        meshes[lamp].triangles.iter_mut().for_each(|t| t.swap(1, 2));
+        meshes[lamp].material.double_sided = double_sided;
+        let scene = Scene::new("cornell, lamp flipped", meshes, *cornell.camera()).expect("scene");
+        cpu.load_scene(&scene).expect("cpu scene");
+        let data = ShadeData::new(&scene).expect("shade data");
+        let (rays, hits, sampler) = camera_pass(&mut cpu, &scene, sampler_kind::ZSOBOL, 0);
+        let params = data.params(sampler, WIDTH, HEIGHT, 0);
+        let (expected, _) = cpu.shade(&params, &data, &rays, &hits).expect("cpu shade");
+        let on_lamp: Vec<usize> = (0..hits.instance.len()).filter(|&i| hits.instance[i] == lamp as u32).collect();
+        assert!(on_lamp.len() > 20, "the camera sees the lamp: {} pixels", on_lamp.len());
+        let glowing = on_lamp.iter().filter(|&&i| expected.emitted[i].truncate() != glam::Vec3::ZERO).count();
+        assert_eq!(glowing, if double_sided { on_lamp.len() } else { 0 }, "double-sided {double_sided}");
+        for device in devices.iter_mut() {
+            let (shades, _) = device.shade(&params, &data, &rays, &hits).expect("device shade");
+            let diff = compare(&expected, &shades);
+            assert_eq!(diff.analytic_outside, 0, "{}, double-sided {double_sided}: U or emitted differ", device.name());
+        }
+    }
+    for device in &devices {
+        vulkan::assert_clean(device);
+    }
+}
+
 #[test]
 fn shade_without_lights_is_zero_and_traces_no_shadow_rays_on_every_vulkan_device() {
     // The hand-written glTF tetrahedron (copper, no emission): a scene without any light, so the

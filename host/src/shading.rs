@@ -64,6 +64,8 @@ impl ShadeData {
             .map(|m| MaterialParams {
                 base_color_roughness: m.material.base_color.extend(m.material.roughness),
                 emission_metallic: m.material.emission.extend(m.material.metallic),
+                two_sided_emission: u32::from(m.material.double_sided),
+                padding: [0; 3],
             })
             .collect();
         let lights = scene.lights().to_vec();
@@ -110,10 +112,14 @@ impl ShadeData {
                 roughness: m.base_color_roughness.w,
                 metallic: m.emission_metallic.w,
                 emission: m.emission_metallic.xyz(),
-                double_sided: false,
+                double_sided: m.two_sided_emission == 1,
             };
             if let Err((name, reason)) = material.check() {
                 return invalid(name, format!("shade data materials[{index}] {reason}"));
+            }
+            if m.two_sided_emission > 1 {
+                let reason = format!("shade data materials[{index}]: {} is neither 0 nor 1", m.two_sided_emission);
+                return invalid("material.two_sided_emission", reason);
             }
         }
         crate::lights::validate_lights(&self.lights)?;

@@ -12,9 +12,15 @@ pub struct MaterialParams {
     pub base_color_roughness: Vec4,
     /// Emitted radiance, linear RGB in W·sr⁻¹·m⁻² (xyz), and metalness (w, in [0, 1]).
     pub emission_metallic: Vec4,
+    /// 1 if the surface emits from both faces (glTF's `doubleSided`), 0 if only from its front
+    /// face — the side its triangles' counter-clockwise winding faces, where the quad light made
+    /// of it emits (pbrt's and Mitsuba's one-sided area lights, whose backs are black).
+    pub two_sided_emission: u32,
+    /// Explicit padding; always 0.
+    pub padding: [u32; 3],
 }
 
-const _: () = assert!(core::mem::size_of::<MaterialParams>() == 32);
+const _: () = assert!(core::mem::size_of::<MaterialParams>() == 48);
 
 /// Push constants of the shade stage: one invocation per camera sample (= pixel) of one pass.
 #[repr(C)]

@@ -38,9 +38,9 @@ pub struct Material {
     pub metallic: f32,
     /// Emitted radiance (linear RGB; zero for non-emitters).
     pub emission: Vec3,
-    /// Emits from both faces (glTF's `doubleSided`): an emissive parallelogram with this material
-    /// becomes a two-sided quad light, as the camera already sees it glowing from either side.
-    /// Otherwise it lights only the side its counter-clockwise winding faces.
+    /// Emits from both faces (glTF's `doubleSided`): both glow where seen, and an emissive
+    /// parallelogram with this material becomes a two-sided quad light. Otherwise only the front
+    /// face, the side its counter-clockwise winding faces, glows and lights; the back is black.
     pub double_sided: bool,
 }
 
@@ -236,7 +236,8 @@ impl Scene {
     }
 
     /// Emissive meshes that did not become lights because their triangles are not one planar
-    /// parallelogram. They still emit where a ray hits them, but are never sampled as lights.
+    /// parallelogram. They still emit where a ray hits their front face (either face if
+    /// [`Material::double_sided`]), but are never sampled as lights.
     pub fn unsupported_emitters(&self) -> usize {
         self.lights.unsupported
     }

@@ -52,6 +52,9 @@ pub struct Surface {
     pub extent: f32,
     /// Instance (mesh) index of the hit, [`NO_HIT`] for a miss; selects the material.
     pub instance: u32,
+    /// The camera ray met the triangle's front face, the side its counter-clockwise winding
+    /// faces, which a one-sided emitter emits from (`MaterialParams::two_sided_emission`).
+    pub front_face: bool,
     /// The hit record was not finite and is read as a miss: the shade stage flags the sample as
     /// replaced ([`crate::sanitized`]).
     pub replaced: bool,
@@ -59,8 +62,14 @@ pub struct Surface {
 
 impl Surface {
     /// A camera ray that hit nothing.
-    pub const MISS: Surface =
-        Surface { position: Vec4::ZERO, normal: Vec4::ZERO, extent: 0.0, instance: NO_HIT, replaced: false };
+    pub const MISS: Surface = Surface {
+        position: Vec4::ZERO,
+        normal: Vec4::ZERO,
+        extent: 0.0,
+        instance: NO_HIT,
+        front_face: false,
+        replaced: false,
+    };
 }
 
 /// Turns a hit into a surface: the point interpolated from the triangle's vertices (the most
@@ -104,12 +113,14 @@ pub fn resolve_surface(
     if normal == Vec3::ZERO || !position.is_finite() {
         return Surface::MISS;
     }
-    let normal = if normal.dot(direction) > 0.0 { -normal } else { normal };
+    let front_face = !(normal.dot(direction) > 0.0);
+    let normal = if front_face { normal } else { -normal };
     Surface {
         position: position.extend(hit_t),
         normal: normal.extend(0.0),
         extent: triangle_extent(a, b, c),
         instance,
+        front_face,
         replaced: false,
     }
 }
@@ -237,7 +248,9 @@ pub fn shade_sample(
     let v = -view_direction;
     let frame = ShadingFrame::new(n, v);
     let lobes = Lobes::new(material, frame, n.dot(v), scene.ltc, params.analytic_residual != 0);
-    let emitted = material.emission_metallic.xyz().extend(0.0);
+    // A one-sided emitter's back is black, as the light made of it casts nothing there.
+    let emits = surface.front_face || material.two_sided_emission != 0;
+    let emitted = if emits { material.emission_metallic.xyz().extend(0.0) } else { Vec4::ZERO };
 
     // One light for the stochastic sample of U_N and S_N.
     let strategy = sampler::sample_2d(&params.sampler, pixel, params.sample_index, dims::SHADE_STRATEGY);
@@ -364,7 +377,12 @@ mod tests {
     }
 
     fn material(base: Vec3, roughness: f32, metallic: f32) -> MaterialParams {
-        MaterialParams { base_color_roughness: base.extend(roughness), emission_metallic: Vec3::ZERO.extend(metallic) }
+        MaterialParams {
+            base_color_roughness: base.extend(roughness),
+            emission_metallic: Vec3::ZERO.extend(metallic),
+            two_sided_emission: 0,
+            padding: [0; 3],
+        }
     }
 
     fn surface_at_origin() -> Surface {
@@ -374,6 +392,7 @@ mod tests {
             // On a triangle about a unit across.
             extent: 1.0,
             instance: 0,
+            front_face: true,
             replaced: false,
         }
     }
@@ -681,5 +700,32 @@ mod tests {
         assert_eq!(hit(0, 1), Surface::MISS, "instance 0 has one triangle");
         assert_eq!(hit(1, NO_HIT), Surface::MISS);
         assert_eq!(hit(1, 1), Surface::MISS);
+        // The counter-clockwise face is the front: met by a ray along −z, not by one along +z.
+        let from_above = resolve_surface(Vec3::NEG_Z, 2.0, 0, 0, glam::Vec2::ZERO, &triangles, &[0]);
+        assert!(from_above.front_face && !s.front_face);
+    }
+
+    /// A one-sided emitter glows only on its front face, where the quad light made of it emits;
+    /// a two-sided one on both. Its back glowed, though it lit nothing on that side.
+    #[test]
+    fn a_one_sided_emitter_is_black_from_behind() {
+        let table = table();
+        let triangles = [Vec4::new(0.0, 0.0, 0.0, 0.0), Vec4::new(1.0, 0.0, 0.0, 0.0), Vec4::new(0.0, 1.0, 0.0, 0.0)];
+        let glow = Vec3::new(4.0, 2.0, 1.0);
+        for two_sided_emission in [0, 1] {
+            let lamp = MaterialParams {
+                emission_metallic: glow.extend(0.0),
+                two_sided_emission,
+                ..material(Vec3::ONE, 1.0, 0.0)
+            };
+            let materials = [lamp];
+            let scene = ShadeScene { materials: &materials, lights: LightSet::new(&[], &[], &[]), ltc: &table };
+            for (direction, front) in [(Vec3::NEG_Z, true), (Vec3::Z, false)] {
+                let surface = resolve_surface(direction, 2.0, 0, 0, glam::Vec2::splat(0.25), &triangles, &[0]);
+                let s = shade_sample(&params(sampler_kind::SOBOL, 1, 0), UVec2::ZERO, direction, &surface, &scene);
+                let expected = if front || two_sided_emission == 1 { glow } else { Vec3::ZERO };
+                assert_eq!(s.value.emitted, expected.extend(0.0), "two-sided {two_sided_emission}, front {front}");
+            }
+        }
     }
 }
