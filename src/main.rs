@@ -561,7 +561,7 @@ fn render_command(args: RenderArgs) -> raywave::Result<()> {
     ));
     if report.unsupported_emitters > 0 {
         eprintln!(
-            "warning: {} emissive mesh(es) of {} are not one planar parallelogram: they glow where seen but light nothing",
+            "warning: {} emissive mesh(es) of {} are not one planar parallelogram: they glow where seen (their front faces) but light nothing",
             report.unsupported_emitters, options.scene
         );
     }
@@ -580,7 +580,10 @@ fn render_command(args: RenderArgs) -> raywave::Result<()> {
         );
     }
     if report.lights == 0 && options.view == RenderView::Lit {
-        eprintln!("warning: {} has no quad light, so nothing is lit (emitters glow where seen)", options.scene);
+        eprintln!(
+            "warning: {} has no quad light, so nothing is lit (emitters glow where their front faces are seen)",
+            options.scene
+        );
     }
     let spp = report.samples_per_pixel;
     let rays = u64::from(options.width) * u64::from(options.height) * u64::from(spp);

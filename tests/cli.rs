@@ -250,10 +250,12 @@ fn bad_input_is_a_typed_error_without_output() {
         assert!(!out.status.success() && stderr(&out).contains("is also --out's file"), "{other:?}: {}", stderr(&out));
         assert!(!twice.exists());
     }
-    // A trailing separator names a directory: the rename failed only after the render.
-    let slash = format!("{}/", dir.path().join("slash.png").display());
-    let out = raywave(&["render", "--device", "cpu", "--out", &slash]);
-    assert!(!out.status.success() && stderr(&out).contains("names a directory"), "{}", stderr(&out));
+    // A trailing separator or `.` names a directory: the rename failed only after the render.
+    for tail in ["/", "/."] {
+        let slash = format!("{}{tail}", dir.path().join("slash.png").display());
+        let out = raywave(&["render", "--device", "cpu", "--out", &slash]);
+        assert!(!out.status.success() && stderr(&out).contains("names a directory"), "{tail}: {}", stderr(&out));
+    }
     // A folder that is a file is not a missing folder.
     let file = dir.path().join("file.txt");
     std::fs::write(&file, "").unwrap();

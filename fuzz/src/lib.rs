@@ -59,7 +59,8 @@ pub fn render_checked(dir: &Path, scene: &Path, choices: u8) {
         backend: BackendOptions::default(),
         settle_seconds: None,
     };
-    // `render` loads the scene first: what does not load is refused there, as by `Scene::load`.
+    // `render` loads the scene before any work (after reserving its outputs): what does not load
+    // is refused there, as by `Scene::load`.
     match render(&options) {
         Ok(report) => {
             assert_eq!(StageReport::total_sanitized(&report.timings), 0, "{:?}", report.timings);

@@ -70,9 +70,11 @@ impl PendingOutput {
                 format!("the file name must end in .{} (the image is written as {kind})", extensions.join(", ."));
             return Err(output_error(std::io::Error::new(std::io::ErrorKind::InvalidInput, reason)));
         }
-        // `Path` drops a trailing separator (`y.png/` has the file name `y.png`), but the rename
-        // at the end would fail on it, after all the work.
-        if path.is_dir() || path.as_os_str().to_string_lossy().ends_with(std::path::is_separator) {
+        // `Path` drops a trailing separator or `.` (`y.png/` and `y.png/.` have the file name
+        // `y.png`), but the rename at the end would fail on them, after all the work.
+        let ends_in_its_name =
+            path.file_name().is_some_and(|name| path.as_os_str().as_encoded_bytes().ends_with(name.as_encoded_bytes()));
+        if path.is_dir() || !ends_in_its_name {
             return Err(output_error(std::io::Error::new(std::io::ErrorKind::IsADirectory, "names a directory")));
         }
         // Checked here: tempfile's error would name its random temporary file, not the output.
@@ -204,7 +206,12 @@ fn keep_previous_by(path: &Path, link: impl Fn(&Path, &Path) -> std::io::Result<
     // A copy of a symbolic link would put back its target's contents as a file in its place.
     let regular = path.symlink_metadata().is_ok_and(|metadata| metadata.is_file());
     let kept = temporary_names().make_in(directory_of(path), |second| {
-        link(path, second).or_else(|err| if regular { std::fs::copy(path, second).map(drop) } else { Err(err) })
+        // Not on `AlreadyExists`: the temporary name is taken, and `make_in` retries another.
+        link(path, second).or_else(|err| match err.kind() {
+            std::io::ErrorKind::AlreadyExists => Err(err),
+            _ if regular => std::fs::copy(path, second).map(drop),
+            _ => Err(err),
+        })
     });
     kept.ok().map(tempfile::NamedTempFile::into_temp_path)
 }
@@ -217,7 +224,6 @@ fn temporary_names() -> tempfile::Builder<'static, 'static> {
     builder
 }
 
-/// The directory a file at `path` goes in (`.` for a bare file name).
 /// The file an output `path` names, for telling whether two outputs name one file: its
 /// directory resolved (`..`, symbolic links) joined with its file name, or the absolute path as
 /// given where the directory cannot be resolved (it does not exist, and
@@ -231,6 +237,7 @@ pub fn output_destination(path: &Path) -> PathBuf {
     }
 }
 
+/// The directory a file at `path` goes in (`.` for a bare file name).
 fn directory_of(path: &Path) -> &Path {
     match path.parent() {
         Some(parent) if !parent.as_os_str().is_empty() => parent,
@@ -388,6 +395,22 @@ mod tests {
         assert_eq!(std::fs::read(&kept).unwrap(), b"previous", "a copy, not a second name of the new file");
         kept.persist(&path).unwrap();
         assert_eq!(std::fs::read(&path).unwrap(), b"previous");
+        // A temporary name already taken is not copied over: another name is tried.
+        let first = std::cell::RefCell::new(None);
+        let taken_once = |_: &Path, second: &Path| {
+            if first.borrow().is_some() {
+                return Err(std::io::Error::from(std::io::ErrorKind::Unsupported));
+            }
+            std::fs::write(second, b"someone else's")?;
+            first.replace(Some(second.to_owned()));
+            Err(std::io::Error::from(std::io::ErrorKind::AlreadyExists))
+        };
+        let kept = keep_previous_by(&path, taken_once).expect("a copy under another name");
+        let first = first.take().unwrap();
+        assert_ne!(kept.to_path_buf(), first);
+        assert_eq!(std::fs::read(&first).unwrap(), b"someone else's", "the taken name was overwritten");
+        assert_eq!(std::fs::read(&kept).unwrap(), b"previous");
+        drop(kept);
         #[cfg(unix)]
         {
             // Not a symbolic link, whose copy would be its target's contents.

@@ -180,7 +180,8 @@ impl Scene {
     /// degenerate camera (or one beyond [`MAX_COORDINATE`]), an emission outside
     /// `[0, MAX_EMISSION]` ([`MAX_EMISSION`]), a base colour, roughness or metalness outside
     /// `[0, 1]`, a derived light whose power overflows `f32`, more than [`MAX_VERTICES`] vertices
-    /// or a scene without any triangle of non-zero area is an error.
+    /// or [`MAX_TRIANGLES`] triangles, or a scene without any triangle of non-zero area is an
+    /// error.
     ///
     /// Every remaining mesh whose material emits (non-zero emission) and whose triangles form one
     /// planar parallelogram becomes one quad light ([`Scene::lights`]); other emissive meshes are
@@ -445,11 +446,11 @@ fn check_indices_and_vertices(scene: &str, meshes: &[Mesh]) -> Result<()> {
 
 /// A camera on the +z side of the bounds' centre that sees the whole bounding sphere with a 45°
 /// vertical field of view — from farther, with a narrower one, where that camera would lie within
-/// 64 steps of `f32` of the centre (a small scene far from the origin). Where that camera would lie beyond [`MAX_COORDINATE`] (a scene more
-/// than 3.8·10⁷ across), it goes to the −z side if it fits there, else to the side with more room,
-/// just inside the limit, with the field of view widened to still see the sphere (at most
-/// 2·atan(√3) ≈ 120° for bounds at the limit). Non-finite bounds are left for validation to
-/// report.
+/// 64 steps of `f32` of the centre (a small scene far from the origin). Where that camera would
+/// lie beyond [`MAX_COORDINATE`] (a scene more than 3.8·10⁷ across), it goes to the −z side if it
+/// fits there, else to the side with more room, just inside the limit, with the field of view
+/// widened to still see the sphere (at most 120°, which sees all of it from 1.15 radii and more).
+/// Non-finite bounds are left for validation to report.
 pub(crate) fn framing_camera(meshes: &[Mesh]) -> Camera {
     let (lo, hi) = meshes
         .iter()
@@ -476,15 +477,14 @@ pub(crate) fn framing_camera(meshes: &[Mesh]) -> Camera {
         (-1.0, minus_room)
     };
     let position = centre + Vec3::Z * (side * distance);
-    let vertical_fov_degrees = if distance < wanted {
-        // Against the coordinate limit: wider, to still see the sphere.
-        2.0 * (radius / distance).atan().to_degrees()
-    } else if wanted > at_45_degrees {
-        // Moved out to be resolvable: narrower, from where the camera lies after rounding (up to
-        // half a step closer).
-        2.0 * (radius / (position.z - centre.z).abs()).min(1.0).asin().to_degrees()
-    } else {
+    let vertical_fov_degrees = if wanted == at_45_degrees && distance == wanted {
         45.0
+    } else {
+        // Against the coordinate limit, wider; moved out to be resolvable, narrower: the angle
+        // under which the sphere is seen from where the camera lies after rounding (up to half a
+        // step closer), at most 120° (a camera in or near the sphere sees what that shows).
+        let seen_from = (position.z - centre.z).abs();
+        2.0 * (radius / seen_from).min(1.0).asin().to_degrees().min(60.0)
     };
     let position = if position.is_finite() { position } else { Vec3::Z };
     let centre = if centre.is_finite() { centre } else { Vec3::ZERO };

@@ -161,39 +161,79 @@ fn has_textures(m: &tobj::Material) -> bool {
 
 /// Checks the OBJ `text` before tobj reads it, naming the line at fault (tobj's vertex numbers
 /// are not the file's, so [`Scene::new`]'s errors could not name it):
-/// - every vertex position (`v`) coordinate is finite and within [`MAX_COORDINATE`], after the
-///   division by its `w` if it has one;
 /// - every index of the faces and lines (`f`, `l`) is not 0 (indices are 1-based), not past 2³²,
 ///   and a negative (relative) one within the vertex data (`v`, `vt`, `vn`) defined before it.
 ///   tobj 4.0.5 turns `0` and relative indices past the start into indices near `usize::MAX` and
 ///   multiplies them, which overflows — a panic where overflow checks are on (debug and test
-///   builds).
+///   builds);
+/// - every vertex position (`v`) a face uses has coordinates finite and within
+///   [`MAX_COORDINATE`], after the division by its `w` if it has one. Vertices no face uses are
+///   not loaded (tobj keeps the used ones), so they may hold anything.
 ///
 /// Tokens that are not numbers are left to tobj, which reports them.
 fn check_vertices_and_indices(text: &[u8]) -> std::result::Result<(), String> {
+    // Per vertex out of range: its position's number (0-based), line and first bad coordinate.
+    let mut out_of_range: Vec<(i64, usize, f32)> = Vec::new();
+    each_face_index(text, |line, token| match token {
+        ObjToken::Vertex(vertex, words) => {
+            // Read as tobj reads them: a number too large for f32 becomes infinite, and a
+            // fourth number is a `w` that divides the three (`v x y z w`; a zero is its error).
+            let numbers: Vec<f32> = words.split_whitespace().map_while(|word| word.parse().ok()).collect();
+            let w = if numbers.len() == 4 && numbers[3] != 0.0 { numbers[3] } else { 1.0 };
+            let mut coordinates = numbers.iter().take(3).map(|c| c / w);
+            if let Some(c) = coordinates.find(|c| !(c.is_finite() && c.abs() <= MAX_COORDINATE)) {
+                out_of_range.push((vertex, line, c));
+            }
+            Ok(())
+        }
+        ObjToken::Index { .. } => Ok(()),
+    })?;
+    if out_of_range.is_empty() {
+        return Ok(());
+    }
+    let lines: Vec<&[u8]> = text.split(|&b| b == b'\n').collect();
+    each_face_index(text, |face_line, token| match token {
+        ObjToken::Index { face: true, kind: 0, vertex } => match out_of_range.iter().find(|(v, ..)| *v == vertex) {
+            Some(&(_, line, c)) => Err(format!(
+                "line {line}: `{}` has coordinate {c}; each must be finite and within ±{MAX_COORDINATE:e} (the face \
+                 on line {face_line} uses it)",
+                String::from_utf8_lossy(lines[line - 1]).trim()
+            )),
+            None => Ok(()),
+        },
+        _ => Ok(()),
+    })
+}
+
+/// What [`each_face_index`] hands on.
+enum ObjToken<'a> {
+    /// A vertex position (`v`): its number (0-based) and the words after `v`.
+    Vertex(i64, &'a str),
+    /// An index of a face (`f`) or line (`l`): which kind of vertex data (0 position, 1 texture
+    /// coordinate, 2 normal) and the 0-based number it names.
+    Index { face: bool, kind: usize, vertex: i64 },
+}
+
+/// Walks the OBJ `text`, handing `visit` each vertex position and each face and line index with
+/// its 1-based line number, and refusing an index that is 0, past 2³², or negative (relative)
+/// beyond the vertex data defined before it (see [`check_vertices_and_indices`]).
+fn each_face_index(
+    text: &[u8],
+    mut visit: impl FnMut(usize, ObjToken) -> std::result::Result<(), String>,
+) -> std::result::Result<(), String> {
     let mut defined = [0i64; 3];
     for (index, line) in text.split(|&b| b == b'\n').enumerate() {
         let line = String::from_utf8_lossy(line);
         let mut words = line.split_whitespace();
         match words.next() {
             Some("v") => {
+                let rest = line.trim_start().trim_start_matches('v');
+                visit(index + 1, ObjToken::Vertex(defined[0], rest))?;
                 defined[0] += 1;
-                // Read as tobj reads them: a number too large for f32 becomes infinite, and a
-                // fourth number is a `w` that divides the three (`v x y z w`; a zero is its error).
-                let numbers: Vec<f32> = words.map_while(|word| word.parse().ok()).collect();
-                let w = if numbers.len() == 4 && numbers[3] != 0.0 { numbers[3] } else { 1.0 };
-                let mut coordinates = numbers.iter().take(3).map(|c| c / w);
-                if let Some(c) = coordinates.find(|c| !(c.is_finite() && c.abs() <= MAX_COORDINATE)) {
-                    return Err(format!(
-                        "line {}: `{}` has coordinate {c}; each must be finite and within ±{MAX_COORDINATE:e}",
-                        index + 1,
-                        line.trim()
-                    ));
-                }
             }
             Some("vt") => defined[1] += 1,
             Some("vn") => defined[2] += 1,
-            Some("f" | "l") => {
+            Some(keyword @ ("f" | "l")) => {
                 for vertex in words {
                     for (kind, part) in vertex.split('/').enumerate().take(3) {
                         let Ok(value) = part.parse::<i64>() else { continue };
@@ -203,6 +243,8 @@ fn check_vertices_and_indices(text: &[u8]) -> std::result::Result<(), String> {
                                 index + 1
                             ));
                         }
+                        let number = if value > 0 { value - 1 } else { defined[kind] + value };
+                        visit(index + 1, ObjToken::Index { face: keyword == "f", kind, vertex: number })?;
                     }
                 }
             }
@@ -212,37 +254,43 @@ fn check_vertices_and_indices(text: &[u8]) -> std::result::Result<(), String> {
     Ok(())
 }
 
-/// Checks that every `usemtl` line of the OBJ `text` names a material of the `libraries` (and
-/// the number of materials each added), after an `mtllib` line, as tobj reads the name: tobj leaves a mesh whose material it does not find without
-/// one, so a typo (`usemtl lmap`), a `usemtl` before the `mtllib` line or without any, or one
-/// indented (tobj then reads `usemtl lamp` as the name) made a grey mesh and no light. Errors
-/// name the line and the library.
+/// Checks that every `usemtl` line of the OBJ `text` names a material of the `libraries` read
+/// before it (each with the number of materials it added, in the order of the `mtllib` lines),
+/// as tobj reads the name: tobj leaves a mesh whose material it does not find without one, so a
+/// typo (`usemtl lmap`), a `usemtl` before the `mtllib` line of its library or without any, or
+/// one indented (tobj then reads `usemtl lamp` as the name) made a grey mesh and no light. Errors
+/// name the line and the libraries.
 fn check_material_names(
     text: &[u8],
     libraries: &[(PathBuf, usize)],
     materials: &[tobj::Material],
 ) -> std::result::Result<(), String> {
-    let names: Vec<String> = libraries.iter().map(|(library, _)| library.display().to_string()).collect();
-    let mut library_read = false;
+    // The libraries read so far, and the materials they added (tobj appends in order).
+    let (mut read, mut known) = (0, 0);
     for (index, line) in text.split(|&b| b == b'\n').enumerate() {
         let line = String::from_utf8_lossy(line);
         match line.split_whitespace().next() {
-            Some("mtllib") => library_read = true,
+            Some("mtllib") if read < libraries.len() => {
+                known += libraries[read].1;
+                read += 1;
+            }
             Some("usemtl") => {
                 // tobj 4.0.5 takes everything after the line's first space.
                 let name = line.split_once(' ').unwrap_or_default().1.trim();
                 let (line_number, written) = (index + 1, line.trim());
-                if !library_read {
+                if read == 0 {
                     return Err(format!(
                         "line {line_number}: `{written}` comes before any `mtllib` line, so it names no material"
                     ));
                 }
-                if !materials.iter().any(|m| m.name == name) {
-                    let read_as = if written == format!("usemtl {name}") {
-                        String::new()
+                if !materials[..known.min(materials.len())].iter().any(|m| m.name == name) {
+                    let read_as = if line.starts_with(char::is_whitespace) {
+                        format!(" (read as the name `{name}`: start the line with `usemtl`)")
                     } else {
-                        format!(" (read as the name `{name}`: start the line with `usemtl `)")
+                        String::new()
                     };
+                    let names: Vec<String> =
+                        libraries[..read].iter().map(|(library, _)| library.display().to_string()).collect();
                     return Err(format!(
                         "line {line_number}: `{written}` names no material of {}{read_as}",
                         names.join(", ")
@@ -342,12 +390,14 @@ mod tests {
             let camera = scene.camera();
             assert!(camera.position.abs().max_element() <= super::super::MAX_COORDINATE, "{camera:?}");
             assert_eq!(camera.look_at.z, centre_z);
-            // It still sees the bounding sphere.
+            // It still sees the bounding sphere (its outline, under asin(radius/distance)), or
+            // looks at it as widely as it may (120°) from within 1.15 radii.
             let (lo, hi) = scene.bounds();
             let radius = (hi - lo).length() * 0.5;
             let distance = (camera.position - camera.look_at).length();
             let half_fov = (camera.vertical_fov_degrees * 0.5).to_radians();
-            assert!(distance * half_fov.tan() >= radius * 0.999, "{camera:?} radius {radius}");
+            let widest = camera.vertical_fov_degrees >= 119.99 && distance < radius * 1.155;
+            assert!(distance * half_fov.sin() >= radius * 0.999 || widest, "{camera:?} radius {radius}");
         }
     }
 
@@ -426,7 +476,7 @@ mod tests {
         }
         std::fs::write(&path, obj.replace("usemtl lamp", " usemtl lamp")).unwrap();
         let err = load(&path).unwrap_err().to_string();
-        assert!(err.contains("(read as the name `usemtl lamp`: start the line with `usemtl `)"), "{err}");
+        assert!(err.contains("(read as the name `usemtl lamp`: start the line with `usemtl`)"), "{err}");
         std::fs::write(&path, obj).unwrap();
         // A colour with fewer than three numbers (tobj 4.0.5 panics on one) or a number that does
         // not parse names the library and its line.
@@ -481,6 +531,11 @@ mod tests {
         std::fs::remove_file(dir.path().join("a.mtl")).unwrap();
         let err = load(&path).unwrap_err().to_string();
         assert!(err.contains("material library") && err.contains("a.mtl"), "{err}");
+        // tobj looks a name up in the libraries read so far: `blue` before b.mtl's line is none.
+        std::fs::write(dir.path().join("a.mtl"), "newmtl red\nKd 1 0 0\n").unwrap();
+        std::fs::write(&path, "mtllib a.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl blue\nf 1 2 3\nmtllib b.mtl\n").unwrap();
+        let err = load(&path).unwrap_err().to_string();
+        assert!(err.contains("line 5: `usemtl blue` names no material of") && !err.contains("b.mtl"), "{err}");
     }
 
     #[test]
@@ -552,6 +607,13 @@ mod tests {
         }
         let at_the_limit = obj_file("v 0 0 0\nv 1e8 0 0\nv 0 -1e8 0\nf 1 2 3\n");
         assert!(load(at_the_limit.path()).is_ok());
+        // Named with the face that uses it, found by a relative index too.
+        let relative = obj_file("v 0 0 0\nv 1e9 0 0\nv 0 1 0\nf -3 -2 -1\n");
+        let err = load(relative.path()).unwrap_err().to_string();
+        assert!(err.contains("line 2: `v 1e9 0 0` has coordinate 1000000000; each must be finite and within ±1e8 (the face on line 4 uses it)"), "{err}");
+        // A vertex no face uses is not loaded, so it may hold anything (also one a polyline uses).
+        let unused = obj_file("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 5e8 0 nan\nf 1 2 3\nl 1 4\n");
+        assert_eq!(load(unused.path()).unwrap().triangle_count(), 1);
         let f = obj_file("v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n");
         assert!(matches!(load(f.path()).unwrap_err(), Error::EmptyScene { dropped_degenerate: 1, .. }));
     }
