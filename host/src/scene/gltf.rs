@@ -945,13 +945,14 @@ mod tests {
         }
     }
 
-    #[test]
-    fn instancing_beyond_the_vertex_limit_is_refused_before_reading() {
-        // POSITION a sparse accessor of 2²⁰ elements (the file's second buffer, 1 MiB, allows it),
-        // instanced by 257 nodes: 2²⁸ + 2²⁰ vertices, refused before any is read — without
-        // allocating the 3 GiB it asks for.
-        let per_instance = 1 << 20;
-        let instances = MAX_VERTICES / per_instance + 1;
+    /// [`quad_gltf`]'s file with its mesh node instanced by `instances` root nodes (no camera)
+    /// and a second buffer, `zeros.bin` of `zeros` zero bytes, as buffer 0 (the quad's becomes 1):
+    /// written to a new folder, whose file path is returned with it.
+    fn instanced_quad_gltf(
+        instances: usize,
+        zeros: usize,
+        edit: impl Fn(String) -> String,
+    ) -> (tempfile::TempDir, std::path::PathBuf) {
         let nodes: Vec<String> = (0..instances).map(|_| r#"{"mesh":0}"#.to_owned()).collect();
         let roots: Vec<String> = (0..instances).map(|i| i.to_string()).collect();
         let text = quad_gltf(6)
@@ -962,18 +963,33 @@ mod tests {
                 1,
             )
             .replacen(
+                r#""buffers":[{"byteLength":60,"#,
+                &format!(r#""buffers":[{{"byteLength":{zeros},"uri":"zeros.bin"}},{{"byteLength":60,"#),
+                1,
+            )
+            .replace(r#"{"buffer":0,"#, r#"{"buffer":1,"#);
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::write(dir.path().join("zeros.bin"), vec![0u8; zeros]).unwrap();
+        let path = dir.path().join("instanced.gltf");
+        std::fs::write(&path, edit(text)).unwrap();
+        (dir, path)
+    }
+
+    #[test]
+    fn instancing_beyond_the_vertex_limit_is_refused_before_reading() {
+        // POSITION a sparse accessor of 2²⁰ elements (the file's 1 MiB zeros allow it),
+        // instanced by 257 nodes: 2²⁸ + 2²⁰ vertices, refused before any is read — without
+        // allocating the 3 GiB it asks for.
+        let per_instance = 1 << 20;
+        let (_dir, path) = instanced_quad_gltf(MAX_VERTICES / per_instance + 1, per_instance, |text| {
+            text.replacen(
                 r#"{"bufferView":0,"componentType":5126,"count":4"#,
                 &format!(
                     r#"{{"componentType":5126,"count":{per_instance},"sparse":{{"count":3,"indices":{{"bufferView":1,"componentType":5123}},"values":{{"bufferView":0}}}}"#
                 ),
                 1,
             )
-            .replacen(r#""buffers":[{"byteLength":60,"#, r#""buffers":[{"byteLength":1048576,"uri":"zeros.bin"},{"byteLength":60,"#, 1)
-            .replace(r#"{"buffer":0,"#, r#"{"buffer":1,"#);
-        let dir = tempfile::tempdir().unwrap();
-        std::fs::write(dir.path().join("zeros.bin"), vec![0u8; per_instance]).unwrap();
-        let path = dir.path().join("instanced.gltf");
-        std::fs::write(&path, text).unwrap();
+        });
         match load(&path) {
             Err(err @ Error::SceneTooLarge { .. }) => {
                 assert!(err.to_string().contains("instance 269484032 vertices, more than 268435456"), "{err}")
@@ -989,31 +1005,14 @@ mod tests {
         // indices, 3 GiB) before dropping them as degenerate.
         let per_instance = 999_999;
         let instances = MAX_TRIANGLES / (per_instance / 3) + 1;
-        let nodes: Vec<String> = (0..instances).map(|_| r#"{"mesh":0}"#.to_owned()).collect();
-        let roots: Vec<String> = (0..instances).map(|i| i.to_string()).collect();
-        let text = quad_gltf(6)
-            .replacen(r#""nodes":[0,1]}],"#, &format!(r#""nodes":[{}]}}],"#, roots.join(",")), 1)
-            .replacen(
-                r#""nodes":[{"mesh":0,"translation":[0,0,-2]},{"camera":0,"translation":[0.5,0.5,3]}],"#,
-                &format!(r#""nodes":[{}],"#, nodes.join(",")),
-                1,
-            )
-            .replace(r#"{"buffer":0,"#, r#"{"buffer":1,"#)
-            .replacen(r#""byteLength":12}]"#, r#""byteLength":12},{"buffer":0,"byteLength":999999}]"#, 1)
-            .replacen(
+        let indices = |text: String| {
+            text.replacen(r#""byteLength":12}]"#, r#""byteLength":12},{"buffer":0,"byteLength":999999}]"#, 1).replacen(
                 r#"{"bufferView":1,"componentType":5123,"count":6,"type":"SCALAR"}"#,
                 &format!(r#"{{"bufferView":2,"componentType":5121,"count":{per_instance},"type":"SCALAR"}}"#),
                 1,
             )
-            .replacen(
-                r#""buffers":[{"byteLength":60,"#,
-                r#""buffers":[{"byteLength":1048576,"uri":"zeros.bin"},{"byteLength":60,"#,
-                1,
-            );
-        let dir = tempfile::tempdir().unwrap();
-        std::fs::write(dir.path().join("zeros.bin"), vec![0u8; 1 << 20]).unwrap();
-        let path = dir.path().join("instanced.gltf");
-        std::fs::write(&path, text).unwrap();
+        };
+        let (_dir, path) = instanced_quad_gltf(instances, 1 << 20, indices);
         match load(&path) {
             Err(err @ Error::SceneTooLarge { .. }) => {
                 let expected =
@@ -1023,8 +1022,7 @@ mod tests {
             other => panic!("expected SceneTooLarge, got {other:?}"),
         }
         // One instance of it loads (every triangle degenerate: an empty scene, but read).
-        let one = std::fs::read_to_string(&path).unwrap().replacen(&format!("[{}]", roots.join(",")), "[0]", 1);
-        std::fs::write(&path, one).unwrap();
+        let (_dir, path) = instanced_quad_gltf(1, 1 << 20, indices);
         assert!(matches!(load(&path), Err(Error::EmptyScene { dropped_degenerate: 333_333, .. })));
     }
 
