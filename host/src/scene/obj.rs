@@ -1,6 +1,7 @@
 //! Wavefront OBJ scenes (through the `tobj` crate): every OBJ model (object, or part of one with
 //! its own `usemtl` material) becomes a mesh with the material of its MTL entry, and the camera
-//! frames the scene's bounds. Polylines (`l`) are skipped: they have no area.
+//! frames the scene's bounds. Polylines (`l`) are skipped: they have no area; so are vertex
+//! colours, which raywave does not use.
 
 use super::line_counter::LineCounter;
 use super::regular_file::read_regular_file;
@@ -25,7 +26,7 @@ pub fn load(path: &Path) -> Result<Scene> {
     check_vertices_and_indices(&text).map_err(load_error)?;
     let options = tobj::LoadOptions { triangulate: true, single_index: true, ..Default::default() };
     // tobj reads line by line and stops at its first error, so the reader's line is the one at fault.
-    let surfaces = without_polylines(&text);
+    let surfaces = surfaces_only(&text);
     let mut reader = LineCounter::new(&surfaces[..]);
     let directory = path.parent().unwrap_or(Path::new(""));
     // tobj's material-library errors carry no text of their own: the first one's is kept here.
@@ -96,16 +97,29 @@ pub fn load(path: &Path) -> Result<Scene> {
     Ok(Scene::new(&name, meshes, camera)?.with_textured_meshes(textured))
 }
 
-/// The OBJ `text` with its polylines (`l`) blanked, line numbers kept: tobj 4.0.5 reads them as
-/// faces, so `l 1 2 3 4` around a square became a filled quad (under an emissive material, a
-/// quad light). A polyline has no area for a ray to hit.
-fn without_polylines(text: &[u8]) -> std::borrow::Cow<'_, [u8]> {
-    let is_polyline = |line: &[u8]| String::from_utf8_lossy(line).split_whitespace().next() == Some("l");
-    if !text.split(|&b| b == b'\n').any(is_polyline) {
+/// The OBJ `text` as raywave reads it, line numbers kept:
+/// - polylines (`l`) blanked: tobj 4.0.5 reads them as faces, so `l 1 2 3 4` around a square
+///   became a filled quad (under an emissive material, a quad light), and a polyline has no area
+///   for a ray to hit;
+/// - vertex colours (`v x y z r g b`) cut off: raywave does not use them, and tobj refused a file
+///   that gives some vertices colours and others none ("face vertex color index out of bounds").
+fn surfaces_only(text: &[u8]) -> std::borrow::Cow<'_, [u8]> {
+    let rewritten = |line: &[u8]| -> Option<Vec<u8>> {
+        let text = String::from_utf8_lossy(line);
+        let words: Vec<&str> = text.split_whitespace().collect();
+        match words.as_slice() {
+            ["l", ..] => Some(Vec::new()),
+            ["v", x, y, z, r, g, b] if [x, y, z, r, g, b].iter().all(|w| w.parse::<f32>().is_ok()) => {
+                Some(format!("v {x} {y} {z}").into_bytes())
+            }
+            _ => None,
+        }
+    };
+    if text.split(|&b| b == b'\n').all(|line| rewritten(line).is_none()) {
         return std::borrow::Cow::Borrowed(text);
     }
-    let lines: Vec<&[u8]> =
-        text.split(|&b| b == b'\n').map(|line| if is_polyline(line) { &[][..] } else { line }).collect();
+    let lines: Vec<Vec<u8>> =
+        text.split(|&b| b == b'\n').map(|line| rewritten(line).unwrap_or_else(|| line.to_vec())).collect();
     std::borrow::Cow::Owned(lines.join(&b'\n'))
 }
 
@@ -536,6 +550,22 @@ mod tests {
         std::fs::write(&path, "mtllib a.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl blue\nf 1 2 3\nmtllib b.mtl\n").unwrap();
         let err = load(&path).unwrap_err().to_string();
         assert!(err.contains("line 5: `usemtl blue` names no material of") && !err.contains("b.mtl"), "{err}");
+    }
+
+    /// Vertex colours on some vertices and not on others: tobj refused the file ("face vertex
+    /// color index out of bounds"), naming no `v` line; raywave does not use them.
+    #[test]
+    fn vertex_colours_are_ignored_even_when_only_some_vertices_have_them() {
+        for obj in [
+            "v 0 0 0 1 0 0\nv 1 0 0\nv 0 1 0 0 0 1\nf 1 2 3\n",
+            "v 0 0 0 1 0 0\nv 1 0 0 0 1 0\nv 0 1 0 0 0 1\nf 1 2 3\n",
+        ] {
+            let scene = load(obj_file(obj).path()).unwrap_or_else(|e| panic!("{obj:?}: {e}"));
+            assert_eq!(scene.meshes()[0].positions, [Vec3::ZERO, Vec3::X, Vec3::Y]);
+        }
+        // Line numbers still name the line at fault.
+        let err = load(obj_file("v 0 0 0 1 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 x\n").path()).unwrap_err().to_string();
+        assert!(err.contains("line 4: face parse error"), "{err}");
     }
 
     #[test]
