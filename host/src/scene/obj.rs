@@ -115,11 +115,11 @@ fn surfaces_only(text: &[u8]) -> std::borrow::Cow<'_, [u8]> {
             _ => None,
         }
     };
-    if text.split(|&b| b == b'\n').all(|line| rewritten(line).is_none()) {
+    let lines: Vec<(&[u8], Option<Vec<u8>>)> = text.split(|&b| b == b'\n').map(|l| (l, rewritten(l))).collect();
+    if lines.iter().all(|(_, new)| new.is_none()) {
         return std::borrow::Cow::Borrowed(text);
     }
-    let lines: Vec<Vec<u8>> =
-        text.split(|&b| b == b'\n').map(|line| rewritten(line).unwrap_or_else(|| line.to_vec())).collect();
+    let lines: Vec<Vec<u8>> = lines.into_iter().map(|(line, new)| new.unwrap_or_else(|| line.to_vec())).collect();
     std::borrow::Cow::Owned(lines.join(&b'\n'))
 }
 
@@ -188,7 +188,7 @@ fn has_textures(m: &tobj::Material) -> bool {
 fn check_vertices_and_indices(text: &[u8]) -> std::result::Result<(), String> {
     // Per vertex out of range: its position's number (0-based), line and first bad coordinate.
     let mut out_of_range: Vec<(i64, usize, f32)> = Vec::new();
-    each_face_index(text, |line, token| match token {
+    each_vertex_and_index(text, |line, token| match token {
         ObjToken::Vertex(vertex, words) => {
             // Read as tobj reads them: a number too large for f32 becomes infinite, and a
             // fourth number is a `w` that divides the three (`v x y z w`; a zero is its error).
@@ -206,7 +206,7 @@ fn check_vertices_and_indices(text: &[u8]) -> std::result::Result<(), String> {
         return Ok(());
     }
     let lines: Vec<&[u8]> = text.split(|&b| b == b'\n').collect();
-    each_face_index(text, |face_line, token| match token {
+    each_vertex_and_index(text, |face_line, token| match token {
         ObjToken::Index { face: true, kind: 0, vertex } => match out_of_range.iter().find(|(v, ..)| *v == vertex) {
             Some(&(_, line, c)) => Err(format!(
                 "line {line}: `{}` has coordinate {c}; each must be finite and within ±{MAX_COORDINATE:e} (the face \
@@ -219,7 +219,7 @@ fn check_vertices_and_indices(text: &[u8]) -> std::result::Result<(), String> {
     })
 }
 
-/// What [`each_face_index`] hands on.
+/// What [`each_vertex_and_index`] hands on.
 enum ObjToken<'a> {
     /// A vertex position (`v`): its number (0-based) and the words after `v`.
     Vertex(i64, &'a str),
@@ -231,7 +231,7 @@ enum ObjToken<'a> {
 /// Walks the OBJ `text`, handing `visit` each vertex position and each face and line index with
 /// its 1-based line number, and refusing an index that is 0, past 2³², or negative (relative)
 /// beyond the vertex data defined before it (see [`check_vertices_and_indices`]).
-fn each_face_index(
+fn each_vertex_and_index(
     text: &[u8],
     mut visit: impl FnMut(usize, ObjToken) -> std::result::Result<(), String>,
 ) -> std::result::Result<(), String> {
