@@ -565,14 +565,21 @@ fn render_command(args: RenderArgs) -> raywave::Result<()> {
             report.unsupported_emitters, options.scene
         );
     }
-    if report.textured_meshes > 0 {
+    if report.unrendered.textured_meshes > 0 {
         eprintln!(
             "warning: {} mesh(es) of {} have textures, which raywave does not sample: their materials' factors alone \
              apply (an emissive texture's mesh emits its factor everywhere)",
-            report.textured_meshes, options.scene
+            report.unrendered.textured_meshes, options.scene
         );
     }
-    if report.orthographic_camera_skipped {
+    if report.unrendered.see_through_meshes > 0 {
+        eprintln!(
+            "warning: {} mesh(es) of {} have see-through materials (alpha blended or masked, MTL dissolve), which \
+             raywave renders opaque",
+            report.unrendered.see_through_meshes, options.scene
+        );
+    }
+    if report.unrendered.orthographic_camera {
         eprintln!(
             "warning: the cameras of {} are orthographic, which raywave does not render: it frames the scene with a \
              perspective camera instead",

@@ -9,6 +9,7 @@ use image::{ImageFormat, RgbImage};
 use raywave_host::denoise::DenoiseMethod;
 use raywave_host::frame::check_samples_per_pixel;
 use raywave_host::lit_frame::{render_lit, LitFrameSettings};
+use raywave_host::scene::Unrendered;
 use raywave_host::shading::{ShadeAccumulator, ShadeData};
 use raywave_host::visualize::{normal_depth_image, output_destination, persist_all, srgb_image, PendingOutput};
 use std::path::PathBuf;
@@ -100,12 +101,9 @@ pub struct RenderReport {
     /// Emissive meshes that are not one planar parallelogram: they glow where seen but light
     /// nothing ([`Scene::unsupported_emitters`]).
     pub unsupported_emitters: usize,
-    /// Meshes whose file gave their materials textures, which raywave does not sample
-    /// ([`Scene::textured_meshes`]).
-    pub textured_meshes: usize,
-    /// The file's only cameras were orthographic, which raywave does not render: the scene is
-    /// seen through the camera that frames it ([`Scene::orthographic_camera_skipped`]).
-    pub orthographic_camera_skipped: bool,
+    /// What the scene's file asked for that raywave does not render: textures, see-through
+    /// materials, orthographic cameras ([`Scene::unrendered`]).
+    pub unrendered: Unrendered,
     /// Samples per pixel traced: `spp` for the lit view, 1 for the normals view.
     pub samples_per_pixel: u32,
     /// Per-stage times, sanitized counts and timed dispatches, summed over the samples (in
@@ -206,8 +204,7 @@ pub fn render(options: &RenderOptions) -> Result<RenderReport> {
         dropped_degenerate: scene.dropped_degenerate(),
         lights: scene.lights().len(),
         unsupported_emitters: scene.unsupported_emitters(),
-        textured_meshes: scene.textured_meshes(),
-        orthographic_camera_skipped: scene.orthographic_camera_skipped(),
+        unrendered: scene.unrendered(),
         samples_per_pixel: settings.samples_per_pixel,
         hits: rendered.hits,
         stream_bytes_per_pixel: rendered.stream_bytes / u64::from(options.width * options.height),

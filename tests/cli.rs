@@ -415,9 +415,10 @@ fn lightless_scenes_warn_in_render_and_are_refused_by_reports() {
     }
 }
 
-/// A scene whose materials have textures renders with a warning that they are not sampled.
+/// A scene whose materials have textures renders with a warning that they are not sampled; one
+/// whose materials are see-through, with a warning that they are opaque.
 #[test]
-fn textured_materials_are_rendered_flat_with_a_warning() {
+fn textured_and_see_through_materials_are_rendered_with_a_warning() {
     let dir = tempfile::tempdir().unwrap();
     std::fs::write(dir.path().join("t.mtl"), "newmtl wood\nKd 0.5 0.4 0.3\nmap_Kd wood.png\n").unwrap();
     let obj = dir.path().join("t.obj");
@@ -425,6 +426,14 @@ fn textured_materials_are_rendered_flat_with_a_warning() {
     let (out, path) = render(dir.path(), "t.png", &["--device", "cpu", "--scene", obj.to_str().unwrap()]);
     assert!(out.status.success() && path.exists(), "{}", stderr(&out));
     assert!(stderr(&out).contains("1 mesh(es) of") && stderr(&out).contains("have textures"), "{}", stderr(&out));
+    assert!(!stderr(&out).contains("see-through"), "{}", stderr(&out));
+    // A see-through one (MTL dissolve) renders opaque, with a warning.
+    std::fs::write(dir.path().join("t.mtl"), "newmtl wood\nKd 0.5 0.4 0.3\nd 0.25\n").unwrap();
+    let (out, path) = render(dir.path(), "d.png", &["--device", "cpu", "--scene", obj.to_str().unwrap()]);
+    assert!(out.status.success() && path.exists(), "{}", stderr(&out));
+    let warning = "1 mesh(es) of";
+    assert!(stderr(&out).contains(warning) && stderr(&out).contains("see-through materials"), "{}", stderr(&out));
+    assert!(!stderr(&out).contains("have textures"), "{}", stderr(&out));
 }
 
 #[test]

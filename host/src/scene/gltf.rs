@@ -1,8 +1,8 @@
 //! glTF 2.0 scenes (through the `gltf` crate): the default scene's node hierarchy with its
 //! transforms, every triangle primitive as a mesh, metallic-roughness materials with emission
 //! (and `KHR_materials_emissive_strength`; `doubleSided` makes an emissive rectangle a two-sided
-//! light), and the first perspective camera, if any (orthographic cameras are skipped, and
-//! noted: [`Scene::orthographic_camera_skipped`]).
+//! light), and the first perspective camera, if any. What raywave does not render — textures,
+//! see-through materials, orthographic cameras — is counted ([`Scene::unrendered`]).
 //!
 //! Bad files give an [`Error::SceneLoad`] naming the file and the JSON field, never a panic or a
 //! hang: on top of the `gltf` crate's validation this checks what that crate trusts (POSITION
@@ -11,7 +11,9 @@
 //! loaded (textures are not sampled), so a missing texture file is no error.
 
 use super::regular_file::{read_regular_file, ReadError};
-use super::{framing_camera, in_range, Camera, Material, Mesh, Scene, MAX_COORDINATE, MAX_TRIANGLES, MAX_VERTICES};
+use super::{
+    framing_camera, in_range, Camera, Material, Mesh, Scene, Unrendered, MAX_COORDINATE, MAX_TRIANGLES, MAX_VERTICES,
+};
 use crate::error::{Error, Result};
 use glam::{Mat4, Vec3};
 use gltf::accessor::{DataType, Dimensions};
@@ -51,7 +53,7 @@ pub fn load(path: &Path) -> Result<Scene> {
         }
     }
     let mut meshes = Vec::new();
-    let mut textured = 0;
+    let mut unrendered = Unrendered::default();
     let (mut scene_camera, mut orthographic) = (None, false);
     for (node, world) in &nodes {
         if let (None, Some(node_camera)) = (&scene_camera, node.camera()) {
@@ -71,23 +73,37 @@ pub fn load(path: &Path) -> Result<Scene> {
                 let (positions, triangles) = triangles(&primitive, &buffers, (node.index(), *world), &field)
                     .map_err(|e| load_error(format!("{e} (in {name:?})")))?;
                 let material = material(&primitive.material()).map_err(load_error)?;
-                textured += usize::from(has_textures(&primitive.material()));
+                unrendered.textured_meshes += usize::from(has_textures(&primitive.material()));
+                unrendered.see_through_meshes += usize::from(is_see_through(&primitive.material()));
                 meshes.push(Mesh { name, positions, triangles, material });
             }
         }
     }
-    let orthographic_camera_skipped = orthographic && scene_camera.is_none();
+    unrendered.orthographic_camera = orthographic && scene_camera.is_none();
     let camera = scene_camera.unwrap_or_else(|| framing_camera(&meshes));
-    Ok(Scene::new(&path.display().to_string(), meshes, camera)?
-        .with_textured_meshes(textured)
-        .with_orthographic_camera_skipped(orthographic_camera_skipped))
+    Ok(Scene::new(&path.display().to_string(), meshes, camera)?.with_unrendered(unrendered))
 }
 
 /// Whether material `m` has a texture that would change its colour, roughness, metalness or
-/// emission — which raywave does not sample ([`Scene::textured_meshes`]).
+/// emission — which raywave does not sample ([`Unrendered::textured_meshes`]).
 fn has_textures(m: &gltf::Material) -> bool {
     let pbr = m.pbr_metallic_roughness();
     pbr.base_color_texture().is_some() || pbr.metallic_roughness_texture().is_some() || m.emissive_texture().is_some()
+}
+
+/// Whether material `m` lets light through somewhere, which raywave does not render
+/// ([`Unrendered::see_through_meshes`]): its alpha (factor, or a base-colour texture's, unknown
+/// as images are not read) is blended, or masked below the cutoff (glTF 2.0 § 3.9.4: `OPAQUE`
+/// ignores alpha; the cutoff defaults to 0.5).
+fn is_see_through(m: &gltf::Material) -> bool {
+    let pbr = m.pbr_metallic_roughness();
+    let [.., alpha] = pbr.base_color_factor();
+    let textured = pbr.base_color_texture().is_some();
+    match m.alpha_mode() {
+        gltf::material::AlphaMode::Opaque => false,
+        gltf::material::AlphaMode::Blend => textured || alpha < 1.0,
+        gltf::material::AlphaMode::Mask => textured || alpha < m.alpha_cutoff().unwrap_or(0.5),
+    }
 }
 
 /// The JSON path of primitive `index` of `mesh`, which errors name.
@@ -845,7 +861,7 @@ mod tests {
         let only = quad_gltf(6).replacen(perspective, orthographic, 1);
         assert_ne!(only, quad_gltf(6));
         let scene = load(file(&only).path()).unwrap();
-        assert!(scene.orthographic_camera_skipped());
+        assert!(scene.unrendered().orthographic_camera);
         assert_eq!(*scene.camera(), framing_camera(scene.meshes()));
         // cameras[0] orthographic on a new node 2, met first; cameras[1] perspective on node 1.
         let both = quad_gltf(6)
@@ -857,9 +873,9 @@ mod tests {
             )
             .replacen(r#""nodes":[0,1]}],"#, r#""nodes":[2,0,1]}],"#, 1);
         let scene = load(file(&both).path()).unwrap();
-        assert!(!scene.orthographic_camera_skipped());
+        assert!(!scene.unrendered().orthographic_camera);
         assert_eq!(scene.camera().position, Vec3::new(0.5, 0.5, 3.0));
-        assert!(!load(file(&quad_gltf(6)).path()).unwrap().orthographic_camera_skipped());
+        assert!(!load(file(&quad_gltf(6)).path()).unwrap().unrendered().orthographic_camera);
     }
 
     #[test]
@@ -905,7 +921,7 @@ mod tests {
 
     #[test]
     fn meshes_with_textures_are_counted() {
-        assert_eq!(load(file(&quad_gltf(6)).path()).unwrap().textured_meshes(), 0);
+        assert_eq!(load(file(&quad_gltf(6)).path()).unwrap().unrendered().textured_meshes, 0);
         let textures = r#""scene":0,"textures":[{"source":0}],"images":[{"uri":"no_such_texture.png"}],"#;
         // The mesh's material (index 0) is a new one with a texture, ahead of the file's own.
         for texture in
@@ -917,7 +933,34 @@ mod tests {
                 1,
             );
             let scene = load(file(&text).path()).unwrap_or_else(|e| panic!("{texture}: {e}"));
-            assert_eq!(scene.textured_meshes(), 1, "{texture}");
+            assert_eq!(scene.unrendered().textured_meshes, 1, "{texture}");
+        }
+    }
+
+    #[test]
+    fn see_through_materials_are_counted() {
+        // The quad's material with (its base colour, its alpha mode and cutoff), and whether it
+        // is see-through: OPAQUE ignores alpha; MASK cuts below alphaCutoff (0.5 unless given).
+        let material = r#"{"pbrMetallicRoughness":{"baseColorFactor":[0.5,0.25,1,1],"metallicFactor":0.5,"roughnessFactor":0.3},"emissiveFactor":[1,0.5,0]}"#;
+        for (colour, mode, see_through) in [
+            (r#""baseColorFactor":[1,1,1,0.2]"#, "", false),
+            (r#""baseColorFactor":[1,1,1,0.9]"#, r#","alphaMode":"BLEND""#, true),
+            (r#""baseColorFactor":[1,1,1,1]"#, r#","alphaMode":"BLEND""#, false),
+            (r#""baseColorTexture":{"index":0}"#, r#","alphaMode":"BLEND""#, true),
+            (r#""baseColorTexture":{"index":0}"#, "", false),
+            (r#""baseColorFactor":[1,1,1,0.4]"#, r#","alphaMode":"MASK""#, true),
+            (r#""baseColorFactor":[1,1,1,0.6]"#, r#","alphaMode":"MASK""#, false),
+            (r#""baseColorFactor":[1,1,1,0.6]"#, r#","alphaMode":"MASK","alphaCutoff":0.7"#, true),
+        ] {
+            let edited = format!(r#"{{"pbrMetallicRoughness":{{{colour}}}{mode}}}"#);
+            let text = quad_gltf(6).replacen(material, &edited, 1).replacen(
+                r#""scene":0,"#,
+                r#""scene":0,"textures":[{"source":0}],"images":[{"uri":"t.png"}],"#,
+                1,
+            );
+            assert!(text.contains(&edited), "{edited}");
+            let scene = load(file(&text).path()).unwrap_or_else(|e| panic!("{edited}: {e}"));
+            assert_eq!(scene.unrendered().see_through_meshes, usize::from(see_through), "{edited}");
         }
     }
 

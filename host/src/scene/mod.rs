@@ -8,11 +8,13 @@ mod line_counter;
 mod obj;
 pub mod procedural;
 mod regular_file;
+mod unrendered;
 
 use crate::error::{Error, Result};
 use glam::{Vec2, Vec3};
 use raywave_shared::Light;
 use std::path::Path;
+pub use unrendered::Unrendered;
 
 /// A triangle mesh, one instance in the acceleration structures.
 #[derive(Clone, Debug, PartialEq)]
@@ -125,8 +127,7 @@ pub struct Scene {
     meshes: Vec<Mesh>,
     camera: Camera,
     dropped_degenerate: usize,
-    textured_meshes: usize,
-    orthographic_camera_skipped: bool,
+    unrendered: Unrendered,
     lights: emitters::DerivedLights,
 }
 
@@ -204,8 +205,7 @@ impl Scene {
             meshes,
             camera,
             dropped_degenerate,
-            textured_meshes: 0,
-            orthographic_camera_skipped: false,
+            unrendered: Unrendered::default(),
             lights,
         };
         scene.validate()?;
@@ -243,31 +243,15 @@ impl Scene {
         self.lights.unsupported
     }
 
-    /// Meshes whose file gave their material textures (glTF base colour, metallic-roughness or
-    /// emissive textures; an MTL `map_Kd`, `map_Ke`, `map_Pr` or `map_Pm`). raywave samples no
-    /// texture: their materials' factors alone apply, so such a mesh is one colour — and an
-    /// emissive texture's mesh emits its factor (Blender writes 1) over its whole surface.
-    /// `raywave render` warns about them.
-    pub fn textured_meshes(&self) -> usize {
-        self.textured_meshes
+    /// What the scene's file asked for that raywave does not render ([`Unrendered`]); all zero
+    /// for built-in scenes and scenes made with [`Scene::new`].
+    pub fn unrendered(&self) -> Unrendered {
+        self.unrendered
     }
 
-    /// This scene, noting that `count` of its meshes came with textures ([`Scene::textured_meshes`]).
-    pub(crate) fn with_textured_meshes(self, count: usize) -> Self {
-        Self { textured_meshes: count, ..self }
-    }
-
-    /// Whether the file's only cameras were orthographic, which raywave does not render (its
-    /// cameras are a pinhole or a thin lens): the scene is then seen through the camera that
-    /// frames its bounds, as for a file without a camera. `raywave render` warns about it.
-    pub fn orthographic_camera_skipped(&self) -> bool {
-        self.orthographic_camera_skipped
-    }
-
-    /// This scene, noting whether an orthographic camera was skipped
-    /// ([`Scene::orthographic_camera_skipped`]).
-    pub(crate) fn with_orthographic_camera_skipped(self, skipped: bool) -> Self {
-        Self { orthographic_camera_skipped: skipped, ..self }
+    /// This scene, noting what its file asked for that raywave does not render.
+    pub(crate) fn with_unrendered(self, unrendered: Unrendered) -> Self {
+        Self { unrendered, ..self }
     }
 
     /// Zero-area triangles removed when the scene was built.

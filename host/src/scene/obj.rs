@@ -5,7 +5,7 @@
 
 use super::line_counter::LineCounter;
 use super::regular_file::read_regular_file;
-use super::{framing_camera, Material, Mesh, Scene, MAX_COORDINATE};
+use super::{framing_camera, Material, Mesh, Scene, Unrendered, MAX_COORDINATE};
 use crate::error::{Error, Result};
 use glam::Vec3;
 use std::cell::RefCell;
@@ -72,10 +72,17 @@ pub fn load(path: &Path) -> Result<Scene> {
             .map_err(|reason| load_error(format!("{}: material `{}`: {reason}", library.display(), m.name)))?;
         converted.push(material);
     }
-    let textured = models
-        .iter()
-        .filter(|model| model.mesh.material_id.and_then(|id| materials.get(id)).is_some_and(has_textures))
-        .count();
+    let meshes_whose_material = |property: fn(&tobj::Material) -> bool| {
+        models
+            .iter()
+            .filter(|model| model.mesh.material_id.and_then(|id| materials.get(id)).is_some_and(property))
+            .count()
+    };
+    let unrendered = Unrendered {
+        textured_meshes: meshes_whose_material(has_textures),
+        see_through_meshes: meshes_whose_material(is_see_through),
+        orthographic_camera: false,
+    };
     let meshes: Vec<Mesh> = models
         .into_iter()
         .enumerate()
@@ -94,7 +101,7 @@ pub fn load(path: &Path) -> Result<Scene> {
         .collect();
     let name = path.display().to_string();
     let camera = framing_camera(&meshes);
-    Ok(Scene::new(&name, meshes, camera)?.with_textured_meshes(textured))
+    Ok(Scene::new(&name, meshes, camera)?.with_unrendered(unrendered))
 }
 
 /// The OBJ `text` as raywave reads it, line numbers kept:
@@ -168,9 +175,15 @@ fn locate(error: tobj::LoadError, line: usize) -> String {
 
 /// Whether MTL entry `m` has a texture that would change its colour, roughness, metalness or
 /// emission (`map_Kd`, `map_Ke`, `map_Pr`, `map_Pm`), which raywave does not sample
-/// ([`Scene::textured_meshes`]).
+/// ([`Unrendered::textured_meshes`]).
 fn has_textures(m: &tobj::Material) -> bool {
     m.diffuse_texture.is_some() || ["map_Ke", "map_Pr", "map_Pm"].iter().any(|key| m.unknown_param.contains_key(*key))
+}
+
+/// Whether MTL entry `m` lets light through somewhere (a dissolve `d` below 1, or a `map_d`),
+/// which raywave does not render ([`Unrendered::see_through_meshes`]).
+fn is_see_through(m: &tobj::Material) -> bool {
+    m.dissolve.is_some_and(|d| d < 1.0) || m.dissolve_texture.is_some()
 }
 
 /// Checks the OBJ `text` before tobj reads it, naming the line at fault (tobj's vertex numbers
@@ -441,7 +454,7 @@ mod tests {
         let floor = by_name("floor (floor)").material;
         assert_eq!(floor.base_color, Vec3::new(0.5, 0.25, 1.0));
         assert!((floor.roughness - 0.1f32.sqrt()).abs() < 1e-6, "Ns 198: α = √(2/200) = 0.1, {}", floor.roughness);
-        assert_eq!(scene.textured_meshes(), 0);
+        assert_eq!(scene.unrendered(), Unrendered::default());
         let metal = by_name("chip (metal)").material;
         assert_eq!((metal.roughness, metal.metallic), (0.3, 1.0));
         assert_eq!(by_name("plain").material, Material::diffuse(DEFAULT_ALBEDO));
@@ -519,7 +532,12 @@ mod tests {
             "newmtl floor\nmap_Kd wood.png\nnewmtl lamp\nKe 1 1 1\nmap_Ke screen.png\nnewmtl metal\n",
         )
         .unwrap();
-        assert_eq!(load(&path).unwrap().textured_meshes(), 2);
+        assert_eq!(load(&path).unwrap().unrendered().textured_meshes, 2);
+        // So are those whose materials are see-through (`d` below 1, or a `map_d`).
+        std::fs::write(&library, "newmtl floor\nd 0.5\nnewmtl lamp\nKe 1 1 1\nd 1\nnewmtl metal\nmap_d cut.png\n")
+            .unwrap();
+        let unrendered = load(&path).unwrap().unrendered();
+        assert_eq!((unrendered.see_through_meshes, unrendered.textured_meshes), (2, 0));
         std::fs::write(&library, b"newmtl floor\nKd 1 1 1\n\nKs 1 1 \xff\n").unwrap();
         let err = load(&path).unwrap_err().to_string();
         assert!(err.contains("scene.mtl: line 4: not UTF-8 text"), "{err}");

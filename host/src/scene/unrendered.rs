@@ -1,0 +1,23 @@
+//! What a scene file asked for that raywave does not render, counted while loading so that a
+//! caller can say so instead of showing a different image without a word.
+
+/// The parts of a scene file raywave loads but does not render as the file describes them.
+/// `raywave render` prints a warning for each non-zero count.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Unrendered {
+    /// Meshes whose materials have textures (glTF base colour, metallic-roughness or emissive
+    /// textures; an MTL `map_Kd`, `map_Ke`, `map_Pr` or `map_Pm`). raywave samples no texture:
+    /// their materials' factors alone apply, so such a mesh is one colour — and an emissive
+    /// texture's mesh emits its factor (Blender writes 1) over its whole surface.
+    pub textured_meshes: usize,
+    /// Meshes whose materials are see-through: glTF `alphaMode` `BLEND` with a base-colour alpha
+    /// below 1 or a base-colour texture (whose alpha may be below 1), or `MASK` with an alpha
+    /// below `alphaCutoff` or a base-colour texture; an MTL `d` below 1 or a `map_d`. raywave
+    /// renders every surface opaque (a `MASK`ed-out mesh, invisible in a glTF viewer, is seen and
+    /// casts shadows). MTL's `Tr` is not counted: exporters disagree on which way it runs.
+    pub see_through_meshes: usize,
+    /// The file's only cameras were orthographic, which raywave does not render (its cameras are
+    /// a pinhole or a thin lens): the scene is seen through the camera that frames its bounds,
+    /// as for a file without a camera.
+    pub orthographic_camera: bool,
+}
