@@ -1,8 +1,9 @@
 //! The edge sum of [`Polygon::form_factor`](super::polygon::Polygon::form_factor) on x86-64,
 //! four edges per SSE instruction: each lane runs the operations of the portable
 //! [`edge_integral`](super::polygon::edge_integral) — the corner normalization of glam's
-//! `normalize_or_zero`, the cross and dot products in glam's order, [`crate::trig::atan2`] with
-//! its branches as lane selects — and the lanes are then summed in edge order, so the sum is the
+//! `normalize_or_zero`, [`edge_cross`](super::polygon::edge_cross)'s choice of scale, the cross
+//! and dot products in glam's order, [`crate::trig::atan2`] — with its branches as lane selects,
+//! and the lanes are then summed in edge order, so the sum is the
 //! portable loop's bit for bit (test: `polygon::tests::lanes_match_the_portable_edge_sum`).
 //! IEEE-754 rounds `+ − × ÷ √` alike in a lane and in a scalar register, and Rust never fuses a
 //! multiply-add, so only the order of operations matters, and it is the same.
@@ -14,9 +15,9 @@
 use super::polygon::MAX_CORNERS;
 use crate::trig::{ATAN_POLYNOMIAL, TAN_PI_8};
 use core::arch::x86_64::{
-    __m128, _mm_add_ps, _mm_and_ps, _mm_andnot_ps, _mm_castps_si128, _mm_castsi128_ps, _mm_cmpeq_ps, _mm_cmpgt_ps,
-    _mm_cmplt_ps, _mm_div_ps, _mm_mul_ps, _mm_or_ps, _mm_set1_ps, _mm_setr_ps, _mm_setzero_ps, _mm_shuffle_ps,
-    _mm_sqrt_ps, _mm_srai_epi32, _mm_storeu_ps, _mm_sub_ps,
+    __m128, _mm_add_ps, _mm_and_ps, _mm_andnot_ps, _mm_castps_si128, _mm_castsi128_ps, _mm_cmpeq_ps, _mm_cmpge_ps,
+    _mm_cmpgt_ps, _mm_cmple_ps, _mm_cmplt_ps, _mm_div_ps, _mm_mul_ps, _mm_or_ps, _mm_set1_ps, _mm_setr_ps,
+    _mm_setzero_ps, _mm_shuffle_ps, _mm_sqrt_ps, _mm_srai_epi32, _mm_storeu_ps, _mm_sub_ps,
 };
 use core::f32::consts::{FRAC_PI_2, FRAC_PI_4, PI};
 use glam::Vec3;
@@ -47,21 +48,21 @@ impl Lanes3 {
     /// Lane `i` takes lane `(i + 1) mod 4`.
     #[inline(always)]
     fn rotated(self) -> Self {
-        // Lanes (1, 2, 3, 0): the immediate's 2-bit fields, lowest first.
-        const NEXT: i32 = 0b00_11_10_01;
-        // SAFETY: SSE is part of every x86-64 target.
-        unsafe {
-            Self {
-                x: _mm_shuffle_ps::<NEXT>(self.x, self.x),
-                y: _mm_shuffle_ps::<NEXT>(self.y, self.y),
-                z: _mm_shuffle_ps::<NEXT>(self.z, self.z),
-            }
-        }
+        Self { x: rotated(self.x), y: rotated(self.y), z: rotated(self.z) }
     }
 }
 
-/// Σᵢ `edge_integral(ĉᵢ, ĉᵢ₊₁)` over the first `count` (≤ [`MAX_CORNERS`]) of `corners`, the
-/// last edge closing back to the first corner, with `ĉ` glam's `normalize_or_zero` — the sum
+/// Lane `i` takes lane `(i + 1) mod 4`.
+#[inline(always)]
+fn rotated(v: __m128) -> __m128 {
+    // Lanes (1, 2, 3, 0): the immediate's 2-bit fields, lowest first.
+    const NEXT: i32 = 0b00_11_10_01;
+    // SAFETY: SSE is part of every x86-64 target.
+    unsafe { _mm_shuffle_ps::<NEXT>(v, v) }
+}
+
+/// Σᵢ `edge_integral(cᵢ, cᵢ₊₁)` over the first `count` (≤ [`MAX_CORNERS`]) of `corners`, the
+/// last edge closing back to the first corner — the sum
 /// [`Polygon::form_factor`](super::polygon::Polygon::form_factor)'s portable loop computes, bit
 /// for bit, for any input (non-finite corners normalize to zero there and here).
 #[inline(always)]
@@ -87,14 +88,13 @@ pub fn edge_sum(corners: &[Vec3; MAX_CORNERS], count: usize) -> f32 {
         let mut integrals = [0.0f32; 4];
         // SAFETY: SSE2 is part of every x86-64 target; the store writes the array's 4 floats.
         unsafe {
-            let a =
-                normalize_or_zero(Lanes3::gather([start(first), start(first + 1), start(first + 2), start(first + 3)]));
+            let a = Corners::new(Lanes3::gather([start(first), start(first + 1), start(first + 2), start(first + 3)]));
             let b = if n == 4 {
                 a.rotated()
             } else {
-                normalize_or_zero(Lanes3::gather([end(first), end(first + 1), end(first + 2), end(first + 3)]))
+                Corners::new(Lanes3::gather([end(first), end(first + 1), end(first + 2), end(first + 3)]))
             };
-            _mm_storeu_ps(integrals.as_mut_ptr(), edge_integrals(a, b));
+            _mm_storeu_ps(integrals.as_mut_ptr(), edge_integrals(&a, &b));
         }
         // In edge order, as the portable loop adds them.
         let mut lane = 0usize;
@@ -113,35 +113,93 @@ unsafe fn select(mask: __m128, a: __m128, b: __m128) -> __m128 {
     _mm_or_ps(_mm_and_ps(mask, a), _mm_andnot_ps(mask, b))
 }
 
-/// glam's `Vec3::normalize_or_zero` per lane: `v · (1/√((x² + y²) + z²))` where that reciprocal
-/// is finite and positive, else zero.
-#[inline(always)]
-unsafe fn normalize_or_zero(v: Lanes3) -> Lanes3 {
-    let length = _mm_sqrt_ps(_mm_add_ps(_mm_add_ps(_mm_mul_ps(v.x, v.x), _mm_mul_ps(v.y, v.y)), _mm_mul_ps(v.z, v.z)));
-    let rcp = _mm_div_ps(_mm_set1_ps(1.0), length);
-    // `rcp > 0 && rcp < ∞`: false for NaN, ∞ and non-positive values alike.
-    let keep = _mm_and_ps(_mm_cmpgt_ps(rcp, _mm_setzero_ps()), _mm_cmplt_ps(rcp, _mm_set1_ps(f32::INFINITY)));
-    Lanes3 {
-        x: _mm_and_ps(keep, _mm_mul_ps(v.x, rcp)),
-        y: _mm_and_ps(keep, _mm_mul_ps(v.y, rcp)),
-        z: _mm_and_ps(keep, _mm_mul_ps(v.z, rcp)),
+/// [`Corner`](super::polygon::Corner) per lane: the corner, its unit direction (glam's
+/// `normalize_or_zero`, `v · (1/√((x² + y²) + z²))`) and that reciprocal length where it is finite
+/// and positive, else both zero.
+#[derive(Copy, Clone)]
+struct Corners {
+    position: Lanes3,
+    unit: Lanes3,
+    reciprocal_length: __m128,
+}
+
+impl Corners {
+    #[inline(always)]
+    unsafe fn new(v: Lanes3) -> Self {
+        let length =
+            _mm_sqrt_ps(_mm_add_ps(_mm_add_ps(_mm_mul_ps(v.x, v.x), _mm_mul_ps(v.y, v.y)), _mm_mul_ps(v.z, v.z)));
+        let rcp = _mm_div_ps(_mm_set1_ps(1.0), length);
+        // `rcp > 0 && rcp < ∞`: false for NaN, ∞ and non-positive values alike.
+        let keep = _mm_and_ps(_mm_cmpgt_ps(rcp, _mm_setzero_ps()), _mm_cmplt_ps(rcp, _mm_set1_ps(f32::INFINITY)));
+        Self {
+            position: v,
+            unit: Lanes3 {
+                x: _mm_and_ps(keep, _mm_mul_ps(v.x, rcp)),
+                y: _mm_and_ps(keep, _mm_mul_ps(v.y, rcp)),
+                z: _mm_and_ps(keep, _mm_mul_ps(v.z, rcp)),
+            },
+            reciprocal_length: _mm_and_ps(keep, rcp),
+        }
+    }
+
+    /// Lane `i` takes lane `(i + 1) mod 4`.
+    #[inline(always)]
+    fn rotated(self) -> Self {
+        Self {
+            position: self.position.rotated(),
+            unit: self.unit.rotated(),
+            reciprocal_length: rotated(self.reciprocal_length),
+        }
     }
 }
 
-/// `edge_integral(a, b)` per lane for unit or zero (finite) `a`, `b`: `θ·(a × b).z/|a × b|`,
-/// `θ = atan2(|a × b|, a·b)`, the ratio 1 for `|a × b| ≤ 10⁻⁷`.
+/// glam's `a × b` per lane: (a.y·b.z − b.y·a.z, a.z·b.x − b.z·a.x, a.x·b.y − b.x·a.y).
 #[inline(always)]
-unsafe fn edge_integrals(a: Lanes3, b: Lanes3) -> __m128 {
-    // glam's `cross`: (a.y·b.z − b.y·a.z, a.z·b.x − b.z·a.x, a.x·b.y − b.x·a.y).
-    let cx = _mm_sub_ps(_mm_mul_ps(a.y, b.z), _mm_mul_ps(b.y, a.z));
-    let cy = _mm_sub_ps(_mm_mul_ps(a.z, b.x), _mm_mul_ps(b.z, a.x));
-    let cz = _mm_sub_ps(_mm_mul_ps(a.x, b.y), _mm_mul_ps(b.x, a.y));
-    let sin_theta = _mm_sqrt_ps(_mm_add_ps(_mm_add_ps(_mm_mul_ps(cx, cx), _mm_mul_ps(cy, cy)), _mm_mul_ps(cz, cz)));
-    let cos_theta = _mm_add_ps(_mm_add_ps(_mm_mul_ps(a.x, b.x), _mm_mul_ps(a.y, b.y)), _mm_mul_ps(a.z, b.z));
+unsafe fn cross(a: Lanes3, b: Lanes3) -> Lanes3 {
+    Lanes3 {
+        x: _mm_sub_ps(_mm_mul_ps(a.y, b.z), _mm_mul_ps(b.y, a.z)),
+        y: _mm_sub_ps(_mm_mul_ps(a.z, b.x), _mm_mul_ps(b.z, a.x)),
+        z: _mm_sub_ps(_mm_mul_ps(a.x, b.y), _mm_mul_ps(b.x, a.y)),
+    }
+}
+
+/// `v · s` per lane.
+#[inline(always)]
+unsafe fn scaled(v: Lanes3, s: __m128) -> Lanes3 {
+    Lanes3 { x: _mm_mul_ps(v.x, s), y: _mm_mul_ps(v.y, s), z: _mm_mul_ps(v.z, s) }
+}
+
+/// `mask ? a : b` per lane for three coordinates.
+#[inline(always)]
+unsafe fn select3(mask: __m128, a: Lanes3, b: Lanes3) -> Lanes3 {
+    Lanes3 { x: select(mask, a.x, b.x), y: select(mask, a.y, b.y), z: select(mask, a.z, b.z) }
+}
+
+/// `edge_integral(a, b)` per lane: `θ·(â × b̂).z/|â × b̂|`, `θ = atan2(|â × b̂|, â·b̂)`, the
+/// ratio 1 for `|â × b̂|` below the smallest normal number, with `â × b̂` as
+/// [`edge_cross`](super::polygon::edge_cross) forms it.
+#[inline(always)]
+unsafe fn edge_integrals(a: &Corners, b: &Corners) -> __m128 {
+    let zero = _mm_setzero_ps();
+    let edge = Lanes3 {
+        x: _mm_sub_ps(b.position.x, a.position.x),
+        y: _mm_sub_ps(b.position.y, a.position.y),
+        z: _mm_sub_ps(b.position.z, a.position.z),
+    };
+    let scaled_by_b = cross(a.unit, scaled(edge, b.reciprocal_length));
+    let scaled_by_a = cross(b.unit, scaled(edge, a.reciprocal_length));
+    let both = _mm_and_ps(_mm_cmpgt_ps(a.reciprocal_length, zero), _mm_cmpgt_ps(b.reciprocal_length, zero));
+    // `b.reciprocal_length <= a.reciprocal_length`, as `!(b > a)` would also take NaN (none arise).
+    let b_farther = _mm_cmple_ps(b.reciprocal_length, a.reciprocal_length);
+    let c = select3(both, select3(b_farther, scaled_by_b, scaled_by_a), Lanes3 { x: zero, y: zero, z: zero });
+    let (u, v) = (a.unit, b.unit);
+    let sin_theta =
+        _mm_sqrt_ps(_mm_add_ps(_mm_add_ps(_mm_mul_ps(c.x, c.x), _mm_mul_ps(c.y, c.y)), _mm_mul_ps(c.z, c.z)));
+    let cos_theta = _mm_add_ps(_mm_add_ps(_mm_mul_ps(u.x, v.x), _mm_mul_ps(u.y, v.y)), _mm_mul_ps(u.z, v.z));
     let theta = atan2_of_finite_nonnegative_y(sin_theta, cos_theta);
     let theta_over_sin =
-        select(_mm_cmpgt_ps(sin_theta, _mm_set1_ps(1.0e-7)), _mm_div_ps(theta, sin_theta), _mm_set1_ps(1.0));
-    _mm_mul_ps(cz, theta_over_sin)
+        select(_mm_cmpge_ps(sin_theta, _mm_set1_ps(f32::MIN_POSITIVE)), _mm_div_ps(theta, sin_theta), _mm_set1_ps(1.0));
+    _mm_mul_ps(c.z, theta_over_sin)
 }
 
 /// [`crate::trig::atan2`] per lane for finite `x` and `y ≥ +0` (a length): its NaN and infinity

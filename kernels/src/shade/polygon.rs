@@ -7,6 +7,16 @@
 //! polygon to the upper hemisphere (Lambert 1760; Arvo 1995). The edge angle is taken as
 //! `atan2(|a × b|, a·b)`, accurate for both tiny and near-antipodal edges (the `acos` form loses
 //! all digits for short edges), and `θ/sin θ → 1` as the edge vanishes, so no NaN can appear.
+//!
+//! The cross product `p̂ᵢ × p̂ᵢ₊₁` is formed from the edge, as `p̂ᵢ × (pᵢ₊₁ − pᵢ)/|pᵢ₊₁|` or
+//! `p̂ᵢ₊₁ × (pᵢ₊₁ − pᵢ)/|pᵢ|` (equal in real arithmetic), scaled by the farther corner. For a
+//! light of size `s` at distance `d` each edge's term is `O(s/d)` while the polygon's sum is
+//! `O((s/d)²)`, and the cross product of two nearly equal unit vectors loses `ε` absolutely — a
+//! relative error `ε·(d/s)²` in the sum: 7 % for a 1 mm light 1 m away, off axis, its sign and
+//! size changed by a backend's multiply-add fusion. The difference of two close corners is exact
+//! in `f32` (Sterbenz), so the edge form errs by `ε·|edge|/max(|pᵢ|, |pᵢ₊₁|)` absolutely, at
+//! most `2ε` and `ε·s/d` for a distant light: the relative error of the sum is `ε·d/s`, what the
+//! corners' own rounding allows.
 
 use crate::trig;
 use core::f32::consts::PI;
@@ -103,25 +113,66 @@ impl Polygon {
     }
 }
 
-/// Σᵢ [`edge_integral`]`(ĉᵢ, ĉᵢ₊₁)` over the first `count` (≤ [`MAX_CORNERS`]) of `corners`,
-/// the last edge closing back to the first corner, `ĉ` each corner normalized (or zero): the sum
-/// of [`Polygon::form_factor`]. This portable loop is what SPIR-V runs; x86-64 runs
+/// Σᵢ [`edge_integral`] of the edge from corner `i` to corner `i + 1` over the first `count`
+/// (≤ [`MAX_CORNERS`]) of `corners`, the last edge closing back to the first corner: the sum of
+/// [`Polygon::form_factor`]. This portable loop is what SPIR-V runs; x86-64 runs
 /// [`super::edge_lanes::edge_sum`], four edges at a time and the same bits.
 #[cfg(any(test, not(all(target_arch = "x86_64", target_feature = "sse2"))))]
 pub fn portable_edge_sum(corners: &[Vec3; MAX_CORNERS], count: usize) -> f32 {
     let n = count.min(MAX_CORNERS);
     let mut sum = 0.0f32;
-    // Each corner's direction is normalized once and carried to the next edge as its start.
-    let first = corners[0].normalize_or_zero();
+    // Each corner's direction is found once and carried to the next edge as its start.
+    let first = Corner::new(corners[0]);
     let mut a = first;
     let mut i = 0usize;
     while i < n {
-        let b = if i + 1 < n { corners[i + 1].normalize_or_zero() } else { first };
-        sum += edge_integral(a, b);
+        let b = if i + 1 < n { Corner::new(corners[i + 1]) } else { first };
+        sum += edge_integral(&a, &b);
         a = b;
         i += 1;
     }
     sum
+}
+
+/// A polygon corner relative to the shading point, with its unit direction and the reciprocal
+/// of its distance — both zero where the corner is zero or not finite (the direction is glam's
+/// `normalize_or_zero`, bit for bit).
+#[derive(Copy, Clone)]
+pub struct Corner {
+    /// The corner, relative to the shading point.
+    pub position: Vec3,
+    /// Its unit direction, or zero.
+    pub unit: Vec3,
+    /// `1/|position|`, or 0 where `unit` is zero.
+    pub reciprocal_length: f32,
+}
+
+impl Corner {
+    /// The corner at `position` from the shading point.
+    #[inline(always)]
+    pub fn new(position: Vec3) -> Self {
+        let reciprocal_length = position.length_recip();
+        if reciprocal_length.is_finite() && reciprocal_length > 0.0 {
+            Self { position, unit: position * reciprocal_length, reciprocal_length }
+        } else {
+            Self { position, unit: Vec3::ZERO, reciprocal_length: 0.0 }
+        }
+    }
+}
+
+/// `â × b̂` of corners `a`, `b` formed from the edge between them, scaled by the farther one (see
+/// the module's note on cancellation): zero where either direction is.
+#[inline(always)]
+pub fn edge_cross(a: &Corner, b: &Corner) -> Vec3 {
+    if !(a.reciprocal_length > 0.0 && b.reciprocal_length > 0.0) {
+        return Vec3::ZERO;
+    }
+    let edge = b.position - a.position;
+    if b.reciprocal_length <= a.reciprocal_length {
+        a.unit.cross(edge * b.reciprocal_length)
+    } else {
+        b.unit.cross(edge * a.reciprocal_length)
+    }
 }
 
 #[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
@@ -129,19 +180,22 @@ use super::edge_lanes::edge_sum;
 #[cfg(not(all(target_arch = "x86_64", target_feature = "sse2")))]
 use portable_edge_sum as edge_sum;
 
-/// The contribution `θ · (â × b̂)·z / |â × b̂|` of the edge from direction `a` to `b` (unit).
+/// The contribution `θ · (â × b̂)·z / |â × b̂|` of the edge from corner `a` to `b`, with
+/// `â × b̂` from [`edge_cross`]. `θ/sin θ` is taken wherever `sin θ` is a normal number — also
+/// for a nearly antipodal edge, `θ ≈ π`: a horizon edge passing close by the shading point, whose
+/// `±π` a cut-off at `sin θ = 10⁻⁷` dropped — and its limit 1 below (the term is then at most
+/// `π·sin θ < 10⁻³⁷`).
 /// Always inlined: each edge is a chain of a square root, two divisions and the `atan2`
 /// polynomial, and only inlined into `portable_edge_sum`'s loop can a processor overlap one
 /// edge's chain with the next (measured on the CPU before the lanes: a quad's form factor 1.7×
 /// faster, the same bits).
 #[inline(always)]
-pub fn edge_integral(a: Vec3, b: Vec3) -> f32 {
-    let cross = a.cross(b);
+pub fn edge_integral(a: &Corner, b: &Corner) -> f32 {
+    let cross = edge_cross(a, b);
     let sin_theta = cross.length();
-    let cos_theta = a.dot(b);
+    let cos_theta = a.unit.dot(b.unit);
     let theta = trig::atan2(sin_theta, cos_theta);
-    // θ / sin θ, with its limit 1 for a vanishing edge (sin θ = 0 with θ = 0).
-    let theta_over_sin = if sin_theta > 1.0e-7 { theta / sin_theta } else { 1.0 };
+    let theta_over_sin = if sin_theta >= f32::MIN_POSITIVE { theta / sin_theta } else { 1.0 };
     cross.z * theta_over_sin
 }
 
@@ -264,10 +318,70 @@ pub(crate) mod tests {
                 Vec3::new(crate::hash::unit_float(h.x) * 4.0 - 2.0, crate::hash::unit_float(h.y) * 4.0 + 0.1, 0.0)
             };
             let quad = [c(0), c(1), c(2), c(3)];
-            let angles: f32 = (0..4).map(|i| edge_integral(quad[i].normalize(), quad[(i + 1) % 4].normalize())).sum();
+            let angles: f32 =
+                (0..4).map(|i| edge_integral(&Corner::new(quad[i]), &Corner::new(quad[(i + 1) % 4]))).sum();
             irregular += usize::from(angles != 0.0);
             assert_eq!(quad_form_factor(quad), 0.0, "{quad:?}");
         }
         assert!(irregular > 0, "some quads' edge angles leave a rounding residue");
+    }
+
+    /// The form factor of the polygon `q` (f32 corners, taken exactly) by the same edge formula
+    /// in f64, whose rounding (`10⁻¹⁶·(d/s)²` relative) is far below the f32 tolerances here.
+    fn form_factor_f64(q: [Vec3; 4]) -> f64 {
+        let q = q.map(|c| c.as_dvec3());
+        let sum: f64 = (0..4)
+            .map(|i| {
+                let (a, b) = (q[i].normalize(), q[(i + 1) % 4].normalize());
+                let cross = a.cross(b);
+                cross.z * cross.length().atan2(a.dot(b)) / cross.length()
+            })
+            .sum();
+        (sum / (2.0 * std::f64::consts::PI)).abs()
+    }
+
+    #[test]
+    fn small_lights_off_axis_keep_their_precision() {
+        // A square of side s about unit distance away, off axis: each edge's term is O(s) and the
+        // sum O(s²·cos θ), so the cross product of two nearly equal unit directions (error ε)
+        // left a relative error ε/(s²·cos θ) — 7 % at s = 10⁻³, 17× at s = 10⁻⁴. Formed from the
+        // edge it is ε/(s·cos θ), what the corners' rounding allows: within 20 times that.
+        for centre in [Vec3::new(0.5, 0.5, 0.7), Vec3::new(0.6, 0.3, 0.2), Vec3::new(-0.8, 0.1, 0.05)] {
+            for s in [1e-2f32, 1e-3, 3e-4, 1e-4] {
+                // The square facing the origin, its edges along two directions ⟂ centre.
+                let n = centre.normalize();
+                let u = n.any_orthonormal_vector() * s;
+                let v = n.cross(u);
+                let corner = centre - 0.5 * (u + v);
+                let q = [corner, corner + u, corner + u + v, corner + v];
+                let expected = form_factor_f64(q);
+                let got = f64::from(quad_form_factor(q));
+                let tolerance = 20.0 * f64::from(f32::EPSILON / (s * n.z));
+                assert!(expected > 0.0);
+                assert!(
+                    (got - expected).abs() <= tolerance * expected,
+                    "side {s} at {centre}: {got} vs {expected} ({:.2e} relative, tolerance {tolerance:.2e})",
+                    (got - expected).abs() / expected
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn a_light_just_in_front_of_the_shading_point_fills_its_quarter_sphere() {
+        // A vertical light (plane y = ε, x and z in [−1, 1]) crossing the horizon, the shading
+        // point (normal +z) a hair in front of its centre: the light fills the quarter sphere
+        // y > 0, z > 0, form factor 1/2. Clipped, its horizon edge runs between two nearly
+        // opposite directions, whose ±π a cut-off at sin θ = 10⁻⁷ dropped (1.4·10⁻⁹ at ε = 2·10⁻⁸).
+        for epsilon in [1e-3f32, 5e-8, 2e-8, 1e-12] {
+            let q = [
+                Vec3::new(-1.0, epsilon, -1.0),
+                Vec3::new(1.0, epsilon, -1.0),
+                Vec3::new(1.0, epsilon, 1.0),
+                Vec3::new(-1.0, epsilon, 1.0),
+            ];
+            let got = quad_form_factor(q);
+            assert!((got - 0.5).abs() < 1e-3, "ε = {epsilon}: {got}");
+        }
     }
 }

@@ -488,8 +488,8 @@ mod tests {
     fn unshadowed_estimate_is_unbiased_for_u() {
         // Mean of 2^17 independent samples within 3 standard errors (plus 1e-4 relative for the
         // f32 accumulation) of the analytic U: glossy and diffuse materials, one and two lights,
-        // a light crossing the horizon, a grazing view; with and without the residual towards GGX,
-        // whose U_N evaluates the GGX lobe.
+        // a light crossing the horizon, a grazing view, a rhombus; with and without the residual
+        // towards GGX, whose U_N evaluates the GGX lobe.
         let view = Vec3::new(0.6, 0.0, 0.8);
         let one = [ceiling_light(Vec3::new(0.3, 0.2, 1.0), 0.4, Vec3::new(5.0, 4.0, 3.0))];
         let two = [one[0], ceiling_light(Vec3::new(-1.5, 0.0, 0.3), 0.5, Vec3::splat(2.0))];
@@ -500,11 +500,22 @@ mod tests {
             Vec3::ONE,
             true,
         )];
+        // A parallelogram that is no rectangle (a 60° rhombus), sampled by area: the
+        // spherical-rectangle method sent 38 % of its samples past such a light, and U_N fell to
+        // 0.56 U.
+        let rhombus = [Light::quad(
+            Vec3::new(-0.6, 0.4, 1.0),
+            Vec3::new(1.0, 0.0, 0.0),
+            Vec3::new(0.5, -0.866_025_4, 0.0),
+            Vec3::new(3.0, 3.0, 2.0),
+            false,
+        )];
         let cases = [
             (&one[..], material(Vec3::new(0.8, 0.6, 0.4), 0.3, 0.5), view),
             (&one[..], material(Vec3::splat(0.7), 1.0, 0.0), view),
             (&two[..], material(Vec3::new(0.9, 0.9, 0.9), 0.2, 1.0), view),
             (&crossing[..], material(Vec3::splat(0.5), 0.5, 0.0), Vec3::new(-0.99, 0.0, 0.141).normalize()),
+            (&rhombus[..], material(Vec3::splat(0.7), 0.6, 0.0), view),
         ];
         for (k, (lights, material, view)) in cases.into_iter().enumerate() {
             for (kind, residual) in KINDS_AND_RESIDUAL {
