@@ -186,12 +186,12 @@ unsafe fn edge_integrals(a: &Corners, b: &Corners) -> __m128 {
         y: _mm_sub_ps(b.position.y, a.position.y),
         z: _mm_sub_ps(b.position.z, a.position.z),
     };
-    let scaled_by_b = cross(a.unit, scaled(edge, b.reciprocal_length));
-    let scaled_by_a = cross(b.unit, scaled(edge, a.reciprocal_length));
     let both = _mm_and_ps(_mm_cmpgt_ps(a.reciprocal_length, zero), _mm_cmpgt_ps(b.reciprocal_length, zero));
-    // `b.reciprocal_length <= a.reciprocal_length`, as `!(b > a)` would also take NaN (none arise).
+    // `b.reciprocal_length <= a.reciprocal_length`: â × edge/|b|, else b̂ × edge/|a|.
     let b_farther = _mm_cmple_ps(b.reciprocal_length, a.reciprocal_length);
-    let c = select3(both, select3(b_farther, scaled_by_b, scaled_by_a), Lanes3 { x: zero, y: zero, z: zero });
+    let unit = select3(b_farther, a.unit, b.unit);
+    let scale = select(b_farther, b.reciprocal_length, a.reciprocal_length);
+    let c = select3(both, cross(unit, scaled(edge, scale)), Lanes3 { x: zero, y: zero, z: zero });
     let (u, v) = (a.unit, b.unit);
     let sin_theta =
         _mm_sqrt_ps(_mm_add_ps(_mm_add_ps(_mm_mul_ps(c.x, c.x), _mm_mul_ps(c.y, c.y)), _mm_mul_ps(c.z, c.z)));

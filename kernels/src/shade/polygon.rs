@@ -167,12 +167,13 @@ pub fn edge_cross(a: &Corner, b: &Corner) -> Vec3 {
     if !(a.reciprocal_length > 0.0 && b.reciprocal_length > 0.0) {
         return Vec3::ZERO;
     }
-    let edge = b.position - a.position;
-    if b.reciprocal_length <= a.reciprocal_length {
-        a.unit.cross(edge * b.reciprocal_length)
+    // â × (b − a)/|b| where b is the farther corner, else b̂ × (b − a)/|a|.
+    let (unit, scale) = if b.reciprocal_length <= a.reciprocal_length {
+        (a.unit, b.reciprocal_length)
     } else {
-        b.unit.cross(edge * a.reciprocal_length)
-    }
+        (b.unit, a.reciprocal_length)
+    };
+    unit.cross((b.position - a.position) * scale)
 }
 
 #[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
