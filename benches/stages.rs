@@ -7,9 +7,9 @@
 //! the stages exchange against the same pass over one record per pixel, and `pipeline`, one
 //! sample per pixel through generate → trace → shade → occlusion as wavefront passes over
 //! streams against the same kernel functions called one after the other per pixel — and
-//! `workgroup_size`, for occupancy tuning: the Vulkan trace and shade stages on a 512² frame in
-//! workgroups of 32 to 256 invocations (`BackendOptions::workgroup_sizes`), timed by the GPU's
-//! timestamps around the dispatch alone.
+//! `workgroup_size`, for occupancy tuning: the Vulkan compute trace methods and the shade stage
+//! on a 512² frame in workgroups of 32 to 256 invocations (`BackendOptions::workgroup_sizes`),
+//! timed by the GPU's timestamps around the dispatch alone, in benchmark mode after a warm-up.
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use glam::{UVec2, Vec4};
@@ -25,7 +25,7 @@ use raywave::kernels::trace::{trace_closest, trace_occluded};
 use raywave::shading::{ShadeAccumulator, ShadeData};
 use raywave::shared::sampling::{sampler_kind, SamplerProbeParams};
 use raywave::shared::{GenerateParams, ShadeParams};
-use raywave::{open_backend, Backend, BackendOptions, DeviceChoice, Scene, WorkgroupSizes};
+use raywave::{open_backend, Backend, BackendOptions, DeviceChoice, Scene};
 use std::hint::black_box;
 
 /// Image sizes benchmarked: a small tile and a 512² frame.
@@ -75,7 +75,8 @@ fn stages(c: &mut Criterion) {
     denoise(c, &mut setup);
     pipeline(c, &mut setup);
     layout(c);
-    workgroup_size(c, &setup);
+    #[cfg(feature = "vulkan")]
+    workgroup_size::group(c, &setup);
 }
 
 /// The samplers alone: one 2-D slot of every sample of a 512² frame at 4 samples per pixel
@@ -139,42 +140,107 @@ fn trace_primary(c: &mut Criterion, setup: &mut Setup) {
     group.finish();
 }
 
-/// Workgroup sizes the `workgroup_size` group compares: powers of two lavapipe and every GPU
-/// measured so far run (Vulkan guarantees only 128), the compiled 64 and the preferred shade
-/// size 256 among them.
-const WORKGROUP_SIZES: [u32; 4] = [32, 64, 128, 256];
+/// Criterion's `workgroup_size` group (with the `vulkan` feature, which opens the device and
+/// lists what it runs).
+#[cfg(feature = "vulkan")]
+mod workgroup_size {
+    use super::{black_box, cpu, generate_params, open_backend, BackendOptions, DeviceChoice, Setup, SIZES};
+    use criterion::{BenchmarkId, Criterion, Throughput};
+    use raywave::bench::{warm_up, GPU_SETTLE_SECONDS, SUSTAIN_SECONDS};
+    use raywave::{Backend, StageReport, TraceMethod, WorkgroupSizes};
+    use std::time::Duration;
 
-/// The Vulkan trace and shade stages on the 512² frame in each of [`WORKGROUP_SIZES`], each
-/// size a backend of its own. Criterion gets the GPU time of the dispatches (`StageReport`), not
-/// the wall clock around uploads and readbacks, which would hide what the size changes.
-fn workgroup_size(c: &mut Criterion, setup: &Setup) {
-    if setup.vulkan.is_none() {
-        return;
-    }
-    let mut group = c.benchmark_group("workgroup_size");
-    let (w, h) = SIZES[1];
-    let rays = cpu::generate(&generate_params(&setup.scene, w, h, 0, 1));
-    let hits = cpu::trace(&setup.cpu_scene, &rays);
-    let params = setup.shade_params(w, h);
-    group.throughput(Throughput::Elements(rays.len() as u64));
-    for size in WORKGROUP_SIZES {
-        let options = BackendOptions { workgroup_sizes: Some(WorkgroupSizes::all(size)), ..Default::default() };
-        let mut v = open_backend(DeviceChoice::Vulkan(None), &options).expect("every device runs these sizes");
-        v.load_scene(&setup.scene).expect("acceleration structures build");
-        group.bench_function(BenchmarkId::new("vulkan-trace", size), |b| {
-            b.iter_custom(|iters| gpu_time(iters, || v.trace(black_box(&rays)).expect("trace").1))
-        });
-        group.bench_function(BenchmarkId::new("vulkan-shade", size), |b| {
-            let data = &setup.data;
-            b.iter_custom(|iters| gpu_time(iters, || v.shade(black_box(&params), data, &rays, &hits).expect("shade").1))
-        });
-    }
-    group.finish();
-}
+    /// Workgroup sizes the group compares: powers of two lavapipe and every GPU measured so far
+    /// run, the compiled 64 and the preferred shade size 256 among them. Vulkan guarantees only
+    /// 128 invocations a workgroup: a device that does not run a size skips it, with a note.
+    const WORKGROUP_SIZES: [u32; 4] = [32, 64, 128, 256];
 
-/// The summed GPU time of `iters` runs of a stage, as criterion's measured time.
-fn gpu_time(iters: u64, mut run: impl FnMut() -> raywave::StageReport) -> std::time::Duration {
-    std::time::Duration::from_secs_f64((0..iters).map(|_| run().seconds).sum())
+    /// The compute trace methods the best Vulkan device has — software traversal, and ray query
+    /// where it has it (`DeviceInfo::trace_methods`, as `raywave bench trace` picks them; the
+    /// ray-tracing pipeline has no workgroups) — and the shade stage on the 512² frame, in each
+    /// of [`WORKGROUP_SIZES`] the device runs, each size and method a backend of its own. Shade
+    /// does not depend on the trace method: it is measured once per size, on the `sw` backend.
+    /// As `raywave bench` measures: in benchmark mode ([`SUSTAIN_SECONDS`]), each backend after
+    /// a [`warm_up`] that settles for [`GPU_SETTLE_SECONDS`], run before its first measurement
+    /// (none where criterion's filter leaves it none, nor where criterion only checks that the
+    /// benches run), so that every size meets the GPU at the same clocks. Criterion gets the GPU
+    /// time of the dispatches (`StageReport`), not the wall clock around uploads and readbacks,
+    /// which would hide what the size changes.
+    pub fn group(c: &mut Criterion, setup: &Setup) {
+        if setup.vulkan.is_none() {
+            return;
+        }
+        let devices = raywave::vulkan::enumerate_devices().expect("the Vulkan device the setup opened");
+        let device = &devices[raywave::device::best_vulkan_device(&devices).expect("the setup's device")];
+        let sizes: Vec<u32> = WORKGROUP_SIZES
+            .into_iter()
+            .filter(|size| {
+                let runs = device.workgroup_sizes.contains(size);
+                if !runs {
+                    eprintln!("note: {} does not run workgroups of {size}: workgroup_size skips it", device.name);
+                }
+                runs
+            })
+            .collect();
+        let methods: Vec<TraceMethod> =
+            device.trace_methods().into_iter().filter(|&method| method != TraceMethod::RtPipeline).collect();
+        let mut group = c.benchmark_group("workgroup_size");
+        let (w, h) = SIZES[1];
+        let rays = cpu::generate(&generate_params(&setup.scene, w, h, 0, 1));
+        let hits = cpu::trace(&setup.cpu_scene, &rays);
+        let params = setup.shade_params(w, h);
+        let trace = |v: &mut dyn Backend| v.trace(black_box(&rays)).expect("trace").1;
+        let shade = |v: &mut dyn Backend| v.shade(black_box(&params), &setup.data, &rays, &hits).expect("shade").1;
+        group.throughput(Throughput::Elements(rays.len() as u64));
+        for &size in &sizes {
+            for &method in &methods {
+                let options = BackendOptions {
+                    trace: Some(method),
+                    sustain_seconds: SUSTAIN_SECONDS,
+                    workgroup_sizes: Some(WorkgroupSizes::all(size)),
+                    ..Default::default()
+                };
+                let choice = DeviceChoice::Vulkan(Some(device.index));
+                let mut v = open_backend(choice, &options).expect("a size and trace method the device runs");
+                v.load_scene(&setup.scene).expect("acceleration structures build");
+                let shades = method == TraceMethod::Software;
+                let mut warmed = !benchmarking();
+                let mut warm = |v: &mut dyn Backend| {
+                    if !std::mem::replace(&mut warmed, true) {
+                        warm_up(GPU_SETTLE_SECONDS, || {
+                            let shade_seconds = if shades { shade(v).seconds } else { 0.0 };
+                            Ok(trace(v).seconds + shade_seconds)
+                        })
+                        .expect("warm-up");
+                    }
+                };
+                let v = v.as_mut();
+                group.bench_function(BenchmarkId::new(format!("vulkan-{}-trace", method.name()), size), |b| {
+                    warm(v);
+                    b.iter_custom(|iters| gpu_time(iters, || trace(v)))
+                });
+                if shades {
+                    group.bench_function(BenchmarkId::new("vulkan-shade", size), |b| {
+                        warm(v);
+                        b.iter_custom(|iters| gpu_time(iters, || shade(v)))
+                    });
+                }
+            }
+        }
+        group.finish();
+    }
+
+    /// Whether criterion measures (`cargo bench`) rather than runs every benchmark once to check
+    /// it (`cargo test`, or `--test`), as criterion decides from the same arguments.
+    fn benchmarking() -> bool {
+        let args: Vec<String> = std::env::args().collect();
+        args.iter().any(|a| a == "--bench") && !args.iter().any(|a| a == "--test")
+    }
+
+    /// The summed GPU time of `iters` runs of a stage, as criterion's measured time.
+    fn gpu_time(iters: u64, mut run: impl FnMut() -> StageReport) -> Duration {
+        Duration::from_secs_f64((0..iters).map(|_| run().seconds).sum())
+    }
 }
 
 /// Resolve + U of every light + one MIS sample per camera ray (per call, on the hits of one

@@ -55,11 +55,11 @@ pub struct Measurement {
     /// Vulkan: how many traces ran back to back in each timed submission (benchmark mode, 50 ms
     /// a submission; the last repetition's), `seconds` being their mean; 1 on the CPU.
     pub dispatches: u32,
-    /// Vulkan: seconds of the untimed warm-up before the measurement (until the times had not
-    /// fallen for 5 s), long where the GPU had to raise its clocks first; absent on the CPU,
-    /// whose tracers take turns instead.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub warm_up_seconds: Option<f64>,
+    /// Seconds of the untimed warm-up before the measurement: on Vulkan until the times had not
+    /// fallen for 5 s (`--settle-seconds`), long where the GPU had to raise its clocks first; on
+    /// the CPU until the tracers, taking turns, had not got faster for [`CPU_SETTLE_SECONDS`]
+    /// (one warm-up per thread count and ray kind, shared by its tracers' lines).
+    pub warm_up_seconds: f64,
     /// Vulkan compute trace methods: invocations per workgroup; absent on the CPU and for the
     /// ray-tracing pipeline, which have none.
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -127,16 +127,16 @@ fn ray_sets(scene: &Scene, cpu_scene: &CpuScene, resolution: u32) -> RaySets {
 /// How long a benchmark's times must have stopped falling before it measures, on the CPU
 /// ([`warm_up`]): drivers compile pipelines lazily (lavapipe at the first dispatch), caches and
 /// branch predictors warm up.
-pub(crate) const CPU_SETTLE_SECONDS: f64 = 0.5;
+pub const CPU_SETTLE_SECONDS: f64 = 0.5;
 
 /// The same on a GPU, whose clocks follow its load slowly: an NVIDIA H200 that had fallen to its
 /// idle 345 MHz held them for ~3 s under the denoise bench's sustained submissions (30–70 %
 /// busy) and then rose by ~150 MHz a second (README) — where opening a device gives it its
 /// 1980 MHz boost at once, for a few seconds, which load then keeps.
-pub(crate) const GPU_SETTLE_SECONDS: f64 = 5.0;
+pub const GPU_SETTLE_SECONDS: f64 = 5.0;
 
 /// Longest warm-up: past it the measurement starts even if the times are still falling.
-pub(crate) const MAX_WARM_UP_SECONDS: f64 = 30.0;
+pub const MAX_WARM_UP_SECONDS: f64 = 30.0;
 
 /// The warm-up runs in rounds of at least this long and at least [`WARM_UP_ROUND_RUNS`] runs.
 const WARM_UP_ROUND_SECONDS: f64 = 0.25;
@@ -154,7 +154,7 @@ const FALLING_FRACTION: f64 = 0.02;
 /// device gives — on a fresh machine, where compiling the pipelines outlasted them (README).
 /// 50 ms of back-to-back dispatches per submission keep it mostly busy, so that it raises its
 /// clocks ([`GPU_SETTLE_SECONDS`]) and holds them.
-pub(crate) const SUSTAIN_SECONDS: f64 = 0.05;
+pub const SUSTAIN_SECONDS: f64 = 0.05;
 
 /// `settle_seconds` (`--settle-seconds`) if it is a settling time the warm-up takes:
 /// finite, within `0..=`[`MAX_WARM_UP_SECONDS`]; else a typed error naming `settle-seconds`.
@@ -171,19 +171,26 @@ pub(crate) fn check_settle_seconds(settle_seconds: f64) -> Result<f64> {
 
 /// Runs `run`, which returns the seconds it measured, untimed until those times have stopped
 /// falling for `settle_seconds` ([`CPU_SETTLE_SECONDS`], [`GPU_SETTLE_SECONDS`]): in rounds
-/// ([`WARM_UP_ROUND_SECONDS`], [`WARM_UP_ROUND_RUNS`]), each round's median against the best
-/// before it ([`FALLING_FRACTION`]), for at most [`MAX_WARM_UP_SECONDS`] (then with a note on
-/// stderr). Returns the warm-up's seconds.
-pub(crate) fn warm_up(settle_seconds: f64, mut run: impl FnMut() -> Result<f64>) -> Result<f64> {
+/// (`WARM_UP_ROUND_SECONDS`, `WARM_UP_ROUND_RUNS`), each round's median against the best
+/// before it (`FALLING_FRACTION`), for at most [`MAX_WARM_UP_SECONDS`] (then with a note on
+/// stderr). Returns the warm-up's seconds. Every `raywave bench` runs it before it measures, and
+/// so does criterion's `workgroup_size` group.
+pub fn warm_up(settle_seconds: f64, run: impl FnMut() -> Result<f64>) -> Result<f64> {
     let start = Instant::now();
+    warm_up_on(|| start.elapsed().as_secs_f64(), settle_seconds, run)
+}
+
+/// [`warm_up`] on the clock `now`, the seconds since the warm-up began: the wall clock there, a
+/// simulated one in the tests, so that they do not depend on how fast the machine runs them.
+fn warm_up_on(mut now: impl FnMut() -> f64, settle_seconds: f64, mut run: impl FnMut() -> Result<f64>) -> Result<f64> {
     let (mut best, mut last_fall) = (f64::INFINITY, 0.0);
     loop {
-        let round_start = Instant::now();
+        let round_start = now();
         let mut times = Vec::new();
-        while times.len() < WARM_UP_ROUND_RUNS || round_start.elapsed().as_secs_f64() < WARM_UP_ROUND_SECONDS {
+        while times.len() < WARM_UP_ROUND_RUNS || now() - round_start < WARM_UP_ROUND_SECONDS {
             times.push(run()?);
         }
-        let (round, elapsed) = (median(times), start.elapsed().as_secs_f64());
+        let (round, elapsed) = (median(times), now());
         if round < best * (1.0 - FALLING_FRACTION) {
             last_fall = elapsed;
         }
@@ -306,7 +313,7 @@ fn measurement(
     rays: usize,
     seconds: f64,
     dispatches: u32,
-    warm_up_seconds: Option<f64>,
+    warm_up_seconds: f64,
 ) -> Measurement {
     Measurement {
         stage: "trace",
@@ -383,16 +390,21 @@ pub fn bench_trace(options: &TraceBenchOptions, mut emit: impl FnMut(&dyn BenchL
                 #[cfg(feature = "embree")]
                 ("embree", &embree),
             ];
+            let time = |tracer: &dyn CpuTracer| pool.install(|| time_cpu(tracer, kind, rays));
+            // Untimed first, as `bench shade` and `bench denoise` measure the CPU: every tracer in
+            // turn until their summed times have stopped falling.
+            let warm_up_seconds =
+                warm_up(CPU_SETTLE_SECONDS, || Ok(tracers.iter().map(|(_, tracer)| time(*tracer)).sum()))?;
             // Repetitions interleave the tracers, so that a slow spell of a shared machine lands on
             // all of them alike and their ratios stay comparable.
             let mut times = vec![Vec::new(); tracers.len()];
             for _ in 0..options.repeats {
                 for ((_, tracer), times) in tracers.iter().zip(&mut times) {
-                    times.push(pool.install(|| time_cpu(*tracer, kind, rays)));
+                    times.push(time(*tracer));
                 }
             }
             for ((name, _), times) in tracers.iter().zip(times) {
-                emit(&measurement(name, kind, threads, rays.len(), median(times), 1, None));
+                emit(&measurement(name, kind, threads, rays.len(), median(times), 1, warm_up_seconds));
             }
         }
     }
@@ -415,14 +427,8 @@ fn bench_vulkan(
     emit: &mut impl FnMut(&dyn BenchLine),
 ) -> Result<()> {
     use crate::{Backend, TraceMethod};
-    let methods = [
-        (TraceMethod::Software, true),
-        (TraceMethod::RayQuery, device.info.missing_for_ray_query().is_empty()),
-        (TraceMethod::RtPipeline, device.info.missing_for_rt_pipeline().is_empty()),
-    ];
-    let methods: Vec<TraceMethod> = methods.iter().filter(|(_, available)| *available).map(|(m, _)| *m).collect();
     let no_workgroups = [device.preferred.trace];
-    for method in methods {
+    for method in device.info.trace_methods() {
         let has_workgroups = method != TraceMethod::RtPipeline;
         for &size in if has_workgroups { &device.sizes[..] } else { &no_workgroups } {
             let mut backend = device.open(size, Some(method))?;
@@ -438,7 +444,7 @@ fn bench_vulkan(
                 })?;
                 let trace = &measured.stages[0];
                 let name = format!("raywave-vk-{}", method.name());
-                let warm_up = Some(measured.warm_up_seconds);
+                let warm_up = measured.warm_up_seconds;
                 emit(&Measurement {
                     workgroup_size: has_workgroups.then(|| backend.workgroup_sizes().trace),
                     ..measurement(&name, kind, 1, rays.len(), trace.seconds, trace.dispatches, warm_up)
@@ -486,26 +492,55 @@ impl BenchLine for BuildMeasurement {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::cell::Cell;
 
-    /// Times that hold for 0.4 s, fall for 0.4 s and hold again, in runs of 10 ms — as a GPU's
-    /// that holds its idle clocks for a while under load before it raises them: a warm-up that
-    /// must see no fall for 0.6 s outlasts the first hold and the fall.
-    #[test]
-    fn the_warm_up_lasts_until_the_times_have_stopped_falling_for_its_settling_time() {
-        let mut calls = 0;
+    /// Seconds each simulated run takes: a binary fraction, so that the simulated clock adds up
+    /// exactly (16 runs make a 0.25 s round).
+    const TICK: f64 = 1.0 / 64.0;
+
+    /// Runs [`warm_up_on`] on a simulated clock that each run advances by [`TICK`], run `n` (from
+    /// 1) measuring `time(n)`: the warm-up's seconds and how many runs it took.
+    fn simulated_warm_up(settle_seconds: f64, time: impl Fn(u32) -> f64) -> (f64, u32) {
+        let runs = Cell::new(0);
         let run = || {
-            calls += 1;
-            std::thread::sleep(std::time::Duration::from_millis(10));
-            Ok(1.0 / calls.clamp(40, 80) as f64)
+            runs.set(runs.get() + 1);
+            Ok(time(runs.get()))
         };
-        warm_up(0.6, run).expect("warm-up");
-        assert!(calls > 80 + WARM_UP_ROUND_RUNS, "ended after {calls} runs, before the times stopped falling");
+        let seconds = warm_up_on(|| f64::from(runs.get()) * TICK, settle_seconds, run).expect("warm-up");
+        (seconds, runs.get())
     }
 
-    /// Steady times end the warm-up (the test returns), not before its settling time.
+    /// Times that hold for 0.5 s, fall for 0.5 s and hold again — as a GPU's that holds its idle
+    /// clocks for a while under load before it raises them: a warm-up that must see no fall for
+    /// 0.6 s outlasts the first hold and the fall, and ends within two rounds after 0.6 s more.
+    #[test]
+    fn the_warm_up_lasts_until_the_times_have_stopped_falling_for_its_settling_time() {
+        let (seconds, runs) = simulated_warm_up(0.6, |n| 1.0 / f64::from(n.clamp(32, 64)));
+        assert!(runs > 64 + WARM_UP_ROUND_RUNS as u32, "ended after {runs} runs, before the times stopped falling");
+        assert!((1.6..=1.6 + 2.0 * WARM_UP_ROUND_SECONDS).contains(&seconds), "{seconds} s, {runs} runs");
+        assert_eq!(seconds, f64::from(runs) * TICK, "the seconds are the clock's");
+    }
+
+    /// Steady times end the warm-up at its settling time, not before (the first round is a
+    /// fall from no time at all); a settling time of 0 after one round.
     #[test]
     fn steady_times_end_the_warm_up_after_its_settling_time() {
-        let seconds = warm_up(0.3, || Ok(1e-3)).expect("warm-up");
-        assert!(seconds >= 0.3, "{seconds} s");
+        let (seconds, _) = simulated_warm_up(0.3, |_| 1e-3);
+        assert!((0.3..=0.3 + 2.0 * WARM_UP_ROUND_SECONDS).contains(&seconds), "{seconds} s");
+        assert_eq!(simulated_warm_up(0.0, |_| 1e-3), (WARM_UP_ROUND_SECONDS, 16));
+    }
+
+    /// Times that never stop falling end the warm-up at [`MAX_WARM_UP_SECONDS`].
+    #[test]
+    fn times_that_keep_falling_end_the_warm_up_at_its_limit() {
+        let (seconds, _) = simulated_warm_up(5.0, |n| 0.9f64.powi(n as i32));
+        assert!((MAX_WARM_UP_SECONDS..=MAX_WARM_UP_SECONDS + WARM_UP_ROUND_SECONDS).contains(&seconds), "{seconds}");
+    }
+
+    /// On the wall clock the warm-up returns its own elapsed seconds: at least its settling time.
+    #[test]
+    fn the_wall_clock_warm_up_reports_at_least_its_settling_time() {
+        let seconds = warm_up(0.05, || Ok(1e-3)).expect("warm-up");
+        assert!(seconds >= 0.05, "{seconds} s");
     }
 }

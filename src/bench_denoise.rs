@@ -9,7 +9,8 @@
 //! 50 ms, so that it holds its clocks (`crate::BackendOptions::sustain_seconds`).
 //! "Bytes" counts every buffer a pass reads or writes once ([`crate::denoise::DenoisePass::bytes_per_pixel`]) —
 //! the traffic of an ideal cache — so `gb_per_s` is the effective bandwidth, and on a GPU with a
-//! known peak (`--peak-gbps`, or the datasheet value of an NVIDIA H100/H200) its fraction.
+//! known peak (`--peak-gbps`, or the datasheet value of an NVIDIA H100 or H200 model,
+//! [`known_peak_gbps`]) its fraction.
 //! On every backend it is also set against that backend's copy probe ([`Backend::copy_probe`]):
 //! a pass that only reads and writes one `Vec4` per pixel of the same frame, the bandwidth a
 //! memory-bound pass can reach there.
@@ -119,17 +120,20 @@ impl DenoiseMeasurement {
     }
 }
 
-/// Datasheet peak memory bandwidth (GB/s) of the GPUs this project is lent, by device name:
-/// H100 SXM5 80 GB HBM3 3 350, H100 PCIe 2 000, H200 4 800 (NVIDIA H100 and H200 datasheets).
+/// Datasheet peak memory bandwidth (GB/s) of a GPU by its exact Vulkan device name
+/// (`deviceName`, as `raywave devices` lists it; the names NVIDIA's driver gives), for the
+/// models whose name fixes it (NVIDIA H100 and H200 datasheets): H100 SXM5 80 GB HBM3 3 350,
+/// H100 PCIe 2 000, H100 NVL 3 900, H200 SXM and H200 NVL 4 800. Any other name is `None`
+/// (`--peak-gbps` gives it): GH200, whose bandwidth differs between its memory versions (96 GB
+/// HBM3 4 000, 144 GB HBM3e 4 900), H800, H20, and names this list does not know — a partial
+/// match gave the H100 NVL the SXM5's 3 350 and every GH200 the H200's 4 800.
 pub fn known_peak_gbps(device_name: &str) -> Option<f64> {
-    if device_name.contains("H200") {
-        Some(4800.0)
-    } else if device_name.contains("H100") && device_name.contains("PCIe") {
-        Some(2000.0)
-    } else if device_name.contains("H100") {
-        Some(3350.0)
-    } else {
-        None
+    match device_name {
+        "NVIDIA H100 80GB HBM3" => Some(3350.0),
+        "NVIDIA H100 PCIe" => Some(2000.0),
+        "NVIDIA H100 NVL" => Some(3900.0),
+        "NVIDIA H200" | "NVIDIA H200 NVL" => Some(4800.0),
+        _ => None,
     }
 }
 
@@ -239,7 +243,7 @@ pub fn bench_denoise(options: &DenoiseBenchOptions, mut emit: impl FnMut(&Denois
         for &size in &device.sizes {
             let mut vulkan = device.open(size, None)?;
             let measuring = Measuring {
-                peak_gbps: options.peak_gbps.or_else(|| known_peak_gbps(&vulkan.name())),
+                peak_gbps: options.peak_gbps.or_else(|| known_peak_gbps(&device.info.name)),
                 settle_seconds: device.settle_seconds,
                 workgroup_size: Some(vulkan.workgroup_sizes().denoise),
             };
@@ -247,4 +251,29 @@ pub fn bench_denoise(options: &DenoiseBenchOptions, mut emit: impl FnMut(&Denois
         }
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_datasheet_peak_is_known_for_exact_model_names_only() {
+        assert_eq!(known_peak_gbps("NVIDIA H100 80GB HBM3"), Some(3350.0));
+        assert_eq!(known_peak_gbps("NVIDIA H100 PCIe"), Some(2000.0));
+        assert_eq!(known_peak_gbps("NVIDIA H100 NVL"), Some(3900.0));
+        assert_eq!(known_peak_gbps("NVIDIA H200"), Some(4800.0));
+        assert_eq!(known_peak_gbps("NVIDIA H200 NVL"), Some(4800.0));
+        for unknown in [
+            "NVIDIA GH200 480GB",
+            "NVIDIA GH200 144G HBM3e",
+            "NVIDIA H800",
+            "NVIDIA H100",
+            "vulkan:0 NVIDIA H100 80GB HBM3 (trace: rtpipe)",
+            "llvmpipe (LLVM 15.0.6, 256 bits)",
+            "",
+        ] {
+            assert_eq!(known_peak_gbps(unknown), None, "{unknown}");
+        }
+    }
 }

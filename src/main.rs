@@ -177,8 +177,8 @@ struct DenoiseBenchArgs {
     /// Skip the Vulkan device.
     #[arg(long)]
     no_vulkan: bool,
-    /// Peak memory bandwidth of the Vulkan device in GB/s (default: the datasheet value for
-    /// NVIDIA H100/H200, none otherwise).
+    /// Peak memory bandwidth of the Vulkan device in GB/s (default: the datasheet value of the
+    /// NVIDIA H100 and H200 models known by their exact device name, none otherwise).
     #[arg(long)]
     peak_gbps: Option<f64>,
     #[command(flatten)]

@@ -306,11 +306,7 @@ impl VulkanBackend {
         let core = open(index, options)?;
         // Declared after `core`, so released before a failed open drops it.
         let _driver = driver_lock::device_use();
-        let missing = |method: TraceMethod| match method {
-            TraceMethod::Software => Vec::new(),
-            TraceMethod::RayQuery => core.info.missing_for_ray_query(),
-            TraceMethod::RtPipeline => core.info.missing_for_rt_pipeline(),
-        };
+        let missing = |method: TraceMethod| core.info.missing_for(method);
         let trace_method = trace.unwrap_or_else(|| {
             [TraceMethod::RayQuery, TraceMethod::RtPipeline]
                 .into_iter()

@@ -2,6 +2,7 @@
 //! ray-tracing feature detection, and device creation.
 
 use super::driver_lock;
+use crate::device::TraceMethod;
 use crate::error::{Error, Result};
 use crate::workgroup::WorkgroupSizes;
 use ash::vk;
@@ -79,6 +80,27 @@ impl DeviceInfo {
             missing.push("VK_KHR_ray_tracing_pipeline (rayTracingPipeline)".to_owned());
         }
         missing
+    }
+
+    /// What trace method `method` needs and this device lacks (empty when it can run; software
+    /// traversal runs everywhere).
+    pub fn missing_for(&self, method: TraceMethod) -> Vec<String> {
+        match method {
+            TraceMethod::Software => Vec::new(),
+            TraceMethod::RayQuery => self.missing_for_ray_query(),
+            TraceMethod::RtPipeline => self.missing_for_rt_pipeline(),
+        }
+    }
+
+    /// The trace methods this device runs, in the order the benchmarks measure them: software
+    /// traversal, then ray query and the ray-tracing pipeline where it has what they need — so
+    /// that every bench picks its methods alike (an NVIDIA H100 or H200: `sw` and `rtpipe`;
+    /// lavapipe: all three).
+    pub fn trace_methods(&self) -> Vec<TraceMethod> {
+        [TraceMethod::Software, TraceMethod::RayQuery, TraceMethod::RtPipeline]
+            .into_iter()
+            .filter(|&method| self.missing_for(method).is_empty())
+            .collect()
     }
 }
 
@@ -595,5 +617,32 @@ mod tests {
         assert_eq!(stream_workgroup_sizes(&wide), [1, 2, 4, 8, 16, 32, 64, 128, 256, 512]);
         let narrow = vk::PhysicalDeviceLimits { max_compute_work_group_size: [128, 128, 64], ..limits };
         assert_eq!(stream_workgroup_sizes(&narrow), [32, 64, 128]);
+    }
+
+    #[test]
+    fn a_device_runs_software_traversal_and_the_hardware_methods_it_has_what_they_need_for() {
+        let lavapipe = DeviceInfo {
+            index: 0,
+            name: "llvmpipe".into(),
+            device_type: "CPU".into(),
+            api_version: "1.4.0".into(),
+            ray_query: true,
+            acceleration_structure: true,
+            ray_tracing_pipeline: true,
+            buffer_device_address: true,
+            vulkan_memory_model: true,
+            timestamps: true,
+            timestamp_valid_bits: 64,
+            workgroup_sizes: vec![32, 64, 128, 256, 512, 1024],
+        };
+        let all = [TraceMethod::Software, TraceMethod::RayQuery, TraceMethod::RtPipeline];
+        assert_eq!(lavapipe.trace_methods(), all);
+        // An NVIDIA H100 or H200: no ray query.
+        let data_center = DeviceInfo { ray_query: false, ..lavapipe.clone() };
+        assert_eq!(data_center.trace_methods(), [TraceMethod::Software, TraceMethod::RtPipeline]);
+        assert_eq!(data_center.missing_for(TraceMethod::RayQuery), ["VK_KHR_ray_query (rayQuery)"]);
+        let compute_only = DeviceInfo { acceleration_structure: false, ..lavapipe };
+        assert_eq!(compute_only.trace_methods(), [TraceMethod::Software]);
+        assert!(compute_only.missing_for(TraceMethod::Software).is_empty());
     }
 }
