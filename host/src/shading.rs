@@ -8,7 +8,7 @@ use crate::error::{Error, Result};
 use crate::lights::{wants_bvh, LightBvh};
 use crate::scene::{Material, Scene};
 use crate::stream::{HitStream, RayStream, ShadeStream};
-use glam::{UVec2, Vec3, Vec4, Vec4Swizzles};
+use glam::{DVec3, UVec2, Vec3, Vec4, Vec4Swizzles};
 use rayon::prelude::*;
 use raywave_kernels::sampling::light_select::LightSet;
 use raywave_kernels::shade::ltc::LTC_TABLE_LEN;
@@ -249,26 +249,30 @@ pub fn shadow_rays(shades: &ShadeStream) -> RayStream {
 }
 
 /// Per-pixel means over the samples of a frame: the inputs of the ratio estimator and of the
-/// denoiser.
+/// denoiser. The sums are `f64`: summed in `f32`, 4 096 samples of the same `U` (a fixed
+/// G-buffer, as `raywave report shade`'s reference draws them) kept a rounding error of ~3·10⁻⁵
+/// of `U`, as large as the ratio estimate's error in unshadowed pixels that the report measures.
+/// The means are `f32` again, what the denoiser and the composites take.
 #[derive(Clone, Debug, Default)]
 pub struct ShadeAccumulator {
     samples: u32,
     /// Samples and shadow rays the passes' stages sanitized ([`StageReport::sanitized`]).
     sanitized: u64,
-    /// Σ analytic `U` (the same every sample; averaged for robustness).
-    analytic: Vec<Vec3>,
+    /// Σ analytic `U` (the same every sample on a fixed G-buffer; else varying with the ray's
+    /// sub-pixel position).
+    analytic: Vec<DVec3>,
     /// Σ `U_N` contributions.
-    unshadowed: Vec<Vec3>,
+    unshadowed: Vec<DVec3>,
     /// Σ `S_N` contributions.
-    shadowed: Vec<Vec3>,
+    shadowed: Vec<DVec3>,
     /// Σ emitted radiance.
-    emitted: Vec<Vec3>,
+    emitted: Vec<DVec3>,
 }
 
 impl ShadeAccumulator {
     /// An empty accumulator for `pixels` pixels.
     pub fn new(pixels: usize) -> Self {
-        let zero = vec![Vec3::ZERO; pixels];
+        let zero = vec![DVec3::ZERO; pixels];
         Self {
             samples: 0,
             sanitized: 0,
@@ -316,12 +320,13 @@ impl ShadeAccumulator {
         self.samples += 1;
         let passes = shades.analytic.iter().zip(&shades.unshadowed).zip(&shades.emitted).zip(occluded);
         for (i, (((u, u_n), e), &blocked)) in passes.enumerate() {
-            self.analytic[i] += u.xyz();
-            self.unshadowed[i] += u_n.xyz();
+            let u_n = u_n.xyz().as_dvec3();
+            self.analytic[i] += u.xyz().as_dvec3();
+            self.unshadowed[i] += u_n;
             if blocked == 0 {
-                self.shadowed[i] += u_n.xyz();
+                self.shadowed[i] += u_n;
             }
-            self.emitted[i] += e.xyz();
+            self.emitted[i] += e.xyz().as_dvec3();
         }
         Ok(())
     }
@@ -337,9 +342,9 @@ impl ShadeAccumulator {
         self.samples
     }
 
-    fn mean(&self, sums: &[Vec3]) -> Vec<Vec3> {
-        let scale = 1.0 / self.samples.max(1) as f32;
-        sums.iter().map(|&s| s * scale).collect()
+    fn mean(&self, sums: &[DVec3]) -> Vec<Vec3> {
+        let samples = f64::from(self.samples.max(1));
+        sums.iter().map(|&s| (s / samples).as_vec3()).collect()
     }
 
     /// Per-pixel `U`.
@@ -410,5 +415,28 @@ mod tests {
         accumulator.add(&shades, &vec![0; 63]).unwrap();
         let u_n: Vec<Vec3> = shades.unshadowed.iter().map(|v| v.xyz()).collect();
         assert_eq!((accumulator.unshadowed(), accumulator.shadowed()), (u_n.clone(), u_n));
+    }
+
+    /// 4 096 samples of the same values (`report shade`'s reference on a fixed G-buffer) average
+    /// to exactly those values, which an `f32` sum does not.
+    #[test]
+    fn the_accumulator_averages_many_equal_samples_exactly() {
+        let (u, u_n, e) = (Vec3::new(0.1, 0.3, 0.7), Vec3::new(0.37, 1.9, 0.011), Vec3::new(3.3, 0.0, 1e-3));
+        let mut shades = ShadeStream::zeroed(2);
+        shades.analytic.fill(u.extend(0.0));
+        shades.unshadowed.fill(u_n.extend(0.0));
+        shades.emitted.fill(e.extend(0.0));
+        let mut accumulator = ShadeAccumulator::new(2);
+        let samples = 4096;
+        for _ in 0..samples {
+            accumulator.add(&shades, &[0, 1]).unwrap();
+        }
+        assert_eq!(accumulator.samples(), samples);
+        assert_eq!(accumulator.analytic(), [u, u]);
+        assert_eq!(accumulator.unshadowed(), [u_n, u_n]);
+        assert_eq!(accumulator.shadowed(), [u_n, Vec3::ZERO]);
+        assert_eq!(accumulator.emitted(), [e, e]);
+        let f32_mean = (0..samples).fold(Vec3::ZERO, |sum, _| sum + u) / samples as f32;
+        assert_ne!(f32_mean, u, "the f32 sum this replaced rounds off");
     }
 }

@@ -20,14 +20,22 @@ struct Working {
     noise: Vec<f32>,
     shadowed: Vec<Vec4>,
     unshadowed: Vec<Vec4>,
+    /// What a bilateral pass writes (then swapped with `shadowed` and `unshadowed`): allocated
+    /// before the timed passes, as the Vulkan backend's buffers are; empty for SVGF.
+    filtered_shadowed: Vec<Vec4>,
+    filtered_unshadowed: Vec<Vec4>,
     ratio: Vec<Vec4>,
     color: Vec<Vec4>,
 }
 
+/// The pixel at row-major index `i` of an image of `params`' width.
+fn pixel_at(params: &DenoiseParams, i: u32) -> IVec2 {
+    IVec2::new((i % params.width) as i32, (i / params.width) as i32)
+}
+
 /// Evaluates `f` at every pixel of the image in parallel.
 fn per_pixel<T: Send>(params: &DenoiseParams, f: impl Fn(IVec2) -> T + Sync) -> Vec<T> {
-    let width = params.width;
-    (0..params.pixels()).into_par_iter().map(|i| f(IVec2::new((i % width) as i32, (i / width) as i32))).collect()
+    (0..params.pixels()).into_par_iter().map(|i| f(pixel_at(params, i))).collect()
 }
 
 /// The index of `pixel` in a row-major image of `params`' width.
@@ -49,18 +57,16 @@ fn run_pass(pass: DenoisePass, params: &DenoiseParams, input: &DenoiseInput, w: 
         DenoisePass::BilateralX | DenoisePass::BilateralY => {
             let along = if pass == DenoisePass::BilateralX { axis::X } else { axis::Y };
             let params = DenoiseParams { axis: along, ..*params };
-            let filtered = per_pixel(&params, |center| {
-                let line = ImageLine {
-                    shadowed: &w.shadowed,
-                    unshadowed: &w.unshadowed,
-                    position: &input.position,
-                    normal: &input.normal,
-                    center,
-                    params: &params,
-                };
-                bilateral_pass(&line, w.noise[index(center)], &params)
+            let (shadowed, unshadowed, noise) = (&w.shadowed, &w.unshadowed, &w.noise);
+            let filtered = w.filtered_shadowed.par_iter_mut().zip(&mut w.filtered_unshadowed);
+            filtered.enumerate().for_each(|(i, (s, u))| {
+                let (position, normal) = (&input.position, &input.normal);
+                let center = pixel_at(&params, i as u32);
+                let line = ImageLine { shadowed, unshadowed, position, normal, center, params: &params };
+                (*s, *u) = bilateral_pass(&line, noise[i], &params);
             });
-            (w.shadowed, w.unshadowed) = filtered.into_iter().unzip();
+            std::mem::swap(&mut w.shadowed, &mut w.filtered_shadowed);
+            std::mem::swap(&mut w.unshadowed, &mut w.filtered_unshadowed);
         }
         DenoisePass::Composite => {
             w.color = per_pixel(params, |p| {
@@ -105,16 +111,20 @@ pub fn copy_probe(params: &DenoiseParams, image: &[Vec4]) -> (Vec<Vec4>, StageRe
 /// Runs `method` on `input` (already checked against `params`): the colour image (rgb, w = 1)
 /// and each pass's wall-clock time.
 pub fn denoise(method: DenoiseMethod, params: &DenoiseParams, input: &DenoiseInput) -> (Vec<Vec4>, Vec<StageReport>) {
+    let passes = method.passes(params);
+    let bilateral = passes.iter().any(|&pass| matches!(pass, DenoisePass::BilateralX | DenoisePass::BilateralY));
+    let filtered = || vec![Vec4::ZERO; if bilateral { input.len() } else { 0 }];
     let mut working = Working {
         noise_raw: Vec::new(),
         noise: Vec::new(),
         shadowed: input.shadowed.clone(),
         unshadowed: input.unshadowed.clone(),
+        filtered_shadowed: filtered(),
+        filtered_unshadowed: filtered(),
         ratio: Vec::new(),
         color: Vec::new(),
     };
-    let timings = method
-        .passes(params)
+    let timings = passes
         .into_iter()
         .map(|pass| {
             let start = Instant::now();
