@@ -185,9 +185,18 @@ pub fn copy_probe_len(params: &DenoiseParams, image: &[Vec4]) -> Result<u32> {
     }
 }
 
-/// Checks the inputs of the shade stage every backend shares: one hit per ray, `params.count`
-/// rays, and a width ≥ 1.
-pub(crate) fn check_shade_inputs(params: &ShadeParams, rays: &RayStream, hits: &HitStream) -> Result<()> {
+/// Checks the inputs of the shade stage every backend shares: the data ([`ShadeData::check`]),
+/// one hit per ray, `params.count` rays, a width ≥ 1, and light and node counts within the data's
+/// buffers. A count past its buffer was clamped to it by the kernels — on the CPU to the slice,
+/// on Vulkan to the buffer, which holds one zeroed element where the slice is empty — so the
+/// backends would have shaded different light sets.
+pub(crate) fn check_shade_inputs(
+    params: &ShadeParams,
+    data: &ShadeData,
+    rays: &RayStream,
+    hits: &HitStream,
+) -> Result<()> {
+    data.check()?;
     rays.check("shade")?;
     hits.check("shade")?;
     let reason = if rays.len() != hits.len() {
@@ -196,6 +205,14 @@ pub(crate) fn check_shade_inputs(params: &ShadeParams, rays: &RayStream, hits: &
         Some(format!("params.count = {} but {} rays", params.count, hits.len()))
     } else if params.width == 0 {
         Some("params.width must be at least 1".to_owned())
+    } else if params.light_count as usize > data.lights.len() {
+        Some(format!("params.light_count = {} but the data has {} lights", params.light_count, data.lights.len()))
+    } else if params.light_node_count as usize > data.light_nodes.len() {
+        Some(format!(
+            "params.light_node_count = {} but the data has {} light BVH nodes",
+            params.light_node_count,
+            data.light_nodes.len()
+        ))
     } else {
         None
     };

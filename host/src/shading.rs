@@ -13,6 +13,7 @@ use rayon::prelude::*;
 use raywave_kernels::sampling::light_select::LightSet;
 use raywave_kernels::shade::ltc::LTC_TABLE_LEN;
 use raywave_kernels::shade::stage::{composite, resolve_surface, shade_sample, ShadeScene, Surface};
+use raywave_shared::light::light_kind;
 use raywave_shared::ltc_table::packed_entries;
 use raywave_shared::{Light, LightBvhNode, MaterialParams, SamplerParams, ShadeParams};
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -100,10 +101,12 @@ impl ShadeData {
     }
 
     /// Checks what the shade stage assumes of this data, whose fields are public so that an
-    /// engine can edit them between frames: each material in the ranges [`Scene::new`] enforces,
-    /// the lights valid ([`crate::lights::validate_lights`]), the LTC table complete
-    /// ([`LTC_TABLE_LEN`] entries), three vertices per triangle and the instances' first
-    /// triangles ascending within them. Every backend's `shade` calls it; an error names the field.
+    /// engine can lay out its own (a changed buffer needs a new `ShadeData`: see its upload
+    /// note): each material in the ranges [`Scene::new`] enforces and one per instance, the
+    /// lights valid ([`crate::lights::validate_lights`]) and quads, a trail per light where
+    /// there is a light BVH, the LTC table complete ([`LTC_TABLE_LEN`] entries), three vertices
+    /// per triangle and the instances' first triangles ascending within them. Every backend's
+    /// `shade` calls it; an error names the field.
     pub fn check(&self) -> Result<()> {
         let invalid = |name, reason: String| Err(Error::InvalidParameter { name, reason });
         for (index, m) in self.materials.iter().enumerate() {
@@ -123,6 +126,26 @@ impl ShadeData {
             }
         }
         crate::lights::validate_lights(&self.lights)?;
+        if let Some(index) = self.lights.iter().position(|light| light.kind != light_kind::QUAD) {
+            let reason = format!("lights[{index}] is a sphere; the shade stage integrates quad lights only");
+            return invalid("light.kind", reason);
+        }
+        if !self.light_nodes.is_empty() && self.light_trails.len() != self.lights.len() {
+            let reason = format!(
+                "{} trails for {} lights (one per light with a BVH)",
+                self.light_trails.len(),
+                self.lights.len()
+            );
+            return invalid("light_trails", reason);
+        }
+        if self.materials.len() < self.first_triangle.len() {
+            let reason = format!(
+                "{} materials for {} instances (one per instance)",
+                self.materials.len(),
+                self.first_triangle.len()
+            );
+            return invalid("materials", reason);
+        }
         if self.ltc.len() != LTC_TABLE_LEN as usize {
             return invalid("ltc", format!("{} entries; the table has {LTC_TABLE_LEN}", self.ltc.len()));
         }

@@ -159,8 +159,7 @@ impl Backend for CpuBackend {
         rays: &RayStream,
         hits: &HitStream,
     ) -> Result<(ShadeStream, StageReport)> {
-        check_shade_inputs(params, rays, hits)?;
-        data.check()?;
+        check_shade_inputs(params, data, rays, hits)?;
         Ok(timed("shade", || {
             let surfaces = shading::resolve(data, rays, hits);
             shading::shade(params, data, rays, &surfaces)
@@ -297,11 +296,15 @@ mod tests {
         let valid = ShadeData::new(&scene).unwrap();
         let shade_params = valid.params(params.sampler, 4, 4, 0);
         type Edit = fn(&mut ShadeData);
-        let edits: [(Edit, &str); 4] = [
+        let edits: [(Edit, &str); 7] = [
             (|d| d.materials[0].emission_metallic.w = f32::NAN, "material.metallic"),
             (|d| d.materials[1].base_color_roughness.x = 2.0, "material.base_color"),
             (|d| d.ltc.clear(), "ltc"),
             (|d| d.first_triangle[1] = u32::MAX, "triangles"),
+            // What the kernels would read past (the CPU) or from a zeroed stand-in (Vulkan).
+            (|d| d.lights[0] = raywave_shared::Light::sphere(glam::Vec3::Y, 0.1, glam::Vec3::ONE), "light.kind"),
+            (|d| d.materials.truncate(1), "materials"),
+            (|d| d.light_nodes.push(bytemuck::Zeroable::zeroed()), "light_trails"),
         ];
         for (edit, field) in edits {
             let mut data = ShadeData::new(&scene).unwrap();
@@ -311,6 +314,12 @@ mod tests {
         let mut short_hits = hits.clone();
         short_hits.instance.pop();
         assert_eq!(name_of(cpu.shade(&shade_params, &valid, &rays, &short_hits).unwrap_err()), "shade");
+        for counts in [
+            ShadeParams { light_count: shade_params.light_count + 1, ..shade_params },
+            ShadeParams { light_node_count: 1, ..shade_params },
+        ] {
+            assert_eq!(name_of(cpu.shade(&counts, &valid, &rays, &hits).unwrap_err()), "shade", "{counts:?}");
+        }
 
         let (shades, _) = cpu.shade(&shade_params, &valid, &rays, &hits).unwrap();
         let mut accumulator = ShadeAccumulator::new(16);

@@ -559,8 +559,7 @@ impl Backend for VulkanBackend {
         hits: &HitStream,
     ) -> Result<(ShadeStream, StageReport)> {
         let _driver = driver_lock::device_use();
-        check_shade_inputs(params, rays, hits)?;
-        data.check()?;
+        check_shade_inputs(params, data, rays, hits)?;
         let len = stream_len(hits.len())?;
         self.check_stream(len)?;
         self.load_shade_data(data)?;
