@@ -143,9 +143,11 @@ fn open_vulkan(_index: Option<usize>, _options: &BackendOptions) -> Result<Box<d
     Err(Error::VulkanUnavailable { reason: "raywave was built without the `vulkan` feature".into() })
 }
 
-/// The index of the device to use by default: a discrete GPU before an integrated one before
-/// anything else, ties broken by enumeration order. Every Vulkan 1.2 device with
-/// `vulkanMemoryModel` runs every stage (tracing in software where ray query is missing).
+/// The index of the device to use by default: of the devices that run raywave's kernels
+/// (`DeviceInfo::missing_for_kernels`: Vulkan 1.2 with `vulkanMemoryModel`, room for the shade
+/// pass's storage buffers) — each runs every stage, tracing in software where ray query is
+/// missing — a discrete GPU before an integrated one before anything else, ties broken by
+/// enumeration order.
 #[cfg(feature = "vulkan")]
 pub fn best_vulkan_device(devices: &[crate::vulkan::DeviceInfo]) -> Result<usize> {
     let rank = |t: &str| match t {
@@ -156,11 +158,19 @@ pub fn best_vulkan_device(devices: &[crate::vulkan::DeviceInfo]) -> Result<usize
     };
     devices
         .iter()
-        .filter(|d| d.vulkan_memory_model)
+        .filter(|d| d.missing_for_kernels().is_empty())
         .min_by_key(|d| (rank(&d.device_type), d.index))
         .map(|d| d.index)
-        .ok_or_else(|| Error::VulkanUnavailable {
-            reason: format!("none of the {} Vulkan devices offers Vulkan 1.2 with vulkanMemoryModel", devices.len()),
+        .ok_or_else(|| {
+            let lacks: Vec<String> =
+                devices.iter().map(|d| format!("{} lacks {}", d.name, d.missing_for_kernels().join(", "))).collect();
+            Error::VulkanUnavailable {
+                reason: format!(
+                    "none of the {} Vulkan devices runs raywave's kernels: {}",
+                    devices.len(),
+                    lacks.join("; ")
+                ),
+            }
         })
 }
 

@@ -114,6 +114,11 @@ pub mod shade {
     pub const REPLACED: u32 = 17;
 }
 
+/// The most storage buffers one pass binds — the shade stage's, [`shade::REPLACED`] + 1 — which a
+/// device's `maxPerStageDescriptorStorageBuffers`, `maxDescriptorSetStorageBuffers` and
+/// `maxPerStageResources` must allow (Vulkan guarantees only 4, 24 and 128).
+pub const MOST_STORAGE_BUFFERS: u32 = shade::REPLACED + 1;
+
 /// Bindings of the denoise passes (set 0): every pass binds storage buffers `0..n` in the order
 /// its entry point (`raywave_kernels::entry::denoise_*`, `svgf_*`) lists; these are the counts.
 /// The two composites, the denoisers' last passes, end with the count of colours they replaced

@@ -3,7 +3,7 @@
 //! id is the triangle index within that mesh — the same ids the CPU backend reports.
 
 use super::buffer::{submit_and_wait, GpuBuffer};
-use super::context::{vk_error, Core};
+use super::context::{vk_error, AccelerationLimits, Core};
 use super::driver_lock;
 use crate::error::{Error, Result};
 use crate::scene::Scene;
@@ -100,16 +100,16 @@ fn build_all(core: &Arc<Core>, builds: &[Build<'_>]) -> Result<Vec<AccelerationS
         };
         structures.push(AccelerationStructure { core: core.clone(), handle, address, _storage: storage });
         scratch_offsets.push(scratch_total);
-        scratch_total += sizes.build_scratch_size.next_multiple_of(core.scratch_alignment);
+        scratch_total += sizes.build_scratch_size.next_multiple_of(core.accel_limits.scratch_alignment);
     }
     let scratch = GpuBuffer::new(
         core,
-        scratch_total + core.scratch_alignment,
+        scratch_total + core.accel_limits.scratch_alignment,
         vk::BufferUsageFlags::STORAGE_BUFFER | vk::BufferUsageFlags::SHADER_DEVICE_ADDRESS,
         MemoryLocation::GpuOnly,
         "acceleration structure scratch",
     )?;
-    let scratch_base = scratch.address.next_multiple_of(core.scratch_alignment);
+    let scratch_base = scratch.address.next_multiple_of(core.accel_limits.scratch_alignment);
     let infos: Vec<_> = builds
         .iter()
         .zip(&structures)
@@ -133,8 +133,35 @@ fn build_all(core: &Arc<Core>, builds: &[Build<'_>]) -> Result<Vec<AccelerationS
     Ok(structures)
 }
 
-/// Builds one BLAS per mesh and a TLAS over them (identity transforms, instance i = mesh i).
+/// Checks `scene` against device `device`'s acceleration-structure limits: at most
+/// `maxInstanceCount` meshes (one instance each) and `maxPrimitiveCount` triangles a mesh.
+/// Building past them is invalid usage — a lost device at best — so it is an error before
+/// anything is uploaded.
+fn check_limits(scene: &Scene, limits: &AccelerationLimits, device: &str) -> Result<()> {
+    let meshes = scene.meshes();
+    let too_large = |what: String| Err(Error::SceneTooLarge { scene: scene.name().to_owned(), what });
+    if meshes.len() as u64 > limits.max_instances {
+        return too_large(format!(
+            "{} meshes, more than {device}'s maxInstanceCount {}",
+            meshes.len(),
+            limits.max_instances
+        ));
+    }
+    match meshes.iter().find(|m| m.triangles.len() as u64 > limits.max_triangles) {
+        Some(mesh) => too_large(format!(
+            "mesh {:?} has {} triangles, more than {device}'s maxPrimitiveCount {}",
+            mesh.name,
+            mesh.triangles.len(),
+            limits.max_triangles
+        )),
+        None => Ok(()),
+    }
+}
+
+/// Builds one BLAS per mesh and a TLAS over them (identity transforms, instance i = mesh i),
+/// once the scene is checked against the device's limits ([`check_limits`]).
 pub(crate) fn build_scene(core: &Arc<Core>, scene: &Scene) -> Result<SceneAccel> {
+    check_limits(scene, &core.accel_limits, &core.info.name)?;
     let meshes = scene.meshes();
     let mut inputs = Vec::with_capacity(meshes.len());
     for mesh in meshes {
@@ -202,4 +229,25 @@ pub(crate) fn build_scene(core: &Arc<Core>, scene: &Scene) -> Result<SceneAccel>
     let tlas = build_all(core, std::slice::from_ref(&tlas_build))?.remove(0);
     drop(instance_buffer);
     Ok(SceneAccel { tlas, _blases: blases })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_scene_past_the_devices_limits_is_refused_before_any_build() {
+        let scene = Scene::load("builtin:cornell").unwrap();
+        let meshes = scene.meshes().len() as u64;
+        let most = scene.meshes().iter().map(|m| m.triangles.len() as u64).max().unwrap();
+        let fits = AccelerationLimits { scratch_alignment: 1, max_instances: meshes, max_triangles: most };
+        assert!(check_limits(&scene, &fits, "a GPU").is_ok());
+        for (limits, expected) in [
+            (AccelerationLimits { max_instances: meshes - 1, ..fits }, "maxInstanceCount"),
+            (AccelerationLimits { max_triangles: most - 1, ..fits }, "maxPrimitiveCount"),
+        ] {
+            let err = check_limits(&scene, &limits, "a GPU").unwrap_err();
+            assert!(matches!(err, Error::SceneTooLarge { .. }) && err.to_string().contains(expected), "{err}");
+        }
+    }
 }

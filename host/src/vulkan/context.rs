@@ -7,6 +7,7 @@ use crate::error::{Error, Result};
 use crate::workgroup::WorkgroupSizes;
 use ash::vk;
 use gpu_allocator::vulkan::{Allocator, AllocatorCreateDesc};
+use raywave_shared::bindings::MOST_STORAGE_BUFFERS;
 use raywave_shared::bindings::STREAM_ROW;
 use std::ffi::{c_void, CStr};
 use std::mem::ManuallyDrop;
@@ -50,6 +51,10 @@ pub struct DeviceInfo {
     /// `timestampValidBits` of the compute queue family raywave runs on (0: no timestamps): the
     /// counter wraps at `2^bits`, so an elapsed time is taken modulo that.
     pub timestamp_valid_bits: u32,
+    /// The storage buffers one compute pass may bind on this device: the least of
+    /// `maxPerStageDescriptorStorageBuffers`, `maxDescriptorSetStorageBuffers` and
+    /// `maxPerStageResources` (raywave's passes bind up to [`MOST_STORAGE_BUFFERS`]).
+    pub storage_buffers_per_pass: u32,
     /// The workgroup sizes this device runs the 1-D stream stages with
     /// ([`ContextOptions::workgroup_sizes`]), ascending: the powers of two within
     /// `maxComputeWorkGroupSize[0]` and `maxComputeWorkGroupInvocations` whose rows of
@@ -58,6 +63,24 @@ pub struct DeviceInfo {
 }
 
 impl DeviceInfo {
+    /// What every kernel needs and this device lacks (empty when raywave runs on it): Vulkan 1.2
+    /// with `vulkanMemoryModel` (every rust-gpu module uses it) and room for
+    /// [`MOST_STORAGE_BUFFERS`] storage buffers in one pass.
+    pub fn missing_for_kernels(&self) -> Vec<String> {
+        let mut missing = Vec::new();
+        if !self.vulkan_memory_model {
+            missing.push("Vulkan 1.2 with vulkanMemoryModel".to_owned());
+        }
+        if self.storage_buffers_per_pass < MOST_STORAGE_BUFFERS {
+            missing.push(format!(
+                "{MOST_STORAGE_BUFFERS} storage buffers a pass (maxPerStageDescriptorStorageBuffers, \
+                 maxDescriptorSetStorageBuffers, maxPerStageResources: {})",
+                self.storage_buffers_per_pass
+            ));
+        }
+        missing
+    }
+
     /// What the ray-query trace stage needs and this device lacks (empty when it can run).
     pub fn missing_for_ray_query(&self) -> Vec<String> {
         let mut missing = Vec::new();
@@ -137,6 +160,18 @@ pub struct ContextOptions {
     pub workgroup_sizes: Option<WorkgroupSizes>,
 }
 
+/// What `VK_KHR_acceleration_structure` allows on a device
+/// (`VkPhysicalDeviceAccelerationStructurePropertiesKHR`).
+#[derive(Copy, Clone, Debug, Default)]
+pub(crate) struct AccelerationLimits {
+    /// `minAccelerationStructureScratchOffsetAlignment`, bytes (at least 1).
+    pub scratch_alignment: u64,
+    /// `maxInstanceCount`: instances in a top-level structure (Vulkan guarantees 2²⁴ − 1).
+    pub max_instances: u64,
+    /// `maxPrimitiveCount`: triangles in a bottom-level structure (Vulkan guarantees 2²⁹ − 1).
+    pub max_triangles: u64,
+}
+
 /// Most dispatches one timed submission repeats in benchmark mode
 /// ([`ContextOptions::sustain_seconds`]).
 pub const MAX_SUSTAINED_DISPATCHES: u32 = 1024;
@@ -157,8 +192,8 @@ pub(crate) struct Core {
     pub rt_properties: RtPipelineProperties,
     pub info: DeviceInfo,
     pub limits: vk::PhysicalDeviceLimits,
-    /// `minAccelerationStructureScratchOffsetAlignment`, bytes.
-    pub scratch_alignment: u64,
+    /// The acceleration-structure limits builds must keep to (all 0 without the extension).
+    pub accel_limits: AccelerationLimits,
     /// [`ContextOptions::sustain_seconds`], as `f64` bits: [`Core::sustain_seconds`], changed
     /// by [`Core::set_sustain_seconds`].
     sustain_seconds: AtomicU64,
@@ -330,6 +365,11 @@ fn describe(instance: &ash::Instance, physical: vk::PhysicalDevice, index: usize
             vulkan_memory_model: api_1_2 && v12.vulkan_memory_model == vk::TRUE,
             timestamps: props.limits.timestamp_compute_and_graphics == vk::TRUE && timestamp_valid_bits > 0,
             timestamp_valid_bits,
+            storage_buffers_per_pass: props
+                .limits
+                .max_per_stage_descriptor_storage_buffers
+                .min(props.limits.max_descriptor_set_storage_buffers)
+                .min(props.limits.max_per_stage_resources),
             workgroup_sizes: stream_workgroup_sizes(&props.limits),
         })
     }
@@ -433,7 +473,7 @@ pub(crate) fn open(index: usize, options: &ContextOptions) -> Result<Arc<Core>> 
         return Err(e);
     }
     match create_device(&instance, physical, index) {
-        Ok((device, queue_family, info, limits, scratch_alignment, rt_properties)) => {
+        Ok((device, queue_family, info, limits, accel_limits, rt_properties)) => {
             // SAFETY: queue family `queue_family` with one queue was requested at device creation.
             let queue = unsafe { device.get_device_queue(queue_family, 0) };
             let allocator = Allocator::new(&AllocatorCreateDesc {
@@ -473,7 +513,7 @@ pub(crate) fn open(index: usize, options: &ContextOptions) -> Result<Arc<Core>> 
                 rt_properties,
                 info,
                 limits,
-                scratch_alignment,
+                accel_limits,
                 sustain_seconds: AtomicU64::new(options.sustain_seconds.to_bits()),
                 workgroup_sizes,
             }))
@@ -520,18 +560,13 @@ fn stream_workgroup_sizes(limits: &vk::PhysicalDeviceLimits) -> Vec<u32> {
         .collect()
 }
 
-type CreatedDevice = (ash::Device, u32, DeviceInfo, vk::PhysicalDeviceLimits, u64, RtPipelineProperties);
+type CreatedDevice = (ash::Device, u32, DeviceInfo, vk::PhysicalDeviceLimits, AccelerationLimits, RtPipelineProperties);
 
 fn create_device(instance: &ash::Instance, physical: vk::PhysicalDevice, index: usize) -> Result<CreatedDevice> {
     let info = describe(instance, physical, index)?;
-    // SAFETY: `physical` belongs to `instance`.
-    let api_version = unsafe { instance.get_physical_device_properties(physical) }.api_version;
-    if api_version < vk::API_VERSION_1_2 || !info.vulkan_memory_model {
-        return Err(Error::MissingFeatures {
-            device: info.name.clone(),
-            stage: "any kernel".into(),
-            missing: vec!["Vulkan 1.2 with vulkanMemoryModel".into()],
-        });
+    let missing = info.missing_for_kernels();
+    if !missing.is_empty() {
+        return Err(Error::MissingFeatures { device: info.name.clone(), stage: "any kernel".into(), missing });
     }
     // SAFETY: `physical` belongs to `instance`; all create-info pointers borrow locals.
     unsafe {
@@ -582,7 +617,11 @@ fn create_device(instance: &ash::Instance, physical: vk::PhysicalDevice, index: 
             let mut props2 = vk::PhysicalDeviceProperties2::default().push_next(&mut as_props);
             instance.get_physical_device_properties2(physical, &mut props2);
         }
-        let scratch_alignment = u64::from(as_props.min_acceleration_structure_scratch_offset_alignment.max(1));
+        let accel_limits = AccelerationLimits {
+            scratch_alignment: u64::from(as_props.min_acceleration_structure_scratch_offset_alignment.max(1)),
+            max_instances: as_props.max_instance_count,
+            max_triangles: as_props.max_primitive_count,
+        };
         let mut rt_properties = RtPipelineProperties::default();
         if rt_pipeline {
             let mut rtp_props = vk::PhysicalDeviceRayTracingPipelinePropertiesKHR::default();
@@ -595,7 +634,7 @@ fn create_device(instance: &ash::Instance, physical: vk::PhysicalDevice, index: 
                 max_dispatch_invocations: rtp_props.max_ray_dispatch_invocation_count,
             };
         }
-        Ok((device, queue_family, info, limits, scratch_alignment, rt_properties))
+        Ok((device, queue_family, info, limits, accel_limits, rt_properties))
     }
 }
 
@@ -633,6 +672,7 @@ mod tests {
             vulkan_memory_model: true,
             timestamps: true,
             timestamp_valid_bits: 64,
+            storage_buffers_per_pass: 1 << 20,
             workgroup_sizes: vec![32, 64, 128, 256, 512, 1024],
         };
         let all = [TraceMethod::Software, TraceMethod::RayQuery, TraceMethod::RtPipeline];
@@ -644,5 +684,34 @@ mod tests {
         let compute_only = DeviceInfo { acceleration_structure: false, ..lavapipe };
         assert_eq!(compute_only.trace_methods(), [TraceMethod::Software]);
         assert!(compute_only.missing_for(TraceMethod::Software).is_empty());
+    }
+
+    #[test]
+    fn a_device_needs_the_memory_model_and_room_for_the_shade_passes_buffers() {
+        let base = DeviceInfo {
+            index: 0,
+            name: "a GPU".into(),
+            device_type: "DISCRETE_GPU".into(),
+            api_version: "1.3.0".into(),
+            ray_query: false,
+            acceleration_structure: false,
+            ray_tracing_pipeline: false,
+            buffer_device_address: true,
+            vulkan_memory_model: true,
+            timestamps: true,
+            timestamp_valid_bits: 64,
+            storage_buffers_per_pass: MOST_STORAGE_BUFFERS,
+            workgroup_sizes: vec![32, 64, 128],
+        };
+        assert!(base.missing_for_kernels().is_empty());
+        // Vulkan's guaranteed minimum, 4 storage buffers a stage: the shade pass binds 18.
+        let small = DeviceInfo { storage_buffers_per_pass: 4, ..base.clone() };
+        let missing = small.missing_for_kernels();
+        assert!(missing.len() == 1 && missing[0].contains("18 storage buffers a pass") && missing[0].contains(": 4)"));
+        let old = DeviceInfo { vulkan_memory_model: false, ..small };
+        assert_eq!(old.missing_for_kernels().len(), 2);
+        // `auto` passes over such devices.
+        let devices = [DeviceInfo { index: 0, ..old }, DeviceInfo { index: 1, device_type: "CPU".into(), ..base }];
+        assert_eq!(crate::device::best_vulkan_device(&devices).unwrap(), 1);
     }
 }

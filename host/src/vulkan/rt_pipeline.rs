@@ -151,11 +151,16 @@ impl RtPipelineKernel {
     /// repeated in benchmark mode); returns the time per trace.
     pub fn trace(&self, resources: &[Resource<'_>], push: &[u8], rays: u32) -> Result<Timing> {
         let core = &self.pass.core;
-        if rays > core.rt_properties.max_dispatch_invocations {
+        // The launch is a whole number of LAUNCH_WIDTH-wide rows: its invocations, not the rays,
+        // must fit the limit (VUID-vkCmdTraceRaysKHR-width-03641).
+        let (width, height) = (rays.min(LAUNCH_WIDTH), rays.div_ceil(LAUNCH_WIDTH));
+        let invocations = u64::from(width) * u64::from(height);
+        if invocations > u64::from(core.rt_properties.max_dispatch_invocations) {
             return Err(Error::InvalidParameter {
                 name: "rays",
                 reason: format!(
-                    "{rays} exceed maxRayDispatchInvocationCount {}",
+                    "{rays} rays launch {invocations} invocations ({height} rows of {width}), more than \
+                     maxRayDispatchInvocationCount {}",
                     core.rt_properties.max_dispatch_invocations
                 ),
             });
@@ -165,7 +170,6 @@ impl RtPipelineKernel {
             stage: "trace (rtpipe)".into(),
             missing: core.info.missing_for_rt_pipeline(),
         })?;
-        let (width, height) = (rays.min(LAUNCH_WIDTH), rays.div_ceil(LAUNCH_WIDTH));
         let callable = vk::StridedDeviceAddressRegionKHR::default();
         self.pass.run(resources, push, rays, |cmd| {
             if rays > 0 {
