@@ -646,7 +646,9 @@ fn vulkan_devices() -> Result<Vec<serde_json::Value>, String> {
                     "acceleration_structure": d.acceleration_structure,
                     "ray_tracing_pipeline": d.ray_tracing_pipeline,
                     "buffer_device_address": d.buffer_device_address, "timestamps": d.timestamps,
-                    "can_trace": d.missing_for_ray_query().is_empty(), "workgroup_sizes": d.workgroup_sizes,
+                    "can_trace": d.missing_for_ray_query().is_empty(),
+                    "runs_kernels": d.missing_for_kernels().is_empty(), "lacks": d.missing_for_kernels(),
+                    "workgroup_sizes": d.workgroup_sizes,
                     "preferred_workgroup_sizes": preferred,
                 })
             })
@@ -688,8 +690,12 @@ fn devices(json: bool) -> raywave::Result<()> {
                     (Some(least), Some(most)) => format!("{least}..={most}"),
                     _ => "none".to_owned(),
                 };
+                let lacks = d["lacks"].as_array().map_or(&[][..], Vec::as_slice);
+                let lacks: Vec<&str> = lacks.iter().filter_map(|l| l.as_str()).collect();
+                let unusable =
+                    if lacks.is_empty() { String::new() } else { format!("  UNUSABLE, lacks: {}", lacks.join(", ")) };
                 print_line(format!(
-                    "vulkan:{:<3} {} ({}, Vulkan {})  ray_query={} acceleration_structure={} ray_tracing_pipeline={} buffer_device_address={} workgroup_sizes={sizes}",
+                    "vulkan:{:<3} {} ({}, Vulkan {})  ray_query={} acceleration_structure={} ray_tracing_pipeline={} buffer_device_address={} workgroup_sizes={sizes}{unusable}",
                     d["index"], d["name"].as_str().unwrap_or("?"), d["type"].as_str().unwrap_or("?"), d["api_version"].as_str().unwrap_or("?"),
                     flag("ray_query"), flag("acceleration_structure"), flag("ray_tracing_pipeline"), flag("buffer_device_address"),
                 ));

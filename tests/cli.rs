@@ -96,6 +96,7 @@ fn devices_lists_a_vulkan_device_with_ray_query() {
         return;
     }
     assert!(devices.iter().any(|d| d["ray_query"] == true && d["can_trace"] == true), "{value}");
+    assert!(devices.iter().any(|d| d["runs_kernels"] == true && d["lacks"] == serde_json::json!([])), "{value}");
 }
 
 #[test]

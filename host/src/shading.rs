@@ -101,7 +101,8 @@ impl ShadeData {
     }
 
     /// Checks what the shade stage assumes of this data, whose fields are public so that an
-    /// engine can lay out its own (a changed buffer needs a new `ShadeData`: see its upload
+    /// engine can adjust what [`ShadeData::new`] laid out before the value's first `shade` (a
+    /// device backend uploads them then; later changes need a new `ShadeData`: see its upload
     /// note): each material in the ranges [`Scene::new`] enforces and one per instance, the
     /// lights valid ([`crate::lights::validate_lights`]) and quads, a trail per light where
     /// there is a light BVH, the LTC table complete ([`LTC_TABLE_LEN`] entries), three vertices
@@ -273,9 +274,10 @@ pub fn shadow_rays(shades: &ShadeStream) -> RayStream {
 
 /// Per-pixel means over the samples of a frame: the inputs of the ratio estimator and of the
 /// denoiser. The sums are `f64`: summed in `f32`, 4 096 samples of the same `U` (a fixed
-/// G-buffer, as `raywave report shade`'s reference draws them) kept a rounding error of ~3·10⁻⁵
-/// of `U`, as large as the ratio estimate's error in unshadowed pixels that the report measures.
-/// The means are `f32` again, what the denoiser and the composites take.
+/// G-buffer, as `raywave report shade`'s reference draws them) averaged to within ~3·10⁻⁵ of
+/// `U`, not to `U` (`report shade`'s lit-pixel RMSE, of that order, stayed as it was: it has
+/// another cause). 48 bytes a pixel more than `f32` sums (177 MB at 2560×1440). The means are
+/// `f32` again, what the denoiser and the composites take.
 #[derive(Clone, Debug, Default)]
 pub struct ShadeAccumulator {
     samples: u32,

@@ -56,12 +56,8 @@ pub mod vulkan {
         let mut backends = Vec::new();
         let open = |device, trace| open(device, trace, options);
         for device in &devices(test) {
-            backends.push(open(device, TraceMethod::Software));
-            if device.missing_for_ray_query().is_empty() {
-                backends.push(open(device, TraceMethod::RayQuery));
-            }
-            if device.missing_for_rt_pipeline().is_empty() {
-                backends.push(open(device, TraceMethod::RtPipeline));
+            for method in device.trace_methods() {
+                backends.push(open(device, method));
             }
         }
         backends

@@ -184,8 +184,10 @@ use portable_edge_sum as edge_sum;
 /// The contribution `θ · (â × b̂)·z / |â × b̂|` of the edge from corner `a` to `b`, with
 /// `â × b̂` from [`edge_cross`]. `θ/sin θ` is taken wherever `sin θ` is a normal number — also
 /// for a nearly antipodal edge, `θ ≈ π`: a horizon edge passing close by the shading point, whose
-/// `±π` a cut-off at `sin θ = 10⁻⁷` dropped — and its limit 1 below (the term is then at most
-/// `π·sin θ < 10⁻³⁷`).
+/// `±π` a cut-off at `sin θ = 10⁻⁷` dropped — and its limit 1 below. `sin θ = |â × b̂|` squares
+/// the cross product's coordinates, which underflow below ~10⁻¹⁹ (10⁻²² with subnormals), so
+/// an antipodal edge still loses its `±π` where the shading point is within ~10⁻¹⁹ of the
+/// light's plane, relative to the light's size; a vanishing edge loses nothing.
 /// Always inlined: each edge is a chain of a square root, two divisions and the `atan2`
 /// polynomial, and only inlined into `portable_edge_sum`'s loop can a processor overlap one
 /// edge's chain with the next (measured on the CPU before the lanes: a quad's form factor 1.7×
