@@ -16,7 +16,7 @@ use super::polygon::MAX_CORNERS;
 use crate::trig::{ATAN_POLYNOMIAL, TAN_PI_8};
 use core::arch::x86_64::{
     __m128, _mm_add_ps, _mm_and_ps, _mm_andnot_ps, _mm_castps_si128, _mm_castsi128_ps, _mm_cmpeq_ps, _mm_cmpge_ps,
-    _mm_cmpgt_ps, _mm_cmple_ps, _mm_cmplt_ps, _mm_div_ps, _mm_mul_ps, _mm_or_ps, _mm_set1_ps, _mm_setr_ps,
+    _mm_cmpgt_ps, _mm_cmple_ps, _mm_cmplt_ps, _mm_div_ps, _mm_min_ps, _mm_mul_ps, _mm_or_ps, _mm_set1_ps, _mm_setr_ps,
     _mm_setzero_ps, _mm_shuffle_ps, _mm_sqrt_ps, _mm_srai_epi32, _mm_storeu_ps, _mm_sub_ps,
 };
 use core::f32::consts::{FRAC_PI_2, FRAC_PI_4, PI};
@@ -187,11 +187,14 @@ unsafe fn edge_integrals(a: &Corners, b: &Corners) -> __m128 {
         z: _mm_sub_ps(b.position.z, a.position.z),
     };
     let both = _mm_and_ps(_mm_cmpgt_ps(a.reciprocal_length, zero), _mm_cmpgt_ps(b.reciprocal_length, zero));
-    // `b.reciprocal_length <= a.reciprocal_length`: â × edge/|b|, else b̂ × edge/|a|.
+    // `b.reciprocal_length <= a.reciprocal_length`: â × edge/|b|, else b̂ × edge/|a| — the nearer
+    // corner's direction, the farther one's scale (the least reciprocal; neither is NaN).
     let b_farther = _mm_cmple_ps(b.reciprocal_length, a.reciprocal_length);
     let unit = select3(b_farther, a.unit, b.unit);
-    let scale = select(b_farther, b.reciprocal_length, a.reciprocal_length);
-    let c = select3(both, cross(unit, scaled(edge, scale)), Lanes3 { x: zero, y: zero, z: zero });
+    let scale = _mm_min_ps(a.reciprocal_length, b.reciprocal_length);
+    let c = cross(unit, scaled(edge, scale));
+    // Zero where either corner is (its lanes may hold NaN).
+    let c = Lanes3 { x: _mm_and_ps(both, c.x), y: _mm_and_ps(both, c.y), z: _mm_and_ps(both, c.z) };
     let (u, v) = (a.unit, b.unit);
     let sin_theta =
         _mm_sqrt_ps(_mm_add_ps(_mm_add_ps(_mm_mul_ps(c.x, c.x), _mm_mul_ps(c.y, c.y)), _mm_mul_ps(c.z, c.z)));

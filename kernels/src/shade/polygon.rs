@@ -167,13 +167,10 @@ pub fn edge_cross(a: &Corner, b: &Corner) -> Vec3 {
     if !(a.reciprocal_length > 0.0 && b.reciprocal_length > 0.0) {
         return Vec3::ZERO;
     }
-    // â × (b − a)/|b| where b is the farther corner, else b̂ × (b − a)/|a|.
-    let (unit, scale) = if b.reciprocal_length <= a.reciprocal_length {
-        (a.unit, b.reciprocal_length)
-    } else {
-        (b.unit, a.reciprocal_length)
-    };
-    unit.cross((b.position - a.position) * scale)
+    // â × (b − a)/|b| where b is the farther corner, else b̂ × (b − a)/|a|: the nearer corner's
+    // direction, the farther one's scale (the lesser reciprocal; neither is NaN).
+    let unit = if b.reciprocal_length <= a.reciprocal_length { a.unit } else { b.unit };
+    unit.cross((b.position - a.position) * a.reciprocal_length.min(b.reciprocal_length))
 }
 
 #[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
