@@ -258,10 +258,20 @@ pub(crate) fn submit_and_wait(core: &Core, record: impl FnOnce(vk::CommandBuffer
                 device.create_fence(&vk::FenceCreateInfo::default(), None).map_err(vk_error("vkCreateFence"))?;
             let cmds = [cmd];
             let submit = [vk::SubmitInfo::default().command_buffers(&cmds)];
-            let waited = device
-                .queue_submit(core.queue, &submit, fence)
-                .map_err(vk_error("vkQueueSubmit"))
-                .and_then(|_| device.wait_for_fences(&[fence], true, u64::MAX).map_err(vk_error("vkWaitForFences")));
+            let waited = match device.queue_submit(core.queue, &submit, fence) {
+                Err(e) => Err(vk_error("vkQueueSubmit")(e)),
+                Ok(()) => {
+                    let waited = device.wait_for_fences(&[fence], true, u64::MAX).map_err(vk_error("vkWaitForFences"));
+                    if waited.is_err() {
+                        // A failed wait (a lost device, out of memory) may leave the submission
+                        // pending: the fence, the pool and the buffers its commands use may go only
+                        // once the queue is idle — or the device lost, which counts every
+                        // submission complete. The wait's own error is the one reported.
+                        let _ = device.device_wait_idle();
+                    }
+                    waited
+                }
+            };
             device.destroy_fence(fence, None);
             waited
         })();
