@@ -278,6 +278,22 @@ fn unlit_regions_show_their_emission_exactly_and_zeros_stay_finite() {
             }
         }
         assert_eq!(dark_pixels, 8 * 12);
+        // A lit pixel that drew no sample reaching the light (U_N = 0) takes the filtered ratio of
+        // its neighbours, not the raw fallback to U: its visibility is about the coin's ½. (TV adds
+        // it as 0 to both sums; SVGF averages its fallback ratio of 1 in, diluted here among
+        // neighbours of which one in eleven is such a pixel.)
+        {
+            let mut fallbacks = 0;
+            for y in 0..SIZE - 1 {
+                for x in (0..SIZE).filter(|&x| !dark(x, y) && (x * 7 + y * 3) % 11 == 0) {
+                    let i = (y * SIZE + x) as usize;
+                    let visibility = color[i].x / input.analytic[i].x;
+                    assert!((0.2..0.8).contains(&visibility), "pixel ({x}, {y}): visibility {visibility}");
+                    fallbacks += 1;
+                }
+            }
+            assert!(fallbacks > 50, "{fallbacks}");
+        }
         // A black image (and its stochastic variant, whose S_N mean is 0) stays black.
         for (what, inputs) in [("zeros", &zeros), ("stochastic zeros", &zeros.stochastic())] {
             let color = denoise(method, &params, inputs);
