@@ -170,6 +170,7 @@ mod workgroup_size {
         if setup.vulkan.is_none() {
             return;
         }
+        let benchmarking = benchmarking();
         let devices = raywave::vulkan::enumerate_devices().expect("the Vulkan device the setup opened");
         let device = &devices[raywave::device::best_vulkan_device(&devices).expect("the setup's device")];
         let sizes: Vec<u32> = WORKGROUP_SIZES
@@ -197,7 +198,7 @@ mod workgroup_size {
                 let options = BackendOptions {
                     trace: Some(method),
                     // Criterion's test mode runs each row once: no sustained submissions there.
-                    sustain_seconds: if benchmarking() { SUSTAIN_SECONDS } else { 0.0 },
+                    sustain_seconds: if benchmarking { SUSTAIN_SECONDS } else { 0.0 },
                     workgroup_sizes: Some(WorkgroupSizes::all(size)),
                     ..Default::default()
                 };
@@ -205,7 +206,7 @@ mod workgroup_size {
                 let mut v = open_backend(choice, &options).expect("a size and trace method the device runs");
                 v.load_scene(&setup.scene).expect("acceleration structures build");
                 let shades = method == TraceMethod::Software;
-                let mut warmed = !benchmarking();
+                let mut warmed = !benchmarking;
                 let mut warm = |v: &mut dyn Backend| {
                     if !std::mem::replace(&mut warmed, true) {
                         warm_up(GPU_SETTLE_SECONDS, || {

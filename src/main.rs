@@ -640,6 +640,7 @@ fn vulkan_devices() -> Result<Vec<serde_json::Value>, String> {
                         (name.to_owned(), preferred.of(stage).into())
                     })
                     .collect();
+                let lacks = d.missing_for_kernels();
                 serde_json::json!({
                     "backend": "vulkan", "index": d.index, "name": d.name, "type": d.device_type,
                     "api_version": d.api_version, "ray_query": d.ray_query,
@@ -647,7 +648,7 @@ fn vulkan_devices() -> Result<Vec<serde_json::Value>, String> {
                     "ray_tracing_pipeline": d.ray_tracing_pipeline,
                     "buffer_device_address": d.buffer_device_address, "timestamps": d.timestamps,
                     "can_trace": d.missing_for_ray_query().is_empty(),
-                    "runs_kernels": d.missing_for_kernels().is_empty(), "lacks": d.missing_for_kernels(),
+                    "runs_kernels": lacks.is_empty(), "lacks": lacks,
                     "workgroup_sizes": d.workgroup_sizes,
                     "preferred_workgroup_sizes": preferred,
                 })

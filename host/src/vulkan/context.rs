@@ -658,9 +658,9 @@ mod tests {
         assert_eq!(stream_workgroup_sizes(&narrow), [32, 64, 128]);
     }
 
-    #[test]
-    fn a_device_runs_software_traversal_and_the_hardware_methods_it_has_what_they_need_for() {
-        let lavapipe = DeviceInfo {
+    /// A device as lavapipe describes itself: every feature, generous limits.
+    fn lavapipe() -> DeviceInfo {
+        DeviceInfo {
             index: 0,
             name: "llvmpipe".into(),
             device_type: "CPU".into(),
@@ -674,7 +674,12 @@ mod tests {
             timestamp_valid_bits: 64,
             storage_buffers_per_pass: 1 << 20,
             workgroup_sizes: vec![32, 64, 128, 256, 512, 1024],
-        };
+        }
+    }
+
+    #[test]
+    fn a_device_runs_software_traversal_and_the_hardware_methods_it_has_what_they_need_for() {
+        let lavapipe = lavapipe();
         let all = [TraceMethod::Software, TraceMethod::RayQuery, TraceMethod::RtPipeline];
         assert_eq!(lavapipe.trace_methods(), all);
         // An NVIDIA H100 or H200: no ray query.
@@ -689,19 +694,10 @@ mod tests {
     #[test]
     fn a_device_needs_the_memory_model_and_room_for_the_shade_passes_buffers() {
         let base = DeviceInfo {
-            index: 0,
             name: "a GPU".into(),
             device_type: "DISCRETE_GPU".into(),
-            api_version: "1.3.0".into(),
-            ray_query: false,
-            acceleration_structure: false,
-            ray_tracing_pipeline: false,
-            buffer_device_address: true,
-            vulkan_memory_model: true,
-            timestamps: true,
-            timestamp_valid_bits: 64,
             storage_buffers_per_pass: MOST_STORAGE_BUFFERS,
-            workgroup_sizes: vec![32, 64, 128],
+            ..lavapipe()
         };
         assert!(base.missing_for_kernels().is_empty());
         // Vulkan's guaranteed minimum, 4 storage buffers a stage: the shade pass binds 18.

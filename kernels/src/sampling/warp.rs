@@ -79,9 +79,11 @@ pub const QUAD_MIN_SPHERICAL_SOLID_ANGLE: f32 = 1.0e-3;
 pub const QUAD_RECTANGLE_MAX_COS: f32 = 1.0e-4;
 
 /// Whether the quad with edges `eu`, `ev` is a rectangle for [`sample_quad_spherical`]
-/// ([`QUAD_RECTANGLE_MAX_COS`]).
+/// ([`QUAD_RECTANGLE_MAX_COS`]), compared squared: no square roots on the sampling path (the
+/// squares stay finite for edges within the scenes' coordinate limit).
 fn is_rectangle(eu: Vec3, ev: Vec3) -> bool {
-    eu.dot(ev).abs() <= QUAD_RECTANGLE_MAX_COS * eu.length() * ev.length()
+    let dot = eu.dot(ev);
+    dot * dot <= QUAD_RECTANGLE_MAX_COS * QUAD_RECTANGLE_MAX_COS * eu.length_squared() * ev.length_squared()
 }
 
 /// Smallest GGX roughness α the GGX functions use; smaller inputs (including 0) are clamped to
