@@ -5,7 +5,7 @@
 //! the maximum over the lines, normalized; then a 3×3 box blur.
 
 use crate::hash::{pcg3d, unit_float};
-use crate::shade::stage::shadow_ratio;
+use crate::shade::stage::{shadow_ratio, SMALLEST_RADIANCE};
 use crate::trig;
 use core::f32::consts::FRAC_PI_4;
 use glam::{IVec2, UVec3, Vec2, Vec3, Vec4, Vec4Swizzles};
@@ -19,9 +19,13 @@ fn clamped_index(p: IVec2, width: u32, height: u32) -> usize {
 }
 
 /// The ratio image's entry for one pixel: its shadow ratio `S_N/U_N` (rgb; 1 where `U_N ≈ 0`),
-/// computed once per pixel by the ratio pass so the noise estimate's many taps only load it.
+/// computed once per pixel by the ratio pass so the noise estimate's many taps only load it; w is
+/// 1 where the ratio was measured — some channel of `U_N` reached the light — and 0 where the
+/// rgb is that fallback (no sample reached the light), which the SVGF baseline must not average
+/// in as a visibility of 1 (`svgf::ratio_and_variance`).
 pub fn ratio_pixel(shadowed: Vec4, unshadowed: Vec4) -> Vec4 {
-    shadow_ratio(shadowed.xyz(), unshadowed.xyz()).extend(0.0)
+    let measured = unshadowed.xyz().cmpge(Vec3::splat(SMALLEST_RADIANCE)).any();
+    shadow_ratio(shadowed.xyz(), unshadowed.xyz()).extend(if measured { 1.0 } else { 0.0 })
 }
 
 /// The ratio at the pixel nearest to `point` (clamped into the image). `(x + ½) as i32` rounds

@@ -4,13 +4,19 @@
 //! A single frame has no temporal history, so the variance is estimated spatially (Falcor's
 //! `SVGFFilterMoments` path for histories shorter than 4 frames): luminance moments over 7×7
 //! bilateral taps, boosted by `4/h` with `h = 1`.
+//!
+//! Pixels whose ratio is the fallback 1 — no sample reached the light, `U_N = 0` — hold no
+//! measurement of their visibility: both passes skip them as taps and fill them from the taps
+//! that were measured, as the TV filter does by adding their zero `S_N`, `U_N` to both sums.
+//! Averaged in as a visibility of 1 they lifted an umbra in which a fraction q of the pixels drew
+//! no light sample to about q (the BRDF-sampled share of samples that miss the light).
 
 #[cfg(target_arch = "spirv")]
 use spirv_std::num_traits::Float;
 
 use super::guide::{edge_stop, Guide};
 use crate::sampling::light_select::luminance;
-use glam::{IVec2, Vec4, Vec4Swizzles};
+use glam::{IVec2, Vec3, Vec4, Vec4Swizzles};
 use raywave_shared::denoise::DenoiseParams;
 
 /// Radius of the spatial moments window: 7×7 (Falcor SVGFFilterMoments).
@@ -22,6 +28,23 @@ const ATROUS_KERNEL: [f32; 3] = [1.0, 2.0 / 3.0, 1.0 / 6.0];
 
 /// Falcor's `1e-10` under the variance's square root.
 const VARIANCE_EPSILON: f32 = 1.0e-10;
+
+/// The w of an à-trous input pixel that has no estimate of its ratio: neither it nor any tap of
+/// the moments window was measured (its rgb is the fallback 1). Variances are ≥ 0, so the sign
+/// tells the two apart; the à-trous iterations fill such a pixel from their wider taps, and one
+/// that none reaches keeps the fallback.
+pub const NO_ESTIMATE: f32 = -1.0;
+
+/// Whether a ratio-image entry ([`super::noise::ratio_pixel`]) was measured rather than the
+/// fallback.
+fn is_measured(entry: Vec4) -> bool {
+    entry.w > 0.0
+}
+
+/// Whether an à-trous input entry (ratio and variance) holds an estimate: see [`NO_ESTIMATE`].
+fn has_estimate(entry: Vec4) -> bool {
+    entry.w >= 0.0
+}
 
 /// The G-buffer entry of pixel `i`.
 fn guide_at(position: &[Vec4], normal: &[Vec4], i: usize) -> Guide {
@@ -39,9 +62,11 @@ fn index_inside(params: &DenoiseParams, p: IVec2) -> Option<usize> {
 }
 
 /// The à-trous input of `pixel`: its shadow ratio (rgb, from the ratio image `ratio`) and the
-/// spatial variance of the ratio's luminance (w) — the moments over 7×7 taps weighted by the edge
-/// stops, `max(0, m₂ − m₁²)` times `params.svgf.y` (the history boost). Pixels without a surface
-/// keep variance 0.
+/// spatial variance of the ratio's luminance (w) — the moments over the 7×7 taps that were
+/// measured ([`super::noise::ratio_pixel`]'s w), weighted by the edge stops, `max(0, m₂ − m₁²)`
+/// times `params.svgf.y` (the history boost). A pixel that was not measured takes those taps'
+/// weighted mean ratio, or keeps the fallback with w = [`NO_ESTIMATE`] where there are none.
+/// Pixels without a surface keep variance 0.
 pub fn ratio_and_variance(
     params: &DenoiseParams,
     pixel: IVec2,
@@ -54,16 +79,22 @@ pub fn ratio_and_variance(
     if !center.is_surface() {
         return ratio[c].xyz().extend(0.0);
     }
-    let (mut m1, mut m2, mut total) = (0.0, 0.0, 0.0);
+    let (mut mean, mut m1, mut m2, mut total) = (Vec3::ZERO, 0.0, 0.0, 0.0);
     let mut dy = -MOMENTS_RADIUS;
     while dy <= MOMENTS_RADIUS {
         let mut dx = -MOMENTS_RADIUS;
         while dx <= MOMENTS_RADIUS {
             if let Some(t) = index_inside(params, pixel + IVec2::new(dx, dy)) {
-                let w =
-                    if t == c { 1.0 } else { edge_stop(&center, &guide_at(position, normal, t), params.edge_weights) };
+                let w = if !is_measured(ratio[t]) {
+                    0.0
+                } else if t == c {
+                    1.0
+                } else {
+                    edge_stop(&center, &guide_at(position, normal, t), params.edge_weights)
+                };
                 if w > 0.0 {
                     let l = luminance(ratio[t].xyz());
+                    mean += w * ratio[t].xyz();
                     m1 += w * l;
                     m2 += w * l * l;
                     total += w;
@@ -73,13 +104,17 @@ pub fn ratio_and_variance(
         }
         dy += 1;
     }
+    if total <= 0.0 {
+        return ratio[c].xyz().extend(NO_ESTIMATE);
+    }
     let (m1, m2) = (m1 / total, m2 / total);
     let variance = ((m2 - m1 * m1).max(0.0) * params.svgf.y).max(0.0);
-    ratio[c].xyz().extend(if variance.is_finite() { variance } else { 0.0 })
+    let value = if is_measured(ratio[c]) { ratio[c].xyz() } else { mean / total };
+    value.extend(if variance.is_finite() { variance } else { 0.0 })
 }
 
 /// The variance at `pixel` prefiltered by a 3×3 Gaussian {1/4, 1/8, 1/16} (Falcor), renormalized
-/// where the kernel leaves the image.
+/// over the taps inside the image that hold an estimate (0 where none does).
 fn prefiltered_variance(params: &DenoiseParams, pixel: IVec2, ratio: &[Vec4]) -> f32 {
     let (mut sum, mut total) = (0.0, 0.0);
     let mut dy = -1;
@@ -87,26 +122,34 @@ fn prefiltered_variance(params: &DenoiseParams, pixel: IVec2, ratio: &[Vec4]) ->
         let mut dx = -1;
         while dx <= 1 {
             if let Some(t) = index_inside(params, pixel + IVec2::new(dx, dy)) {
-                let k = if dx == 0 && dy == 0 {
-                    0.25
-                } else if dx == 0 || dy == 0 {
-                    0.125
-                } else {
-                    0.0625
-                };
-                sum += k * ratio[t].w;
-                total += k;
+                if has_estimate(ratio[t]) {
+                    let k = if dx == 0 && dy == 0 {
+                        0.25
+                    } else if dx == 0 || dy == 0 {
+                        0.125
+                    } else {
+                        0.0625
+                    };
+                    sum += k * ratio[t].w;
+                    total += k;
+                }
             }
             dx += 1;
         }
         dy += 1;
     }
-    sum / total
+    if total > 0.0 {
+        sum / total
+    } else {
+        0.0
+    }
 }
 
 /// One à-trous iteration at `pixel` with tap spacing `params.step`: 5×5 taps weighted by the B3
 /// kernel, the edge stops and the luminance stop `exp(−|Δl| / (phiColor·sqrt(var₃ₓ₃)))`; the
-/// variance (w) is carried with squared weights (Falcor SVGFAtrous). Pixels without a surface
+/// variance (w) is carried with squared weights (Falcor SVGFAtrous). Taps without an estimate
+/// ([`NO_ESTIMATE`]) are skipped; a centre without one takes the other taps' mean without the
+/// luminance stop (it has no luminance to compare), or stays without. Pixels without a surface
 /// pass through.
 pub fn atrous_step(params: &DenoiseParams, pixel: IVec2, ratio: &[Vec4], position: &[Vec4], normal: &[Vec4]) -> Vec4 {
     let Some(c) = index_inside(params, pixel) else { return Vec4::new(1.0, 1.0, 1.0, 0.0) };
@@ -114,20 +157,27 @@ pub fn atrous_step(params: &DenoiseParams, pixel: IVec2, ratio: &[Vec4], positio
     if !center.is_surface() {
         return ratio[c];
     }
+    let center_has_estimate = has_estimate(ratio[c]);
     let l_center = luminance(ratio[c].xyz());
     let phi = params.svgf.x * (VARIANCE_EPSILON + prefiltered_variance(params, pixel, ratio)).max(0.0).sqrt();
     let step = params.step.max(1) as i32;
-    let (mut color, mut variance, mut total) = (glam::Vec3::ZERO, 0.0, 0.0);
+    let (mut color, mut variance, mut total) = (Vec3::ZERO, 0.0, 0.0);
     let mut dy = -2;
     while dy <= 2 {
         let mut dx = -2;
         while dx <= 2 {
             if let Some(t) = index_inside(params, pixel + IVec2::new(dx, dy) * step) {
                 let kernel = ATROUS_KERNEL[dx.unsigned_abs() as usize] * ATROUS_KERNEL[dy.unsigned_abs() as usize];
-                let w = if t == c {
+                let w = if !has_estimate(ratio[t]) {
+                    0.0
+                } else if t == c {
                     1.0
                 } else {
-                    let luminance_stop = (-(luminance(ratio[t].xyz()) - l_center).abs() / phi).exp();
+                    let luminance_stop = if center_has_estimate {
+                        (-(luminance(ratio[t].xyz()) - l_center).abs() / phi).exp()
+                    } else {
+                        1.0
+                    };
                     kernel * luminance_stop * edge_stop(&center, &guide_at(position, normal, t), params.edge_weights)
                 };
                 if w > 0.0 {
@@ -139,6 +189,9 @@ pub fn atrous_step(params: &DenoiseParams, pixel: IVec2, ratio: &[Vec4], positio
             dx += 1;
         }
         dy += 1;
+    }
+    if total <= 0.0 {
+        return ratio[c];
     }
     let out = (color / total).extend(variance / (total * total));
     if out.is_finite() {
@@ -152,7 +205,6 @@ pub fn atrous_step(params: &DenoiseParams, pixel: IVec2, ratio: &[Vec4], positio
 mod tests {
     use super::*;
     use crate::hash::CounterRng;
-    use glam::Vec3;
     use raywave_shared::denoise::MAX_RADIUS;
     use std::{vec, vec::Vec};
 
@@ -178,6 +230,18 @@ mod tests {
         }
     }
 
+    /// `img` with `S_N = U_N = 0` where `unmeasured` says: pixels none of whose samples reached
+    /// the light, so that their ratio is the fallback 1.
+    fn without_light_samples(mut img: Image, unmeasured: impl Fn(u32, u32) -> bool) -> Image {
+        let width = img.params.width;
+        for (i, (s, u)) in img.shadowed.iter_mut().zip(&mut img.unshadowed).enumerate() {
+            if unmeasured(i as u32 % width, i as u32 / width) {
+                (*s, *u) = (Vec4::ZERO, Vec4::ZERO);
+            }
+        }
+        img
+    }
+
     fn svgf(img: &Image) -> Vec<Vec4> {
         let p = &img.params;
         let pixels = |i: u32| IVec2::new((i % p.width) as i32, (i / p.width) as i32);
@@ -198,6 +262,43 @@ mod tests {
         let img = plane(16, 16, |_, _| 0.25);
         for v in svgf(&img) {
             assert!((v.x - 0.25).abs() < 1e-6 && v.w.abs() < 1e-9, "{v}");
+        }
+    }
+
+    #[test]
+    fn pixels_that_drew_no_light_sample_take_their_measured_neighbours_ratio() {
+        // A third of the pixels drew no sample that reached the light (hashed, so no pattern).
+        let unmeasured = |x: u32, y: u32| crate::hash::pcg3d(glam::UVec3::new(x, y, 5)).x.is_multiple_of(3);
+        for visibility in [0.0, 1.0] {
+            let img = without_light_samples(plane(24, 24, |_, _| visibility), unmeasured);
+            for (i, v) in svgf(&img).iter().enumerate() {
+                // Averaged in as measured, the fallback lifted the umbra to about a third.
+                assert_eq!(v.truncate(), Vec3::splat(visibility), "visibility {visibility}, pixel {i}");
+                assert!(v.w >= 0.0, "pixel {i} has an estimate: {v}");
+            }
+        }
+    }
+
+    #[test]
+    fn a_pixel_no_moments_tap_measured_is_filled_by_the_atrous_taps_or_keeps_the_fallback() {
+        // One measured pixel, at visibility ¼; the moments window reaches 3 pixels from it, the
+        // four à-trous iterations (spacing 1, 2, 4, 8) 30 more: every pixel of the image.
+        let img = without_light_samples(plane(20, 20, |_, _| 0.25), |x, y| (x, y) != (2, 3));
+        let p = &img.params;
+        let raw: Vec<Vec4> =
+            img.shadowed.iter().zip(&img.unshadowed).map(|(&s, &u)| super::super::noise::ratio_pixel(s, u)).collect();
+        let moments = |i: u32| {
+            ratio_and_variance(p, IVec2::new((i % 20) as i32, (i / 20) as i32), &raw, &img.position, &img.normal)
+        };
+        assert_eq!(moments(3 * 20 + 2 + 3).truncate(), Vec3::splat(0.25), "3 pixels away: filled");
+        assert_eq!(moments(3 * 20 + 2 + 4), Vec4::new(1.0, 1.0, 1.0, NO_ESTIMATE), "4 pixels away: no estimate");
+        for (i, v) in svgf(&img).iter().enumerate() {
+            assert!((v.truncate() - Vec3::splat(0.25)).abs().max_element() < 1e-6 && v.w >= 0.0, "pixel {i}: {v}");
+        }
+        // With no measured pixel at all, every pixel keeps the fallback 1 (the composite's `U`).
+        let img = without_light_samples(plane(20, 20, |_, _| 0.25), |_, _| true);
+        for v in svgf(&img) {
+            assert_eq!(v, Vec4::new(1.0, 1.0, 1.0, NO_ESTIMATE));
         }
     }
 
