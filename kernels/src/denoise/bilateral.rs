@@ -7,7 +7,7 @@
 #[cfg(target_arch = "spirv")]
 use spirv_std::num_traits::Float;
 
-use super::guide::{edge_stop, Guide};
+use super::guide::{edge_stop, Guide, SMALLEST_WEIGHT};
 use glam::Vec4;
 use raywave_shared::denoise::{DenoiseParams, MAX_RADIUS};
 
@@ -72,7 +72,8 @@ pub fn gaussian_radius(noise: f32, radius: u32, samples_per_pixel: u32) -> f32 {
 }
 
 /// One 1-D pass at a pixel: returns the filtered `(S_N, U_N)`. Taps `r ∈ [−R, R]` weigh
-/// `exp(−(r/g)²) · edge_stop`, with `g` the [`gaussian_radius`]; the centre weighs 1. A pixel
+/// `exp(−(r/g)²) · edge_stop`, with `g` the [`gaussian_radius`], or nothing below
+/// [`SMALLEST_WEIGHT`]; the centre weighs 1. A pixel
 /// whose `g ≤ 0.5` — no shadow noise — or that has no surface passes through untouched [H-DX].
 pub fn bilateral_pass<L: FilterLine>(line: &L, noise: f32, params: &DenoiseParams) -> (Vec4, Vec4) {
     let center = line.tap(0);
@@ -90,7 +91,7 @@ pub fn bilateral_pass<L: FilterLine>(line: &L, noise: f32, params: &DenoiseParam
         while side <= 1 {
             let tap = line.tap(side * r);
             let w = gaussian * edge_stop(&center.guide, &tap.guide, params.edge_weights);
-            if w > 0.0 {
+            if w >= SMALLEST_WEIGHT {
                 shadowed += w * tap.shadowed;
                 unshadowed += w * tap.unshadowed;
                 total += w;
@@ -229,6 +230,20 @@ mod tests {
         let ratio = s.x / u.x;
         assert!((ratio - 0.5).abs() < 0.1, "alternating visibility filters to ≈ 1/2: {ratio}");
         assert!((s.y / u.y - ratio).abs() < 1e-6, "one ratio for every channel");
+    }
+
+    #[test]
+    fn subnormal_weights_count_as_zero_on_every_backend() {
+        // g = 15 · 0.0684 = 1.026 px: the taps at r = ±10 weigh e^−95 ≈ 5·10⁻⁴², a subnormal a
+        // GPU may flush; r = 9 weighs e^−77 ≈ 4·10⁻³⁴, a normal number. Only the tap at +10 sees
+        // light, 10³⁰ times the others' U_N: kept, it would lift S_N to ~2·10⁻¹².
+        let mut p = strip(&[0.0; 41]);
+        p.shadowed[30] = p.unshadowed[30] * 1.0e30;
+        let g = gaussian_radius(0.0684, MAX_RADIUS, 1);
+        assert!((87.4..103.2).contains(&(10.0 / g).powi(2)) && (9.0 / g).powi(2) < 87.3, "g = {g}");
+        assert_eq!(filter(&p, 20, 0.0684).0, Vec4::ZERO);
+        p.shadowed[29] = p.unshadowed[29] * 1.0e30;
+        assert!(filter(&p, 20, 0.0684).0.x > 0.0, "the normal weight at r = 9 counts");
     }
 
     #[test]

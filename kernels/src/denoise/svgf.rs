@@ -14,7 +14,7 @@
 #[cfg(target_arch = "spirv")]
 use spirv_std::num_traits::Float;
 
-use super::guide::{edge_stop, Guide};
+use super::guide::{edge_stop, Guide, SMALLEST_WEIGHT};
 use crate::sampling::light_select::luminance;
 use glam::{IVec2, Vec3, Vec4, Vec4Swizzles};
 use raywave_shared::denoise::DenoiseParams;
@@ -92,7 +92,7 @@ pub fn ratio_and_variance(
                 } else {
                     edge_stop(&center, &guide_at(position, normal, t), params.edge_weights)
                 };
-                if w > 0.0 {
+                if w >= SMALLEST_WEIGHT {
                     let l = luminance(ratio[t].xyz());
                     mean += w * ratio[t].xyz();
                     m1 += w * l;
@@ -180,7 +180,7 @@ pub fn atrous_step(params: &DenoiseParams, pixel: IVec2, ratio: &[Vec4], positio
                     };
                     kernel * luminance_stop * edge_stop(&center, &guide_at(position, normal, t), params.edge_weights)
                 };
-                if w > 0.0 {
+                if w >= SMALLEST_WEIGHT {
                     color += w * ratio[t].xyz();
                     variance += w * w * ratio[t].w;
                     total += w;
