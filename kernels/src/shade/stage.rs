@@ -212,11 +212,24 @@ impl Lobes {
     }
 }
 
-/// Whether `p` is on the emitting side of quad light `light`.
+/// How far from a quad light's plane a point counts as lying in it, relative to the larger of the
+/// point's and the light's corner's largest coordinate: 8 ulp. A hit point interpolated from its
+/// triangle's vertices is off its plane by about 2 ulp (measured on the Cornell lamp, on the CPU
+/// and an H100), and the side test's own rounding adds about as much.
+const IN_LIGHT_PLANE_TOLERANCE: f32 = 8.0 * f32::EPSILON;
+
+/// Whether `p` is on the emitting side of quad light `light`. Not where `p` lies in the light's
+/// plane (within [`IN_LIGHT_PLANE_TOLERANCE`]): a light lights nothing there — a point beside it
+/// sees it edge-on — and on its own surface rounding alone would decide the side, between `U` = 0
+/// and a light that fills the hemisphere (the back of a one-sided lamp speckled with full `U`,
+/// differently on each backend).
 fn faces(light: &Light, p: Vec3) -> bool {
+    let corner = light.position.xyz();
     let normal = light.edge_u.xyz().cross(light.edge_v.xyz());
-    let side = normal.dot(p - light.position.xyz());
-    side > 0.0 || (light.two_sided != 0 && side < 0.0)
+    let side = normal.dot(p - corner);
+    let scale = p.abs().max(corner.abs()).max_element();
+    let in_plane = side.abs() <= IN_LIGHT_PLANE_TOLERANCE * scale * normal.length();
+    !in_plane && (side > 0.0 || (light.two_sided != 0 && side < 0.0))
 }
 
 /// Hit probabilities `(U_D, U_S)` of `light` at `p` for `lobes`; zero if `p` sees its back.
@@ -674,6 +687,42 @@ mod tests {
         // A miss shades nothing.
         let miss = shade_sample(&params(0, 0, 0), UVec2::ZERO, Vec3::Z, &Surface::MISS, &scene);
         assert_eq!(miss, Sanitized::clean(ShadeSample::NONE));
+    }
+
+    #[test]
+    fn a_light_lights_nothing_in_its_own_plane() {
+        // The back of a lamp: a point on an upward-emitting quad light, its normal facing down
+        // (towards a camera below). Rounding puts such a hit point a few ulp above or below the
+        // plane; above, the light filled its hemisphere (U = albedo · L), below it was behind.
+        // Far from the origin too, where an ulp is larger.
+        let table = table();
+        let materials = [material(Vec3::splat(0.8), 1.0, 0.0)];
+        for origin in [Vec3::ZERO, Vec3::new(300.0, -200.0, 100.0)] {
+            for two_sided in [false, true] {
+                let lamp = [Light::quad(origin + Vec3::new(-0.5, -0.5, 0.0), Vec3::X, Vec3::Y, Vec3::ONE, two_sided)];
+                let scene = ShadeScene { materials: &materials, lights: LightSet::new(&lamp, &[], &[]), ltc: &table };
+                let shade_at = |z: f32| {
+                    let p = origin + Vec3::new(0.1, 0.2, 0.0) + Vec3::Z * z;
+                    let surface = Surface { position: p.extend(1.0), normal: Vec4::NEG_Z, ..surface_at_origin() };
+                    shade_sample(&params(sampler_kind::SOBOL, 1, 0), UVec2::ZERO, Vec3::Z, &surface, &scene).value
+                };
+                let ulp = f32::EPSILON * origin.abs().max_element().max(0.5);
+                for steps in -4..=4 {
+                    let s = shade_at(steps as f32 * ulp);
+                    let what = std::format!("{steps} ulp off the plane at {origin}, two-sided {two_sided}");
+                    assert_eq!(
+                        (s.analytic, s.unshadowed, s.shadow_direction.w),
+                        (Vec4::ZERO, Vec4::ZERO, 0.0),
+                        "{what}"
+                    );
+                }
+                // A gap of 10⁻⁴ of the coordinates is no rounding: the light fills the point's
+                // hemisphere (U: the diffuse albedo 0.8 less the Fresnel, plus the specular lobe).
+                let near = origin.abs().max_element().max(1.0) * 1.0e-4;
+                let lit = shade_at(near).analytic;
+                assert!((0.75..0.85).contains(&lit.x), "{near} above the lamp at {origin}: U {lit}");
+            }
+        }
     }
 
     #[test]
