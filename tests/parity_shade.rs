@@ -236,8 +236,8 @@ fn describe_analytic_outside(
     let line = |&i: &usize| {
         let point = rays.origin[i].truncate() + rays.direction[i].truncate() * hits.t[i];
         format!(
-            "pixel {i} ({}, {}): ray {:?} → {:?}, t {:e}, instance {} primitive {} at {point:?}; U {:?} vs {:?}, \
-             emitted {:?} vs {:?}",
+            "pixel {i} ({}, {}): ray {:?} → {:?}, t {:e}, instance {} primitive {} barycentrics {:?} (about \
+             {point:?}); U {:?} vs {:?}, emitted {:?} vs {:?}",
             i as u32 % WIDTH,
             i as u32 / WIDTH,
             rays.origin[i],
@@ -245,6 +245,7 @@ fn describe_analytic_outside(
             hits.t[i],
             hits.instance[i],
             hits.primitive[i],
+            hits.barycentrics[i],
             cpu.analytic[i],
             device.analytic[i],
             cpu.emitted[i],
@@ -355,7 +356,8 @@ fn shade_matches_the_cpu_on_every_vulkan_device() {
 /// where the lamp is one-sided (it glowed, though it lit nothing on that side), glowing where it
 /// is double-sided, alike on the CPU and every device. And unlit by the lamp: its hit points lie
 /// in the lamp's plane, where rounding alone used to decide whether the lamp filled their
-/// hemisphere (`U` ≈ 17.6 in a few pixels a sample, different ones on the CPU and an H100).
+/// hemisphere (`U` ≈ 17.6 in a few pixels a sample, different ones on the CPU and an H100); now
+/// the lamp lights neither its own mesh nor its plane (`kernels/src/shade/stage.rs`).
 #[test]
 fn a_lamp_seen_from_behind_is_black_unless_double_sided_on_every_vulkan_device() {
     let mut cpu = CpuBackend::new();

@@ -28,13 +28,26 @@ pub struct Light {
     pub kind: u32,
     /// 1 if a quad emits from both faces, else 0.
     pub two_sided: u32,
+    /// The scene mesh (hit records' instance) this light is made of, which it does not light: a
+    /// planar emitter lights nothing on itself, and a mesh taken for a quad light may bend off the
+    /// light's plane by the emitter fit's tolerance, where the shade stage would see its own
+    /// light in front of it. [`Light::NO_MESH`] for a light made of no mesh.
+    pub mesh: u32,
     /// Explicit padding; always 0.
-    pub padding: [u32; 2],
+    pub padding: u32,
 }
 
 const _: () = assert!(core::mem::size_of::<Light>() == 80);
 
 impl Light {
+    /// [`Light::mesh`] of a light made of no mesh.
+    pub const NO_MESH: u32 = u32::MAX;
+
+    /// This light as the one made of scene mesh `mesh` (see [`Light::mesh`]).
+    pub fn made_of(self, mesh: u32) -> Self {
+        Self { mesh, ..self }
+    }
+
     /// A sphere light at `centre` of `radius` emitting `radiance` (linear RGB, W·sr⁻¹·m⁻²).
     pub fn sphere(centre: Vec3, radius: f32, radiance: Vec3) -> Self {
         Self {
@@ -44,7 +57,8 @@ impl Light {
             radiance: radiance.extend(0.0),
             kind: light_kind::SPHERE,
             two_sided: 0,
-            padding: [0; 2],
+            mesh: Self::NO_MESH,
+            padding: 0,
         }
     }
 
@@ -58,7 +72,8 @@ impl Light {
             radiance: radiance.extend(0.0),
             kind: light_kind::QUAD,
             two_sided: u32::from(two_sided),
-            padding: [0; 2],
+            mesh: Self::NO_MESH,
+            padding: 0,
         }
     }
 }

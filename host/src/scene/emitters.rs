@@ -39,10 +39,9 @@ const ROUNDING_SLACK: f64 = 16.0 * f32::EPSILON as f64;
 /// The lights derived from a scene's meshes.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub(super) struct DerivedLights {
-    /// One quad light per emissive parallelogram mesh, in mesh order.
+    /// One quad light per emissive parallelogram mesh, in mesh order, each [`Light::made_of`] its
+    /// mesh.
     pub lights: Vec<Light>,
-    /// For each light, the index of the mesh it came from.
-    pub light_meshes: Vec<u32>,
     /// For each mesh, the index of its light, if it has one.
     pub mesh_lights: Vec<Option<u32>>,
     /// Emissive meshes that are not parallelograms.
@@ -61,9 +60,9 @@ pub(super) fn derive(meshes: &[Mesh]) -> DerivedLights {
         match parallelogram(mesh) {
             Some(quad) => {
                 derived.mesh_lights[index] = Some(derived.lights.len() as u32);
-                derived.light_meshes.push(index as u32);
                 let two_sided = mesh.material.double_sided;
-                derived.lights.push(Light::quad(quad.corner, quad.edge_u, quad.edge_v, emission, two_sided));
+                let light = Light::quad(quad.corner, quad.edge_u, quad.edge_v, emission, two_sided);
+                derived.lights.push(light.made_of(index as u32));
             }
             None => derived.unsupported += 1,
         }
@@ -256,7 +255,7 @@ mod tests {
         let bent = emissive(vec![Vec3::ZERO, Vec3::X, Vec3::new(1.0, 1.0, 0.5), Vec3::Y], vec![[0, 1, 2], [0, 2, 3]]);
         let derived = derive(&[dark, lit.clone(), bent, lit]);
         assert_eq!(derived.lights.len(), 2);
-        assert_eq!(derived.light_meshes, vec![1, 3]);
+        assert_eq!(derived.lights.iter().map(|l| l.mesh).collect::<Vec<_>>(), vec![1, 3]);
         assert_eq!(derived.mesh_lights, vec![None, Some(0), None, Some(1)]);
         assert_eq!(derived.unsupported, 1);
         let light = derived.lights[0];

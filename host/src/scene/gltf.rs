@@ -778,8 +778,8 @@ mod tests {
             Vec3::new(4.0, 2.0, 1.0),
             false,
         );
-        assert_eq!(scene.lights(), &[lamp]);
         let light_mesh = scene.light_mesh(0);
+        assert_eq!(scene.lights(), &[lamp.made_of(light_mesh as u32)]);
         assert_eq!(scene.meshes()[light_mesh].name, "lamp primitive 0");
         assert_eq!(scene.mesh_light(light_mesh), Some(0));
         assert_eq!(scene.mesh_light(1 - light_mesh), None);

@@ -227,7 +227,7 @@ impl Scene {
     /// The index in [`Scene::meshes`] (the instance index) of the mesh that light `light` came
     /// from. Panics if `light` is not below `lights().len()`, like slice indexing.
     pub fn light_mesh(&self, light: usize) -> usize {
-        self.lights.light_meshes[light] as usize
+        self.lights.lights[light].mesh as usize
     }
 
     /// The index in [`Scene::lights`] of mesh (instance) `mesh`'s light, or `None` if that mesh

@@ -213,16 +213,18 @@ impl Lobes {
 }
 
 /// How far from a quad light's plane a point counts as lying in it, relative to the larger of the
-/// point's and the light's corner's largest coordinate: 8 ulp. A hit point interpolated from its
-/// triangle's vertices is off its plane by about 2 ulp (measured on the Cornell lamp, on the CPU
-/// and an H100), and the side test's own rounding adds about as much.
+/// point's and the light's corner's largest coordinate: 8 ε, 8 to 16 ulp of that coordinate. A hit
+/// point interpolated from its triangle's vertices is off its plane by about 2 ulp (measured on
+/// the Cornell lamp, on the CPU and an H100), and the side test's own rounding adds about as much
+/// (at most 1.6 ε in a simulation of tilted lights of 1 mm to 1000 units up to 10⁴ out).
 const IN_LIGHT_PLANE_TOLERANCE: f32 = 8.0 * f32::EPSILON;
 
 /// Whether `p` is on the emitting side of quad light `light`. Not where `p` lies in the light's
 /// plane (within [`IN_LIGHT_PLANE_TOLERANCE`]): a light lights nothing there — a point beside it
 /// sees it edge-on — and on its own surface rounding alone would decide the side, between `U` = 0
 /// and a light that fills the hemisphere (the back of a one-sided lamp speckled with full `U`,
-/// differently on each backend).
+/// differently on each backend). Points of the mesh a light is made of are excluded by identity
+/// too ([`Light::mesh`]); this covers lights made of no mesh and other geometry in their plane.
 fn faces(light: &Light, p: Vec3) -> bool {
     let corner = light.position.xyz();
     let normal = light.edge_u.xyz().cross(light.edge_v.xyz());
@@ -232,9 +234,10 @@ fn faces(light: &Light, p: Vec3) -> bool {
     !in_plane && (side > 0.0 || (light.two_sided != 0 && side < 0.0))
 }
 
-/// Hit probabilities `(U_D, U_S)` of `light` at `p` for `lobes`; zero if `p` sees its back.
-fn hit_probabilities(light: &Light, p: Vec3, lobes: &Lobes) -> (f32, f32) {
-    if !faces(light, p) {
+/// Hit probabilities `(U_D, U_S)` of `light` at `p`, a point of scene mesh `instance`, for
+/// `lobes`; zero if `p` sees its back or lies on the light itself ([`Light::mesh`]).
+fn hit_probabilities(light: &Light, p: Vec3, instance: u32, lobes: &Lobes) -> (f32, f32) {
+    if light.mesh == instance || !faces(light, p) {
         return (0.0, 0.0);
     }
     let quad = ltc::local_quad(&lobes.frame, p, light.position.xyz(), light.edge_u.xyz(), light.edge_v.xyz());
@@ -278,7 +281,7 @@ pub fn shade_sample(
     let mut k = 0u32;
     while k < light_count {
         let light = &scene.lights.lights[k as usize];
-        let (d, s) = hit_probabilities(light, p, &lobes);
+        let (d, s) = hit_probabilities(light, p, surface.instance, &lobes);
         analytic += light.radiance.xyz() * (lobes.diffuse * d + lobes.specular * s);
         if k == choice.index {
             (u_d, u_s) = (d, s);
@@ -689,38 +692,70 @@ mod tests {
         assert_eq!(miss, Sanitized::clean(ShadeSample::NONE));
     }
 
+    /// A 1 × 1 quad light centred at `centre` with edges `turn · x̂`, `turn · ŷ` (emitting towards
+    /// `turn · ẑ`), the shading surface `z` along that normal from the point `(0.1, 0.2)` of its
+    /// centre, facing it (normal `−turn · ẑ`: the back of a lamp seen from below), on mesh
+    /// `instance` (materials: one, index 0); returns the shade sample.
+    fn shade_by_lamp(lamp: Light, turn: glam::Quat, z: f32, instance: u32) -> ShadeSample {
+        let table = table();
+        let materials = [material(Vec3::splat(0.8), 1.0, 0.0), material(Vec3::splat(0.8), 1.0, 0.0)];
+        let lights = [lamp];
+        let scene = ShadeScene { materials: &materials, lights: LightSet::new(&lights, &[], &[]), ltc: &table };
+        let normal = turn * Vec3::Z;
+        let p = lamp.position.xyz() + turn * Vec3::new(0.6, 0.7, 0.0) + normal * z;
+        let surface =
+            Surface { position: p.extend(1.0), normal: (-normal).extend(0.0), instance, ..surface_at_origin() };
+        shade_sample(&params(sampler_kind::SOBOL, 1, 0), UVec2::ZERO, normal, &surface, &scene).value
+    }
+
+    /// The lamps of the own-plane tests: axis-aligned at the origin, and turned far from it, where
+    /// an ulp is larger and the side test rounds in every coordinate. With the rotation and the
+    /// ulp of the larger coordinates (the tolerance's unit).
+    fn lamps(two_sided: bool) -> [(Light, glam::Quat, f32); 2] {
+        let turn = glam::Quat::from_axis_angle(Vec3::new(1.0, 2.0, 3.0).normalize(), 0.7);
+        let far = Vec3::new(300.0, -200.0, 100.0);
+        let lamp = |centre: Vec3, turn: glam::Quat| {
+            let corner = centre - turn * Vec3::new(0.5, 0.5, 0.0);
+            Light::quad(corner, turn * Vec3::X, turn * Vec3::Y, Vec3::ONE, two_sided)
+        };
+        [
+            (lamp(Vec3::ZERO, glam::Quat::IDENTITY), glam::Quat::IDENTITY, 0.6 * f32::EPSILON),
+            (lamp(far, turn), turn, 300.5 * f32::EPSILON),
+        ]
+    }
+
     #[test]
     fn a_light_lights_nothing_in_its_own_plane() {
-        // The back of a lamp: a point on an upward-emitting quad light, its normal facing down
-        // (towards a camera below). Rounding puts such a hit point a few ulp above or below the
-        // plane; above, the light filled its hemisphere (U = albedo · L), below it was behind.
-        // Far from the origin too, where an ulp is larger.
-        let table = table();
-        let materials = [material(Vec3::splat(0.8), 1.0, 0.0)];
-        for origin in [Vec3::ZERO, Vec3::new(300.0, -200.0, 100.0)] {
-            for two_sided in [false, true] {
-                let lamp = [Light::quad(origin + Vec3::new(-0.5, -0.5, 0.0), Vec3::X, Vec3::Y, Vec3::ONE, two_sided)];
-                let scene = ShadeScene { materials: &materials, lights: LightSet::new(&lamp, &[], &[]), ltc: &table };
-                let shade_at = |z: f32| {
-                    let p = origin + Vec3::new(0.1, 0.2, 0.0) + Vec3::Z * z;
-                    let surface = Surface { position: p.extend(1.0), normal: Vec4::NEG_Z, ..surface_at_origin() };
-                    shade_sample(&params(sampler_kind::SOBOL, 1, 0), UVec2::ZERO, Vec3::Z, &surface, &scene).value
-                };
-                let ulp = f32::EPSILON * origin.abs().max_element().max(0.5);
+        // The back of a lamp: a point on an emitting quad, its normal facing away from the
+        // emission (towards a camera on the other side). Rounding puts such a hit point a few
+        // ulp in front or behind; in front, the light filled its hemisphere (U = albedo · L).
+        for two_sided in [false, true] {
+            for (lamp, turn, ulp) in lamps(two_sided) {
+                let what = |steps| std::format!("{steps} ulp off {lamp:?}");
                 for steps in -4..=4 {
-                    let s = shade_at(steps as f32 * ulp);
-                    let what = std::format!("{steps} ulp off the plane at {origin}, two-sided {two_sided}");
-                    assert_eq!(
-                        (s.analytic, s.unshadowed, s.shadow_direction.w),
-                        (Vec4::ZERO, Vec4::ZERO, 0.0),
-                        "{what}"
-                    );
+                    let s = shade_by_lamp(lamp, turn, steps as f32 * ulp, 0);
+                    let unlit = (s.analytic, s.unshadowed, s.shadow_direction.w);
+                    assert_eq!(unlit, (Vec4::ZERO, Vec4::ZERO, 0.0), "{}", what(steps));
                 }
-                // A gap of 10⁻⁴ of the coordinates is no rounding: the light fills the point's
-                // hemisphere (U: the diffuse albedo 0.8 less the Fresnel, plus the specular lobe).
-                let near = origin.abs().max_element().max(1.0) * 1.0e-4;
-                let lit = shade_at(near).analytic;
-                assert!((0.75..0.85).contains(&lit.x), "{near} above the lamp at {origin}: U {lit}");
+                // Twice the tolerance off is no rounding: the light fills the point's hemisphere
+                // (U: the diffuse albedo 0.8 less the Fresnel, plus the specular lobe).
+                let lit = shade_by_lamp(lamp, turn, 16.0 * ulp, 0).analytic;
+                assert!((0.75..0.85).contains(&lit.x), "{}: U {lit}", what(16));
+            }
+        }
+    }
+
+    #[test]
+    fn a_light_lights_nothing_of_the_mesh_it_is_made_of() {
+        // A point 10⁻⁵ of the coordinates in front of the lamp — where the emitter fit lets the
+        // second triangle of a lamp's mesh bend (10⁻⁴ of its size) — is lit by a light of another
+        // mesh, and not by the light made of its own.
+        for (lamp, turn, ulp) in lamps(false) {
+            let z = 1.0e-5 * ulp / f32::EPSILON;
+            for (light, instance, lit) in [(lamp, 0, true), (lamp.made_of(1), 0, true), (lamp.made_of(1), 1, false)] {
+                let u = shade_by_lamp(light, turn, z, instance).analytic.x;
+                assert_eq!(u > 0.75, lit, "mesh {} seen from mesh {instance}: U {u}", light.mesh);
+                assert!(lit || u == 0.0, "{u}");
             }
         }
     }
