@@ -25,8 +25,9 @@ impl Guide {
 
 /// Filter weights below the smallest normal `f32` (2⁻¹²⁶) count as 0, on every backend: a GPU may
 /// flush such a subnormal weight to 0 (Vulkan leaves denormals to the device) where the CPU keeps
-/// it. The bilateral Gaussian `exp(−(r/g)²)` is subnormal for `(r/g)²` in 87.3 … 103.3, and
-/// SVGF's luminance stop wherever the variance is small.
+/// it. The bilateral Gaussian `exp(−(r/g)²)` is subnormal for `(r/g)²` in 87.3 … 104, and SVGF's
+/// luminance stop wherever the variance is small. (A weight within a few ulp of the threshold may
+/// still land on either side: Vulkan bounds `exp`'s error at `3 + 2·|x|` ulp.)
 pub const SMALLEST_WEIGHT: f32 = f32::MIN_POSITIVE;
 
 /// Depth differences are measured relative to the centre's depth so the stop is unit-free: with

@@ -9,7 +9,10 @@
 //! measurement of their visibility: both passes skip them as taps and fill them from the taps
 //! that were measured, as the TV filter does by adding their zero `S_N`, `U_N` to both sums.
 //! Averaged in as a visibility of 1 they lifted an umbra in which a fraction q of the pixels drew
-//! no light sample to about q (the BRDF-sampled share of samples that miss the light).
+//! no light sample to about q (the BRDF-sampled share of samples that miss the light). A pixel
+//! counts as measured when any channel of `U_N` reached the light; a channel that did not keeps
+//! its fallback 1 in the average (TV would leave that channel out), which matters only for lights
+//! with a zero channel beside other lights, where `U` in that channel is their light alone.
 
 #[cfg(target_arch = "spirv")]
 use spirv_std::num_traits::Float;
@@ -193,7 +196,8 @@ pub fn atrous_step(params: &DenoiseParams, pixel: IVec2, ratio: &[Vec4], positio
     if total <= 0.0 {
         return ratio[c];
     }
-    let out = (color / total).extend(variance / (total * total));
+    // Divided twice, not by `total²`, which underflows for a filled centre's tiny total.
+    let out = (color / total).extend(variance / total / total);
     if out.is_finite() {
         out
     } else {
