@@ -38,6 +38,12 @@ const VARIANCE_EPSILON: f32 = 1.0e-10;
 /// that none reaches keeps the fallback.
 pub const NO_ESTIMATE: f32 = -1.0;
 
+/// The smallest sum of à-trous weights that fills a centre without an estimate: 2⁻⁶³, whose
+/// square — the carried variance's divisor — is the smallest normal `f32`. Below it the squared
+/// weights are subnormal, which a GPU may flush where the CPU keeps them; the centre then keeps
+/// no estimate on every backend. (A centre with an estimate weighs 1 itself.)
+pub const SMALLEST_TOTAL: f32 = 1.0 / (1u64 << 63) as f32;
+
 /// Whether a ratio-image entry ([`super::noise::ratio_pixel`]) was measured rather than the
 /// fallback.
 fn is_measured(entry: Vec4) -> bool {
@@ -152,8 +158,8 @@ fn prefiltered_variance(params: &DenoiseParams, pixel: IVec2, ratio: &[Vec4]) ->
 /// kernel, the edge stops and the luminance stop `exp(−|Δl| / (phiColor·sqrt(var₃ₓ₃)))`; the
 /// variance (w) is carried with squared weights (Falcor SVGFAtrous). Taps without an estimate
 /// ([`NO_ESTIMATE`]) are skipped; a centre without one takes the other taps' mean without the
-/// luminance stop (it has no luminance to compare), or stays without. Pixels without a surface
-/// pass through.
+/// luminance stop (it has no luminance to compare), or stays without where their weights sum
+/// below [`SMALLEST_TOTAL`]. Pixels without a surface pass through.
 pub fn atrous_step(params: &DenoiseParams, pixel: IVec2, ratio: &[Vec4], position: &[Vec4], normal: &[Vec4]) -> Vec4 {
     let Some(c) = index_inside(params, pixel) else { return Vec4::new(1.0, 1.0, 1.0, 0.0) };
     let center = guide_at(position, normal, c);
@@ -193,11 +199,10 @@ pub fn atrous_step(params: &DenoiseParams, pixel: IVec2, ratio: &[Vec4], positio
         }
         dy += 1;
     }
-    if total <= 0.0 {
+    if total < SMALLEST_TOTAL {
         return ratio[c];
     }
-    // Divided twice, not by `total²`, which underflows for a filled centre's tiny total.
-    let out = (color / total).extend(variance / total / total);
+    let out = (color / total).extend(variance / (total * total));
     if out.is_finite() {
         out
     } else {
@@ -304,6 +309,57 @@ mod tests {
         for v in svgf(&img) {
             assert_eq!(v, Vec4::new(1.0, 1.0, 1.0, NO_ESTIMATE));
         }
+    }
+
+    /// The largest `t` in `[0, 1]` at which `stop(t)` is still positive (`stop(0) > 0`,
+    /// `stop(1) = 0`): the edge stop's smallest positive value along `t`, about 2⁻²⁴.
+    fn last_positive(stop: impl Fn(f32) -> f32) -> f32 {
+        let (mut lo, mut hi) = (0.0f32, 1.0f32);
+        for _ in 0..64 {
+            let mid = 0.5 * (lo + hi);
+            if stop(mid) > 0.0 {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        lo
+    }
+
+    #[test]
+    fn a_centre_filled_only_through_vanishing_weights_keeps_no_estimate() {
+        // A 5 × 5 image: the centre has no estimate, its diagonal neighbour (B3 kernel 4/9) has
+        // one, the others no surface. The tap's depth, normal and luminance each put an edge stop
+        // at its smallest positive value (~6·10⁻⁸): with all three its weight, ~10⁻²², sums below
+        // 2⁻⁶³ — its square is subnormal, which the CPU keeps and a GPU may flush — and the centre
+        // keeps no estimate; with two, ~10⁻¹⁵, it is filled, with a finite variance.
+        let params = DenoiseParams { step: 1, edge_weights: Vec4::ONE, ..DenoiseParams::new(5, 5) };
+        let center = Guide { position: Vec4::new(0.0, 0.0, 0.0, 1.0), normal: Vec4::new(0.0, 0.0, 1.0, 1.0) };
+        let tap = |depth: f32, angle: f32, luminance: f32| Guide {
+            position: Vec4::new(0.1, 0.0, 0.0, 1.0 + 0.25 * depth),
+            normal: Vec3::new(0.0, -angle.sin(), angle.cos()).extend(1.0 + luminance),
+        };
+        let stop = |g: Guide| edge_stop(&center, &g, params.edge_weights);
+        let depth = last_positive(|t| stop(tap(t, 0.0, 0.0)));
+        let angle =
+            core::f32::consts::FRAC_PI_2 * last_positive(|t| stop(tap(0.0, t * core::f32::consts::FRAC_PI_2, 0.0)));
+        let luminance = 0.2 * last_positive(|t| stop(tap(0.0, 0.0, 0.2 * t)));
+        let run = |g: Guide| {
+            let mut position = vec![Vec4::ZERO; 25];
+            let mut normal = vec![Vec4::ZERO; 25];
+            let mut ratio = vec![Vec4::new(1.0, 1.0, 1.0, NO_ESTIMATE); 25];
+            (position[12], normal[12]) = (center.position, center.normal);
+            (position[18], normal[18], ratio[18]) = (g.position, g.normal, Vec4::new(0.25, 0.25, 0.25, 0.01));
+            (stop(g), atrous_step(&params, IVec2::new(2, 2), &ratio, &position, &normal))
+        };
+        let (weight, out) = run(tap(depth, angle, luminance));
+        let kernel = ATROUS_KERNEL[1] * ATROUS_KERNEL[1];
+        assert!(weight * kernel > 0.0 && weight * kernel < SMALLEST_TOTAL, "{weight:e}");
+        assert!((weight * kernel) * (weight * kernel) > 0.0, "the CPU keeps the subnormal square");
+        assert_eq!(out, Vec4::new(1.0, 1.0, 1.0, NO_ESTIMATE));
+        let (weight, out) = run(tap(depth, 0.0, luminance));
+        assert!(weight * kernel > SMALLEST_TOTAL, "{weight:e}");
+        assert!(out.truncate() == Vec3::splat(0.25) && out.w.is_finite() && out.w >= 0.0, "{out}");
     }
 
     #[test]
