@@ -29,7 +29,8 @@ use std::sync::atomic::{AtomicU64, Ordering};
 pub struct ShadeData {
     /// Material per instance (mesh).
     pub materials: Vec<MaterialParams>,
-    /// The quad lights.
+    /// The quad lights. One made of a scene mesh names it ([`Light::made_of`]) and lights nothing
+    /// of it; a light an engine adds keeps [`Light::NO_MESH`].
     pub lights: Vec<Light>,
     /// Light BVH nodes (empty: linear importance scan, for few lights).
     pub light_nodes: Vec<LightBvhNode>,

@@ -780,6 +780,7 @@ mod tests {
         );
         let light_mesh = scene.light_mesh(0);
         assert_eq!(scene.lights(), &[lamp.made_of(light_mesh as u32)]);
+        assert_eq!(scene.lights()[0].mesh, 1, "the lamp is the second mesh, after the floor");
         assert_eq!(scene.meshes()[light_mesh].name, "lamp primitive 0");
         assert_eq!(scene.mesh_light(light_mesh), Some(0));
         assert_eq!(scene.mesh_light(1 - light_mesh), None);

@@ -219,7 +219,8 @@ impl Scene {
     /// from both where its material is [`Material::double_sided`]:
     /// the light's corner is the first triangle's corner off the diagonal and its edges run to
     /// that triangle's next and previous corners, so `edge_u × edge_v` is the triangle's
-    /// counter-clockwise normal. The meshes stay in [`Scene::meshes`], so rays still hit them.
+    /// counter-clockwise normal. The meshes stay in [`Scene::meshes`], so rays still hit them;
+    /// each light is [`Light::made_of`] its mesh, which it does not light.
     pub fn lights(&self) -> &[Light] {
         &self.lights.lights
     }
