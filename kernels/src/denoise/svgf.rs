@@ -167,8 +167,13 @@ pub fn atrous_step(params: &DenoiseParams, pixel: IVec2, ratio: &[Vec4], positio
         return ratio[c];
     }
     let center_has_estimate = has_estimate(ratio[c]);
-    let l_center = luminance(ratio[c].xyz());
-    let phi = params.svgf.x * (VARIANCE_EPSILON + prefiltered_variance(params, pixel, ratio)).max(0.0).sqrt();
+    // The luminance stop's centre and scale; unused for a centre without an estimate.
+    let (l_center, phi) = if center_has_estimate {
+        let variance = prefiltered_variance(params, pixel, ratio);
+        (luminance(ratio[c].xyz()), params.svgf.x * (VARIANCE_EPSILON + variance).max(0.0).sqrt())
+    } else {
+        (0.0, 0.0)
+    };
     let step = params.step.max(1) as i32;
     let (mut color, mut variance, mut total) = (Vec3::ZERO, 0.0, 0.0);
     let mut dy = -2;
@@ -251,11 +256,20 @@ mod tests {
         img
     }
 
+    /// The pixel at row-major index `i` of `img`.
+    fn pixel(img: &Image, i: u32) -> IVec2 {
+        IVec2::new((i % img.params.width) as i32, (i / img.params.width) as i32)
+    }
+
+    /// The ratio image of `img` (the denoisers' ratio pass).
+    fn raw_ratio(img: &Image) -> Vec<Vec4> {
+        img.shadowed.iter().zip(&img.unshadowed).map(|(&s, &u)| super::super::noise::ratio_pixel(s, u)).collect()
+    }
+
     fn svgf(img: &Image) -> Vec<Vec4> {
         let p = &img.params;
-        let pixels = |i: u32| IVec2::new((i % p.width) as i32, (i / p.width) as i32);
-        let raw: Vec<Vec4> =
-            img.shadowed.iter().zip(&img.unshadowed).map(|(&s, &u)| super::super::noise::ratio_pixel(s, u)).collect();
+        let pixels = |i: u32| pixel(img, i);
+        let raw = raw_ratio(img);
         let mut ratio: Vec<Vec4> =
             (0..p.pixels()).map(|i| ratio_and_variance(p, pixels(i), &raw, &img.position, &img.normal)).collect();
         for k in 0..4 {
@@ -293,12 +307,8 @@ mod tests {
         // One measured pixel, at visibility ¼; the moments window reaches 3 pixels from it, the
         // four à-trous iterations (spacing 1, 2, 4, 8) 30 more: every pixel of the image.
         let img = without_light_samples(plane(20, 20, |_, _| 0.25), |x, y| (x, y) != (2, 3));
-        let p = &img.params;
-        let raw: Vec<Vec4> =
-            img.shadowed.iter().zip(&img.unshadowed).map(|(&s, &u)| super::super::noise::ratio_pixel(s, u)).collect();
-        let moments = |i: u32| {
-            ratio_and_variance(p, IVec2::new((i % 20) as i32, (i / 20) as i32), &raw, &img.position, &img.normal)
-        };
+        let raw = raw_ratio(&img);
+        let moments = |i: u32| ratio_and_variance(&img.params, pixel(&img, i), &raw, &img.position, &img.normal);
         assert_eq!(moments(3 * 20 + 2 + 3).truncate(), Vec3::splat(0.25), "3 pixels away: filled");
         assert_eq!(moments(3 * 20 + 2 + 4), Vec4::new(1.0, 1.0, 1.0, NO_ESTIMATE), "4 pixels away: no estimate");
         for (i, v) in svgf(&img).iter().enumerate() {

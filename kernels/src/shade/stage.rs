@@ -230,9 +230,9 @@ fn faces(light: &Light, p: Vec3) -> bool {
     let corner = light.position.xyz();
     let normal = light.edge_u.xyz().cross(light.edge_v.xyz());
     let side = normal.dot(p - corner);
-    let scale = p.abs().max(corner.abs()).max_element();
-    let in_plane = side.abs() <= IN_LIGHT_PLANE_TOLERANCE * scale * normal.length();
-    !in_plane && (side > 0.0 || (light.two_sided != 0 && side < 0.0))
+    let emitting_side = side > 0.0 || (light.two_sided != 0 && side < 0.0);
+    // The tolerance (a square root) only for the lights that pass the sign test.
+    emitting_side && side.abs() > IN_LIGHT_PLANE_TOLERANCE * p.abs().max(corner.abs()).max_element() * normal.length()
 }
 
 /// Hit probabilities `(U_D, U_S)` of `light` at `p`, a point of scene mesh `instance`, for
