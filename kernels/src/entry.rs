@@ -363,15 +363,6 @@ pub fn shade(
     }
 }
 
-/// The pixel of invocation `i` of a `params.width`-wide image, if `i` is inside it.
-fn denoise_pixel(params: &raywave_shared::DenoiseParams, i: u32) -> Option<glam::IVec2> {
-    if i < params.pixels() {
-        Some(glam::IVec2::new((i % params.width) as i32, (i / params.width) as i32))
-    } else {
-        None
-    }
-}
-
 /// Entry point of the copy probe (one invocation per pixel): pixel `i`'s `Vec4` copied to
 /// another buffer, nothing else — the least a per-pixel pass over `Vec4` images can move, and so
 /// the memory roof `raywave bench denoise` measures the passes' bandwidth against.
@@ -383,7 +374,7 @@ pub fn copy_probe(
     #[spirv(storage_buffer, descriptor_set = 0, binding = 1)] copy: &mut [Vec4],
 ) {
     let i = stream_index(global_id);
-    if denoise_pixel(params, i).is_some() {
+    if params.pixel(i).is_some() {
         copy[i as usize] = source[i as usize];
     }
 }
@@ -398,7 +389,7 @@ pub fn denoise_ratio(
     #[spirv(storage_buffer, descriptor_set = 0, binding = 2)] ratio: &mut [Vec4],
 ) {
     let i = stream_index(global_id);
-    if denoise_pixel(params, i).is_some() {
+    if params.pixel(i).is_some() {
         let k = i as usize;
         ratio[k] = crate::denoise::noise::ratio_pixel(shadowed[k], unshadowed[k]);
     }
@@ -413,7 +404,7 @@ pub fn denoise_noise(
     #[spirv(storage_buffer, descriptor_set = 0, binding = 1)] noise: &mut [f32],
 ) {
     let i = stream_index(global_id);
-    if let Some(pixel) = denoise_pixel(params, i) {
+    if let Some(pixel) = params.pixel(i) {
         noise[i as usize] = crate::denoise::noise::noise_estimate(params, pixel, ratio);
     }
 }
@@ -427,7 +418,7 @@ pub fn denoise_noise_blur(
     #[spirv(storage_buffer, descriptor_set = 0, binding = 1)] blurred: &mut [f32],
 ) {
     let i = stream_index(global_id);
-    if let Some(pixel) = denoise_pixel(params, i) {
+    if let Some(pixel) = params.pixel(i) {
         blurred[i as usize] = crate::denoise::noise::blurred_noise(params, pixel, raw);
     }
 }
@@ -542,7 +533,7 @@ pub fn denoise_composite(
 ) {
     use glam::Vec4Swizzles;
     let i = stream_index(global_id);
-    if denoise_pixel(params, i).is_some() {
+    if params.pixel(i).is_some() {
         let k = i as usize;
         let c =
             crate::shade::stage::composite(analytic[k].xyz(), unshadowed[k].xyz(), shadowed[k].xyz(), emitted[k].xyz());
@@ -561,7 +552,7 @@ pub fn svgf_variance(
     #[spirv(storage_buffer, descriptor_set = 0, binding = 3)] with_variance: &mut [Vec4],
 ) {
     let i = stream_index(global_id);
-    if let Some(pixel) = denoise_pixel(params, i) {
+    if let Some(pixel) = params.pixel(i) {
         with_variance[i as usize] = crate::denoise::svgf::ratio_and_variance(params, pixel, ratio, position, normal);
     }
 }
@@ -578,7 +569,7 @@ pub fn svgf_atrous(
     #[spirv(storage_buffer, descriptor_set = 0, binding = 3)] filtered: &mut [Vec4],
 ) {
     let i = stream_index(global_id);
-    if let Some(pixel) = denoise_pixel(params, i) {
+    if let Some(pixel) = params.pixel(i) {
         filtered[i as usize] = crate::denoise::svgf::atrous_step(params, pixel, ratio, position, normal);
     }
 }
@@ -598,7 +589,7 @@ pub fn svgf_composite(
 ) {
     use glam::Vec4Swizzles;
     let i = stream_index(global_id);
-    if denoise_pixel(params, i).is_some() {
+    if params.pixel(i).is_some() {
         let k = i as usize;
         let c = crate::shade::stage::apply_visibility(analytic[k].xyz(), ratio[k].xyz(), emitted[k].xyz());
         color[k] = counted(c, replaced).extend(1.0);

@@ -5,7 +5,7 @@
 
 use crate::bindings::WORKGROUP_SIZE;
 use bytemuck::{Pod, Zeroable};
-use glam::Vec4;
+use glam::{IVec2, Vec4};
 
 /// Largest filter radius R in pixels: the reference code's R = 10 [H-DX, H-CPU, H-SD]. The
 /// Vulkan bilateral pass keeps `WORKGROUP_SIZE + 2·MAX_RADIUS` pixels of a line in workgroup
@@ -145,6 +145,26 @@ impl DenoiseParams {
         self.width * self.height
     }
 
+    /// The pixel at row-major index `i` (`(i mod width, i / width)`), if `i` lies inside the
+    /// image: what an invocation of a per-pixel pass works on.
+    pub fn pixel(&self, i: u32) -> Option<IVec2> {
+        if i < self.pixels() {
+            Some(IVec2::new((i % self.width) as i32, (i / self.width) as i32))
+        } else {
+            None
+        }
+    }
+
+    /// The row-major index of `pixel`, if it lies inside the image: where a filter tap reads.
+    pub fn index_of(&self, pixel: IVec2) -> Option<usize> {
+        let inside = pixel.x >= 0 && pixel.y >= 0 && (pixel.x as u32) < self.width && (pixel.y as u32) < self.height;
+        if inside {
+            Some((pixel.y as u32 * self.width + pixel.x as u32) as usize)
+        } else {
+            None
+        }
+    }
+
     /// Length of the lines the bilateral pass filters along and how many there are:
     /// `(width, height)` along x, `(height, width)` along y.
     pub const fn lines(&self) -> (u32, u32) {
@@ -203,6 +223,20 @@ mod tests {
         };
         assert_eq!([chosen(1), chosen(2), chosen(3), chosen(4), chosen(5)], [(1, 1), (2, 2), (3, 3), (4, 3), (5, 4)]);
         assert_eq!(DenoiseParams::with_radius(128, 128, 2), DenoiseParams::new(128, 128));
+    }
+
+    #[test]
+    fn pixels_and_indices_are_row_major_and_only_inside_the_image() {
+        let p = DenoiseParams::new(7, 3);
+        for i in 0..p.pixels() {
+            let pixel = p.pixel(i).expect("an index below the pixel count");
+            assert_eq!(p.index_of(pixel), Some(i as usize), "pixel {pixel}");
+        }
+        assert_eq!((p.pixel(8), p.pixel(20)), (Some(IVec2::new(1, 1)), Some(IVec2::new(6, 2))));
+        assert_eq!((p.pixel(21), p.pixel(u32::MAX)), (None, None));
+        let outside = [IVec2::new(-1, 0), IVec2::new(0, -1), IVec2::new(7, 0), IVec2::new(0, 3), IVec2::MIN];
+        assert!(outside.iter().all(|&pixel| p.index_of(pixel).is_none()));
+        assert_eq!(DenoiseParams::new(0, 5).pixel(0), None, "an empty image has no pixel");
     }
 
     #[test]

@@ -14,85 +14,128 @@ use raywave_shared::DenoiseParams;
 use std::sync::atomic::AtomicU64;
 use std::time::Instant;
 
-/// The buffers a denoiser threads through its passes.
+/// The buffers a denoiser threads through its passes, each allocated and written (at the image's
+/// size, or empty where no pass of the method writes it) before the timed passes, as the Vulkan
+/// backend's buffers are; a pass writes into its output buffer and, where it reads its own kind
+/// of input, swaps the two.
 struct Working {
     noise_raw: Vec<f32>,
     noise: Vec<f32>,
     shadowed: Vec<Vec4>,
     unshadowed: Vec<Vec4>,
-    /// What a bilateral pass writes (then swapped with `shadowed` and `unshadowed`): allocated
-    /// before the timed passes, as the Vulkan backend's buffers are; empty for SVGF.
+    /// What a bilateral pass writes (then swapped with `shadowed` and `unshadowed`).
     filtered_shadowed: Vec<Vec4>,
     filtered_unshadowed: Vec<Vec4>,
     ratio: Vec<Vec4>,
+    /// What an SVGF pass writes (then swapped with `ratio`).
+    filtered_ratio: Vec<Vec4>,
     color: Vec<Vec4>,
 }
 
-/// The pixel at row-major index `i` of an image of `params`' width.
-fn pixel_at(params: &DenoiseParams, i: u32) -> IVec2 {
-    IVec2::new((i % params.width) as i32, (i / params.width) as i32)
+impl Working {
+    /// The buffers `passes` write, for `input`.
+    fn for_passes(passes: &[DenoisePass], input: &DenoiseInput) -> Self {
+        let written_by = |wanted: fn(&DenoisePass) -> bool| if passes.iter().any(wanted) { input.len() } else { 0 };
+        let noise = written_by(|pass| matches!(pass, DenoisePass::Noise | DenoisePass::NoiseBlur));
+        let filtered = written_by(|pass| matches!(pass, DenoisePass::BilateralX | DenoisePass::BilateralY));
+        let filtered_ratio =
+            written_by(|pass| matches!(pass, DenoisePass::SvgfVariance | DenoisePass::SvgfAtrous { .. }));
+        Self {
+            noise_raw: written_zeros(noise),
+            noise: written_zeros(noise),
+            shadowed: input.shadowed.clone(),
+            unshadowed: input.unshadowed.clone(),
+            filtered_shadowed: written_zeros(filtered),
+            filtered_unshadowed: written_zeros(filtered),
+            ratio: written_zeros(written_by(|pass| *pass == DenoisePass::Ratio)),
+            filtered_ratio: written_zeros(filtered_ratio),
+            color: written_zeros(input.len()),
+        }
+    }
 }
 
-/// Evaluates `f` at every pixel of the image in parallel.
-fn per_pixel<T: Send>(params: &DenoiseParams, f: impl Fn(IVec2) -> T + Sync) -> Vec<T> {
-    (0..params.pixels()).into_par_iter().map(|i| f(pixel_at(params, i))).collect()
+/// `len` zeros, every one written: unlike `vec![0.0; len]`, whose zeroed allocation maps its
+/// pages only when a pass first writes them, so that no pass's time includes those page faults.
+fn written_zeros<T: Clone + Default>(len: usize) -> Vec<T> {
+    let mut zeros = Vec::with_capacity(len);
+    zeros.resize(len, T::default());
+    zeros
 }
 
-/// The index of `pixel` in a row-major image of `params`' width.
-fn pixel_index(params: &DenoiseParams, pixel: IVec2) -> usize {
-    (pixel.y as u32 * params.width + pixel.x as u32) as usize
+/// Writes `f(pixel)` into `out[i]` for every pixel `i` of the image in parallel, as every
+/// invocation of a per-pixel entry point does (`out` holds one value per pixel).
+fn per_pixel_into<T: Send>(params: &DenoiseParams, out: &mut [T], f: impl Fn(IVec2) -> T + Sync) {
+    out.par_iter_mut().zip(0..params.pixels()).for_each(|(value, i)| {
+        if let Some(pixel) = params.pixel(i) {
+            *value = f(pixel);
+        }
+    });
+}
+
+/// Writes `f(i)` into `out[i]` for every index of `out` in parallel: a per-pixel pass that
+/// reads only its own pixel.
+fn per_index_into<T: Send>(out: &mut [T], f: impl Fn(usize) -> T + Sync) {
+    out.par_iter_mut().enumerate().for_each(|(i, value)| *value = f(i));
 }
 
 /// Runs `pass` on the CPU; returns how many invocations replaced a non-finite value (only the
 /// composites, the denoiser's boundary, can).
 fn run_pass(pass: DenoisePass, params: &DenoiseParams, input: &DenoiseInput, w: &mut Working) -> u64 {
     let sanitized = AtomicU64::new(0);
-    let index = |p: IVec2| pixel_index(params, p);
+    let (position, normal) = (&input.position, &input.normal);
     match pass {
         DenoisePass::Ratio => {
-            w.ratio = w.shadowed.par_iter().zip(&w.unshadowed).map(|(&s, &u)| noise::ratio_pixel(s, u)).collect();
+            let (shadowed, unshadowed) = (&w.shadowed, &w.unshadowed);
+            per_index_into(&mut w.ratio, |i| noise::ratio_pixel(shadowed[i], unshadowed[i]));
         }
-        DenoisePass::Noise => w.noise_raw = per_pixel(params, |p| noise::noise_estimate(params, p, &w.ratio)),
-        DenoisePass::NoiseBlur => w.noise = per_pixel(params, |p| noise::blurred_noise(params, p, &w.noise_raw)),
+        DenoisePass::Noise => {
+            let ratio = &w.ratio;
+            per_pixel_into(params, &mut w.noise_raw, |p| noise::noise_estimate(params, p, ratio));
+        }
+        DenoisePass::NoiseBlur => {
+            let raw = &w.noise_raw;
+            per_pixel_into(params, &mut w.noise, |p| noise::blurred_noise(params, p, raw));
+        }
         DenoisePass::BilateralX | DenoisePass::BilateralY => {
             let along = if pass == DenoisePass::BilateralX { axis::X } else { axis::Y };
             let params = DenoiseParams { axis: along, ..*params };
             let (shadowed, unshadowed, noise) = (&w.shadowed, &w.unshadowed, &w.noise);
             let filtered = w.filtered_shadowed.par_iter_mut().zip(&mut w.filtered_unshadowed);
-            filtered.enumerate().for_each(|(i, (s, u))| {
-                let (position, normal) = (&input.position, &input.normal);
-                let center = pixel_at(&params, i as u32);
-                let line = ImageLine { shadowed, unshadowed, position, normal, center, params: &params };
-                (*s, *u) = bilateral_pass(&line, noise[i], &params);
+            filtered.zip(0..params.pixels()).for_each(|((s, u), i)| {
+                if let Some(center) = params.pixel(i) {
+                    let line = ImageLine { shadowed, unshadowed, position, normal, center, params: &params };
+                    (*s, *u) = bilateral_pass(&line, noise[i as usize], &params);
+                }
             });
             std::mem::swap(&mut w.shadowed, &mut w.filtered_shadowed);
             std::mem::swap(&mut w.unshadowed, &mut w.filtered_unshadowed);
         }
         DenoisePass::Composite => {
-            w.color = per_pixel(params, |p| {
-                let i = index(p);
-                let c = composite(
-                    input.analytic[i].truncate(),
-                    w.unshadowed[i].truncate(),
-                    w.shadowed[i].truncate(),
-                    input.emitted[i].truncate(),
-                );
+            let (shadowed, unshadowed) = (&w.shadowed, &w.unshadowed);
+            per_index_into(&mut w.color, |i| {
+                let (analytic, emitted) = (input.analytic[i].truncate(), input.emitted[i].truncate());
+                let c = composite(analytic, unshadowed[i].truncate(), shadowed[i].truncate(), emitted);
                 count(c, &sanitized).extend(1.0)
             });
         }
         DenoisePass::SvgfVariance => {
-            w.ratio =
-                per_pixel(params, |p| svgf::ratio_and_variance(params, p, &w.ratio, &input.position, &input.normal));
+            let ratio = &w.ratio;
+            per_pixel_into(params, &mut w.filtered_ratio, |p| {
+                svgf::ratio_and_variance(params, p, ratio, position, normal)
+            });
+            std::mem::swap(&mut w.ratio, &mut w.filtered_ratio);
         }
         DenoisePass::SvgfAtrous { step } => {
             let params = DenoiseParams { step, ..*params };
-            w.ratio = per_pixel(&params, |p| svgf::atrous_step(&params, p, &w.ratio, &input.position, &input.normal));
+            let ratio = &w.ratio;
+            per_pixel_into(&params, &mut w.filtered_ratio, |p| svgf::atrous_step(&params, p, ratio, position, normal));
+            std::mem::swap(&mut w.ratio, &mut w.filtered_ratio);
         }
         DenoisePass::SvgfComposite => {
-            w.color = per_pixel(params, |p| {
-                let i = index(p);
-                let c =
-                    apply_visibility(input.analytic[i].truncate(), w.ratio[i].truncate(), input.emitted[i].truncate());
+            let ratio = &w.ratio;
+            per_index_into(&mut w.color, |i| {
+                let (analytic, emitted) = (input.analytic[i].truncate(), input.emitted[i].truncate());
+                let c = apply_visibility(analytic, ratio[i].truncate(), emitted);
                 count(c, &sanitized).extend(1.0)
             });
         }
@@ -101,10 +144,11 @@ fn run_pass(pass: DenoisePass, params: &DenoiseParams, input: &DenoiseInput, w: 
 }
 
 /// The copy probe on the CPU ([`crate::Backend::copy_probe`]; `image` already checked against
-/// `params`): the loop every pass runs, copying each pixel.
+/// `params`): the loop every pass runs, copying each pixel into a buffer allocated beforehand.
 pub fn copy_probe(params: &DenoiseParams, image: &[Vec4]) -> (Vec<Vec4>, StageReport) {
+    let mut copy = written_zeros(params.pixels() as usize);
     let start = Instant::now();
-    let copy = per_pixel(params, |p| image[pixel_index(params, p)]);
+    per_index_into(&mut copy, |i| image[i]);
     (copy, StageReport::clean("copy probe", start.elapsed().as_secs_f64()))
 }
 
@@ -112,18 +156,7 @@ pub fn copy_probe(params: &DenoiseParams, image: &[Vec4]) -> (Vec<Vec4>, StageRe
 /// and each pass's wall-clock time.
 pub fn denoise(method: DenoiseMethod, params: &DenoiseParams, input: &DenoiseInput) -> (Vec<Vec4>, Vec<StageReport>) {
     let passes = method.passes(params);
-    let bilateral = passes.iter().any(|&pass| matches!(pass, DenoisePass::BilateralX | DenoisePass::BilateralY));
-    let filtered = || vec![Vec4::ZERO; if bilateral { input.len() } else { 0 }];
-    let mut working = Working {
-        noise_raw: Vec::new(),
-        noise: Vec::new(),
-        shadowed: input.shadowed.clone(),
-        unshadowed: input.unshadowed.clone(),
-        filtered_shadowed: filtered(),
-        filtered_unshadowed: filtered(),
-        ratio: Vec::new(),
-        color: Vec::new(),
-    };
+    let mut working = Working::for_passes(&passes, input);
     let timings = passes
         .into_iter()
         .map(|pass| {

@@ -137,11 +137,7 @@ impl FilterLine for ImageLine<'_> {
         } else {
             glam::IVec2::new(offset, 0)
         };
-        let p = self.center + step;
-        if p.x < 0 || p.y < 0 || p.x as u32 >= self.params.width || p.y as u32 >= self.params.height {
-            return FilterTap::OUTSIDE;
-        }
-        let i = (p.y as u32 * self.params.width + p.x as u32) as usize;
+        let Some(i) = self.params.index_of(self.center + step) else { return FilterTap::OUTSIDE };
         FilterTap {
             shadowed: self.shadowed[i],
             unshadowed: self.unshadowed[i],

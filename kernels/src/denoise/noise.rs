@@ -124,9 +124,8 @@ pub fn blurred_noise(params: &DenoiseParams, pixel: IVec2, raw: &[f32]) -> f32 {
     while dy <= 1 {
         let mut dx = -1;
         while dx <= 1 {
-            let p = pixel + IVec2::new(dx, dy);
-            if p.x >= 0 && p.y >= 0 && (p.x as u32) < params.width && (p.y as u32) < params.height {
-                sum += raw[(p.y as u32 * params.width + p.x as u32) as usize];
+            if let Some(i) = params.index_of(pixel + IVec2::new(dx, dy)) {
+                sum += raw[i];
                 count += 1.0;
             }
             dx += 1;

@@ -60,16 +60,6 @@ fn guide_at(position: &[Vec4], normal: &[Vec4], i: usize) -> Guide {
     Guide { position: position[i], normal: normal[i] }
 }
 
-/// The index of `p` if it lies inside the image.
-fn index_inside(params: &DenoiseParams, p: IVec2) -> Option<usize> {
-    let inside = p.x >= 0 && p.y >= 0 && (p.x as u32) < params.width && (p.y as u32) < params.height;
-    if inside {
-        Some((p.y as u32 * params.width + p.x as u32) as usize)
-    } else {
-        None
-    }
-}
-
 /// The à-trous input of `pixel`: its shadow ratio (rgb, from the ratio image `ratio`) and the
 /// spatial variance of the ratio's luminance (w) — the moments over the 7×7 taps that were
 /// measured ([`super::noise::ratio_pixel`]'s w), weighted by the edge stops, `max(0, m₂ − m₁²)`
@@ -83,7 +73,7 @@ pub fn ratio_and_variance(
     position: &[Vec4],
     normal: &[Vec4],
 ) -> Vec4 {
-    let Some(c) = index_inside(params, pixel) else { return Vec4::new(1.0, 1.0, 1.0, 0.0) };
+    let Some(c) = params.index_of(pixel) else { return Vec4::new(1.0, 1.0, 1.0, 0.0) };
     let center = guide_at(position, normal, c);
     if !center.is_surface() {
         return ratio[c].xyz().extend(0.0);
@@ -93,7 +83,7 @@ pub fn ratio_and_variance(
     while dy <= MOMENTS_RADIUS {
         let mut dx = -MOMENTS_RADIUS;
         while dx <= MOMENTS_RADIUS {
-            if let Some(t) = index_inside(params, pixel + IVec2::new(dx, dy)) {
+            if let Some(t) = params.index_of(pixel + IVec2::new(dx, dy)) {
                 let w = if !is_measured(ratio[t]) {
                     0.0
                 } else if t == c {
@@ -130,7 +120,7 @@ fn prefiltered_variance(params: &DenoiseParams, pixel: IVec2, ratio: &[Vec4]) ->
     while dy <= 1 {
         let mut dx = -1;
         while dx <= 1 {
-            if let Some(t) = index_inside(params, pixel + IVec2::new(dx, dy)) {
+            if let Some(t) = params.index_of(pixel + IVec2::new(dx, dy)) {
                 if has_estimate(ratio[t]) {
                     let k = if dx == 0 && dy == 0 {
                         0.25
@@ -161,7 +151,7 @@ fn prefiltered_variance(params: &DenoiseParams, pixel: IVec2, ratio: &[Vec4]) ->
 /// luminance stop (it has no luminance to compare), or stays without where their weights sum
 /// below [`SMALLEST_TOTAL`]. Pixels without a surface pass through.
 pub fn atrous_step(params: &DenoiseParams, pixel: IVec2, ratio: &[Vec4], position: &[Vec4], normal: &[Vec4]) -> Vec4 {
-    let Some(c) = index_inside(params, pixel) else { return Vec4::new(1.0, 1.0, 1.0, 0.0) };
+    let Some(c) = params.index_of(pixel) else { return Vec4::new(1.0, 1.0, 1.0, 0.0) };
     let center = guide_at(position, normal, c);
     if !center.is_surface() {
         return ratio[c];
@@ -180,7 +170,7 @@ pub fn atrous_step(params: &DenoiseParams, pixel: IVec2, ratio: &[Vec4], positio
     while dy <= 2 {
         let mut dx = -2;
         while dx <= 2 {
-            if let Some(t) = index_inside(params, pixel + IVec2::new(dx, dy) * step) {
+            if let Some(t) = params.index_of(pixel + IVec2::new(dx, dy) * step) {
                 let kernel = ATROUS_KERNEL[dx.unsigned_abs() as usize] * ATROUS_KERNEL[dy.unsigned_abs() as usize];
                 let w = if !has_estimate(ratio[t]) {
                     0.0
@@ -258,7 +248,7 @@ mod tests {
 
     /// The pixel at row-major index `i` of `img`.
     fn pixel(img: &Image, i: u32) -> IVec2 {
-        IVec2::new((i % img.params.width) as i32, (i / img.params.width) as i32)
+        img.params.pixel(i).expect("a pixel of the image")
     }
 
     /// The ratio image of `img` (the denoisers' ratio pass).
