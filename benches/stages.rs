@@ -171,8 +171,7 @@ mod workgroup_size {
             return;
         }
         let benchmarking = benchmarking();
-        let devices = raywave::vulkan::enumerate_devices().expect("the Vulkan device the setup opened");
-        let device = &devices[raywave::device::best_vulkan_device(&devices).expect("the setup's device")];
+        let device = &raywave::device::best_vulkan_device_info().expect("the Vulkan device the setup opened");
         let sizes: Vec<u32> = WORKGROUP_SIZES
             .into_iter()
             .filter(|size| {

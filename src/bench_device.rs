@@ -38,11 +38,7 @@ impl VulkanBenchOptions {
         };
         #[cfg(feature = "vulkan")]
         {
-            let best = || {
-                let mut devices = crate::vulkan::enumerate_devices().ok()?;
-                let index = crate::device::best_vulkan_device(&devices).ok()?;
-                Some(devices.swap_remove(index))
-            };
+            let best = || crate::device::best_vulkan_device_info().ok();
             let Some(info) = enabled.then(best).flatten() else { return no_device() };
             let preferred = crate::WorkgroupSizes::preferred_on(&info.workgroup_sizes);
             for &size in &self.workgroup_sizes {

@@ -150,6 +150,19 @@ fn open_vulkan(_index: Option<usize>, _options: &BackendOptions) -> Result<Box<d
 /// enumeration order.
 #[cfg(feature = "vulkan")]
 pub fn best_vulkan_device(devices: &[crate::vulkan::DeviceInfo]) -> Result<usize> {
+    best_of(devices).map(|device| device.index)
+}
+
+/// The device `--device auto` opens when it opens a Vulkan device, described: the
+/// [`best_vulkan_device`] of those [`crate::vulkan::enumerate_devices`] finds.
+#[cfg(feature = "vulkan")]
+pub fn best_vulkan_device_info() -> Result<crate::vulkan::DeviceInfo> {
+    best_of(&crate::vulkan::enumerate_devices()?).cloned()
+}
+
+/// [`best_vulkan_device`]'s choice among `devices`.
+#[cfg(feature = "vulkan")]
+fn best_of(devices: &[crate::vulkan::DeviceInfo]) -> Result<&crate::vulkan::DeviceInfo> {
     let rank = |t: &str| match t {
         "DISCRETE_GPU" => 0,
         "INTEGRATED_GPU" => 1,
@@ -160,7 +173,6 @@ pub fn best_vulkan_device(devices: &[crate::vulkan::DeviceInfo]) -> Result<usize
         .iter()
         .filter(|d| d.missing_for_kernels().is_empty())
         .min_by_key(|d| (rank(&d.device_type), d.index))
-        .map(|d| d.index)
         .ok_or_else(|| {
             let lacks: Vec<String> =
                 devices.iter().map(|d| format!("{} lacks {}", d.name, d.missing_for_kernels().join(", "))).collect();
