@@ -597,9 +597,14 @@ pub fn sample_quad_area(p: Vec3, o: Vec3, eu: Vec3, ev: Vec3, u: Vec2) -> LightS
 pub fn quad_area_pdf(p: Vec3, o: Vec3, eu: Vec3, ev: Vec3, dir: Vec3) -> f32 {
     let g = quad_geometry(p, o, eu, ev);
     let d = dir.normalize_or_zero();
-    let t = quad_hit(&g, eu, ev, d);
-    if t > 0.0 {
-        sanitize_pdf(t * t / d.dot(g.n).abs())
+    area_pdf_at_hit(g.n, d, quad_hit(&g, eu, ev, d))
+}
+
+/// [`quad_area_pdf`] where the ray along unit `dir` hits the quad of unnormalized normal `n`
+/// (`eu × ev`) at `distance` (> 0; else 0): `t²/|dir·n|`.
+fn area_pdf_at_hit(n: Vec3, dir: Vec3, distance: f32) -> f32 {
+    if distance > 0.0 {
+        sanitize_pdf(distance * distance / dir.dot(n).abs())
     } else {
         0.0
     }
@@ -636,7 +641,7 @@ pub fn sample_quad_spherical(p: Vec3, o: Vec3, eu: Vec3, ev: Vec3, u: Vec2) -> L
 }
 
 /// [`sample_quad_spherical`] given the quad's `solid_angle` at `p` ([`quad_solid_angle`]), for a
-/// caller that also needs its [`quad_spherical_pdf_with_solid_angle`]: the solid angle is the
+/// caller that also needs its [`quad_spherical_pdf_at_hit`]: the solid angle is the
 /// costliest part of each (two spherical triangles, two `atan2`s).
 pub fn sample_quad_spherical_with_solid_angle(
     p: Vec3,
@@ -780,24 +785,22 @@ pub fn quad_ray_distance(p: Vec3, o: Vec3, eu: Vec3, ev: Vec3, dir: Vec3) -> f32
 /// the sampler's special cases: 0 when Ω = 0, [`quad_area_pdf`] when Ω <
 /// [`QUAD_MIN_SPHERICAL_SOLID_ANGLE`] or the quad is no rectangle ([`QUAD_RECTANGLE_MAX_COS`]).
 pub fn quad_spherical_pdf(p: Vec3, o: Vec3, eu: Vec3, ev: Vec3, dir: Vec3) -> f32 {
-    quad_spherical_pdf_with_solid_angle(p, o, eu, ev, quad_solid_angle(p, o, eu, ev), dir)
+    let d = dir.normalize_or_zero();
+    quad_spherical_pdf_at_hit(eu, ev, quad_solid_angle(p, o, eu, ev), d, quad_ray_distance(p, o, eu, ev, d))
 }
 
-/// [`quad_spherical_pdf`] given the quad's `solid_angle` at `p` ([`quad_solid_angle`]), for a
-/// caller that computed it already ([`sample_quad_spherical_with_solid_angle`]).
-pub fn quad_spherical_pdf_with_solid_angle(p: Vec3, o: Vec3, eu: Vec3, ev: Vec3, solid_angle: f32, dir: Vec3) -> f32 {
-    if !(solid_angle > 0.0) || !(eu.length_squared() > 0.0) || !(ev.length_squared() > 0.0) {
+/// [`quad_spherical_pdf`] for a caller that has the quad's `solid_angle` at `p`
+/// ([`quad_solid_angle`]) and the `distance` along unit `dir` to where it hits the quad
+/// ([`quad_ray_distance`], 0 for a miss) already, as a caller that drew `dir` and traces it to
+/// the light does: neither is formed again.
+pub fn quad_spherical_pdf_at_hit(eu: Vec3, ev: Vec3, solid_angle: f32, dir: Vec3, distance: f32) -> f32 {
+    if !(distance > 0.0) || !(solid_angle > 0.0) || !(eu.length_squared() > 0.0) || !(ev.length_squared() > 0.0) {
         return 0.0;
     }
     if solid_angle < QUAD_MIN_SPHERICAL_SOLID_ANGLE || !is_rectangle(eu, ev) {
-        return quad_area_pdf(p, o, eu, ev, dir);
+        return area_pdf_at_hit(eu.cross(ev), dir, distance);
     }
-    let g = quad_geometry(p, o, eu, ev);
-    if quad_hit(&g, eu, ev, dir.normalize_or_zero()) > 0.0 {
-        sanitize_pdf(1.0 / solid_angle)
-    } else {
-        0.0
-    }
+    sanitize_pdf(1.0 / solid_angle)
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -321,7 +321,7 @@ pub fn shade_sample(
     }
     let pdf_brdf = pdf_specular + (pdf_diffuse - pdf_specular) * p_diff;
     let solid_angle = if light_sampled { solid_angle } else { warp::quad_solid_angle(p, corner, eu, ev) };
-    let pdf_light = warp::quad_spherical_pdf_with_solid_angle(p, corner, eu, ev, solid_angle, direction);
+    let pdf_light = warp::quad_spherical_pdf_at_hit(eu, ev, solid_angle, direction, distance);
     let pdf = (pdf_light + (pdf_brdf - pdf_light) * p_brdf) * choice.pmf;
     if !(pdf > 0.0) {
         return result;
