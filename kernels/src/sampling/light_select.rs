@@ -47,6 +47,7 @@ use raywave_shared::light::{light_kind, Light, LightBounds, LightBvhNode};
 use spirv_std::num_traits::Float;
 
 use crate::hash::ONE_MINUS_EPSILON;
+use crate::sampling::warp::{clamp_sample, clamp_sample_1d, safe_sqrt};
 
 /// Rec. 709 luminance weights of linear RGB (ITU-R BT.709, `Y = 0.2126 R + 0.7152 G + 0.0722 B`).
 pub const LUMINANCE: Vec3 = Vec3::new(0.2126, 0.7152, 0.0722);
@@ -80,11 +81,6 @@ impl LightChoice {
     }
 }
 
-/// `sqrt(max(0, x))`.
-fn safe_sqrt(x: f32) -> f32 {
-    Float::sqrt(x.max(0.0))
-}
-
 /// `sin θ` from `cos θ` for θ ∈ [0, π].
 fn sin_from_cos(cos: f32) -> f32 {
     safe_sqrt(1.0 - cos * cos)
@@ -105,15 +101,6 @@ fn sin_sub_clamped(sin_a: f32, cos_a: f32, sin_b: f32, cos_b: f32) -> f32 {
         0.0
     } else {
         sin_a * cos_b - cos_a * sin_b
-    }
-}
-
-/// A sample clamped to `[0, 1 − 2⁻²⁴]`; NaN becomes 0.
-fn clamp_sample(u: f32) -> f32 {
-    if u >= 0.0 {
-        u.min(ONE_MINUS_EPSILON)
-    } else {
-        0.0
     }
 }
 
@@ -278,7 +265,7 @@ pub fn select_uniform(count: u32, u: f32) -> LightChoice {
     if count == 0 {
         return LightChoice::NONE;
     }
-    let index = ((clamp_sample(u) * count as f32) as u32).min(count - 1);
+    let index = ((clamp_sample_1d(u) * count as f32) as u32).min(count - 1);
     LightChoice { index, pmf: 1.0 / count as f32 }
 }
 
@@ -316,7 +303,7 @@ fn scan_select(lights: &[Light], count: u32, p: Vec3, n: Vec3, u: f32) -> LightC
     if total.is_nan() || total <= 0.0 {
         return select_uniform(count, u);
     }
-    let target = clamp_sample(u) * total;
+    let target = clamp_sample_1d(u) * total;
     let mut running = 0.0;
     let mut last = LightChoice::NONE;
     let mut i = 0;
@@ -382,7 +369,7 @@ fn bvh_select(nodes: &[LightBvhNode], count: u32, p: Vec3, n: Vec3, u: f32) -> L
     if count == 0 {
         return LightChoice::NONE;
     }
-    let mut u = clamp_sample(u);
+    let mut u = clamp_sample_1d(u);
     let mut node = 0u32;
     let mut pmf = 1.0f32;
     let mut depth = 0u32;
@@ -547,7 +534,7 @@ pub fn uniform_light_point(light: &Light, u: Vec2) -> (Vec3, Vec3) {
         (corner + d * light.position.w, d)
     } else {
         let (eu, ev) = (light.edge_u.truncate(), light.edge_v.truncate());
-        let u = super::warp::clamp_sample(u);
+        let u = clamp_sample(u);
         (corner + u.x * eu + u.y * ev, eu.cross(ev).normalize_or(Vec3::Z))
     }
 }

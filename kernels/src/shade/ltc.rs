@@ -59,13 +59,12 @@ impl LtcLobe {
     }
 
     /// A local direction drawn from the mixture with `u ∈ [0,1)²`: `u.x` picks the lobe (the
-    /// first below `w`) and is rescaled to `[0, 1)` for that lobe's own cosine sample. Its
-    /// density is [`LtcLobe::pdf`].
+    /// first below `w`) and is rescaled to `[0, 1)` for that lobe's own cosine sample (which
+    /// clamps it to `[0, 1 − 2⁻²⁴]` where the rescaling rounds up to 1). Its density is
+    /// [`LtcLobe::pdf`].
     pub fn sample(&self, u: Vec2) -> Vec3 {
         let w = self.weight;
         let (inv_m, x) = if u.x < w { (self.inv_m, u.x / w) } else { (self.inv_m_2, (u.x - w) / (1.0 - w)) };
-        // 1 − 2⁻²⁴: the largest f32 below 1, where the rescaling rounds up.
-        let x = x.clamp(0.0, 0.99999994);
         warp::sample_ltc(warp::ltc_inverse(inv_m), Vec2::new(x, u.y))
     }
 }

@@ -295,7 +295,7 @@ pub fn shade_sample(
     let analytic = if analytic_finite { analytic.extend(0.0) } else { Vec4::ZERO };
     let mut result =
         Sanitized { value: ShadeSample { analytic, emitted, ..ShadeSample::NONE }, replaced: !analytic_finite };
-    if !choice.is_valid() || choice.pmf <= 0.0 || (u_d <= 0.0 && u_s <= 0.0) {
+    if !choice.is_valid() || (u_d <= 0.0 && u_s <= 0.0) {
         return result;
     }
     let light = &scene.lights.lights[choice.index as usize];
@@ -309,7 +309,12 @@ pub fn shade_sample(
     let light_sampled = !(strategy.x < p_brdf);
     let solid_angle = if light_sampled { warp::quad_solid_angle(p, corner, eu, ev) } else { 0.0 };
     let direction = if light_sampled {
-        warp::sample_quad_spherical_with_solid_angle(p, corner, eu, ev, solid_angle, u).direction
+        let sample = warp::sample_quad_spherical_with_solid_angle(p, corner, eu, ev, solid_angle, u);
+        // pdf 0 is "no sample": its direction (+z) is a placeholder, not a direction to the light.
+        if !(sample.pdf > 0.0) {
+            return result;
+        }
+        sample.direction
     } else {
         let local = if strategy.y < p_diff { warp::sample_cosine_hemisphere(u) } else { lobes.ltc.sample(u) };
         lobes.world_direction(local).normalize_or_zero()
@@ -354,9 +359,12 @@ pub fn shade_sample(
 /// a light of radiance 10⁻⁵ (a lamp in a scene exposed for the sun) would lose its shadows.
 pub const SMALLEST_RADIANCE: f32 = f32::MIN_POSITIVE;
 
-/// The shadow ratio `S_N / U_N` per channel, in `[0, 1]` for a pixel's means (`S_N ≤ U_N` sample
-/// by sample): 1 — "unshadowed" — where `U_N` is 0 (below [`SMALLEST_RADIANCE`]), i.e. no sample
-/// reached the light and the ratio is undefined, so the composite falls back to `U` [H-DX, H-CPU].
+/// The shadow ratio `S_N / U_N` per channel, in `[0, 1]` for a pixel's means, raw or filtered
+/// with the same weights (`S_N ≤ U_N` sample by sample): 1 — "unshadowed" — where `U_N` is 0
+/// (below [`SMALLEST_RADIANCE`]), i.e. no sample reached the light and the ratio is undefined, so
+/// the composite falls back to `U` [H-DX, H-CPU]. Clamped to `[0, 10⁴]` for other inputs: the
+/// stochastic+tv baseline divides `S_N` by one constant per channel (its mean over the image,
+/// `raywave::denoise::DenoiseInput::stochastic`), where a bright pixel's ratio exceeds 1.
 pub fn shadow_ratio(shadowed: Vec3, unshadowed: Vec3) -> Vec3 {
     let ratio = |s: f32, u_n: f32| if u_n >= SMALLEST_RADIANCE { (s / u_n).clamp(0.0, 1.0e4) } else { 1.0 };
     Vec3::new(ratio(shadowed.x, unshadowed.x), ratio(shadowed.y, unshadowed.y), ratio(shadowed.z, unshadowed.z))
@@ -739,7 +747,7 @@ mod tests {
                     assert_eq!(unlit, (Vec4::ZERO, Vec4::ZERO, 0.0), "{}", what(steps));
                 }
                 // About twice the tolerance off is no rounding: the light fills the point's hemisphere
-                // (U: the diffuse albedo 0.8 less the Fresnel, plus the specular lobe).
+                // (U: the diffuse albedo 0.8 plus the specular lobe's 0.01).
                 let lit = shade_by_lamp(lamp, turn, 16.0 * ulp, 0).analytic;
                 assert!((0.75..0.85).contains(&lit.x), "{}: U {lit}", what(16));
             }
