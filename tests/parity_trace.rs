@@ -147,6 +147,31 @@ fn untraceable_rays_miss_on_every_backend() {
     }
 }
 
+/// Every backend refuses to trace — closest hits, occlusion, a whole frame — before a scene is
+/// loaded, with the same typed error naming the scene.
+#[test]
+fn tracing_without_a_scene_is_refused_on_every_backend() {
+    let scene = cornell();
+    let rays = test_rays(&scene);
+    let params = generate_params(&scene, 8, 6, 0, 1);
+    let refusals = |backend: &mut dyn Backend| {
+        let name = |result: raywave::Result<()>| match result {
+            Err(raywave::Error::InvalidParameter { name, .. }) => name,
+            other => panic!("{other:?}"),
+        };
+        [
+            name(backend.trace(&rays).map(drop)),
+            name(backend.trace_occlusion(&rays).map(drop)),
+            name(backend.render(&params).map(drop)),
+        ]
+    };
+    assert_eq!(refusals(&mut cpu::CpuBackend::new()), ["scene"; 3], "cpu");
+    for mut device in vulkan::every_device("tracing without a scene") {
+        assert_eq!(refusals(&mut device), ["scene"; 3], "{}", device.name());
+        vulkan::assert_clean(&device);
+    }
+}
+
 /// Rays from random points in the scene bounds in random directions (incoherent, like diffuse
 /// bounces), plus the scene's camera rays.
 fn incoherent_rays(scene: &Scene, count: u32) -> RayStream {

@@ -15,8 +15,9 @@ use raywave_shared::{DenoiseParams, GenerateParams, SamplerProbeParams, ShadePar
 pub struct StageReport {
     /// Stage name (`generate`, `trace`, …).
     pub stage: &'static str,
-    /// Seconds per dispatch: GPU timestamps on Vulkan (the timed submission's time over
-    /// `dispatches`), wall clock of the parallel loop on the CPU.
+    /// Seconds per dispatch: on Vulkan the timed submission's time over `dispatches`, from GPU
+    /// timestamps where the device writes them (`DeviceInfo::timestamps`), else from the host
+    /// clock around the submission; the wall clock of the parallel loop on the CPU.
     pub seconds: f64,
     /// How many times the stage's kernel ran back to back in its timed submission: 1, except on
     /// a Vulkan backend opened for benchmarking (`ContextOptions::sustain_seconds`), where the
@@ -147,10 +148,13 @@ pub const MAX_PROBE_SAMPLES: u64 = 1 << 24;
 /// Number of samples the sampler probe `params` covers, checked against [`MAX_PROBE_SAMPLES`] and
 /// the sampler's own index space.
 pub fn sampler_probe_len(params: &SamplerProbeParams) -> Result<u32> {
-    let count = (u64::from(params.width) * u64::from(params.height)).checked_shl(params.sampler.spp_log2);
-    match count {
-        Some(count) if count <= MAX_PROBE_SAMPLES && params.sampler.spp_log2 < 32 => Ok(count as u32),
-        _ => Err(crate::error::Error::InvalidParameter {
+    let pixels = u64::from(params.width) * u64::from(params.height);
+    // `checked_shl` would only refuse shifts of 64 or more, not the bits a shift pushes out.
+    let samples_per_pixel = 1u64.checked_shl(params.sampler.spp_log2).filter(|_| params.sampler.spp_log2 < 32);
+    let count = samples_per_pixel.and_then(|spp| pixels.checked_mul(spp)).filter(|&count| count <= MAX_PROBE_SAMPLES);
+    match count.and_then(|count| u32::try_from(count).ok()) {
+        Some(count) => Ok(count),
+        None => Err(crate::error::Error::InvalidParameter {
             name: "sampler probe",
             reason: format!(
                 "{}×{} pixels at 2^{} samples exceed {MAX_PROBE_SAMPLES} samples",
@@ -175,13 +179,12 @@ pub fn warp_probe_len(params: &WarpParams) -> Result<u32> {
 /// Number of pixels of the copy probe's `image`: `params`' image, not empty, one entry each.
 pub fn copy_probe_len(params: &DenoiseParams, image: &[Vec4]) -> Result<u32> {
     let pixels = u64::from(params.width) * u64::from(params.height);
-    if pixels > 0 && image.len() as u64 == pixels {
-        Ok(pixels as u32)
-    } else {
-        Err(crate::error::Error::InvalidParameter {
+    match u32::try_from(pixels) {
+        Ok(pixels) if pixels > 0 && image.len() as u64 == u64::from(pixels) => Ok(pixels),
+        _ => Err(crate::error::Error::InvalidParameter {
             name: "copy probe",
             reason: format!("{}×{} pixels but an image of {} entries", params.width, params.height, image.len()),
-        })
+        }),
     }
 }
 
@@ -260,5 +263,39 @@ pub(crate) fn check_image_size_common(width: u32, height: u32, max_pixels: u64, 
     match reason {
         Some(reason) => Err(crate::Error::ImageSize { width, height, backend: backend.to_owned(), reason }),
         None => Ok(()),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use raywave_shared::SamplerParams;
+
+    fn sampler_probe(width: u32, height: u32, spp_log2: u32) -> SamplerProbeParams {
+        let sampler = SamplerParams { kind: 0, seed: 0, spp_log2, resolution_log2: 0 };
+        SamplerProbeParams { sampler, width, height, dimension: 0, padding: 0 }
+    }
+
+    #[test]
+    fn a_sampler_probe_counts_its_samples_or_refuses_them() {
+        assert_eq!(sampler_probe_len(&sampler_probe(4, 4, 2)).ok(), Some(64));
+        assert_eq!(sampler_probe_len(&sampler_probe(1 << 12, 1 << 12, 0)).ok(), Some(1 << 24));
+        // Too many, including counts a shift would wrap: 2^64 (to 0) and 2^64 + 2^24 (to 2^24).
+        let refused =
+            [(1 << 12, 1 << 12, 1), (1 << 20, 1 << 20, 24), (257, 4_278_255_361, 24), (1, 1, 32), (1, 1, u32::MAX)];
+        for (width, height, spp_log2) in refused {
+            assert!(
+                sampler_probe_len(&sampler_probe(width, height, spp_log2)).is_err(),
+                "{width}×{height}, 2^{spp_log2}"
+            );
+        }
+    }
+
+    #[test]
+    fn a_copy_probe_takes_one_entry_per_pixel() {
+        let params = DenoiseParams::new(3, 2);
+        assert_eq!(copy_probe_len(&params, &[Vec4::ZERO; 6]).ok(), Some(6));
+        assert!(copy_probe_len(&params, &[Vec4::ZERO; 5]).is_err());
+        assert!(copy_probe_len(&DenoiseParams::new(0, 2), &[]).is_err(), "an empty image");
     }
 }

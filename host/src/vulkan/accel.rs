@@ -40,7 +40,7 @@ const INPUT_USAGE: vk::BufferUsageFlags = vk::BufferUsageFlags::from_raw(
         | vk::BufferUsageFlags::SHADER_DEVICE_ADDRESS.as_raw(),
 );
 
-/// One pending build: its geometry description, primitive count and destination.
+/// One pending build: its geometry description, primitive count and level (bottom or top).
 struct Build<'a> {
     geometry: [vk::AccelerationStructureGeometryKHR<'a>; 1],
     primitive_count: u32,

@@ -29,16 +29,17 @@ use raywave_shared::{
 };
 use std::sync::Arc;
 
-/// Storage buffers of the streams: read and written by shaders, device-local, uploaded and read
-/// back through staging copies ([`GpuBuffer::device_local`]).
-const STREAM_USAGE: vk::BufferUsageFlags = vk::BufferUsageFlags::STORAGE_BUFFER;
-
-/// The ray stream on the device.
-struct DeviceRays {
+/// What a trace kernel reads of a ray stream on the device: its origins and directions.
+struct DevicePaths {
     origin: GpuBuffer,
     direction: GpuBuffer,
-    pixel: GpuBuffer,
     len: u32,
+}
+
+/// The ray stream on the device (what generate writes): the paths and each ray's pixel.
+struct DeviceRays {
+    paths: DevicePaths,
+    pixel: GpuBuffer,
 }
 
 /// The hit stream on the device.
@@ -59,7 +60,7 @@ fn stream_bytes<T: Pod>(len: u32) -> u64 {
 /// range: every stage checks its stream against [`VulkanBackend::max_rays`] first, which keeps
 /// a stream of the widest element, `Vec4`, within it.
 fn stream_buffer<T: Pod>(core: &Arc<Core>, len: u32, name: &str) -> Result<GpuBuffer> {
-    GpuBuffer::device_local(core, stream_bytes::<T>(len), STREAM_USAGE, name)
+    GpuBuffer::storage::<T>(core, len, name)
 }
 
 /// A device buffer for the `count` samples of `T` of probe `name` (at least one: a binding
@@ -71,28 +72,31 @@ fn probe_buffer<T: Pod>(core: &Arc<Core>, count: u32, name: &'static str) -> Res
     stream_buffer::<T>(core, len, name)
 }
 
-impl DeviceRays {
-    fn new(core: &Arc<Core>, len: u32) -> Result<Self> {
+impl DevicePaths {
+    /// The origins and directions of `rays`, of `len` rays checked against the device
+    /// ([`VulkanBackend::check_stream`]).
+    fn upload(core: &Arc<Core>, rays: &RayStream, len: u32) -> Result<Self> {
         Ok(Self {
-            origin: stream_buffer::<Vec4>(core, len, "ray origin")?,
-            direction: stream_buffer::<Vec4>(core, len, "ray direction")?,
-            pixel: stream_buffer::<u32>(core, len, "ray pixel")?,
+            origin: GpuBuffer::storage_with(core, &rays.origin, "ray origin")?,
+            direction: GpuBuffer::storage_with(core, &rays.direction, "ray direction")?,
             len,
         })
     }
+}
 
-    fn upload(core: &Arc<Core>, rays: &RayStream) -> Result<Self> {
-        Ok(Self {
-            origin: GpuBuffer::with_data(core, &rays.origin, STREAM_USAGE, "ray origin")?,
-            direction: GpuBuffer::with_data(core, &rays.direction, STREAM_USAGE, "ray direction")?,
-            pixel: GpuBuffer::with_data(core, &rays.pixel, STREAM_USAGE, "ray pixel")?,
-            len: stream_len(rays.len())?,
-        })
+impl DeviceRays {
+    fn new(core: &Arc<Core>, len: u32) -> Result<Self> {
+        let paths = DevicePaths {
+            origin: stream_buffer::<Vec4>(core, len, "ray origin")?,
+            direction: stream_buffer::<Vec4>(core, len, "ray direction")?,
+            len,
+        };
+        Ok(Self { paths, pixel: stream_buffer::<u32>(core, len, "ray pixel")? })
     }
 
     fn read(&self) -> Result<RayStream> {
-        let n = self.len as usize;
-        Ok(RayStream { origin: self.origin.read(n)?, direction: self.direction.read(n)?, pixel: self.pixel.read(n)? })
+        let (paths, n) = (&self.paths, self.paths.len as usize);
+        Ok(RayStream { origin: paths.origin.read(n)?, direction: paths.direction.read(n)?, pixel: self.pixel.read(n)? })
     }
 }
 
@@ -107,13 +111,14 @@ impl DeviceHits {
         })
     }
 
-    fn upload(core: &Arc<Core>, hits: &HitStream) -> Result<Self> {
+    /// `hits`, `len` of them checked against the device ([`VulkanBackend::check_stream`]).
+    fn upload(core: &Arc<Core>, hits: &HitStream, len: u32) -> Result<Self> {
         Ok(Self {
-            t: GpuBuffer::with_data(core, &hits.t, STREAM_USAGE, "hit t")?,
-            primitive: GpuBuffer::with_data(core, &hits.primitive, STREAM_USAGE, "hit primitive")?,
-            instance: GpuBuffer::with_data(core, &hits.instance, STREAM_USAGE, "hit instance")?,
-            barycentrics: GpuBuffer::with_data(core, &hits.barycentrics, STREAM_USAGE, "hit barycentrics")?,
-            len: stream_len(hits.len())?,
+            t: GpuBuffer::storage_with(core, &hits.t, "hit t")?,
+            primitive: GpuBuffer::storage_with(core, &hits.primitive, "hit primitive")?,
+            instance: GpuBuffer::storage_with(core, &hits.instance, "hit instance")?,
+            barycentrics: GpuBuffer::storage_with(core, &hits.barycentrics, "hit barycentrics")?,
+            len,
         })
     }
 
@@ -199,14 +204,7 @@ fn input_buffer<T: Pod>(core: &Arc<Core>, data: &[T], name: &str) -> Result<GpuB
     let dummy = [T::zeroed()];
     let data = if data.is_empty() { &dummy[..] } else { data };
     check_storage_range(&core.limits, std::mem::size_of_val(data) as u64, "scene", name)?;
-    GpuBuffer::with_data(core, data, STREAM_USAGE, name)
-}
-
-fn stream_len(len: usize) -> Result<u32> {
-    u32::try_from(len).map_err(|_| Error::InvalidParameter {
-        name: "rays",
-        reason: format!("{len} rays exceed the 32-bit stream index"),
-    })
+    GpuBuffer::storage_with(core, data, name)
 }
 
 /// The scene as the chosen trace method reads it on the device.
@@ -221,7 +219,8 @@ enum DeviceScene {
 /// ray-tracing pipeline.
 enum TraceKernel {
     Compute(ComputeKernel),
-    RtPipeline(RtPipelineKernel),
+    /// Boxed: it holds the ray-tracing pipeline's function table.
+    RtPipeline(Box<RtPipelineKernel>),
 }
 
 /// A Vulkan device running raywave's stages. Several threads may each open, use and drop their own
@@ -354,7 +353,7 @@ impl VulkanBackend {
             Ok(TraceKernel::Compute(ComputeKernel::new(&core, entry, layout, push, core.workgroup_sizes.trace)?))
         };
         let rt = |shaders, layout: &[(u32, vk::DescriptorType)]| -> Result<TraceKernel> {
-            Ok(TraceKernel::RtPipeline(RtPipelineKernel::new(&core, shaders, layout, push)?))
+            Ok(TraceKernel::RtPipeline(Box::new(RtPipelineKernel::new(&core, shaders, layout, push)?)))
         };
         let (trace, occlusion) = match trace_method {
             TraceMethod::Software => {
@@ -419,11 +418,22 @@ impl VulkanBackend {
         check_generate_params(params)?;
         let rays = DeviceRays::new(&self.core, params.ray_count())?;
         let timing = self.generate.dispatch(
-            &[Resource::Buffer(&rays.origin), Resource::Buffer(&rays.direction), Resource::Buffer(&rays.pixel)],
+            &[
+                Resource::Buffer(&rays.paths.origin),
+                Resource::Buffer(&rays.paths.direction),
+                Resource::Buffer(&rays.pixel),
+            ],
             bytemuck::bytes_of(params),
-            rays.len,
+            rays.paths.len,
         )?;
         Ok((rays, timing.report("generate", 0)))
+    }
+
+    /// The scene the trace kernels read, if one is loaded.
+    fn loaded_scene(&self) -> Result<&DeviceScene> {
+        self.scene
+            .as_ref()
+            .ok_or(Error::InvalidParameter { name: "scene", reason: "trace needs a loaded scene".into() })
     }
 
     /// Runs `kernel` over `rays` with `outputs` bound after the rays (layout of
@@ -432,14 +442,11 @@ impl VulkanBackend {
         &self,
         stage: &'static str,
         kernel: &TraceKernel,
-        rays: &DeviceRays,
+        rays: &DevicePaths,
         outputs: &[&GpuBuffer],
     ) -> Result<StageReport> {
-        let scene = self
-            .scene
-            .as_ref()
-            .ok_or(Error::InvalidParameter { name: "scene", reason: "trace needs a loaded scene".into() })?;
-        self.check_stream(rays.len)?;
+        let scene = self.loaded_scene()?;
+        self.check_stream(rays.len as usize, "rays")?;
         let (scene_resource, triangles) = match scene {
             DeviceScene::Accelerated(accel) => (Resource::AccelerationStructure(accel.tlas.handle), vec![]),
             DeviceScene::Software { nodes, vertices, ids } => {
@@ -463,37 +470,44 @@ impl VulkanBackend {
         Ok(timing.report(stage, counter.read_count()?))
     }
 
-    /// Checks that a stream of `len` elements fits one storage buffer and one dispatch (in
-    /// workgroups of the smallest stage size: if those fit, every stage's do).
-    fn check_stream(&self, len: u32) -> Result<()> {
-        if dispatch_grid(&self.core.limits, len, self.core.workgroup_sizes.smallest()).is_none()
-            || u64::from(len) > self.max_rays()
-        {
-            return Err(Error::InvalidParameter {
-                name: "rays",
-                reason: format!("{len} rays exceed the device's limits"),
-            });
-        }
-        Ok(())
+    /// The length of a stream of `len` elements of input `name` (rays, hits, an image's pixels)
+    /// if it fits one storage buffer and one dispatch (in workgroups of the smallest stage size:
+    /// if those fit, every stage's do), else a typed error naming the input and the limit.
+    fn check_stream(&self, len: usize, name: &'static str) -> Result<u32> {
+        let workgroup = self.core.workgroup_sizes.smallest();
+        let fits = |len: &u32| {
+            dispatch_grid(&self.core.limits, *len, workgroup).is_some() && u64::from(*len) <= self.max_rays()
+        };
+        u32::try_from(len).ok().filter(fits).ok_or_else(|| Error::InvalidParameter {
+            name,
+            reason: format!("{len} elements exceed the device's {} per stream", self.max_rays()),
+        })
     }
 
-    /// Uploads `data` for the shade stage unless the buffers already hold it.
-    fn load_shade_data(&mut self, data: &ShadeData) -> Result<()> {
-        if self.shade_data.as_ref().is_some_and(|d| d.identity == data.identity()) {
-            return Ok(());
-        }
-        // Free the old buffers before allocating the new ones.
-        self.shade_data = None;
-        self.shade_data = Some(DeviceShadeData::upload(&self.core, data)?);
-        Ok(())
-    }
-
-    fn trace_on_device(&self, rays: &DeviceRays) -> Result<(DeviceHits, StageReport)> {
+    fn trace_on_device(&self, rays: &DevicePaths) -> Result<(DeviceHits, StageReport)> {
         let hits = DeviceHits::new(&self.core, rays.len)?;
         let outputs = [&hits.t, &hits.primitive, &hits.instance, &hits.barycentrics];
         let report = self.run_trace_kernel("trace", &self.trace, rays, &outputs)?;
         Ok((hits, report))
     }
+}
+
+/// The shade data in `loaded` — `data`'s, uploaded unless the buffers already hold it; the old
+/// buffers are freed before the new ones are allocated. A function of the backend's fields, not
+/// a method, so that the data it returns borrows `loaded` alone.
+fn load_shade_data<'a>(
+    core: &Arc<Core>,
+    loaded: &'a mut Option<DeviceShadeData>,
+    data: &ShadeData,
+) -> Result<&'a DeviceShadeData> {
+    let current = match loaded.take() {
+        Some(current) if current.identity == data.identity() => current,
+        old => {
+            drop(old);
+            DeviceShadeData::upload(core, data)?
+        }
+    };
+    Ok(loaded.insert(current))
 }
 
 impl Backend for VulkanBackend {
@@ -537,17 +551,19 @@ impl Backend for VulkanBackend {
     fn trace(&mut self, rays: &RayStream) -> Result<(HitStream, StageReport)> {
         let _driver = driver_lock::device_use();
         rays.check("trace")?;
-        let device_rays = DeviceRays::upload(&self.core, rays)?;
-        let (hits, timing) = self.trace_on_device(&device_rays)?;
+        self.loaded_scene()?;
+        let paths = DevicePaths::upload(&self.core, rays, self.check_stream(rays.len(), "rays")?)?;
+        let (hits, timing) = self.trace_on_device(&paths)?;
         Ok((hits.read()?, timing))
     }
 
     fn trace_occlusion(&mut self, rays: &RayStream) -> Result<(Vec<u32>, StageReport)> {
         let _driver = driver_lock::device_use();
         rays.check("trace_occlusion")?;
-        let device_rays = DeviceRays::upload(&self.core, rays)?;
-        let occluded = stream_buffer::<u32>(&self.core, device_rays.len, "occluded")?;
-        let report = self.run_trace_kernel("occlusion", &self.occlusion, &device_rays, &[&occluded])?;
+        self.loaded_scene()?;
+        let paths = DevicePaths::upload(&self.core, rays, self.check_stream(rays.len(), "rays")?)?;
+        let occluded = stream_buffer::<u32>(&self.core, paths.len, "occluded")?;
+        let report = self.run_trace_kernel("occlusion", &self.occlusion, &paths, &[&occluded])?;
         Ok((occluded.read(rays.len())?, report))
     }
 
@@ -560,15 +576,11 @@ impl Backend for VulkanBackend {
     ) -> Result<(ShadeStream, StageReport)> {
         let _driver = driver_lock::device_use();
         check_shade_inputs(params, data, rays, hits)?;
-        let len = stream_len(hits.len())?;
-        self.check_stream(len)?;
-        self.load_shade_data(data)?;
-        let (core, scene) = match &self.shade_data {
-            Some(scene) => (&self.core, scene),
-            None => return Err(Error::InvalidParameter { name: "shade", reason: "shade data not uploaded".into() }),
-        };
-        let direction = GpuBuffer::with_data(core, &rays.direction, STREAM_USAGE, "ray direction")?;
-        let hits = DeviceHits::upload(core, hits)?;
+        let len = self.check_stream(hits.len(), "hits")?;
+        let core = &self.core;
+        let scene = load_shade_data(core, &mut self.shade_data, data)?;
+        let direction = GpuBuffer::storage_with(core, &rays.direction, "ray direction")?;
+        let hits = DeviceHits::upload(core, hits, len)?;
         let out = DeviceShades::new(core, len)?;
         let counter = GpuBuffer::counter(core, "shade")?;
         let resources = [
@@ -598,8 +610,9 @@ impl Backend for VulkanBackend {
 
     fn render(&mut self, params: &GenerateParams) -> Result<FrameOutput> {
         let _driver = driver_lock::device_use();
+        self.loaded_scene()?;
         let (rays, generate_time) = self.generate_on_device(params)?;
-        let (hits, trace_time) = self.trace_on_device(&rays)?;
+        let (hits, trace_time) = self.trace_on_device(&rays.paths)?;
         Ok(FrameOutput { rays: rays.read()?, hits: hits.read()?, timings: vec![generate_time, trace_time] })
     }
 
@@ -611,13 +624,13 @@ impl Backend for VulkanBackend {
     ) -> Result<(Vec<Vec4>, Vec<StageReport>)> {
         let _driver = driver_lock::device_use();
         input.check(params)?;
-        self.check_stream(params.pixels())?;
+        self.check_stream(input.len(), "denoise")?;
         self.denoise_kernels.run(&self.core, method, params, input)
     }
 
     fn copy_probe(&mut self, params: &DenoiseParams, image: &[Vec4]) -> Result<(Vec<Vec4>, StageReport)> {
         let _driver = driver_lock::device_use();
-        self.check_stream(copy_probe_len(params, image)?)?;
+        self.check_stream(copy_probe_len(params, image)? as usize, "copy probe")?;
         self.denoise_kernels.copy_probe(&self.core, params, image)
     }
 

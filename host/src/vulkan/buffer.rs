@@ -101,6 +101,18 @@ impl GpuBuffer {
         Ok(buffer)
     }
 
+    /// A device-local storage buffer ([`Self::device_local`]) for `len` elements of `T`: what
+    /// every stream, image and probe a kernel reads or writes is held in.
+    pub fn storage<T: Pod>(core: &Arc<Core>, len: u32, name: &str) -> Result<Self> {
+        let bytes = u64::from(len) * std::mem::size_of::<T>() as u64;
+        Self::device_local(core, bytes, vk::BufferUsageFlags::STORAGE_BUFFER, name)
+    }
+
+    /// A device-local storage buffer ([`Self::storage`]) holding `data`.
+    pub fn storage_with<T: Pod>(core: &Arc<Core>, data: &[T], name: &str) -> Result<Self> {
+        Self::with_data(core, data, vk::BufferUsageFlags::STORAGE_BUFFER, name)
+    }
+
     /// Copies `data` to the start of this device-local buffer through a host-visible staging
     /// buffer, and waits.
     pub fn upload<T: Pod>(&self, data: &[T]) -> Result<()> {

@@ -10,6 +10,7 @@ use gpu_allocator::vulkan::{Allocator, AllocatorCreateDesc};
 use raywave_shared::bindings::MOST_STORAGE_BUFFERS;
 use raywave_shared::bindings::STREAM_ROW;
 use std::ffi::{c_void, CStr};
+use std::io::Write;
 use std::mem::ManuallyDrop;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, OnceLock};
@@ -238,7 +239,9 @@ unsafe extern "system" fn debug_callback(
         (text, &*(user_data as *const Mutex<Vec<String>>))
     };
     let line = format!("[vulkan {severity:?}] {text}");
-    eprintln!("{line}");
+    // Not `eprintln!`, which panics when stderr is gone (a closed pipe), and a panic out of an
+    // `extern "system"` callback aborts the process; the message is kept in `sink` regardless.
+    let _ = writeln!(std::io::stderr().lock(), "{line}");
     if let Ok(mut messages) = sink.lock() {
         messages.push(line);
     }
@@ -583,7 +586,10 @@ fn create_device(instance: &ash::Instance, physical: vk::PhysicalDevice, index: 
             extensions.push(ash::khr::acceleration_structure::NAME.as_ptr());
             extensions.push(ash::khr::deferred_host_operations::NAME.as_ptr());
         }
-        if info.ray_query {
+        // Like the ray-tracing pipeline, only with what it requires (VK_KHR_acceleration_structure:
+        // VUID-vkCreateDevice-ppEnabledExtensionNames-01387).
+        let ray_query = info.missing_for_ray_query().is_empty();
+        if ray_query {
             extensions.push(ash::khr::ray_query::NAME.as_ptr());
         }
         let rt_pipeline = info.missing_for_rt_pipeline().is_empty();
@@ -604,7 +610,7 @@ fn create_device(instance: &ash::Instance, physical: vk::PhysicalDevice, index: 
         if info.acceleration_structure {
             create = create.push_next(&mut as_features);
         }
-        if info.ray_query {
+        if ray_query {
             create = create.push_next(&mut rq_features);
         }
         if rt_pipeline {

@@ -9,7 +9,6 @@ use crate::backend::StageReport;
 use crate::denoise::{bilateral_invocations, DenoiseInput, DenoiseMethod, DenoisePass};
 use crate::error::{Error, Result};
 use ash::vk;
-use bytemuck::Pod;
 use glam::Vec4;
 use raywave_shared::bindings::denoise as counts;
 use raywave_shared::bindings::WORKGROUP_SIZE;
@@ -28,17 +27,6 @@ pub(crate) struct DenoiseKernels {
     svgf_atrous: ComputeKernel,
     svgf_composite: ComputeKernel,
     copy_probe: ComputeKernel,
-}
-
-/// A device image of `pixels` elements of `T`.
-fn image<T: Pod>(core: &Arc<Core>, pixels: u32, name: &str) -> Result<GpuBuffer> {
-    let bytes = u64::from(pixels.max(1)) * std::mem::size_of::<T>() as u64;
-    GpuBuffer::device_local(core, bytes, vk::BufferUsageFlags::STORAGE_BUFFER, name)
-}
-
-/// A device image holding `data`.
-fn upload(core: &Arc<Core>, data: &[Vec4], name: &str) -> Result<GpuBuffer> {
-    GpuBuffer::with_data(core, data, vk::BufferUsageFlags::STORAGE_BUFFER, name)
 }
 
 impl DenoiseKernels {
@@ -65,7 +53,8 @@ impl DenoiseKernels {
     }
 
     /// Runs the copy probe on `source` (already checked against `params`) and reads the copy
-    /// back; the time is the dispatch's GPU time.
+    /// back; the time is the dispatch's ([`super::pass::Pass::run`]: GPU timestamps where the
+    /// device has them).
     pub fn copy_probe(
         &self,
         core: &Arc<Core>,
@@ -73,8 +62,8 @@ impl DenoiseKernels {
         source: &[Vec4],
     ) -> Result<(Vec<Vec4>, StageReport)> {
         let pixels = params.pixels();
-        let source = upload(core, source, "copy probe source")?;
-        let copy = image::<Vec4>(core, pixels, "copy probe copy")?;
+        let source = GpuBuffer::storage_with(core, source, "copy probe source")?;
+        let copy = GpuBuffer::storage::<Vec4>(core, pixels, "copy probe copy")?;
         let timing = self.copy_probe.dispatch(
             &[Resource::Buffer(&source), Resource::Buffer(&copy)],
             bytemuck::bytes_of(params),
@@ -84,7 +73,8 @@ impl DenoiseKernels {
     }
 
     /// Runs `method` on `input` (already checked against `params`): uploads the inputs, runs
-    /// every pass on the device and reads the colour back. Timings are the passes' GPU times.
+    /// every pass on the device and reads the colour back. Timings are the passes'
+    /// ([`super::pass::Pass::run`]: GPU timestamps where the device has them).
     pub fn run(
         &self,
         core: &Arc<Core>,
@@ -93,17 +83,26 @@ impl DenoiseKernels {
         input: &DenoiseInput,
     ) -> Result<(Vec<Vec4>, Vec<StageReport>)> {
         let pixels = params.pixels();
-        let position = upload(core, &input.position, "denoise position")?;
-        let normal = upload(core, &input.normal, "denoise normal")?;
-        let analytic = upload(core, &input.analytic, "denoise analytic")?;
-        let emitted = upload(core, &input.emitted, "denoise emitted")?;
+        let position = GpuBuffer::storage_with(core, &input.position, "denoise position")?;
+        let normal = GpuBuffer::storage_with(core, &input.normal, "denoise normal")?;
+        let analytic = GpuBuffer::storage_with(core, &input.analytic, "denoise analytic")?;
+        let emitted = GpuBuffer::storage_with(core, &input.emitted, "denoise emitted")?;
         // Ping-pong pairs: [0] holds the current S_N / U_N / ratio, [1] receives the next.
-        let mut shadowed = [upload(core, &input.shadowed, "S_N")?, image::<Vec4>(core, pixels, "S_N filtered")?];
-        let mut unshadowed = [upload(core, &input.unshadowed, "U_N")?, image::<Vec4>(core, pixels, "U_N filtered")?];
-        let mut ratio = [image::<Vec4>(core, pixels, "ratio")?, image::<Vec4>(core, pixels, "ratio filtered")?];
-        let noise_raw = image::<f32>(core, pixels, "noise raw")?;
-        let noise = image::<f32>(core, pixels, "noise")?;
-        let color = image::<Vec4>(core, pixels, "denoised colour")?;
+        let mut shadowed = [
+            GpuBuffer::storage_with(core, &input.shadowed, "S_N")?,
+            GpuBuffer::storage::<Vec4>(core, pixels, "S_N filtered")?,
+        ];
+        let mut unshadowed = [
+            GpuBuffer::storage_with(core, &input.unshadowed, "U_N")?,
+            GpuBuffer::storage::<Vec4>(core, pixels, "U_N filtered")?,
+        ];
+        let mut ratio = [
+            GpuBuffer::storage::<Vec4>(core, pixels, "ratio")?,
+            GpuBuffer::storage::<Vec4>(core, pixels, "ratio filtered")?,
+        ];
+        let noise_raw = GpuBuffer::storage::<f32>(core, pixels, "noise raw")?;
+        let noise = GpuBuffer::storage::<f32>(core, pixels, "noise")?;
+        let color = GpuBuffer::storage::<Vec4>(core, pixels, "denoised colour")?;
         // Only the composites, the denoiser's boundary, count (their last binding).
         let counter = GpuBuffer::counter(core, "denoise")?;
         let mut timings = Vec::new();

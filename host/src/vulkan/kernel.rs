@@ -27,11 +27,14 @@ impl ComputeKernel {
         push_constant_bytes: u32,
         workgroup_size: u32,
     ) -> Result<Self> {
+        // Before anything is created, so that this error leaks nothing.
+        let name = std::ffi::CString::new(entry).map_err(|_| Error::InvalidParameter {
+            name: "entry",
+            reason: format!("entry point name {entry:?} holds a NUL byte"),
+        })?;
         let stages = vk::ShaderStageFlags::COMPUTE;
         let mut pass = Pass::new(core, entry, vk::PipelineBindPoint::COMPUTE, stages, bindings, push_constant_bytes)?;
         let module = pass.shader_module(entry, Some(workgroup_size))?;
-        let name = std::ffi::CString::new(entry)
-            .map_err(|_| Error::InvalidParameter { name: "entry", reason: entry.into() })?;
         let stage = vk::PipelineShaderStageCreateInfo::default().stage(stages).module(module).name(&name);
         // SAFETY: the create info borrows live locals; the module is destroyed after creation.
         let created = unsafe {

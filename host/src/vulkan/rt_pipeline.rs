@@ -35,6 +35,8 @@ const LAUNCH_WIDTH: u32 = 4096;
 /// A ray-tracing pipeline with its shader binding table.
 pub(crate) struct RtPipelineKernel {
     pass: Pass,
+    /// The device's `VK_KHR_ray_tracing_pipeline` functions, which record the launch.
+    loader: ash::khr::ray_tracing_pipeline::Device,
     _sbt: GpuBuffer,
     raygen: vk::StridedDeviceAddressRegionKHR,
     miss: vk::StridedDeviceAddressRegionKHR,
@@ -144,7 +146,8 @@ impl RtPipelineKernel {
         let record = |group: u64, size: u64| {
             vk::StridedDeviceAddressRegionKHR::default().device_address(base + group * region).stride(stride).size(size)
         };
-        Ok(Self { raygen: record(0, stride), miss: record(1, stride), hit: record(2, stride), _sbt: sbt, pass })
+        let (raygen, miss, hit) = (record(0, stride), record(1, stride), record(2, stride));
+        Ok(Self { loader: loader.clone(), raygen, miss, hit, _sbt: sbt, pass })
     }
 
     /// Traces `rays` rays (raygen launch `LAUNCH_WIDTH` wide) and waits ([`Pass::run`]:
@@ -165,12 +168,7 @@ impl RtPipelineKernel {
                 ),
             });
         }
-        let loader = core.ray_tracing_pipeline.as_ref().ok_or_else(|| Error::MissingFeatures {
-            device: core.info.name.clone(),
-            stage: "trace (rtpipe)".into(),
-            missing: core.info.missing_for_rt_pipeline(),
-        })?;
-        let callable = vk::StridedDeviceAddressRegionKHR::default();
+        let (loader, callable) = (&self.loader, vk::StridedDeviceAddressRegionKHR::default());
         self.pass.run(resources, push, rays, |cmd| {
             if rays > 0 {
                 // SAFETY: `cmd` is recording with this pass's pipeline and set bound; the SBT
