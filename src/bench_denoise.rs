@@ -232,6 +232,8 @@ pub fn bench_denoise(options: &DenoiseBenchOptions, mut emit: impl FnMut(&Denois
         return Err(crate::Error::InvalidParameter { name: "peak-gbps", reason: "must be finite and > 0".into() });
     }
     check_radius("denoise-radius", options.denoise_radius)?;
+    // The frame's size and samples before any device is enumerated or scene loaded.
+    LitFrameSettings::new(options.width, options.height, options.spp).check_on(&crate::cpu::CpuBackend::new())?;
     #[cfg_attr(not(feature = "vulkan"), allow(unused_variables))]
     let vulkan_device = options.vulkan_options.device(options.vulkan, crate::StreamStage::Denoise)?;
     let input = frame_input(options)?;

@@ -27,19 +27,28 @@ impl VulkanBenchOptions {
     #[cfg_attr(not(feature = "vulkan"), allow(unused_variables))]
     pub(crate) fn device(&self, enabled: bool, stage: StreamStage) -> Result<Option<BenchDevice>> {
         let settle_seconds = self.settle_seconds.map(check_settle_seconds).transpose()?.unwrap_or(GPU_SETTLE_SECONDS);
-        let no_device = || -> Result<Option<BenchDevice>> {
+        // Without a device the bench measures the CPU alone, and says why unless it was asked to.
+        let no_device = |why: &str| -> Result<Option<BenchDevice>> {
             if self.workgroup_sizes.is_empty() {
+                if enabled {
+                    eprintln!("note: no Vulkan device is measured: {why}");
+                }
                 return Ok(None);
             }
             Err(crate::Error::InvalidParameter {
                 name: "workgroup-sizes",
-                reason: "no Vulkan device is measured (--no-vulkan, or none opens), so none runs them".into(),
+                reason: format!("no Vulkan device is measured ({why}), so none runs them"),
             })
         };
+        if !enabled {
+            return no_device("--no-vulkan");
+        }
         #[cfg(feature = "vulkan")]
         {
-            let best = || crate::device::best_vulkan_device_info().ok();
-            let Some(info) = enabled.then(best).flatten() else { return no_device() };
+            let info = match crate::device::best_vulkan_device_info() {
+                Ok(info) => info,
+                Err(err) => return no_device(&err.to_string()),
+            };
             let preferred = crate::WorkgroupSizes::preferred_on(&info.workgroup_sizes);
             for &size in &self.workgroup_sizes {
                 preferred.with(stage, size).check(&info.workgroup_sizes).map_err(|err| match err {
@@ -57,7 +66,7 @@ impl VulkanBenchOptions {
             Ok(Some(BenchDevice { info, settle_seconds, sizes, preferred, stage }))
         }
         #[cfg(not(feature = "vulkan"))]
-        no_device()
+        no_device("raywave was built without the `vulkan` feature")
     }
 }
 

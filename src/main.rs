@@ -103,10 +103,12 @@ struct SceneReportArgs {
 }
 
 impl SceneReportArgs {
-    /// The report's options at image side `resolution`, and the backend it runs on.
+    /// The report's options at image side `resolution`, and the backend it runs on; `check`
+    /// checks the report's own options with them, before the backend opens.
     fn open(
         self,
         resolution: u32,
+        check: impl FnOnce(&raywave::report::SceneReportOptions) -> raywave::Result<()>,
     ) -> raywave::Result<(raywave::report::SceneReportOptions, Box<dyn raywave::Backend>)> {
         let options = raywave::report::SceneReportOptions {
             scenes: self.scenes,
@@ -117,6 +119,7 @@ impl SceneReportArgs {
         };
         // Before the backend opens, which takes a second on a software Vulkan device.
         options.check()?;
+        check(&options)?;
         let backend = raywave::open_backend(self.device.parse()?, &BackendOptions::default())?;
         Ok((options, backend))
     }
@@ -494,7 +497,7 @@ fn report_sampling_command(args: SamplingReportArgs) -> raywave::Result<()> {
 
 fn report_shade_command(args: ShadeReportArgs) -> raywave::Result<()> {
     let json = args.common.json;
-    let (options, mut backend) = args.common.open(args.resolution)?;
+    let (options, mut backend) = args.common.open(args.resolution, |_| Ok(()))?;
     raywave::report::shade::report_shade(backend.as_mut(), &options, |line| {
         print_line(if json { line.json() } else { line.row() })
     })
@@ -509,9 +512,10 @@ fn report_error_vs_time_command(args: ErrorVsTimeArgs) -> raywave::Result<()> {
         .map(|path| raywave::visualize::PendingOutput::create(path, image::ImageFormat::Png))
         .transpose()?;
     let json = args.common.json;
-    let (report, mut backend) = args.common.open(args.resolution)?;
-    let options =
-        ErrorVsTimeOptions { report, denoise_radius: args.radius.denoise_radius, settle_seconds: args.settle_seconds };
+    let (denoise_radius, settle_seconds) = (args.radius.denoise_radius, args.settle_seconds);
+    let with = |report| ErrorVsTimeOptions { report, denoise_radius, settle_seconds };
+    let (report, mut backend) = args.common.open(args.resolution, |report| with(report.clone()).check())?;
+    let options = with(report);
     let lines = report_error_vs_time(backend.as_mut(), &options, |line| {
         print_line(if json { line.json() } else { line.row() })
     })?;

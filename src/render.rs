@@ -138,16 +138,28 @@ impl RenderOptions {
 }
 
 /// Checks the options that need neither the scene nor the backend: the frame's settings
-/// ([`LitFrameSettings::check`]: lens values and filter radius in range), outputs that the view
-/// writes, and no file named twice.
+/// ([`LitFrameSettings::check`]: lens values and filter radius in range), the samples per pixel
+/// in range (whether they fit the sampler's index at this image size is checked once the backend
+/// has checked the size), outputs that the view writes, and no file named twice.
 fn check_options(options: &RenderOptions) -> Result<()> {
     let invalid = |name, reason: String| Err(crate::Error::InvalidParameter { name, reason });
     options.frame_settings().check()?;
+    crate::frame::check_sample_count("spp", options.spp)?;
     if options.view == RenderView::Normals {
         for (name, given) in [("exr", options.exr.is_some()), ("stochastic", options.stochastic.is_some())] {
             if given {
                 return invalid(name, "the normals view writes only --out; drop it or use --view lit".into());
             }
+        }
+        // Options of the lit view's shading and denoising, which the normals view would ignore
+        // (`--denoise` only where it differs from its default).
+        let lit_only = [
+            ("denoise", options.denoise != DenoiseMethod::Tv),
+            ("denoise-radius", options.denoise_radius.is_some()),
+            ("analytic-residual", options.analytic_residual),
+        ];
+        if let Some((name, _)) = lit_only.into_iter().find(|&(_, given)| given) {
+            return invalid(name, "the normals view is neither shaded nor denoised; drop it or use --view lit".into());
         }
     }
     let named =

@@ -203,6 +203,8 @@ fn bad_input_is_a_typed_error_without_output() {
     assert_rejected(&["--device", "cpu", "--sampler", "halton"], "unknown sampler `halton`");
     assert_rejected(&["--device", "cpu", "--spp", "0"], "spp: 0 is outside 1..=65536");
     assert_rejected(&["--device", "cpu", "--spp", "70000"], "spp: 70000 is outside 1..=65536");
+    // Before the scene loads (this one would fail to) and the device opens (nor would it).
+    assert_rejected(&["--device", "vulkan:99", "--scene", "/no/such/scene.obj", "--spp", "0"], "spp: 0 is outside");
     let sampler_overflow = ["--device", "cpu", "--width", "65536", "--height", "1024", "--spp", "4"];
     assert_rejected(&sampler_overflow, "exceed the sampler's 32-bit index");
     assert_rejected(&["--device", "cpu", "--view", "albedo"], "unknown view `albedo`");
@@ -226,6 +228,14 @@ fn bad_input_is_a_typed_error_without_output() {
     assert_rejected(&["--device", "cpu", "--aperture", "0.1", "--focus", "1e19"], "focus");
     let normals_exr = dir.path().join("normals.exr");
     assert_rejected(&["--device", "cpu", "--view", "normals", "--exr", normals_exr.to_str().unwrap()], "normals view");
+    // Options the normals view would ignore.
+    for (option, needle) in [
+        (&["--denoise", "svgf"][..], "denoise: the normals view"),
+        (&["--denoise-radius", "3"], "denoise-radius: the normals view"),
+        (&["--analytic-residual"], "analytic-residual: the normals view"),
+    ] {
+        assert_rejected(&[&["--device", "cpu", "--view", "normals"][..], option].concat(), needle);
+    }
     assert!(!normals_exr.exists());
 
     let out = raywave(&["render", "--device", "cpu", "--out", "/no/such/dir/out.png"]);
@@ -460,9 +470,14 @@ fn an_orthographic_camera_is_framed_with_a_warning() {
 /// frame is shaded or the reference converged).
 #[test]
 fn bench_and_report_options_out_of_range_are_typed_errors() {
-    let cases: [(&[&str], &str); 22] = [
+    let cases: [(&[&str], &str); 27] = [
         (&["bench", "denoise", "--no-vulkan", "--repeats", "0"], "repeats: must be at least 1"),
         (&["bench", "denoise", "--no-vulkan", "--spp", "0"], "spp: 0 is outside"),
+        // Before the scene loads, which would fail too.
+        (&["bench", "denoise", "--scene", "/no/such/scene.obj", "--spp", "0"], "spp: 0 is outside"),
+        // Before the backend opens, which would fail too.
+        (&["report", "error-vs-time", "--device", "vulkan:99", "--denoise-radius", "11"], "denoise-radius: radius 11"),
+        (&["report", "error-vs-time", "--device", "vulkan:99", "--settle-seconds", "31"], "settle-seconds: 31"),
         (&["bench", "denoise", "--no-vulkan", "--spp", "8192"], "exceed the sampler's 32-bit index"),
         (&["bench", "denoise", "--no-vulkan", "--peak-gbps=-5"], "peak-gbps: must be finite and > 0"),
         (&["bench", "denoise", "--no-vulkan", "--denoise-radius", "0"], "denoise-radius: radius 0 outside 1..=10"),
@@ -485,12 +500,14 @@ fn bench_and_report_options_out_of_range_are_typed_errors() {
         (&["bench", "shade", "--settle-seconds=-1"], "settle-seconds: -1 is not within 0..=30 s"),
         (&["report", "shade", "--resolution", "1024", "--reference-spp", "8192"], "reference-spp: 8192 samples"),
         // Each named: one message named the report and listed every condition.
-        (&["report", "shade", "--reps", "0"], "reps: 0 is below 1"),
+        (&["report", "shade", "--reps", "0"], "reps: 0 is outside 1..=4096"),
+        (&["report", "error-vs-time", "--reps", "4097"], "reps: 4097 is outside 1..=4096"),
+        (&["report", "sampling", "--reps", "100000"], "reps: 100000 is outside 2..=4096"),
         (&["report", "sampling", "--reps", "1"], "reps: at least 2 repetitions are needed for a variance"),
         (&["report", "shade", "--max-spp", "0"], "max-spp: 0 is below 1"),
         (
-            &["report", "error-vs-time", "--reference-spp", "4", "--max-spp", "8"],
-            "reference-spp: 4 is below max-spp (8)",
+            &["report", "error-vs-time", "--reference-spp", "8", "--max-spp", "4"],
+            "reference-spp: 8 is below 4 × max-spp (4)",
         ),
     ];
     for (args, needle) in cases {
@@ -732,7 +749,11 @@ fn vulkan_devices(test: &str) -> Option<Vec<raywave::vulkan::DeviceInfo>> {
 #[cfg(feature = "vulkan")]
 #[test]
 fn trace_bench_measures_each_workgroup_size_of_each_compute_method() {
-    let Some(device) = vulkan_devices("trace bench workgroup sizes") else { return };
+    if vulkan_devices("trace bench workgroup sizes").is_none() {
+        return;
+    }
+    // The bench measures the best device alone.
+    let best = raywave::device::best_vulkan_device_info().expect("the device the bench measures");
     let base =
         ["bench", "trace", "--scene", "builtin:cornell", "--resolution", "8", "--repeats", "1", "--threads", "1"];
     let quick = [&base[..], &["--settle-seconds", "0.05", "--json"]].concat();
@@ -748,14 +769,18 @@ fn trace_bench_measures_each_workgroup_size_of_each_compute_method() {
     assert_eq!(count("raywave-vk-sw", Some(32)), 3);
     assert_eq!(count("raywave-vk-sw", Some(128)), 3);
     assert_eq!(count("raywave-vk-sw", None), 0);
-    let ray_query = device.iter().any(|d| d.missing_for_ray_query().is_empty());
+    let ray_query = best.missing_for_ray_query().is_empty();
     assert_eq!(
         count("raywave-vk-rayquery", Some(32)) + count("raywave-vk-rayquery", Some(128)),
         if ray_query { 6 } else { 0 }
     );
     assert_eq!(count("raywave-vk-rtpipe", Some(32)) + count("raywave-vk-rtpipe", Some(128)), 0);
     assert_eq!(count("raywave-cpu", None), 3);
-    let measured = 2 * 3 * (1 + usize::from(ray_query)) + count("raywave-vk-rtpipe", None) + 2 * 3;
+    // The CPU tracers once each, without a size: raywave's, obvhs's, and Embree where built with it.
+    let on_the_cpu = |l: &&serde_json::Value| !l["impl"].as_str().is_some_and(|i| i.starts_with("raywave-vk-"));
+    let cpu_lines = lines.iter().filter(on_the_cpu).count();
+    assert_eq!(cpu_lines, 3 * (2 + usize::from(cfg!(feature = "embree"))), "{lines:?}");
+    let measured = 2 * 3 * (1 + usize::from(ray_query)) + count("raywave-vk-rtpipe", None) + cpu_lines;
     assert_eq!(lines.len(), measured, "{lines:?}");
     let preferred = json_lines(&raywave(&quick));
     assert!(

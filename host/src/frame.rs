@@ -31,6 +31,17 @@ pub fn sampler_params(kind: u32, seed: u32, width: u32, height: u32, samples_per
 /// (the reports' references use 4096).
 pub const MAX_SAMPLES_PER_PIXEL: u32 = 65_536;
 
+/// Checks a sample count per pixel before anything is known of the frame: within
+/// `1..=`[`MAX_SAMPLES_PER_PIXEL`]. `name` is the option's name for the error.
+pub fn check_sample_count(name: &'static str, samples_per_pixel: u32) -> crate::error::Result<()> {
+    if (1..=MAX_SAMPLES_PER_PIXEL).contains(&samples_per_pixel) {
+        Ok(())
+    } else {
+        let reason = format!("{samples_per_pixel} is outside 1..={MAX_SAMPLES_PER_PIXEL}");
+        Err(crate::error::Error::InvalidParameter { name, reason })
+    }
+}
+
 /// Checks a sample count per pixel for a `width × height` frame: within
 /// `1..=`[`MAX_SAMPLES_PER_PIXEL`], and the Morton-ordered sample space (image side and count
 /// rounded up to powers of two, [`SamplerParams::fits_index`]) within the sampler's 32-bit index,
@@ -41,10 +52,8 @@ pub fn check_samples_per_pixel(
     height: u32,
     samples_per_pixel: u32,
 ) -> crate::error::Result<()> {
+    check_sample_count(name, samples_per_pixel)?;
     let invalid = |reason: String| Err(crate::error::Error::InvalidParameter { name, reason });
-    if !(1..=MAX_SAMPLES_PER_PIXEL).contains(&samples_per_pixel) {
-        return invalid(format!("{samples_per_pixel} is outside 1..={MAX_SAMPLES_PER_PIXEL}"));
-    }
     if !sampler_params(sampler_kind::ZSOBOL, 0, width, height, samples_per_pixel).fits_index() {
         return invalid(format!(
             "{samples_per_pixel} samples per pixel of a {width}×{height} image exceed the sampler's 32-bit \

@@ -24,22 +24,45 @@ pub struct SceneReportOptions {
     pub reps: u32,
 }
 
+/// Most repetitions a report averages (`--reps`): far more than any statistic here needs, and
+/// small enough that the repetitions' seeds (`0..reps`) never reach the seeds a report keeps apart
+/// for other images (the scene reports' reference, 65 261; the sampling report's second
+/// estimator, from 2²⁰ on).
+pub const MAX_REPS: u32 = 4096;
+
+/// How many times `max-spp` a scene report's reference must sample at least: its own noise then
+/// adds at most `√(1 + 1/4) − 1` ≈ 12 % to the RMSE measured at `max-spp` (its variance a quarter
+/// of theirs, independent of them), less at fewer samples. The default 4096 is 64 × the default 64.
+pub const MIN_REFERENCE_FACTOR: u32 = 4;
+
+/// Checks a report's repetitions: `minimum..=`[`MAX_REPS`], the error naming `--reps`.
+pub fn check_reps(reps: u32, minimum: u32) -> crate::Result<()> {
+    if (minimum..=MAX_REPS).contains(&reps) {
+        Ok(())
+    } else {
+        Err(crate::Error::InvalidParameter {
+            name: "reps",
+            reason: format!("{reps} is outside {minimum}..={MAX_REPS}"),
+        })
+    }
+}
+
 impl SceneReportOptions {
-    /// Checks the options: reps ≥ 1, max-spp ≥ 1, reference-spp ≥ max-spp, the resolution
+    /// Checks the options: reps within `1..=`[`MAX_REPS`], max-spp ≥ 1, reference-spp at least
+    /// [`MIN_REFERENCE_FACTOR`] × max-spp, the resolution
     /// ([`check_resolution`]) and the reference's sample count
     /// ([`check_samples_per_pixel`](crate::frame::check_samples_per_pixel)); an error names the
     /// option.
     pub fn check(&self) -> crate::Result<()> {
         let invalid = |name, reason: String| Err(crate::Error::InvalidParameter { name, reason });
-        if self.reps < 1 {
-            return invalid("reps", format!("{} is below 1", self.reps));
-        }
+        check_reps(self.reps, 1)?;
         if self.max_spp < 1 {
             return invalid("max-spp", format!("{} is below 1", self.max_spp));
         }
-        if self.reference_spp < self.max_spp {
+        if u64::from(self.reference_spp) < u64::from(MIN_REFERENCE_FACTOR) * u64::from(self.max_spp) {
             let reason = format!(
-                "{} is below max-spp ({}): the reference must converge further",
+                "{} is below {MIN_REFERENCE_FACTOR} × max-spp ({}): the reference must converge further than what \
+                 it measures",
                 self.reference_spp, self.max_spp
             );
             return invalid("reference-spp", reason);

@@ -490,6 +490,7 @@ pub fn validate(options: &SamplingReportOptions) -> Result<()> {
     if options.reps < 2 {
         return invalid("reps", "at least 2 repetitions are needed for a variance");
     }
+    super::check_reps(options.reps, 2)?;
     super::check_resolution(options.resolution)?;
     Ok(())
 }
