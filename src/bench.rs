@@ -7,6 +7,7 @@ use crate::frame::generate_params;
 use crate::kernels::hash::{pcg3d, unit_float};
 use crate::kernels::sampling::warp::{local_to_world, sample_cosine_hemisphere};
 use crate::kernels::trace::{trace_closest, trace_occluded, Ray};
+use crate::output_line::{json_object, OutputLine};
 use crate::shared::stream::NO_HIT;
 use crate::{Error, RayStream, Result, Scene, StageReport};
 use glam::{UVec3, Vec2, Vec3, Vec4, Vec4Swizzles};
@@ -338,7 +339,7 @@ pub(crate) fn check_repeats(repeats: u32) -> Result<()> {
 }
 
 /// Runs the trace benchmark; `emit` receives each measurement as soon as it is taken.
-pub fn bench_trace(options: &TraceBenchOptions, mut emit: impl FnMut(&dyn BenchLine)) -> Result<()> {
+pub fn bench_trace(options: &TraceBenchOptions, mut emit: impl FnMut(&dyn OutputLine)) -> Result<()> {
     // rayon makes at most this many threads, silently: the report would name a count it did not run.
     let max_threads = rayon::max_num_threads();
     if let Some(threads) = options.threads.iter().find(|&&t| !(1..=max_threads).contains(&t)) {
@@ -424,7 +425,7 @@ fn bench_vulkan(
     device: &crate::bench_device::BenchDevice,
     scene: &Scene,
     kinds: &[(&'static str, &RayStream); 3],
-    emit: &mut impl FnMut(&dyn BenchLine),
+    emit: &mut impl FnMut(&dyn OutputLine),
 ) -> Result<()> {
     use crate::{Backend, TraceMethod};
     let no_workgroups = [device.preferred.trace];
@@ -455,17 +456,9 @@ fn bench_vulkan(
     Ok(())
 }
 
-/// A line the benchmark emits, printable as JSON or as a table row.
-pub trait BenchLine {
-    /// The line as one JSON object.
-    fn json(&self) -> String;
-    /// The line as a human-readable table row.
-    fn row(&self) -> String;
-}
-
-impl BenchLine for Measurement {
+impl OutputLine for Measurement {
     fn json(&self) -> String {
-        serde_json::to_string(self).unwrap_or_default()
+        json_object(self)
     }
     fn row(&self) -> String {
         let workgroup = crate::bench_device::workgroup_note(self.workgroup_size);
@@ -476,9 +469,9 @@ impl BenchLine for Measurement {
     }
 }
 
-impl BenchLine for BuildMeasurement {
+impl OutputLine for BuildMeasurement {
     fn json(&self) -> String {
-        serde_json::to_string(self).unwrap_or_default()
+        json_object(self)
     }
     fn row(&self) -> String {
         let isa = self.traversal_isa.map(|isa| format!(", raywave traversal build {isa}")).unwrap_or_default();

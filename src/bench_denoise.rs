@@ -96,14 +96,12 @@ pub struct DenoiseMeasurement {
     pub workgroup_size: Option<u32>,
 }
 
-impl DenoiseMeasurement {
-    /// The JSON line.
-    pub fn json(&self) -> String {
-        serde_json::to_string(self).unwrap_or_default()
+impl crate::output_line::OutputLine for DenoiseMeasurement {
+    fn json(&self) -> String {
+        crate::output_line::json_object(self)
     }
 
-    /// A table row.
-    pub fn row(&self) -> String {
+    fn row(&self) -> String {
         let fraction = self.bandwidth_fraction.map_or(String::new(), |f| format!("  {:.1} % of peak", 100.0 * f));
         let dispatches = self.dispatches.map_or(String::new(), |d| format!("  ×{d}"));
         let workgroup = crate::bench_device::workgroup_note(self.workgroup_size);

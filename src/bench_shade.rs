@@ -57,9 +57,9 @@ pub struct ShadeMeasurement {
     pub workgroup_size: Option<u32>,
 }
 
-impl crate::bench::BenchLine for ShadeMeasurement {
+impl crate::output_line::OutputLine for ShadeMeasurement {
     fn json(&self) -> String {
-        serde_json::to_string(self).unwrap_or_default()
+        crate::output_line::json_object(self)
     }
     fn row(&self) -> String {
         let workgroup = crate::bench_device::workgroup_note(self.workgroup_size);

@@ -13,6 +13,7 @@ pub mod bench_device;
 pub mod bench_shade;
 #[cfg(feature = "embree")]
 pub mod embree;
+pub mod output_line;
 pub mod render;
 pub mod report;
 

@@ -2,6 +2,7 @@
 
 use clap::{Parser, Subcommand};
 use raywave::bench::{bench_trace, TraceBenchOptions};
+use raywave::output_line::OutputLine;
 use raywave::render::{render, RenderOptions, RenderView};
 use raywave::{BackendOptions, DeviceChoice, TraceMethod};
 use std::path::PathBuf;
@@ -450,11 +451,10 @@ fn bench_trace_command(args: TraceBenchArgs) -> raywave::Result<()> {
         vulkan_options: args.common.vulkan.options(),
     };
     let json = args.common.json;
-    bench_trace(&options, |line| print_line(if json { line.json() } else { line.row() }))
+    bench_trace(&options, |line| print_line(line.text(json)))
 }
 
 fn bench_shade_command(args: ShadeBenchArgs) -> raywave::Result<()> {
-    use raywave::bench::BenchLine;
     use raywave::bench_shade::{bench_shade, ShadeBenchOptions};
     let options = ShadeBenchOptions {
         scene: args.scene,
@@ -464,7 +464,7 @@ fn bench_shade_command(args: ShadeBenchArgs) -> raywave::Result<()> {
         vulkan_options: args.common.vulkan.options(),
     };
     let json = args.common.json;
-    bench_shade(&options, |line| print_line(if json { line.json() } else { line.row() }))
+    bench_shade(&options, |line| print_line(line.text(json)))
 }
 
 fn bench_denoise_command(args: DenoiseBenchArgs) -> raywave::Result<()> {
@@ -480,7 +480,7 @@ fn bench_denoise_command(args: DenoiseBenchArgs) -> raywave::Result<()> {
         denoise_radius: args.radius.denoise_radius,
         vulkan_options: args.vulkan.options(),
     };
-    bench_denoise(&options, |line| print_line(if args.json { line.json() } else { line.row() }))
+    bench_denoise(&options, |line| print_line(line.text(args.json)))
 }
 
 fn report_sampling_command(args: SamplingReportArgs) -> raywave::Result<()> {
@@ -491,16 +491,14 @@ fn report_sampling_command(args: SamplingReportArgs) -> raywave::Result<()> {
     let mut backend = raywave::open_backend(args.device.parse()?, &BackendOptions::default())?;
     report_sampling(backend.as_mut(), &options, |line| match line {
         ReportLine::Case(case, result) => print_line(if args.json { result.json() } else { result.row(case) }),
-        ReportLine::Spectrum(spectrum) => print_line(if args.json { spectrum.json() } else { spectrum.row() }),
+        ReportLine::Spectrum(spectrum) => print_line(spectrum.text(args.json)),
     })
 }
 
 fn report_shade_command(args: ShadeReportArgs) -> raywave::Result<()> {
     let json = args.common.json;
     let (options, mut backend) = args.common.open(args.resolution, |_| Ok(()))?;
-    raywave::report::shade::report_shade(backend.as_mut(), &options, |line| {
-        print_line(if json { line.json() } else { line.row() })
-    })
+    raywave::report::shade::report_shade(backend.as_mut(), &options, |line| print_line(line.text(json)))
 }
 
 fn report_error_vs_time_command(args: ErrorVsTimeArgs) -> raywave::Result<()> {
@@ -516,9 +514,7 @@ fn report_error_vs_time_command(args: ErrorVsTimeArgs) -> raywave::Result<()> {
     let with = |report| ErrorVsTimeOptions { report, denoise_radius, settle_seconds };
     let (report, mut backend) = args.common.open(args.resolution, |report| with(report.clone()).check())?;
     let options = with(report);
-    let lines = report_error_vs_time(backend.as_mut(), &options, |line| {
-        print_line(if json { line.json() } else { line.row() })
-    })?;
+    let lines = report_error_vs_time(backend.as_mut(), &options, |line| print_line(line.text(json)))?;
     if !json {
         print_line(String::new());
         for row in fastest_by_error(&lines) {

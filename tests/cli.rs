@@ -378,12 +378,18 @@ fn an_interrupted_render_leaves_no_file() {
             let status = Command::new("kill").args([format!("-{name}"), pid.clone()]).status().unwrap();
             assert!(status.success(), "kill -{name}");
         };
+        // The handlers are in place once the temporary file exists: the signal is caught, or
+        // left ignored where the parent ignored it.
+        #[cfg(target_os = "linux")]
+        {
+            let (ignored, caught) = signal_masks(&pid);
+            let bit = 1u64 << (number - 1);
+            assert_eq!((ignored & bit != 0, caught & bit != 0), (nohup, !nohup), "SIG{signal}");
+        }
         kill(signal);
         let expected = if nohup {
-            // Still rendering half a second later (handled, it would have ended at once); then
-            // SIGTERM ends it.
-            std::thread::sleep(Duration::from_millis(500));
-            assert!(child.try_wait().unwrap().is_none(), "an ignored SIGHUP ended the render");
+            // An ignored SIGHUP leaves it rendering, so SIGTERM is what ends it (had SIGHUP ended
+            // it, the status would name SIGHUP).
             kill("TERM");
             libc::SIGTERM
         } else {
@@ -394,6 +400,18 @@ fn an_interrupted_render_leaves_no_file() {
         let left: Vec<_> = std::fs::read_dir(dir.path()).unwrap().map(|entry| entry.unwrap().file_name()).collect();
         assert!(left.is_empty(), "SIG{signal}: left {left:?}");
     }
+}
+
+/// The signals process `pid` ignores and those it catches (`SigIgn`, `SigCgt` of
+/// `/proc/PID/status`: bit n − 1 for signal n).
+#[cfg(target_os = "linux")]
+fn signal_masks(pid: &str) -> (u64, u64) {
+    let status = std::fs::read_to_string(format!("/proc/{pid}/status")).unwrap();
+    let mask = |key: &str| {
+        let hex = status.lines().find_map(|line| line.strip_prefix(key)).unwrap_or_else(|| panic!("{key} in {status}"));
+        u64::from_str_radix(hex.trim(), 16).unwrap()
+    };
+    (mask("SigIgn:"), mask("SigCgt:"))
 }
 
 /// Runs raywave with `args`, its standard output closed before it prints anything, and checks
@@ -601,16 +619,21 @@ fn shade_report_prints_json_lines() {
         "--max-spp",
         "2",
         "--reps",
-        "1",
+        "2",
     ]);
     assert!(out.status.success(), "{}", stderr(&out));
     let lines = json_lines(&out);
     assert_eq!(lines.len(), 3 + 2 * 2 * 3, "the 1-spp floor's regions, then spp × estimators × regions");
     for line in &lines {
         assert_eq!(line["scene"], "builtin:cornell");
-        assert!(["visibility-floor", "ratio", "stochastic"].contains(&line["estimator"].as_str().unwrap()));
+        let estimator = line["estimator"].as_str().unwrap();
+        assert!(["visibility-floor", "ratio", "stochastic"].contains(&estimator));
         assert!(["all", "shadow", "lit"].contains(&line["region"].as_str().unwrap()));
         assert!(line["rmse"].as_f64().unwrap().is_finite());
+        // The repetitions' standard error, where there are repetitions (two here).
+        let stderr = line.get("rmse_stderr").map(|e| e.as_f64().unwrap());
+        assert_eq!(stderr.is_some(), estimator != "visibility-floor", "{line}");
+        assert!(stderr.is_none_or(|e| e.is_finite() && e >= 0.0), "{line}");
     }
 }
 

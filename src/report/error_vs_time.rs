@@ -18,7 +18,7 @@
 
 use super::flip::mean_flip;
 use super::shade::{accumulate, GBuffer, ShadowRegions};
-use super::sum_from_zero;
+use super::{sum_from_zero, Repeated};
 use crate::bench::{check_settle_seconds, warm_up, SUSTAIN_SECONDS};
 use crate::denoise::{check_radius, frame_params, rgb, DenoiseInput, DenoiseMethod};
 use crate::shading::ShadeData;
@@ -76,6 +76,10 @@ pub struct ErrorVsTimeLine {
     pub method: &'static str,
     /// Relative MSE against the reference ([`relmse`]), mean over the repetitions.
     pub relmse: f64,
+    /// The standard error of `relmse` over the repetitions ([`super::Repeated::standard_error`]:
+    /// ±1.96 of it is about a 95 % confidence interval); absent for one repetition.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub relmse_stderr: Option<f64>,
     /// The part of `relmse` made in shadowed pixels (penumbrae and umbrae, [`ShadowRegions`]).
     pub relmse_shadow: f64,
     /// The part of `relmse` made in unshadowed pixels; with `relmse_shadow` and the part in
@@ -91,16 +95,15 @@ pub struct ErrorVsTimeLine {
     pub warm_up_seconds: Option<f64>,
 }
 
-impl ErrorVsTimeLine {
-    /// The JSON line.
-    pub fn json(&self) -> String {
-        serde_json::to_string(self).unwrap_or_default()
+impl crate::output_line::OutputLine for ErrorVsTimeLine {
+    fn json(&self) -> String {
+        crate::output_line::json_object(self)
     }
 
-    /// A table row.
-    pub fn row(&self) -> String {
+    fn row(&self) -> String {
+        let stderr = self.relmse_stderr.map_or(String::new(), |e| format!(" ± {e:.6}"));
         format!(
-            "{:<28} {:>3} spp  {:<14} relMSE {:.6} (shadow {:.6}, lit {:.6})  FLIP {:.4}  {:>9.2} ms",
+            "{:<28} {:>3} spp  {:<14} relMSE {:.6}{stderr} (shadow {:.6}, lit {:.6})  FLIP {:.4}  {:>9.2} ms",
             self.scene, self.spp, self.method, self.relmse, self.relmse_shadow, self.relmse_lit, self.flip, self.ms
         )
     }
@@ -230,9 +233,11 @@ impl PreparedScene {
     ) -> Result<[MethodError; METHODS.len()]> {
         let regions = ShadowRegions::new(&self.analytic, reference);
         let mut sums = [MethodError::default(); METHODS.len()];
+        let mut relmse_runs = [Repeated::default(); METHODS.len()];
         for &seed in seeds {
-            for (sum, (image, ms)) in sums.iter_mut().zip(self.frame(backend, spp, seed)?.images) {
-                sum.relmse += relmse(&image, reference);
+            let frame = self.frame(backend, spp, seed)?.images;
+            for ((sum, runs), (image, ms)) in sums.iter_mut().zip(&mut relmse_runs).zip(frame) {
+                runs.add(relmse(&image, reference));
                 sum.relmse_shadow += relmse_part(&image, reference, &regions.shadow);
                 sum.relmse_lit += relmse_part(&image, reference, &regions.lit);
                 sum.flip += mean_flip(&image, reference, self.resolution, self.resolution);
@@ -240,12 +245,16 @@ impl PreparedScene {
             }
         }
         let count = seeds.len().max(1) as f64;
-        Ok(sums.map(|s| MethodError {
-            relmse: s.relmse / count,
-            relmse_shadow: s.relmse_shadow / count,
-            relmse_lit: s.relmse_lit / count,
-            flip: s.flip / count,
-            ms: s.ms / count,
+        Ok(std::array::from_fn(|k| {
+            let (sum, runs) = (sums[k], relmse_runs[k]);
+            MethodError {
+                relmse: runs.mean(),
+                relmse_stderr: runs.standard_error(),
+                relmse_shadow: sum.relmse_shadow / count,
+                relmse_lit: sum.relmse_lit / count,
+                flip: sum.flip / count,
+                ms: sum.ms / count,
+            }
         }))
     }
 }
@@ -255,6 +264,9 @@ impl PreparedScene {
 pub struct MethodError {
     /// Relative MSE against the reference ([`relmse`]).
     pub relmse: f64,
+    /// The standard error of `relmse` over the frames ([`Repeated::standard_error`]); `None`
+    /// for one frame.
+    pub relmse_stderr: Option<f64>,
     /// The part of `relmse` made in shadowed pixels ([`relmse_part`], [`ShadowRegions`]).
     pub relmse_shadow: f64,
     /// The part of `relmse` made in unshadowed pixels.
@@ -285,13 +297,14 @@ pub fn report_error_vs_time(
         let seeds: Vec<u32> = (0..report.reps).collect();
         for spp in report.spp_steps() {
             for (method, error) in METHODS.into_iter().zip(prepared.errors(backend, &reference, spp, &seeds)?) {
-                let MethodError { relmse, relmse_shadow, relmse_lit, flip, ms } = error;
+                let MethodError { relmse, relmse_stderr, relmse_shadow, relmse_lit, flip, ms } = error;
                 let scene = name.clone();
                 let line = ErrorVsTimeLine {
                     scene,
                     spp,
                     method,
                     relmse,
+                    relmse_stderr,
                     relmse_shadow,
                     relmse_lit,
                     flip,
@@ -484,6 +497,7 @@ mod tests {
             spp,
             method,
             relmse,
+            relmse_stderr: None,
             relmse_shadow: 0.0,
             relmse_lit: 0.0,
             flip: 0.0,

@@ -105,8 +105,73 @@ pub fn check_resolution(resolution: u32) -> crate::Result<()> {
     }
 }
 
+/// A measurement repeated over independent seeds: its mean, and the standard error of that mean
+/// (Welford's running mean and sum of squared deviations, which do not cancel when the values
+/// barely differ).
+#[derive(Copy, Clone, Debug, Default, PartialEq)]
+pub struct Repeated {
+    count: u32,
+    mean: f64,
+    squared_deviations: f64,
+}
+
+impl Repeated {
+    /// Adds one repetition's value.
+    pub fn add(&mut self, value: f64) {
+        self.count += 1;
+        let delta = value - self.mean;
+        self.mean += delta / f64::from(self.count);
+        self.squared_deviations += delta * (value - self.mean);
+    }
+
+    /// The mean of the values (0 for none).
+    pub fn mean(&self) -> f64 {
+        self.mean
+    }
+
+    /// The standard error of [`Self::mean`], `s/√n` with `s` the values' sample standard
+    /// deviation: the expectation lies within ±1.96 of it of the mean with about 95 %
+    /// confidence (the normal approximation, fair for the sums over thousands of pixels each
+    /// value is; with few repetitions the Student-t factor is larger, 4.30 for 3). `None` for
+    /// fewer than two values.
+    pub fn standard_error(&self) -> Option<f64> {
+        (self.count >= 2).then(|| {
+            let n = f64::from(self.count);
+            (self.squared_deviations / (n - 1.0) / n).sqrt()
+        })
+    }
+}
+
 /// The sum of `values`, +0 for none: `Iterator::sum` of no `f64` is −0, which an empty region's
 /// RMSE printed as `-0.0`.
 pub(crate) fn sum_from_zero(values: impl Iterator<Item = f64>) -> f64 {
     values.fold(0.0, |sum, value| sum + value)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn repeated_values_give_their_mean_and_its_standard_error() {
+        let mut repeated = Repeated::default();
+        assert_eq!((repeated.mean(), repeated.standard_error()), (0.0, None));
+        repeated.add(2.0);
+        assert_eq!((repeated.mean(), repeated.standard_error()), (2.0, None), "one value has no spread");
+        for value in [4.0, 4.0, 4.0, 5.0, 5.0, 7.0, 9.0] {
+            repeated.add(value);
+        }
+        // Mean 5, sample variance 32/7 over 8 values.
+        assert!((repeated.mean() - 5.0).abs() < 1e-12);
+        let expected = (32.0 / 7.0 / 8.0f64).sqrt();
+        assert!((repeated.standard_error().unwrap() - expected).abs() < 1e-12);
+        // Values that barely differ, far from 0: the sum of squares minus the squared sum would
+        // cancel to nothing (or below zero) here.
+        let mut close = Repeated::default();
+        for k in 0..4 {
+            close.add(1.0e6 + f64::from(k) * 1.0e-6);
+        }
+        let expected = (1.25e-12f64 * 4.0 / 3.0 / 4.0).sqrt();
+        assert!((close.standard_error().unwrap() / expected - 1.0).abs() < 1e-3, "{close:?}");
+    }
 }

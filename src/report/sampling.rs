@@ -146,7 +146,7 @@ pub struct CaseResult {
 impl CaseResult {
     /// The JSON line.
     pub fn json(&self) -> String {
-        serde_json::to_string(self).unwrap_or_default()
+        crate::output_line::json_object(self)
     }
 
     /// A human-readable table row.
@@ -395,14 +395,13 @@ pub struct SpectrumResult {
     pub radial_power: Vec<f64>,
 }
 
-impl SpectrumResult {
-    /// The JSON line.
-    pub fn json(&self) -> String {
-        serde_json::to_string(self).unwrap_or_default()
+impl crate::output_line::OutputLine for SpectrumResult {
+    fn json(&self) -> String {
+        crate::output_line::json_object(self)
     }
 
-    /// A human-readable row: the low-frequency power and the spectrum in eight bands.
-    pub fn row(&self) -> String {
+    /// The low-frequency power and the spectrum in eight bands.
+    fn row(&self) -> String {
         let bands: Vec<String> = self
             .radial_power
             .chunks(self.radial_power.len().div_ceil(8).max(1))

@@ -11,7 +11,7 @@
 //! 1-spp ratio estimate is up to its small bias. Emitters seen directly add the same radiance to
 //! every sample of a fixed surface, so they cancel in the error.
 
-use super::sum_from_zero;
+use super::{sum_from_zero, Repeated};
 use crate::frame::{generate_params_with, sampler_params};
 use crate::kernels::sampling::light_select::luminance;
 use crate::shading::{ShadeAccumulator, ShadeData};
@@ -37,20 +37,24 @@ pub struct ShadeLine {
     /// Root-mean-square error against the reference (linear radiance, mean over RGB), averaged
     /// over the repetitions (the `visibility-floor`: computed from the reference alone).
     pub rmse: f64,
+    /// The standard error of `rmse` over the repetitions ([`Repeated::standard_error`]: ±1.96 of
+    /// it is about a 95 % confidence interval); absent for one repetition and for the
+    /// `visibility-floor`, which is no mean of repetitions.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub rmse_stderr: Option<f64>,
     /// Pixels in the region.
     pub pixels: usize,
 }
 
-impl ShadeLine {
-    /// The JSON line.
-    pub fn json(&self) -> String {
-        serde_json::to_string(self).unwrap_or_default()
+impl crate::output_line::OutputLine for ShadeLine {
+    fn json(&self) -> String {
+        crate::output_line::json_object(self)
     }
 
-    /// A table row.
-    pub fn row(&self) -> String {
+    fn row(&self) -> String {
+        let stderr = self.rmse_stderr.map_or(String::new(), |e| format!(" ± {e:.5}"));
         format!(
-            "{:<28} {:>3} spp  {:<10} {:<6} RMSE {:.5}  ({} px)",
+            "{:<28} {:>3} spp  {:<10} {:<6} RMSE {:.5}{stderr}  ({} px)",
             self.scene, self.spp, self.estimator, self.region, self.rmse, self.pixels
         )
     }
@@ -193,17 +197,18 @@ pub fn report_shade(
                 estimator: "visibility-floor",
                 region,
                 rmse: visibility_floor(&analytic, &reference, &emitted, pixels),
+                rmse_stderr: None,
                 pixels: pixels.len(),
             });
         }
         for spp in options.spp_steps() {
-            let mut sums = [[0.0f64; 3]; 2];
+            let mut rmse = [[Repeated::default(); 3]; 2];
             for rep in 0..options.reps {
                 let (run, _) = accumulate(backend, &gbuffer, &data, options.resolution, spp, rep)?;
                 let (ratio, stochastic) = (run.ratio_image(), run.stochastic_image());
                 for (e, image) in [&ratio, &stochastic].into_iter().enumerate() {
                     for (r, pixels) in [&all, &shadow, &lit].into_iter().enumerate() {
-                        sums[e][r] += mse(image, &reference, pixels).sqrt();
+                        rmse[e][r].add(mse(image, &reference, pixels).sqrt());
                     }
                 }
             }
@@ -215,7 +220,8 @@ pub fn report_shade(
                         spp,
                         estimator,
                         region,
-                        rmse: sums[e][r] / f64::from(options.reps),
+                        rmse: rmse[e][r].mean(),
+                        rmse_stderr: rmse[e][r].standard_error(),
                         pixels: pixels.len(),
                     });
                 }
