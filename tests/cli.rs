@@ -521,7 +521,7 @@ fn bench_and_report_options_out_of_range_are_typed_errors() {
         (&["report", "shade", "--reps", "0"], "reps: 0 is outside 1..=4096"),
         (&["report", "error-vs-time", "--reps", "4097"], "reps: 4097 is outside 1..=4096"),
         (&["report", "sampling", "--reps", "100000"], "reps: 100000 is outside 2..=4096"),
-        (&["report", "sampling", "--reps", "1"], "reps: at least 2 repetitions are needed for a variance"),
+        (&["report", "sampling", "--reps", "1"], "reps: 1 is outside 2..=4096: a variance needs two repetitions"),
         (&["report", "shade", "--max-spp", "0"], "max-spp: 0 is below 1"),
         (
             &["report", "error-vs-time", "--reference-spp", "8", "--max-spp", "4"],

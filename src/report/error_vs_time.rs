@@ -77,7 +77,8 @@ pub struct ErrorVsTimeLine {
     /// Relative MSE against the reference ([`relmse`]), mean over the repetitions.
     pub relmse: f64,
     /// The standard error of `relmse` over the repetitions ([`super::Repeated::standard_error`]:
-    /// ±1.96 of it is about a 95 % confidence interval); absent for one repetition.
+    /// ±t times it is a 95 % confidence interval, t = 3.18 for 4 repetitions, 1.96 for many);
+    /// absent for one repetition.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub relmse_stderr: Option<f64>,
     /// The part of `relmse` made in shadowed pixels (penumbrae and umbrae, [`ShadowRegions`]).

@@ -31,20 +31,25 @@ pub struct SceneReportOptions {
 pub const MAX_REPS: u32 = 4096;
 
 /// How many times `max-spp` a scene report's reference must sample at least: its own noise then
-/// adds at most `√(1 + 1/4) − 1` ≈ 12 % to the RMSE measured at `max-spp` (its variance a quarter
-/// of theirs, independent of them), less at fewer samples. The default 4096 is 64 × the default 64.
+/// adds at most `√(1 + 1/4) − 1` ≈ 12 % to `report shade`'s ratio RMSE at `max-spp` (its variance a
+/// quarter of theirs, independent of them), less at fewer samples — but up to 25 % to a relMSE,
+/// an MSE, and more to the error of a denoised image, whose own variance is far below the raw
+/// estimate's at the same samples, so `report error-vs-time` wants a much larger factor (its
+/// default 4096 at 64 spp is 64 ×, as is `report shade`'s). A floor that catches a reference
+/// no better than what it measures, not a guarantee of accuracy.
 pub const MIN_REFERENCE_FACTOR: u32 = 4;
 
-/// Checks a report's repetitions: `minimum..=`[`MAX_REPS`], the error naming `--reps`.
-pub fn check_reps(reps: u32, minimum: u32) -> crate::Result<()> {
+/// Checks a report's repetitions: `minimum..=`[`MAX_REPS`], the error naming `--reps` and, below
+/// the minimum, adding `why_minimum` (why fewer will not do).
+pub fn check_reps(reps: u32, minimum: u32, why_minimum: &str) -> crate::Result<()> {
     if (minimum..=MAX_REPS).contains(&reps) {
-        Ok(())
-    } else {
-        Err(crate::Error::InvalidParameter {
-            name: "reps",
-            reason: format!("{reps} is outside {minimum}..={MAX_REPS}"),
-        })
+        return Ok(());
     }
+    let why = if reps < minimum { why_minimum } else { "" };
+    Err(crate::Error::InvalidParameter {
+        name: "reps",
+        reason: format!("{reps} is outside {minimum}..={MAX_REPS}{why}"),
+    })
 }
 
 impl SceneReportOptions {
@@ -55,7 +60,7 @@ impl SceneReportOptions {
     /// option.
     pub fn check(&self) -> crate::Result<()> {
         let invalid = |name, reason: String| Err(crate::Error::InvalidParameter { name, reason });
-        check_reps(self.reps, 1)?;
+        check_reps(self.reps, 1, "")?;
         if self.max_spp < 1 {
             return invalid("max-spp", format!("{} is below 1", self.max_spp));
         }
@@ -130,9 +135,9 @@ impl Repeated {
     }
 
     /// The standard error of [`Self::mean`], `s/√n` with `s` the values' sample standard
-    /// deviation: the expectation lies within ±1.96 of it of the mean with about 95 %
-    /// confidence (the normal approximation, fair for the sums over thousands of pixels each
-    /// value is; with few repetitions the Student-t factor is larger, 4.30 for 3). `None` for
+    /// deviation: the expectation lies within ±t of it of the mean with 95 % confidence, t the
+    /// Student-t quantile for `n − 1` degrees of freedom (4.30 for 3 values, 3.18 for 4, 2.26 for
+    /// 10, 1.96 for many; each value a mean over many pixels, so close to normal). `None` for
     /// fewer than two values.
     pub fn standard_error(&self) -> Option<f64> {
         (self.count >= 2).then(|| {

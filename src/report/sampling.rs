@@ -485,11 +485,7 @@ pub fn report_sampling(
 
 /// Checks the options.
 pub fn validate(options: &SamplingReportOptions) -> Result<()> {
-    let invalid = |name, reason: &str| Err(crate::Error::InvalidParameter { name, reason: reason.into() });
-    if options.reps < 2 {
-        return invalid("reps", "at least 2 repetitions are needed for a variance");
-    }
-    super::check_reps(options.reps, 2)?;
+    super::check_reps(options.reps, 2, ": a variance needs two repetitions")?;
     super::check_resolution(options.resolution)?;
     Ok(())
 }

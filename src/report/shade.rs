@@ -37,9 +37,9 @@ pub struct ShadeLine {
     /// Root-mean-square error against the reference (linear radiance, mean over RGB), averaged
     /// over the repetitions (the `visibility-floor`: computed from the reference alone).
     pub rmse: f64,
-    /// The standard error of `rmse` over the repetitions ([`Repeated::standard_error`]: ±1.96 of
-    /// it is about a 95 % confidence interval); absent for one repetition and for the
-    /// `visibility-floor`, which is no mean of repetitions.
+    /// The standard error of `rmse` over the repetitions ([`Repeated::standard_error`]: ±t times
+    /// it is a 95 % confidence interval, t = 3.18 for 4 repetitions, 1.96 for many); absent for
+    /// one repetition and for the `visibility-floor`, which is no mean of repetitions.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub rmse_stderr: Option<f64>,
     /// Pixels in the region.

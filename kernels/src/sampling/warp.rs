@@ -62,7 +62,7 @@ pub const CONE_SLACK: f32 = 4.0 * f32::EPSILON;
 /// much sideways, and by `1/|cos θl|` times it along the ray, as does the rounding of `t` itself —
 /// so 16 ulps keeps `pdf(sample(u))` consistent while widening the quad by `~2·10⁻⁶·t` sideways
 /// and `~2·10⁻⁶·t·tan θl` along the ray. (A slack of `t/|cos θl|` in every direction, as before,
-/// let a ray at `|cos θl|` = 10⁻⁵ pass 0.15 units beside a light half a unit wide.)
+/// let a ray at `|cos θl|` = 7.6·10⁻⁶ pass 0.15 units beside a light half a unit wide.)
 pub const QUAD_EDGE_SLACK: f32 = 16.0 * f32::EPSILON;
 
 /// Below this solid angle (sr) a quad light is sampled uniformly by area, both by
