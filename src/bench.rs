@@ -323,7 +323,7 @@ fn measurement(
         threads,
         rays,
         seconds,
-        mrays_per_s: rays as f64 / seconds.max(1e-12) / 1e6,
+        mrays_per_s: per_second(rays as f64, seconds) / 1e6,
         dispatches,
         warm_up_seconds,
         workgroup_size: None,
@@ -336,6 +336,12 @@ pub(crate) fn check_repeats(repeats: u32) -> Result<()> {
         return Err(Error::InvalidParameter { name: "repeats", reason: "must be at least 1".into() });
     }
     Ok(())
+}
+
+/// `count` per second over `seconds`, the time floored at 1 ps: a measurement too short for its
+/// clock (0 s) reads as very fast rather than infinite, which JSON cannot hold.
+pub(crate) fn per_second(count: f64, seconds: f64) -> f64 {
+    count / seconds.max(1e-12)
 }
 
 /// Runs the trace benchmark; `emit` receives each measurement as soon as it is taken.
@@ -486,6 +492,12 @@ impl OutputLine for BuildMeasurement {
 mod tests {
     use super::*;
     use std::cell::Cell;
+
+    #[test]
+    fn rates_stay_finite_for_a_time_below_the_clock() {
+        assert_eq!(per_second(6.0, 2.0), 3.0);
+        assert!(per_second(1.0e9, 0.0).is_finite() && per_second(1.0e9, 0.0) > 1.0e20);
+    }
 
     /// Seconds each simulated run takes: a binary fraction, so that the simulated clock adds up
     /// exactly (16 runs make a 0.25 s round).

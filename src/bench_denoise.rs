@@ -160,7 +160,7 @@ fn copy_bandwidth(
 ) -> Result<f64> {
     let measured = measure(settle_seconds, repeats, || Ok(vec![backend.copy_probe(params, image)?.1]))?;
     let bytes = 2.0 * std::mem::size_of::<Vec4>() as f64 * f64::from(params.pixels());
-    Ok(bytes / measured.stages[0].seconds / 1e9)
+    Ok(crate::bench::per_second(bytes, measured.stages[0].seconds) / 1e9)
 }
 
 /// How [`bench_backend`] measures a backend: the device's peak bandwidth if known, the warm-up's
@@ -192,7 +192,7 @@ fn bench_backend(
         let Measured { stages, warm_up_seconds } =
             measure(settle_seconds, options.repeats, || backend.denoise(method, &params, input).map(|(_, r)| r))?;
         let line = |pass: &'static str, seconds: f64, dispatches: Option<u32>, bytes: u64| {
-            let gb_per_s = bytes as f64 / seconds / 1e9;
+            let gb_per_s = crate::bench::per_second(bytes as f64, seconds) / 1e9;
             DenoiseMeasurement {
                 stage: "denoise",
                 implementation: backend.name(),

@@ -93,7 +93,7 @@ pub fn bench_shade(options: &ShadeBenchOptions, mut emit: impl FnMut(&ShadeMeasu
             samples: rays.len(),
             lights: data.lights.len(),
             seconds,
-            msamples_per_s: rays.len() as f64 / seconds.max(1e-12) / 1e6,
+            msamples_per_s: crate::bench::per_second(rays.len() as f64, seconds) / 1e6,
             dispatches,
             warm_up_seconds: measured.warm_up_seconds,
             workgroup_size,
