@@ -163,36 +163,40 @@ fn check_limits(scene: &Scene, limits: &AccelerationLimits, device: &str) -> Res
 pub(crate) fn build_scene(core: &Arc<Core>, scene: &Scene) -> Result<SceneAccel> {
     check_limits(scene, &core.accel_limits, &core.info.name)?;
     let meshes = scene.meshes();
-    let mut inputs = Vec::with_capacity(meshes.len());
-    for mesh in meshes {
-        let vertices: Vec<[f32; 3]> = mesh.positions.iter().map(|p| p.to_array()).collect();
-        let indices: Vec<u32> = mesh.triangles.iter().flatten().copied().collect();
-        let vertex_buffer = GpuBuffer::with_data(core, &vertices, INPUT_USAGE, "blas vertices")?;
-        let index_buffer = GpuBuffer::with_data(core, &indices, INPUT_USAGE, "blas indices")?;
-        inputs.push((vertex_buffer, index_buffer, mesh.positions.len() as u32, mesh.triangles.len() as u32));
-    }
-    let blas_builds: Vec<Build> = inputs
+    // Every mesh's vertices in one buffer and its indices in another — two uploads, each a
+    // blocking submission, rather than two per mesh — and each BLAS reads its own range. The
+    // ranges start at multiples of 12 bytes, aligned for the f32 vertices and u32 indices.
+    let vertices: Vec<[f32; 3]> = meshes.iter().flat_map(|m| m.positions.iter().map(|p| p.to_array())).collect();
+    let indices: Vec<u32> = meshes.iter().flat_map(|m| m.triangles.iter().flatten().copied()).collect();
+    let vertex_buffer = GpuBuffer::with_data(core, &vertices, INPUT_USAGE, "blas vertices")?;
+    let index_buffer = GpuBuffer::with_data(core, &indices, INPUT_USAGE, "blas indices")?;
+    let mut start = (vertex_buffer.address, index_buffer.address);
+    let blas_builds: Vec<Build> = meshes
         .iter()
-        .map(|(vertices, indices, vertex_count, triangle_count)| {
+        .map(|mesh| {
+            let (vertex_address, index_address) = start;
+            start.0 += 12 * mesh.positions.len() as u64;
+            start.1 += 12 * mesh.triangles.len() as u64;
             let triangles = vk::AccelerationStructureGeometryTrianglesDataKHR::default()
                 .vertex_format(vk::Format::R32G32B32_SFLOAT)
-                .vertex_data(vk::DeviceOrHostAddressConstKHR { device_address: vertices.address })
+                .vertex_data(vk::DeviceOrHostAddressConstKHR { device_address: vertex_address })
                 .vertex_stride(12)
-                .max_vertex(vertex_count.saturating_sub(1))
+                .max_vertex((mesh.positions.len() as u32).saturating_sub(1))
                 .index_type(vk::IndexType::UINT32)
-                .index_data(vk::DeviceOrHostAddressConstKHR { device_address: indices.address });
+                .index_data(vk::DeviceOrHostAddressConstKHR { device_address: index_address });
             Build {
                 geometry: [vk::AccelerationStructureGeometryKHR::default()
                     .geometry_type(vk::GeometryTypeKHR::TRIANGLES)
                     .geometry(vk::AccelerationStructureGeometryDataKHR { triangles })
                     .flags(vk::GeometryFlagsKHR::OPAQUE)],
-                primitive_count: *triangle_count,
+                primitive_count: mesh.triangles.len() as u32,
                 level: vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL,
             }
         })
         .collect();
     let blases = build_all(core, &blas_builds)?;
-    drop(inputs);
+    // The builds have completed (`build_all` waits): their inputs can go.
+    drop((vertex_buffer, index_buffer));
 
     let identity = vk::TransformMatrixKHR { matrix: [1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0] };
     let instances: Vec<vk::AccelerationStructureInstanceKHR> = blases
