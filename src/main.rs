@@ -105,7 +105,7 @@ struct SceneReportArgs {
 
 impl SceneReportArgs {
     /// The report's options at image side `resolution`, and the backend it runs on; `check`
-    /// checks the report's own options with them, before the backend opens.
+    /// checks the options (the scene report's and the report's own), before the backend opens.
     fn open(
         self,
         resolution: u32,
@@ -119,7 +119,6 @@ impl SceneReportArgs {
             reps: self.reps,
         };
         // Before the backend opens, which takes a second on a software Vulkan device.
-        options.check()?;
         check(&options)?;
         let backend = raywave::open_backend(self.device.parse()?, &BackendOptions::default())?;
         Ok((options, backend))
@@ -497,7 +496,7 @@ fn report_sampling_command(args: SamplingReportArgs) -> raywave::Result<()> {
 
 fn report_shade_command(args: ShadeReportArgs) -> raywave::Result<()> {
     let json = args.common.json;
-    let (options, mut backend) = args.common.open(args.resolution, |_| Ok(()))?;
+    let (options, mut backend) = args.common.open(args.resolution, |options| options.check())?;
     raywave::report::shade::report_shade(backend.as_mut(), &options, |line| print_line(line.text(json)))
 }
 

@@ -149,11 +149,12 @@ pub const MAX_PROBE_SAMPLES: u64 = 1 << 24;
 /// the sampler's own index space.
 pub fn sampler_probe_len(params: &SamplerProbeParams) -> Result<u32> {
     let pixels = u64::from(params.width) * u64::from(params.height);
-    // `checked_shl` would only refuse shifts of 64 or more, not the bits a shift pushes out.
-    let samples_per_pixel = 1u64.checked_shl(params.sampler.spp_log2).filter(|_| params.sampler.spp_log2 < 32);
+    let spp_log2 = params.sampler.spp_log2;
+    let samples_per_pixel = (spp_log2 < 32).then(|| 1u64 << spp_log2);
     let count = samples_per_pixel.and_then(|spp| pixels.checked_mul(spp)).filter(|&count| count <= MAX_PROBE_SAMPLES);
-    match count.and_then(|count| u32::try_from(count).ok()) {
-        Some(count) => Ok(count),
+    match count {
+        // At most MAX_PROBE_SAMPLES = 2²⁴: a u32.
+        Some(count) => Ok(count as u32),
         None => Err(crate::error::Error::InvalidParameter {
             name: "sampler probe",
             reason: format!(

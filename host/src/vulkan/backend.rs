@@ -51,25 +51,13 @@ struct DeviceHits {
     len: u32,
 }
 
-/// Bytes of `len` elements of `T`.
-fn stream_bytes<T: Pod>(len: u32) -> u64 {
-    u64::from(len) * std::mem::size_of::<T>() as u64
-}
-
-/// A device buffer for a stream of `len` elements of `T`. Not checked against the storage-buffer
-/// range: every stage checks its stream against [`VulkanBackend::max_rays`] first, which keeps
-/// a stream of the widest element, `Vec4`, within it.
-fn stream_buffer<T: Pod>(core: &Arc<Core>, len: u32, name: &str) -> Result<GpuBuffer> {
-    GpuBuffer::storage::<T>(core, len, name)
-}
-
 /// A device buffer for the `count` samples of `T` of probe `name` (at least one: a binding
 /// cannot be empty), refused where the device could not bind it whole ([`check_storage_range`]):
 /// a probe is bounded by its sample count, not by [`VulkanBackend::max_rays`].
 fn probe_buffer<T: Pod>(core: &Arc<Core>, count: u32, name: &'static str) -> Result<GpuBuffer> {
     let len = count.max(1);
-    check_storage_range(&core.limits, stream_bytes::<T>(len), name, name)?;
-    stream_buffer::<T>(core, len, name)
+    check_storage_range(&core.limits, u64::from(len) * std::mem::size_of::<T>() as u64, name, name)?;
+    GpuBuffer::storage::<T>(core, len, name)
 }
 
 impl DevicePaths {
@@ -87,11 +75,11 @@ impl DevicePaths {
 impl DeviceRays {
     fn new(core: &Arc<Core>, len: u32) -> Result<Self> {
         let paths = DevicePaths {
-            origin: stream_buffer::<Vec4>(core, len, "ray origin")?,
-            direction: stream_buffer::<Vec4>(core, len, "ray direction")?,
+            origin: GpuBuffer::storage::<Vec4>(core, len, "ray origin")?,
+            direction: GpuBuffer::storage::<Vec4>(core, len, "ray direction")?,
             len,
         };
-        Ok(Self { paths, pixel: stream_buffer::<u32>(core, len, "ray pixel")? })
+        Ok(Self { paths, pixel: GpuBuffer::storage::<u32>(core, len, "ray pixel")? })
     }
 
     fn read(&self) -> Result<RayStream> {
@@ -103,10 +91,10 @@ impl DeviceRays {
 impl DeviceHits {
     fn new(core: &Arc<Core>, len: u32) -> Result<Self> {
         Ok(Self {
-            t: stream_buffer::<f32>(core, len, "hit t")?,
-            primitive: stream_buffer::<u32>(core, len, "hit primitive")?,
-            instance: stream_buffer::<u32>(core, len, "hit instance")?,
-            barycentrics: stream_buffer::<Vec2>(core, len, "hit barycentrics")?,
+            t: GpuBuffer::storage::<f32>(core, len, "hit t")?,
+            primitive: GpuBuffer::storage::<u32>(core, len, "hit primitive")?,
+            instance: GpuBuffer::storage::<u32>(core, len, "hit instance")?,
+            barycentrics: GpuBuffer::storage::<Vec2>(core, len, "hit barycentrics")?,
             len,
         })
     }
@@ -146,11 +134,11 @@ struct DeviceShades {
 impl DeviceShades {
     fn new(core: &Arc<Core>, len: u32) -> Result<Self> {
         Ok(Self {
-            analytic: stream_buffer::<Vec4>(core, len, "shade analytic")?,
-            unshadowed: stream_buffer::<Vec4>(core, len, "shade unshadowed")?,
-            emitted: stream_buffer::<Vec4>(core, len, "shade emitted")?,
-            shadow_origin: stream_buffer::<Vec4>(core, len, "shadow ray origin")?,
-            shadow_direction: stream_buffer::<Vec4>(core, len, "shadow ray direction")?,
+            analytic: GpuBuffer::storage::<Vec4>(core, len, "shade analytic")?,
+            unshadowed: GpuBuffer::storage::<Vec4>(core, len, "shade unshadowed")?,
+            emitted: GpuBuffer::storage::<Vec4>(core, len, "shade emitted")?,
+            shadow_origin: GpuBuffer::storage::<Vec4>(core, len, "shadow ray origin")?,
+            shadow_direction: GpuBuffer::storage::<Vec4>(core, len, "shadow ray direction")?,
             len,
         })
     }
@@ -436,17 +424,17 @@ impl VulkanBackend {
             .ok_or(Error::InvalidParameter { name: "scene", reason: "trace needs a loaded scene".into() })
     }
 
-    /// Runs `kernel` over `rays` with `outputs` bound after the rays (layout of
-    /// [`trace_bindings`]); returns its report as `stage`.
+    /// Runs `kernel` over `rays` (checked against the device, [`Self::check_stream`]) in `scene`
+    /// with `outputs` bound after the rays (layout of [`trace_bindings`]); returns its report as
+    /// `stage`.
     fn run_trace_kernel(
         &self,
         stage: &'static str,
         kernel: &TraceKernel,
+        scene: &DeviceScene,
         rays: &DevicePaths,
         outputs: &[&GpuBuffer],
     ) -> Result<StageReport> {
-        let scene = self.loaded_scene()?;
-        self.check_stream(rays.len as usize, "rays")?;
         let (scene_resource, triangles) = match scene {
             DeviceScene::Accelerated(accel) => (Resource::AccelerationStructure(accel.tlas.handle), vec![]),
             DeviceScene::Software { nodes, vertices, ids } => {
@@ -484,10 +472,10 @@ impl VulkanBackend {
         })
     }
 
-    fn trace_on_device(&self, rays: &DevicePaths) -> Result<(DeviceHits, StageReport)> {
+    fn trace_on_device(&self, scene: &DeviceScene, rays: &DevicePaths) -> Result<(DeviceHits, StageReport)> {
         let hits = DeviceHits::new(&self.core, rays.len)?;
         let outputs = [&hits.t, &hits.primitive, &hits.instance, &hits.barycentrics];
-        let report = self.run_trace_kernel("trace", &self.trace, rays, &outputs)?;
+        let report = self.run_trace_kernel("trace", &self.trace, scene, rays, &outputs)?;
         Ok((hits, report))
     }
 }
@@ -551,19 +539,19 @@ impl Backend for VulkanBackend {
     fn trace(&mut self, rays: &RayStream) -> Result<(HitStream, StageReport)> {
         let _driver = driver_lock::device_use();
         rays.check("trace")?;
-        self.loaded_scene()?;
+        let scene = self.loaded_scene()?;
         let paths = DevicePaths::upload(&self.core, rays, self.check_stream(rays.len(), "rays")?)?;
-        let (hits, timing) = self.trace_on_device(&paths)?;
+        let (hits, timing) = self.trace_on_device(scene, &paths)?;
         Ok((hits.read()?, timing))
     }
 
     fn trace_occlusion(&mut self, rays: &RayStream) -> Result<(Vec<u32>, StageReport)> {
         let _driver = driver_lock::device_use();
         rays.check("trace_occlusion")?;
-        self.loaded_scene()?;
+        let scene = self.loaded_scene()?;
         let paths = DevicePaths::upload(&self.core, rays, self.check_stream(rays.len(), "rays")?)?;
-        let occluded = stream_buffer::<u32>(&self.core, paths.len, "occluded")?;
-        let report = self.run_trace_kernel("occlusion", &self.occlusion, &paths, &[&occluded])?;
+        let occluded = GpuBuffer::storage::<u32>(&self.core, paths.len, "occluded")?;
+        let report = self.run_trace_kernel("occlusion", &self.occlusion, scene, &paths, &[&occluded])?;
         Ok((occluded.read(rays.len())?, report))
     }
 
@@ -610,9 +598,10 @@ impl Backend for VulkanBackend {
 
     fn render(&mut self, params: &GenerateParams) -> Result<FrameOutput> {
         let _driver = driver_lock::device_use();
-        self.loaded_scene()?;
+        let scene = self.loaded_scene()?;
         let (rays, generate_time) = self.generate_on_device(params)?;
-        let (hits, trace_time) = self.trace_on_device(&rays.paths)?;
+        self.check_stream(rays.paths.len as usize, "rays")?;
+        let (hits, trace_time) = self.trace_on_device(scene, &rays.paths)?;
         Ok(FrameOutput { rays: rays.read()?, hits: hits.read()?, timings: vec![generate_time, trace_time] })
     }
 

@@ -102,7 +102,9 @@ impl GpuBuffer {
     }
 
     /// A device-local storage buffer ([`Self::device_local`]) for `len` elements of `T`: what
-    /// every stream, image and probe a kernel reads or writes is held in.
+    /// every stream, image and probe a kernel reads or writes is held in. Not checked against the
+    /// storage-buffer range: the backend checks every stream against its `max_rays` first, which
+    /// keeps a stream of the widest element, `Vec4`, within it, and every probe on its own.
     pub fn storage<T: Pod>(core: &Arc<Core>, len: u32, name: &str) -> Result<Self> {
         let bytes = u64::from(len) * std::mem::size_of::<T>() as u64;
         Self::device_local(core, bytes, vk::BufferUsageFlags::STORAGE_BUFFER, name)
@@ -136,7 +138,7 @@ impl GpuBuffer {
     /// (the `REPLACED` bindings of `raywave_shared::bindings`); [`Self::read_count`] reads it
     /// once the dispatch has completed.
     pub fn counter(core: &Arc<Core>, name: &str) -> Result<Self> {
-        let mut counter = Self::with_data(core, &[0u32], vk::BufferUsageFlags::STORAGE_BUFFER, name)?;
+        let mut counter = Self::storage_with(core, &[0u32], name)?;
         counter.is_counter = true;
         Ok(counter)
     }
