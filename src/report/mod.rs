@@ -7,6 +7,7 @@ pub mod sampling;
 pub mod scenes;
 pub mod shade;
 pub mod spectrum;
+pub mod variance;
 
 /// What a scene report (`report shade`, `report error-vs-time`) measures: on each scene, a
 /// converged reference and runs at 1, 2, 4, … `max_spp` samples per pixel.

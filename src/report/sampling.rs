@@ -18,6 +18,7 @@
 //! are `spp · ratio`.
 
 use super::scenes::{self, ShadingPoint};
+use super::variance::{variance_ratio_interval, GroupedMoments};
 use crate::kernels::sampling::{dims, light_select, sampler, warp};
 use crate::shared::sampling::sampler_kind;
 use crate::shared::Light;
@@ -126,6 +127,11 @@ pub struct CaseResult {
     pub case: &'static str,
     /// Image variance of the worse estimator over that of the better one.
     pub variance_ratio: f64,
+    /// Its 95 % confidence interval (`variance::variance_ratio_interval`, a jackknife over groups
+    /// of repetitions); `null` with fewer than three repetitions.
+    pub variance_ratio_low: Option<f64>,
+    /// The interval's upper end.
+    pub variance_ratio_high: Option<f64>,
     /// The talk's ratio.
     pub published: f64,
     /// Independent repetitions per estimator.
@@ -152,13 +158,17 @@ impl CaseResult {
     /// A human-readable table row.
     pub fn row(&self, case: &Case) -> String {
         format!(
-            "{:<28} {:>14} vs {:<12} {:>3} spp  ratio {:>6.2} (published {:.2}, ours/published {:.2})  \
+            "{:<28} {:>14} vs {:<12} {:>3} spp  ratio {:>6.2} {} (published {:.2}, ours/published {:.2})  \
              {:>5.1} rays for equal error  [{} reps, {} px]",
             self.case,
             case.worse.label,
             case.better.label,
             self.spp,
             self.variance_ratio,
+            match (self.variance_ratio_low, self.variance_ratio_high) {
+                (Some(low), Some(high)) => format!("(95 %: {low:.2}–{high:.2})"),
+                _ => "(no interval: too few repetitions)".to_string(),
+            },
             self.published,
             self.variance_ratio / self.published,
             self.rays_for_equal_error,
@@ -293,44 +303,8 @@ pub fn estimate_image(
     Ok(image)
 }
 
-/// Per-pixel mean and variance over repetitions (Welford's update, in f64).
-#[derive(Clone, Debug)]
-pub struct PixelMoments {
-    count: u32,
-    mean: Vec<f64>,
-    m2: Vec<f64>,
-}
-
-impl PixelMoments {
-    /// Empty moments for `pixels` pixels.
-    pub fn new(pixels: usize) -> Self {
-        Self { count: 0, mean: vec![0.0; pixels], m2: vec![0.0; pixels] }
-    }
-
-    /// Adds one repetition's image.
-    pub fn add(&mut self, image: &[f32]) {
-        self.count += 1;
-        let n = f64::from(self.count);
-        for ((mean, m2), &x) in self.mean.iter_mut().zip(&mut self.m2).zip(image) {
-            let delta = f64::from(x) - *mean;
-            *mean += delta / n;
-            *m2 += delta * (f64::from(x) - *mean);
-        }
-    }
-
-    /// Per-pixel means.
-    pub fn mean(&self) -> &[f64] {
-        &self.mean
-    }
-
-    /// Sample variance of each pixel's estimate, averaged over the pixels.
-    pub fn mean_variance(&self) -> f64 {
-        let denominator = f64::from(self.count.saturating_sub(1).max(1));
-        self.m2.iter().sum::<f64>() / denominator / self.m2.len().max(1) as f64
-    }
-}
-
-/// Runs `estimator` for `reps` repetitions (seeds `seed_base + r`) and returns its moments.
+/// Runs `estimator` for `reps` repetitions (seeds `seed_base + r`) and returns its moments, the
+/// repetitions dealt into the jackknife's groups.
 pub fn moments(
     backend: &mut dyn Backend,
     scene: &Scene,
@@ -338,10 +312,10 @@ pub fn moments(
     spp: u32,
     options: &SamplingReportOptions,
     seed_base: u32,
-) -> Result<PixelMoments> {
-    let mut moments = PixelMoments::new((options.resolution * options.resolution) as usize);
+) -> Result<GroupedMoments> {
+    let mut moments = GroupedMoments::new((options.resolution * options.resolution) as usize, options.reps);
     for rep in 0..options.reps {
-        moments.add(&estimate_image(backend, scene, estimator, spp, seed_base + rep, options.resolution)?);
+        moments.add(rep, &estimate_image(backend, scene, estimator, spp, seed_base + rep, options.resolution)?);
     }
     Ok(moments)
 }
@@ -362,13 +336,17 @@ pub fn measure_case(
     case: &Case,
     options: &SamplingReportOptions,
 ) -> Result<CaseMeasurement> {
-    let worse = moments(backend, scene, &case.worse, case.spp, options, 0)?.mean_variance();
+    let worse_moments = moments(backend, scene, &case.worse, case.spp, options, 0)?;
     let better_moments = moments(backend, scene, &case.better, case.spp, options, 1 << 20)?;
-    let better = better_moments.mean_variance();
+    let (worse_pooled, better_pooled) = (worse_moments.pooled(), better_moments.pooled());
+    let (worse, better) = (worse_pooled.mean_variance(), better_pooled.mean_variance());
     let ratio = worse / better.max(f64::MIN_POSITIVE);
+    let interval = variance_ratio_interval(&worse_moments, &better_moments);
     let result = CaseResult {
         case: case.name,
         variance_ratio: ratio,
+        variance_ratio_low: interval.map(|(low, _)| low),
+        variance_ratio_high: interval.map(|(_, high)| high),
         published: case.published,
         reps: options.reps,
         spp: case.spp,
@@ -377,7 +355,7 @@ pub fn measure_case(
         rays_for_equal_error: f64::from(case.spp) * ratio,
         pixels: (options.resolution * options.resolution) as usize,
     };
-    Ok(CaseMeasurement { result, reference: better_moments.mean().to_vec() })
+    Ok(CaseMeasurement { result, reference: better_pooled.mean().to_vec() })
 }
 
 /// The screen-space error spectrum of one sampler.
