@@ -199,14 +199,14 @@ pub fn edge_integral(a: &Corner, b: &Corner) -> f32 {
     cross.z * theta_over_sin
 }
 
-/// The form factor of the quad with corners `q` (see [`Polygon::form_factor`]).
-pub fn quad_form_factor(q: [Vec3; 4]) -> f32 {
-    Polygon::quad(q).form_factor()
-}
-
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;
+
+    /// The form factor of the quad with corners `q`.
+    fn quad_form_factor(q: [Vec3; 4]) -> f32 {
+        Polygon::quad(q).form_factor()
+    }
 
     /// `∫ f(l) dω` over the parallelogram `corner + s·u + t·v` seen from the origin, by the
     /// midpoint rule on an `n × n` grid over its plane, in f64: the shade tests' brute-force

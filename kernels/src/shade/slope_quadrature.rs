@@ -435,7 +435,7 @@ fn sort<const N: usize>(values: &mut [f32; N], count: usize) {
 mod tests {
     use super::*;
     use crate::shade::ggx::GgxLobe;
-    use crate::shade::ltc::{local_quad, lookup, specular_form_factor_corrected, ShadingFrame};
+    use crate::shade::ltc::{lobe_form_factors, local_quad, lookup, ShadingFrame};
     use crate::shade::polygon::tests::solid_angle_integral;
     use glam::Vec4;
     use raywave_shared::ltc_table::packed_entries;
@@ -469,7 +469,7 @@ mod tests {
                 let frame = ShadingFrame::new(Vec3::Z, v);
                 for (corner, u, w) in quads {
                     let quad = local_quad(&frame, Vec3::ZERO, corner, u, w);
-                    let corrected = specular_form_factor_corrected(&lobe, &ggx, quad);
+                    let corrected = lobe_form_factors(&lobe, Some(ggx), quad).1;
                     let case = (roughness, cos_v, corner);
                     assert!((0.0..=1.0).contains(&corrected), "{case:?}: {corrected}");
                     if Polygon::quad(quad).clip_to_horizon().count == 0 {
@@ -490,7 +490,7 @@ mod tests {
             let ggx = GgxLobe::new(roughness, cos_v);
             let frame = ShadingFrame::new(Vec3::Z, Vec3::new((1.0 - cos_v * cos_v).sqrt(), 0.0, cos_v));
             let big = local_quad(&frame, Vec3::ZERO, Vec3::new(-1e4, -1e4, 1.0), Vec3::X * 2e4, Vec3::Y * 2e4);
-            let u = specular_form_factor_corrected(&lobe, &ggx, big);
+            let u = lobe_form_factors(&lobe, Some(ggx), big).1;
             assert!((u - 1.0).abs() < 0.01, "{roughness} {cos_v}: {u}");
         }
     }
