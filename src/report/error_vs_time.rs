@@ -233,35 +233,41 @@ impl PreparedScene {
         seeds: &[u32],
     ) -> Result<[MethodError; METHODS.len()]> {
         let regions = ShadowRegions::new(&self.analytic, reference);
-        let mut sums = [MethodError::default(); METHODS.len()];
-        let mut relmse_runs = [Repeated::default(); METHODS.len()];
+        let mut runs = [MethodRuns::default(); METHODS.len()];
         for &seed in seeds {
             let frame = self.frame(backend, spp, seed)?.images;
-            for ((sum, runs), (image, ms)) in sums.iter_mut().zip(&mut relmse_runs).zip(frame) {
-                runs.add(relmse(&image, reference));
-                sum.relmse_shadow += relmse_part(&image, reference, &regions.shadow);
-                sum.relmse_lit += relmse_part(&image, reference, &regions.lit);
-                sum.flip += mean_flip(&image, reference, self.resolution, self.resolution);
-                sum.ms += ms;
+            for (runs, (image, ms)) in runs.iter_mut().zip(frame) {
+                runs.relmse.add(relmse(&image, reference));
+                runs.relmse_shadow.add(relmse_part(&image, reference, &regions.shadow));
+                runs.relmse_lit.add(relmse_part(&image, reference, &regions.lit));
+                runs.flip.add(mean_flip(&image, reference, self.resolution, self.resolution));
+                runs.ms.add(ms);
             }
         }
-        let count = seeds.len().max(1) as f64;
-        Ok(std::array::from_fn(|k| {
-            let (sum, runs) = (sums[k], relmse_runs[k]);
-            MethodError {
-                relmse: runs.mean(),
-                relmse_stderr: runs.standard_error(),
-                relmse_shadow: sum.relmse_shadow / count,
-                relmse_lit: sum.relmse_lit / count,
-                flip: sum.flip / count,
-                ms: sum.ms / count,
-            }
+        Ok(runs.map(|runs| MethodError {
+            relmse: runs.relmse.mean(),
+            relmse_stderr: runs.relmse.standard_error(),
+            relmse_shadow: runs.relmse_shadow.mean(),
+            relmse_lit: runs.relmse_lit.mean(),
+            flip: runs.flip.mean(),
+            ms: runs.ms.mean(),
         }))
     }
 }
 
+/// One method's measurements over the frames of [`PreparedScene::errors`], each quantity's mean
+/// (and `relmse`'s standard error) taken at the end.
+#[derive(Copy, Clone, Default)]
+struct MethodRuns {
+    relmse: Repeated,
+    relmse_shadow: Repeated,
+    relmse_lit: Repeated,
+    flip: Repeated,
+    ms: Repeated,
+}
+
 /// One method's error and time, averaged over frames (see [`PreparedScene::errors`]).
-#[derive(Copy, Clone, Debug, Default, PartialEq)]
+#[derive(Copy, Clone, Debug, PartialEq)]
 pub struct MethodError {
     /// Relative MSE against the reference ([`relmse`]).
     pub relmse: f64,
