@@ -94,7 +94,12 @@ pub(super) fn parallelogram(mesh: &Mesh) -> Option<Parallelogram> {
         }
     }
     let magnitude = all.iter().fold(0.0f64, |m, p| m.max(p.abs().max_element()));
-    let tolerance = RELATIVE_TOLERANCE * diameter + ROUNDING_SLACK * magnitude;
+    // At most a quarter of the shortest triangle edge, so that no corner lies within it of two
+    // others: the rounding slack alone is 0.19 at 10⁵ from the origin, wider than a small lamp
+    // there, and the relative part is wider than a strip light of aspect ratio beyond 10⁴.
+    let shortest_edge =
+        [ad, bd].iter().flat_map(|t| (0..3).map(move |i| t[i].distance(t[(i + 1) % 3]))).fold(f64::INFINITY, f64::min);
+    let tolerance = (RELATIVE_TOLERANCE * diameter + ROUNDING_SLACK * magnitude).min(0.25 * shortest_edge);
     if !tolerance.is_finite() {
         return None;
     }
@@ -132,8 +137,10 @@ pub(super) fn parallelogram(mesh: &Mesh) -> Option<Parallelogram> {
     let corner = a[off_a];
     let edge_u = a[(off_a + 1) % 3] - corner;
     let edge_v = a[(off_a + 2) % 3] - corner;
+    // An area the kernels can compute with, in `f32` as they do: a 10⁻¹² m square's cross
+    // product is 10⁻²⁴, its squared length underflows, and light validation would refuse it.
     let area = edge_u.cross(edge_v);
-    if area == Vec3::ZERO || !area.is_finite() || area.as_dvec3().dot(normal) <= 0.0 {
+    if !area.is_finite() || area.length() < f32::MIN_POSITIVE || area.as_dvec3().dot(normal) <= 0.0 {
         return None;
     }
     Some(Parallelogram { corner, edge_u, edge_v })
@@ -194,6 +201,34 @@ mod tests {
                 assert!(c.contains(&q.corner));
             }
         }
+    }
+
+    /// A small lamp far from the origin and a thin strip light: the shape tolerance (0.19 at 10⁵
+    /// from the origin; 2·10⁻⁴ for a strip 2 long) is capped below their short sides, so each
+    /// corner still has one partner.
+    #[test]
+    fn small_lights_far_out_and_thin_strips_are_parallelograms() {
+        let square = [Vec3::ZERO, Vec3::X, Vec3::new(1.0, 1.0, 0.0), Vec3::Y];
+        let far = square.map(|p| p * 0.15 + Vec3::new(1.0e5, 0.0, 0.0));
+        let strip = square.map(|p| p * Vec3::new(2.0, 1.0e-4, 1.0));
+        for corners in [far, strip] {
+            let mesh = emissive(corners.to_vec(), vec![[0, 1, 2], [0, 2, 3]]);
+            let q = parallelogram(&mesh).unwrap_or_else(|| panic!("{corners:?} not detected"));
+            assert!(same_corner_set(quad_corners(&q), corners, 1e-2), "{q:?}");
+        }
+    }
+
+    /// A square too small for `f32` area arithmetic (side 10⁻¹², area 10⁻²⁴, its squared length
+    /// below the smallest float) is no light, rather than a light that validation refuses — which
+    /// failed the whole scene.
+    #[test]
+    fn a_light_too_small_for_f32_area_is_no_light_and_the_scene_loads() {
+        let square = [Vec3::ZERO, Vec3::X, Vec3::new(1.0, 1.0, 0.0), Vec3::Y].map(|p| p * 1.0e-12);
+        let mesh = emissive(square.to_vec(), vec![[0, 1, 2], [0, 2, 3]]);
+        assert_eq!(parallelogram(&mesh), None);
+        let scene = crate::scene::Scene::new("tiny lamp", vec![mesh], crate::scene::cornell::camera());
+        let scene = scene.expect("a scene with a too-small lamp loads");
+        assert!(scene.lights().is_empty());
     }
 
     #[test]

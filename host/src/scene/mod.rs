@@ -521,7 +521,6 @@ mod tests {
         assert_eq!(scene.meshes()[scene.light_mesh(0)].name, "light");
         assert_eq!(scene.mesh_light(scene.light_mesh(0)), Some(0));
         assert_eq!((0..scene.meshes().len()).filter(|&m| scene.mesh_light(m).is_some()).count(), 1);
-        assert!(crate::lights::validate_lights(scene.lights()).is_ok());
     }
 
     #[test]
@@ -531,7 +530,6 @@ mod tests {
         assert_eq!(scene.camera(), published.camera());
         assert_eq!((scene.lights().len(), scene.unsupported_emitters()), (20, 0));
         assert!(crate::lights::wants_bvh(scene.lights().len()));
-        assert!(crate::lights::validate_lights(scene.lights()).is_ok());
         let bounds = |light: &Light| raywave_kernels::sampling::light_select::light_bounds(light);
         let outer = bounds(&published.lights()[0]);
         for (k, light) in scene.lights().iter().enumerate() {
@@ -551,7 +549,6 @@ mod tests {
         assert!(BUILTIN_SCENES.contains(&"cornell-two-lights"));
         assert_eq!(scene.camera(), Scene::load("builtin:cornell").unwrap().camera());
         assert_eq!((scene.lights().len(), scene.unsupported_emitters()), (2, 0));
-        assert!(crate::lights::validate_lights(scene.lights()).is_ok());
         let radiances: Vec<Vec3> = scene.lights().iter().map(|l| l.radiance.truncate()).collect();
         assert_eq!(radiances, [cornell::WARM_LIGHT, cornell::COOL_LIGHT]);
         for (k, light) in scene.lights().iter().enumerate() {
@@ -566,10 +563,9 @@ mod tests {
     }
 
     #[test]
-    fn builtin_scenes_lights_are_valid() {
+    fn builtin_scenes_have_no_unsupported_emitters() {
         for name in BUILTIN_SCENES {
             let scene = Scene::load(&format!("builtin:{name}")).unwrap();
-            assert!(crate::lights::validate_lights(scene.lights()).is_ok(), "{name}");
             assert_eq!(scene.unsupported_emitters(), 0, "{name}");
         }
     }
