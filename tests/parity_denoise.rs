@@ -363,6 +363,35 @@ fn an_identity_tv_filter_is_the_raw_composite_on_every_vulkan_device() {
     check_parity("denoise parity (identity)", &[case], 0.0);
 }
 
+/// Without an occluder (`S_N = U_N` in every pixel, of every magnitude) the undenoised image is
+/// `emitted + U` bit for bit on the CPU and every device: the shadow ratio is 1 exactly where
+/// `S_N = U_N`, not `S_N / U_N`, which a device may round off 1 (Vulkan bounds `OpFDiv` to
+/// 2.5 ulp).
+#[test]
+fn without_an_occluder_the_image_is_u_exactly_on_the_cpu_and_every_vulkan_device() {
+    let (params, mut input) = synthetic(3, 200, 29);
+    let mut rng = CounterRng::new(29);
+    for (unshadowed, shadowed) in input.unshadowed.iter_mut().zip(&mut input.shadowed) {
+        if *unshadowed != Vec4::ZERO {
+            let scale = 10f32.powf(20.0 * rng.next_f32() - 10.0);
+            *unshadowed = (unshadowed.truncate() * scale * (1.0 + rng.next_f32())).extend(0.0);
+        }
+        *shadowed = *unshadowed;
+    }
+    let expected: Vec<Vec3> =
+        input.analytic.iter().zip(&input.emitted).map(|(u, e)| e.truncate() + u.truncate()).collect();
+    let case = Case { name: "no occluder".to_owned(), method: DenoiseMethod::None, params, input };
+    let check = |backend: &mut dyn Backend| {
+        let color: Vec<Vec3> = run(backend, &case).iter().map(|c| c.truncate()).collect();
+        assert_eq!(color, expected, "{}: the image is not U", backend.name());
+    };
+    check(&mut CpuBackend::new());
+    for mut device in vulkan::each_device("no occluder") {
+        check(&mut device);
+        vulkan::assert_clean(&device);
+    }
+}
+
 /// Runs every method on `backend` with `input`, which holds a NaN in `shadowed[7]`, and asserts
 /// the typed input error naming that value.
 fn assert_refuses_nan(backend: &mut dyn Backend, params: &DenoiseParams, input: &DenoiseInput) {
