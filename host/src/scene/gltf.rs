@@ -39,9 +39,10 @@ pub fn load(path: &Path) -> Result<Scene> {
             if let Some(position) = primitive.get(&Semantic::Positions) {
                 let field = format!("{}.attributes.POSITION", primitive_field(&mesh, index));
                 check_accessor(&position, &buffers, &field, Dimensions::Vec3, &[DataType::F32]).map_err(load_error)?;
-                // Saturating: a count is the file's (an indices accessor is checked only below).
-                vertices = vertices.saturating_add(position.count() as u64);
+                // Saturating: a count is the file's (an indices accessor is checked only below). A
+                // primitive keeps the vertices its indices use ([`triangles`]): at most its corners.
                 let corners = primitive.indices().map_or(position.count(), |indices| indices.count());
+                vertices = vertices.saturating_add(position.count().min(corners) as u64);
                 triangle_count = triangle_count.saturating_add(surface_triangles(primitive.mode(), corners as u64));
             }
         }
@@ -246,9 +247,9 @@ fn check_position_accessor_indices(root: &gltf::json::Root) -> std::result::Resu
 /// surface primitive ([`surface_triangles`]), whose JSON path `field` the errors name: POSITION a VEC3 float
 /// accessor and indices (if any) a SCALAR unsigned integer one, as glTF 2.0 requires (the `gltf`
 /// crate's reader would panic on float indices and read other types as garbage), each inside
-/// its buffer ([`check_accessor`]); every world position finite and within
-/// [`MAX_COORDINATE`] and every index below the POSITION count (which [`Scene::new`]
-/// would report without the JSON path).
+/// its buffer ([`check_accessor`]); every index below the POSITION count (which
+/// [`Scene::new`] would report without the JSON path) and every world position the indices use
+/// finite and within [`MAX_COORDINATE`]. The positions are those the indices use, renumbered.
 fn triangles(
     primitive: &gltf::Primitive,
     buffers: &[buffer::Data],
@@ -259,31 +260,41 @@ fn triangles(
     let position = primitive.get(&Semantic::Positions).ok_or_else(|| format!("{field}: no POSITION attribute"))?;
     let position_field = format!("{field}.attributes.POSITION");
     check_accessor(&position, buffers, &position_field, Dimensions::Vec3, &[DataType::F32])?;
-    let positions: Vec<Vec3> = reader
-        .read_positions()
-        .ok_or_else(|| unreadable(&position, &position_field))?
-        .map(|p| world.transform_point3(Vec3::from_array(p)))
-        .collect();
-    if let Some((element, p)) = positions.iter().enumerate().find(|(_, p)| !in_range(**p)) {
-        return Err(format!(
-            "{position_field} element {element} is at {p} in world space under nodes[{node}]'s transform; each \
-             coordinate must be finite and within ±{MAX_COORDINATE:e}"
-        ));
-    }
-    let indices: Vec<u32> = match primitive.indices() {
+    let accessor_positions: Vec<[f32; 3]> =
+        reader.read_positions().ok_or_else(|| unreadable(&position, &position_field))?.collect();
+    let mut indices: Vec<u32> = match primitive.indices() {
         Some(accessor) => {
             let indices_field = format!("{field}.indices");
             let unsigned = [DataType::U8, DataType::U16, DataType::U32];
             check_accessor(&accessor, buffers, &indices_field, Dimensions::Scalar, &unsigned)?;
             reader.read_indices().ok_or_else(|| unreadable(&accessor, &indices_field))?.into_u32().collect()
         }
-        None => (0..positions.len() as u32).collect(),
+        None => (0..accessor_positions.len() as u32).collect(),
     };
-    if let Some((element, index)) = indices.iter().enumerate().find(|(_, &i)| i as usize >= positions.len()) {
+    if let Some((element, index)) = indices.iter().enumerate().find(|(_, &i)| i as usize >= accessor_positions.len()) {
         return Err(format!(
             "{field}.indices element {element} is {index}, but attributes.POSITION has {} elements",
-            positions.len()
+            accessor_positions.len()
         ));
+    }
+    // Only the vertices the indices use, in world space, renumbered in order of first use:
+    // primitives may share one large POSITION accessor, each drawing a range of it.
+    let mut renumbered = vec![u32::MAX; accessor_positions.len()];
+    let mut positions = Vec::new();
+    for index in &mut indices {
+        let element = *index as usize;
+        if renumbered[element] == u32::MAX {
+            let p = world.transform_point3(Vec3::from_array(accessor_positions[element]));
+            if !in_range(p) {
+                return Err(format!(
+                    "{position_field} element {element} is at {p} in world space under nodes[{node}]'s transform; \
+                     each coordinate must be finite and within ±{MAX_COORDINATE:e}"
+                ));
+            }
+            renumbered[element] = positions.len() as u32;
+            positions.push(p);
+        }
+        *index = renumbered[element];
     }
     let triangles: Vec<[u32; 3]> = match primitive.mode() {
         Mode::TriangleStrip => strip_triangles(&indices),
@@ -1117,6 +1128,40 @@ mod tests {
         (dir, path)
     }
 
+    /// Two primitives sharing the quad's POSITION accessor, each drawing one triangle of it, keep
+    /// the three vertices each uses (they copied all four); and a vertex no triangle uses may lie
+    /// beyond the coordinate limit (it failed the file).
+    #[test]
+    fn primitives_keep_only_the_vertices_their_indices_use() {
+        let halves = r#"{"attributes":{"POSITION":0},"indices":1,"material":0},{"attributes":{"POSITION":0},"indices":2,"material":0}"#;
+        let text = quad_gltf(3)
+            .replacen(r#"{"attributes":{"POSITION":0},"indices":1,"material":0}"#, halves, 1)
+            .replacen(
+                r#"{"bufferView":1,"componentType":5123,"count":3,"type":"SCALAR"}"#,
+                r#"{"bufferView":1,"componentType":5123,"count":3,"type":"SCALAR"},{"bufferView":1,"byteOffset":6,"componentType":5123,"count":3,"type":"SCALAR"}"#,
+                1,
+            );
+        let f = file(&text);
+        let scene = load(f.path()).unwrap();
+        let kept: Vec<usize> = scene.meshes().iter().map(|m| m.positions.len()).collect();
+        assert_eq!(kept, [3, 3], "{text}");
+        assert_eq!(
+            scene.meshes()[1].positions,
+            [Vec3::new(0.0, 0.0, -2.0), Vec3::new(1.0, 1.0, -2.0), Vec3::new(0.0, 1.0, -2.0)]
+        );
+        assert_eq!(scene.meshes()[1].triangles, [[0, 1, 2]]);
+
+        // Vertex 3 far beyond the limit, the indices drawing only the first triangle.
+        let mut buffer = quad_buffer();
+        buffer[36..40].copy_from_slice(&1.0e30f32.to_le_bytes());
+        let text = quad_gltf(3).replacen(&base64_encode(&quad_buffer()), &base64_encode(&buffer), 1);
+        let f = file(&text);
+        assert_eq!(load(f.path()).unwrap().meshes()[0].positions.len(), 3);
+        let f = file(&quad_gltf(6).replacen(&base64_encode(&quad_buffer()), &base64_encode(&buffer), 1));
+        let err = load(f.path()).unwrap_err().to_string();
+        assert!(err.contains("attributes.POSITION element 3"), "{err}");
+    }
+
     /// An indices accessor whose `count` is near 2⁶⁴, instanced by four nodes: its triangles,
     /// counted before the accessor is checked, overflowed the count (a panic where overflow is
     /// checked); the file is refused with a typed error instead.
@@ -1133,9 +1178,9 @@ mod tests {
 
     #[test]
     fn instancing_beyond_the_vertex_limit_is_refused_before_reading() {
-        // POSITION a sparse accessor of 2²⁰ elements (the file's 1 MiB zeros allow it),
-        // instanced by 257 nodes: 2²⁸ + 2²⁰ vertices, refused before any is read — without
-        // allocating the 3 GiB it asks for.
+        // POSITION a sparse accessor of 2²⁰ elements (the file's 1 MiB zeros allow it), drawn
+        // without indices (so every vertex is used), instanced by 257 nodes: 2²⁸ + 2²⁰
+        // vertices, refused before any is read — without allocating the 3 GiB it asks for.
         let per_instance = 1 << 20;
         let (_dir, path) = instanced_quad_gltf(MAX_VERTICES / per_instance + 1, per_instance, |text| {
             text.replacen(
@@ -1145,6 +1190,7 @@ mod tests {
                 ),
                 1,
             )
+            .replacen(r#""indices":1,"#, "", 1)
         });
         match load(&path) {
             Err(err @ Error::SceneTooLarge { .. }) => {
