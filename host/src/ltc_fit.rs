@@ -47,9 +47,9 @@
 //!   lobe → two): roughness 0.51 at θ = 0 0.035 → 0.003, 1.0 at 85° 0.13 → 0.02, 0.63 at 53°
 //!   0.094 → 0.049, 0.32 at 68° 0.14 → 0.089; median over all cells 0.015. Against an f64
 //!   reference (`tests/analytic_lighting.rs`) the median error of `U` fell from 4.2 % to 0.68 %
-//!   (0.43 % with FIT_VERSION 4's warm starts, below; 0.67 % against the test's 10⁶-sample
+//!   (0.43 % with FIT_VERSION 4's warm starts, below; 0.68 % against the test's 10⁶-sample
 //!   reference, whose 3σ allowance is narrower); lights that catch only a far tail still
-//!   see 30–173 %. The price at
+//!   see 30–174 %. The price at
 //!   run time is a second polygon integral in `U_S` and a lobe choice in the LTC sampling.
 //!   Tried on single cells and rejected (no better `U` against the f64 reference): a fitted
 //!   scale above the horizon (so a mixture may straddle it at grazing views; the fit keeps the
@@ -89,11 +89,15 @@
 //!   from row 15's or row 17's cell reached 0.023, 0.029 and 0.23. With both starts
 //!   (FIT_VERSION 4) row 16's 90th-percentile error fell from 0.213 to 0.143 and its maximum
 //!   from 0.66 to 0.42, row 19's median from 0.029 to 0.018, row 33's from 0.057 to 0.043; no
-//!   cell got worse than its along-θ fit would have been from the same neighbours. The price is
-//!   where neighbouring cells now pick different basins, the bilinear lookup between them fits
-//!   neither (`tests/ltc_interpolation.rs`: 39 such seams at roughness ≥ 0.1, against 93 in
-//!   FIT_VERSION 3, but new ones between rows 18 and 19 for θ = 33–46°; and between the last
-//!   two columns of rows 46–51 the centre error rose from at most 0.14 to 0.30). Cell `(a, t)`
+//!   cell got worse than its along-θ fit would have been from the same neighbours. A cell keeps
+//!   its winning start's lobe order, so neighbours may store the same two lobes in opposite
+//!   orders (20 pairs, rows 0–18), and a lobe of no weight drifts (entries up to ±10³, 24 lobes
+//!   in rows 0–3): the kernels' lookup (`raywave_kernels::shade::ltc::lookup`) aligns the four
+//!   cells' orders and weights each lobe by its mass, so neither shows between cells
+//!   (`tests/ltc_interpolation.rs`: no seam; a plain bilinear blend left 39 at roughness ≥ 0.1).
+//!   Fixing the order in the fit instead — each cell aligned with the two neighbours it starts
+//!   from, the table fitted again (56 minutes) — left 42 flipped pairs and 53 seams: orders
+//!   propagated along rows and along columns disagree where the lobes trade roles. Cell `(a, t)`
 //!   needs `(a, t − 1)` and `(a + 1, t)`, so [`fit_table`] fits the anti-diagonals `t + 63 − a`
 //!   one after another, each one's cells in parallel (rayon). The warm starts are the neighbours
 //!   **as stored** (their `f32` table entries read back, [`CellFit::stored_mixture`]), so

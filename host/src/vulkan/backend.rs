@@ -156,7 +156,7 @@ impl DeviceShades {
 }
 
 /// The scene data of the shade stage on the device, uploaded once per [`ShadeData`] value (the
-/// 128 KiB LTC table, the triangles, …) and reused while the same value comes back.
+/// 192 KiB LTC table, the triangles, …) and reused while the same value comes back.
 struct DeviceShadeData {
     /// Which [`ShadeData`] these buffers hold.
     identity: ShadeDataIdentity,
