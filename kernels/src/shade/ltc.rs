@@ -76,11 +76,11 @@ impl LtcLobe {
 ///
 /// The four cells' mixtures are blended lobe by lobe, each lobe's `M⁻¹` weighted by the mass it
 /// carries in its cell (bilinear weight × lobe weight), after each cell's two lobes are put in
-/// the order closer to those of the cell weighing most ([`StoredMixture::aligned_with`]). The fit
-/// stores a cell's lobes in either order, and where neighbours differ, a plain bilinear blend of
-/// the entries mixed a sharp lobe with a wide one (relative L1 error 0.23 halfway between cells
-/// (7, 38) and (7, 39), whose own errors are 0.004); and a lobe of no weight in its cell, whose
-/// entries the fit left anywhere up to ±10³, no longer pulls its neighbours' lobe.
+/// the order closer to those of the cell weighing most (a weighted L1 distance of the entries).
+/// The fit stores a cell's lobes in either order, and where neighbours differ, a plain bilinear
+/// blend of the entries mixed a sharp lobe with a wide one (relative L1 error 0.23 halfway
+/// between cells (7, 38) and (7, 39), whose own errors are 0.004); and a lobe of no weight in
+/// its cell, whose entries the fit left anywhere up to ±10³, no longer pulls its neighbours'.
 pub fn lookup(table: &[Vec4], roughness: f32, cos_theta_v: f32) -> LtcLobe {
     let last = (LTC_SIZE - 1) as f32;
     let r = if roughness > 0.0 { roughness.min(1.0) } else { 0.0 };
@@ -152,7 +152,7 @@ impl StoredMixture {
 
     /// How far apart two cells' lobes are, slot by slot as a blend pairs them: each slot's L1
     /// distance between the entries weighted by its mean weight in the two cells, plus the
-    /// difference of the weights (the fitter's `LtcMixture::lookup_distance`, in `f32`).
+    /// difference of the weights.
     fn distance(&self, other: &Self) -> f32 {
         let l1 = |a: Vec4, b: Vec4| (a - b).abs().element_sum();
         0.5 * (self.weight + other.weight) * l1(self.first, other.first)
