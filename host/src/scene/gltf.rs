@@ -69,7 +69,7 @@ pub fn load(path: &Path) -> Result<Scene> {
         }
         if let Some(mesh) = node.mesh() {
             for (index, primitive) in mesh.primitives().enumerate() {
-                if surface_triangles(primitive.mode(), 3) == 0 {
+                if !draws_surfaces(primitive.mode()) {
                     continue;
                 }
                 // An unnamed mesh is named by its JSON path, so errors that name the mesh find it.
@@ -324,6 +324,11 @@ fn surface_triangles(mode: Mode, corners: u64) -> u64 {
         Mode::TriangleStrip | Mode::TriangleFan => corners.saturating_sub(2),
         Mode::Points | Mode::Lines | Mode::LineLoop | Mode::LineStrip => 0,
     }
+}
+
+/// Whether a primitive of `mode` draws triangles ([`surface_triangles`]' surface modes).
+fn draws_surfaces(mode: Mode) -> bool {
+    surface_triangles(mode, 3) > 0
 }
 
 /// The triangles of a strip (glTF 2.0, 3.7.2.1): triangle `i` is `(pᵢ, pᵢ₊₁₊ᵢ﹪₂, pᵢ₊₂₋ᵢ﹪₂)`, every
@@ -953,8 +958,7 @@ mod tests {
             assert_ne!(text, lamp);
             let f = file(&text);
             let scene = load(f.path()).unwrap();
-            let light = scene.lights()[0];
-            let facing = light.edge_u.truncate().cross(light.edge_v.truncate()).normalize();
+            let facing = facing(&scene.lights()[0]);
             // Mirrored in y (alone or with x and z: a point reflection) the lamp's front turns up.
             let expected = if scale == "[-1, 1, 1]" { Vec3::NEG_Y } else { Vec3::Y };
             assert!(facing.abs_diff_eq(expected, 1e-6), "scale {scale}: faces {facing}");
