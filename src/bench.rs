@@ -213,10 +213,12 @@ pub(crate) struct StageMedian {
     pub dispatches: u32,
 }
 
-/// What [`measure`] took: each stage's median, in the order `run` reports them, and the seconds
-/// of the warm-up before.
+/// What [`measure`] took: each stage's median, in the order `run` reports them, the median of
+/// the runs' summed stage times (not the sum of the medians), and the seconds of the warm-up
+/// before.
 pub(crate) struct Measured {
     pub stages: Vec<StageMedian>,
+    pub total_seconds: f64,
     pub warm_up_seconds: f64,
 }
 
@@ -236,7 +238,8 @@ pub(crate) fn measure(
             dispatches: runs.last().map_or(1, |r| r[i].dispatches),
         })
         .collect();
-    Ok(Measured { stages, warm_up_seconds })
+    let total_seconds = median(runs.iter().map(|r| r.iter().map(|stage| stage.seconds).sum()).collect());
+    Ok(Measured { stages, total_seconds, warm_up_seconds })
 }
 
 /// The median of a list of timings (the upper one of an even count; NaN for none, which the
@@ -368,13 +371,12 @@ pub fn bench_trace(options: &TraceBenchOptions, mut emit: impl FnMut(&dyn Output
     });
     #[cfg(feature = "embree")]
     let embree = {
-        let start = Instant::now();
         let embree = crate::embree::EmbreeScene::build(&scene)?;
         emit(&BuildMeasurement {
             stage: "bvh_build",
             implementation: "embree-high".into(),
             triangles: scene.triangle_count(),
-            seconds: start.elapsed().as_secs_f64(),
+            seconds: embree.build_time().as_secs_f64(),
             bytes_per_triangle: f64::NAN,
             traversal_isa: None,
         });

@@ -67,7 +67,8 @@ pub struct DenoiseMeasurement {
     pub pixels: u64,
     /// The filter radius R in pixels.
     pub radius: u32,
-    /// Median seconds (GPU timestamps on Vulkan, wall clock on the CPU).
+    /// Median seconds (GPU timestamps on Vulkan, wall clock on the CPU); on the `total` line the
+    /// median of each timed run's summed passes.
     pub seconds: f64,
     /// How many times the pass ran back to back in each timed submission (the last
     /// repetition's), `seconds` being their mean: 1 on the CPU, more on Vulkan
@@ -189,7 +190,7 @@ fn bench_backend(
     let copy_gb_per_s = copy_bandwidth(backend, &params, &input.shadowed, options.repeats, settle_seconds)?;
     for method in [DenoiseMethod::Tv, DenoiseMethod::Svgf] {
         let passes = method.passes(&params);
-        let Measured { stages, warm_up_seconds } =
+        let Measured { stages, total_seconds, warm_up_seconds } =
             measure(settle_seconds, options.repeats, || backend.denoise(method, &params, input).map(|(_, r)| r))?;
         let line = |pass: &'static str, seconds: f64, dispatches: Option<u32>, bytes: u64| {
             let gb_per_s = crate::bench::per_second(bytes as f64, seconds) / 1e9;
@@ -211,10 +212,9 @@ fn bench_backend(
                 workgroup_size,
             }
         };
-        let (mut total_seconds, mut total_bytes) = (0.0, 0);
+        let mut total_bytes = 0;
         for (pass, stage) in passes.iter().zip(stages) {
             let bytes = pass.bytes_per_pixel() * pixels;
-            total_seconds += stage.seconds;
             total_bytes += bytes;
             emit(&line(pass.name(), stage.seconds, Some(stage.dispatches), bytes));
         }

@@ -69,6 +69,9 @@ pub struct CpuScene {
     nodes: Vec<CwBvhNode>,
     vertices: Vec<Vec4>,
     ids: Vec<UVec2>,
+    /// The scene's triangle count; `ids` holds one entry per leaf reference, more than this
+    /// where spatial splits reference a triangle from several leaves.
+    triangle_count: usize,
     /// obvhs's own BVH, kept for the benchmark that compares against obvhs's traversal.
     obvhs: CwBvh,
     build_time: Duration,
@@ -151,7 +154,15 @@ impl CpuScene {
             })
             .collect();
         let ids = order.iter().map(|&i| ids[i as usize]).collect();
-        Ok(Self { nodes, vertices, ids, obvhs, build_time: start.elapsed(), isa: TraversalIsa::detect() })
+        Ok(Self {
+            nodes,
+            vertices,
+            ids,
+            triangle_count: flat.len(),
+            obvhs,
+            build_time: start.elapsed(),
+            isa: TraversalIsa::detect(),
+        })
     }
 
     /// The scene as the trace kernels read it.
@@ -197,12 +208,13 @@ impl CpuScene {
         self.build_time
     }
 
-    /// Bytes of nodes plus triangle data, divided by the triangle count.
+    /// Bytes of nodes plus triangle data, divided by the scene's triangle count (not the leaf
+    /// references, so the slow preset's spatial-split copies count against it).
     pub fn bytes_per_triangle(&self) -> f64 {
         let bytes = std::mem::size_of_val(self.nodes.as_slice())
             + std::mem::size_of_val(self.vertices.as_slice())
             + std::mem::size_of_val(self.ids.as_slice());
-        bytes as f64 / self.ids.len().max(1) as f64
+        bytes as f64 / self.triangle_count.max(1) as f64
     }
 
     /// Closest hit through obvhs's own `CwBvh::ray_traverse` with the same watertight triangle
@@ -300,6 +312,30 @@ mod tests {
         assert_eq!(&bytemuck::bytes_of(&shared.child_bounds)[8..16], &original.child_max_x);
         assert_eq!(&bytemuck::bytes_of(&shared.child_bounds)[40..48], &original.child_max_z);
         assert!(tree_depth(&cpu.nodes) >= 1);
+    }
+
+    #[test]
+    fn bytes_per_triangle_counts_the_scenes_triangles_not_the_leaf_references() {
+        // The slow preset pre-splits large triangles: here two long slivers across a field of
+        // 400 small ones end up referenced from several leaves each. The memory is still
+        // charged to the scene's triangles.
+        let dir = tempfile::tempdir().unwrap();
+        let mut obj = String::new();
+        for i in 0..400 {
+            let (x, z) = ((i % 20) as f32, (i / 20) as f32);
+            obj += &format!("v {x} 0 {z}\nv {} 0 {z}\nv {x} 0.1 {}\n", x + 0.1, z + 0.1);
+        }
+        obj += "v -1 0.5 -1\nv 21 0.6 21\nv -1 0.7 -0.9\nv 21 0.5 -1\nv -1 0.6 21\nv 20.9 0.7 -1\n";
+        obj += &(0..402).map(|t| format!("f {} {} {}\n", 3 * t + 1, 3 * t + 2, 3 * t + 3)).collect::<String>();
+        let path = dir.path().join("slivers.obj");
+        std::fs::write(&path, obj).unwrap();
+        let scene = Scene::load(path.to_str().unwrap()).unwrap();
+        let cpu = CpuScene::build_with(&scene, BvhQuality::Slow).unwrap();
+        assert!(cpu.ids.len() > scene.triangle_count(), "{} references", cpu.ids.len());
+        let bytes = std::mem::size_of_val(cpu.nodes.as_slice())
+            + std::mem::size_of_val(cpu.vertices.as_slice())
+            + std::mem::size_of_val(cpu.ids.as_slice());
+        assert_eq!(cpu.bytes_per_triangle(), bytes as f64 / scene.triangle_count() as f64);
     }
 
     /// Rays from random points of the scene's bounding box in random directions, some of them
