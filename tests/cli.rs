@@ -488,7 +488,7 @@ fn an_orthographic_camera_is_framed_with_a_warning() {
 /// frame is shaded or the reference converged).
 #[test]
 fn bench_and_report_options_out_of_range_are_typed_errors() {
-    let cases: [(&[&str], &str); 27] = [
+    let cases: [(&[&str], &str); 28] = [
         (&["bench", "denoise", "--no-vulkan", "--repeats", "0"], "repeats: must be at least 1"),
         (&["bench", "denoise", "--no-vulkan", "--spp", "0"], "spp: 0 is outside"),
         // Before the scene loads, which would fail too.
@@ -530,6 +530,11 @@ fn bench_and_report_options_out_of_range_are_typed_errors() {
     ];
     for (args, needle) in cases {
         assert_refused_before_measuring(args, needle);
+        // Lines and plots are keyed by scene name: a repeated scene merged into the first.
+        (
+            &["report", "error-vs-time", "--scenes", "builtin:cornell,builtin:cornell-two-lights,builtin:cornell"],
+            "scenes: builtin:cornell is listed twice",
+        ),
     }
 }
 

@@ -433,7 +433,8 @@ fn scene_errors(scene_name: &str) -> Vec<(u32, [MethodError; METHODS.len()])> {
     let reference = reference(&mut backend, &prepared, scene_name);
     SPP.iter()
         .map(|&spp| {
-            let errors = prepared.errors(&mut backend, &reference, spp, &SEEDS).expect("frames");
+            let (errors, sanitized) = prepared.errors(&mut backend, &reference, spp, &SEEDS).expect("frames");
+            assert_eq!(sanitized, 0, "{scene_name} at {spp} spp");
             for (method, error) in METHODS.iter().zip(&errors) {
                 eprintln!("{scene_name}: {spp:>2} spp {method:<14} relMSE {:.6}  FLIP {:.4}", error.relmse, error.flip);
             }

@@ -224,19 +224,22 @@ impl PreparedScene {
     }
 
     /// Every method's error against `reference` and time at `spp` samples, in [`METHODS`]
-    /// order: the means over one [`frame`](Self::frame) per seed of `seeds` (at least one).
+    /// order: the means over one [`frame`](Self::frame) per seed of `seeds` (at least one); and
+    /// the values those frames' stages sanitized ([`MethodFrames::sanitized`], summed).
     pub fn errors(
         &self,
         backend: &mut dyn Backend,
         reference: &[Vec3],
         spp: u32,
         seeds: &[u32],
-    ) -> Result<[MethodError; METHODS.len()]> {
+    ) -> Result<([MethodError; METHODS.len()], u64)> {
         let regions = ShadowRegions::new(&self.analytic, reference);
         let mut runs = [MethodRuns::default(); METHODS.len()];
+        let mut sanitized = 0;
         for &seed in seeds {
-            let frame = self.frame(backend, spp, seed)?.images;
-            for (runs, (image, ms)) in runs.iter_mut().zip(frame) {
+            let frame = self.frame(backend, spp, seed)?;
+            sanitized += frame.sanitized;
+            for (runs, (image, ms)) in runs.iter_mut().zip(frame.images) {
                 runs.relmse.add(relmse(&image, reference));
                 runs.relmse_shadow.add(relmse_part(&image, reference, &regions.shadow));
                 runs.relmse_lit.add(relmse_part(&image, reference, &regions.lit));
@@ -244,14 +247,15 @@ impl PreparedScene {
                 runs.ms.add(ms);
             }
         }
-        Ok(runs.map(|runs| MethodError {
+        let errors = runs.map(|runs| MethodError {
             relmse: runs.relmse.mean(),
             relmse_stderr: runs.relmse.standard_error(),
             relmse_shadow: runs.relmse_shadow.mean(),
             relmse_lit: runs.relmse_lit.mean(),
             flip: runs.flip.mean(),
             ms: runs.ms.mean(),
-        }))
+        });
+        Ok((errors, sanitized))
     }
 }
 
@@ -303,7 +307,9 @@ pub fn report_error_vs_time(
             options.settle_seconds.map(|settle| prepared.settle(backend, &scene, settle)).transpose()?;
         let seeds: Vec<u32> = (0..report.reps).collect();
         for spp in report.spp_steps() {
-            for (method, error) in METHODS.into_iter().zip(prepared.errors(backend, &reference, spp, &seeds)?) {
+            let (errors, sanitized) = prepared.errors(backend, &reference, spp, &seeds)?;
+            super::warn_if_sanitized(name, spp, sanitized);
+            for (method, error) in METHODS.into_iter().zip(errors) {
                 let MethodError { relmse, relmse_stderr, relmse_shadow, relmse_lit, flip, ms } = error;
                 let scene = name.clone();
                 let line = ErrorVsTimeLine {

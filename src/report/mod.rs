@@ -54,14 +54,20 @@ pub fn check_reps(reps: u32, minimum: u32, why_minimum: &str) -> crate::Result<(
 }
 
 impl SceneReportOptions {
-    /// Checks the options: reps within `1..=`[`MAX_REPS`], max-spp ≥ 1, reference-spp at least
-    /// [`MIN_REFERENCE_FACTOR`] × max-spp, the resolution
+    /// Checks the options: reps within `1..=`[`MAX_REPS`], no scene listed twice, max-spp ≥ 1,
+    /// reference-spp at least [`MIN_REFERENCE_FACTOR`] × max-spp, the resolution
     /// ([`check_resolution`]) and the reference's sample count
     /// ([`check_samples_per_pixel`](crate::frame::check_samples_per_pixel)); an error names the
     /// option.
     pub fn check(&self) -> crate::Result<()> {
         let invalid = |name, reason: String| Err(crate::Error::InvalidParameter { name, reason });
         check_reps(self.reps, 1, "")?;
+        if let Some(repeated) =
+            self.scenes.iter().enumerate().find_map(|(i, s)| self.scenes[..i].contains(s).then_some(s))
+        {
+            // Lines, plots and tables are keyed by the scene's name: a second run would merge into the first.
+            return invalid("scenes", format!("{repeated} is listed twice"));
+        }
         if self.max_spp < 1 {
             return invalid("max-spp", format!("{} is below 1", self.max_spp));
         }
@@ -98,6 +104,26 @@ impl SceneReportOptions {
     pub fn spp_steps(&self) -> impl Iterator<Item = u32> {
         let max = self.max_spp;
         std::iter::successors(Some(1u32), |&n| n.checked_mul(2)).take_while(move |&n| n <= max)
+    }
+}
+
+/// The warning a scene report prints on stderr when `count` values of `scene`'s frames at `spp`
+/// samples went non-finite and were replaced ([`crate::StageReport::sanitized`]; only a scene
+/// of broken geometry does that): its errors were measured on the replacements. `None` for 0.
+fn sanitized_warning(scene: &str, spp: u32, count: u64) -> Option<String> {
+    (count > 0).then(|| {
+        format!(
+            "warning: {scene} at {spp} spp: {count} value(s) went non-finite and were replaced (rays or hits \
+             as misses, samples without their contribution, colours by the emitted radiance); the errors \
+             reported include them"
+        )
+    })
+}
+
+/// Prints [`sanitized_warning`] on stderr, if any.
+pub(crate) fn warn_if_sanitized(scene: &str, spp: u32, count: u64) {
+    if let Some(warning) = sanitized_warning(scene, spp, count) {
+        eprintln!("{warning}");
     }
 }
 
@@ -157,6 +183,13 @@ pub(crate) fn sum_from_zero(values: impl Iterator<Item = f64>) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn only_sanitized_values_warn_and_the_warning_names_scene_and_count() {
+        assert_eq!(sanitized_warning("builtin:cornell", 4, 0), None);
+        let warning = sanitized_warning("broken.obj", 2, 17).expect("a warning");
+        assert!(warning.starts_with("warning: broken.obj at 2 spp: 17 value(s) went non-finite"), "{warning}");
+    }
 
     #[test]
     fn repeated_values_give_their_mean_and_its_standard_error() {

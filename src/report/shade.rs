@@ -34,12 +34,14 @@ pub struct ShadeLine {
     pub estimator: &'static str,
     /// `all`, `shadow` or `lit`.
     pub region: &'static str,
-    /// Root-mean-square error against the reference (linear radiance, mean over RGB), averaged
-    /// over the repetitions (the `visibility-floor`: computed from the reference alone).
+    /// Root-mean-square error against the reference (linear radiance, mean over RGB): the square
+    /// root of the squared error's mean over every pixel of the region and every repetition, the
+    /// statistic the `visibility-floor` (computed from the reference alone) bounds.
     pub rmse: f64,
-    /// The standard error of `rmse` over the repetitions ([`Repeated::standard_error`]: ±t times
-    /// it is a 95 % confidence interval, t = 3.18 for 4 repetitions, 1.96 for many); absent for
-    /// one repetition and for the `visibility-floor`, which is no mean of repetitions.
+    /// The standard error of `rmse` over the repetitions, by the delta method: the standard error
+    /// of the repetitions' mean squared error ([`Repeated::standard_error`]) over `2·rmse`. ±t
+    /// times it is a 95 % confidence interval, t = 3.18 for 4 repetitions, 1.96 for many; absent
+    /// for one repetition and for the `visibility-floor`, which is no mean of repetitions.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub rmse_stderr: Option<f64>,
     /// Pixels in the region.
@@ -172,6 +174,13 @@ pub fn visibility_floor(analytic: &[Vec3], reference: &[Vec3], emitted: &[Vec3],
     (sum / pixels.len().max(1) as f64).sqrt()
 }
 
+/// The standard error of `√mean` of `squared_error`'s repetitions by the delta method,
+/// `se(mean) / (2·√mean)`; 0 where every repetition's error was 0, `None` for one repetition.
+fn rmse_standard_error(squared_error: &Repeated) -> Option<f64> {
+    let rmse = squared_error.mean().sqrt();
+    squared_error.standard_error().map(|se| if rmse > 0.0 { se / (2.0 * rmse) } else { 0.0 })
+}
+
 /// Runs the report, handing each line to `emit` as soon as it is measured.
 pub fn report_shade(
     backend: &mut dyn Backend,
@@ -202,16 +211,19 @@ pub fn report_shade(
             });
         }
         for spp in options.spp_steps() {
-            let mut rmse = [[Repeated::default(); 3]; 2];
+            let mut squared_error = [[Repeated::default(); 3]; 2];
+            let mut sanitized = gbuffer.sanitized;
             for rep in 0..options.reps {
                 let (run, _) = accumulate(backend, &gbuffer, &data, options.resolution, spp, rep)?;
+                sanitized += run.sanitized();
                 let (ratio, stochastic) = (run.ratio_image(), run.stochastic_image());
                 for (e, image) in [&ratio, &stochastic].into_iter().enumerate() {
                     for (r, pixels) in [&all, &shadow, &lit].into_iter().enumerate() {
-                        rmse[e][r].add(mse(image, &reference, pixels).sqrt());
+                        squared_error[e][r].add(mse(image, &reference, pixels));
                     }
                 }
             }
+            super::warn_if_sanitized(name, spp, sanitized);
             for (e, estimator) in ["ratio", "stochastic"].into_iter().enumerate() {
                 for (r, (region, pixels)) in [("all", &all), ("shadow", &shadow), ("lit", &lit)].into_iter().enumerate()
                 {
@@ -220,8 +232,8 @@ pub fn report_shade(
                         spp,
                         estimator,
                         region,
-                        rmse: rmse[e][r].mean(),
-                        rmse_stderr: rmse[e][r].standard_error(),
+                        rmse: squared_error[e][r].mean().sqrt(),
+                        rmse_stderr: rmse_standard_error(&squared_error[e][r]),
                         pixels: pixels.len(),
                     });
                 }
@@ -234,6 +246,21 @@ pub fn report_shade(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_rmse_standard_error_is_the_mean_squared_errors_over_twice_the_rmse() {
+        let mut squared_error = Repeated::default();
+        squared_error.add(4.0);
+        assert_eq!(rmse_standard_error(&squared_error), None);
+        squared_error.add(12.0);
+        // Mean 8, sample variance 32, standard error √(32/2) = 4; √8 = 2√2.
+        let expected = 4.0 / (2.0 * 8.0f64.sqrt());
+        assert!((rmse_standard_error(&squared_error).unwrap() - expected).abs() < 1e-12);
+        let mut exact = Repeated::default();
+        exact.add(0.0);
+        exact.add(0.0);
+        assert_eq!(rmse_standard_error(&exact), Some(0.0));
+    }
 
     #[test]
     fn visibility_floor_is_the_binary_sample_variance_times_u_squared() {
