@@ -207,6 +207,9 @@ fn bad_input_is_a_typed_error_without_output() {
     assert_rejected(&["--device", "vulkan:99", "--scene", "/no/such/scene.obj", "--spp", "0"], "spp: 0 is outside");
     let sampler_overflow = ["--device", "cpu", "--width", "65536", "--height", "1024", "--spp", "4"];
     assert_rejected(&sampler_overflow, "exceed the sampler's 32-bit index");
+    // A side over 65536 overflows the index at any sample count: the size is named, not `spp`.
+    let too_wide = ["--device", "cpu", "--width", "70000", "--height", "1", "--spp", "1"];
+    assert_rejected(&too_wide, "width/height: a 70000×1 image exceeds the sampler's 32-bit index even at 1");
     assert_rejected(&["--device", "cpu", "--view", "albedo"], "unknown view `albedo`");
     assert_rejected(&["--device", "cpu", "--exr", "/no/such/dir/out.exr"], "/no/such/dir/out.exr");
     assert_rejected(&["--device", "cpu", "--aperture=-1"], "aperture");
@@ -527,14 +530,14 @@ fn bench_and_report_options_out_of_range_are_typed_errors() {
             &["report", "error-vs-time", "--reference-spp", "8", "--max-spp", "4"],
             "reference-spp: 8 is below 4 × max-spp (4)",
         ),
-    ];
-    for (args, needle) in cases {
-        assert_refused_before_measuring(args, needle);
         // Lines and plots are keyed by scene name: a repeated scene merged into the first.
         (
             &["report", "error-vs-time", "--scenes", "builtin:cornell,builtin:cornell-two-lights,builtin:cornell"],
             "scenes: builtin:cornell is listed twice",
         ),
+    ];
+    for (args, needle) in cases {
+        assert_refused_before_measuring(args, needle);
     }
 }
 

@@ -26,7 +26,7 @@ use raywave::shared::sampling::sampler_kind;
 use raywave::shared::{DenoiseParams, GenerateParams, SamplerParams, SamplerProbeParams, WarpParams};
 use raywave::stream::{HitStream, RayStream};
 use raywave::vulkan::{ContextOptions, VulkanBackend, MAX_SUSTAINED_DISPATCHES};
-use raywave::{Backend, Scene, StageReport, StreamStage, WorkgroupSizes};
+use raywave::{open_backend, Backend, BackendOptions, DeviceChoice, Scene, StageReport, StreamStage, WorkgroupSizes};
 use std::fmt::Debug;
 
 /// The busy time benchmark mode stretches each submission to here: 50 ms, far above what any
@@ -440,6 +440,15 @@ fn an_unusable_workgroup_size_is_refused_when_the_device_opens() {
         match VulkanBackend::open(device.index, &options, None) {
             Err(raywave::Error::InvalidParameter { name: refused, .. }) if refused == name => {}
             other => panic!("{name} = {size}: {:?}", other.map(|b| b.name())),
+        }
+        // `--device auto` must not fall back to the CPU and drop the sizes asked for (sizes no
+        // device runs: `auto` may pick another device than this one).
+        if !size.is_power_of_two() {
+            let options = BackendOptions { workgroup_sizes: Some(workgroup_sizes), ..Default::default() };
+            match open_backend(DeviceChoice::Auto, &options) {
+                Err(raywave::Error::InvalidParameter { name: refused, .. }) if refused == name => {}
+                other => panic!("auto, {name} = {size}: {:?}", other.map(|b| b.name().to_owned())),
+            }
         }
     }
     let mixed = WorkgroupSizes { generate: 32, trace: 128, shade: largest, denoise: 256.min(largest) };

@@ -7,7 +7,7 @@ use crate::scene::Scene;
 use crate::shading::ShadeData;
 use crate::stream::{HitStream, RayStream, ShadeStream};
 use glam::{UVec2, Vec4};
-use raywave_shared::{DenoiseParams, GenerateParams, SamplerProbeParams, ShadeParams, WarpParams};
+use raywave_shared::{DenoiseParams, GenerateParams, SamplerParams, SamplerProbeParams, ShadeParams, WarpParams};
 
 /// What one run of a stage (or denoise pass) on a backend reports: its time, and how many of its
 /// invocations had to replace a non-finite value (DESIGN rule 5).
@@ -152,6 +152,7 @@ pub fn sampler_probe_len(params: &SamplerProbeParams) -> Result<u32> {
     let spp_log2 = params.sampler.spp_log2;
     let samples_per_pixel = (spp_log2 < 32).then(|| 1u64 << spp_log2);
     let count = samples_per_pixel.and_then(|spp| pixels.checked_mul(spp)).filter(|&count| count <= MAX_PROBE_SAMPLES);
+    check_sampler("sampler probe", &params.sampler, params.width, params.height, 1)?;
     match count {
         // At most MAX_PROBE_SAMPLES = 2²⁴: a u32.
         Some(count) => Ok(count as u32),
@@ -165,8 +166,32 @@ pub fn sampler_probe_len(params: &SamplerProbeParams) -> Result<u32> {
     }
 }
 
-/// Number of samples the warp probe `params` covers, checked against [`MAX_PROBE_SAMPLES`].
+/// Checks that `sampler` gives samples `0..sample_count` of every pixel of a `width × height`
+/// image their own points ([`SamplerParams::indexes`]); `name` names the stage in the error.
+fn check_sampler(
+    name: &'static str,
+    sampler: &SamplerParams,
+    width: u32,
+    height: u32,
+    sample_count: u32,
+) -> Result<()> {
+    if sampler.indexes(width, height, sample_count) {
+        return Ok(());
+    }
+    Err(crate::error::Error::InvalidParameter {
+        name,
+        reason: format!(
+            "the ZSOBOL sampler's space (a 2^{} square, 2^{} samples a pixel) repeats points for {sample_count} \
+             samples of a {width}×{height} image (see SamplerParams::indexes)",
+            sampler.resolution_log2, sampler.spp_log2
+        ),
+    })
+}
+
+/// Number of samples the warp probe `params` covers (sample `i` of pixel (0, 0)), checked against
+/// [`MAX_PROBE_SAMPLES`] and the sampler's index space.
 pub fn warp_probe_len(params: &WarpParams) -> Result<u32> {
+    check_sampler("warp probe", &params.sampler, 1, 1, params.count)?;
     if u64::from(params.count) <= MAX_PROBE_SAMPLES {
         Ok(params.count)
     } else {
@@ -190,10 +215,11 @@ pub fn copy_probe_len(params: &DenoiseParams, image: &[Vec4]) -> Result<u32> {
 }
 
 /// Checks the inputs of the shade stage every backend shares: the data ([`ShadeData::check`]),
-/// one hit per ray, `params.count` rays, a width ≥ 1, and light and node counts within the data's
-/// buffers. A count past its buffer was clamped to it by the kernels — on the CPU to the slice,
+/// one hit per ray, `params.count` rays, a width ≥ 1, light and node counts within the data's
+/// buffers (a count past its buffer was clamped to it by the kernels — on the CPU to the slice,
 /// on Vulkan to the buffer, which holds one zeroed element where the slice is empty — so the
-/// backends would have shaded different light sets.
+/// backends would have shaded different light sets), and a sampler that gives the sample its own
+/// point in every pixel ([`SamplerParams::indexes`]).
 pub(crate) fn check_shade_inputs(
     params: &ShadeParams,
     data: &ShadeData,
@@ -222,14 +248,19 @@ pub(crate) fn check_shade_inputs(
     };
     match reason {
         Some(reason) => Err(crate::error::Error::InvalidParameter { name: "shade", reason }),
-        None => Ok(()),
+        // Invocation i shades pixel (i mod width, i div width).
+        None => {
+            let height = params.count.div_ceil(params.width);
+            check_sampler("shade", &params.sampler, params.width, height, params.sample_index.saturating_add(1))
+        }
     }
 }
 
 /// Checks generate-stage parameters beyond the image size (which each backend checks against its
 /// own limit): a finite camera basis with a non-zero view direction and image plane, `0 ≤ tmin <
-/// tmax` finite, and a finite non-negative aperture with a positive finite focus distance when it
-/// is open — what [`GenerateParams`]' fields document; a zeroed basis gave NaN ray directions.
+/// tmax` finite, a finite non-negative aperture with a positive finite focus distance when it
+/// is open — what [`GenerateParams`]' fields document; a zeroed basis gave NaN ray directions —
+/// and a sampler that gives the sample its own point ([`SamplerParams::indexes`]).
 pub(crate) fn check_generate_params(params: &GenerateParams) -> Result<()> {
     let basis = [params.origin, params.forward, params.right, params.up];
     let plane = params.right.truncate().cross(params.up.truncate());
@@ -248,7 +279,13 @@ pub(crate) fn check_generate_params(params: &GenerateParams) -> Result<()> {
     };
     match reason {
         Some(reason) => Err(crate::error::Error::InvalidParameter { name: "generate", reason }),
-        None => Ok(()),
+        None => check_sampler(
+            "generate",
+            &params.sampler,
+            params.width,
+            params.height,
+            params.sample_index.saturating_add(1),
+        ),
     }
 }
 
@@ -270,10 +307,12 @@ pub(crate) fn check_image_size_common(width: u32, height: u32, max_pixels: u64, 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use raywave_shared::SamplerParams;
+    use raywave_shared::sampling::sampler_kind;
 
+    /// A ZSobol sampler probe over `width × height` pixels, its square covering the image.
     fn sampler_probe(width: u32, height: u32, spp_log2: u32) -> SamplerProbeParams {
-        let sampler = SamplerParams { kind: 0, seed: 0, spp_log2, resolution_log2: 0 };
+        let resolution_log2 = width.max(height).checked_next_power_of_two().map_or(32, u32::trailing_zeros);
+        let sampler = SamplerParams { kind: sampler_kind::ZSOBOL, seed: 0, spp_log2, resolution_log2 };
         SamplerProbeParams { sampler, width, height, dimension: 0, padding: 0 }
     }
 
@@ -290,6 +329,43 @@ mod tests {
                 "{width}×{height}, 2^{spp_log2}"
             );
         }
+    }
+
+    /// ZSobol points repeat where its sample space does not cover the image or the sample: every
+    /// stage that draws from it refuses such parameters.
+    #[test]
+    fn a_zsobol_space_that_would_repeat_points_is_refused() {
+        let mut probe = sampler_probe(5, 3, 2);
+        assert!(sampler_probe_len(&probe).is_ok());
+        probe.sampler.resolution_log2 = 2;
+        assert!(sampler_probe_len(&probe).is_err(), "a 4-pixel square under a 5-pixel side");
+        probe.sampler.kind = sampler_kind::SOBOL;
+        assert!(sampler_probe_len(&probe).is_ok(), "other samplers have no such space");
+        probe.sampler = SamplerParams { kind: sampler_kind::ZSOBOL, seed: 0, spp_log2: 1, resolution_log2: u32::MAX };
+        assert!(sampler_probe_len(&probe).is_err(), "a field that would wrap u32 arithmetic");
+
+        let warp = |count: u32, spp_log2: u32| WarpParams {
+            kind: 0,
+            count,
+            padding: [0; 2],
+            sampler: SamplerParams { kind: sampler_kind::ZSOBOL, seed: 0, spp_log2, resolution_log2: 0 },
+            a: Vec4::ZERO,
+            b: Vec4::ZERO,
+            c: Vec4::ZERO,
+        };
+        assert_eq!(warp_probe_len(&warp(16, 4)).ok(), Some(16));
+        assert!(warp_probe_len(&warp(17, 4)).is_err(), "sample 16 of 2^4 repeats sample 0's point");
+
+        let scene = crate::Scene::load("builtin:cornell").unwrap();
+        let mut generate = crate::frame::generate_params(&scene, 9, 7, 0, 1);
+        assert!(check_generate_params(&generate).is_ok());
+        generate.sample_index = 1;
+        assert!(check_generate_params(&generate).is_err(), "sample 1 of a one-sample frame");
+        generate.sampler.spp_log2 = 1;
+        assert!(check_generate_params(&generate).is_ok());
+        generate.sampler.resolution_log2 = 3;
+        generate.width = 9;
+        assert!(check_generate_params(&generate).is_err(), "an 8-pixel square under a 9-pixel side");
     }
 
     #[test]

@@ -95,10 +95,10 @@ pub struct BackendOptions {
 }
 
 /// Opens the backend `choice` names. `Auto` falls back to the CPU when no Vulkan device can be
-/// opened, unless `options` ask for what only Vulkan has (validation, a hardware trace method):
-/// then, as for an explicit Vulkan choice that cannot be honoured, the error says why Vulkan
-/// failed (a CPU run would silently drop what was asked). A trace method the backend lacks is an
-/// error.
+/// opened, unless `options` ask for what only Vulkan has (validation, a hardware trace method,
+/// workgroup sizes) or Vulkan refused one of them as invalid: then, as for an explicit Vulkan
+/// choice that cannot be honoured, the error says why Vulkan failed (a CPU run would silently
+/// drop what was asked). A trace method the backend lacks is an error.
 pub fn open_backend(choice: DeviceChoice, options: &BackendOptions) -> Result<Box<dyn Backend>> {
     let cpu = || -> Result<Box<dyn Backend>> {
         match options.trace {
@@ -113,7 +113,8 @@ pub fn open_backend(choice: DeviceChoice, options: &BackendOptions) -> Result<Bo
         DeviceChoice::Cpu => cpu(),
         DeviceChoice::Auto => open_vulkan(None, options).or_else(|vulkan_error| {
             let hardware_trace = options.trace.is_some_and(|method| method != TraceMethod::Software);
-            if options.validation || hardware_trace {
+            let vulkan_only = options.validation || hardware_trace || options.workgroup_sizes.is_some();
+            if vulkan_only || matches!(vulkan_error, Error::InvalidParameter { .. }) {
                 Err(vulkan_error)
             } else {
                 cpu()
@@ -145,8 +146,8 @@ fn open_vulkan(_index: Option<usize>, _options: &BackendOptions) -> Result<Box<d
 
 /// The index of the device to use by default: of the devices that run raywave's kernels
 /// (`DeviceInfo::missing_for_kernels`: Vulkan 1.2 with `vulkanMemoryModel`, room for the shade
-/// pass's storage buffers) — each runs every stage, tracing in software where ray query is
-/// missing — a discrete GPU before an integrated one before anything else, ties broken by
+/// pass's storage buffers) — each runs every stage, tracing with ray query, else the ray-tracing
+/// pipeline, else in software — a discrete GPU before an integrated one before anything else, ties broken by
 /// enumeration order.
 #[cfg(feature = "vulkan")]
 pub fn best_vulkan_device(devices: &[crate::vulkan::DeviceInfo]) -> Result<usize> {

@@ -23,7 +23,8 @@ pub fn parse_sampler_kind(name: &str) -> crate::error::Result<u32> {
 /// power-of-two square and the sample count rounded up to a power of two (Sobol' nets want
 /// power-of-two counts [sampling-denoise.md §1.2, §1.5]).
 pub fn sampler_params(kind: u32, seed: u32, width: u32, height: u32, samples_per_pixel: u32) -> SamplerParams {
-    let log2_ceil = |n: u32| n.max(1).next_power_of_two().trailing_zeros();
+    // A side above 2³¹ rounds up to 2³², which `u32` cannot hold: 32 then fails `fits_index`.
+    let log2_ceil = |n: u32| n.max(1).checked_next_power_of_two().map_or(32, u32::trailing_zeros);
     SamplerParams { kind, seed, spp_log2: log2_ceil(samples_per_pixel), resolution_log2: log2_ceil(width.max(height)) }
 }
 
@@ -45,7 +46,8 @@ pub fn check_sample_count(name: &'static str, samples_per_pixel: u32) -> crate::
 /// Checks a sample count per pixel for a `width × height` frame: within
 /// `1..=`[`MAX_SAMPLES_PER_PIXEL`], and the Morton-ordered sample space (image side and count
 /// rounded up to powers of two, [`SamplerParams::fits_index`]) within the sampler's 32-bit index,
-/// beyond which sample indices would wrap and repeat. `name` is the option's name for the error.
+/// beyond which sample indices would wrap and repeat. `name` is the option's name for the error;
+/// an image whose longer side alone overflows the index (above 65536) is named `width/height`.
 pub fn check_samples_per_pixel(
     name: &'static str,
     width: u32,
@@ -53,12 +55,21 @@ pub fn check_samples_per_pixel(
     samples_per_pixel: u32,
 ) -> crate::error::Result<()> {
     check_sample_count(name, samples_per_pixel)?;
-    let invalid = |reason: String| Err(crate::error::Error::InvalidParameter { name, reason });
-    if !sampler_params(sampler_kind::ZSOBOL, 0, width, height, samples_per_pixel).fits_index() {
-        return invalid(format!(
+    let fits = |samples| sampler_params(sampler_kind::ZSOBOL, 0, width, height, samples).fits_index();
+    if !fits(1) {
+        // Not the sample count's fault: the image's longer side alone overflows the index.
+        let reason = format!(
+            "a {width}×{height} image exceeds the sampler's 32-bit index even at 1 sample per pixel \
+             (2·log2(longer side), rounded up, must be ≤ 32: a side of at most 65536)"
+        );
+        return Err(crate::error::Error::InvalidParameter { name: "width/height", reason });
+    }
+    if !fits(samples_per_pixel) {
+        let reason = format!(
             "{samples_per_pixel} samples per pixel of a {width}×{height} image exceed the sampler's 32-bit \
              index (2·log2(side) + log2(samples), each rounded up, must be ≤ 32)"
-        ));
+        );
+        return Err(crate::error::Error::InvalidParameter { name, reason });
     }
     Ok(())
 }

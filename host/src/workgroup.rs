@@ -59,12 +59,13 @@ impl WorkgroupSizes {
     /// The sizes every kernel's SPIR-V is compiled with: [`WORKGROUP_SIZE`] (64) everywhere.
     pub const COMPILED: WorkgroupSizes = WorkgroupSizes::all(WORKGROUP_SIZE);
 
-    /// The sizes a backend runs unless told otherwise, each stage's fastest as measured: shade
-    /// in workgroups of 256, the others of the compiled 64. On an NVIDIA H100 (README, "Workgroup
-    /// size") shade ran 1.12× as fast in 256 as in 64 on the 512² Cornell box and 1.37× with the
-    /// 20 lights of `builtin:cornell-light-grid` at 1024² (32 and 128 as 64; 512 and 1024
-    /// slower), and lavapipe 1.22× and 1.05×; trace (32–256) and the denoise passes (32, 64,
-    /// 256) were within 4 % of 64 on both.
+    /// The sizes a backend runs unless told otherwise: shade in workgroups of 256, the others
+    /// of the compiled 64. Chosen when shade led in 256: on an NVIDIA H100 (README, "Workgroup
+    /// size") 1.12× as fast as in 64 on the 512² Cornell box and 1.37× with the 20 lights of
+    /// `builtin:cornell-light-grid` at 1024² (512 and 1024 slower), on lavapipe 1.22× and
+    /// 1.05×; trace (32–256) and the denoise passes (32, 64, 256) were within 4 % of 64 on
+    /// both. Since the shade stage's speed-ups the H100 shades within ±5 % in 32–256 (the grid
+    /// 1 % ahead in 256, the 512² box 5 % behind), so 256 costs nothing there.
     pub const PREFERRED: WorkgroupSizes = WorkgroupSizes { shade: 256, ..Self::COMPILED };
 
     /// Every stream stage in workgroups of `size`.

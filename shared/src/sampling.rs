@@ -28,8 +28,9 @@ pub struct SamplerParams {
     /// Seed: different seeds give statistically independent randomizations.
     pub seed: u32,
     /// log₂ of the samples per pixel the frame will take (`ZSOBOL` interleaves the sample index
-    /// below the pixel's Morton code; other kinds ignore it). Sample indices at or past `2^spp_log2`
-    /// wrap onto other pixels' sequences, so set it from the real count.
+    /// below the pixel's Morton code; other kinds ignore it). A sample index at or past
+    /// `2^spp_log2` is merged into the Morton code and repeats another (pixel, sample)'s point,
+    /// so set it from the real count ([`Self::indexes`]; the host refuses such indices).
     pub spp_log2: u32,
     /// log₂ of the power-of-two square covering the image (`ZSOBOL` only):
     /// `ceil(log2(max(width, height)))`. `2·resolution_log2 + spp_log2` must be ≤ 32.
@@ -41,7 +42,19 @@ const _: () = assert!(core::mem::size_of::<SamplerParams>() == 16);
 impl SamplerParams {
     /// Whether the Morton-ordered sample space of a `ZSOBOL` sampler fits its 32-bit index.
     pub fn fits_index(&self) -> bool {
-        2 * self.resolution_log2 + self.spp_log2 <= 32
+        // In u64: fields from outside may be anything, and u32 arithmetic could wrap.
+        2 * u64::from(self.resolution_log2) + u64::from(self.spp_log2) <= 32
+    }
+
+    /// Whether samples `0..sample_count` of every pixel of a `width × height` image each get their
+    /// own point: for `ZSOBOL`, the index fits ([`Self::fits_index`]), the square of side
+    /// `2^resolution_log2` covers the image and `sample_count ≤ 2^spp_log2` — else pixels or
+    /// samples share a Morton index and repeat each other's points. Other kinds index any sample.
+    pub fn indexes(&self, width: u32, height: u32, sample_count: u32) -> bool {
+        self.kind != sampler_kind::ZSOBOL
+            || (self.fits_index()
+                && (1u64 << self.resolution_log2) >= u64::from(width.max(height))
+                && u64::from(sample_count) <= 1u64 << self.spp_log2)
     }
 }
 

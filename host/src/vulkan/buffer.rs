@@ -37,8 +37,13 @@ impl Drop for GpuBuffer {
     }
 }
 
+/// Least alignment, in bytes, of a buffer that has a device address: the largest a device address
+/// input needs (an acceleration structure's instance array, 16 bytes; vertex and index data 4).
+const DEVICE_ADDRESS_ALIGNMENT: u64 = 16;
+
 impl GpuBuffer {
-    /// Creates a buffer of `size` bytes (at least 4, since Vulkan forbids empty buffers).
+    /// Creates a buffer of `size` bytes (at least 4, since Vulkan forbids empty buffers); one with
+    /// a device address starts on a 16-byte boundary.
     pub fn new(
         core: &Arc<Core>,
         size: u64,
@@ -56,7 +61,13 @@ impl GpuBuffer {
         let mut this =
             Self { core: core.clone(), buffer, allocation: None, address: 0, device_local, size, is_counter: false };
         // SAFETY: `buffer` is a live buffer of this device.
-        let requirements = unsafe { core.device.get_buffer_memory_requirements(buffer) };
+        let mut requirements = unsafe { core.device.get_buffer_memory_requirements(buffer) };
+        if wants_address {
+            // Device addresses feed acceleration-structure builds, whose instance and geometry
+            // data must be 16-byte aligned (VUID-vkCmdBuildAccelerationStructuresKHR-pInfos-03715);
+            // the buffer's own memory alignment is not bound to be that large.
+            requirements.alignment = requirements.alignment.max(DEVICE_ADDRESS_ALIGNMENT);
+        }
         let allocation = core
             .allocator
             .lock()

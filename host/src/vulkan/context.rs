@@ -156,7 +156,7 @@ pub struct ContextOptions {
     pub sustain_seconds: f64,
     /// Invocations per workgroup of each 1-D stream stage, for occupancy tuning: each a power of
     /// two among [`DeviceInfo::workgroup_sizes`], else a typed error at open naming the field;
-    /// `None` (the default): the sizes measured fastest, [`WorkgroupSizes::PREFERRED`], as far as
+    /// `None` (the default): the preferred sizes, [`WorkgroupSizes::PREFERRED`], as far as
     /// the device runs them ([`WorkgroupSizes::preferred_on`]).
     pub workgroup_sizes: Option<WorkgroupSizes>,
 }
