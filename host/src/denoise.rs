@@ -26,6 +26,16 @@ pub enum DenoiseMethod {
     None,
 }
 
+/// The TV filter's passes, in order, where it filters (see [`DenoiseMethod::passes`]).
+pub(crate) const TV_PASSES: [DenoisePass; 6] = [
+    DenoisePass::Ratio,
+    DenoisePass::Noise,
+    DenoisePass::NoiseBlur,
+    DenoisePass::BilateralX,
+    DenoisePass::BilateralY,
+    DenoisePass::Composite,
+];
+
 impl DenoiseMethod {
     /// The method's name on the command line and in reports.
     pub fn name(self) -> &'static str {
@@ -43,14 +53,7 @@ impl DenoiseMethod {
         match self {
             Self::None => vec![DenoisePass::Composite],
             Self::Tv if params.tv_filter_is_identity() => Self::None.passes(params),
-            Self::Tv => vec![
-                DenoisePass::Ratio,
-                DenoisePass::Noise,
-                DenoisePass::NoiseBlur,
-                DenoisePass::BilateralX,
-                DenoisePass::BilateralY,
-                DenoisePass::Composite,
-            ],
+            Self::Tv => TV_PASSES.to_vec(),
             Self::Svgf => {
                 let mut passes = vec![DenoisePass::Ratio, DenoisePass::SvgfVariance];
                 let iterations = params.atrous_iterations.clamp(1, MAX_ATROUS_ITERATIONS);

@@ -155,7 +155,11 @@ pub fn copy_probe(params: &DenoiseParams, image: &[Vec4]) -> (Vec<Vec4>, StageRe
 /// Runs `method` on `input` (already checked against `params`): the colour image (rgb, w = 1)
 /// and each pass's wall-clock time.
 pub fn denoise(method: DenoiseMethod, params: &DenoiseParams, input: &DenoiseInput) -> (Vec<Vec4>, Vec<StageReport>) {
-    let passes = method.passes(params);
+    run_passes(method.passes(params), params, input)
+}
+
+/// Runs `passes` in order on `input`: the colour image and each pass's wall-clock time.
+fn run_passes(passes: Vec<DenoisePass>, params: &DenoiseParams, input: &DenoiseInput) -> (Vec<Vec4>, Vec<StageReport>) {
     let mut working = Working::for_passes(&passes, input);
     let timings = passes
         .into_iter()
@@ -166,4 +170,48 @@ pub fn denoise(method: DenoiseMethod, params: &DenoiseParams, input: &DenoiseInp
         })
         .collect();
     (working.color, timings)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::denoise::TV_PASSES;
+    use raywave_kernels::hash::CounterRng;
+
+    /// Where [`DenoiseParams::tv_filter_is_identity`] lets the TV method skip to its composite,
+    /// its full passes give that image bit for bit: coin-flip visibility over a tilted plane,
+    /// U_N varying and sometimes 0, a few pixels without a surface, at N = 4R² samples. One
+    /// sample fewer, they filter.
+    #[test]
+    fn the_tv_passes_leave_the_image_as_it_is_where_the_method_skips_them() {
+        const WIDTH: u32 = 23;
+        const HEIGHT: u32 = 17;
+        let mut rng = CounterRng::new(11);
+        let mut input = DenoiseInput::default();
+        for i in 0..WIDTH * HEIGHT {
+            let (x, y) = ((i % WIDTH) as f32, (i / WIDTH) as f32);
+            let surface = i % 29 != 0;
+            let point = glam::Vec3::new(x - 11.0, y - 8.0, -20.0 - 0.3 * x);
+            let analytic = glam::Vec3::new(0.8, 0.6, 0.3) * (0.5 + rng.next_f32());
+            let unshadowed = if rng.next_f32() < 0.1 { glam::Vec3::ZERO } else { analytic * (0.5 + rng.next_f32()) };
+            let visible = rng.next_f32() < 0.5;
+            input.position.push(if surface { point.extend(point.length()) } else { Vec4::ZERO });
+            input.normal.push(if surface { glam::Vec3::Z.extend(analytic.y) } else { Vec4::ZERO });
+            input.analytic.push(analytic.extend(0.0));
+            input.unshadowed.push(unshadowed.extend(0.0));
+            input.shadowed.push(if visible { unshadowed.extend(0.0) } else { Vec4::ZERO });
+            input.emitted.push(Vec4::new(0.0, 0.1 * (i % 3) as f32, 0.0, 0.0));
+        }
+        let mut params = DenoiseParams { seed: 3, ..DenoiseParams::with_radius(WIDTH, HEIGHT, 4) };
+        params.samples_per_pixel = 4 * params.radius * params.radius;
+        assert!(params.tv_filter_is_identity());
+        assert_eq!(DenoiseMethod::Tv.passes(&params), [DenoisePass::Composite]);
+        let (skipped, _) = denoise(DenoiseMethod::Tv, &params, &input);
+        let (full, reports) = run_passes(TV_PASSES.to_vec(), &params, &input);
+        assert_eq!(full, skipped, "the full passes at N = 4R²");
+        assert!(reports.iter().all(|r| r.sanitized == 0));
+        params.samples_per_pixel -= 1;
+        let (filtered, _) = run_passes(TV_PASSES.to_vec(), &params, &input);
+        assert_ne!(filtered, skipped, "at N = 4R² − 1 the filter works");
+    }
 }

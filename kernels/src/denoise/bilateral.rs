@@ -226,6 +226,17 @@ mod tests {
         let ratio = s.x / u.x;
         assert!((ratio - 0.5).abs() < 0.1, "alternating visibility filters to ≈ 1/2: {ratio}");
         assert!((s.y / u.y - ratio).abs() < 1e-6, "one ratio for every channel");
+        // Unshadowed everywhere under a U_N that varies from pixel to pixel: S_N and U_N weighed
+        // alike filter to the same value, bit for bit (a constant U_N would hide a difference,
+        // normalised weights returning it whatever they are).
+        let mut lit = strip(&[1.0; 41]);
+        for (x, (s, u)) in lit.shadowed.iter_mut().zip(&mut lit.unshadowed).enumerate() {
+            *u *= 0.25 + (x % 7) as f32;
+            *s = *u;
+        }
+        let (s, u) = filter(&lit, 20, 1.0);
+        assert_eq!(s, u, "S_N and U_N weighed alike");
+        assert_ne!(u, lit.unshadowed[20], "the pixel was filtered");
     }
 
     #[test]

@@ -36,14 +36,18 @@ pub const SMALLEST_WEIGHT: f32 = f32::MIN_POSITIVE;
 const DEPTH_SCALE: f32 = 4.0;
 
 /// Tap offsets below this fraction of the centre's depth count as the same point for the plane
-/// stop (the reference's `dist² < 0.001` in metres, made unit-free).
+/// stop, which has no direction to measure there. Much smaller than the reference's
+/// `dist² < 0.001` m² (3.2 cm; 7.9·10⁻³ of the depth at the 4 m of `DEPTH_SCALE`), which at 512²
+/// and 90° skips the plane stop for the taps within two pixels: here it only guards the division
+/// and applies to every other tap (a deviation, kept: the denoiser's measured figures use it).
 const SAME_POINT: f32 = 1.0e-4;
 
 /// The joint bilateral weight of `tap` seen from `center`, in `[0, 1]`: the product of the four
 /// edge stops of the reference code [H-DX, H-CPU], with `weights` = (depth `Wd`, normal `Wn`,
 /// plane `Wp`, analytic `Wa`):
 /// - depth `max(0, 1 − Wd·4·|Δz|/z)` (relative, see `DEPTH_SCALE`);
-/// - normal `max(0, 1 − Wn·(1 − (n_c·n_t)⁴))`;
+/// - normal `max(0, 1 − Wn·(1 − max(0, n_c·n_t)⁴))` — the reference raises `n_c·n_t` itself to
+///   the fourth power, which weighs opposite normals as equal ones; clamped here, they weigh 0;
 /// - plane `max(0, 1 − 2·Wp·max(|dq·n_t|, |dq·n_c|)/|dq|)²` (1 for coincident points);
 /// - analytic `max(0, 1 − 10·Wa·|ΔL|/max(L_c, L_t))` — relative to the luminances so it does not
 ///   depend on the lights' units (the reference uses absolute display-referred values); 1 when

@@ -3,7 +3,12 @@
 //! ratio with the same edge stops as the TV filter so the comparison isolates the noise guide.
 //! A single frame has no temporal history, so the variance is estimated spatially (Falcor's
 //! `SVGFFilterMoments` path for histories shorter than 4 frames): luminance moments over 7×7
-//! bilateral taps, boosted by `4/h` with `h = 1`.
+//! bilateral taps, boosted by `4/h` with `h = 1`. Falcor's path also hands the à-trous
+//! iterations the ratio averaged over those taps; this baseline keeps each measured pixel's own
+//! ratio, which measured better here: the pre-blur, guided by no variance, raised its 1-spp relMSE
+//! at 128² from 2.99·10⁻⁴ to 5.76·10⁻⁴ on the Cornell box (FLIP 0.0129 → 0.0181) and from
+//! 1.66·10⁻³ to 1.87·10⁻³ on the two-light box — so the TV filter is measured against the
+//! stronger variant.
 //!
 //! Pixels whose ratio is the fallback 1 — no sample reached the light, `U_N = 0` — hold no
 //! measurement of their visibility: both passes skip them as taps and fill them from the taps
@@ -38,10 +43,11 @@ const VARIANCE_EPSILON: f32 = 1.0e-10;
 /// that none reaches keeps the fallback.
 pub const NO_ESTIMATE: f32 = -1.0;
 
-/// The smallest sum of à-trous weights that fills a centre without an estimate: 2⁻⁶³, whose
-/// square — the carried variance's divisor — is the smallest normal `f32`. Below it the squared
-/// weights are subnormal, which a GPU may flush where the CPU keeps them; the centre then keeps
-/// no estimate on every backend. (A centre with an estimate weighs 1 itself.)
+/// The smallest sum of weights that fills a centre without an estimate (the moments pass and
+/// the à-trous iterations): 2⁻⁶³, whose square — the carried variance's divisor — is the smallest
+/// normal `f32`. Below it the sums are made of products a GPU may flush as subnormal where the CPU
+/// keeps them; the centre then keeps no estimate on every backend. (A centre with an estimate
+/// weighs 1 itself.)
 pub const SMALLEST_TOTAL: f32 = 1.0 / (1u64 << 63) as f32;
 
 /// Whether a ratio-image entry ([`super::noise::ratio_pixel`]) was measured rather than the
@@ -60,12 +66,15 @@ fn guide_at(position: &[Vec4], normal: &[Vec4], i: usize) -> Guide {
     Guide { position: position[i], normal: normal[i] }
 }
 
-/// The à-trous input of `pixel`: its shadow ratio (rgb, from the ratio image `ratio`) and the
-/// spatial variance of the ratio's luminance (w) — the moments over the 7×7 taps that were
-/// measured ([`super::noise::ratio_pixel`]'s w), weighted by the edge stops, `max(0, m₂ − m₁²)`
-/// times `params.svgf.y` (the history boost). A pixel that was not measured takes those taps'
-/// weighted mean ratio, or keeps the fallback with w = [`NO_ESTIMATE`] where there are none.
-/// Pixels without a surface keep variance 0.
+/// The à-trous input of `pixel` (Falcor's `SVGFFilterMoments` for a history shorter than 4
+/// frames): its shadow ratio (rgb) and the spatial variance of the ratio's luminance (w) — the
+/// moments over the 7×7 taps that were measured ([`super::noise::ratio_pixel`]'s w), weighted by
+/// the edge stops and, from a measured centre, Falcor's luminance stop
+/// `exp(−|l_t − l_c| / phiColor)` (`params.svgf.x`), `max(0, m₂ − m₁²)` times `params.svgf.y` (the
+/// history boost). A measured pixel keeps its own ratio (Falcor's path would average it over the
+/// taps; see the module docs); one that was not takes the taps' mean without the luminance stop,
+/// or keeps the fallback with w = [`NO_ESTIMATE`] where their weights sum below
+/// [`SMALLEST_TOTAL`]. Pixels without a surface keep their ratio and variance 0.
 pub fn ratio_and_variance(
     params: &DenoiseParams,
     pixel: IVec2,
@@ -78,21 +87,25 @@ pub fn ratio_and_variance(
     if !center.is_surface() {
         return ratio[c].xyz().extend(0.0);
     }
+    let center_measured = is_measured(ratio[c]);
+    let l_center = luminance(ratio[c].xyz());
     let (mut mean, mut m1, mut m2, mut total) = (Vec3::ZERO, 0.0, 0.0, 0.0);
     let mut dy = -MOMENTS_RADIUS;
     while dy <= MOMENTS_RADIUS {
         let mut dx = -MOMENTS_RADIUS;
         while dx <= MOMENTS_RADIUS {
             if let Some(t) = params.index_of(pixel + IVec2::new(dx, dy)) {
+                let l = luminance(ratio[t].xyz());
                 let w = if !is_measured(ratio[t]) {
                     0.0
                 } else if t == c {
                     1.0
                 } else {
-                    edge_stop(&center, &guide_at(position, normal, t), params.edge_weights)
+                    let luminance_stop =
+                        if center_measured { (-(l - l_center).abs() / params.svgf.x).exp() } else { 1.0 };
+                    luminance_stop * edge_stop(&center, &guide_at(position, normal, t), params.edge_weights)
                 };
                 if w >= SMALLEST_WEIGHT {
-                    let l = luminance(ratio[t].xyz());
                     mean += w * ratio[t].xyz();
                     m1 += w * l;
                     m2 += w * l * l;
@@ -103,12 +116,12 @@ pub fn ratio_and_variance(
         }
         dy += 1;
     }
-    if total <= 0.0 {
+    if total < SMALLEST_TOTAL {
         return ratio[c].xyz().extend(NO_ESTIMATE);
     }
     let (m1, m2) = (m1 / total, m2 / total);
     let variance = ((m2 - m1 * m1).max(0.0) * params.svgf.y).max(0.0);
-    let value = if is_measured(ratio[c]) { ratio[c].xyz() } else { mean / total };
+    let value = if center_measured { ratio[c].xyz() } else { mean / total };
     value.extend(if variance.is_finite() { variance } else { 0.0 })
 }
 
@@ -186,7 +199,13 @@ pub fn atrous_step(params: &DenoiseParams, pixel: IVec2, ratio: &[Vec4], positio
                 };
                 if w >= SMALLEST_WEIGHT {
                     color += w * ratio[t].xyz();
-                    variance += w * w * ratio[t].w;
+                    // A carried variance below the smallest normal f32 (a weight under 2⁻⁶³, or
+                    // a tiny variance) is subnormal, which a GPU may flush where the CPU keeps
+                    // it: such a term counts as 0 on every backend.
+                    let carried = w * w * ratio[t].w;
+                    if carried >= SMALLEST_WEIGHT {
+                        variance += carried;
+                    }
                     total += w;
                 }
             }
@@ -209,7 +228,7 @@ pub fn atrous_step(params: &DenoiseParams, pixel: IVec2, ratio: &[Vec4], positio
 mod tests {
     use super::*;
     use crate::hash::CounterRng;
-    use raywave_shared::denoise::MAX_RADIUS;
+    use raywave_shared::denoise::{DEFAULT_SVGF_PHI_COLOR, MAX_RADIUS};
     use std::{vec, vec::Vec};
 
     struct Image {
@@ -326,6 +345,32 @@ mod tests {
         lo
     }
 
+    /// The vanishing-weight tests' 5 × 5 à-trous step: every edge weight 1, spacing 1.
+    const VANISHING_PARAMS: DenoiseParams =
+        DenoiseParams { step: 1, edge_weights: Vec4::ONE, ..DenoiseParams::new(5, 5) };
+
+    /// Their centre: depth 1, facing +z, analytic luminance 1.
+    const VANISHING_CENTER: Guide =
+        Guide { position: Vec4::new(0.0, 0.0, 0.0, 1.0), normal: Vec4::new(0.0, 0.0, 1.0, 1.0) };
+
+    /// A tap 0.1 beside [`VANISHING_CENTER`], `depth` quarters deeper, its normal tilted by
+    /// `angle` and its analytic luminance `luminance` higher: each moves one edge stop to 0.
+    fn vanishing_tap(depth: f32, angle: f32, luminance: f32) -> Guide {
+        Guide {
+            position: Vec4::new(0.1, 0.0, 0.0, 1.0 + 0.25 * depth),
+            normal: Vec3::new(0.0, -angle.sin(), angle.cos()).extend(1.0 + luminance),
+        }
+    }
+
+    /// The normal tilt and the luminance step at which the normal and the analytic edge stop of
+    /// [`vanishing_tap`] are each at their smallest positive value (~6·10⁻⁸).
+    fn smallest_normal_and_luminance_stops() -> (f32, f32) {
+        let stop = |g: Guide| edge_stop(&VANISHING_CENTER, &g, VANISHING_PARAMS.edge_weights);
+        let right_angle = core::f32::consts::FRAC_PI_2;
+        let angle = right_angle * last_positive(|t| stop(vanishing_tap(0.0, t * right_angle, 0.0)));
+        (angle, 0.2 * last_positive(|t| stop(vanishing_tap(0.0, 0.0, 0.2 * t))))
+    }
+
     #[test]
     fn a_centre_filled_only_through_vanishing_weights_keeps_no_estimate() {
         // A 5 × 5 image: the centre has no estimate, its diagonal neighbour (B3 kernel 4/9) has
@@ -333,17 +378,11 @@ mod tests {
         // at its smallest positive value (~6·10⁻⁸): with all three its weight, ~10⁻²², sums below
         // 2⁻⁶³ — its square is subnormal, which the CPU keeps and a GPU may flush — and the centre
         // keeps no estimate; with two, ~10⁻¹⁵, it is filled, with a finite variance.
-        let params = DenoiseParams { step: 1, edge_weights: Vec4::ONE, ..DenoiseParams::new(5, 5) };
-        let center = Guide { position: Vec4::new(0.0, 0.0, 0.0, 1.0), normal: Vec4::new(0.0, 0.0, 1.0, 1.0) };
-        let tap = |depth: f32, angle: f32, luminance: f32| Guide {
-            position: Vec4::new(0.1, 0.0, 0.0, 1.0 + 0.25 * depth),
-            normal: Vec3::new(0.0, -angle.sin(), angle.cos()).extend(1.0 + luminance),
-        };
+        let (params, center) = (VANISHING_PARAMS, VANISHING_CENTER);
         let stop = |g: Guide| edge_stop(&center, &g, params.edge_weights);
-        let depth = last_positive(|t| stop(tap(t, 0.0, 0.0)));
-        let angle =
-            core::f32::consts::FRAC_PI_2 * last_positive(|t| stop(tap(0.0, t * core::f32::consts::FRAC_PI_2, 0.0)));
-        let luminance = 0.2 * last_positive(|t| stop(tap(0.0, 0.0, 0.2 * t)));
+        let depth = last_positive(|t| stop(vanishing_tap(t, 0.0, 0.0)));
+        let (angle, luminance) = smallest_normal_and_luminance_stops();
+        let tap = vanishing_tap;
         let run = |g: Guide| {
             let mut position = vec![Vec4::ZERO; 25];
             let mut normal = vec![Vec4::ZERO; 25];
@@ -360,6 +399,52 @@ mod tests {
         let (weight, out) = run(tap(depth, 0.0, luminance));
         assert!(weight * kernel > SMALLEST_TOTAL, "{weight:e}");
         assert!(out.truncate() == Vec3::splat(0.25) && out.w.is_finite() && out.w >= 0.0, "{out}");
+    }
+
+    #[test]
+    fn variances_carried_by_subnormal_squared_weights_count_as_zero() {
+        // The centre of a 5 × 5 image has no estimate; its four edge neighbours (B3 kernel 2/3)
+        // have one and weigh w each, 2⁻⁶⁵ ≤ w < 2⁻⁶³: together enough to fill the centre, while
+        // each w² is subnormal — kept by the CPU, flushed by a GPU that flushes — so the carried
+        // variance is 0 on every backend, not the 0.01/4 the kept squares would give.
+        let (params, center) = (VANISHING_PARAMS, VANISHING_CENTER);
+        let stop = |g: Guide| edge_stop(&center, &g, params.edge_weights);
+        let (angle, luminance) = smallest_normal_and_luminance_stops();
+        let tap = vanishing_tap;
+        let kernel = ATROUS_KERNEL[1] * ATROUS_KERNEL[0];
+        let target = 1.0 / (1u64 << 63) as f32 / 2.0;
+        // The depth at which the tap's weight falls to 2⁻⁶⁴: the last that still reaches it.
+        let depth = last_positive(|t| (stop(tap(t, angle, luminance)) * kernel - target).max(0.0));
+        let g = tap(depth, angle, luminance);
+        let w = stop(g) * kernel;
+        assert!(w >= 0.5 * target && w < 2.0 * target && w * w < f32::MIN_POSITIVE, "{w:e}");
+        assert!(4.0 * w >= SMALLEST_TOTAL, "{w:e}");
+        let mut position = vec![Vec4::ZERO; 25];
+        let mut normal = vec![Vec4::ZERO; 25];
+        let mut ratio = vec![Vec4::new(1.0, 1.0, 1.0, NO_ESTIMATE); 25];
+        (position[12], normal[12]) = (center.position, center.normal);
+        for t in [7, 11, 13, 17] {
+            (position[t], normal[t], ratio[t]) = (g.position, g.normal, Vec4::new(0.25, 0.25, 0.25, 0.01));
+        }
+        let out = atrous_step(&params, IVec2::new(2, 2), &ratio, &position, &normal);
+        assert!((out.truncate() - Vec3::splat(0.25)).abs().max_element() < 1e-6, "filled: {out}");
+        assert_eq!(out.w, 0.0, "no carried variance");
+    }
+
+    #[test]
+    fn the_moments_weigh_taps_by_falcors_luminance_stop_and_a_measured_centre_keeps_its_ratio() {
+        // A 7 × 7 plane lit only at its centre: the 48 other taps pass every edge stop (weight 1)
+        // and Falcor's luminance stop weighs each exp(−|0 − 1| / 10); the centre's own weight is
+        // 1. The luminance moments are then m₁ = m₂ = 1/(1 + 48w), the variance 4·m₁·(1 − m₁);
+        // the centre's ratio stays its own 1.
+        let img = plane(7, 7, |x, y| if (x, y) == (3, 3) { 1.0 } else { 0.0 });
+        let raw = raw_ratio(&img);
+        let out = ratio_and_variance(&img.params, IVec2::new(3, 3), &raw, &img.position, &img.normal);
+        let w = (-1.0f32 / DEFAULT_SVGF_PHI_COLOR).exp();
+        let m1 = 1.0 / (1.0 + 48.0 * w);
+        let variance = 4.0 * m1 * (1.0 - m1);
+        assert_eq!(out.truncate(), Vec3::ONE);
+        assert!((out.w - variance).abs() < 1e-5, "{} vs {variance} (without the stop: 4·48/49²)", out.w);
     }
 
     #[test]
