@@ -1,9 +1,10 @@
 //! The shade stage through the light BVH (more than 8 lights) keeps `U_N` an unbiased estimate of
 //! the analytic `U`: `builtin:cornell-light-grid`, the Cornell box with its light cut into a 4 × 5
-//! grid of coloured lights of different brightness, where every sample's light is chosen by the BVH walk and weighted by its
-//! pmf. A pmf that disagrees with the choice (a wrong trail, a child probability computed twice
-//! differently) biases `U_N` by the disagreement; so does a light the walk can reach with
-//! pmf 0. The built-in scenes (one and two lights) take the linear scan instead.
+//! grid of coloured lights of different brightness, where every sample's light is chosen by the BVH walk and weighted by the
+//! pmf that walk multiplied up. A walk whose branch probabilities do not sum to 1, or that cannot
+//! reach a light, biases `U_N`. (The shade stage never evaluates a pmf from a light's trail; that
+//! the trails give the walk's pmf bit for bit is `raywave-host`'s `lights` unit tests' job.) The
+//! built-in scenes (one and two lights) take the linear scan instead.
 //!
 //! Per pixel, over 512 samples (CPU, fixed seed), the mean of `lum(U_N) − lum(U)` is compared with
 //! its standard error: every pixel's |z| ≤ 5.5 (measured: 3.37 at most over the 817 lit pixels;

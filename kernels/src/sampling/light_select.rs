@@ -37,6 +37,10 @@
 //! probability to 1, and each level rescales the 24-bit sample, so a subtree with pmf ≲ 2⁻²⁴ can
 //! get pmf 0 (pbrt-v4 behaves the same); such a subtree contributes at most ≈ 2⁻²⁴ of the total
 //! bound. [`bvh_pmf`] is exactly the product [`select_bvh`] forms, so MIS weights stay consistent.
+//! The linear scan has the same limit: its target `u·Σ I` moves in steps of 2⁻²⁴ of the total,
+//! so a light whose importance is below that step may fall between two steps and never be
+//! chosen, though [`importance_pmf`] gives it its share; the light missed is at most ≈ 2⁻²⁴ of
+//! the total importance.
 //!
 //! All functions are `no_std`, loop-bounded, allocation- and panic-free, and return finite values:
 //! importances are clamped to `[0,` [`MAX_IMPORTANCE`]`]` so that sums over up to 2³² lights stay

@@ -5,7 +5,7 @@
 //! Sobol' with blue-noise screen-space error). Every function here is a pure function of its
 //! inputs, `no_std`, and the same on the CPU and in SPIR-V.
 //!
-//! - [`sampler`]: `(pixel, sample index, dimension) → [0, 1−2⁻²⁴)²` for the three samplers of
+//! - [`sampler`]: `(pixel, sample index, dimension) → [0, 1−2⁻²⁴]²` for the three samplers of
 //!   [`raywave_shared::sampling::sampler_kind`], built on [`sobol`] and [`owen`].
 //! - [`dims`]: the explicit allocation of sampler dimensions to stages.
 //! - [`warp`]: `[0,1)² →` directions, each with its pdf.

@@ -15,8 +15,10 @@
 //!   each pixel's samples are stratified, pixels are independent.
 //! - `INDEPENDENT`: pcg3d counter hashing, uniform and independent (the baseline).
 //!
-//! Both Sobol' samplers pad to more dimensions with an independent shuffle and scramble per slot,
-//! so every slot's first `2^k` samples of a pixel form a (0,k,2)-net.
+//! Both Sobol' samplers pad to more dimensions with an independent shuffle and scramble per slot.
+//! With `SOBOL` every slot's first `2^k` samples of a pixel form a (0,k,2)-net; with `ZSOBOL` a
+//! pixel's whole `2^spp_log2` samples do, but not every power-of-two prefix of them: its base-4
+//! digits are permuted, so samples {0, 1} of a digit may fall in one half of the square.
 
 use super::owen::{hash_combine, mix_bits, nested_uniform_scramble};
 use super::sobol::{sobol_dimension_0, sobol_dimension_1};
