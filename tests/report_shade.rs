@@ -1,5 +1,6 @@
-//! The shade report's claims on a small image: in unshadowed pixels the ratio estimator is exact
-//! (its error is the reference's residual, ≪ the stochastic error), and over the whole image it
+//! The shade report's claims on a small image: in unshadowed pixels the ratio estimator is nearly
+//! exact (its error is rare rays blocked in pixels that show 99.5–100 % of `U`, plus the
+//! reference's residual: a tenth or less of the stochastic error), and over the whole image it
 //! beats the fully stochastic estimator at 1 and 2 samples per pixel; at 1 spp, in shadowed
 //! pixels, it sits at the visibility floor (the error of any unbiased estimate made of `U` times
 //! one binary visibility sample), which on the Cornell box is above half the stochastic error over
@@ -44,7 +45,9 @@ fn ratio_estimator_is_exact_where_lit_at_the_visibility_floor_in_shadow_and_beat
             eprintln!(
                 "{scene} {spp} spp lit: ratio {lit_ratio:.5} stochastic {lit_stochastic:.5} floor {lit_floor:.5}"
             );
-            assert!(lit_ratio < 0.05 * lit_stochastic, "{scene} {spp} spp lit: {lit_ratio} vs {lit_stochastic}");
+            // A tenth: the rare-event error (above) is 0.0016 ± 0.0008 against 0.048 on the
+            // two-light box at 1 spp — at a twentieth it would pass by about one standard error.
+            assert!(lit_ratio < 0.1 * lit_stochastic, "{scene} {spp} spp lit: {lit_ratio} vs {lit_stochastic}");
         }
     }
     // One light of one colour, where the floor is exact for unbiased estimates: the 1-spp ratio

@@ -84,7 +84,8 @@ impl LitFrameSettings {
 
     /// Checks every setting for a frame on `backend`: [`Self::check`], then the image size
     /// against the backend's limits ([`Backend::check_image_size`]), then the samples per pixel
-    /// for that size ([`check_samples_per_pixel`], named `spp`).
+    /// for that size ([`check_samples_per_pixel`], named `spp`, or `width/height` where the image
+    /// alone overflows the sampler's index).
     pub fn check_on(&self, backend: &dyn Backend) -> Result<()> {
         self.check()?;
         backend.check_image_size(self.width, self.height)?;

@@ -69,8 +69,8 @@ pub mod warp_kind {
     pub const UNIFORM_SPHERE: u32 = 2;
     /// Uniform cone around +z: `a.x` = cos θmax.
     pub const UNIFORM_CONE: u32 = 3;
-    /// Sphere light seen from the origin, sampled in its subtended cone (with the small-angle
-    /// fallback): `a.xyz` = centre, `a.w` = radius.
+    /// Sphere light seen from the origin, sampled uniformly in its subtended cone: `a.xyz` =
+    /// centre, `a.w` = radius.
     pub const SPHERE_LIGHT_CONE: u32 = 4;
     /// Sphere light seen from the origin, sampled uniformly by area over the whole sphere, pdf
     /// converted to solid angle (directions to back-facing points included): `a` as above.

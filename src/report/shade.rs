@@ -5,8 +5,8 @@
 //! reference (the ratio estimate at `reference_spp`, whose `S_N/U_N` has converged; equal to `U`
 //! exactly where nothing is in shadow), then for 1, 2, 4, … 64 samples per pixel the RMSE of the
 //! ratio estimate `U · S_N / U_N` and of the stochastic `S_N` against it — over all pixels, over
-//! shadowed pixels (reference `S/U` below 0.995 in luminance) and over unshadowed ones — averaged
-//! over `reps` independent seeds — and, once per scene, the error of any unbiased estimate made
+//! shadowed pixels (reference `S/U` below 0.995 in luminance) and over unshadowed ones — the root
+//! of the squared error's mean over those pixels and `reps` independent seeds — and, once per scene, the error of any unbiased estimate made
 //! of `U` times one binary visibility sample (the `visibility-floor` lines), which is what the
 //! 1-spp ratio estimate is up to its small bias. Emitters seen directly add the same radiance to
 //! every sample of a fixed surface, so they cancel in the error.

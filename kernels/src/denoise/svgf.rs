@@ -199,11 +199,12 @@ pub fn atrous_step(params: &DenoiseParams, pixel: IVec2, ratio: &[Vec4], positio
                 };
                 if w >= SMALLEST_WEIGHT {
                     color += w * ratio[t].xyz();
-                    // A carried variance below the smallest normal f32 (a weight under 2⁻⁶³, or
-                    // a tiny variance) is subnormal, which a GPU may flush where the CPU keeps
-                    // it: such a term counts as 0 on every backend.
-                    let carried = w * w * ratio[t].w;
-                    if carried >= SMALLEST_WEIGHT {
+                    // A squared weight or carried variance below the smallest normal f32 (a
+                    // weight under 2⁻⁶³, or a tiny variance) is subnormal, which a GPU may flush
+                    // where the CPU keeps it: such a term counts as 0 on every backend.
+                    let squared = w * w;
+                    let carried = squared * ratio[t].w;
+                    if squared >= SMALLEST_WEIGHT && carried >= SMALLEST_WEIGHT {
                         variance += carried;
                     }
                     total += w;
