@@ -7,7 +7,7 @@ use super::line_counter::LineCounter;
 use super::regular_file::read_regular_file;
 use super::{framing_camera, Material, Mesh, Scene, Unrendered, MAX_COORDINATE};
 use crate::error::{Error, Result};
-use glam::Vec3;
+use glam::{DVec3, Vec3};
 use std::cell::RefCell;
 use std::path::{Path, PathBuf};
 
@@ -24,6 +24,7 @@ pub fn load(path: &Path) -> Result<Scene> {
     }
     let text = read_regular_file(path, u64::MAX).map_err(|e| load_error(e.to_string()))?;
     check_vertices_and_indices(&text).map_err(load_error)?;
+    check_polygon_fans(&text).map_err(load_error)?;
     let options = tobj::LoadOptions { triangulate: true, single_index: true, ..Default::default() };
     // tobj reads line by line and stops at its first error, so the reader's line is the one at fault.
     let surfaces = surfaces_only(&text);
@@ -133,19 +134,36 @@ fn surfaces_only(text: &[u8]) -> std::borrow::Cow<'_, [u8]> {
 /// The text of the material library at `path`, or why it cannot be used: the OS's reason, not a
 /// regular file, or the line at fault — one that is not UTF-8 text, or a colour (`Ka`, `Kd`, `Ks`, `Ke`) with
 /// fewer than three numbers, refused here before tobj parses the text: tobj 4.0.5 panics on one
-/// (found by fuzzing the loader).
+/// (found by fuzzing the loader). Also refused, because tobj would drop them without a word: a
+/// property before the first `newmtl` (it belongs to no material), and a material name defined
+/// twice (the later definition would hide the earlier).
 fn read_material_library(path: &Path) -> std::result::Result<String, String> {
     let bytes = read_regular_file(path, u64::MAX).map_err(|e| e.to_string())?;
     let text = String::from_utf8(bytes).map_err(|e| {
         let valid = &e.as_bytes()[..e.utf8_error().valid_up_to()];
         format!("line {}: not UTF-8 text", 1 + valid.iter().filter(|&&b| b == b'\n').count())
     })?;
+    let mut defined: std::collections::HashMap<&str, usize> = std::collections::HashMap::new();
     for (index, line) in text.lines().enumerate() {
         let mut words = line.split_whitespace();
-        if let Some(key @ ("Ka" | "Kd" | "Ks" | "Ke")) = words.next() {
-            if words.count() < 3 {
+        let (key, arguments) = (words.next(), words.count());
+        match key {
+            Some(key @ ("Ka" | "Kd" | "Ks" | "Ke")) if arguments < 3 => {
                 return Err(format!("line {}: `{key}` needs three numbers", index + 1));
             }
+            Some("newmtl") => {
+                let name = line.trim_start()["newmtl".len()..].trim();
+                if let Some(first) = defined.insert(name, index + 1) {
+                    return Err(format!(
+                        "line {}: material `{name}` is defined again (first on line {first})",
+                        index + 1
+                    ));
+                }
+            }
+            Some(key) if defined.is_empty() && !key.starts_with('#') => {
+                return Err(format!("line {}: `{key}` before the first `newmtl` belongs to no material", index + 1));
+            }
+            _ => {}
         }
     }
     Ok(text)
@@ -199,17 +217,13 @@ fn is_see_through(m: &tobj::Material) -> bool {
 ///
 /// Tokens that are not numbers are left to tobj, which reports them.
 fn check_vertices_and_indices(text: &[u8]) -> std::result::Result<(), String> {
-    // Per vertex out of range: its position's number (0-based), line and first bad coordinate.
-    let mut out_of_range: Vec<(i64, usize, f32)> = Vec::new();
+    // Per vertex out of range, by its position's number (0-based): its line and first bad
+    // coordinate. A map, so that checking a million faces against many such vertices stays linear.
+    let mut out_of_range: std::collections::HashMap<i64, (usize, f32)> = std::collections::HashMap::new();
     each_vertex_and_index(text, |line, token| match token {
         ObjToken::Vertex(vertex, words) => {
-            // Read as tobj reads them: a number too large for f32 becomes infinite, and a
-            // fourth number is a `w` that divides the three (`v x y z w`; a zero is its error).
-            let numbers: Vec<f32> = words.split_whitespace().map_while(|word| word.parse().ok()).collect();
-            let w = if numbers.len() == 4 && numbers[3] != 0.0 { numbers[3] } else { 1.0 };
-            let mut coordinates = numbers.iter().take(3).map(|c| c / w);
-            if let Some(c) = coordinates.find(|c| !(c.is_finite() && c.abs() <= MAX_COORDINATE)) {
-                out_of_range.push((vertex, line, c));
+            if let Some(c) = coordinates(words).into_iter().find(|c| !(c.is_finite() && c.abs() <= MAX_COORDINATE)) {
+                out_of_range.insert(vertex, (line, c));
             }
             Ok(())
         }
@@ -220,8 +234,8 @@ fn check_vertices_and_indices(text: &[u8]) -> std::result::Result<(), String> {
     }
     let lines: Vec<&[u8]> = text.split(|&b| b == b'\n').collect();
     each_vertex_and_index(text, |face_line, token| match token {
-        ObjToken::Index { face: true, kind: 0, vertex } => match out_of_range.iter().find(|(v, ..)| *v == vertex) {
-            Some(&(_, line, c)) => Err(format!(
+        ObjToken::Index { face: true, kind: 0, vertex } => match out_of_range.get(&vertex) {
+            Some(&(line, c)) => Err(format!(
                 "line {line}: `{}` has coordinate {c}; each must be finite and within ±{MAX_COORDINATE:e} (the face \
                  on line {face_line} uses it)",
                 String::from_utf8_lossy(lines[line - 1]).trim()
@@ -230,6 +244,65 @@ fn check_vertices_and_indices(text: &[u8]) -> std::result::Result<(), String> {
         },
         _ => Ok(()),
     })
+}
+
+/// The coordinates of a vertex position (`v`) from the words after `v`, read as tobj reads them:
+/// a number too large for `f32` becomes infinite, and a fourth number is a `w` that divides the
+/// three (`v x y z w`; a zero is its error). Fewer than three where the line has fewer numbers.
+fn coordinates(words: &str) -> Vec<f32> {
+    let numbers: Vec<f32> = words.split_whitespace().map_while(|word| word.parse().ok()).collect();
+    let w = if numbers.len() == 4 && numbers[3] != 0.0 { numbers[3] } else { 1.0 };
+    numbers.iter().take(3).map(|c| c / w).collect()
+}
+
+/// Checks that tobj's triangulation of every face of four or more corners in the OBJ `text` is
+/// the face: tobj fans each one out from its first corner, which covers a convex face (or one
+/// whose first corner sees all the others) but fills a concave one's notch with a triangle that
+/// faces backwards — wrong geometry without a word. Each fan triangle's normal must point along
+/// the face's own (Newell's) normal; an error names the face's line. Faces with missing or
+/// unreadable corners are left to tobj and [`check_vertices_and_indices`].
+fn check_polygon_fans(text: &[u8]) -> std::result::Result<(), String> {
+    let mut positions: Vec<Option<DVec3>> = Vec::new();
+    // Faces of four or more corners (the position numbers), with their lines.
+    let mut polygons: Vec<(usize, Vec<i64>)> = Vec::new();
+    each_vertex_and_index(text, |line, token| {
+        match token {
+            ObjToken::Vertex(_, words) => positions.push(match coordinates(words)[..] {
+                [x, y, z] => Some(DVec3::new(x.into(), y.into(), z.into())),
+                _ => None,
+            }),
+            ObjToken::Index { face: true, kind: 0, vertex } => match polygons.last_mut() {
+                Some((face_line, corners)) if *face_line == line => corners.push(vertex),
+                _ => {
+                    if polygons.last().is_some_and(|(_, corners)| corners.len() < 4) {
+                        polygons.pop();
+                    }
+                    polygons.push((line, vec![vertex]));
+                }
+            },
+            _ => {}
+        }
+        Ok(())
+    })?;
+    for (line, corners) in polygons.iter().filter(|(_, corners)| corners.len() >= 4) {
+        let corner = |&v: &i64| usize::try_from(v).ok().and_then(|v| positions.get(v).copied().flatten());
+        let Some(points) = corners.iter().map(corner).collect::<Option<Vec<DVec3>>>() else { continue };
+        let n = points.len();
+        let normal: DVec3 = (0..n).map(|i| points[i].cross(points[(i + 1) % n])).sum();
+        let folds = (1..n - 1).any(|i| {
+            let fan = (points[i] - points[0]).cross(points[i + 1] - points[0]);
+            // A little below 0 still counts as collinear corners, not as a fold.
+            fan.dot(normal) < -1e-9 * fan.length() * normal.length()
+        });
+        if folds {
+            return Err(format!(
+                "line {line}: this {n}-cornered face is not convex where it is split into triangles from its \
+                 first corner, which would fill its notch with a backward-facing triangle; split it into \
+                 triangles or convex faces"
+            ));
+        }
+    }
+    Ok(())
 }
 
 /// What [`each_vertex_and_index`] hands on.
@@ -343,7 +416,9 @@ fn mtl_material(m: &tobj::Material) -> std::result::Result<Material, String> {
             .map(|v| v.trim().parse::<f32>().map_err(|_| format!("`{key} {v}` is not a number")))
             .transpose()
     };
-    let roughness = pbr("Pr")?.or_else(|| m.shininess.map(|ns| (2.0 / (ns.max(0.0) + 2.0)).sqrt().sqrt()));
+    // A NaN `Ns` stays NaN (`max` would turn it into 0, a roughness of 1), which the check refuses.
+    let from_exponent = |ns: f32| if ns.is_nan() { ns } else { (2.0 / (ns.max(0.0) + 2.0)).sqrt().sqrt() };
+    let roughness = pbr("Pr")?.or_else(|| m.shininess.map(from_exponent));
     let material = Material {
         base_color: m.diffuse.map_or(DEFAULT_ALBEDO, Vec3::from_array),
         roughness: roughness.unwrap_or(1.0),
@@ -514,11 +589,21 @@ mod tests {
             ("newmtl floor\nKa\n", "scene.mtl: line 2: `Ka` needs three numbers"),
             ("newmtl floor\nKs 1 2 x\n", "scene.mtl: line 2: material"),
             ("newmtl floor\n\nNs many\n", "scene.mtl: line 3: material"),
+            // tobj would drop these without a word: a lamp's `Ke` before its `newmtl`, and a
+            // second `lamp` hiding the first.
+            ("# lamp\nKe 10 10 10\nnewmtl lamp\n", "scene.mtl: line 2: `Ke` before the first `newmtl`"),
+            (
+                "newmtl lamp\nKe 5 5 5\nnewmtl  lamp \nKd 1 1 1\n",
+                "line 3: material `lamp` is defined again (first on line 1)",
+            ),
         ] {
             std::fs::write(&library, text).unwrap();
             let err = load(&path).unwrap_err().to_string();
             assert!(err.contains("material library") && err.contains(expected), "{text:?}: {err}");
         }
+        std::fs::write(&library, "newmtl floor\nNs nan\nnewmtl lamp\nnewmtl metal\n").unwrap();
+        let err = load(&path).unwrap_err().to_string();
+        assert!(err.contains("scene.mtl: material `floor`: Pr (or Ns): has NaN"), "{err}");
         for (not_a_file, expected) in [("/dev/zero", "/dev/zero: not a regular file"), (".", "/.: not a regular file")]
         {
             let scene = dir.path().join("device.obj");
@@ -601,6 +686,25 @@ mod tests {
         std::fs::write(&path, format!("{square}l 1 2\nf 1 2 x\n")).unwrap();
         let err = load(&path).unwrap_err().to_string();
         assert!(err.contains("line 8: face parse error"), "{err}");
+    }
+
+    #[test]
+    fn faces_that_a_fan_would_triangulate_wrongly_are_refused() {
+        // A square with a notch at its fourth corner: the fan from corner 1 makes (1, 2, 3),
+        // twice the face's area, and a backward triangle (1, 3, 4) inside it.
+        let notched = "v 0 0 0\nv 2 0 0\nv 2 2 0\nv 1.5 0.5 0\nf 1 2 3 4\n";
+        let err = load(obj_file(notched).path()).unwrap_err().to_string();
+        assert!(err.contains("line 5: this 4-cornered face is not convex"), "{err}");
+        // The same corners from the notch: every fan triangle faces the same way — it is the face.
+        let from_the_notch = "v 0 0 0\nv 2 0 0\nv 2 2 0\nv 1.5 0.5 0\nf 4 1 2 3\n";
+        assert_eq!(load(obj_file(from_the_notch).path()).unwrap().triangle_count(), 2);
+        // Convex faces, a pentagon far from the origin with three collinear corners, a face that
+        // refers to corners defined after it, and quads wound either way all load.
+        let convex = "v 1e5 0 0\nv 100002 0 0\nv 100004 0 0\nv 100004 2 0\nv 1e5 2 0\nf 1 2 3 4 5\nf 5 4 3 2 1\n";
+        // (The first fan's triangle (1, 2, 3) is degenerate and dropped; the reversed face's are not.)
+        assert_eq!(load(obj_file(convex).path()).unwrap().triangle_count(), 2 + 3);
+        let forward = "f 1 2 3 4\nv 0 0 1\nv 1 0 1\nv 1 1 1\nv 0 1 1\n";
+        assert_eq!(load(obj_file(forward).path()).unwrap().triangle_count(), 2);
     }
 
     #[test]
