@@ -262,14 +262,16 @@ fn coordinates(words: &str) -> Vec<f32> {
 /// the face's own (Newell's) normal; an error names the face's line. Faces with missing or
 /// unreadable corners are left to tobj and [`check_vertices_and_indices`].
 fn check_polygon_fans(text: &[u8]) -> std::result::Result<(), String> {
-    let mut positions: Vec<Option<DVec3>> = Vec::new();
+    // Every vertex position as tobj keeps it (f32, 12 bytes each); NaN where a line has fewer
+    // than three numbers.
+    let mut positions: Vec<Vec3> = Vec::new();
     // Faces of four or more corners (the position numbers), with their lines.
     let mut polygons: Vec<(usize, Vec<i64>)> = Vec::new();
     each_vertex_and_index(text, |line, token| {
         match token {
             ObjToken::Vertex(_, words) => positions.push(match coordinates(words)[..] {
-                [x, y, z] => Some(DVec3::new(x.into(), y.into(), z.into())),
-                _ => None,
+                [x, y, z] => Vec3::new(x, y, z),
+                _ => Vec3::NAN,
             }),
             ObjToken::Index { face: true, kind: 0, vertex } => match polygons.last_mut() {
                 Some((face_line, corners)) if *face_line == line => corners.push(vertex),
@@ -285,7 +287,10 @@ fn check_polygon_fans(text: &[u8]) -> std::result::Result<(), String> {
         Ok(())
     })?;
     for (line, corners) in polygons.iter().filter(|(_, corners)| corners.len() >= 4) {
-        let corner = |&v: &i64| usize::try_from(v).ok().and_then(|v| positions.get(v).copied().flatten());
+        let corner = |&v: &i64| {
+            let position = positions.get(usize::try_from(v).ok()?)?;
+            position.is_finite().then(|| position.as_dvec3())
+        };
         let Some(points) = corners.iter().map(corner).collect::<Option<Vec<DVec3>>>() else { continue };
         let n = points.len();
         let normal: DVec3 = (0..n).map(|i| points[i].cross(points[(i + 1) % n])).sum();
