@@ -5,7 +5,7 @@
 
 use super::line_counter::LineCounter;
 use super::regular_file::read_regular_file;
-use super::{framing_camera, Material, Mesh, Scene, Unrendered, MAX_COORDINATE};
+use super::{framing_camera, Material, Mesh, Scene, Unrendered, MAX_COORDINATE, MAX_TRIANGLES, MAX_VERTICES};
 use crate::error::{Error, Result};
 use glam::{DVec3, Vec3};
 use std::cell::RefCell;
@@ -23,6 +23,7 @@ pub fn load(path: &Path) -> Result<Scene> {
         return Err(load_error("is a directory".into()));
     }
     let text = read_regular_file(path, u64::MAX).map_err(|e| load_error(e.to_string()))?;
+    check_size(path, &text, MAX_VERTICES, MAX_TRIANGLES)?;
     check_vertices_and_indices(&text).map_err(load_error)?;
     check_polygon_fans(&text).map_err(load_error)?;
     let options = tobj::LoadOptions { triangulate: true, single_index: true, ..Default::default() };
@@ -244,6 +245,38 @@ fn check_vertices_and_indices(text: &[u8]) -> std::result::Result<(), String> {
         },
         _ => Ok(()),
     })
+}
+
+/// Refuses, with [`Error::SceneTooLarge`], an OBJ `text` (read from `path`) of more vertex
+/// positions (`v` lines) than `max_positions` or more triangles than `max_triangles` — a face of
+/// `n` corners makes `n − 2`, as tobj's fan splits it — before tobj or the other checks build
+/// them: a 600 MB face line of 3·10⁸ corners had tobj allocate gigabytes of indices until memory
+/// ran out, where a glTF file that large is counted first. An index that names no vertex data
+/// is an [`Error::SceneLoad`] (see [`each_vertex_and_index`]).
+fn check_size(path: &Path, text: &[u8], max_positions: usize, max_triangles: usize) -> Result<()> {
+    let (mut positions, mut triangles, mut face) = (0usize, 0usize, (0usize, 0usize));
+    each_vertex_and_index(text, |line, token| {
+        match token {
+            ObjToken::Vertex(..) => positions += 1,
+            ObjToken::Index { face: true, kind: 0, .. } if face.0 == line => face.1 += 1,
+            ObjToken::Index { face: true, kind: 0, .. } => {
+                triangles += face.1.saturating_sub(2);
+                face = (line, 1);
+            }
+            ObjToken::Index { .. } => {}
+        }
+        Ok(())
+    })
+    .map_err(|message| Error::SceneLoad { path: path.to_owned(), message })?;
+    triangles += face.1.saturating_sub(2);
+    let too_many = |count: usize, limit: usize, what: &str| {
+        (count > limit).then(|| Error::SceneTooLarge {
+            scene: path.display().to_string(),
+            what: format!("its {count} {what} exceed {limit}"),
+        })
+    };
+    let refusal = too_many(positions, max_positions, "vertex positions");
+    refusal.or_else(|| too_many(triangles, max_triangles, "triangles")).map_or(Ok(()), Err)
 }
 
 /// The coordinates of a vertex position (`v`) from the words after `v`, read as tobj reads them:
@@ -773,6 +806,28 @@ mod tests {
         assert_eq!(load(unused.path()).unwrap().triangle_count(), 1);
         let f = obj_file("v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n");
         assert!(matches!(load(f.path()).unwrap_err(), Error::EmptyScene { dropped_degenerate: 1, .. }));
+    }
+
+    #[test]
+    fn files_over_the_size_limits_are_refused_before_they_are_built() {
+        // 5 positions; a triangle, a quad and a pentagon (1 + 2 + 3 triangles), a polyline (none),
+        // and the corners of a face given with texture and normal indices counted once.
+        let text = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 2 0\nvt 0 0\nvn 0 0 1\n\
+                    f 1 2 3\nf 1/1/1 2/1/1 3/1/1 4/1/1\nl 1 2 3 4 5\nf 1 2 3 5 4\n";
+        let f = obj_file(text);
+        let check = |positions, triangles| check_size(f.path(), text.as_bytes(), positions, triangles);
+        assert!(check(5, 6).is_ok());
+        let scene = f.path().display().to_string();
+        for (limits, what) in [((4, 6), "its 5 vertex positions exceed 4"), ((5, 5), "its 6 triangles exceed 5")] {
+            match check(limits.0, limits.1) {
+                Err(Error::SceneTooLarge { scene: s, what: w }) => assert_eq!((s, w.as_str()), (scene.clone(), what)),
+                other => panic!("{limits:?}: expected SceneTooLarge, got {other:?}"),
+            }
+        }
+        // The count walks the faces, so an index naming no vertex is refused there, by line.
+        let bad = "v 0 0 0\nf 1 2 0\n";
+        let err = check_size(f.path(), bad.as_bytes(), 5, 6).unwrap_err();
+        assert!(matches!(err, Error::SceneLoad { .. }) && err.to_string().contains("line 2:"), "{err}");
     }
 
     #[test]
