@@ -8,7 +8,8 @@
 //! axis, see [`SUBDIVISIONS`]), cells expecting fewer than
 //! [`MIN_EXPECTED`] samples are pooled, and Pearson's statistic `Σ (O − E)²/E` is compared with
 //! the χ² distribution with `cells − 1` degrees of freedom (statrs). A warp and its pdf agree when
-//! the p-value is not tiny (the tests use p > 0.01 at a fixed seed), and the summed cell
+//! the p-value is not tiny (the warp tests reject below a Šidák-corrected threshold over all their
+//! domains, at fixed seeds), and the summed cell
 //! integrals (`pdf_integral`) must be ≈ 1.
 //!
 //! Two domains: the unit sphere, cut into equal-area cells in `(cos θ, φ)`
@@ -39,13 +40,17 @@ pub struct ChiSquare {
     /// Degrees of freedom: cells after pooling − 1.
     pub dof: u32,
     /// Probability that a χ² variable with `dof` degrees of freedom exceeds `statistic`
-    /// (`1 − CDF`); small values reject the hypothesis that the samples follow the pdf.
+    /// (`1 − CDF`); small values reject the hypothesis that the samples follow the pdf. 0 where
+    /// the statistic is infinite (samples in a cell, or pool, that expects none), and NaN where
+    /// pooling left a single cell (`dof` 0): the counts cannot test the pdf, so a check
+    /// `p_value > α` fails rather than passing without power.
     pub p_value: f64,
     /// Integral of the pdf over the domain: the summed cell integrals (≈ 1 for a normalized pdf
     /// whose support lies in the domain).
     pub pdf_integral: f64,
     /// Samples that fell outside the domain (not finite, zero length, outside `[0,1]²`); they are
-    /// not part of the statistic, so callers should assert on this count.
+    /// not counted in any cell while the expected counts take `N` with them, which inflates the
+    /// statistic, so callers should assert that there are none.
     pub outside: u64,
     /// Samples in cells whose integrated pdf is exactly 0. They join the pool of small cells;
     /// callers decide how many are plausible: a cell that a support boundary crosses may get 0
@@ -59,7 +64,7 @@ impl core::fmt::Display for ChiSquare {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         write!(
             f,
-            "χ² = {:.1}, dof = {}, p = {:.4}, ∫pdf = {:.6}, outside = {}, in zero cells = {}",
+            "χ² = {:.1}, dof = {}, p = {:.3e}, ∫pdf = {:.6}, outside = {}, in zero cells = {}",
             self.statistic, self.dof, self.p_value, self.pdf_integral, self.outside, self.zero_expected_samples
         )
     }
@@ -92,7 +97,8 @@ impl Histogram {
 /// order of expectation and merged until the pool reaches [`MIN_EXPECTED`]; a final pool still
 /// below it is merged into the smallest cell kept. Cells expecting exactly 0 add their samples to
 /// the pool and count them in `zero_expected_samples` (see there); empty ones are ignored.
-/// `pdf_integral` is `Σ expected / Σ observed` and `outside` is 0.
+/// `pdf_integral` is `Σ expected / Σ observed` and `outside` is 0. See
+/// [`ChiSquare::p_value`] for a statistic that is infinite or a single cell left.
 pub fn chi_square_counts(observed: &[u64], expected: &[f64]) -> ChiSquare {
     let total: u64 = observed.iter().sum();
     let expected_total: f64 = expected.iter().sum();
@@ -144,7 +150,13 @@ pub fn chi_square_counts(observed: &[u64], expected: &[f64]) -> ChiSquare {
         })
         .sum();
     let dof = cells.len().saturating_sub(1) as u32;
-    let p_value = if dof == 0 { 1.0 } else { ChiSquared::new(dof as f64).map(|d| d.sf(statistic)).unwrap_or(f64::NAN) };
+    let p_value = if statistic == f64::INFINITY {
+        0.0
+    } else if dof == 0 {
+        f64::NAN
+    } else {
+        ChiSquared::new(dof as f64).map(|d| d.sf(statistic)).unwrap_or(f64::NAN)
+    };
     ChiSquare { statistic, dof, p_value, pdf_integral, outside: 0, zero_expected_samples }
 }
 
@@ -382,5 +394,12 @@ mod tests {
         // Cells with nothing expected and nothing observed are ignored.
         let r = chi_square_counts(&[0, 10, 10], &[0.0, 10.0, 10.0]);
         assert_eq!(r.dof, 1);
+        // Pooled into a single cell, the counts cannot test the pdf: not a pass, even where they
+        // plainly contradict it (every sample where nothing is expected: χ² = ∞; or 100 where
+        // the one pool expects 4: χ² = 96²/4).
+        for (observed, expected) in [(&[10u64][..], &[0.0][..]), (&[100, 0], &[0.0, 4.0]), (&[3, 2], &[2.5, 2.5])] {
+            let r = chi_square_counts(observed, expected);
+            assert!(r.dof == 0 && (r.p_value.is_nan() || r.p_value <= 0.01), "{observed:?} against {expected:?}: {r}");
+        }
     }
 }

@@ -6,15 +6,16 @@
 //! - exactly two triangles that share one edge, the parallelogram's diagonal (shared corners are
 //!   matched by position within the tolerance, so duplicated vertices, as non-indexed glTF
 //!   primitives have, still match);
-//! - the corner of the second triangle off the diagonal lies on the first triangle's plane, and
-//!   the four corners form a parallelogram (`p + q = s₀ + s₁` for the off-diagonal corners `p`, `q`
-//!   and the diagonal's ends `s₀`, `s₁`, i.e. opposite edges are equal);
+//! - the four corners form a parallelogram (`p + q = s₀ + s₁` for the off-diagonal corners `p`,
+//!   `q` and the diagonal's ends `s₀`, `s₁`, i.e. opposite edges are equal), which also puts `q`
+//!   on the first triangle's plane;
 //! - both triangles wind the same way, so the mesh has one front face.
 //!
 //! Tolerance: `1e-4 · d + 16 ε · m`, with `d` the longest distance between the six triangle
 //! corners, `m` their largest absolute coordinate and `ε` the `f32` machine epsilon: a relative
 //! error of 10⁻⁴ in the shape, plus the rounding of vertices far from the origin (transformed glTF
-//! positions). The checks run in `f64`.
+//! positions); at most a quarter of the shortest triangle edge, so that no corner is within it of
+//! two others. The checks run in `f64`.
 //!
 //! **Orientation.** The light's corner is the first triangle's corner off the diagonal, `p`; its
 //! edges run from `p` to the triangle's next and previous corners in the triangle's own order.
@@ -100,22 +101,13 @@ pub(super) fn parallelogram(mesh: &Mesh) -> Option<Parallelogram> {
     let shortest_edge =
         [ad, bd].iter().flat_map(|t| (0..3).map(move |i| t[i].distance(t[(i + 1) % 3]))).fold(f64::INFINITY, f64::min);
     let tolerance = (RELATIVE_TOLERANCE * diameter + ROUNDING_SLACK * magnitude).min(0.25 * shortest_edge);
-    if !tolerance.is_finite() {
-        return None;
-    }
 
-    // Match the first triangle's corners to the second's: exactly two shared corners, each with
-    // exactly one partner, two different partners.
-    let mut partner = [None; 3];
-    for (i, p) in ad.iter().enumerate() {
-        let mut near = (0..3).filter(|&j| p.distance(bd[j]) <= tolerance);
-        partner[i] = near.next();
-        if near.next().is_some() {
-            return None;
-        }
-    }
+    // Match the first triangle's corners to the second's: exactly two shared corners. Two corners
+    // of a triangle lie at least the shortest edge apart, more than twice the tolerance, so no
+    // corner has two partners and no two corners share one.
+    let partner = ad.map(|p| (0..3).find(|&j| p.distance(bd[j]) <= tolerance));
     let shared: Vec<usize> = partner.iter().flatten().copied().collect();
-    if shared.len() != 2 || shared[0] == shared[1] {
+    if shared.len() != 2 {
         return None;
     }
     let off_a = partner.iter().position(Option::is_none)?;
@@ -128,9 +120,10 @@ pub(super) fn parallelogram(mesh: &Mesh) -> Option<Parallelogram> {
     let second_normal = (bd[1] - bd[0]).cross(bd[2] - bd[0]);
     let unit = normal.try_normalize()?;
     let consistent = unit.dot(second_normal.try_normalize()?) > 0.0;
-    let planar = (q - p).dot(unit).abs() <= tolerance;
+    // Also puts `q` on the first triangle's plane: `q − p = (x − p) + (y − p) − (x + y − p − q)`,
+    // whose first two terms lie in it.
     let parallelogram = (x + y - p - q).length() <= tolerance;
-    if !(consistent && planar && parallelogram) {
+    if !(consistent && parallelogram) {
         return None;
     }
 
