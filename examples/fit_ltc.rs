@@ -83,7 +83,7 @@ fn print_errors(table: &ltc_fit::LtcTable) {
     let mut inner: Vec<f64> = table.cells.iter().filter(|c| c.t <= 56).map(|c| c.rel_l1_error).collect();
     inner.sort_by(f64::total_cmp);
     println!(
-        "cells with cos θ ≥ 0.21 (col ≤ 56): median {:.4}, p90 {:.4}, max {:.4}",
+        "cells with cos θ ≥ 0.2099 (col ≤ 56): median {:.4}, p90 {:.4}, max {:.4}",
         inner[inner.len() / 2],
         inner[inner.len() * 9 / 10],
         inner[inner.len() - 1]

@@ -116,8 +116,11 @@
 //!
 //! Cells sit **at** `i/63` (the corners of a bilinear patch, ltc_code's texel centres), so the
 //! run-time lookup is `s = clamp(r, 0, 1)·63`, `u = clamp(sqrt(1 − saturate(n·v)), 0, 1)·63`,
-//! bilinear between `floor` and `floor + 1` (clamped to 62 and 63). On a GPU texture that is
-//! `uv = coord·(63/64) + 0.5/64` with `coord = (r, x)`.
+//! between `floor` and `floor + 1` (clamped to 62 and 63). On a GPU texture those cells are the
+//! texels at `uv = coord·(63/64) + 0.5/64` with `coord = (r, x)`, but its bilinear filter is a
+//! plain blend of the entries, which leaves seams where neighbouring cells store their two lobes
+//! in the other order: fetch the four cells and blend them lobe by lobe as
+//! `raywave_kernels::shade::ltc::lookup` does (above).
 //!
 //! Per cell, three `Vec4`s:
 //! * `LTC_MATRIX[i] = (m⁻¹₀₀, m⁻¹₂₀, m⁻¹₀₂, m⁻¹₂₂)` — the four non-trivial entries of the first
@@ -223,13 +226,15 @@ impl Ggx {
     }
 
     /// Smith's `Λ(ω) = (√(1 + α² tan² θ) − 1)/2` for `cos θ = z > 0`, written as
-    /// `ε/(2(1 + √(1 + ε)))` with `ε = α² tan² θ` to avoid cancellation.
+    /// `ε/(2(1 + √(1 + ε)))` with `ε = α² tan² θ` to avoid cancellation. `z²` is floored at
+    /// the smallest normal `f64`, as the kernels' `smith_lambda` floors it in `f32`: a direction
+    /// a hair above the horizon (`z < 10⁻¹⁶¹`, `z²` underflowing to 0) gets a huge `Λ`, not ∞/∞.
     pub fn lambda(alpha: f64, z: f64) -> f64 {
         if z >= 1.0 {
             return 0.0;
         }
         let z2 = z * z;
-        let eps = alpha * alpha * (1.0 - z2) / z2;
+        let eps = alpha * alpha * (1.0 - z2) / z2.max(f64::MIN_POSITIVE);
         eps / (2.0 * (1.0 + (1.0 + eps).sqrt()))
     }
 
@@ -542,15 +547,24 @@ fn minimize_with_restarts<const D: usize>(
 
 /// Downhill simplex (Nelder & Mead 1965) with the standard coefficients (reflection 1, expansion
 /// 2, contraction ½, shrink ½), starting from `start` and `start + step·eᵢ`. Stops when
-/// `2|f_hi − f_lo| ≤ tol·(|f_hi| + |f_lo|)` (the Numerical Recipes criterion) or after
-/// `max_iters` iterations.
+/// `2|f_hi − f_lo| ≤ tol·(|f_hi| + |f_lo|)` with `f_hi` finite (the Numerical Recipes criterion),
+/// when the simplex's values are equal (also all +∞), or after `max_iters` iterations. A NaN value counts as +∞,
+/// the worst: a NaN start had stayed first in the order and been returned as the minimum.
 pub fn nelder_mead<const D: usize>(
-    mut f: impl FnMut(&[f64; D]) -> f64,
+    mut objective: impl FnMut(&[f64; D]) -> f64,
     start: [f64; D],
     step: f64,
     tol: f64,
     max_iters: usize,
 ) -> Minimum<D> {
+    let mut f = |p: &[f64; D]| {
+        let value = objective(p);
+        if value.is_nan() {
+            f64::INFINITY
+        } else {
+            value
+        }
+    };
     let mut pts: Vec<[f64; D]> = (0..=D)
         .map(|i| {
             let mut p = start;
@@ -564,13 +578,14 @@ pub fn nelder_mead<const D: usize>(
     let mut evals = D + 1;
     let along = |o: &[f64; D], p: &[f64; D], c: f64| -> [f64; D] { core::array::from_fn(|k| o[k] + c * (o[k] - p[k])) };
     for _ in 0..max_iters {
-        // Order: best first, worst last (NaN counts as worst).
+        // Order: best first, worst last.
         let mut order: Vec<usize> = (0..=D).collect();
-        order.sort_by(|&i, &j| vals[i].partial_cmp(&vals[j]).unwrap_or(std::cmp::Ordering::Greater));
+        order.sort_by(|&i, &j| vals[i].total_cmp(&vals[j]));
         pts = order.iter().map(|&i| pts[i]).collect();
         vals = order.iter().map(|&i| vals[i]).collect();
         let (lo, hi) = (vals[0], vals[D]);
-        if 2.0 * (hi - lo).abs() <= tol * (hi.abs() + lo.abs()) {
+        // An infinite worst value passes the relative test (∞ ≤ ∞) without converging.
+        if hi == lo || (hi.is_finite() && 2.0 * (hi - lo).abs() <= tol * (hi.abs() + lo.abs())) {
             break;
         }
         let centroid: [f64; D] = core::array::from_fn(|k| pts[..D].iter().map(|p| p[k]).sum::<f64>() / D as f64);
@@ -1120,7 +1135,8 @@ pub fn packed_table_source(c: &FitConfig, table: PackedTable<'_>) -> String {
 //! `raywave_host::ltc_fit` for the details.
 //!
 //! Layout: `index = row·{n} + col` (row = roughness `a`, col = view `t`), values at `i/63`; look up
-//! with `s = r·63`, `u = sqrt(1 − n·v)·63`, bilinearly.
+//! with `s = r·63`, `u = sqrt(1 − n·v)·63` between the four cells around, lobe by lobe as
+//! `raywave_kernels::shade::ltc::lookup` blends them (a texture's bilinear filter leaves seams).
 //! * `LTC_MATRIX[i]`, `LTC_MATRIX_2[i] = (m⁻¹₀₀, m⁻¹₂₀, m⁻¹₀₂, m⁻¹₂₂)` of the two lobes' inverse
 //!   transforms normalized to `m⁻¹₁₁ = 1`: `M⁻¹ = Mat3::from_cols(vec3(x, 0, y), Vec3::Y,
 //!   vec3(z, 0, w))` in the frame (`normalize(v − n(n·v))`, `n × x`, `n`).
@@ -1432,7 +1448,8 @@ mod tests {
         let smooth = lobe_moments(&Ggx::new(MIN_ALPHA, DVec3::Z), 64).magnitude;
         assert!((smooth - 1.0).abs() < 1e-6, "{smooth}");
         // Known value: at α = 1, D = 1/π, so the albedo at normal incidence is
-        // ∫ cos/(4π(1 + Λ(l))) dl = ½∫₀¹ μ/(1 + Λ(μ))... = 0.30685 (1-D quadrature, below).
+        // ∫ cos/(4π(1 + Λ(l))) dl = ½∫₀¹ 1/(1 + Λ(μ)) dμ = ∫₀¹ μ/(1 + μ) dμ = 1 − ln 2 = 0.30685
+        // (1-D quadrature, below).
         let n = 200_000;
         let one_d: f64 = (0..n)
             .map(|i| {
@@ -1491,7 +1508,7 @@ mod tests {
     fn fitted_lobes_keep_their_mass_above_the_horizon() {
         // The LTC's mass below the surface is lost to the horizon clipping of `U`. Fitting the
         // frame angle keeps it small: measured over every third cell (FIT_VERSION 4), mean 0.3 %,
-        // 90th percentile 1.0 %, at most 1.3 % for cos θ ≥ 0.21 (col ≤ 56) (the single-lobe
+        // 90th percentile 1.0 %, at most 1.3 % for cos θ ≥ 0.2099 (col ≤ 56) (the single-lobe
         // FIT_VERSION 2: 0.25 %, 0.8 %, 1.2 %). ltc_code's fixed average-direction frame
         // (FIT_VERSION 1) left 2.1 %, 6.7 % and 10 %.
         let n = 64;
@@ -1556,6 +1573,18 @@ mod tests {
         let rosen = |p: &[f64; 2]| (1.0 - p[0]).powi(2) + 100.0 * (p[1] - p[0] * p[0]).powi(2);
         let m = nelder_mead(rosen, [-1.2, 1.0], 0.1, 1e-14, 2000);
         assert!((m.x[0] - 1.0).abs() < 1e-4 && (m.x[1] - 1.0).abs() < 1e-4, "{m:?}");
+    }
+
+    #[test]
+    fn nelder_mead_takes_nan_as_the_worst_value() {
+        // NaN at the start: it had stayed first in the order, so the search ran every iteration
+        // (its stop test NaN) and returned the start.
+        let nan_at_start = |p: &[f64; 1]| if p[0] == 0.0 { f64::NAN } else { (p[0] - 1.0 / 3.0).powi(2) };
+        let m = nelder_mead(nan_at_start, [0.0], 0.1, 1e-12, 400);
+        assert!(m.value.is_finite() && (m.x[0] - 1.0 / 3.0).abs() < 1e-4, "{m:?}");
+        // Nowhere finite: it stops at once instead of shrinking for every iteration.
+        let m = nelder_mead(|_: &[f64; 2]| f64::NAN, [0.0, 0.0], 0.1, 1e-12, 400);
+        assert_eq!((m.value, m.evals), (f64::INFINITY, 3));
     }
 
     #[test]

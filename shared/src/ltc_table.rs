@@ -13,7 +13,8 @@
 //! `raywave_host::ltc_fit` for the details.
 //!
 //! Layout: `index = row·64 + col` (row = roughness `a`, col = view `t`), values at `i/63`; look up
-//! with `s = r·63`, `u = sqrt(1 − n·v)·63`, bilinearly.
+//! with `s = r·63`, `u = sqrt(1 − n·v)·63` between the four cells around, lobe by lobe as
+//! `raywave_kernels::shade::ltc::lookup` blends them (a texture's bilinear filter leaves seams).
 //! * `LTC_MATRIX[i]`, `LTC_MATRIX_2[i] = (m⁻¹₀₀, m⁻¹₂₀, m⁻¹₀₂, m⁻¹₂₂)` of the two lobes' inverse
 //!   transforms normalized to `m⁻¹₁₁ = 1`: `M⁻¹ = Mat3::from_cols(vec3(x, 0, y), Vec3::Y,
 //!   vec3(z, 0, w))` in the frame (`normalize(v − n(n·v))`, `n × x`, `n`).

@@ -129,7 +129,8 @@ pub fn lookup(table: &[Vec4], roughness: f32, cos_theta_v: f32) -> LtcLobe {
     LtcLobe {
         inv_m: inverse(first),
         inv_m_2: inverse(second),
-        weight: blend.first_mass,
+        // The f32 sum of the four corners' masses: 1 + 2⁻²³ where all four store w = 1.
+        weight: blend.first_mass.clamp(0.0, 1.0),
         magnitude: amplitude.x,
         fresnel: amplitude.y,
     }
@@ -409,6 +410,19 @@ mod tests {
         let form_factor = f64::from(lobe_form_factors(&lobe, None, quad).1);
         let sigma = (form_factor * (1.0 - form_factor) / f64::from(n)).sqrt();
         assert!((fraction - form_factor).abs() < 4.0 * sigma, "{fraction} vs {form_factor} ± {sigma}");
+    }
+
+    #[test]
+    fn mixture_weights_stay_within_zero_and_one() {
+        // Where all four cells store w = 1 (the smoothest rows), the f32 sum of the masses had
+        // come to 1 + 2⁻²³, and the second lobe's weight 1 − w below 0.
+        let table = table();
+        assert_eq!(lookup(&table, 0.004_762_004_6, 0.899_067_7).weight, 1.0);
+        for i in 0..4000 {
+            let (roughness, t) = ((i % 200) as f32 / 199.0 * 4.0 / 63.0, (i / 200) as f32 / 19.0);
+            let weight = lookup(&table, roughness, 1.0 - t * t).weight;
+            assert!((0.0..=1.0).contains(&weight), "({roughness}, {t}): {weight}");
+        }
     }
 
     #[test]
