@@ -292,7 +292,8 @@ struct RenderArgs {
     /// Also write the HDR image (linear RGB, 32-bit float OpenEXR).
     #[arg(long)]
     exr: Option<PathBuf>,
-    /// Also write the fully stochastic image (S_N without the ratio) as PNG, for comparison.
+    /// Also write the fully stochastic image (emitted radiance + S_N, without the ratio) as PNG,
+    /// for comparison.
     #[arg(long)]
     stochastic: Option<PathBuf>,
     /// Denoiser of the shadow ratio: `tv` (seed 000's TV-guided joint bilateral filter), `svgf`

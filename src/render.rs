@@ -7,7 +7,6 @@ use crate::{open_backend, Backend, BackendOptions, DeviceChoice, Result, Scene, 
 use glam::Vec3;
 use image::{ImageFormat, RgbImage};
 use raywave_host::denoise::DenoiseMethod;
-use raywave_host::frame::check_samples_per_pixel;
 use raywave_host::lit_frame::{render_lit, LitFrameSettings};
 use raywave_host::scene::Unrendered;
 use raywave_host::shading::{ShadeAccumulator, ShadeData};
@@ -17,7 +16,8 @@ use std::path::PathBuf;
 /// What the image shows.
 #[derive(Copy, Clone, Debug, PartialEq, Eq)]
 pub enum RenderView {
-    /// Direct lighting from the scene's quad lights with soft shadows: `U · S_N / U_N`.
+    /// Direct lighting from the scene's quad lights with soft shadows: the emitted radiance plus
+    /// `U · S_N / U_N`, the ratio denoised (`--denoise`).
     Lit,
     /// The geometry: face-forward normals darkened with depth (one sample per pixel).
     Normals,
@@ -64,7 +64,8 @@ pub struct RenderOptions {
     pub out: PathBuf,
     /// Also write the HDR image (linear RGB, 32-bit float OpenEXR) here.
     pub exr: Option<PathBuf>,
-    /// Also write the fully stochastic image (`S_N`, no ratio) as PNG here, for comparison.
+    /// Also write the fully stochastic image (emitted radiance + `S_N`, no ratio) as PNG here,
+    /// for comparison.
     pub stochastic: Option<PathBuf>,
     /// The denoiser of the shadow ratio ([`DenoiseMethod::Tv`] by default;
     /// [`DenoiseMethod::None`] composites the raw `U · S_N/U_N`).
@@ -190,9 +191,9 @@ pub fn render(options: &RenderOptions) -> Result<RenderReport> {
         backend_options.sustain_seconds = backend_options.sustain_seconds.max(SUSTAIN_SECONDS);
     }
     let mut backend = open_backend(options.device, &backend_options)?;
-    backend.check_image_size(options.width, options.height)?;
-    // The view's frame has one sample for the normals, but `--spp` is checked for either.
-    check_samples_per_pixel("spp", options.width, options.height, options.spp)?;
+    // The view's frame: its size on this backend, and its samples (one for the normals view,
+    // whatever `--spp` says) for its sampler.
+    options.frame_settings().check_on(backend.as_ref())?;
     backend.load_scene(&scene)?;
     let settings = options.frame_settings();
     let data = if options.view == RenderView::Lit {
@@ -219,7 +220,7 @@ pub fn render(options: &RenderOptions) -> Result<RenderReport> {
         unrendered: scene.unrendered(),
         samples_per_pixel: settings.samples_per_pixel,
         hits: rendered.hits,
-        stream_bytes_per_pixel: rendered.stream_bytes / u64::from(options.width * options.height),
+        stream_bytes_per_pixel: rendered.stream_bytes / (u64::from(options.width) * u64::from(options.height)),
         timings: rendered.timings,
         warm_up_seconds,
     };

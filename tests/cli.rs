@@ -612,6 +612,16 @@ fn lit_render_writes_png_exr_and_stochastic_images() {
     assert!((sum_corrected / sum_plain - 1.0).abs() < 0.02, "{sum_corrected} vs {sum_plain}");
     let (out, normals) = render(dir.path(), "normals.png", &["--device", "cpu", "--view", "normals"]);
     assert!(out.status.success() && image::open(&normals).is_ok(), "{}", stderr(&out));
+    // The sample index limits only what the frame draws: the normals view's one sample (not the
+    // default `--spp 4`, which a lit 65536-wide frame exceeds), and only the blue-noise sampler's
+    // Morton index (`sobol` indexes a 70000-wide frame).
+    for (name, extra) in [
+        ("wide-normals.png", &["--view", "normals", "--width", "65536", "--height", "1"][..]),
+        ("wide-sobol.png", &["--sampler", "sobol", "--spp", "1", "--width", "70000", "--height", "1"]),
+    ] {
+        let (out, path) = render(dir.path(), name, &[&["--device", "cpu"][..], extra].concat());
+        assert!(out.status.success() && image::open(&path).is_ok(), "{name}: {}", stderr(&out));
+    }
 }
 
 #[test]

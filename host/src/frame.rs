@@ -43,19 +43,21 @@ pub fn check_sample_count(name: &'static str, samples_per_pixel: u32) -> crate::
     }
 }
 
-/// Checks a sample count per pixel for a `width × height` frame: within
-/// `1..=`[`MAX_SAMPLES_PER_PIXEL`], and the Morton-ordered sample space (image side and count
-/// rounded up to powers of two, [`SamplerParams::fits_index`]) within the sampler's 32-bit index,
-/// beyond which sample indices would wrap and repeat. `name` is the option's name for the error;
-/// an image whose longer side alone overflows the index (above 65536) is named `width/height`.
+/// Checks a sample count per pixel for a `width × height` frame drawn by the sampler of `kind`
+/// (one of [`sampler_kind`]): within `1..=`[`MAX_SAMPLES_PER_PIXEL`], and, for the blue-noise `ZSOBOL`
+/// sampler, its Morton-ordered sample space (image side and count rounded up to powers of two,
+/// [`SamplerParams::indexes`]) within the 32-bit index, beyond which sample indices would wrap
+/// and repeat; the other kinds index any sample. `name` is the option's name for the error; an
+/// image whose longer side alone overflows the index (above 65536) is named `width/height`.
 pub fn check_samples_per_pixel(
     name: &'static str,
+    kind: u32,
     width: u32,
     height: u32,
     samples_per_pixel: u32,
 ) -> crate::error::Result<()> {
     check_sample_count(name, samples_per_pixel)?;
-    let fits = |samples| sampler_params(sampler_kind::ZSOBOL, 0, width, height, samples).fits_index();
+    let fits = |samples| sampler_params(kind, 0, width, height, samples).indexes(width, height, samples);
     if !fits(1) {
         // Not the sample count's fault: the image's longer side alone overflows the index.
         let reason = format!(

@@ -89,7 +89,7 @@ impl LitFrameSettings {
     pub fn check_on(&self, backend: &dyn Backend) -> Result<()> {
         self.check()?;
         backend.check_image_size(self.width, self.height)?;
-        check_samples_per_pixel("spp", self.width, self.height, self.samples_per_pixel)
+        check_samples_per_pixel("spp", self.sampler_kind, self.width, self.height, self.samples_per_pixel)
     }
 
     /// The sampler of this frame's samples.
@@ -277,6 +277,14 @@ mod tests {
         assert!(matches!(empty, Err(Error::ImageSize { width: 0, .. })), "{empty:?}");
         assert_eq!(rejected_setting(LitFrameSettings { samples_per_pixel: 0, ..good }), "spp");
         assert_eq!(rejected_setting(LitFrameSettings::new(4096, 4096, 1024)), "spp");
+        assert_eq!(rejected_setting(LitFrameSettings::new(65537, 1, 1)), "width/height");
+        // Only the blue-noise sampler's Morton index limits the samples: the others index any.
+        for sampler_kind in [sampler_kind::SOBOL, sampler_kind::INDEPENDENT] {
+            for (width, height, spp) in [(4096, 4096, 1024), (65537, 1, 1)] {
+                let settings = LitFrameSettings { sampler_kind, ..LitFrameSettings::new(width, height, spp) };
+                settings.check_on(&CpuBackend::new()).unwrap();
+            }
+        }
         assert_eq!(rejected_setting(LitFrameSettings { sampler_kind: sampler_kind::COUNT, ..good }), "sampler");
         assert_eq!(rejected_setting(LitFrameSettings { denoise_radius: Some(0), ..good }), "denoise-radius");
         for lens_radius in [-1.0, f32::NAN, 2.0 * MAX_LENS_DISTANCE] {
@@ -312,7 +320,7 @@ mod tests {
     }
 
     #[test]
-    fn samples_count_hits_and_resolve_the_first_sample() {
+    fn samples_count_hits_resolve_the_first_sample_and_draw_their_own_points() {
         let scene = Scene::load("builtin:cornell").unwrap();
         let data = ShadeData::new(&scene).unwrap();
         let mut cpu = CpuBackend::new();
@@ -327,5 +335,23 @@ mod tests {
         let stages: Vec<_> = samples.timings.iter().map(|t| t.stage).collect();
         assert_eq!(stages, ["generate", "trace", "shade", "occlusion"]);
         assert!(samples.timings.iter().all(|t| t.dispatches == 3 && t.sanitized == 0));
+
+        // Each sample draws its own camera rays and shadow rays: the sums are those of passes
+        // rendered and shaded with their own sample indices, which a pass that repeated another's
+        // index in generate or in shade would not match.
+        let mut expected = ShadeAccumulator::new(16 * 12);
+        for index in 0..3 {
+            let rendered = cpu.render(&settings.generate_params(&scene, index)).unwrap();
+            let params = data.params(settings.sampler(), 16, 12, index);
+            expected.shade_pass(&mut cpu, &params, &data, &rendered.rays, &rendered.hits).unwrap();
+        }
+        let frame = &samples.accumulator;
+        assert_eq!((frame.analytic(), frame.unshadowed()), (expected.analytic(), expected.unshadowed()));
+        assert_eq!(frame.shadowed(), expected.shadowed());
+        // And the passes differ: the same index three times would give every sum three equal terms.
+        let mut repeated = ShadeAccumulator::new(16 * 12);
+        let params = data.params(settings.sampler(), 16, 12, 0);
+        repeated.shade_pass(&mut cpu, &params, &data, &first.rays, &first.hits).unwrap();
+        assert_ne!(frame.unshadowed(), repeated.unshadowed());
     }
 }

@@ -80,7 +80,8 @@ impl SceneReportOptions {
             return invalid("reference-spp", reason);
         }
         check_resolution(self.resolution)?;
-        crate::frame::check_samples_per_pixel("reference-spp", self.resolution, self.resolution, self.reference_spp)
+        let (kind, resolution) = (crate::shared::sampling::sampler_kind::ZSOBOL, self.resolution);
+        crate::frame::check_samples_per_pixel("reference-spp", kind, resolution, resolution, self.reference_spp)
     }
 
     /// Loads every scene before any is measured, so that a bad name or a scene the report cannot
@@ -133,7 +134,8 @@ pub fn check_resolution(resolution: u32) -> crate::Result<()> {
     if (4..=1024).contains(&resolution) {
         Ok(())
     } else {
-        Err(crate::Error::InvalidParameter { name: "resolution", reason: "must be within 4..=1024".into() })
+        let reason = format!("{resolution} is outside 4..=1024");
+        Err(crate::Error::InvalidParameter { name: "resolution", reason })
     }
 }
 
