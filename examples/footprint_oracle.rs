@@ -81,7 +81,10 @@ fn measure(args: &Args, name: &str, scene: &Scene) -> raywave::Result<()> {
     let mut backend = CpuBackend::new();
     let side = args.resolution;
     let prepared = PreparedScene::new(&mut backend, scene, side)?;
-    let reference = prepared.reference(&mut backend, args.reference_spp)?;
+    let (reference, sanitized) = prepared.reference(&mut backend, args.reference_spp)?;
+    if sanitized > 0 {
+        eprintln!("warning: {name}: the reference's stages replaced {sanitized} non-finite value(s)");
+    }
     let regions = ShadowRegions::new(&prepared.analytic, &reference);
     let blocks = tiles(&regions.shadow, side, args.tile);
     // Candidates: no filter, then R = 1 … MAX_RADIUS.

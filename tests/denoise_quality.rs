@@ -403,7 +403,8 @@ fn reference(backend: &mut CpuBackend, prepared: &PreparedScene, scene_name: &st
         }
     }
     let start = Instant::now();
-    let image = prepared.reference(backend, REFERENCE_SPP).expect("reference");
+    let (image, sanitized) = prepared.reference(backend, REFERENCE_SPP).expect("reference");
+    assert_eq!(sanitized, 0, "{scene_name}: the reference's stages replaced values");
     eprintln!("{scene_name}: reference at {REFERENCE_SPP} spp took {:.1} s", start.elapsed().as_secs_f64());
     let bytes: Vec<u8> = image.iter().flat_map(|c| c.to_array()).flat_map(f32::to_le_bytes).collect();
     let partial = path.with_extension(format!("{}.partial", std::process::id()));

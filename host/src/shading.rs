@@ -36,7 +36,8 @@ pub struct ShadeData {
     pub light_nodes: Vec<LightBvhNode>,
     /// Per light, its trail in the BVH (empty without a BVH).
     pub light_trails: Vec<u32>,
-    /// The LTC table: matrices then amplitudes.
+    /// The LTC table: first-lobe matrices, second-lobe matrices, then amplitudes
+    /// ([`LTC_TABLE_LEN`] entries).
     pub ltc: Vec<Vec4>,
     /// Three vertices per triangle, instances one after the other.
     pub triangles: Vec<Vec4>,
@@ -104,7 +105,7 @@ impl ShadeData {
     /// Checks what the shade stage assumes of this data, whose fields are public so that an
     /// engine can adjust what [`ShadeData::new`] laid out before the value's first `shade` (a
     /// device backend uploads them then; later changes need a new `ShadeData`: see its upload
-    /// note): each material in the ranges [`Scene::new`] enforces and one per instance, the
+    /// note): each material in the ranges [`Scene::new`] enforces and at least one per instance, the
     /// lights valid ([`crate::lights::validate_lights`]) and quads, a trail per light where
     /// there is a light BVH, the LTC table complete ([`LTC_TABLE_LEN`] entries), three vertices
     /// per triangle and the instances' first triangles ascending within them. Every backend's
@@ -142,7 +143,7 @@ impl ShadeData {
         }
         if self.materials.len() < self.first_triangle.len() {
             let reason = format!(
-                "{} materials for {} instances (one per instance)",
+                "{} materials for {} instances (at least one per instance)",
                 self.materials.len(),
                 self.first_triangle.len()
             );
@@ -331,7 +332,10 @@ impl ShadeAccumulator {
     }
 
     /// Adds one pass: its shade stream and the occlusion of its shadow rays (1 = blocked), both
-    /// one record per pixel of this accumulator (an error otherwise, and nothing is added).
+    /// one record per pixel of this accumulator, with `U`, `U_N` and the emitted radiance finite
+    /// and ≥ 0 as the shade stage writes them (an error otherwise, naming the first record at
+    /// fault, and nothing is added: a NaN `U_N` had turned into a fully lit ratio pixel and a
+    /// black stochastic one without a word).
     pub fn add(&mut self, shades: &ShadeStream, occluded: &[u32]) -> Result<()> {
         shades.check("accumulate")?;
         let pixels = self.analytic.len();
@@ -342,6 +346,14 @@ impl ShadeAccumulator {
                 occluded.len()
             );
             return Err(Error::InvalidParameter { name: "accumulate", reason });
+        }
+        let fields = [("analytic", &shades.analytic), ("unshadowed", &shades.unshadowed), ("emitted", &shades.emitted)];
+        for (field, values) in fields {
+            let unsound = |v: &Vec4| !(v.xyz().is_finite() && v.xyz().min_element() >= 0.0);
+            if let Some(record) = values.par_iter().position_first(unsound) {
+                let reason = format!("shade record {record}: {field} {} is not finite and ≥ 0", values[record].xyz());
+                return Err(Error::InvalidParameter { name: "accumulate", reason });
+            }
         }
         self.samples += 1;
         // Each pixel on its own, in parallel: a serial loop over 96 bytes a pixel was the slowest
@@ -397,10 +409,14 @@ impl ShadeAccumulator {
         self.mean(&self.emitted)
     }
 
-    /// The ratio estimator's image: `emitted + U · S_N / U_N` (fallback `U` where `U_N ≈ 0`).
-    pub fn ratio_image(&self) -> Vec<Vec3> {
+    /// The ratio estimator's image: `emitted + U · S_N / U_N` (fallback `U` where `U_N ≈ 0`),
+    /// and how many pixels [`composite`] replaced by their emitted radiance because the sum
+    /// overflowed `f32` (never for scenes' values, which [`crate::scene::MAX_EMISSION`] bounds).
+    pub fn ratio_image(&self) -> (Vec<Vec3>, u64) {
         let (u, u_n, s_n, e) = (self.analytic(), self.unshadowed(), self.shadowed(), self.emitted());
-        (0..u.len()).map(|i| composite(u[i], u_n[i], s_n[i], e[i]).value).collect()
+        let pixels: Vec<_> = (0..u.len()).map(|i| composite(u[i], u_n[i], s_n[i], e[i])).collect();
+        let replaced = pixels.iter().filter(|p| p.replaced).count() as u64;
+        (pixels.into_iter().map(|p| p.value).collect(), replaced)
     }
 
     /// The fully stochastic image: `emitted + S_N`.
@@ -468,5 +484,32 @@ mod tests {
         assert_eq!(accumulator.emitted(), [e, e]);
         let f32_mean = (0..samples).fold(Vec3::ZERO, |sum, _| sum + u) / samples as f32;
         assert_ne!(f32_mean, u, "the f32 sum this replaced rounds off");
+    }
+
+    #[test]
+    fn the_accumulator_refuses_unsound_records_and_counts_replaced_composites() {
+        let mut shades = ShadeStream::zeroed(3);
+        shades.analytic.fill(Vec4::new(1.0, 1.0, 1.0, 0.0));
+        shades.unshadowed.fill(Vec4::new(0.5, 0.5, 0.5, 0.0));
+        let mut accumulator = ShadeAccumulator::new(3);
+        for (field, value) in [("unshadowed", f32::NAN), ("analytic", -1.0), ("emitted", f32::INFINITY)] {
+            let mut bad = shades.clone();
+            let values = match field {
+                "unshadowed" => &mut bad.unshadowed,
+                "analytic" => &mut bad.analytic,
+                _ => &mut bad.emitted,
+            };
+            values[2].y = value;
+            let err = accumulator.add(&bad, &[0; 3]).unwrap_err().to_string();
+            assert!(err.contains(&format!("shade record 2: {field}")), "{err}");
+            assert_eq!(accumulator.samples(), 0, "nothing added");
+        }
+        // Finite values whose composite `U·S_N/U_N + E` overflows: replaced, and counted.
+        shades.analytic[1] = Vec4::new(3e38, 1.0, 1.0, 0.0);
+        shades.emitted[1] = Vec4::new(3e38, 0.0, 0.0, 0.0);
+        accumulator.add(&shades, &[0; 3]).unwrap();
+        let (image, replaced) = accumulator.ratio_image();
+        assert_eq!(replaced, 1);
+        assert!(image.iter().all(|c| c.is_finite()), "{image:?}");
     }
 }

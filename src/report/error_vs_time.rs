@@ -176,9 +176,11 @@ impl PreparedScene {
     }
 
     /// The converged image: the ratio estimate at `spp` samples per pixel (seed fixed apart from
-    /// every measured run's).
-    pub fn reference(&self, backend: &mut dyn Backend, spp: u32) -> Result<Vec<Vec3>> {
-        Ok(accumulate(backend, &self.gbuffer, &self.data, self.resolution, spp, 0xfeed)?.0.ratio_image())
+    /// every measured run's), and the values its stages sanitized or its composite replaced.
+    pub fn reference(&self, backend: &mut dyn Backend, spp: u32) -> Result<(Vec<Vec3>, u64)> {
+        let (run, _) = accumulate(backend, &self.gbuffer, &self.data, self.resolution, spp, 0xfeed)?;
+        let (image, replaced) = run.ratio_image();
+        Ok((image, self.gbuffer.sanitized + run.sanitized() + replaced))
     }
 
     /// Switches `backend` to benchmark mode (50 ms of back-to-back dispatches per timed
@@ -302,7 +304,8 @@ pub fn report_error_vs_time(
             denoise_radius: options.radius(),
             ..PreparedScene::new(backend, &scene, report.resolution)?
         };
-        let reference = prepared.reference(backend, report.reference_spp)?;
+        let (reference, sanitized) = prepared.reference(backend, report.reference_spp)?;
+        super::warn_if_sanitized(name, report.reference_spp, sanitized);
         let warm_up_seconds =
             options.settle_seconds.map(|settle| prepared.settle(backend, &scene, settle)).transpose()?;
         let seeds: Vec<u32> = (0..report.reps).collect();

@@ -261,7 +261,10 @@ pub fn shadow_sample(
 }
 
 /// The image of `estimator` with `spp` samples per pixel (row-major `resolution²` pixels, 0 where
-/// every camera ray misses) for repetition seed `seed`, on `backend` holding `scene`.
+/// every camera ray misses) for repetition seed `seed`, on `backend` holding `scene`, and how
+/// many values went non-finite on the way: those the stages sanitized, and samples whose weight
+/// is not finite, which add nothing (a NaN weight had failed `weight > 0`, so its ray came back
+/// unblocked and made the pixel NaN).
 pub fn estimate_image(
     backend: &mut dyn Backend,
     scene: &Scene,
@@ -269,14 +272,16 @@ pub fn estimate_image(
     spp: u32,
     seed: u32,
     resolution: u32,
-) -> Result<Vec<f32>> {
+) -> Result<(Vec<f32>, u64)> {
     let lights = lights_for(estimator.strategy);
     let sampler_params = crate::frame::sampler_params(estimator.sampler, seed, resolution, resolution, spp);
     let mut image = vec![0.0f32; (resolution * resolution) as usize];
+    let mut sanitized = 0;
     for sample_index in 0..spp {
         let params = crate::frame::generate_params_with(scene, resolution, resolution, sample_index, sampler_params);
-        let (camera_rays, _) = backend.generate(&params)?;
-        let points = scenes::shading_points(scene, backend, &camera_rays)?;
+        let (camera_rays, generated) = backend.generate(&params)?;
+        let (points, traced) = scenes::shading_points(scene, backend, &camera_rays)?;
+        sanitized += generated.sanitized + traced;
         let samples: Vec<ShadowSample> = points
             .par_iter()
             .map(|point| {
@@ -293,18 +298,22 @@ pub fn estimate_image(
             rays.direction[i] = if s.weight > 0.0 { s.direction.extend(s.tmax) } else { Vec4::new(0.0, 0.0, 1.0, 0.0) };
             rays.pixel[i] = point.pixel;
         }
-        let (occluded, _) = backend.trace_occlusion(&rays)?;
+        let (occluded, occlusion) = backend.trace_occlusion(&rays)?;
+        sanitized += occlusion.sanitized;
         for ((point, s), &blocked) in points.iter().zip(&samples).zip(&occluded) {
-            if blocked == 0 {
+            if !s.weight.is_finite() {
+                sanitized += 1;
+            } else if blocked == 0 {
                 image[point.pixel as usize] += s.weight / spp as f32;
             }
         }
     }
-    Ok(image)
+    Ok((image, sanitized))
 }
 
 /// Runs `estimator` for `reps` repetitions (seeds `seed_base + r`) and returns its moments, the
-/// repetitions dealt into the jackknife's groups.
+/// repetitions dealt into the jackknife's groups, and the values that went non-finite
+/// ([`estimate_image`]).
 pub fn moments(
     backend: &mut dyn Backend,
     scene: &Scene,
@@ -312,12 +321,15 @@ pub fn moments(
     spp: u32,
     options: &SamplingReportOptions,
     seed_base: u32,
-) -> Result<GroupedMoments> {
+) -> Result<(GroupedMoments, u64)> {
     let mut moments = GroupedMoments::new((options.resolution * options.resolution) as usize, options.reps);
+    let mut sanitized = 0;
     for rep in 0..options.reps {
-        moments.add(rep, &estimate_image(backend, scene, estimator, spp, seed_base + rep, options.resolution)?);
+        let (image, replaced) = estimate_image(backend, scene, estimator, spp, seed_base + rep, options.resolution)?;
+        moments.add(rep, &image);
+        sanitized += replaced;
     }
-    Ok(moments)
+    Ok((moments, sanitized))
 }
 
 /// One measured case with the better estimator's per-pixel mean (a converged reference for the
@@ -327,6 +339,8 @@ pub struct CaseMeasurement {
     pub result: CaseResult,
     /// Per-pixel mean of the better estimator over all repetitions.
     pub reference: Vec<f64>,
+    /// Values that went non-finite in either estimator's images ([`estimate_image`]).
+    pub sanitized: u64,
 }
 
 /// Measures one case on `backend`, whose loaded scene must be `scene`.
@@ -336,11 +350,20 @@ pub fn measure_case(
     case: &Case,
     options: &SamplingReportOptions,
 ) -> Result<CaseMeasurement> {
-    let worse_moments = moments(backend, scene, &case.worse, case.spp, options, 0)?;
-    let better_moments = moments(backend, scene, &case.better, case.spp, options, 1 << 20)?;
+    let (worse_moments, worse_sanitized) = moments(backend, scene, &case.worse, case.spp, options, 0)?;
+    let (better_moments, better_sanitized) = moments(backend, scene, &case.better, case.spp, options, 1 << 20)?;
     let (worse_pooled, better_pooled) = (worse_moments.pooled(), better_moments.pooled());
     let (worse, better) = (worse_pooled.mean_variance(), better_pooled.mean_variance());
-    let ratio = worse / better.max(f64::MIN_POSITIVE);
+    if better.is_nan() || better <= 0.0 {
+        // The ratio would be infinite, or meaningless if the worse variance is 0 too.
+        let reason = format!(
+            "case {}: the better estimator's variance is {better} at {}² pixels, so no variance ratio can be \
+             measured; take a larger resolution",
+            case.name, options.resolution
+        );
+        return Err(crate::Error::InvalidParameter { name: "resolution", reason });
+    }
+    let ratio = worse / better;
     let interval = variance_ratio_interval(&worse_moments, &better_moments);
     let result = CaseResult {
         case: case.name,
@@ -355,7 +378,11 @@ pub fn measure_case(
         rays_for_equal_error: f64::from(case.spp) * ratio,
         pixels: (options.resolution * options.resolution) as usize,
     };
-    Ok(CaseMeasurement { result, reference: better_pooled.mean().to_vec() })
+    Ok(CaseMeasurement {
+        result,
+        reference: better_pooled.mean().to_vec(),
+        sanitized: worse_sanitized + better_sanitized,
+    })
 }
 
 /// The screen-space error spectrum of one sampler.
@@ -378,11 +405,13 @@ impl crate::output_line::OutputLine for SpectrumResult {
         crate::output_line::json_object(self)
     }
 
-    /// The low-frequency power and the spectrum in eight bands.
+    /// The low-frequency power and the spectrum in eight bands of rings 1 ..= resolution/2 (ring
+    /// 0, the mean, is ≈ 0 once the error's mean is removed, and had pulled the first band low).
     fn row(&self) -> String {
-        let bands: Vec<String> = self
-            .radial_power
-            .chunks(self.radial_power.len().div_ceil(8).max(1))
+        let rings = self.radial_power.get(1..).unwrap_or_default();
+        let bands: Vec<String> = (0..8)
+            .map(|b| &rings[b * rings.len() / 8..(b + 1) * rings.len() / 8])
+            .filter(|band| !band.is_empty())
             .map(|band| format!("{:.2}", band.iter().sum::<f64>() / band.len() as f64))
             .collect();
         format!(
@@ -399,20 +428,23 @@ impl crate::output_line::OutputLine for SpectrumResult {
 pub const SPECTRUM_IMAGES: u32 = 32;
 
 /// The radially averaged power spectrum of the 1-spp error image (estimate − `reference`) of the
-/// `case.better` strategy under each sampler kind, over [`SPECTRUM_IMAGES`] seeds.
+/// `case.better` strategy under each sampler kind, over [`SPECTRUM_IMAGES`] seeds, and the values
+/// that went non-finite in those images ([`estimate_image`]).
 pub fn error_spectra(
     backend: &mut dyn Backend,
     scene: &Scene,
     case: &Case,
     measured: &CaseMeasurement,
     resolution: u32,
-) -> Result<Vec<SpectrumResult>> {
+) -> Result<(Vec<SpectrumResult>, u64)> {
     let mut results = Vec::new();
+    let mut sanitized = 0;
     for kind in 0..sampler_kind::COUNT {
         let estimator = Estimator { sampler: kind, ..case.better };
         let mut spectrum = super::spectrum::PowerSpectrum::new(resolution as usize);
         for seed in 0..SPECTRUM_IMAGES {
-            let estimate = estimate_image(backend, scene, &estimator, 1, seed, resolution)?;
+            let (estimate, replaced) = estimate_image(backend, scene, &estimator, 1, seed, resolution)?;
+            sanitized += replaced;
             let error: Vec<f64> = estimate
                 .iter()
                 .zip(&measured.reference)
@@ -428,7 +460,7 @@ pub fn error_spectra(
             radial_power: spectrum.radial_average(),
         });
     }
-    Ok(results)
+    Ok((results, sanitized))
 }
 
 /// One printed line of the report.
@@ -451,9 +483,12 @@ pub fn report_sampling(
     backend.load_scene(&scene)?;
     for case in cases() {
         let measured = measure_case(backend, &scene, &case, options)?;
+        super::warn_if_sanitized(&format!("{} ({})", scene.name(), case.name), case.spp, measured.sanitized);
         emit(ReportLine::Case(&case, &measured.result));
         if case.name == "sobol_vs_random" {
-            for spectrum in error_spectra(backend, &scene, &case, &measured, options.resolution)? {
+            let (spectra, sanitized) = error_spectra(backend, &scene, &case, &measured, options.resolution)?;
+            super::warn_if_sanitized(&format!("{} (error spectrum)", scene.name()), 1, sanitized);
+            for spectrum in spectra {
                 emit(ReportLine::Spectrum(&spectrum));
             }
         }
@@ -466,4 +501,27 @@ pub fn validate(options: &SamplingReportOptions) -> Result<()> {
     super::check_reps(options.reps, 2, ": a variance needs two repetitions")?;
     super::check_resolution(options.resolution)?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::output_line::OutputLine;
+
+    /// White noise at 64² (33 rings, ring 0 the removed mean) prints eight bands of 1: the
+    /// bands had been chunks of 5 rings (seven bands), the first reading 0.80 with ring 0 in it.
+    #[test]
+    fn spectrum_rows_show_eight_bands_without_the_mean() {
+        let white = |rings: usize| SpectrumResult {
+            case: "error_spectrum",
+            sampler: "random",
+            images: 1,
+            low_frequency_power: 1.0,
+            radial_power: std::iter::once(0.0).chain(std::iter::repeat_n(1.0, rings - 1)).collect(),
+        };
+        for rings in [33, 17, 9, 513] {
+            let row = white(rings).row();
+            assert!(row.contains("[1.00 1.00 1.00 1.00 1.00 1.00 1.00 1.00]"), "{rings} rings: {row}");
+        }
+    }
 }

@@ -43,9 +43,10 @@ pub struct ShadingPoint {
 }
 
 /// Traces `rays` (a camera ray stream) on `backend`, whose loaded scene must be `scene`, and
-/// returns the surfaces they hit; rays that miss are left out.
-pub fn shading_points(scene: &Scene, backend: &mut dyn Backend, rays: &RayStream) -> Result<Vec<ShadingPoint>> {
-    let (hits, _) = backend.trace(rays)?;
+/// returns the surfaces they hit (rays that miss are left out) and the rays and hits the trace
+/// stage sanitized ([`crate::StageReport::sanitized`]).
+pub fn shading_points(scene: &Scene, backend: &mut dyn Backend, rays: &RayStream) -> Result<(Vec<ShadingPoint>, u64)> {
+    let (hits, report) = backend.trace(rays)?;
     let mut points = Vec::with_capacity(rays.len());
     for i in 0..rays.len() {
         if hits.primitive[i] == NO_HIT {
@@ -60,5 +61,5 @@ pub fn shading_points(scene: &Scene, backend: &mut dyn Backend, rays: &RayStream
             albedo: luminance(surface.material.base_color),
         });
     }
-    Ok(points)
+    Ok((points, report.sanitized))
 }

@@ -194,7 +194,8 @@ pub fn report_shade(
         let gbuffer = GBuffer::new(backend, &scene, options.resolution)?;
         let (reference_run, _) =
             accumulate(backend, &gbuffer, &data, options.resolution, options.reference_spp, 0xfeed)?;
-        let reference = reference_run.ratio_image();
+        let (reference, replaced) = reference_run.ratio_image();
+        super::warn_if_sanitized(name, options.reference_spp, gbuffer.sanitized + reference_run.sanitized() + replaced);
         let analytic = reference_run.analytic();
         let all: Vec<usize> = (0..reference.len()).collect();
         let ShadowRegions { shadow, lit } = ShadowRegions::new(&analytic, &reference);
@@ -216,7 +217,8 @@ pub fn report_shade(
             for rep in 0..options.reps {
                 let (run, _) = accumulate(backend, &gbuffer, &data, options.resolution, spp, rep)?;
                 sanitized += run.sanitized();
-                let (ratio, stochastic) = (run.ratio_image(), run.stochastic_image());
+                let ((ratio, replaced), stochastic) = (run.ratio_image(), run.stochastic_image());
+                sanitized += replaced;
                 for (e, image) in [&ratio, &stochastic].into_iter().enumerate() {
                     for (r, pixels) in [&all, &shadow, &lit].into_iter().enumerate() {
                         squared_error[e][r].add(mse(image, &reference, pixels));
