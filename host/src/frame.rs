@@ -43,6 +43,9 @@ pub fn check_sample_count(name: &'static str, samples_per_pixel: u32) -> crate::
     }
 }
 
+/// The end of [`check_samples_per_pixel`]'s errors: the samplers without its limit.
+const OTHER_SAMPLERS: &str = "the sobol and random samplers have no such limit";
+
 /// Checks a sample count per pixel for a `width × height` frame drawn by the sampler of `kind`
 /// (one of [`sampler_kind`]): within `1..=`[`MAX_SAMPLES_PER_PIXEL`], and, for the blue-noise `ZSOBOL`
 /// sampler, its Morton-ordered sample space (image side and count rounded up to powers of two,
@@ -62,14 +65,14 @@ pub fn check_samples_per_pixel(
         // Not the sample count's fault: the image's longer side alone overflows the index.
         let reason = format!(
             "a {width}×{height} image exceeds the sampler's 32-bit index even at 1 sample per pixel \
-             (2·log2(longer side), rounded up, must be ≤ 32: a side of at most 65536)"
+             (2·log2(longer side), rounded up, must be ≤ 32: a side of at most 65536; {OTHER_SAMPLERS})"
         );
         return Err(crate::error::Error::InvalidParameter { name: "width/height", reason });
     }
     if !fits(samples_per_pixel) {
         let reason = format!(
             "{samples_per_pixel} samples per pixel of a {width}×{height} image exceed the sampler's 32-bit \
-             index (2·log2(side) + log2(samples), each rounded up, must be ≤ 32)"
+             index (2·log2(side) + log2(samples), each rounded up, must be ≤ 32; {OTHER_SAMPLERS})"
         );
         return Err(crate::error::Error::InvalidParameter { name, reason });
     }

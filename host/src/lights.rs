@@ -59,8 +59,8 @@ const BUCKETS: usize = 12;
 /// `f32` axis (≈ 10⁻⁷ rad).
 const CONE_SLACK: f64 = 1e-5;
 
-/// Checks one light: finite fields, a known kind, a non-negative radiance, a positive size and a
-/// power that fits in `f32`. The error names the field and the light's index.
+/// Checks one light: finite fields, a known kind, a non-negative radiance, and an area (positive)
+/// and a power that fit in `f32`. The error names the field and the light's index.
 pub fn validate_light(index: usize, light: &Light) -> Result<()> {
     let fields: [(&'static str, Vec4); 4] = [
         ("light.position", light.position),
@@ -436,7 +436,8 @@ fn check_tree_size(powered: usize, max_depth: u32) -> Result<()> {
         return Err(Error::InvalidParameter {
             name: "lights",
             reason: format!(
-                "{powered} lights of non-zero power do not fit a light BVH of depth {max_depth} ({most} at most)"
+                "{powered} lights of non-zero power do not fit a light BVH of depth {max_depth} whose node \
+                 indices are u32 ({most} at most)"
             ),
         });
     }

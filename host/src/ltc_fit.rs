@@ -227,8 +227,9 @@ impl Ggx {
 
     /// Smith's `Λ(ω) = (√(1 + α² tan² θ) − 1)/2` for `cos θ = z > 0`, written as
     /// `ε/(2(1 + √(1 + ε)))` with `ε = α² tan² θ` to avoid cancellation. `z²` is floored at
-    /// the smallest normal `f64`, as the kernels' `smith_lambda` floors it in `f32`: a direction
-    /// a hair above the horizon (`z < 10⁻¹⁶¹`, `z²` underflowing to 0) gets a huge `Λ`, not ∞/∞.
+    /// the smallest normal `f64` (the kernels' `smith_lambda` floors it at 10⁻³⁰ in `f32`): a
+    /// direction a hair above the horizon (`z ≲ 10⁻¹⁵⁴`, where `α²/z²` overflowed) gets a huge
+    /// `Λ`, not ∞/∞.
     pub fn lambda(alpha: f64, z: f64) -> f64 {
         if z >= 1.0 {
             return 0.0;

@@ -347,10 +347,13 @@ impl ShadeAccumulator {
             );
             return Err(Error::InvalidParameter { name: "accumulate", reason });
         }
-        let fields = [("analytic", &shades.analytic), ("unshadowed", &shades.unshadowed), ("emitted", &shades.emitted)];
-        for (field, values) in fields {
-            let unsound = |v: &Vec4| !(v.xyz().is_finite() && v.xyz().min_element() >= 0.0);
-            if let Some(record) = values.par_iter().position_first(unsound) {
+        // One pass over the three fields; the field at fault is named afterwards.
+        let unsound = |v: &Vec4| !(v.xyz().is_finite() && v.xyz().min_element() >= 0.0);
+        let records = shades.analytic.par_iter().zip(&shades.unshadowed).zip(&shades.emitted);
+        if let Some(record) = records.position_first(|((u, u_n), e)| unsound(u) || unsound(u_n) || unsound(e)) {
+            let fields =
+                [("analytic", &shades.analytic), ("unshadowed", &shades.unshadowed), ("emitted", &shades.emitted)];
+            if let Some((field, values)) = fields.into_iter().find(|(_, values)| unsound(&values[record])) {
                 let reason = format!("shade record {record}: {field} {} is not finite and ≥ 0", values[record].xyz());
                 return Err(Error::InvalidParameter { name: "accumulate", reason });
             }

@@ -295,7 +295,8 @@ pub fn estimate_image(
         for (i, (point, s)) in points.iter().zip(&samples).enumerate() {
             rays.origin[i] = point.origin.extend(0.0);
             // Samples that cannot contribute get an empty interval; their visibility is unused.
-            rays.direction[i] = if s.weight > 0.0 { s.direction.extend(s.tmax) } else { Vec4::new(0.0, 0.0, 1.0, 0.0) };
+            let traced = s.weight.is_finite() && s.weight > 0.0;
+            rays.direction[i] = if traced { s.direction.extend(s.tmax) } else { Vec4::new(0.0, 0.0, 1.0, 0.0) };
             rays.pixel[i] = point.pixel;
         }
         let (occluded, occlusion) = backend.trace_occlusion(&rays)?;
@@ -343,6 +344,20 @@ pub struct CaseMeasurement {
     pub sanitized: u64,
 }
 
+/// `worse / better`, the variance ratio of case `name` measured on `resolution²` pixels; an
+/// error where the better estimator's variance is not positive: the ratio would be infinite (a
+/// JSON `null`), or meaningless where the worse variance is 0 too.
+fn variance_ratio(name: &str, worse: f64, better: f64, resolution: u32) -> Result<f64> {
+    if better.is_nan() || better <= 0.0 {
+        let reason = format!(
+            "case {name}: the better estimator's variance is {better} at {resolution}² pixels, so no variance \
+             ratio can be measured; take a larger resolution"
+        );
+        return Err(crate::Error::InvalidParameter { name: "resolution", reason });
+    }
+    Ok(worse / better)
+}
+
 /// Measures one case on `backend`, whose loaded scene must be `scene`.
 pub fn measure_case(
     backend: &mut dyn Backend,
@@ -354,16 +369,7 @@ pub fn measure_case(
     let (better_moments, better_sanitized) = moments(backend, scene, &case.better, case.spp, options, 1 << 20)?;
     let (worse_pooled, better_pooled) = (worse_moments.pooled(), better_moments.pooled());
     let (worse, better) = (worse_pooled.mean_variance(), better_pooled.mean_variance());
-    if better.is_nan() || better <= 0.0 {
-        // The ratio would be infinite, or meaningless if the worse variance is 0 too.
-        let reason = format!(
-            "case {}: the better estimator's variance is {better} at {}² pixels, so no variance ratio can be \
-             measured; take a larger resolution",
-            case.name, options.resolution
-        );
-        return Err(crate::Error::InvalidParameter { name: "resolution", reason });
-    }
-    let ratio = worse / better;
+    let ratio = variance_ratio(case.name, worse, better, options.resolution)?;
     let interval = variance_ratio_interval(&worse_moments, &better_moments);
     let result = CaseResult {
         case: case.name,
@@ -405,8 +411,9 @@ impl crate::output_line::OutputLine for SpectrumResult {
         crate::output_line::json_object(self)
     }
 
-    /// The low-frequency power and the spectrum in eight bands of rings 1 ..= resolution/2 (ring
-    /// 0, the mean, is ≈ 0 once the error's mean is removed, and had pulled the first band low).
+    /// The low-frequency power and the spectrum in eight bands of rings 1 ..= resolution/2 (fewer
+    /// below 16 rings: one ring each) — ring 0, the mean, is ≈ 0 once the error's mean is removed,
+    /// and had pulled the first band low.
     fn row(&self) -> String {
         let rings = self.radial_power.get(1..).unwrap_or_default();
         let bands: Vec<String> = (0..8)
@@ -522,6 +529,17 @@ mod tests {
         for rings in [33, 17, 9, 513] {
             let row = white(rings).row();
             assert!(row.contains("[1.00 1.00 1.00 1.00 1.00 1.00 1.00 1.00]"), "{rings} rings: {row}");
+        }
+        // At 4² (3 rings), one band per ring beyond the mean's.
+        assert!(white(3).row().contains("[1.00 1.00]"), "{}", white(3).row());
+    }
+
+    #[test]
+    fn a_variance_ratio_needs_a_positive_better_variance() {
+        assert_eq!(variance_ratio("case", 3.0, 1.5, 64).unwrap(), 2.0);
+        for better in [0.0, f64::NAN] {
+            let err = variance_ratio("ao", 4.0, better, 4).unwrap_err().to_string();
+            assert!(err.contains("resolution: case ao: the better estimator's variance is"), "{err}");
         }
     }
 }

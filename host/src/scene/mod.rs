@@ -372,8 +372,10 @@ pub const MAX_COORDINATE: f32 = 1.0e8;
 /// 4 GiB on NVIDIA's drivers (the software trace's 48 bytes per triangle reach that at 89 M
 /// triangles), and the glTF loader counts the meshes its nodes instance against this limit before
 /// reading them, so that a small file cannot make it allocate without bound (one 10⁶-vertex
-/// sparse accessor instanced by 10⁴ nodes asked for 10¹⁰ vertices); the OBJ loader likewise
-/// counts a file's vertex positions and triangles before tobj builds them.
+/// sparse accessor instanced by 10⁴ nodes asked for 10¹⁰ vertices); the OBJ loader refuses a
+/// file of more `v` lines, or of faces making more triangles, before tobj builds them (tobj
+/// may still make more vertices than `v` lines, one per distinct index triple, which the scene's
+/// own check counts).
 pub const MAX_VERTICES: usize = 1 << 28;
 
 /// The most triangles a scene holds, over all its meshes: 2²⁸ (3 GiB of vertex indices), for the

@@ -23,8 +23,7 @@ pub fn load(path: &Path) -> Result<Scene> {
         return Err(load_error("is a directory".into()));
     }
     let text = read_regular_file(path, u64::MAX).map_err(|e| load_error(e.to_string()))?;
-    check_size(path, &text, MAX_VERTICES, MAX_TRIANGLES)?;
-    check_vertices_and_indices(&text).map_err(load_error)?;
+    check_vertices_and_indices(path, &text, Limits { positions: MAX_VERTICES, triangles: MAX_TRIANGLES })?;
     check_polygon_fans(&text).map_err(load_error)?;
     let options = tobj::LoadOptions { triangulate: true, single_index: true, ..Default::default() };
     // tobj reads line by line and stops at its first error, so the reader's line is the one at fault.
@@ -214,22 +213,40 @@ fn is_see_through(m: &tobj::Material) -> bool {
 ///   builds);
 /// - every vertex position (`v`) a face uses has coordinates finite and within
 ///   [`MAX_COORDINATE`], after the division by its `w` if it has one. Vertices no face uses are
-///   not loaded (tobj keeps the used ones), so they may hold anything.
+///   not loaded (tobj keeps the used ones), so they may hold anything;
+/// - the file has at most `limits.positions` vertex positions and makes at most
+///   `limits.triangles` triangles ([`GeometryCount`]), counted before anything is built (an
+///   [`Error::SceneTooLarge`] naming the line where the count passes its limit): a 600 MB face
+///   line of 3·10⁸ corners had tobj allocate gigabytes of indices until memory ran out, where a
+///   glTF file that large is counted first. tobj may still make more vertices than `v` lines
+///   (one per distinct position, texture and normal index), which [`Scene::new`] counts.
 ///
-/// Tokens that are not numbers are left to tobj, which reports them.
-fn check_vertices_and_indices(text: &[u8]) -> std::result::Result<(), String> {
+/// Tokens that are not numbers are left to tobj, which reports them. Other errors are
+/// [`Error::SceneLoad`]s naming the line.
+fn check_vertices_and_indices(path: &Path, text: &[u8], limits: Limits) -> Result<()> {
+    let load_error = |message: String| Error::SceneLoad { path: path.to_owned(), message };
     // Per vertex out of range, by its position's number (0-based): its line and first bad
     // coordinate. A map, so that checking a million faces against many such vertices stays linear.
     let mut out_of_range: std::collections::HashMap<i64, (usize, f32)> = std::collections::HashMap::new();
-    each_vertex_and_index(text, |line, token| match token {
-        ObjToken::Vertex(vertex, words) => {
+    let mut count = GeometryCount::default();
+    let mut too_large = None;
+    let walked = each_vertex_and_index(text, |line, token| {
+        count.add(line, &token);
+        if let Some(what) = count.excess(limits) {
+            too_large = Some(format!("{what} (passed at line {line})"));
+            return Err(String::new());
+        }
+        if let ObjToken::Vertex(vertex, words) = token {
             if let Some(c) = coordinates(words).into_iter().find(|c| !(c.is_finite() && c.abs() <= MAX_COORDINATE)) {
                 out_of_range.insert(vertex, (line, c));
             }
-            Ok(())
         }
-        ObjToken::Index { .. } => Ok(()),
-    })?;
+        Ok(())
+    });
+    if let Some(what) = too_large {
+        return Err(Error::SceneTooLarge { scene: path.display().to_string(), what });
+    }
+    walked.map_err(load_error)?;
     if out_of_range.is_empty() {
         return Ok(());
     }
@@ -245,38 +262,62 @@ fn check_vertices_and_indices(text: &[u8]) -> std::result::Result<(), String> {
         },
         _ => Ok(()),
     })
+    .map_err(load_error)
 }
 
-/// Refuses, with [`Error::SceneTooLarge`], an OBJ `text` (read from `path`) of more vertex
-/// positions (`v` lines) than `max_positions` or more triangles than `max_triangles` — a face of
-/// `n` corners makes `n − 2`, as tobj's fan splits it — before tobj or the other checks build
-/// them: a 600 MB face line of 3·10⁸ corners had tobj allocate gigabytes of indices until memory
-/// ran out, where a glTF file that large is counted first. An index that names no vertex data
-/// is an [`Error::SceneLoad`] (see [`each_vertex_and_index`]).
-fn check_size(path: &Path, text: &[u8], max_positions: usize, max_triangles: usize) -> Result<()> {
-    let (mut positions, mut triangles, mut face) = (0usize, 0usize, (0usize, 0usize));
-    each_vertex_and_index(text, |line, token| {
+/// The most vertex positions and triangles an OBJ file may hold ([`check_vertices_and_indices`]).
+#[derive(Copy, Clone, Debug)]
+struct Limits {
+    positions: usize,
+    triangles: usize,
+}
+
+/// Running counts of an OBJ file's vertex positions (`v` lines) and of the triangles tobj makes
+/// of its faces, fed token by token from [`each_vertex_and_index`].
+#[derive(Default)]
+struct GeometryCount {
+    positions: usize,
+    /// Triangles of the faces before the current one.
+    triangles: usize,
+    /// The current face's line and position indices so far.
+    face: (usize, usize),
+}
+
+impl GeometryCount {
+    /// Triangles tobj 4.0.5 makes of a face of `corners` corners: its fan's `corners − 2`, and
+    /// one (degenerate, `a a a` or `a b b`) of a face of one or two, which it keeps too.
+    fn fan(corners: usize) -> usize {
+        if corners == 0 {
+            0
+        } else {
+            corners.saturating_sub(2).max(1)
+        }
+    }
+
+    fn add(&mut self, line: usize, token: &ObjToken) {
         match token {
-            ObjToken::Vertex(..) => positions += 1,
-            ObjToken::Index { face: true, kind: 0, .. } if face.0 == line => face.1 += 1,
+            ObjToken::Vertex(..) => self.positions += 1,
             ObjToken::Index { face: true, kind: 0, .. } => {
-                triangles += face.1.saturating_sub(2);
-                face = (line, 1);
+                if self.face.0 != line {
+                    self.triangles += Self::fan(self.face.1);
+                    self.face = (line, 0);
+                }
+                self.face.1 += 1;
             }
             ObjToken::Index { .. } => {}
         }
-        Ok(())
-    })
-    .map_err(|message| Error::SceneLoad { path: path.to_owned(), message })?;
-    triangles += face.1.saturating_sub(2);
-    let too_many = |count: usize, limit: usize, what: &str| {
-        (count > limit).then(|| Error::SceneTooLarge {
-            scene: path.display().to_string(),
-            what: format!("its {count} {what} exceed {limit}"),
-        })
-    };
-    let refusal = too_many(positions, max_positions, "vertex positions");
-    refusal.or_else(|| too_many(triangles, max_triangles, "triangles")).map_or(Ok(()), Err)
+    }
+
+    /// What passes `limits` so far, the current face included, if anything.
+    fn excess(&self, limits: Limits) -> Option<String> {
+        if self.positions > limits.positions {
+            Some(format!("more than {} vertex positions", limits.positions))
+        } else if self.triangles + Self::fan(self.face.1) > limits.triangles {
+            Some(format!("more than {} triangles", limits.triangles))
+        } else {
+            None
+        }
+    }
 }
 
 /// The coordinates of a vertex position (`v`) from the words after `v`, read as tobj reads them:
@@ -811,23 +852,26 @@ mod tests {
     #[test]
     fn files_over_the_size_limits_are_refused_before_they_are_built() {
         // 5 positions; a triangle, a quad and a pentagon (1 + 2 + 3 triangles), a polyline (none),
-        // and the corners of a face given with texture and normal indices counted once.
+        // faces of one and two corners (one degenerate triangle each, as tobj makes them), and
+        // the corners of a face given with texture and normal indices counted once.
         let text = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 2 0\nvt 0 0\nvn 0 0 1\n\
-                    f 1 2 3\nf 1/1/1 2/1/1 3/1/1 4/1/1\nl 1 2 3 4 5\nf 1 2 3 5 4\n";
+                    f 1 2 3\nf 1/1/1 2/1/1 3/1/1 4/1/1\nl 1 2 3 4 5\nf 1 2 3 5 4\nf 1\nf 1 2\n";
         let f = obj_file(text);
-        let check = |positions, triangles| check_size(f.path(), text.as_bytes(), positions, triangles);
-        assert!(check(5, 6).is_ok());
+        let check = |positions, triangles| {
+            check_vertices_and_indices(f.path(), text.as_bytes(), Limits { positions, triangles })
+        };
+        assert!(check(5, 8).is_ok());
         let scene = f.path().display().to_string();
-        for (limits, what) in [((4, 6), "its 5 vertex positions exceed 4"), ((5, 5), "its 6 triangles exceed 5")] {
+        for (limits, what) in [
+            ((4, 8), "more than 4 vertex positions (passed at line 5)"),
+            ((5, 7), "more than 7 triangles (passed at line 13)"),
+            ((5, 5), "more than 5 triangles (passed at line 11)"),
+        ] {
             match check(limits.0, limits.1) {
                 Err(Error::SceneTooLarge { scene: s, what: w }) => assert_eq!((s, w.as_str()), (scene.clone(), what)),
                 other => panic!("{limits:?}: expected SceneTooLarge, got {other:?}"),
             }
         }
-        // The count walks the faces, so an index naming no vertex is refused there, by line.
-        let bad = "v 0 0 0\nf 1 2 0\n";
-        let err = check_size(f.path(), bad.as_bytes(), 5, 6).unwrap_err();
-        assert!(matches!(err, Error::SceneLoad { .. }) && err.to_string().contains("line 2:"), "{err}");
     }
 
     #[test]
