@@ -116,7 +116,7 @@ fn sampler(c: &mut Criterion, setup: &mut Setup) {
 fn generate(c: &mut Criterion, setup: &mut Setup) {
     let mut group = c.benchmark_group("generate");
     for (w, h) in SIZES {
-        let params = generate_params(&setup.scene, w, h, 0, 1);
+        let params = generate_params(&setup.scene, w, h, 1);
         group.throughput(Throughput::Elements(u64::from(w * h)));
         group.bench_with_input(BenchmarkId::new("cpu", w * h), &params, |b, p| b.iter(|| cpu::generate(black_box(p))));
         if let Some(v) = setup.vulkan.as_mut() {
@@ -131,7 +131,7 @@ fn generate(c: &mut Criterion, setup: &mut Setup) {
 fn trace_primary(c: &mut Criterion, setup: &mut Setup) {
     let mut group = c.benchmark_group("trace_primary");
     for (w, h) in SIZES {
-        let rays = cpu::generate(&generate_params(&setup.scene, w, h, 0, 1));
+        let rays = cpu::generate(&generate_params(&setup.scene, w, h, 1));
         group.throughput(Throughput::Elements(rays.len() as u64));
         group.bench_with_input(BenchmarkId::new("cpu", rays.len()), &rays, |b, r| {
             b.iter(|| cpu::trace(&setup.cpu_scene, black_box(r)))
@@ -191,7 +191,7 @@ mod workgroup_size {
             device.trace_methods().into_iter().filter(|&method| method != TraceMethod::RtPipeline).collect();
         let mut group = c.benchmark_group("workgroup_size");
         let (w, h) = SIZES[1];
-        let rays = cpu::generate(&generate_params(&setup.scene, w, h, 0, 1));
+        let rays = cpu::generate(&generate_params(&setup.scene, w, h, 1));
         let hits = cpu::trace(&setup.cpu_scene, &rays);
         let params = setup.shade_params(w, h);
         let trace = |v: &mut dyn Backend| v.trace(black_box(&rays)).expect("trace").1;
@@ -254,7 +254,7 @@ mod workgroup_size {
 fn shade(c: &mut Criterion, setup: &mut Setup) {
     let mut group = c.benchmark_group("shade");
     for (w, h) in SIZES {
-        let rays = cpu::generate(&generate_params(&setup.scene, w, h, 0, 1));
+        let rays = cpu::generate(&generate_params(&setup.scene, w, h, 1));
         let hits = cpu::trace(&setup.cpu_scene, &rays);
         let params = setup.shade_params(w, h);
         // With every light's U_S from the GGX lobe's integral (ShadeParams::analytic_residual).
@@ -304,7 +304,7 @@ fn denoise(c: &mut Criterion, setup: &mut Setup) {
 /// ([`inline_pass`]), first checked to give the same estimates.
 fn pipeline(c: &mut Criterion, setup: &mut Setup) {
     let (w, h) = (512, 512);
-    let generate = generate_params(&setup.scene, w, h, 0, 1);
+    let generate = generate_params(&setup.scene, w, h, 1);
     let shade_params = setup.shade_params(w, h);
     let (cpu, data, cpu_scene) = (&mut setup.cpu, &setup.data, &setup.cpu_scene);
     // The stages' streams alone, as the inline pass returns its records alone: accumulating

@@ -98,7 +98,7 @@ struct RaySets {
 /// Primary camera rays; from each primary hit, a shadow ray to a point light above the scene and a
 /// cosine-distributed diffuse ray, both from the offset hit point.
 fn ray_sets(scene: &Scene, cpu_scene: &CpuScene, resolution: u32) -> RaySets {
-    let primary = cpu::generate(&generate_params(scene, resolution, resolution, 0, 7));
+    let primary = cpu::generate(&generate_params(scene, resolution, resolution, 7));
     let hits = cpu::trace(cpu_scene, &primary);
     let (lo, hi) = scene.bounds();
     let light = Vec3::new((lo.x + hi.x) * 0.5, hi.y + (hi - lo).length() * 0.25, (lo.z + hi.z) * 0.5);

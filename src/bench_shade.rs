@@ -80,7 +80,7 @@ pub fn bench_shade(options: &ShadeBenchOptions, mut emit: impl FnMut(&ShadeMeasu
     let scene = Scene::load(&options.scene)?;
     let data = ShadeData::new(&scene)?;
     cpu.load_scene(&scene)?;
-    let (rays, _) = cpu.generate(&generate_params(&scene, side, side, 0, 1))?;
+    let (rays, _) = cpu.generate(&generate_params(&scene, side, side, 1))?;
     let (hits, _) = cpu.trace(&rays)?;
     let params = data.params(sampler_params(sampler_kind::ZSOBOL, 1, side, side, 1), side, side, 0);
     let mut shade_on = |backend: &mut dyn Backend, settle: f64, workgroup_size: Option<u32>| -> Result<()> {

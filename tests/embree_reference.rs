@@ -14,7 +14,7 @@ use raywave::Scene;
 fn embree_matches_the_cpu_trace() {
     let (meshes, camera) = hairball(20_000, 5);
     for scene in [Scene::load("builtin:cornell").unwrap(), Scene::new("hairball", meshes, camera).unwrap()] {
-        let rays = cpu::generate(&generate_params(&scene, 256, 256, 0, 1));
+        let rays = cpu::generate(&generate_params(&scene, 256, 256, 1));
         let cpu_scene = CpuScene::build(&scene).unwrap();
         let expected = cpu::trace(&cpu_scene, &rays);
         let embree = EmbreeScene::build(&scene).unwrap();

@@ -63,7 +63,7 @@ fn compare(scene: &Scene, rays: &RayStream, expected: &HitStream, actual: &HitSt
 
 /// Camera rays plus, for variety, rays from inside the box in hashed directions.
 fn test_rays(scene: &Scene) -> RayStream {
-    let mut rays = cpu::generate(&generate_params(scene, 320, 320, 0, 3));
+    let mut rays = cpu::generate(&generate_params(scene, 320, 320, 3));
     let centre = glam::Vec3::new(0.278, 0.274, 0.28);
     for i in 0..rays.len() / 2 {
         let h = raywave::kernels::hash::pcg3d(glam::UVec3::new(i as u32, 11, 5));
@@ -98,7 +98,7 @@ fn trace_matches_cpu_on_every_vulkan_device() {
 #[test]
 fn whole_frame_matches_cpu_on_every_vulkan_device() {
     let scene = cornell();
-    let params = generate_params(&scene, 257, 193, 0, 9);
+    let params = generate_params(&scene, 257, 193, 9);
     let mut cpu_backend = raywave::cpu::CpuBackend::new();
     cpu_backend.load_scene(&scene).unwrap();
     let expected = cpu_backend.render(&params).unwrap();
@@ -153,7 +153,7 @@ fn untraceable_rays_miss_on_every_backend() {
 fn tracing_without_a_scene_is_refused_on_every_backend() {
     let scene = cornell();
     let rays = test_rays(&scene);
-    let params = generate_params(&scene, 8, 6, 0, 1);
+    let params = generate_params(&scene, 8, 6, 1);
     let refusals = |backend: &mut dyn Backend| {
         let name = |result: raywave::Result<()>| match result {
             Err(raywave::Error::InvalidParameter { name, .. }) => name,
@@ -175,7 +175,7 @@ fn tracing_without_a_scene_is_refused_on_every_backend() {
 /// Rays from random points in the scene bounds in random directions (incoherent, like diffuse
 /// bounces), plus the scene's camera rays.
 fn incoherent_rays(scene: &Scene, count: u32) -> RayStream {
-    let mut rays = cpu::generate(&generate_params(scene, 128, 128, 0, 5));
+    let mut rays = cpu::generate(&generate_params(scene, 128, 128, 5));
     let (lo, hi) = scene.bounds();
     for i in 0..count {
         let h = raywave::kernels::hash::pcg3d(glam::UVec3::new(i, 21, 8));
@@ -251,7 +251,7 @@ fn backends_on_several_threads_at_once_match_cpu() {
     const ROUNDS: usize = 2;
     let scene = cornell();
     let cpu_scene = CpuScene::build(&scene).unwrap();
-    let rays = cpu::generate(&generate_params(&scene, 64, 48, 0, 1));
+    let rays = cpu::generate(&generate_params(&scene, 64, 48, 1));
     let expected = cpu::trace(&cpu_scene, &rays);
     let start = std::sync::Barrier::new(THREADS);
     std::thread::scope(|threads| {

@@ -360,7 +360,7 @@ mod tests {
         assert!(warp_probe_len(&warp(17, 4)).is_err(), "sample 16 of 2^4 repeats sample 0's point");
 
         let scene = crate::Scene::load("builtin:cornell").unwrap();
-        let mut generate = crate::frame::generate_params(&scene, 9, 7, 0, 1);
+        let mut generate = crate::frame::generate_params(&scene, 9, 7, 1);
         assert!(check_generate_params(&generate).is_ok());
         generate.sample_index = 1;
         assert!(check_generate_params(&generate).is_err(), "sample 1 of a one-sample frame");

@@ -79,12 +79,12 @@ pub fn check_samples_per_pixel(
     Ok(())
 }
 
-/// Generate-stage parameters for `scene`'s pinhole camera at `width × height` (both ≥ 1), sample
-/// `sample_index` of one, drawn by the default blue-noise sampler (`ZSOBOL`) with `seed`. See
-/// [`generate_params_with`].
-pub fn generate_params(scene: &Scene, width: u32, height: u32, sample_index: u32, seed: u32) -> GenerateParams {
+/// Generate-stage parameters for `scene`'s pinhole camera at `width × height` (both ≥ 1): a
+/// one-sample frame drawn by the default blue-noise sampler (`ZSOBOL`) with `seed`. Frames of
+/// more samples take [`generate_params_with`] and a sampler sized for them ([`sampler_params`]).
+pub fn generate_params(scene: &Scene, width: u32, height: u32, seed: u32) -> GenerateParams {
     let sampler = sampler_params(sampler_kind::ZSOBOL, seed, width, height, 1);
-    generate_params_with(scene, width, height, sample_index, sampler)
+    generate_params_with(scene, width, height, 0, sampler)
 }
 
 /// Generate-stage parameters for `scene`'s camera at `width × height` (both ≥ 1), sample
@@ -131,7 +131,7 @@ mod tests {
     #[test]
     fn cornell_camera_looks_down_z_with_red_wall_on_the_left() {
         let scene = Scene::load("builtin:cornell").unwrap();
-        let p = generate_params(&scene, 64, 32, 0, 0);
+        let p = generate_params(&scene, 64, 32, 0);
         assert!((p.forward.xyz() - glam::Vec3::Z).length() < 1e-6);
         // The red wall is at x ≈ 0.55 m; image right must point towards x = 0 (the green wall).
         assert!(p.right.x < 0.0);

@@ -448,7 +448,7 @@ mod tests {
     fn cpu_shade_fills_every_field_and_the_accumulator_takes_the_stream() {
         let scene = Scene::load("builtin:cornell").unwrap();
         let data = ShadeData::new(&scene).unwrap();
-        let params = crate::frame::generate_params(&scene, 9, 7, 0, 3);
+        let params = crate::frame::generate_params(&scene, 9, 7, 3);
         let rays = crate::cpu::generate(&params);
         let hits = crate::cpu::trace(&crate::cpu::CpuScene::build(&scene).unwrap(), &rays);
         let shade_params = data.params(params.sampler, 9, 7, 0);

@@ -247,7 +247,7 @@ mod tests {
         let scene = Scene::load("builtin:cornell").unwrap();
         let mut backend = CpuBackend::new();
         backend.load_scene(&scene).unwrap();
-        let params = crate::frame::generate_params(&scene, 33, 17, 0, 4);
+        let params = crate::frame::generate_params(&scene, 33, 17, 4);
         let frame = backend.render(&params).unwrap();
         assert_eq!(frame.rays.pixel, (0..33 * 17).collect::<Vec<u32>>());
         assert!(frame.hits.t.iter().all(|t| t.is_finite()));
@@ -282,7 +282,7 @@ mod tests {
         assert_eq!(name_of(cpu.trace_occlusion(&rays).unwrap_err()), "trace_occlusion");
         let zeroed = GenerateParams { width: 1, height: 1, ..bytemuck::Zeroable::zeroed() };
         assert_eq!(name_of(cpu.generate(&zeroed).unwrap_err()), "generate");
-        let params = crate::frame::generate_params(&scene, 4, 4, 0, 1);
+        let params = crate::frame::generate_params(&scene, 4, 4, 1);
         for broken in [
             GenerateParams { tmax: params.tmin, ..params },
             GenerateParams { lens_radius: 0.1, focus_distance: 0.0, ..params },
