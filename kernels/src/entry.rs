@@ -1,5 +1,6 @@
-//! `#[spirv(compute)]` entry points: thin wrappers that turn an invocation id into a stream index,
-//! call the stage function and store its result. Binding numbers repeat
+//! The SPIR-V entry points — `#[spirv(compute)]` kernels and the ray-tracing pipeline's
+//! ray-generation, miss and closest-hit shaders: thin wrappers that turn an invocation id into a
+//! stream index, call the stage function and store its result. Binding numbers repeat
 //! [`raywave_shared::bindings`] (attributes need literals); `threads(64)` is
 //! [`raywave_shared::bindings::WORKGROUP_SIZE`].
 
@@ -166,15 +167,14 @@ pub fn trace_raygen(
     #[spirv(storage_buffer, descriptor_set = 0, binding = 9)] replaced: &mut [u32],
     #[spirv(ray_payload)] payload: &mut crate::trace::Hit,
 ) {
-    use crate::sanitized::Sanitized;
-    use crate::trace::{sanitize, Hit, Ray};
+    use crate::trace::{trace_closest_with, Hit};
     let i = (launch_id.y * launch_size.x + launch_id.x) as usize;
     if i < params.ray_count as usize {
-        let ray = Ray::from_stream(ray_origin[i], ray_direction[i]);
-        let hit = if ray.is_traceable() {
+        let hit = trace_closest_with(ray_origin[i], ray_direction[i], move |ray| {
             *payload = Hit::MISS;
             // SAFETY: `tlas` is a valid acceleration structure bound by the host, the ray is
-            // traceable, and `payload` lives in the ray-payload storage class.
+            // traceable (`trace_closest_with` calls this only then), and `payload` lives in the
+            // ray-payload storage class.
             unsafe {
                 tlas.trace_ray(
                     spirv_std::ray_tracing::RayFlags::OPAQUE,
@@ -189,10 +189,8 @@ pub fn trace_raygen(
                     payload,
                 );
             }
-            sanitize(*payload)
-        } else {
-            Sanitized { value: Hit::MISS, replaced: !ray.is_finite() }
-        };
+            *payload
+        });
         store_hit(i, counted(hit, replaced), hit_t, hit_primitive, hit_instance, hit_barycentrics);
     }
 }
@@ -279,18 +277,17 @@ pub fn occlusion_raygen(
     use spirv_std::ray_tracing::RayFlags;
     let i = (launch_id.y * launch_size.x + launch_id.x) as usize;
     if i < params.ray_count as usize {
-        let ray = crate::trace::Ray::from_stream(ray_origin[i], ray_direction[i]);
-        *payload = 0;
-        if ray.is_traceable() {
+        let blocked = crate::trace::trace_occluded_with(ray_origin[i], ray_direction[i], move |ray| {
+            // Blocked unless the miss shader clears it.
             *payload = 1;
             let flags = RayFlags::OPAQUE | RayFlags::TERMINATE_ON_FIRST_HIT | RayFlags::SKIP_CLOSEST_HIT_SHADER;
             // SAFETY: as in `trace_raygen`.
             unsafe {
                 tlas.trace_ray(flags, 0xff, 0, 0, 0, ray.origin, ray.tmin, ray.direction, ray.tmax, payload);
             }
-        }
-        let blocked = crate::sanitized::Sanitized { value: *payload, replaced: !ray.is_finite() };
-        occluded[i] = counted(blocked, replaced);
+            *payload != 0
+        });
+        occluded[i] = u32::from(counted(blocked, replaced));
     }
 }
 

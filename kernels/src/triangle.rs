@@ -11,6 +11,9 @@
 //! SPIR-V cannot assume `Float64`). Both faces are hit, matching Vulkan ray query without culling
 //! flags.
 
+// `!(x >= y)` sends a NaN determinant or distance down the "no hit" branch on purpose.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 use glam::{Vec2, Vec3, Vec3A};
 
 /// The component of `v` along `axis` (0 = x, 1 = y, otherwise z), written as a branch so it
@@ -58,7 +61,9 @@ fn unit(axis: u32) -> Vec3A {
 }
 
 impl WatertightRay {
-    /// Prepares a ray. `direction` need not be unit length but must be non-zero and finite.
+    /// Prepares a ray. `direction` need not be unit length but must be finite, its largest
+    /// component at least `trace::MIN_DIRECTION` in magnitude (as a traceable ray's is), so
+    /// that `1/d` of that component is finite.
     pub fn new(origin: Vec3, direction: Vec3) -> Self {
         let abs = direction.abs();
         let kz = if abs.x > abs.y {
@@ -149,18 +154,24 @@ impl WatertightRay {
         // ray) counts as degenerate, as 0 does: its reciprocal overflows to infinity, which made
         // the hit's t and barycentrics non-finite (found by fuzzing a CPU render; a GPU that
         // flushes subnormals to zero misses it too).
-        if outside | (det_abs < f32::MIN_POSITIVE) {
+        // Written so that a NaN determinant fails too (`!(x ≥ y)`, not `x < y`): edge products
+        // that overflow — a ray origin far beyond the scene's — had returned a NaN hit, which as
+        // the first hit found stopped the traversal from accepting any later box or triangle.
+        if outside | !(det_abs >= f32::MIN_POSITIVE) {
             return None;
         }
 
         let t_scaled = u * a.z + v * b.z + w * c.z;
-        // Compare t·|det| against the range without dividing, sign-corrected for back faces.
+        // Compare t·|det| against the range without dividing, sign-corrected for back faces (a
+        // NaN fails, as above).
         let t_scaled_abs = if det < 0.0 { -t_scaled } else { t_scaled };
-        if t_scaled_abs < tmin * det_abs || t_scaled_abs > tmax * det_abs {
+        if !(t_scaled_abs >= tmin * det_abs && t_scaled_abs <= tmax * det_abs) {
             return None;
         }
         let rcp_det = 1.0 / det;
-        Some(TriangleHit { t: t_scaled * rcp_det, barycentrics: Vec2::new(v * rcp_det, w * rcp_det) })
+        // `t_scaled · (1/det)` rounds twice and can land an ulp outside the range just checked.
+        let t = (t_scaled * rcp_det).clamp(tmin, tmax);
+        Some(TriangleHit { t, barycentrics: Vec2::new(v * rcp_det, w * rcp_det) })
     }
 }
 
@@ -328,6 +339,39 @@ mod tests {
             let (p, q) = (vertex(i), vertex(i / 2));
             assert_eq!(edge_function(p, q, &cross_2d), cross_2d(p, q), "{p} → {q}");
         }
+    }
+
+    /// A ray origin so far from the triangle that the edge products overflow (∞ − ∞ = NaN) gives
+    /// no hit, not one at t = NaN.
+    #[test]
+    fn edge_products_that_overflow_give_no_hit() {
+        let ray = WatertightRay::new(Vec3::new(1e30, 1e30, 0.0), Vec3::Z);
+        let (u, v) = (ray.transform(V1.into()), ray.transform(V2.into()));
+        assert!(cross_2d(u, v).is_nan(), "the case overflows");
+        assert_eq!(ray.intersect(V0, V1, V2, 0.0, f32::MAX), None);
+    }
+
+    /// A hit's t lies in `[tmin, tmax]` even where the range check, made on `t·det`, passes a `t`
+    /// that the division rounds an ulp outside: random rays against random triangles, each
+    /// range an ulp inside the hit's unbounded t on one side.
+    #[test]
+    fn hit_parameters_stay_inside_the_range() {
+        let mut rng = crate::hash::CounterRng::new(41);
+        let mut rounded_in = 0;
+        for _ in 0..20_000 {
+            let [v0, v1, v2] = [rng.vec3(-1.0, 1.0), rng.vec3(-1.0, 1.0), rng.vec3(-1.0, 1.0)];
+            let target = v0 + (v1 - v0) * 0.3 + (v2 - v0) * 0.3;
+            let origin = target + rng.unit_vec3() * rng.range(0.5, 64.0);
+            let ray = WatertightRay::new(origin, (target - origin) * rng.range(0.1, 10.0));
+            let Some(unbounded) = ray.intersect(v0, v1, v2, 0.0, f32::MAX) else { continue };
+            for (tmin, tmax) in [(0.0, unbounded.t.next_down()), (unbounded.t.next_up(), f32::MAX)] {
+                if let Some(hit) = ray.intersect(v0, v1, v2, tmin, tmax) {
+                    assert!((tmin..=tmax).contains(&hit.t), "{} outside [{tmin}, {tmax}]", hit.t);
+                    rounded_in += 1;
+                }
+            }
+        }
+        assert!(rounded_in > 100, "only {rounded_in} ranges met the rounding");
     }
 
     #[test]

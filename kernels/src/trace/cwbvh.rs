@@ -6,7 +6,7 @@
 //! child boxes into one 32-bit hit mask, whose high byte lists internal children in front-to-back
 //! order for the ray's octant and whose low 24 bits list the triangles of hit leaves.
 
-use super::{ClosestHitQuery, Hit, OcclusionQuery, Ray};
+use super::{ClosestHitQuery, Hit, OcclusionQuery, Ray, MIN_DIRECTION};
 use crate::triangle::WatertightRay;
 use glam::{UVec2, Vec3, Vec3A, Vec4};
 use raywave_shared::bvh::CwBvhNode;
@@ -14,18 +14,20 @@ use raywave_shared::bvh::CwBvhNode;
 #[cfg(target_arch = "x86_64")]
 mod avx2;
 
-/// Traversal stack depth. obvhs's CWBVH builder keeps trees shallower than 32 levels (its
-/// validation asserts it); a node group is pushed at most once per level.
+/// Traversal stack depth. A node group is pushed at most once per level below the root, so a
+/// tree shallower than this never fills it: the host refuses deeper trees when it builds them
+/// (`CpuScene::build_with`, `Error::SceneTooLarge`), since obvhs's builder promises no depth and
+/// a full stack would drop the groups it cannot push.
 pub const STACK_SIZE: usize = 32;
 
-/// Slack on the far side of every box test: 1 + 2·γ(3) with γ(n) = n·ε/(1 − n·ε), ε = 2⁻²⁴, so
-/// rounding in the three-operation slab computation never culls a box the ray really enters
-/// (Ize, "Robust BVH Ray Traversal", JCGT 2(2), 2013; pbrt-v4 `Bounds3::IntersectP`).
-const FAR_SLACK: f32 = 1.0 + 2.0 * (3.0 * f32::EPSILON * 0.5) / (1.0 - 3.0 * f32::EPSILON * 0.5);
-
-/// Smallest direction magnitude used when inverting a direction: zero (and ±0) components become
-/// ±1e-30 so slab distances stay finite (no `0 · ∞` NaN) for axis-aligned rays.
-const MIN_DIRECTION: f32 = 1e-30;
+/// Slack on the far side of every box test: 1 + 2·γ(6) with γ(n) = n·ε/(1 − n·ε), ε = 2⁻²⁴
+/// (Ize, "Robust BVH Ray Traversal", JCGT 2(2), 2013, whose slab takes three roundings;
+/// pbrt-v4 `Bounds3::IntersectP`). A quantised plane's distance here takes six: `1/d`, the
+/// node origin's offset from the ray origin and its product with `1/d`, the product of the
+/// plane's grid index with the scaled cell, the one-cell expansion and their sum. Where those
+/// terms nearly cancel — a plane close to the ray origin — the error is not relative to the
+/// small result; the expansion's absolute margin of one cell (below) covers it there.
+const FAR_SLACK: f32 = 1.0 + 2.0 * (6.0 * f32::EPSILON * 0.5) / (1.0 - 6.0 * f32::EPSILON * 0.5);
 
 /// The scene as the software trace stage reads it: node and triangle buffers built by the host.
 pub struct CwBvhScene<'a> {
@@ -88,6 +90,8 @@ impl BoxRay {
     #[inline(always)]
     fn new(ray: &Ray) -> Self {
         let d = ray.direction;
+        // Zero (and ±0) components of axis-aligned rays, and others below the floor, become
+        // ±MIN_DIRECTION; the dominant one of a traceable ray is never below it.
         let safe = |c: f32| if c.abs() < MIN_DIRECTION { MIN_DIRECTION.copysign(c) } else { c };
         let inv_direction = Vec3::new(1.0 / safe(d.x), 1.0 / safe(d.y), 1.0 / safe(d.z));
         let negative =
@@ -191,9 +195,10 @@ impl CwBvhScene<'_> {
 #[cfg(target_arch = "x86_64")]
 const NODE_BYTES: usize = core::mem::size_of::<CwBvhNode>();
 
-/// Bytes of one triangle's vertices (three `Vec4`s).
+/// Bytes of one triangle's vertices (three `Vec4`s; the ids, which `shared::bvh::TRIANGLE_BYTES`
+/// counts too, are read only for the closest hit).
 #[cfg(target_arch = "x86_64")]
-const TRIANGLE_BYTES: usize = 3 * core::mem::size_of::<Vec4>();
+const TRIANGLE_VERTEX_BYTES: usize = 3 * core::mem::size_of::<Vec4>();
 
 impl CwBvhScene<'_> {
     /// Starts loading, without a branch, everything a node test can lead to next: the node's
@@ -214,7 +219,7 @@ impl CwBvhScene<'_> {
         // 0 when no triangle was hit: a wasted hint at `primitive_base`.
         let first_hit = (hits & 0x00ff_ffff).trailing_zeros() & 31;
         let first_triangle = self.vertices.as_ptr().wrapping_add(3 * (node.primitive_base + first_hit) as usize);
-        prefetch_block::<{ 8 * TRIANGLE_BYTES }>(first_triangle.cast());
+        prefetch_block::<{ 8 * TRIANGLE_VERTEX_BYTES }>(first_triangle.cast());
     }
 
     #[cfg(not(target_arch = "x86_64"))]

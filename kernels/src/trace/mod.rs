@@ -1,8 +1,11 @@
 //! The trace stage: closest hit of every ray in the ray stream.
 //!
-//! The stage is written against [`ClosestHitQuery`], so one function serves every backend: the
-//! CPU executor implements the query over obvhs's CWBVH with [`crate::triangle`]'s watertight
-//! test; the SPIR-V build implements it with `VK_KHR_ray_query` (`trace::ray_query`, SPIR-V only).
+//! The stage is written against [`ClosestHitQuery`] and [`OcclusionQuery`], so one function
+//! serves every backend: the software traversal ([`cwbvh`], obvhs's CWBVH with
+//! [`crate::triangle`]'s watertight test) on the CPU and in SPIR-V, and `VK_KHR_ray_query`
+//! (`trace::ray_query`, SPIR-V only); the ray-tracing pipeline's ray-generation shaders, whose
+//! traversal is a shader call rather than a query, run the same checks through
+//! [`trace_closest_with`] and [`trace_occluded_with`].
 
 pub mod cwbvh;
 #[cfg(all(target_arch = "spirv", feature = "ray-query"))]
@@ -17,7 +20,8 @@ use raywave_shared::stream::NO_HIT;
 pub struct Ray {
     /// Origin in scene units.
     pub origin: Vec3,
-    /// Direction; any non-zero length.
+    /// Direction, of any length whose largest component is at least [`MIN_DIRECTION`] in
+    /// magnitude (a shorter one is not traceable, as a zero one is not).
     pub direction: Vec3,
     /// Start of the valid interval (≥ 0).
     pub tmin: f32,
@@ -31,12 +35,14 @@ impl Ray {
         Self { origin: origin.xyz(), direction: direction.xyz(), tmin: origin.w, tmax: direction.w }
     }
 
-    /// Whether the ray can be traced: all components finite, a non-zero direction and
-    /// `0 ≤ tmin ≤ tmax`. Vulkan leaves other rays undefined, so the stage never passes them on.
+    /// Whether the ray can be traced: all components finite, a direction whose largest
+    /// component is at least [`MIN_DIRECTION`] in magnitude, and `0 ≤ tmin ≤ tmax`. Vulkan
+    /// leaves rays of a zero direction undefined, so the stage never passes them on; one of
+    /// subnormal components made the watertight test's `1/d` overflow into NaN.
     pub fn is_traceable(&self) -> bool {
         self.origin.is_finite()
             && self.direction.is_finite()
-            && self.direction != Vec3::ZERO
+            && self.direction.abs().max_element() >= MIN_DIRECTION
             && self.tmin.is_finite()
             && self.tmax.is_finite()
             && self.tmin >= 0.0
@@ -50,6 +56,12 @@ impl Ray {
         self.origin.is_finite() && self.direction.is_finite() && self.tmin.is_finite() && self.tmax.is_finite()
     }
 }
+
+/// Smallest largest-component of a traceable ray's direction ([`Ray::is_traceable`]): far
+/// enough above `f32::MIN_POSITIVE` that `1/d` of the dominant component stays finite, and the
+/// floor the box test puts under the other components ([`cwbvh`]) so that their slab distances
+/// stay finite (no `0 · ∞`) for axis-aligned rays.
+pub const MIN_DIRECTION: f32 = 1e-30;
 
 /// The closest hit of one ray, as the trace stage writes it into the hit stream.
 #[derive(Copy, Clone, Debug, PartialEq)]
@@ -92,8 +104,14 @@ pub trait OcclusionQuery {
 /// blocked within its interval. Rays that are not traceable report "not occluded", like a miss;
 /// those that are not finite are also flagged as replaced.
 pub fn trace_occluded<Q: OcclusionQuery>(origin: Vec4, direction: Vec4, query: &Q) -> Sanitized<bool> {
+    trace_occluded_with(origin, direction, |ray| query.occluded(ray))
+}
+
+/// [`trace_occluded`] with the any-hit query `occluded`, called for traceable rays only.
+#[inline(always)]
+pub fn trace_occluded_with(origin: Vec4, direction: Vec4, occluded: impl FnOnce(&Ray) -> bool) -> Sanitized<bool> {
     let ray = Ray::from_stream(origin, direction);
-    Sanitized { value: ray.is_traceable() && query.occluded(&ray), replaced: !ray.is_finite() }
+    Sanitized { value: ray.is_traceable() && occluded(&ray), replaced: !ray.is_finite() }
 }
 
 /// The trace stage for one invocation: reads the ray at its stream fields and returns its closest
@@ -101,11 +119,17 @@ pub fn trace_occluded<Q: OcclusionQuery>(origin: Vec4, direction: Vec4, query: &
 /// values are not finite is written as a miss, so no NaN or Inf leaves the stage; both are
 /// flagged as replaced (a non-finite ray, a non-finite hit).
 pub fn trace_closest<Q: ClosestHitQuery>(origin: Vec4, direction: Vec4, query: &Q) -> Sanitized<Hit> {
+    trace_closest_with(origin, direction, |ray| query.closest_hit(ray))
+}
+
+/// [`trace_closest`] with the closest-hit query `closest_hit`, called for traceable rays only.
+#[inline(always)]
+pub fn trace_closest_with(origin: Vec4, direction: Vec4, closest_hit: impl FnOnce(&Ray) -> Hit) -> Sanitized<Hit> {
     let ray = Ray::from_stream(origin, direction);
     if !ray.is_traceable() {
         return Sanitized { value: Hit::MISS, replaced: !ray.is_finite() };
     }
-    sanitize(query.closest_hit(&ray))
+    sanitize(closest_hit(&ray))
 }
 
 /// A hit as it may leave the stage: one whose values are not all finite becomes a miss.
@@ -139,9 +163,11 @@ mod tests {
 
     #[test]
     fn traceable_rays_reach_the_query() {
-        let (o, d) = (Vec4::new(0.0, 0.0, 0.0, 0.0), Vec4::new(0.0, 0.0, 1.0, 10.0));
-        assert_eq!(trace_closest(o, d, &Fixed(HIT)), Sanitized::clean(HIT));
-        assert_eq!(trace_occluded(o, d, &Fixed(HIT)), Sanitized::clean(true));
+        let o = Vec4::new(0.0, 0.0, 0.0, 0.0);
+        for d in [Vec4::new(0.0, 0.0, 1.0, 10.0), Vec4::new(0.0, -MIN_DIRECTION, 0.0, 10.0)] {
+            assert_eq!(trace_closest(o, d, &Fixed(HIT)), Sanitized::clean(HIT), "{d}");
+            assert_eq!(trace_occluded(o, d, &Fixed(HIT)), Sanitized::clean(true), "{d}");
+        }
     }
 
     /// Rays that cannot be traced miss (and are not occluded); only the non-finite ones — inputs
@@ -156,6 +182,9 @@ mod tests {
             (ok_origin, Vec4::new(0.0, f32::NAN, 1.0, 10.0), true),
             (ok_origin, Vec4::new(0.0, 0.0, 1.0, f32::INFINITY), true),
             (ok_origin, Vec4::new(0.0, 0.0, 0.0, 10.0), false),
+            // Below the floor: `1/d` overflows in the watertight test (it had traced a NaN hit).
+            (ok_origin, Vec4::new(0.0, 0.0, 1e-40, 10.0), false),
+            (ok_origin, Vec4::new(-0.9e-30, 0.9e-30, 0.0, 10.0), false),
             (Vec4::new(0.0, 0.0, 0.0, -1.0), ok_dir, false),
             (Vec4::new(0.0, 0.0, 0.0, 11.0), ok_dir, false),
         ];

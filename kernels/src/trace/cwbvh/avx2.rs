@@ -45,8 +45,8 @@ impl BoxRay8 {
     #[inline(always)]
     pub(super) unsafe fn new(ray: &BoxRay) -> Self {
         let lanes = |v: glam::Vec3| _mm_set_ps(0.0, v.z, v.y, v.x);
+        // `blendv` reads only the sign bit: −1 picks the max plane, +0 the min plane.
         let sign = |axis: usize| if ray.negative[axis] == 1 { -1.0 } else { 0.0 };
-        // -0.0 has only the sign bit set, which is all `blendv` reads.
         let negative = _mm_set_ps(0.0, sign(2), sign(1), sign(0));
         let near = |axis: usize| axis * 2 + ray.negative[axis] as usize;
         Self {
