@@ -118,7 +118,9 @@ fn generate(c: &mut Criterion, setup: &mut Setup) {
     for (w, h) in SIZES {
         let params = generate_params(&setup.scene, w, h, 1);
         group.throughput(Throughput::Elements(u64::from(w * h)));
-        group.bench_with_input(BenchmarkId::new("cpu", w * h), &params, |b, p| b.iter(|| cpu::generate(black_box(p))));
+        group.bench_with_input(BenchmarkId::new("cpu", w * h), &params, |b, p| {
+            b.iter(|| cpu::generate(black_box(p)).expect("generate"))
+        });
         if let Some(v) = setup.vulkan.as_mut() {
             group.bench_with_input(BenchmarkId::new("vulkan", w * h), &params, |b, p| {
                 b.iter(|| v.generate(black_box(p)).expect("generate"))
@@ -131,10 +133,10 @@ fn generate(c: &mut Criterion, setup: &mut Setup) {
 fn trace_primary(c: &mut Criterion, setup: &mut Setup) {
     let mut group = c.benchmark_group("trace_primary");
     for (w, h) in SIZES {
-        let rays = cpu::generate(&generate_params(&setup.scene, w, h, 1));
+        let rays = cpu::generate(&generate_params(&setup.scene, w, h, 1)).expect("generate");
         group.throughput(Throughput::Elements(rays.len() as u64));
         group.bench_with_input(BenchmarkId::new("cpu", rays.len()), &rays, |b, r| {
-            b.iter(|| cpu::trace(&setup.cpu_scene, black_box(r)))
+            b.iter(|| cpu::trace(&setup.cpu_scene, black_box(r)).expect("trace"))
         });
         if let Some(v) = setup.vulkan.as_mut() {
             group.bench_with_input(BenchmarkId::new("vulkan", rays.len()), &rays, |b, r| {
@@ -191,8 +193,8 @@ mod workgroup_size {
             device.trace_methods().into_iter().filter(|&method| method != TraceMethod::RtPipeline).collect();
         let mut group = c.benchmark_group("workgroup_size");
         let (w, h) = SIZES[1];
-        let rays = cpu::generate(&generate_params(&setup.scene, w, h, 1));
-        let hits = cpu::trace(&setup.cpu_scene, &rays);
+        let rays = cpu::generate(&generate_params(&setup.scene, w, h, 1)).expect("generate");
+        let hits = cpu::trace(&setup.cpu_scene, &rays).expect("trace");
         let params = setup.shade_params(w, h);
         let trace = |v: &mut dyn Backend| v.trace(black_box(&rays)).expect("trace").1;
         let shade = |v: &mut dyn Backend| v.shade(black_box(&params), &setup.data, &rays, &hits).expect("shade").1;
@@ -254,8 +256,8 @@ mod workgroup_size {
 fn shade(c: &mut Criterion, setup: &mut Setup) {
     let mut group = c.benchmark_group("shade");
     for (w, h) in SIZES {
-        let rays = cpu::generate(&generate_params(&setup.scene, w, h, 1));
-        let hits = cpu::trace(&setup.cpu_scene, &rays);
+        let rays = cpu::generate(&generate_params(&setup.scene, w, h, 1)).expect("generate");
+        let hits = cpu::trace(&setup.cpu_scene, &rays).expect("trace");
         let params = setup.shade_params(w, h);
         // With every light's U_S from the GGX lobe's integral (ShadeParams::analytic_residual).
         let residual_params = ShadeParams { analytic_residual: 1, ..params };

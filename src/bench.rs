@@ -97,9 +97,9 @@ struct RaySets {
 
 /// Primary camera rays; from each primary hit, a shadow ray to a point light above the scene and a
 /// cosine-distributed diffuse ray, both from the offset hit point.
-fn ray_sets(scene: &Scene, cpu_scene: &CpuScene, resolution: u32) -> RaySets {
-    let primary = cpu::generate(&generate_params(scene, resolution, resolution, 7));
-    let hits = cpu::trace(cpu_scene, &primary);
+fn ray_sets(scene: &Scene, cpu_scene: &CpuScene, resolution: u32) -> Result<RaySets> {
+    let primary = cpu::generate(&generate_params(scene, resolution, resolution, 7))?;
+    let hits = cpu::trace(cpu_scene, &primary)?;
     let (lo, hi) = scene.bounds();
     let light = Vec3::new((lo.x + hi.x) * 0.5, hi.y + (hi - lo).length() * 0.25, (lo.z + hi.z) * 0.5);
     let mut shadow = RayStream::default();
@@ -122,7 +122,7 @@ fn ray_sets(scene: &Scene, cpu_scene: &CpuScene, resolution: u32) -> RaySets {
         diffuse.direction.push(d.normalize_or(n).extend(primary.direction[i].w));
         diffuse.pixel.push(primary.pixel[i]);
     }
-    RaySets { primary, shadow, diffuse }
+    Ok(RaySets { primary, shadow, diffuse })
 }
 
 /// How long a benchmark's times must have stopped falling before it measures, on the CPU
@@ -382,7 +382,7 @@ pub fn bench_trace(options: &TraceBenchOptions, mut emit: impl FnMut(&dyn Output
         });
         embree
     };
-    let sets = ray_sets(&scene, &cpu_scene, options.resolution);
+    let sets = ray_sets(&scene, &cpu_scene, options.resolution)?;
     let kinds: [(&'static str, &RayStream); 3] =
         [("primary", &sets.primary), ("shadow", &sets.shadow), ("diffuse", &sets.diffuse)];
     for &threads in &options.threads {

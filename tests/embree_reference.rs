@@ -14,9 +14,9 @@ use raywave::Scene;
 fn embree_matches_the_cpu_trace() {
     let (meshes, camera) = hairball(20_000, 5);
     for scene in [Scene::load("builtin:cornell").unwrap(), Scene::new("hairball", meshes, camera).unwrap()] {
-        let rays = cpu::generate(&generate_params(&scene, 256, 256, 1));
+        let rays = cpu::generate(&generate_params(&scene, 256, 256, 1)).expect("generate");
         let cpu_scene = CpuScene::build(&scene).unwrap();
-        let expected = cpu::trace(&cpu_scene, &rays);
+        let expected = cpu::trace(&cpu_scene, &rays).expect("trace");
         let embree = EmbreeScene::build(&scene).unwrap();
         let mut agree = 0;
         for i in 0..rays.len() {

@@ -29,7 +29,7 @@ fn generate_matches_cpu_on_every_vulkan_device() {
         let sampler = sampler_params(kind, seed, width, height, 8);
         let mut params = generate_params_with(&scene, width, height, sample, sampler);
         params.lens_radius = lens_radius;
-        let expected = cpu::generate(&params);
+        let expected = cpu::generate(&params).expect("generate");
         for device in &mut devices {
             let (rays, timing) = device.generate(&params).expect("generate runs");
             assert!(timing.seconds >= 0.0);

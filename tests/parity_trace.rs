@@ -63,7 +63,7 @@ fn compare(scene: &Scene, rays: &RayStream, expected: &HitStream, actual: &HitSt
 
 /// Camera rays plus, for variety, rays from inside the box in hashed directions.
 fn test_rays(scene: &Scene) -> RayStream {
-    let mut rays = cpu::generate(&generate_params(scene, 320, 320, 3));
+    let mut rays = cpu::generate(&generate_params(scene, 320, 320, 3)).expect("generate");
     let centre = glam::Vec3::new(0.278, 0.274, 0.28);
     for i in 0..rays.len() / 2 {
         let h = raywave::kernels::hash::pcg3d(glam::UVec3::new(i as u32, 11, 5));
@@ -81,7 +81,7 @@ fn trace_matches_cpu_on_every_vulkan_device() {
     let cpu_scene = CpuScene::build(&scene).expect("BVH builds");
     let rays = test_rays(&scene);
     assert!(rays.len() >= 100_000);
-    let expected = cpu::trace(&cpu_scene, &rays);
+    let expected = cpu::trace(&cpu_scene, &rays).expect("trace");
     let hit_fraction = expected.primitive.iter().filter(|&&p| p != NO_HIT).count() as f64 / rays.len() as f64;
     // The box is open towards the camera (no front wall), so about a tenth of the rays escape.
     assert!(hit_fraction > 0.85, "the test rays must mostly hit the box ({hit_fraction})");
@@ -175,7 +175,7 @@ fn tracing_without_a_scene_is_refused_on_every_backend() {
 /// Rays from random points in the scene bounds in random directions (incoherent, like diffuse
 /// bounces), plus the scene's camera rays.
 fn incoherent_rays(scene: &Scene, count: u32) -> RayStream {
-    let mut rays = cpu::generate(&generate_params(scene, 128, 128, 5));
+    let mut rays = cpu::generate(&generate_params(scene, 128, 128, 5)).expect("generate");
     let (lo, hi) = scene.bounds();
     for i in 0..count {
         let h = raywave::kernels::hash::pcg3d(glam::UVec3::new(i, 21, 8));
@@ -201,7 +201,7 @@ fn trace_matches_cpu_on_incoherent_scenes() {
     ];
     for scene in &scenes {
         let rays = incoherent_rays(scene, 100_000);
-        let expected = cpu::trace(&CpuScene::build(scene).unwrap(), &rays);
+        let expected = cpu::trace(&CpuScene::build(scene).unwrap(), &rays).expect("trace");
         let hits = expected.primitive.iter().filter(|&&p| p != NO_HIT).count();
         assert!(hits > rays.len() / 10, "{}: the rays must hit often ({hits})", scene.name());
         for mut device in vulkan::every_device("incoherent parity") {
@@ -225,7 +225,7 @@ fn occlusion_matches_cpu_on_every_vulkan_device() {
         d.w = 1.0;
     }
     let cpu_scene = CpuScene::build(&scene).unwrap();
-    let (expected, sanitized) = cpu::trace_occlusion_counted(&cpu_scene, &rays);
+    let (expected, sanitized) = cpu::trace_occlusion_counted(&cpu_scene, &rays).expect("occlusion");
     assert_eq!(sanitized, 0);
     let blocked = expected.iter().filter(|&&o| o == 1).count();
     assert!(blocked > rays.len() / 10 && blocked < rays.len() * 9 / 10, "a mix of blocked and free rays ({blocked})");
@@ -251,8 +251,8 @@ fn backends_on_several_threads_at_once_match_cpu() {
     const ROUNDS: usize = 2;
     let scene = cornell();
     let cpu_scene = CpuScene::build(&scene).unwrap();
-    let rays = cpu::generate(&generate_params(&scene, 64, 48, 1));
-    let expected = cpu::trace(&cpu_scene, &rays);
+    let rays = cpu::generate(&generate_params(&scene, 64, 48, 1)).expect("generate");
+    let expected = cpu::trace(&cpu_scene, &rays).expect("trace");
     let start = std::sync::Barrier::new(THREADS);
     std::thread::scope(|threads| {
         for thread in 0..THREADS {

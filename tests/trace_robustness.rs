@@ -54,7 +54,7 @@ struct Traced {
 
 /// Traces `rays` on the CPU and on every Vulkan device × trace method.
 fn trace_everywhere(test: &str, scene: &Scene, rays: &RayStream) -> Vec<Traced> {
-    let cpu_hits = cpu::trace(&CpuScene::build(scene).expect("BVH builds"), rays);
+    let cpu_hits = cpu::trace(&CpuScene::build(scene).expect("BVH builds"), rays).expect("trace");
     let cpu = Traced { backend: "cpu".to_owned(), driver_intersection: false, hits: cpu_hits };
     std::iter::once(cpu).chain(trace_on_vulkan(test, scene, rays)).collect()
 }
@@ -168,7 +168,8 @@ fn offset_secondary_rays_never_hit_their_own_convex_surface() {
             .map(|(i, o)| centre + (random3(i as u32, 20) - 0.5) * radius - *o)
             .collect();
         let primary =
-            cpu::trace(&CpuScene::build(&scene).unwrap(), &rays_from(&primary_origins, &primary_dirs, radius * 10.0));
+            cpu::trace(&CpuScene::build(&scene).unwrap(), &rays_from(&primary_origins, &primary_dirs, radius * 10.0))
+                .expect("trace");
         // Secondary rays: from the barycentric hit point, offset along the outward geometric
         // normal, into the outward hemisphere (grazing directions included). The icosphere is
         // convex, so any hit is a false self-intersection.
@@ -309,7 +310,7 @@ fn kernel_traversal_matches_brute_force_on_incoherent_rays() {
     let origins: Vec<Vec3> = (0..n).map(|i| random3(i, 40) * 1.6 - 0.3).collect();
     let directions: Vec<Vec3> = (0..n).map(|i| random_direction(i, 41)).collect();
     let rays = rays_from(&origins, &directions, 5.0);
-    let hits = cpu::trace(&cpu_scene, &rays);
+    let hits = cpu::trace(&cpu_scene, &rays).expect("trace");
     let mut agree = 0;
     for (i, origin) in origins.iter().enumerate() {
         let ray = raywave::kernels::triangle::WatertightRay::new(*origin, rays.direction[i].truncate());
@@ -344,8 +345,8 @@ fn occlusion_agrees_with_closest_hit_and_exits_early() {
     let origins: Vec<Vec3> = (0..n).map(|i| random3(i, 50) * 1.6 - 0.3).collect();
     let directions: Vec<Vec3> = (0..n).map(|i| random_direction(i, 51)).collect();
     let rays = rays_from(&origins, &directions, 2.0);
-    let hits = cpu::trace(&cpu_scene, &rays);
-    let occluded = cpu::trace_occlusion(&cpu_scene, &rays);
+    let hits = cpu::trace(&cpu_scene, &rays).expect("trace");
+    let occluded = cpu::trace_occlusion(&cpu_scene, &rays).expect("occlusion");
     let (mut closest_tests, mut any_tests) = (0u64, 0u64);
     for (i, &blocked) in occluded.iter().enumerate() {
         assert_eq!(blocked == 1, hits.primitive[i] != NO_HIT, "ray {i}");

@@ -289,10 +289,22 @@ pub(crate) fn check_generate_params(params: &GenerateParams) -> Result<()> {
     }
 }
 
-/// Checks the size rules every backend shares: both sides ≥ 1 and the pixel count within `max_pixels`.
+/// Longest image side every backend accepts, in pixels. The generate stage places a ray at
+/// `(x + jitter) / width` in `f32`, whose 24-bit significand keeps sub-pixel steps of 2⁻⁸ pixel
+/// up to this side but only whole pixels from 2²³ on, and rounds neighbouring pixels onto one
+/// ray from 2²⁴ on; the blue-noise sampler's Morton index covers no longer side either.
+pub const MAX_IMAGE_SIDE: u32 = 1 << 16;
+
+/// Checks the size rules every backend shares: both sides within `1..=`[`MAX_IMAGE_SIDE`] and
+/// the pixel count within `max_pixels`.
 pub(crate) fn check_image_size_common(width: u32, height: u32, max_pixels: u64, backend: &str) -> Result<()> {
     let reason = if width == 0 || height == 0 {
         Some("width and height must be at least 1".to_owned())
+    } else if width.max(height) > MAX_IMAGE_SIDE {
+        Some(format!(
+            "a side of {} pixels exceeds {MAX_IMAGE_SIDE}, beyond which f32 sub-pixel positions lose precision",
+            width.max(height)
+        ))
     } else if u64::from(width) * u64::from(height) > max_pixels {
         Some(format!("{} pixels exceed the limit of {max_pixels}", u64::from(width) * u64::from(height)))
     } else {
@@ -314,6 +326,19 @@ mod tests {
         let resolution_log2 = width.max(height).checked_next_power_of_two().map_or(32, u32::trailing_zeros);
         let sampler = SamplerParams { kind: sampler_kind::ZSOBOL, seed: 0, spp_log2, resolution_log2 };
         SamplerProbeParams { sampler, width, height, dimension: 0, padding: 0 }
+    }
+
+    /// Sides up to [`MAX_IMAGE_SIDE`] pass; a longer one is refused naming it, whatever the
+    /// pixel count allows (a 2²⁴-pixel-wide line's neighbours had shared one ray).
+    #[test]
+    fn image_sides_are_limited_to_keep_sub_pixel_precision() {
+        assert!(check_image_size_common(MAX_IMAGE_SIDE, 1, u64::MAX, "any").is_ok());
+        assert!(check_image_size_common(1, MAX_IMAGE_SIDE, u64::MAX, "any").is_ok());
+        for (width, height) in [(MAX_IMAGE_SIDE + 1, 1), (1, 1 << 24), (u32::MAX, u32::MAX)] {
+            let err = check_image_size_common(width, height, u64::MAX, "any").expect_err("refused");
+            let side = format!("a side of {} pixels exceeds 65536", width.max(height));
+            assert!(matches!(err, crate::Error::ImageSize { .. }) && err.to_string().contains(&side), "{err}");
+        }
     }
 
     #[test]

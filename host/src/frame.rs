@@ -128,6 +128,22 @@ mod tests {
     use super::*;
     use glam::Vec4Swizzles;
 
+    /// The sampler's own limit, for callers that check it without a backend's size check: a side
+    /// over 65536 overflows the blue-noise index at any sample count and is named as the size;
+    /// a count that overflows it at a size that fits is named as the option.
+    #[test]
+    fn the_blue_noise_index_names_the_size_or_the_samples_that_overflow_it() {
+        let name = |kind, width, spp| match check_samples_per_pixel("spp", kind, width, 1, spp) {
+            Err(crate::error::Error::InvalidParameter { name, .. }) => Some(name),
+            Ok(()) => None,
+            Err(other) => panic!("{other}"),
+        };
+        assert_eq!(name(sampler_kind::ZSOBOL, 65537, 1), Some("width/height"));
+        assert_eq!(name(sampler_kind::ZSOBOL, 65536, 2), Some("spp"));
+        assert_eq!(name(sampler_kind::ZSOBOL, 65536, 1), None);
+        assert_eq!(name(sampler_kind::SOBOL, 65537, 4), None, "its own index has no such limit");
+    }
+
     #[test]
     fn cornell_camera_looks_down_z_with_red_wall_on_the_left() {
         let scene = Scene::load("builtin:cornell").unwrap();

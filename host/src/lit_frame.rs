@@ -277,10 +277,15 @@ mod tests {
         assert!(matches!(empty, Err(Error::ImageSize { width: 0, .. })), "{empty:?}");
         assert_eq!(rejected_setting(LitFrameSettings { samples_per_pixel: 0, ..good }), "spp");
         assert_eq!(rejected_setting(LitFrameSettings::new(4096, 4096, 1024)), "spp");
-        assert_eq!(rejected_setting(LitFrameSettings::new(65537, 1, 1)), "width/height");
+        assert_eq!(rejected_setting(LitFrameSettings::new(65536, 1, 2)), "spp");
+        // A longer side is the backend's to refuse, for every sampler, before the samples.
+        let too_wide = LitFrameSettings::new(65537, 1, 1).check_on(&CpuBackend::new());
+        assert!(matches!(too_wide, Err(Error::ImageSize { width: 65537, .. })), "{too_wide:?}");
         // Only the blue-noise sampler's Morton index limits the samples: the others index any.
         for sampler_kind in [sampler_kind::SOBOL, sampler_kind::INDEPENDENT] {
-            for (width, height, spp) in [(4096, 4096, 1024), (65537, 1, 1)] {
+            let settings = LitFrameSettings { sampler_kind, ..LitFrameSettings::new(65537, 1, 1) };
+            assert!(matches!(settings.check_on(&CpuBackend::new()), Err(Error::ImageSize { .. })));
+            for (width, height, spp) in [(4096, 4096, 1024), (65536, 1, 2)] {
                 let settings = LitFrameSettings { sampler_kind, ..LitFrameSettings::new(width, height, spp) };
                 settings.check_on(&CpuBackend::new()).unwrap();
             }

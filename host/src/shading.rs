@@ -449,8 +449,8 @@ mod tests {
         let scene = Scene::load("builtin:cornell").unwrap();
         let data = ShadeData::new(&scene).unwrap();
         let params = crate::frame::generate_params(&scene, 9, 7, 3);
-        let rays = crate::cpu::generate(&params);
-        let hits = crate::cpu::trace(&crate::cpu::CpuScene::build(&scene).unwrap(), &rays);
+        let rays = crate::cpu::generate(&params).expect("generate");
+        let hits = crate::cpu::trace(&crate::cpu::CpuScene::build(&scene).unwrap(), &rays).expect("trace");
         let shade_params = data.params(params.sampler, 9, 7, 0);
         let (shades, sanitized) = shade(&shade_params, &data, &rays, &resolve(&data, &rays, &hits));
         assert_eq!(sanitized, 0);

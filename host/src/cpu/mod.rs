@@ -50,8 +50,22 @@ impl CpuBackend {
     }
 }
 
-/// Runs the generate stage over `0..params.ray_count()`.
-pub fn generate(params: &GenerateParams) -> RayStream {
+/// Runs the generate stage over `0..params.ray_count()`, after the checks of the CPU backend's
+/// [`Backend::generate`]: the image size within its limits ([`MAX_PIXELS`]; a size whose pixel
+/// count wraps `ray_count`'s `u32` had given an empty stream) and the camera's parameters.
+pub fn generate(params: &GenerateParams) -> Result<RayStream> {
+    check_generate(params)?;
+    Ok(generate_checked(params))
+}
+
+/// [`generate`]'s checks, with the backend named as [`CpuBackend::name`] names it.
+fn check_generate(params: &GenerateParams) -> Result<()> {
+    check_image_size_common(params.width, params.height, MAX_PIXELS, &CpuBackend::new().name())?;
+    check_generate_params(params)
+}
+
+/// The generate stage over `params` that [`check_generate`] has accepted.
+fn generate_checked(params: &GenerateParams) -> RayStream {
     let mut rays = RayStream::zeroed(params.ray_count() as usize);
     (&mut rays.origin, &mut rays.direction, &mut rays.pixel).into_par_iter().enumerate().for_each(
         |(i, (origin, direction, pixel))| {
@@ -63,8 +77,21 @@ pub fn generate(params: &GenerateParams) -> RayStream {
 }
 
 /// Runs the trace stage over every ray of `rays`: the hit stream and how many rays or hits were
-/// not finite and became misses ([`StageReport::sanitized`]).
-pub fn trace_counted(scene: &CpuScene, rays: &RayStream) -> (HitStream, u64) {
+/// not finite and became misses ([`StageReport::sanitized`]). Fields of different lengths are an
+/// error naming them, as [`Backend::trace`] makes it (a short direction field had given zeroed
+/// records — hits on mesh 0's triangle 0 — for the rays past its end).
+pub fn trace_counted(scene: &CpuScene, rays: &RayStream) -> Result<(HitStream, u64)> {
+    rays.check("trace")?;
+    Ok(trace_checked(scene, rays))
+}
+
+/// The hit stream of [`trace_counted`] alone.
+pub fn trace(scene: &CpuScene, rays: &RayStream) -> Result<HitStream> {
+    Ok(trace_counted(scene, rays)?.0)
+}
+
+/// [`trace_counted`] over a ray stream whose fields have been checked.
+fn trace_checked(scene: &CpuScene, rays: &RayStream) -> (HitStream, u64) {
     let mut hits = HitStream::zeroed(rays.len());
     let sanitized = AtomicU64::new(0);
     (&mut hits.t, &mut hits.primitive, &mut hits.instance, &mut hits.barycentrics)
@@ -77,26 +104,27 @@ pub fn trace_counted(scene: &CpuScene, rays: &RayStream) -> (HitStream, u64) {
     (hits, sanitized.into_inner())
 }
 
-/// The hit stream of [`trace_counted`] alone.
-pub fn trace(scene: &CpuScene, rays: &RayStream) -> HitStream {
-    trace_counted(scene, rays).0
-}
-
 /// Runs the occlusion variant of the trace stage (shadow rays) over every ray of `rays`: 1 where
 /// the ray is blocked within its interval, 0 where it is not; and how many rays were not finite
-/// (reported unblocked).
-pub fn trace_occlusion_counted(scene: &CpuScene, rays: &RayStream) -> (Vec<u32>, u64) {
+/// (reported unblocked). Fields of different lengths are an error naming them.
+pub fn trace_occlusion_counted(scene: &CpuScene, rays: &RayStream) -> Result<(Vec<u32>, u64)> {
+    rays.check("trace_occlusion")?;
+    Ok(occlusion_checked(scene, rays))
+}
+
+/// The occlusion results of [`trace_occlusion_counted`] alone.
+pub fn trace_occlusion(scene: &CpuScene, rays: &RayStream) -> Result<Vec<u32>> {
+    Ok(trace_occlusion_counted(scene, rays)?.0)
+}
+
+/// [`trace_occlusion_counted`] over a ray stream whose fields have been checked.
+fn occlusion_checked(scene: &CpuScene, rays: &RayStream) -> (Vec<u32>, u64) {
     let sanitized = AtomicU64::new(0);
     let occluded = (&rays.origin, &rays.direction)
         .into_par_iter()
         .map(|(origin, direction)| u32::from(count(trace_occluded(*origin, *direction, scene), &sanitized)))
         .collect();
     (occluded, sanitized.into_inner())
-}
-
-/// The occlusion results of [`trace_occlusion_counted`] alone.
-pub fn trace_occlusion(scene: &CpuScene, rays: &RayStream) -> Vec<u32> {
-    trace_occlusion_counted(scene, rays).0
 }
 
 /// The value of an invocation's result, adding it to `sanitized` if it replaced a non-finite value
@@ -135,21 +163,20 @@ impl Backend for CpuBackend {
     }
 
     fn generate(&mut self, params: &GenerateParams) -> Result<(RayStream, StageReport)> {
-        self.check_image_size(params.width, params.height)?;
-        check_generate_params(params)?;
-        Ok(timed("generate", || (generate(params), 0)))
+        check_generate(params)?;
+        Ok(timed("generate", || (generate_checked(params), 0)))
     }
 
     fn trace(&mut self, rays: &RayStream) -> Result<(HitStream, StageReport)> {
         rays.check("trace")?;
         let scene = self.scene()?;
-        Ok(timed("trace", || trace_counted(scene, rays)))
+        Ok(timed("trace", || trace_checked(scene, rays)))
     }
 
     fn trace_occlusion(&mut self, rays: &RayStream) -> Result<(Vec<u32>, StageReport)> {
         rays.check("trace_occlusion")?;
         let scene = self.scene()?;
-        Ok(timed("occlusion", || trace_occlusion_counted(scene, rays)))
+        Ok(timed("occlusion", || occlusion_checked(scene, rays)))
     }
 
     fn shade(
@@ -214,8 +241,26 @@ mod tests {
         let mut rays = RayStream::zeroed(1);
         rays.origin[0] = origin.extend(0.0);
         rays.direction[0] = direction.extend(10.0);
-        let hits = trace(&CpuScene::build(&scene).unwrap(), &rays);
+        let hits = trace(&CpuScene::build(&scene).unwrap(), &rays).unwrap();
         (hits.t[0], hits.instance[0])
+    }
+
+    /// The free `generate` checks what the backend checks: a 65536² image, whose pixel count
+    /// wraps `ray_count`'s `u32` to 0, had returned an empty stream; a longer side than
+    /// [`crate::backend::MAX_IMAGE_SIDE`] is refused whatever the pixel count; a camera without
+    /// an image plane is refused.
+    #[test]
+    fn the_free_generate_refuses_what_the_backend_refuses() {
+        let scene = Scene::load("builtin:cornell").unwrap();
+        for (width, height, reason) in [(1 << 16, 1 << 16, "exceed the limit"), (1 << 17, 1, "a side of 131072")] {
+            let params = crate::frame::generate_params(&scene, width, height, 0);
+            let err = generate(&params).expect_err("refused");
+            assert!(matches!(err, Error::ImageSize { .. }) && err.to_string().contains(reason), "{err}");
+        }
+        let mut flat = crate::frame::generate_params(&scene, 4, 4, 0);
+        flat.up = Vec4::ZERO;
+        assert!(matches!(generate(&flat), Err(Error::InvalidParameter { name: "generate", .. })));
+        assert_eq!(generate(&crate::frame::generate_params(&scene, 4, 3, 0)).expect("generates").len(), 12);
     }
 
     #[test]
@@ -280,6 +325,10 @@ mod tests {
         rays.pixel.push(4);
         assert_eq!(name_of(cpu.trace(&rays).unwrap_err()), "trace");
         assert_eq!(name_of(cpu.trace_occlusion(&rays).unwrap_err()), "trace_occlusion");
+        // The free functions too (they had zipped to the shortest field).
+        let cpu_scene = CpuScene::build(&scene).unwrap();
+        assert_eq!(name_of(trace_counted(&cpu_scene, &rays).unwrap_err()), "trace");
+        assert_eq!(name_of(trace_occlusion_counted(&cpu_scene, &rays).unwrap_err()), "trace_occlusion");
         let zeroed = GenerateParams { width: 1, height: 1, ..bytemuck::Zeroable::zeroed() };
         assert_eq!(name_of(cpu.generate(&zeroed).unwrap_err()), "generate");
         let params = crate::frame::generate_params(&scene, 4, 4, 1);
