@@ -27,7 +27,8 @@ pub struct TraceBenchOptions {
     pub repeats: u32,
     /// Also measure every Vulkan trace method of the best Vulkan device, if there is one.
     pub vulkan: bool,
-    /// obvhs build preset of the BVH that raywave and obvhs both traverse.
+    /// obvhs build preset of the BVH that raywave (on the CPU and in the Vulkan `sw` method) and
+    /// obvhs traverse.
     pub bvh: crate::cpu::BvhQuality,
     /// The Vulkan device's workgroup sizes of the compute trace methods (`sw`, `rayquery`;
     /// [`crate::WorkgroupSizes::trace`]; the ray-tracing pipeline has no workgroups and is
@@ -38,7 +39,7 @@ pub struct TraceBenchOptions {
 /// One measurement, printed as one JSON line.
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct Measurement {
-    /// Always `trace` (or `bvh_build` for the build line).
+    /// Always `trace` (the build line is a [`BuildMeasurement`]).
     pub stage: &'static str,
     /// `raywave-cpu`, `obvhs`, `embree`, `raywave-vk-sw`, `raywave-vk-rayquery`, `raywave-vk-rtpipe`.
     #[serde(rename = "impl")]
@@ -65,6 +66,11 @@ pub struct Measurement {
     /// ray-tracing pipeline, which have none.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub workgroup_size: Option<u32>,
+    /// The obvhs build preset of the tree traversed (`fast`, `medium`, `slow`): raywave's CPU and
+    /// `sw` traversals and obvhs's; absent for Embree and the driver-built acceleration
+    /// structures of `rayquery` and `rtpipe`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub bvh: Option<&'static str>,
 }
 
 /// The BVH build line: build time and memory per triangle.
@@ -222,16 +228,27 @@ pub(crate) struct Measured {
     pub warm_up_seconds: f64,
 }
 
-/// Times `run` — one run of the stages it reports, on one backend — as every `raywave bench`
-/// does: a [`warm_up`] of `settle_seconds` on their summed times, then `repeats` timed runs.
+/// Times `run` — one run of the `stage_count` stages it reports, on one backend — as every
+/// `raywave bench` does: a [`warm_up`] of `settle_seconds` on their summed times, then `repeats`
+/// timed runs. A run that reports another number of stages is an error naming `stages`, not
+/// stages silently dropped or a panic.
 pub(crate) fn measure(
     settle_seconds: f64,
     repeats: u32,
+    stage_count: usize,
     mut run: impl FnMut() -> Result<Vec<StageReport>>,
 ) -> Result<Measured> {
-    let warm_up_seconds = warm_up(settle_seconds, || Ok(run()?.iter().map(|r| r.seconds).sum()))?;
-    let runs = (0..repeats).map(|_| run()).collect::<Result<Vec<_>>>()?;
-    let stage_count = runs.first().map_or(0, Vec::len);
+    let mut checked_run = || {
+        let reports = run()?;
+        if reports.len() != stage_count {
+            let names: Vec<_> = reports.iter().map(|report| report.stage).collect();
+            let reason = format!("a run reported {} stage times {names:?}, not {stage_count}", reports.len());
+            return Err(Error::InvalidParameter { name: "stages", reason });
+        }
+        Ok(reports)
+    };
+    let warm_up_seconds = warm_up(settle_seconds, || Ok(checked_run()?.iter().map(|r| r.seconds).sum()))?;
+    let runs = (0..repeats).map(|_| checked_run()).collect::<Result<Vec<_>>>()?;
     let stages = (0..stage_count)
         .map(|i| StageMedian {
             seconds: median(runs.iter().map(|r| r[i].seconds).collect()),
@@ -242,11 +259,16 @@ pub(crate) fn measure(
     Ok(Measured { stages, total_seconds, warm_up_seconds })
 }
 
-/// The median of a list of timings (the upper one of an even count; NaN for none, which the
-/// benchmarks' checks of their repetitions rule out). Shared by every `raywave bench`.
+/// The median of a list of timings (the mean of the middle two of an even count; NaN for none,
+/// which the benchmarks' checks of their repetitions rule out). Shared by every `raywave bench`.
 pub(crate) fn median(mut times: Vec<f64>) -> f64 {
     times.sort_by(f64::total_cmp);
-    times.get(times.len() / 2).copied().unwrap_or(f64::NAN)
+    let middle = times.len() / 2;
+    match times.len() {
+        0 => f64::NAN,
+        n if n % 2 == 0 => 0.5 * (times[middle - 1] + times[middle]),
+        _ => times[middle],
+    }
 }
 
 fn wall(f: impl FnOnce()) -> f64 {
@@ -330,6 +352,7 @@ fn measurement(
         dispatches,
         warm_up_seconds,
         workgroup_size: None,
+        bvh: None,
     }
 }
 
@@ -393,27 +416,32 @@ pub fn bench_trace(options: &TraceBenchOptions, mut emit: impl FnMut(&dyn Output
         for (kind, rays) in kinds {
             let raywave = RaywaveCpu(&cpu_scene);
             let obvhs = ObvhsReference(&cpu_scene);
-            let tracers: [(&str, &dyn CpuTracer); _] = [
-                ("raywave-cpu", &raywave),
-                ("obvhs", &obvhs),
+            // Each with the obvhs preset of the tree it traverses (Embree builds its own).
+            let tracers: [(&str, Option<&str>, &dyn CpuTracer); _] = [
+                ("raywave-cpu", Some(options.bvh.name()), &raywave),
+                ("obvhs", Some(options.bvh.name()), &obvhs),
                 #[cfg(feature = "embree")]
-                ("embree", &embree),
+                ("embree", None, &embree),
             ];
             let time = |tracer: &dyn CpuTracer| pool.install(|| time_cpu(tracer, kind, rays));
             // Untimed first, as `bench shade` and `bench denoise` measure the CPU: every tracer in
             // turn until their summed times have stopped falling.
             let warm_up_seconds =
-                warm_up(CPU_SETTLE_SECONDS, || Ok(tracers.iter().map(|(_, tracer)| time(*tracer)).sum()))?;
+                warm_up(CPU_SETTLE_SECONDS, || Ok(tracers.iter().map(|(_, _, tracer)| time(*tracer)).sum()))?;
             // Repetitions interleave the tracers, so that a slow spell of a shared machine lands on
             // all of them alike and their ratios stay comparable.
             let mut times = vec![Vec::new(); tracers.len()];
             for _ in 0..options.repeats {
-                for ((_, tracer), times) in tracers.iter().zip(&mut times) {
+                for ((_, _, tracer), times) in tracers.iter().zip(&mut times) {
                     times.push(time(*tracer));
                 }
             }
-            for ((name, _), times) in tracers.iter().zip(times) {
-                emit(&measurement(name, kind, threads, rays.len(), median(times), 1, warm_up_seconds));
+            for ((name, bvh, _), times) in tracers.iter().zip(times) {
+                let seconds = median(times);
+                emit(&Measurement {
+                    bvh: *bvh,
+                    ..measurement(name, kind, threads, rays.len(), seconds, 1, warm_up_seconds)
+                });
             }
         }
     }
@@ -440,10 +468,10 @@ fn bench_vulkan(
     for method in device.info.trace_methods() {
         let has_workgroups = method != TraceMethod::RtPipeline;
         for &size in if has_workgroups { &device.sizes[..] } else { &no_workgroups } {
-            let mut backend = device.open(size, Some(method))?;
+            let mut backend = device.open(size, Some(method), options.bvh)?;
             backend.load_scene(scene)?;
             for &(kind, rays) in kinds {
-                let measured = measure(device.settle_seconds, options.repeats, || {
+                let measured = measure(device.settle_seconds, options.repeats, 1, || {
                     let report = if kind == "shadow" {
                         backend.trace_occlusion(rays).map(|(_, t)| t)
                     } else {
@@ -456,6 +484,7 @@ fn bench_vulkan(
                 let warm_up = measured.warm_up_seconds;
                 emit(&Measurement {
                     workgroup_size: has_workgroups.then(|| backend.workgroup_sizes().trace),
+                    bvh: (method == TraceMethod::Software).then(|| backend.software_bvh().name()),
                     ..measurement(&name, kind, 1, rays.len(), trace.seconds, trace.dispatches, warm_up)
                 });
             }
@@ -470,8 +499,9 @@ impl OutputLine for Measurement {
     }
     fn row(&self) -> String {
         let workgroup = crate::bench_device::workgroup_note(self.workgroup_size);
+        let bvh = self.bvh.map(|preset| format!("  bvh {preset}")).unwrap_or_default();
         format!(
-            "{:<20} {:<8} {:>2} threads {:>9} rays {:>9.4} s {:>8.2} Mrays/s  ×{}{workgroup}",
+            "{:<20} {:<8} {:>2} threads {:>9} rays {:>9.4} s {:>8.2} Mrays/s  ×{}{workgroup}{bvh}",
             self.implementation, self.kind, self.threads, self.rays, self.seconds, self.mrays_per_s, self.dispatches
         )
     }
@@ -494,6 +524,26 @@ impl OutputLine for BuildMeasurement {
 mod tests {
     use super::*;
     use std::cell::Cell;
+
+    /// The middle value of an odd count, the mean of the middle two of an even one (`--repeats 2`
+    /// had reported the slower run), NaN for none.
+    #[test]
+    fn the_median_is_the_middle_of_the_sorted_times() {
+        assert_eq!(median(vec![3.0, 1.0, 2.0]), 2.0);
+        assert_eq!(median(vec![4.0, 1.0]), 2.5);
+        assert_eq!(median(vec![4.0, 1.0, 3.0, 2.0]), 2.5);
+        assert!(median(Vec::new()).is_nan());
+    }
+
+    /// A run that reports another number of stages than the bench expects is a typed error, not
+    /// stages dropped from the totals or a panic on a missing one.
+    #[test]
+    fn a_run_with_the_wrong_number_of_stages_is_refused() {
+        let report = StageReport::clean("trace", 1e-3);
+        let error = measure(0.0, 1, 2, || Ok(vec![report.clone()])).err().expect("refused");
+        assert!(matches!(&error, Error::InvalidParameter { name: "stages", .. }), "{error}");
+        assert!(measure(0.0, 2, 1, || Ok(vec![report.clone()])).is_ok());
+    }
 
     #[test]
     fn rates_stay_finite_for_a_time_below_the_clock() {

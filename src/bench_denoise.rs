@@ -76,8 +76,8 @@ pub struct DenoiseMeasurement {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub dispatches: Option<u32>,
     /// Seconds of the untimed warm-up of this denoiser before it was timed (until its times had
-    /// not fallen for 5 s on Vulkan, 0.5 s on the CPU): long where the device had to raise its
-    /// clocks first.
+    /// not fallen for `--settle-seconds`, default 5 s, on Vulkan; 0.5 s on the CPU): long where
+    /// the device had to raise its clocks first.
     pub warm_up_seconds: f64,
     /// Bytes the pass must move.
     pub bytes: u64,
@@ -159,7 +159,7 @@ fn copy_bandwidth(
     repeats: u32,
     settle_seconds: f64,
 ) -> Result<f64> {
-    let measured = measure(settle_seconds, repeats, || Ok(vec![backend.copy_probe(params, image)?.1]))?;
+    let measured = measure(settle_seconds, repeats, 1, || Ok(vec![backend.copy_probe(params, image)?.1]))?;
     let bytes = 2.0 * std::mem::size_of::<Vec4>() as f64 * f64::from(params.pixels());
     Ok(crate::bench::per_second(bytes, measured.stages[0].seconds) / 1e9)
 }
@@ -191,7 +191,9 @@ fn bench_backend(
     for method in [DenoiseMethod::Tv, DenoiseMethod::Svgf] {
         let passes = method.passes(&params);
         let Measured { stages, total_seconds, warm_up_seconds } =
-            measure(settle_seconds, options.repeats, || backend.denoise(method, &params, input).map(|(_, r)| r))?;
+            measure(settle_seconds, options.repeats, passes.len(), || {
+                backend.denoise(method, &params, input).map(|(_, r)| r)
+            })?;
         let line = |pass: &'static str, seconds: f64, dispatches: Option<u32>, bytes: u64| {
             let gb_per_s = crate::bench::per_second(bytes as f64, seconds) / 1e9;
             DenoiseMeasurement {
@@ -241,7 +243,7 @@ pub fn bench_denoise(options: &DenoiseBenchOptions, mut emit: impl FnMut(&Denois
     #[cfg(feature = "vulkan")]
     if let Some(device) = vulkan_device {
         for &size in &device.sizes {
-            let mut vulkan = device.open(size, None)?;
+            let mut vulkan = device.open(size, None, Default::default())?;
             let measuring = Measuring {
                 peak_gbps: options.peak_gbps.or_else(|| known_peak_gbps(&device.info.name)),
                 settle_seconds: device.settle_seconds,

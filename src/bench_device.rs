@@ -91,11 +91,18 @@ pub(crate) enum BenchDevice {}
 #[cfg(feature = "vulkan")]
 impl BenchDevice {
     /// The device opened in benchmark mode (`crate::bench::SUSTAIN_SECONDS`) with the swept
-    /// stage in workgroups of `size` and trace method `trace` (`None`: the best it has).
-    pub fn open(&self, size: u32, trace: Option<crate::TraceMethod>) -> Result<crate::vulkan::VulkanBackend> {
+    /// stage in workgroups of `size`, trace method `trace` (`None`: the best it has) and, for
+    /// software traversal, a CWBVH of preset `software_bvh`.
+    pub fn open(
+        &self,
+        size: u32,
+        trace: Option<crate::TraceMethod>,
+        software_bvh: crate::cpu::BvhQuality,
+    ) -> Result<crate::vulkan::VulkanBackend> {
         let context = crate::vulkan::ContextOptions {
             sustain_seconds: crate::bench::SUSTAIN_SECONDS,
             workgroup_sizes: Some(self.preferred.with(self.stage, size)),
+            software_bvh,
             ..Default::default()
         };
         crate::vulkan::VulkanBackend::open(self.info.index, &context, trace)

@@ -84,7 +84,8 @@ pub fn bench_shade(options: &ShadeBenchOptions, mut emit: impl FnMut(&ShadeMeasu
     let (hits, _) = cpu.trace(&rays)?;
     let params = data.params(sampler_params(sampler_kind::ZSOBOL, 1, side, side, 1), side, side, 0);
     let mut shade_on = |backend: &mut dyn Backend, settle: f64, workgroup_size: Option<u32>| -> Result<()> {
-        let measured = measure(settle, options.repeats, || Ok(vec![backend.shade(&params, &data, &rays, &hits)?.1]))?;
+        let measured =
+            measure(settle, options.repeats, 1, || Ok(vec![backend.shade(&params, &data, &rays, &hits)?.1]))?;
         let (seconds, dispatches) = (measured.stages[0].seconds, measured.stages[0].dispatches);
         emit(&ShadeMeasurement {
             stage: "shade",
@@ -104,7 +105,7 @@ pub fn bench_shade(options: &ShadeBenchOptions, mut emit: impl FnMut(&ShadeMeasu
     #[cfg(feature = "vulkan")]
     if let Some(device) = vulkan_device {
         for &size in &device.sizes {
-            let mut backend = device.open(size, None)?;
+            let mut backend = device.open(size, None, Default::default())?;
             let runs = backend.workgroup_sizes().shade;
             shade_on(&mut backend, device.settle_seconds, Some(runs))?;
         }

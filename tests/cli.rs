@@ -494,7 +494,7 @@ fn an_orthographic_camera_is_framed_with_a_warning() {
 /// frame is shaded or the reference converged).
 #[test]
 fn bench_and_report_options_out_of_range_are_typed_errors() {
-    let cases: [(&[&str], &str); 28] = [
+    let cases: [(&[&str], &str); 29] = [
         (&["bench", "denoise", "--no-vulkan", "--repeats", "0"], "repeats: must be at least 1"),
         (&["bench", "denoise", "--no-vulkan", "--spp", "0"], "spp: 0 is outside"),
         // Before the scene loads, which would fail too.
@@ -510,6 +510,7 @@ fn bench_and_report_options_out_of_range_are_typed_errors() {
         (&["bench", "trace", "--no-vulkan", "--repeats", "0"], "repeats: must be at least 1"),
         (&["bench", "trace", "--no-vulkan", "--resolution", "0"], "at least 1"),
         (&["bench", "trace", "--no-vulkan", "--threads", "0"], "threads: 0 is outside 1..="),
+        (&["bench", "trace", "--no-vulkan", "--bvh", "best"], "bvh: \"best\": expected fast, medium or slow"),
         // Sizes no device runs were ignored without a word.
         (
             &["bench", "shade", "--no-vulkan", "--workgroup-sizes", "64"],
@@ -780,6 +781,60 @@ fn denoise_bench_prints_each_pass_and_the_total() {
     assert_eq!(wider.iter().filter(|l| l["pass"] == "svgf atrous").count(), 3, "three à-trous iterations at R = 3");
 }
 
+/// `bench trace` and `bench shade` on the CPU alone, as any build measures on any machine: the
+/// BVH build line, then each tracer's line per ray kind — its rate the one its own rays and
+/// seconds make, the `--bvh` preset named where an obvhs tree was traversed — and the shade line.
+#[test]
+fn trace_and_shade_benches_measure_the_cpu_alone() {
+    let args = ["bench", "trace", "--no-vulkan", "--scene", "builtin:cornell", "--resolution", "8", "--repeats", "2"];
+    let out = raywave(&[&args[..], &["--threads", "1", "--bvh", "medium", "--json"]].concat());
+    assert!(out.status.success(), "{}", stderr(&out));
+    let lines = json_lines(&out);
+    let rate_of = |line: &serde_json::Value, count: &str| {
+        let seconds = line["seconds"].as_f64().unwrap();
+        assert!(seconds > 0.0 && line["warm_up_seconds"].as_f64().unwrap() >= 0.5, "{line:?}");
+        line[count].as_f64().unwrap() / seconds / 1e6
+    };
+    let build = &lines[0];
+    assert_eq!((build["stage"].as_str(), build["impl"].as_str()), (Some("bvh_build"), Some("obvhs-cwbvh-medium")));
+    assert!(build["triangles"].as_u64().unwrap() > 0 && build["bytes_per_triangle"].as_f64().unwrap() > 0.0);
+    assert!(["portable", "x86-64-v3"].contains(&build["traversal_isa"].as_str().unwrap()), "{build:?}");
+    let traces: Vec<_> = lines.iter().filter(|l| l["stage"] == "trace").collect();
+    let tracers = 2 + usize::from(cfg!(feature = "embree"));
+    assert_eq!(traces.len(), 3 * tracers, "{lines:?}");
+    for (i, line) in traces.iter().enumerate() {
+        assert_eq!(line["kind"], ["primary", "shadow", "diffuse"][i / tracers], "{line:?}");
+        assert_eq!((line["threads"].as_u64(), line["dispatches"].as_u64()), (Some(1), Some(1)), "{line:?}");
+        assert!(line.get("workgroup_size").is_none(), "{line:?}");
+        let expected_bvh = if line["impl"] == "embree" { None } else { Some("medium") };
+        assert_eq!(line.get("bvh").and_then(|b| b.as_str()), expected_bvh, "{line:?}");
+        let rate = line["mrays_per_s"].as_f64().unwrap();
+        assert!((rate - rate_of(line, "rays")).abs() <= 1e-12 * rate, "{line:?}");
+    }
+    // 8² primary rays; a shadow and a diffuse ray from each primary hit.
+    let rays = |kind: &str| -> Vec<u64> {
+        traces.iter().filter(|l| l["kind"] == kind).map(|l| l["rays"].as_u64().unwrap()).collect()
+    };
+    assert_eq!(rays("primary"), vec![64; tracers]);
+    assert!(rays("shadow") == rays("diffuse") && (1..=64).contains(&rays("shadow")[0]), "{traces:?}");
+    assert!(rays("shadow").iter().all(|&n| n == rays("shadow")[0]), "{traces:?}");
+
+    let args = ["bench", "shade", "--no-vulkan", "--scene", "builtin:cornell-light-grid", "--resolution", "8"];
+    let out = raywave(&[&args[..], &["--repeats", "1", "--json"]].concat());
+    assert!(out.status.success(), "{}", stderr(&out));
+    let lines = json_lines(&out);
+    assert_eq!(lines.len(), 1, "{lines:?}");
+    let line = &lines[0];
+    assert_eq!(
+        (line["stage"].as_str(), line["samples"].as_u64(), line["lights"].as_u64()),
+        (Some("shade"), Some(64), Some(20))
+    );
+    assert!(line["impl"].as_str().unwrap().starts_with("cpu") && line.get("workgroup_size").is_none(), "{line:?}");
+    assert_eq!(line["dispatches"].as_u64(), Some(1));
+    let rate = line["msamples_per_s"].as_f64().unwrap();
+    assert!((rate - rate_of(line, "samples")).abs() <= 1e-12 * rate, "{line:?}");
+}
+
 /// The Vulkan devices, or `None` after a loud SKIP (a failure under CI) when there are none.
 #[cfg(feature = "vulkan")]
 fn vulkan_devices(test: &str) -> Option<Vec<raywave::vulkan::DeviceInfo>> {
@@ -804,9 +859,15 @@ fn trace_bench_measures_each_workgroup_size_of_each_compute_method() {
     let base =
         ["bench", "trace", "--scene", "builtin:cornell", "--resolution", "8", "--repeats", "1", "--threads", "1"];
     let quick = [&base[..], &["--settle-seconds", "0.05", "--json"]].concat();
-    let out = raywave(&[&quick[..], &["--workgroup-sizes", "32,128"]].concat());
+    let out = raywave(&[&quick[..], &["--workgroup-sizes", "32,128", "--bvh", "slow"]].concat());
     assert!(out.status.success(), "{}", stderr(&out));
     let lines: Vec<_> = json_lines(&out).into_iter().filter(|l| l["stage"] == "trace").collect();
+    // `sw` traverses the `--bvh` tree, as the CPU does (it had built the default one); the
+    // driver's structures and Embree's have no preset.
+    for line in &lines {
+        let obvhs_tree = ["raywave-cpu", "obvhs", "raywave-vk-sw"].contains(&line["impl"].as_str().unwrap());
+        assert_eq!(line.get("bvh").and_then(|b| b.as_str()), obvhs_tree.then_some("slow"), "{line:?}");
+    }
     let count = |implementation: &str, size: Option<u64>| {
         let matches = |l: &&serde_json::Value| l["impl"] == implementation && l["workgroup_size"].as_u64() == size;
         let kinds: Vec<_> = lines.iter().filter(matches).map(|l| l["kind"].as_str().unwrap().to_owned()).collect();

@@ -135,6 +135,7 @@ fn open_vulkan(index: Option<usize>, options: &BackendOptions) -> Result<Box<dyn
         validation: options.validation,
         sustain_seconds: options.sustain_seconds,
         workgroup_sizes: options.workgroup_sizes,
+        software_bvh: crate::cpu::BvhQuality::default(),
     };
     Ok(Box::new(VulkanBackend::open(index, &context, options.trace)?))
 }

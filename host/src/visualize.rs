@@ -33,12 +33,12 @@ pub fn normal_depth_image(scene: &Scene, rays: &RayStream, hits: &HitStream, wid
 }
 
 /// Linear radiance to an 8-bit sRGB image: each channel clamped to [0, 1] (exposure 1, no tone
-/// curve, so values are comparable across renders) and encoded with the sRGB transfer function
+/// curve, so values are comparable across renders; +∞ is white, −∞ and NaN black) and encoded with the sRGB transfer function
 /// (IEC 61966-2-1). `colors` is row-major, `width · height` long (shorter panics, like slice
 /// indexing).
 pub fn srgb_image(colors: &[Vec3], width: u32, height: u32) -> RgbImage {
     let encode = |c: f32| {
-        let c = if c.is_finite() { c.clamp(0.0, 1.0) } else { 0.0 };
+        let c = if c.is_nan() { 0.0 } else { c.clamp(0.0, 1.0) };
         let srgb = if c <= 0.003_130_8 { 12.92 * c } else { 1.055 * c.powf(1.0 / 2.4) - 0.055 };
         (srgb * 255.0 + 0.5) as u8
     };
@@ -92,11 +92,16 @@ impl PendingOutput {
 
     /// Encodes linear radiance `colors` (row-major, `width · height`) as 32-bit float RGB in the
     /// output's format (OpenEXR keeps the HDR values) into the temporary file; see
-    /// [`WrittenOutput`] for moving it into place.
+    /// [`WrittenOutput`] for moving it into place. Any other number of colours is an
+    /// [`Error::Encode`] naming both (`image` would have dropped the surplus silently).
     pub fn write_linear_rgb(self, colors: &[Vec3], width: u32, height: u32) -> Result<WrittenOutput> {
+        let pixels = u64::from(width) * u64::from(height);
         let data: Vec<f32> = colors.iter().flat_map(|c| c.to_array()).collect();
-        let image = image::Rgb32FImage::from_raw(width, height, data)
-            .ok_or_else(|| Error::Encode { path: self.path.clone(), message: "image size mismatch".into() })?;
+        let image = image::Rgb32FImage::from_raw(width, height, data).filter(|_| colors.len() as u64 == pixels);
+        let Some(image) = image else {
+            let message = format!("{} colours for a {width}×{height} image of {pixels} pixels", colors.len());
+            return Err(Error::Encode { path: self.path.clone(), message });
+        };
         self.write_image(&image)
     }
 
@@ -454,15 +459,24 @@ mod tests {
         pending.write_linear_rgb(&[Vec3::new(0.5, 2.0, 1e3)], 1, 1).unwrap().persist().unwrap();
         let read = image::open(&exr).unwrap().into_rgb32f();
         assert_eq!(read.get_pixel(0, 0).0, [0.5, 2.0, 1e3], "HDR values survive");
+        // Too many colours or too few: refused, naming both counts.
+        for colors in [&[Vec3::ONE; 3][..], &[Vec3::ONE; 1]] {
+            let pending = PendingOutput::create(&dir.path().join("sized.exr"), ImageFormat::OpenExr).unwrap();
+            let err = pending.write_linear_rgb(colors, 2, 1).expect_err("refused");
+            let message = format!("{} colours for a 2×1 image of 2 pixels", colors.len());
+            assert!(matches!(err, Error::Encode { .. }) && err.to_string().contains(&message), "{err}");
+        }
     }
 
     #[test]
     fn srgb_encoding_clamps_and_follows_the_transfer_function() {
-        let colors = [Vec3::new(0.0, 1.0, 0.5), Vec3::new(-1.0, 7.0, f32::NAN), Vec3::splat(0.002), Vec3::ZERO];
+        let infinite = Vec3::new(f32::INFINITY, f32::NEG_INFINITY, 0.0);
+        let colors = [Vec3::new(0.0, 1.0, 0.5), Vec3::new(-1.0, 7.0, f32::NAN), Vec3::splat(0.002), infinite];
         let image = srgb_image(&colors, 2, 2);
         assert_eq!(image.get_pixel(0, 0).0, [0, 255, 188]); // 0.5 → 0.7354 → 188
         assert_eq!(image.get_pixel(1, 0).0, [0, 255, 0]);
         assert_eq!(image.get_pixel(0, 1).0, [7, 7, 7]); // linear segment: 12.92·0.002 → 6.6
+        assert_eq!(image.get_pixel(1, 1).0, [255, 0, 0], "+∞ is clamped to white, not taken for NaN");
     }
 
     /// Whether the temporary file at `path` is listed for [`remove_pending_outputs`].

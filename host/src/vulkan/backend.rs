@@ -224,6 +224,8 @@ pub struct VulkanBackend {
     shade_kernel: ComputeKernel,
     denoise_kernels: DenoiseKernels,
     trace_method: TraceMethod,
+    /// [`ContextOptions::software_bvh`]: the preset [`TraceMethod::Software`] builds.
+    software_bvh: crate::cpu::BvhQuality,
     scene: Option<DeviceScene>,
     /// The shade stage's scene data, cached across `shade` calls.
     shade_data: Option<DeviceShadeData>,
@@ -364,10 +366,17 @@ impl VulkanBackend {
             shade_kernel,
             denoise_kernels: DenoiseKernels::new(&core)?,
             trace_method,
+            software_bvh: options.software_bvh,
             scene: None,
             shade_data: None,
             core,
         })
+    }
+
+    /// The obvhs preset of the CWBVH that software traversal builds for each scene it loads
+    /// ([`ContextOptions::software_bvh`]).
+    pub fn software_bvh(&self) -> crate::cpu::BvhQuality {
+        self.software_bvh
     }
 
     /// The device's name and features.
@@ -519,7 +528,7 @@ impl Backend for VulkanBackend {
                 DeviceScene::Accelerated(build_scene(&self.core, scene)?)
             }
             TraceMethod::Software => {
-                let cpu = CpuScene::build(scene)?;
+                let cpu = CpuScene::build_with(scene, self.software_bvh)?;
                 DeviceScene::Software {
                     nodes: input_buffer(&self.core, cpu.nodes(), "cwbvh nodes")?,
                     vertices: input_buffer(&self.core, cpu.vertices(), "cwbvh vertices")?,

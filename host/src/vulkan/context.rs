@@ -159,6 +159,10 @@ pub struct ContextOptions {
     /// `None` (the default): the preferred sizes, [`WorkgroupSizes::PREFERRED`], as far as
     /// the device runs them ([`WorkgroupSizes::preferred_on`]).
     pub workgroup_sizes: Option<WorkgroupSizes>,
+    /// The obvhs preset of the CWBVH that the software trace method builds for each scene it
+    /// loads (the other methods build the driver's acceleration structures): the default, or
+    /// the one `raywave bench trace --bvh` measures on the CPU, so both traverse the same tree.
+    pub software_bvh: crate::cpu::BvhQuality,
 }
 
 /// What `VK_KHR_acceleration_structure` allows on a device
