@@ -21,7 +21,9 @@
 //! - every pixel within [`REL_ALL`].
 //!
 //! Not bit-exact, because the kernels use `exp` and `sqrt` (Vulkan bounds their error at
-//! `3 + 2·|x|` ulp and 3 ulp — lavapipe is close to libm, a GPU need not be), and because the
+//! `3 + 2·|x|` ulp and 3 ulp — lavapipe is close to libm, a GPU need not be), because a SPIR-V
+//! driver may fuse a product and a sum into one multiply-add where Rust rounds twice (the tap
+//! positions `centre + r·direction`, the second differences, the edge stops), and because the
 //! filter makes discrete decisions on such values: a pixel passes through untouched when its
 //! Gaussian radius `saturate(1.5·noise)·R/√N ≤ 0.5 px`, and each tap of the rotated noise lines is the nearest
 //! pixel to `centre + r·(cos θ, sin θ)`, so a last-bit difference in `θ` can move a tap lying on a

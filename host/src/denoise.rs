@@ -7,7 +7,7 @@ use crate::shading::ShadeAccumulator;
 use glam::{Vec3, Vec4};
 use raywave_kernels::sampling::light_select::luminance;
 use raywave_kernels::shade::stage::{Surface, SMALLEST_RADIANCE};
-use raywave_shared::denoise::{axis, MAX_RADIUS};
+use raywave_shared::denoise::{axis, MAX_FILTERED_RADIANCE, MAX_RADIUS};
 use raywave_shared::DenoiseParams;
 
 /// A denoiser of the shadow term.
@@ -195,13 +195,15 @@ impl DenoiseInput {
     /// composite returns `den(S_N)` (up to rounding, for pixels below 10⁴ times that mean, where
     /// `shadow_ratio` clamps). The G-buffer (edge stops) stays the same.
     pub fn stochastic(&self) -> Self {
+        // Summed in f64: 2·10⁶ pixels of 2·10³² overflow an f32 sum (the mean becoming ∞ and
+        // every pixel NaN), and an f32 sum of that many terms drifts by percents long before.
         let (sum, count) = self
             .shadowed
             .iter()
             .zip(&self.position)
             .filter(|(_, p)| p.w > 0.0)
-            .fold((Vec4::ZERO, 0usize), |(sum, count), (&s, _)| (sum + s, count + 1));
-        let mean = sum / count.max(1) as f32;
+            .fold((glam::DVec4::ZERO, 0usize), |(sum, count), (&s, _)| (sum + s.as_dvec4(), count + 1));
+        let mean = (sum / count.max(1) as f64).as_vec4();
         // A channel no light reaches (mean 0) takes any constant: its S_N is 0 everywhere.
         let lit = mean.cmpge(Vec4::splat(SMALLEST_RADIANCE));
         let scale = Vec4::select(lit, mean, Vec4::ONE).truncate().extend(0.0);
@@ -261,8 +263,8 @@ impl DenoiseInput {
             ("normal", &self.normal, ValueRule::LuminanceInW),
             ("analytic", &self.analytic, ValueRule::Radiance),
             ("emitted", &self.emitted, ValueRule::Radiance),
-            ("shadowed", &self.shadowed, ValueRule::Radiance),
-            ("unshadowed", &self.unshadowed, ValueRule::Radiance),
+            ("shadowed", &self.shadowed, ValueRule::FilteredRadiance),
+            ("unshadowed", &self.unshadowed, ValueRule::FilteredRadiance),
         ]
     }
 
@@ -286,6 +288,8 @@ enum ValueRule {
     Finite,
     /// Finite, rgb not negative (a radiance).
     Radiance,
+    /// A radiance the filter sums: also at most [`MAX_FILTERED_RADIANCE`].
+    FilteredRadiance,
     /// Finite, w not negative (the analytic luminance beside the normal).
     LuminanceInW,
 }
@@ -295,8 +299,10 @@ impl ValueRule {
     fn violation(self, value: Vec4) -> Option<&'static str> {
         if !value.is_finite() {
             Some("is not finite")
-        } else if matches!(self, Self::Radiance) && value.truncate().min_element() < 0.0 {
+        } else if matches!(self, Self::Radiance | Self::FilteredRadiance) && value.truncate().min_element() < 0.0 {
             Some("is a negative radiance")
+        } else if matches!(self, Self::FilteredRadiance) && value.truncate().max_element() > MAX_FILTERED_RADIANCE {
+            Some("exceeds MAX_FILTERED_RADIANCE (f32::MAX / 32), beyond which the filter's sums overflow")
         } else if matches!(self, Self::LuminanceInW) && value.w < 0.0 {
             Some("has a negative analytic luminance (w)")
         } else {
@@ -427,6 +433,10 @@ mod tests {
         assert!(reason(&|d| d.emitted[0].z = -1e-3)
             .contains("emitted[0] (pixel 0, 0) = [0, 0, -0.001, 0] is a negative radiance"));
         assert!(reason(&|d| d.unshadowed[3].x = -1.0).contains("unshadowed[3]"));
+        // Radiances whose weighted sums overflow the filter; the composite's inputs may be larger.
+        let huge = reason(&|d| d.unshadowed[7].z = MAX_FILTERED_RADIANCE * 2.0);
+        assert!(huge.contains("unshadowed[7] (pixel 3, 1)") && huge.contains("exceeds MAX_FILTERED_RADIANCE"));
+        assert!(reason(&|d| d.shadowed[2].x = f32::MAX).contains("shadowed[2]"));
         assert!(reason(&|d| d.analytic[4].x = -1.0).contains("analytic[4]"));
         assert!(reason(&|d| d.normal[5].w = -0.5).contains("normal[5] (pixel 1, 1)"));
         // Negative normals and positions are directions and points, not radiances.
@@ -434,7 +444,21 @@ mod tests {
         fine.normal[5] = Vec4::new(0.0, 0.0, -1.0, 0.5);
         fine.position[2] = Vec4::new(-3.0, -1.0, -2.0, 4.0);
         fine.shadowed[1].w = -1.0;
+        fine.unshadowed[8] = Vec4::splat(MAX_FILTERED_RADIANCE);
+        fine.analytic[9] = Vec4::splat(f32::MAX);
         assert!(fine.check(&params).is_ok(), "w of a radiance is unused");
+    }
+
+    /// The stochastic baseline's constant is the mean of `S_N` over the surfaces, summed in f64:
+    /// 100 pixels of 10³⁷ had summed to ∞ in f32 (every ratio then 0 and every composite NaN).
+    #[test]
+    fn the_stochastic_baseline_takes_the_mean_of_large_radiances() {
+        let mut large = input(101);
+        large.position.iter_mut().take(100).for_each(|p| p.w = 1.0);
+        large.shadowed.iter_mut().for_each(|s| *s = Vec4::new(1e37, 3.0, 0.0, 0.0));
+        let baseline = large.stochastic();
+        assert_eq!(baseline.unshadowed[0], Vec4::new(1e37, 3.0, 1.0, 0.0), "the unlit channel takes 1");
+        assert_eq!(baseline.analytic, baseline.unshadowed);
     }
 
     #[test]

@@ -12,6 +12,15 @@ use glam::{IVec2, Vec4};
 /// memory, so the radius is bounded at compile time.
 pub const MAX_RADIUS: u32 = 10;
 
+/// Largest `S_N` or `U_N` channel the denoiser filters: `f32::MAX / 32` (≈ 1.06·10³⁷). The
+/// bilateral passes sum up to `2·MAX_RADIUS + 1 = 21` taps of weight ≤ 1, which stays finite
+/// below it; above it a sum could overflow to ∞ and the ratio `S/U` silently become 0 or 1.
+/// Scenes' radiance stops far below (`scene::MAX_EMISSION` = 10²⁰).
+pub const MAX_FILTERED_RADIANCE: f32 = f32::MAX / 32.0;
+
+/// The 21 taps' weights sum below 32: `MAX_FILTERED_RADIANCE`'s margin.
+const _: () = assert!(2 * MAX_RADIUS < 32);
+
 /// Pixels of one line a bilateral workgroup loads into shared memory: its own
 /// `WORKGROUP_SIZE` plus `MAX_RADIUS` on each side.
 pub const TILE_LEN: u32 = WORKGROUP_SIZE + 2 * MAX_RADIUS;
@@ -81,9 +90,12 @@ impl DenoiseParams {
     }
 
     /// The defaults with filter radius `radius` (`1..=MAX_RADIUS`; the denoiser refuses others)
-    /// and the SVGF baseline's à-trous iterations that match it: 4 (Falcor) with R ≥ 5, one per
-    /// doubling of R below (footprint `2·(2^k − 1)` pixels ≈ 3R), so both filters cover about
-    /// the same pixels.
+    /// and the SVGF baseline's à-trous iterations `k`: 4 (Falcor) with R ≥ 5, one fewer per
+    /// halving of R below, so that small images, whose R is small, are not blurred across. The
+    /// baseline blurs wider than the TV filter: its reach is `2·(2^k − 1)` pixels (30 at k = 4)
+    /// and its kernel's standard deviation `√((4^k − 1)/3)` pixels (9.2 at k = 4; each B3 level
+    /// adds a variance of its step squared), against the TV Gaussian's at most `R/√2` (4.2 at
+    /// R = 6).
     pub const fn with_radius(width: u32, height: u32, radius: u32) -> Self {
         let atrous_iterations = if radius >= 5 {
             4

@@ -45,9 +45,12 @@ pub trait FilterLine {
 /// has second differences at any `N` — shrinks with it. Without it the filter kept blurring edges
 /// at 16 spp and more, and the raw ratio beat it there (measured in `tests/denoise_quality.rs`).
 /// The TV estimate itself is no standard deviation and falls with `N` too — saturated at 1 spp,
-/// then roughly as `σ^½` (simulated, R = 6, binary visibility ½: 0.97, 0.70, 0.50, 0.36 at
-/// 1, 4, 16, 64 spp) — so the radius narrows about as `N^(−3/4)` overall and most pixels pass
-/// through by 64 spp; the alternatives below were measured on top of that same estimate.
+/// then roughly as `σ^½` (simulated, R = 6, a grey binary visibility ½ in every pixel, the
+/// noisiest case: 1.00, 0.92, 0.66, 0.46 at 1, 4, 16, 64 spp, 3^¼ above a single channel's
+/// 0.97, 0.71, 0.50, 0.35 since a grey difference's RGB length is √3 its channel's) — so the
+/// radius narrows faster than `1/√N`: 6, 3.0, 1.5 and 0.52 px on average there, a quarter of
+/// those pixels passing through at 64 spp, quieter ones sooner; the alternatives below were
+/// measured on top of that same estimate.
 /// A slower narrowing trades one built-in scene against the other (`raywave report
 /// error-vs-time`, 128², R = 2, ratio+tv relMSE at 2/4/8/16 spp): `N^(−1/3)` costs the Cornell
 /// box 5/11/10/27 % (the wider blur's bias outweighs the variance it removes) and gains the
@@ -132,11 +135,7 @@ pub struct ImageLine<'a> {
 
 impl FilterLine for ImageLine<'_> {
     fn tap(&self, offset: i32) -> FilterTap {
-        let step = if self.params.axis == raywave_shared::denoise::axis::Y {
-            glam::IVec2::new(0, offset)
-        } else {
-            glam::IVec2::new(offset, 0)
-        };
+        let step = line_pixel(self.params, 0, offset);
         let Some(i) = self.params.index_of(self.center + step) else { return FilterTap::OUTSIDE };
         FilterTap {
             shadowed: self.shadowed[i],
@@ -237,6 +236,23 @@ mod tests {
         let (s, u) = filter(&lit, 20, 1.0);
         assert_eq!(s, u, "S_N and U_N weighed alike");
         assert_ne!(u, lit.unshadowed[20], "the pixel was filtered");
+    }
+
+    /// At the largest radiance the denoiser accepts, the widest filter's sums stay finite and
+    /// alternating visibility still filters to ≈ ½ (sums that overflowed had given 0 or 1).
+    #[test]
+    fn the_largest_filtered_radiance_keeps_the_sums_finite() {
+        let visibility: Vec<f32> = (0..41).map(|x| (x % 2) as f32).collect();
+        let mut p = strip(&visibility);
+        for (s, u) in p.shadowed.iter_mut().zip(&mut p.unshadowed) {
+            let scale = raywave_shared::denoise::MAX_FILTERED_RADIANCE / u.max_element();
+            (*s, *u) = (*s * scale, *u * scale);
+        }
+        assert_eq!(p.unshadowed[0].z, raywave_shared::denoise::MAX_FILTERED_RADIANCE);
+        let (s, u) = filter(&p, 20, 1.0);
+        assert!(s.is_finite() && u.is_finite(), "{s} {u}");
+        let ratio = s.z / u.z;
+        assert!((ratio - 0.5).abs() < 0.1, "{ratio}");
     }
 
     #[test]

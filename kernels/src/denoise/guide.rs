@@ -7,7 +7,9 @@ use glam::{Vec4, Vec4Swizzles};
 #[derive(Copy, Clone, Debug, PartialEq)]
 pub struct Guide {
     /// Surface point (xyz, scene units) and its depth along the camera ray (w, > 0); w = 0 where
-    /// the camera ray hit nothing (such pixels are never filtered or used as taps).
+    /// the camera ray hit nothing (such pixels are never filtered nor weigh as taps of the
+    /// bilateral and à-trous passes; the noise lines and SVGF's variance prefilter read them,
+    /// their ratio the fallback 1 and their variance 0).
     pub position: Vec4,
     /// Unit surface normal facing the camera (xyz) and the luminance of the analytic `U` (w).
     pub normal: Vec4,
@@ -51,7 +53,9 @@ const SAME_POINT: f32 = 1.0e-4;
 /// - plane `max(0, 1 − 2·Wp·max(|dq·n_t|, |dq·n_c|)/|dq|)²` (1 for coincident points);
 /// - analytic `max(0, 1 − 10·Wa·|ΔL|/max(L_c, L_t))` — relative to the luminances so it does not
 ///   depend on the lights' units (the reference uses absolute display-referred values); 1 when
-///   both are 0 (below [`SMALLEST_RADIANCE`]).
+///   both are 0 (below [`SMALLEST_RADIANCE`]). The relative difference is at most 1, so with the
+///   default `Wa` = 0.09 this stop only lowers a tap's weight, to 0.1 at the least, and never
+///   rejects it — as the reference's does for luminances within [0, 1].
 ///
 /// 0 when the tap has no surface.
 ///
@@ -68,9 +72,12 @@ pub fn edge_stop(center: &Guide, tap: &Guide, weights: Vec4) -> f32 {
     let cos = n_c.dot(n_t).max(0.0);
     let cos4 = (cos * cos) * (cos * cos);
     let normal = (1.0 - weights.y * (1.0 - cos4)).max(0.0);
-    let offset = tap.position.xyz() - center.position.xyz();
+    // In units of the centre's depth before squaring, so that the length neither overflows (an
+    // offset beyond 1.8·10¹⁹ had made the stop 1 for any geometry) nor turns subnormal (which a
+    // GPU may flush) at scales the depth shares.
+    let offset = (tap.position.xyz() - center.position.xyz()) / depth_center;
     let distance = offset.length();
-    let plane = if distance <= SAME_POINT * depth_center {
+    let plane = if distance <= SAME_POINT {
         1.0
     } else {
         let off_plane = offset.dot(n_t).abs().max(offset.dot(n_c).abs()) / distance;
@@ -119,7 +126,9 @@ mod tests {
 
     #[test]
     fn weights_are_scale_free_and_finite() {
-        for scale in [1e-3f32, 1.0, 1e5] {
+        // The plane stop's offset had overflowed (1e25: the stop became 1) or underflowed (1e-25:
+        // a coincident point) when squared in scene units.
+        for scale in [1e-25f32, 1e-3, 1.0, 1e5, 1e25] {
             let c = guide(Vec3::ZERO, 10.0 * scale, Vec3::Y, 0.5);
             let t = guide(Vec3::new(0.01, 0.001, 0.0) * scale, 10.1 * scale, Vec3::Y, 0.4);
             let w = edge_stop(&c, &t, DEFAULT_EDGE_WEIGHTS);
