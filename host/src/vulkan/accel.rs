@@ -55,8 +55,8 @@ fn build_info<'a>(build: &'a Build<'a>) -> vk::AccelerationStructureBuildGeometr
         .geometries(&build.geometry)
 }
 
-/// Allocates and builds the acceleration structures of `builds` (all of one level) in one
-/// submission.
+/// Allocates and builds the acceleration structures of `builds` (all of one level, at least
+/// one: a scene has a mesh with a triangle, `Scene::validate`) in one submission.
 fn build_all(core: &Arc<Core>, builds: &[Build<'_>]) -> Result<Vec<AccelerationStructure>> {
     let accel = core.acceleration_structure.as_ref().ok_or_else(|| Error::MissingFeatures {
         device: core.info.name.clone(),
@@ -201,10 +201,11 @@ pub(crate) fn build_scene(core: &Arc<Core>, scene: &Scene) -> Result<SceneAccel>
     let identity = vk::TransformMatrixKHR { matrix: [1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0] };
     let instances: Vec<vk::AccelerationStructureInstanceKHR> = blases
         .iter()
-        .enumerate()
-        .map(|(i, blas)| vk::AccelerationStructureInstanceKHR {
+        .map(|blas| vk::AccelerationStructureInstanceKHR {
             transform: identity,
-            instance_custom_index_and_mask: vk::Packed24_8::new(i as u32, 0xff),
+            // No shader reads the custom index (they read the instance index, which is the mesh
+            // index), so 0 rather than a mesh index that 24 bits would wrap.
+            instance_custom_index_and_mask: vk::Packed24_8::new(0, 0xff),
             instance_shader_binding_table_record_offset_and_flags: vk::Packed24_8::new(
                 0,
                 vk::GeometryInstanceFlagsKHR::TRIANGLE_FACING_CULL_DISABLE.as_raw() as u8,

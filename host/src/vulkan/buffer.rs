@@ -63,9 +63,10 @@ impl GpuBuffer {
         // SAFETY: `buffer` is a live buffer of this device.
         let mut requirements = unsafe { core.device.get_buffer_memory_requirements(buffer) };
         if wants_address {
-            // Device addresses feed acceleration-structure builds, whose instance and geometry
-            // data must be 16-byte aligned (VUID-vkCmdBuildAccelerationStructuresKHR-pInfos-03715);
-            // the buffer's own memory alignment is not bound to be that large.
+            // Device addresses feed acceleration-structure builds, whose instance data must be
+            // 16-byte aligned (VUID-vkCmdBuildAccelerationStructuresKHR-pInfos-03715; vertex and
+            // index data need only their component size, 03711/03712); the buffer's own memory
+            // alignment is not bound to be that large.
             requirements.alignment = requirements.alignment.max(DEVICE_ADDRESS_ALIGNMENT);
         }
         let allocation = core

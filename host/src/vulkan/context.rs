@@ -197,7 +197,8 @@ pub(crate) struct Core {
     pub rt_properties: RtPipelineProperties,
     pub info: DeviceInfo,
     pub limits: vk::PhysicalDeviceLimits,
-    /// The acceleration-structure limits builds must keep to (all 0 without the extension).
+    /// The acceleration-structure limits builds must keep to (without the extension: counts 0,
+    /// scratch alignment 1).
     pub accel_limits: AccelerationLimits,
     /// [`ContextOptions::sustain_seconds`], as `f64` bits: [`Core::sustain_seconds`], changed
     /// by [`Core::set_sustain_seconds`].

@@ -150,7 +150,7 @@ impl RtPipelineKernel {
         Ok(Self { loader: loader.clone(), raygen, miss, hit, _sbt: sbt, pass })
     }
 
-    /// Traces `rays` rays (raygen launch `LAUNCH_WIDTH` wide) and waits ([`Pass::run`]:
+    /// Traces `rays` rays (raygen launch `min(rays, LAUNCH_WIDTH)` wide) and waits ([`Pass::run`]:
     /// repeated in benchmark mode); returns the time per trace.
     pub fn trace(&self, resources: &[Resource<'_>], push: &[u8], rays: u32) -> Result<Timing> {
         let core = &self.pass.core;
