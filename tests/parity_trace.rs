@@ -147,6 +147,47 @@ fn untraceable_rays_miss_on_every_backend() {
     }
 }
 
+/// Rays whose directions are as short as a traceable ray's may be ([`MIN_DIRECTION`]) hit what
+/// the same rays of direction `d / MIN_DIRECTION` hit, at `t / MIN_DIRECTION`, on every backend — an axis-aligned
+/// one too, whose zero components the box test floors far below it (a floor as large as the
+/// direction had traced `(0, 0, d)` as a diagonal and missed); shorter ones miss uncounted.
+#[test]
+fn the_shortest_traceable_directions_hit_what_unit_ones_hit_on_every_backend() {
+    use raywave::kernels::trace::MIN_DIRECTION;
+    let scene = cornell();
+    // Largest component 1: scaled by MIN_DIRECTION, exactly the shortest traceable.
+    let units = [glam::Vec3::Z, glam::Vec3::NEG_Y, glam::Vec3::X, glam::Vec3::new(0.375, -0.625, 1.0)];
+    let origin = glam::Vec4::new(0.3, 0.3, 0.3, 0.0);
+    let stream = |scale: f32, tmax: f32| RayStream {
+        origin: vec![origin; units.len()],
+        direction: units.iter().map(|d| (*d * scale).extend(tmax)).collect(),
+        pixel: (0..units.len() as u32).collect(),
+    };
+    let cpu_scene = CpuScene::build(&scene).unwrap();
+    let unit = cpu::trace(&cpu_scene, &stream(1.0, 10.0)).expect("trace");
+    let short_rays = stream(MIN_DIRECTION, 10.0 / MIN_DIRECTION);
+    let short = cpu::trace(&cpu_scene, &short_rays).expect("trace");
+    for i in 0..units.len() {
+        assert_ne!(unit.primitive[i], NO_HIT, "ray {i} hits the box");
+        assert_eq!((short.instance[i], short.primitive[i]), (unit.instance[i], unit.primitive[i]), "ray {i}");
+        let t = short.t[i] * MIN_DIRECTION;
+        assert!((t - unit.t[i]).abs() <= T_REL_TOLERANCE * unit.t[i], "ray {i}: {t} vs {}", unit.t[i]);
+    }
+    let shorter = stream(0.5 * MIN_DIRECTION, 20.0 / MIN_DIRECTION);
+    let (misses, sanitized) = cpu::trace_counted(&cpu_scene, &shorter).expect("trace");
+    assert!(misses.primitive.iter().all(|&p| p == NO_HIT) && sanitized == 0, "not traceable, not replaced");
+    for mut device in vulkan::every_device("shortest directions") {
+        device.load_scene(&scene).unwrap();
+        let (hits, report) = device.trace(&short_rays).unwrap();
+        assert_eq!(compare(&scene, &short_rays, &short, &hits), 1.0, "{}", device.name());
+        assert_eq!(report.sanitized, 0, "{}", device.name());
+        let (occluded, _) = device.trace_occlusion(&short_rays).unwrap();
+        assert_eq!(occluded, vec![1; units.len()], "{}", device.name());
+        assert_eq!(device.trace(&shorter).unwrap().0, misses, "{}", device.name());
+        vulkan::assert_clean(&device);
+    }
+}
+
 /// Every backend refuses to trace — closest hits, occlusion, a whole frame — before a scene is
 /// loaded, with the same typed error naming the scene.
 #[test]

@@ -157,7 +157,7 @@ impl WatertightRay {
         // Written so that a NaN determinant fails too (`!(x ≥ y)`, not `x < y`): edge products
         // that overflow — a ray origin far beyond the scene's — had returned a NaN hit, which as
         // the first hit found stopped the traversal from accepting any later box or triangle.
-        if outside | !(det_abs >= f32::MIN_POSITIVE) {
+        if outside | !(det_abs >= f32::MIN_POSITIVE && det_abs.is_finite()) {
             return None;
         }
 
@@ -169,8 +169,15 @@ impl WatertightRay {
             return None;
         }
         let rcp_det = 1.0 / det;
-        // `t_scaled · (1/det)` rounds twice and can land an ulp outside the range just checked.
-        let t = (t_scaled * rcp_det).clamp(tmin, tmax);
+        let t = t_scaled * rcp_det;
+        // A t that overflowed (where `tmax·|det|` did too, and the check passed on ∞ ≤ ∞) is no
+        // hit within a finite range.
+        if !t.is_finite() {
+            return None;
+        }
+        // `t_scaled · (1/det)` rounds twice and can land an ulp outside the range just checked;
+        // `max`/`min`, not `clamp`, which panics on an empty range (`tmin > tmax`).
+        let t = t.max(tmin).min(tmax);
         Some(TriangleHit { t, barycentrics: Vec2::new(v * rcp_det, w * rcp_det) })
     }
 }
@@ -372,6 +379,20 @@ mod tests {
             }
         }
         assert!(rounded_in > 100, "only {rounded_in} ranges met the rounding");
+    }
+
+    /// An empty range (`tmin > tmax`, which the stage never passes but the public test takes)
+    /// whose products with the determinant both round to 0 lets a hit at t = 0 through the
+    /// range check: its t is put in range without a panic (`f32::clamp` had asserted
+    /// `min ≤ max`).
+    #[test]
+    fn an_empty_range_whose_products_underflow_does_not_panic() {
+        let (tmin, tmax) = (f32::from_bits(2), f32::from_bits(1));
+        // Exact binary coordinates: the determinant is 0.25 exactly, and both products halve or
+        // quarter the smallest subnormal, rounding to 0.
+        let ray = WatertightRay::new(Vec3::new(0.125, 0.125, 0.0), Vec3::Z);
+        let hit = ray.intersect(V0, V1 * 0.5, V2 * 0.5, tmin, tmax).expect("the range check passes");
+        assert_eq!(hit.t, tmax);
     }
 
     #[test]

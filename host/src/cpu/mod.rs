@@ -58,9 +58,9 @@ pub fn generate(params: &GenerateParams) -> Result<RayStream> {
     Ok(generate_checked(params))
 }
 
-/// [`generate`]'s checks, with the backend named as [`CpuBackend::name`] names it.
+/// [`generate`]'s checks: the CPU backend's image size, then the camera's parameters.
 fn check_generate(params: &GenerateParams) -> Result<()> {
-    check_image_size_common(params.width, params.height, MAX_PIXELS, &CpuBackend::new().name())?;
+    CpuBackend::new().check_image_size(params.width, params.height)?;
     check_generate_params(params)
 }
 

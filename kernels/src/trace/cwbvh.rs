@@ -6,7 +6,7 @@
 //! child boxes into one 32-bit hit mask, whose high byte lists internal children in front-to-back
 //! order for the ray's octant and whose low 24 bits list the triangles of hit leaves.
 
-use super::{ClosestHitQuery, Hit, OcclusionQuery, Ray, MIN_DIRECTION};
+use super::{ClosestHitQuery, Hit, OcclusionQuery, Ray};
 use crate::triangle::WatertightRay;
 use glam::{UVec2, Vec3, Vec3A, Vec4};
 use raywave_shared::bvh::CwBvhNode;
@@ -20,14 +20,21 @@ mod avx2;
 /// a full stack would drop the groups it cannot push.
 pub const STACK_SIZE: usize = 32;
 
-/// Slack on the far side of every box test: 1 + 2·γ(6) with γ(n) = n·ε/(1 − n·ε), ε = 2⁻²⁴
+/// Slack on the far side of every box test: 1 + 2·γ(10) with γ(n) = n·ε/(1 − n·ε), ε = 2⁻²⁴
 /// (Ize, "Robust BVH Ray Traversal", JCGT 2(2), 2013, whose slab takes three roundings;
 /// pbrt-v4 `Bounds3::IntersectP`). A quantised plane's distance here takes six: `1/d`, the
 /// node origin's offset from the ray origin and its product with `1/d`, the product of the
-/// plane's grid index with the scaled cell, the one-cell expansion and their sum. Where those
+/// plane's grid index with the scaled cell, the one-cell expansion and their sum — ten half-ulp
+/// errors where Vulkan lets `1/d` be 2.5 ulp off (the CPU rounds it correctly). Where those
 /// terms nearly cancel — a plane close to the ray origin — the error is not relative to the
 /// small result; the expansion's absolute margin of one cell (below) covers it there.
-const FAR_SLACK: f32 = 1.0 + 2.0 * (6.0 * f32::EPSILON * 0.5) / (1.0 - 6.0 * f32::EPSILON * 0.5);
+const FAR_SLACK: f32 = 1.0 + 2.0 * (10.0 * f32::EPSILON * 0.5) / (1.0 - 10.0 * f32::EPSILON * 0.5);
+
+/// The floor under a direction component's magnitude before it is inverted: zero (and ±0)
+/// components become ±10⁻³⁰, so that slab distances stay finite (no `0 · ∞`) for axis-aligned
+/// rays; `10³⁰ ×` the scene's 10⁸ coordinate limit still fits `f32`. A traceable ray's largest
+/// component is at least `trace::MIN_DIRECTION`, far above it.
+const BOX_FLOOR: f32 = 1e-30;
 
 /// The scene as the software trace stage reads it: node and triangle buffers built by the host.
 pub struct CwBvhScene<'a> {
@@ -90,9 +97,7 @@ impl BoxRay {
     #[inline(always)]
     fn new(ray: &Ray) -> Self {
         let d = ray.direction;
-        // Zero (and ±0) components of axis-aligned rays, and others below the floor, become
-        // ±MIN_DIRECTION; the dominant one of a traceable ray is never below it.
-        let safe = |c: f32| if c.abs() < MIN_DIRECTION { MIN_DIRECTION.copysign(c) } else { c };
+        let safe = |c: f32| if c.abs() < BOX_FLOOR { BOX_FLOOR.copysign(c) } else { c };
         let inv_direction = Vec3::new(1.0 / safe(d.x), 1.0 / safe(d.y), 1.0 / safe(d.z));
         let negative =
             [u32::from(inv_direction.x < 0.0), u32::from(inv_direction.y < 0.0), u32::from(inv_direction.z < 0.0)];

@@ -57,11 +57,13 @@ impl Ray {
     }
 }
 
-/// Smallest largest-component of a traceable ray's direction ([`Ray::is_traceable`]): far
-/// enough above `f32::MIN_POSITIVE` that `1/d` of the dominant component stays finite, and the
-/// floor the box test puts under the other components ([`cwbvh`]) so that their slab distances
-/// stay finite (no `0 · ∞`) for axis-aligned rays.
-pub const MIN_DIRECTION: f32 = 1e-30;
+/// Smallest largest-component of a traceable ray's direction ([`Ray::is_traceable`]), 10⁻¹²:
+/// `1/d` of the dominant component is then finite in the watertight test, and the floor of
+/// 10⁻³⁰ the box test puts under the other components (`cwbvh`, so that an axis-aligned ray's
+/// slab distances stay finite) is at most 10⁻¹⁸ of it — a zero component's slab then reaches
+/// past any hit in a scene within its coordinate limit. A floor as large as the dominant
+/// component had traced such a ray as a diagonal one.
+pub const MIN_DIRECTION: f32 = 1e-12;
 
 /// The closest hit of one ray, as the trace stage writes it into the hit stream.
 #[derive(Copy, Clone, Debug, PartialEq)]
@@ -115,7 +117,8 @@ pub fn trace_occluded_with(origin: Vec4, direction: Vec4, occluded: impl FnOnce(
 }
 
 /// The trace stage for one invocation: reads the ray at its stream fields and returns its closest
-/// hit. Rays that are not traceable (NaN, Inf, zero direction, bad interval) miss, and a hit whose
+/// hit. Rays that are not traceable (NaN, Inf, a direction shorter than [`MIN_DIRECTION`], a bad
+/// interval) miss, and a hit whose
 /// values are not finite is written as a miss, so no NaN or Inf leaves the stage; both are
 /// flagged as replaced (a non-finite ray, a non-finite hit).
 pub fn trace_closest<Q: ClosestHitQuery>(origin: Vec4, direction: Vec4, query: &Q) -> Sanitized<Hit> {
@@ -184,7 +187,7 @@ mod tests {
             (ok_origin, Vec4::new(0.0, 0.0, 0.0, 10.0), false),
             // Below the floor: `1/d` overflows in the watertight test (it had traced a NaN hit).
             (ok_origin, Vec4::new(0.0, 0.0, 1e-40, 10.0), false),
-            (ok_origin, Vec4::new(-0.9e-30, 0.9e-30, 0.0, 10.0), false),
+            (ok_origin, Vec4::new(-0.9e-12, 0.9e-12, 0.0, 10.0), false),
             (Vec4::new(0.0, 0.0, 0.0, -1.0), ok_dir, false),
             (Vec4::new(0.0, 0.0, 0.0, 11.0), ok_dir, false),
         ];
