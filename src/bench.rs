@@ -230,8 +230,8 @@ pub(crate) struct Measured {
 
 /// Times `run` — one run of the `stage_count` stages it reports, on one backend — as every
 /// `raywave bench` does: a [`warm_up`] of `settle_seconds` on their summed times, then `repeats`
-/// timed runs. A run that reports another number of stages is an error naming `stages`, not
-/// stages silently dropped or a panic.
+/// timed runs. A run that reports another number of stages — a defect of the backend, not of
+/// the options — is an error naming `backend`, not stages silently dropped or a panic.
 pub(crate) fn measure(
     settle_seconds: f64,
     repeats: u32,
@@ -242,8 +242,12 @@ pub(crate) fn measure(
         let reports = run()?;
         if reports.len() != stage_count {
             let names: Vec<_> = reports.iter().map(|report| report.stage).collect();
-            let reason = format!("a run reported {} stage times {names:?}, not {stage_count}", reports.len());
-            return Err(Error::InvalidParameter { name: "stages", reason });
+            let reason = format!(
+                "reported {} stage times {names:?} for a run of {stage_count} stages (a defect of the backend, not \
+                 of the options)",
+                reports.len()
+            );
+            return Err(Error::InvalidParameter { name: "backend", reason });
         }
         Ok(reports)
     };
@@ -541,7 +545,7 @@ mod tests {
     fn a_run_with_the_wrong_number_of_stages_is_refused() {
         let report = StageReport::clean("trace", 1e-3);
         let error = measure(0.0, 1, 2, || Ok(vec![report.clone()])).err().expect("refused");
-        assert!(matches!(&error, Error::InvalidParameter { name: "stages", .. }), "{error}");
+        assert!(matches!(&error, Error::InvalidParameter { name: "backend", .. }), "{error}");
         assert!(measure(0.0, 2, 1, || Ok(vec![report.clone()])).is_ok());
     }
 

@@ -227,9 +227,10 @@ impl DenoiseInput {
     /// Checks the inputs against `params`: the bilateral passes' invocation counts fit 32 bits
     /// ([`DenoiseParams::bilateral_invocations`]; for every method, so that every backend and
     /// method accept the same images), every buffer holds `width · height` entries, the radius
-    /// is within `1..=MAX_RADIUS`, the estimates average at least one sample, and every value
-    /// is finite, with the radiances (`U`, emitted, `S_N`, `U_N`: rgb) and the analytic
-    /// luminance (`normal.w`) not negative. One NaN or
+    /// is within `1..=MAX_RADIUS`, the estimates average at least one sample, the edge weights
+    /// are finite and ≥ 0, and every value is finite, with the radiances (`U`, emitted, `S_N`,
+    /// `U_N`: rgb) and the analytic luminance (`normal.w`) not negative, and `S_N`, `U_N` at
+    /// most [`MAX_FILTERED_RADIANCE`], below which the filter's sums stay finite. One NaN or
     /// negative pixel would otherwise spread through the noise estimate and the filter taps to
     /// its neighbours (a 7 × 7 block at R = 3), or leave the stage as NaN (an emitted NaN).
     /// Cost: one read of the six buffers, about 20 ms for a 1920 × 1080 frame on the 2-vCPU test
@@ -247,6 +248,10 @@ impl DenoiseInput {
             Some(reason)
         } else if params.samples_per_pixel == 0 {
             Some("samples per pixel is 0 (the estimates average at least one sample)".to_owned())
+        } else if !(params.edge_weights.is_finite() && params.edge_weights.min_element() >= 0.0) {
+            // A negative weight makes its stop exceed 1, and the filter's sums could then
+            // overflow below MAX_FILTERED_RADIANCE.
+            Some(format!("edge weights {} must be finite and ≥ 0", params.edge_weights))
         } else {
             self.first_invalid_value(params.width)
         };
@@ -437,6 +442,15 @@ mod tests {
         let huge = reason(&|d| d.unshadowed[7].z = MAX_FILTERED_RADIANCE * 2.0);
         assert!(huge.contains("unshadowed[7] (pixel 3, 1)") && huge.contains("exceeds MAX_FILTERED_RADIANCE"));
         assert!(reason(&|d| d.shadowed[2].x = f32::MAX).contains("shadowed[2]"));
+        for weights in [Vec4::new(1.0, -0.5, 1.0, 0.1), Vec4::splat(f32::NAN)] {
+            let weighted = DenoiseParams { edge_weights: weights, ..params };
+            match input(12).check(&weighted) {
+                Err(Error::InvalidParameter { name: "denoise", reason }) => {
+                    assert!(reason.contains("edge weights") && reason.contains("finite and ≥ 0"), "{reason}")
+                }
+                other => panic!("expected the edge weights refused, got {other:?}"),
+            }
+        }
         assert!(reason(&|d| d.analytic[4].x = -1.0).contains("analytic[4]"));
         assert!(reason(&|d| d.normal[5].w = -0.5).contains("normal[5] (pixel 1, 1)"));
         // Negative normals and positions are directions and points, not radiances.

@@ -33,7 +33,8 @@ pub fn normal_depth_image(scene: &Scene, rays: &RayStream, hits: &HitStream, wid
 }
 
 /// Linear radiance to an 8-bit sRGB image: each channel clamped to [0, 1] (exposure 1, no tone
-/// curve, so values are comparable across renders; +∞ is white, −∞ and NaN black) and encoded with the sRGB transfer function
+/// curve, so values are comparable across renders; a channel of +∞ is full, −∞ and NaN are 0)
+/// and encoded with the sRGB transfer function
 /// (IEC 61966-2-1). `colors` is row-major, `width · height` long (shorter panics, like slice
 /// indexing).
 pub fn srgb_image(colors: &[Vec3], width: u32, height: u32) -> RgbImage {
