@@ -20,7 +20,7 @@ use glam::Vec3;
 use raywave::cpu::CpuBackend;
 use raywave::denoise::{rgb, DenoiseInput, DenoiseMethod};
 use raywave::report::error_vs_time::{relmse_part, PreparedScene};
-use raywave::report::shade::{accumulate, ShadowRegions};
+use raywave::report::shade::accumulate;
 use raywave::report::SceneReportOptions;
 use raywave::shared::denoise::MAX_RADIUS;
 use raywave::shared::DenoiseParams;
@@ -85,7 +85,7 @@ fn measure(args: &Args, name: &str, scene: &Scene) -> raywave::Result<()> {
     if sanitized > 0 {
         eprintln!("warning: {name}: the reference's stages replaced {sanitized} non-finite value(s)");
     }
-    let regions = ShadowRegions::new(&prepared.analytic, &reference);
+    let regions = prepared.shadow_regions(&reference);
     let blocks = tiles(&regions.shadow, side, args.tile);
     // Candidates: no filter, then R = 1 … MAX_RADIUS.
     let fixed = vec![(0.0, 0.0); 1 + MAX_RADIUS as usize];

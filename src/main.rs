@@ -83,7 +83,8 @@ struct DenoiseRadiusArg {
 /// The arguments every scene report takes (see `raywave::report::SceneReportOptions`).
 #[derive(clap::Args)]
 struct SceneReportArgs {
-    /// Built-in scenes, comma-separated.
+    /// Scenes, comma-separated: `builtin:NAME` or scene files (.obj, .gltf, .glb), each with a
+    /// quad light.
     #[arg(long, default_value = "builtin:cornell,builtin:cornell-two-lights", value_delimiter = ',')]
     scenes: Vec<String>,
     /// Samples per pixel of the reference image.

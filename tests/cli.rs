@@ -680,7 +680,7 @@ fn error_vs_time_in_steady_state_measures_the_same_errors() {
         for key in ["scene", "spp", "method", "relmse", "relmse_shadow", "relmse_lit", "flip"] {
             assert_eq!(once[key], steady[key], "{key}: {once} against {steady}");
         }
-        assert!(once.get("warm_up_seconds").is_none(), "{once}");
+        assert!(once.get("warm_up_seconds").is_none() && once.get("relmse_stderr").is_none(), "{once}");
         assert!(steady["warm_up_seconds"].as_f64().unwrap() >= 0.05, "{steady}");
         assert!(steady["ms"].as_f64().unwrap() > 0.0, "{steady}");
     }
@@ -702,7 +702,7 @@ fn error_vs_time_report_prints_every_method_and_draws_the_plot() {
         "--max-spp",
         "2",
         "--reps",
-        "1",
+        "2",
         "--json",
         "--plot",
         plot.to_str().unwrap(),
@@ -720,6 +720,9 @@ fn error_vs_time_report_prints_every_method_and_draws_the_plot() {
         let part = |key: &str| line[key].as_f64().unwrap_or_else(|| panic!("{key} missing"));
         let (shadow, lit) = (part("relmse_shadow"), part("relmse_lit"));
         assert!(shadow >= 0.0 && lit >= 0.0 && shadow + lit <= line["relmse"].as_f64().unwrap() * (1.0 + 1e-12));
+        // Two repetitions: the mean's standard error (absent for one, as the steady-state test sees).
+        let stderr = part("relmse_stderr");
+        assert!(stderr.is_finite() && stderr >= 0.0, "{line}");
     }
     // The table ends with the fastest method per error level.
     let table = raywave(&args[..args.len() - 3]);

@@ -415,7 +415,11 @@ fn reference(backend: &mut CpuBackend, prepared: &PreparedScene, scene_name: &st
         .flatten()
         .flatten()
         .map(|e| e.path())
-        .filter(|p| p != &path && p.file_name().and_then(|n| n.to_str()).is_some_and(|n| n.starts_with(&prefix)));
+        // Not another test process's file in progress, which it is about to rename.
+        .filter(|p| {
+            let name = p.file_name().and_then(|n| n.to_str());
+            p != &path && name.is_some_and(|n| n.starts_with(&prefix) && !n.ends_with(".partial"))
+        });
     for old in stale {
         let _ = std::fs::remove_file(old);
     }

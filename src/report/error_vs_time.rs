@@ -10,10 +10,19 @@
 //! on its frame: the G-buffer's camera rays, the shade and occlusion passes, and the passes that
 //! make its image from the accumulated estimates — the composite alone for the raw methods
 //! ([`DenoiseMethod::None`]), a filter and the composite for the others (GPU timestamps on
-//! Vulkan, wall clock on the CPU) — averaged over the repetitions; with `settle_seconds`, in
-//! benchmark mode after a warm-up, the reference image still rendered once per pass
-//! ([`PreparedScene::settle`]). Each relMSE is split into the
-//! parts made in shadowed and in unshadowed pixels ([`ShadowRegions`]), which shows where a
+//! Vulkan, wall clock on the CPU; not the host's work between them, nor uploads and readbacks)
+//! — averaged over the repetitions; with `settle_seconds`, in benchmark mode after a warm-up,
+//! the reference image still rendered once per pass ([`PreparedScene::settle`]). The G-buffer
+//! is traced once per scene, and its time, added to every frame's, is that one trace's: cold
+//! (the scene's first dispatch) unless `settle_seconds` traces it again after the warm-up.
+//!
+//! Every method is charged the same shade passes, which evaluate the analytic `U` for every
+//! light on every pass although the stochastic methods never read it: the time axis compares
+//! the estimators at equal work, not what leaving `U` out would save a purely stochastic
+//! renderer. The stochastic methods go through the composite with `U = U_N` = the mean of `S_N`
+//! ([`DenoiseInput::stochastic`]), so a pixel above 10⁴ times that mean is clipped there, and
+//! `stochastic+tv`'s edge stops keep the luminance of `U` as a guide. Each relMSE is split into
+//! the parts made in shadowed and in unshadowed pixels ([`ShadowRegions`]), which shows where a
 //! method's error is.
 
 use super::flip::mean_flip;
@@ -114,17 +123,20 @@ impl crate::output_line::OutputLine for ErrorVsTimeLine {
 /// [`RELMSE_EPSILON`] (Gharbi et al. 2019; `../shared/reference/sampling-denoise.md` §3.4).
 /// Panics if the images differ in length (the mean would be over the wrong count).
 pub fn relmse(image: &[Vec3], reference: &[Vec3]) -> f64 {
-    assert_eq!(image.len(), reference.len(), "relmse: image and reference differ in size");
-    let sum: f64 = image.iter().zip(reference).map(|(&x, &y)| relative_squared_error(x, y)).sum();
-    0.5 * sum / (3 * reference.len().max(1)) as f64
+    relmse_over(image, reference, 0..reference.len())
 }
 
 /// The part of [`relmse`] made in `pixels`: their terms over the whole image's count, so the
 /// parts of disjoint sets of pixels add up to the image's relMSE. Panics if the images differ in
 /// length or an index is out of range.
 pub fn relmse_part(image: &[Vec3], reference: &[Vec3], pixels: &[usize]) -> f64 {
-    assert_eq!(image.len(), reference.len(), "relmse_part: image and reference differ in size");
-    let sum = sum_from_zero(pixels.iter().map(|&i| relative_squared_error(image[i], reference[i])));
+    relmse_over(image, reference, pixels.iter().copied())
+}
+
+/// The terms of [`relmse`] at `pixels`, over the whole image's count.
+fn relmse_over(image: &[Vec3], reference: &[Vec3], pixels: impl Iterator<Item = usize>) -> f64 {
+    assert_eq!(image.len(), reference.len(), "relMSE: image and reference differ in size");
+    let sum = sum_from_zero(pixels.map(|i| relative_squared_error(image[i], reference[i])));
     0.5 * sum / (3 * reference.len().max(1)) as f64
 }
 
@@ -147,6 +159,8 @@ pub struct PreparedScene {
     /// The analytic unshadowed radiance `U` per pixel (the same in every frame: the surfaces
     /// are fixed), which tells shadowed pixels from unshadowed ones in the reference.
     pub analytic: Vec<Vec3>,
+    /// The radiance the surfaces emit per pixel (fixed too), which the reference includes.
+    pub emitted: Vec<Vec3>,
     /// Image side in pixels.
     pub resolution: u32,
     /// The filters' radius R in pixels: [`DenoiseParams::default_radius`] for the image side
@@ -158,27 +172,37 @@ pub struct PreparedScene {
 pub struct MethodFrames {
     /// Each method's image and its milliseconds, in [`METHODS`] order.
     pub images: Vec<(Vec<Vec3>, f64)>,
-    /// Values the frame's stages sanitized — the G-buffer's trace, the shade passes, the
-    /// denoisers' composites ([`crate::StageReport::sanitized`]); 0 on sound input.
+    /// Values the frame's stages sanitized — the shade passes, the denoisers' composites
+    /// ([`crate::StageReport::sanitized`]); 0 on sound input. The G-buffer's, which every frame
+    /// shares, are [`GBuffer::sanitized`].
     pub sanitized: u64,
 }
 
 impl PreparedScene {
-    /// Loads `scene` into `backend` and traces its G-buffer.
+    /// Loads `scene` into `backend`, traces its G-buffer and shades it once for the analytic and
+    /// emitted radiance.
     pub fn new(backend: &mut dyn Backend, scene: &Scene, resolution: u32) -> Result<Self> {
         backend.load_scene(scene)?;
         let data = ShadeData::new(scene)?;
         let gbuffer = GBuffer::new(backend, scene, resolution)?;
         let surfaces = gbuffer.surfaces(&data);
-        let analytic = accumulate(backend, &gbuffer, &data, resolution, 1, 0)?.0.analytic();
+        let (once, _) = accumulate(backend, &gbuffer, &data, resolution, 1, 0)?;
+        let (analytic, emitted) = (once.analytic(), once.emitted());
         let denoise_radius = DenoiseParams::default_radius(resolution, resolution);
-        Ok(Self { data, gbuffer, surfaces, analytic, resolution, denoise_radius })
+        Ok(Self { data, gbuffer, surfaces, analytic, emitted, resolution, denoise_radius })
     }
 
-    /// The converged image: the ratio estimate at `spp` samples per pixel (seed fixed apart from
-    /// every measured run's), and the values its stages sanitized or its composite replaced.
+    /// The pixels of `reference` split by how much of their direct light reaches them
+    /// ([`ShadowRegions`]).
+    pub fn shadow_regions(&self, reference: &[Vec3]) -> ShadowRegions {
+        ShadowRegions::new(&self.analytic, &self.emitted, reference)
+    }
+
+    /// The converged image: the ratio estimate at `spp` samples per pixel (seed
+    /// [`super::REFERENCE_SEED`], apart from every measured run's), and the values the
+    /// G-buffer's trace and its stages sanitized or its composite replaced.
     pub fn reference(&self, backend: &mut dyn Backend, spp: u32) -> Result<(Vec<Vec3>, u64)> {
-        let (run, _) = accumulate(backend, &self.gbuffer, &self.data, self.resolution, spp, 0xfeed)?;
+        let (run, _) = accumulate(backend, &self.gbuffer, &self.data, self.resolution, spp, super::REFERENCE_SEED)?;
         let (image, replaced) = run.ratio_image();
         Ok((image, self.gbuffer.sanitized + run.sanitized() + replaced))
     }
@@ -201,7 +225,7 @@ impl PreparedScene {
     /// milliseconds, in [`METHODS`] order, and what its stages sanitized.
     pub fn frame(&self, backend: &mut dyn Backend, spp: u32, seed: u32) -> Result<MethodFrames> {
         let (run, shade_seconds) = accumulate(backend, &self.gbuffer, &self.data, self.resolution, spp, seed)?;
-        let mut sanitized = self.gbuffer.sanitized + run.sanitized();
+        let mut sanitized = run.sanitized();
         let base_ms = 1e3 * (self.gbuffer.seconds + shade_seconds);
         let input = DenoiseInput::new(&self.surfaces, &run);
         let params = DenoiseParams {
@@ -227,7 +251,8 @@ impl PreparedScene {
 
     /// Every method's error against `reference` and time at `spp` samples, in [`METHODS`]
     /// order: the means over one [`frame`](Self::frame) per seed of `seeds` (at least one); and
-    /// the values those frames' stages sanitized ([`MethodFrames::sanitized`], summed).
+    /// the values the G-buffer's trace and those frames' stages sanitized
+    /// ([`MethodFrames::sanitized`], summed; the G-buffer's once, as every frame shares it).
     pub fn errors(
         &self,
         backend: &mut dyn Backend,
@@ -235,9 +260,13 @@ impl PreparedScene {
         spp: u32,
         seeds: &[u32],
     ) -> Result<([MethodError; METHODS.len()], u64)> {
-        let regions = ShadowRegions::new(&self.analytic, reference);
+        if seeds.is_empty() {
+            let reason = "no seeds: a mean needs at least one frame".to_owned();
+            return Err(crate::Error::InvalidParameter { name: "reps", reason });
+        }
+        let regions = self.shadow_regions(reference);
         let mut runs = [MethodRuns::default(); METHODS.len()];
-        let mut sanitized = 0;
+        let mut sanitized = self.gbuffer.sanitized;
         for &seed in seeds {
             let frame = self.frame(backend, spp, seed)?;
             sanitized += frame.sanitized;
@@ -444,7 +473,7 @@ pub fn plot(lines: &[ErrorVsTimeLine], title: &str, output: PendingOutput) -> Re
     let scenes = scenes(lines);
     let (width, panel_height) = (960u32, 560u32);
     let height = panel_height * scenes.len().max(1) as u32;
-    let mut pixels = vec![255u8; (width * height * 3) as usize];
+    let mut pixels = vec![255u8; width as usize * height as usize * 3];
     {
         let root = BitMapBackend::with_buffer(&mut pixels, (width, height)).into_drawing_area();
         let panels = root.split_evenly((scenes.len().max(1), 1));

@@ -13,7 +13,7 @@ pub mod variance;
 /// converged reference and runs at 1, 2, 4, … `max_spp` samples per pixel.
 #[derive(Clone, Debug)]
 pub struct SceneReportOptions {
-    /// Built-in scenes (`builtin:NAME`).
+    /// Scenes: `builtin:NAME` or scene files, each with a quad light.
     pub scenes: Vec<String>,
     /// Image side in pixels.
     pub resolution: u32,
@@ -27,9 +27,15 @@ pub struct SceneReportOptions {
 
 /// Most repetitions a report averages (`--reps`): far more than any statistic here needs, and
 /// small enough that the repetitions' seeds (`0..reps`) never reach the seeds a report keeps apart
-/// for other images (the scene reports' reference, 65 261; the sampling report's second
-/// estimator, from 2²⁰ on).
+/// for other images (the scene reports' reference, [`REFERENCE_SEED`]; the sampling report's
+/// second estimator, from 2²⁰ on).
 pub const MAX_REPS: u32 = 4096;
+
+/// The sampler seed of a scene report's converged reference (65 261), apart from every
+/// repetition's seed (`0..`[`MAX_REPS`]), so that no measured run shares its samples.
+pub const REFERENCE_SEED: u32 = 0xfeed;
+
+const _: () = assert!(REFERENCE_SEED >= MAX_REPS);
 
 /// How many times `max-spp` a scene report's reference must sample at least: its own noise then
 /// adds at most `√(1 + 1/4) − 1` ≈ 12 % to `report shade`'s ratio RMSE at `max-spp` (its variance a

@@ -11,6 +11,7 @@
 //! 1-spp ratio estimate is up to its small bias. Emitters seen directly add the same radiance to
 //! every sample of a fixed surface, so they cancel in the error.
 
+use super::error_vs_time::PreparedScene;
 use super::{sum_from_zero, Repeated};
 use crate::frame::{generate_params_with, sampler_params};
 use crate::kernels::sampling::light_select::luminance;
@@ -103,14 +104,16 @@ pub struct ShadowRegions {
 }
 
 impl ShadowRegions {
-    /// Splits the pixels of `reference` (converged, emitted radiance included) by their analytic
-    /// unshadowed `analytic`; pixels without direct light (`U` = 0) are in neither set.
-    pub fn new(analytic: &[Vec3], reference: &[Vec3]) -> Self {
+    /// Splits the pixels of `reference` (converged, `emitted` radiance included, which is taken
+    /// out first, as [`visibility_floor`] does: an emitter's own light is no direct light
+    /// reaching it) by their analytic unshadowed `analytic`; pixels without direct light
+    /// (`U` = 0) are in neither set.
+    pub fn new(analytic: &[Vec3], emitted: &[Vec3], reference: &[Vec3]) -> Self {
         let (mut shadow, mut lit) = (Vec::new(), Vec::new());
-        for (i, (&u, &converged)) in analytic.iter().zip(reference).enumerate() {
+        for (i, ((&u, &emitted), &converged)) in analytic.iter().zip(emitted).zip(reference).enumerate() {
             let u = luminance(u);
             if u > 0.0 {
-                if luminance(converged) < LIT_FRACTION * u {
+                if luminance(converged - emitted) < LIT_FRACTION * u {
                     shadow.push(i);
                 } else {
                     lit.push(i);
@@ -189,24 +192,19 @@ pub fn report_shade(
 ) -> Result<()> {
     options.check()?;
     for (name, scene) in options.scenes.iter().zip(options.load_scenes()?) {
-        backend.load_scene(&scene)?;
-        let data = ShadeData::new(&scene)?;
-        let gbuffer = GBuffer::new(backend, &scene, options.resolution)?;
-        let (reference_run, _) =
-            accumulate(backend, &gbuffer, &data, options.resolution, options.reference_spp, 0xfeed)?;
-        let (reference, replaced) = reference_run.ratio_image();
-        super::warn_if_sanitized(name, options.reference_spp, gbuffer.sanitized + reference_run.sanitized() + replaced);
-        let analytic = reference_run.analytic();
+        let prepared = PreparedScene::new(backend, &scene, options.resolution)?;
+        let (reference, sanitized) = prepared.reference(backend, options.reference_spp)?;
+        super::warn_if_sanitized(name, options.reference_spp, sanitized);
+        let PreparedScene { data, gbuffer, analytic, emitted, .. } = &prepared;
         let all: Vec<usize> = (0..reference.len()).collect();
-        let ShadowRegions { shadow, lit } = ShadowRegions::new(&analytic, &reference);
-        let emitted = reference_run.emitted();
+        let ShadowRegions { shadow, lit } = prepared.shadow_regions(&reference);
         for (region, pixels) in [("all", &all), ("shadow", &shadow), ("lit", &lit)] {
             emit(&ShadeLine {
                 scene: name.clone(),
                 spp: 1,
                 estimator: "visibility-floor",
                 region,
-                rmse: visibility_floor(&analytic, &reference, &emitted, pixels),
+                rmse: visibility_floor(analytic, &reference, emitted, pixels),
                 rmse_stderr: None,
                 pixels: pixels.len(),
             });
@@ -215,7 +213,7 @@ pub fn report_shade(
             let mut squared_error = [[Repeated::default(); 3]; 2];
             let mut sanitized = gbuffer.sanitized;
             for rep in 0..options.reps {
-                let (run, _) = accumulate(backend, &gbuffer, &data, options.resolution, spp, rep)?;
+                let (run, _) = accumulate(backend, gbuffer, data, options.resolution, spp, rep)?;
                 sanitized += run.sanitized();
                 let ((ratio, replaced), stochastic) = (run.ratio_image(), run.stochastic_image());
                 sanitized += replaced;

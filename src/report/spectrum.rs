@@ -9,7 +9,6 @@ use rustfft::FftPlanner;
 pub struct PowerSpectrum {
     side: usize,
     power: Vec<f64>,
-    images: u32,
 }
 
 impl PowerSpectrum {
@@ -17,7 +16,7 @@ impl PowerSpectrum {
     /// frequency but DC, so there is no spectrum to average (the reports hold images to ≥ 4).
     pub fn new(side: usize) -> Self {
         assert!(side >= 2, "a power spectrum needs images of at least 2 × 2 pixels, not {side} × {side}");
-        Self { side, power: vec![0.0; side * side], images: 0 }
+        Self { side, power: vec![0.0; side * side] }
     }
 
     /// Adds the spectrum of one row-major `side × side` error image (its mean is removed first,
@@ -44,7 +43,6 @@ impl PowerSpectrum {
         for (p, d) in self.power.iter_mut().zip(&data) {
             *p += d.norm_sqr();
         }
-        self.images += 1;
     }
 
     /// Mean power in each ring `r = round(|k|)` for `r = 0 ..= side/2` (frequencies in cycles
@@ -73,8 +71,8 @@ impl PowerSpectrum {
             .collect()
     }
 
-    /// Mean normalised power of the lowest frequencies, rings `1 ..= side/8`: ≈ 1 for white
-    /// noise, well below 1 for blue noise.
+    /// Mean normalised power of the lowest frequencies, rings `1 ..= max(1, side/8)` — below ⅛
+    /// cycle per pixel: ≈ 1 for white noise, well below 1 for blue noise.
     pub fn low_frequency_power(&self) -> f64 {
         let radial = self.radial_average();
         let top = (self.side / 8).max(1);
@@ -107,5 +105,29 @@ mod tests {
             &(0..side * side).map(|i| if (i % side + i / side) % 2 == 0 { 1.0 } else { -1.0 }).collect::<Vec<_>>(),
         );
         assert!(checker.low_frequency_power() < 1e-9);
+    }
+
+    /// A cosine of `k` cycles along x or y puts its power in ring `k` alone, on an odd and an
+    /// even side, up to the Nyquist ring of the even one (the checkerboard's power lies at
+    /// |k| = side/√2, outside every ring, so it does not test the binning).
+    #[test]
+    fn a_cosine_lands_in_the_ring_of_its_frequency() {
+        for (side, k) in [(9usize, 2usize), (9, 4), (32, 3), (32, 16)] {
+            for along_y in [false, true] {
+                let mut spectrum = PowerSpectrum::new(side);
+                let image: Vec<f64> = (0..side * side)
+                    .map(|i| {
+                        let coordinate = if along_y { i / side } else { i % side };
+                        (std::f64::consts::TAU * (k * coordinate) as f64 / side as f64).cos()
+                    })
+                    .collect();
+                spectrum.add(&image);
+                let radial = spectrum.radial_average();
+                assert_eq!(radial.len(), side / 2 + 1);
+                for (ring, &power) in radial.iter().enumerate() {
+                    assert_eq!(power > 1e-6, ring == k, "side {side}, k {k}, ring {ring}: {power}");
+                }
+            }
+        }
     }
 }
