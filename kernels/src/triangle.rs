@@ -29,7 +29,8 @@ pub fn component(v: Vec3, axis: u32) -> f32 {
 /// A hit on one triangle.
 #[derive(Copy, Clone, Debug, PartialEq)]
 pub struct TriangleHit {
-    /// Ray parameter of the hit, in `[tmin, tmax]`.
+    /// Ray parameter of the hit, in `[tmin, tmax]` (`tmax` for an empty range that a hit at
+    /// its ends' rounding passed).
     pub t: f32,
     /// Barycentric weights of vertices 1 and 2 (Vulkan's convention): the hit point is
     /// `(1 − u − v)·v0 + u·v1 + v·v2`.

@@ -13,7 +13,8 @@
 //! Vulkan, wall clock on the CPU; not the host's work between them, nor uploads and readbacks)
 //! — averaged over the repetitions; with `settle_seconds`, in benchmark mode after a warm-up,
 //! the reference image still rendered once per pass ([`PreparedScene::settle`]). The G-buffer
-//! is traced once per scene, and its time, added to every frame's, is that one trace's: cold
+//! is generated and traced once per scene, and its time, added to every frame's, is that one
+//! run's: cold
 //! (the scene's first dispatch) unless `settle_seconds` traces it again after the warm-up.
 //!
 //! Every method is charged the same shade passes, which evaluate the analytic `U` for every

@@ -400,7 +400,7 @@ pub struct SpectrumResult {
     pub sampler: &'static str,
     /// Error images averaged.
     pub images: u32,
-    /// Mean normalised power of rings 1 ..= max(1, resolution/8), below ⅛ cycle per pixel
+    /// Mean normalised power of rings 1 ..= max(1, resolution/8), up to about ⅛ cycle per pixel
     /// (white noise ≈ 1, blue noise ≪ 1).
     pub low_frequency_power: f64,
     /// Normalised radially averaged power, ring 0 ..= resolution/2 (cycles per image).

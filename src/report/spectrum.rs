@@ -71,8 +71,9 @@ impl PowerSpectrum {
             .collect()
     }
 
-    /// Mean normalised power of the lowest frequencies, rings `1 ..= max(1, side/8)` — below ⅛
-    /// cycle per pixel: ≈ 1 for white noise, well below 1 for blue noise.
+    /// Mean normalised power of the lowest frequencies, rings `1 ..= max(1, side/8)` — up to
+    /// about ⅛ cycle per pixel (ring 1 alone below a side of 16): ≈ 1 for white noise, well
+    /// below 1 for blue noise.
     pub fn low_frequency_power(&self) -> f64 {
         let radial = self.radial_average();
         let top = (self.side / 8).max(1);

@@ -263,6 +263,24 @@ mod tests {
         assert_eq!(generate(&crate::frame::generate_params(&scene, 4, 3, 0)).expect("generates").len(), 12);
     }
 
+    /// A short direction traces what a unit one does, also for geometry 10⁻¹⁷ of the distance
+    /// across: a 10⁻⁹-wide triangle 10⁸ away, hit near its node's edge. The box test had floored
+    /// the zero components of `(0, 0, 10⁻¹²)` at 10⁻³⁰, 10⁻¹⁸ of the direction, and culled the
+    /// node; it now scales every direction to a largest component in [1, 2) first.
+    #[test]
+    fn a_short_direction_hits_tiny_geometry_far_away() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("tiny.obj");
+        std::fs::write(&path, "v 0 0 0\nv 1e-9 0 0\nv 0 1e-9 0\nf 1 2 3\n").unwrap();
+        let cpu_scene = CpuScene::build(&Scene::load(path.to_str().unwrap()).unwrap()).unwrap();
+        let origin = Vec4::new(0.99e-9, 0.005e-9, -1e8, 0.0);
+        for length in [1.0, raywave_kernels::trace::MIN_DIRECTION] {
+            let hit = trace_closest(origin, Vec4::new(0.0, 0.0, length, 2e8 / length), &cpu_scene).value;
+            assert_eq!(hit.primitive, 0, "direction length {length}: {hit:?}");
+            assert!((hit.t * length / 1e8 - 1.0).abs() < 1e-6, "direction length {length}: {hit:?}");
+        }
+    }
+
     #[test]
     fn camera_axis_hits_the_tall_block_front_face() {
         // At x = 278 mm the tall block's front edge runs from (265, 296) to (423, 247) mm, so the

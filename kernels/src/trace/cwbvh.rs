@@ -30,10 +30,13 @@ pub const STACK_SIZE: usize = 32;
 /// small result; the expansion's absolute margin of one cell (below) covers it there.
 const FAR_SLACK: f32 = 1.0 + 2.0 * (10.0 * f32::EPSILON * 0.5) / (1.0 - 10.0 * f32::EPSILON * 0.5);
 
-/// The floor under a direction component's magnitude before it is inverted: zero (and ±0)
+/// The floor under a direction component's magnitude before it is inverted, in the box test's
+/// direction (scaled so that its largest component is in [1, 2), [`BoxRay`]): zero (and ±0)
 /// components become ±10⁻³⁰, so that slab distances stay finite (no `0 · ∞`) for axis-aligned
-/// rays; `10³⁰ ×` the scene's 10⁸ coordinate limit still fits `f32`. A traceable ray's largest
-/// component is at least `trace::MIN_DIRECTION`, far above it.
+/// rays; `10³⁰ ×` the scene's 10⁸ coordinate limit still fits `f32`. Relative to the largest
+/// component whatever the direction's length, the floor moves the box test's ray sideways by
+/// 10⁻³⁰ of the distance it travels, which the one-cell box expansion covers for any hit closer
+/// than 10³⁰ cells of its node.
 const BOX_FLOOR: f32 = 1e-30;
 
 /// The scene as the software trace stage reads it: node and triangle buffers built by the host.
@@ -83,10 +86,17 @@ fn highest_bit(bits: u32) -> u32 {
     31 - bits.leading_zeros()
 }
 
-/// A ray prepared for box tests.
+/// A ray prepared for box tests, on its direction scaled by the power of two that brings the
+/// largest component into [1, 2) — exactly, so the box test traces the same line — and the ray
+/// parameter scaled by the inverse ([`Self::t_scale`]). Unscaled, the floor under the other
+/// components was as large as a short direction itself: a traceable `(0, 0, 10⁻¹²)` ray missed
+/// a 10⁻⁹-wide cluster 10⁸ away that the same ray of unit direction hits.
 struct BoxRay {
     origin: Vec3,
+    /// 1 / the scaled direction, components floored at [`BOX_FLOOR`].
     inv_direction: Vec3,
+    /// The box test's ray parameter per unit of the ray's own: a power of two.
+    t_scale: f32,
     /// Per axis: 1 when the direction is negative (near plane = max plane).
     negative: [u32; 3],
     /// The ray's octant, inverted, as obvhs orders children: bit 2 = x ≥ 0, bit 1 = y ≥ 0, bit 0 = z ≥ 0.
@@ -96,13 +106,18 @@ struct BoxRay {
 impl BoxRay {
     #[inline(always)]
     fn new(ray: &Ray) -> Self {
-        let d = ray.direction;
+        // The largest component's biased exponent e: scaled by 2^(127 − e) it lies in [1, 2),
+        // and t by 2^(e − 127). Clamped so that both factors are normal floats; a traceable
+        // direction's e is at least 87 (10⁻¹²).
+        let exponent = ((ray.direction.abs().max_element().to_bits() >> 23) & 0xff).clamp(1, 253);
+        let d = ray.direction * f32::from_bits((254 - exponent) << 23);
+        let t_scale = f32::from_bits(exponent << 23);
         let safe = |c: f32| if c.abs() < BOX_FLOOR { BOX_FLOOR.copysign(c) } else { c };
         let inv_direction = Vec3::new(1.0 / safe(d.x), 1.0 / safe(d.y), 1.0 / safe(d.z));
         let negative =
             [u32::from(inv_direction.x < 0.0), u32::from(inv_direction.y < 0.0), u32::from(inv_direction.z < 0.0)];
         let octant_inv = ((1 - negative[0]) << 2) | ((1 - negative[1]) << 1) | (1 - negative[2]);
-        Self { origin: ray.origin, inv_direction, negative, octant_inv }
+        Self { origin: ray.origin, inv_direction, t_scale, negative, octant_inv }
     }
 }
 
@@ -110,6 +125,10 @@ impl BoxRay {
 trait ChildBoxTest {
     /// The ray's octant, inverted (see [`BoxRay::octant_inv`]).
     fn octant_inv(&self) -> u32;
+
+    /// The box test's ray parameter per unit of the ray's own ([`BoxRay::t_scale`]): the factor
+    /// `child_hits`' range takes.
+    fn t_scale(&self) -> f32;
 
     /// The hit mask of `node`'s children for this ray within `[tmin, tmax]`: internal children
     /// hit at bits 24–31 in traversal order, the triangles of hit leaves at bits 0–23.
@@ -122,6 +141,11 @@ impl ChildBoxTest for BoxRay {
     #[inline(always)]
     fn octant_inv(&self) -> u32 {
         self.octant_inv
+    }
+
+    #[inline(always)]
+    fn t_scale(&self) -> f32 {
+        self.t_scale
     }
 
     #[inline(always)]
@@ -286,6 +310,9 @@ impl CwBvhScene<'_> {
     #[inline(always)]
     fn traverse<B: ChildBoxTest>(&self, ray: &Ray, box_ray: &B, any_hit: bool) -> Found {
         let tri_ray = WatertightRay::new(ray.origin, ray.direction);
+        // Exact: `t_scale` is a power of two (the range's ends at most move into or out of the
+        // subnormals, where the box test is conservative either way).
+        let box_tmin = ray.tmin * box_ray.t_scale();
         let mut stack = [UVec2::ZERO; STACK_SIZE];
         let mut stack_len = 0usize;
         // Start with a group whose only internal hit is the root (node 0 = first child of group 0).
@@ -307,7 +334,7 @@ impl CwBvhScene<'_> {
                 let slot = (bit - 24) ^ box_ray.octant_inv();
                 let child = internal_child(node_group.x, imask & 0xff, slot);
                 let node = &self.nodes[child as usize];
-                let hits = box_ray.child_hits(node, ray.tmin, found.t);
+                let hits = box_ray.child_hits(node, box_tmin, found.t * box_ray.t_scale());
                 found.stats.nodes += 1;
                 self.prefetch_children(node, hits);
                 node_group = UVec2::new(node.child_base, (hits & 0xff00_0000) | (node.exponents_and_imask >> 24));
@@ -545,8 +572,10 @@ mod tests {
             let portable = BoxRay::new(&ray);
             // SAFETY: AVX2 was detected above.
             let wide = unsafe { avx2::BoxRay8::new(&portable) };
-            let expected = portable.child_hits(&node, ray.tmin, ray.tmax);
-            assert_eq!(wide.child_hits(&node, ray.tmin, ray.tmax), expected, "node {i}: {node:?} {ray:?}");
+            let (tmin, tmax) = (ray.tmin * portable.t_scale, ray.tmax * portable.t_scale);
+            assert_eq!(wide.t_scale(), portable.t_scale);
+            let expected = portable.child_hits(&node, tmin, tmax);
+            assert_eq!(wide.child_hits(&node, tmin, tmax), expected, "node {i}: {node:?} {ray:?}");
             hits_seen += u32::from(expected != 0);
         }
         assert!(hits_seen > 5_000, "too few rays hit a child ({hits_seen}) for the comparison to mean much");

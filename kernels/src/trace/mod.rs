@@ -58,11 +58,10 @@ impl Ray {
 }
 
 /// Smallest largest-component of a traceable ray's direction ([`Ray::is_traceable`]), 10⁻¹²:
-/// `1/d` of the dominant component is then finite in the watertight test, and the floor of
-/// 10⁻³⁰ the box test puts under the other components (`cwbvh`, so that an axis-aligned ray's
-/// slab distances stay finite) is at most 10⁻¹⁸ of it — a zero component's slab then reaches
-/// past any hit in a scene within its coordinate limit. A floor as large as the dominant
-/// component had traced such a ray as a diagonal one.
+/// `1/d` of the dominant component is then finite in the watertight test, and the sheared
+/// depths `Δz/d` of a scene within its 10⁸ coordinate limit stay far from overflow. (The box
+/// test scales every direction to a largest component in [1, 2) first, `cwbvh`; a floor of
+/// 10⁻³⁰ under unscaled components, as large as such a direction, had traced it as a diagonal.)
 pub const MIN_DIRECTION: f32 = 1e-12;
 
 /// The closest hit of one ray, as the trace stage writes it into the hit stream.

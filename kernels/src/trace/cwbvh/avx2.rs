@@ -26,8 +26,10 @@ use raywave_shared::bvh::CwBvhNode;
 pub(super) struct BoxRay8 {
     /// Ray origin in lanes 0–2.
     origin: __m128,
-    /// 1 / direction (zero components made ±1e-30, as in [`BoxRay`]) in lanes 0–2.
+    /// 1 / the scaled direction (as in [`BoxRay`]) in lanes 0–2.
     inv_direction: __m128,
+    /// [`BoxRay`]'s `t_scale`.
+    t_scale: f32,
     /// All bits set in the lanes of axes along which the direction is negative.
     negative: __m128,
     /// Per axis, the plane array (0 = min x … 5 = max z) of the near and of the far planes.
@@ -52,6 +54,7 @@ impl BoxRay8 {
         Self {
             origin: lanes(ray.origin),
             inv_direction: lanes(ray.inv_direction),
+            t_scale: ray.t_scale,
             negative,
             near_arrays: [near(0), near(1), near(2)],
             far_arrays: [near(0) ^ 1, near(1) ^ 1, near(2) ^ 1],
@@ -64,6 +67,11 @@ impl ChildBoxTest for BoxRay8 {
     #[inline(always)]
     fn octant_inv(&self) -> u32 {
         self.octant_inv
+    }
+
+    #[inline(always)]
+    fn t_scale(&self) -> f32 {
+        self.t_scale
     }
 
     #[inline(always)]
