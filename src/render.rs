@@ -193,9 +193,9 @@ pub fn render(options: &RenderOptions) -> Result<RenderReport> {
     let mut backend = open_backend(options.device, &backend_options)?;
     // The view's frame: its size on this backend, and its samples (one for the normals view,
     // whatever `--spp` says) for its sampler.
-    options.frame_settings().check_on(backend.as_ref())?;
-    backend.load_scene(&scene)?;
     let settings = options.frame_settings();
+    settings.check_on(backend.as_ref())?;
+    backend.load_scene(&scene)?;
     let data = if options.view == RenderView::Lit {
         let mut data = ShadeData::new(&scene)?;
         data.analytic_residual = options.analytic_residual;

@@ -197,23 +197,21 @@ fn cone_union(a: Cone, b: Cone) -> Cone {
     // Where one cone holds the other, that one is kept, widened by the slack like a merged cone:
     // its axis is normalised again when stored in f32 (`Bounds::to_shared`), which can move it
     // by ~10⁻⁷ rad from a leaf's axis, whose cone may be a bare axis (θ = 0).
-    let widened = |c: Cone, theta: f64| {
+    // The merged cone below gets the same slack.
+    let widened = |w: DVec3, theta: f64| {
         if theta + CONE_SLACK >= PI {
             Cone::ENTIRE_SPHERE
         } else {
-            Cone { w: c.w, cos_theta: (theta + CONE_SLACK).cos() }
+            Cone { w, cos_theta: (theta + CONE_SLACK).cos() }
         }
     };
     if (theta_d + theta_b).min(PI) <= theta_a {
-        return widened(a, theta_a);
+        return widened(a.w, theta_a);
     }
     if (theta_d + theta_a).min(PI) <= theta_b {
-        return widened(b, theta_b);
+        return widened(b.w, theta_b);
     }
     let theta_o = (theta_a + theta_d + theta_b) / 2.0;
-    if theta_o + CONE_SLACK >= PI {
-        return Cone::ENTIRE_SPHERE;
-    }
     // Rotate a's axis towards b's by θo − θa about a × b (Rodrigues); then both cones touch the
     // merged one from inside, and the slack widens it beyond rounding.
     let k = a.w.cross(b.w);
@@ -224,7 +222,7 @@ fn cone_union(a: Cone, b: Cone) -> Cone {
     let theta_r = theta_o - theta_a;
     let (sin, cos) = theta_r.sin_cos();
     let w = a.w * cos + k.cross(a.w) * sin + k * k.dot(a.w) * (1.0 - cos);
-    Cone { w: w.normalize(), cos_theta: (theta_o + CONE_SLACK).cos() }
+    widened(w.normalize(), theta_o)
 }
 
 /// Light bounds in `f64` for the build.

@@ -417,9 +417,15 @@ impl ShadeAccumulator {
     /// overflowed `f32` (never for scenes' values, which [`crate::scene::MAX_EMISSION`] bounds).
     pub fn ratio_image(&self) -> (Vec<Vec3>, u64) {
         let (u, u_n, s_n, e) = (self.analytic(), self.unshadowed(), self.shadowed(), self.emitted());
-        let pixels: Vec<_> = (0..u.len()).map(|i| composite(u[i], u_n[i], s_n[i], e[i])).collect();
-        let replaced = pixels.iter().filter(|p| p.replaced).count() as u64;
-        (pixels.into_iter().map(|p| p.value).collect(), replaced)
+        let mut replaced = 0;
+        let image = (0..u.len())
+            .map(|i| {
+                let pixel = composite(u[i], u_n[i], s_n[i], e[i]);
+                replaced += u64::from(pixel.replaced);
+                pixel.value
+            })
+            .collect();
+        (image, replaced)
     }
 
     /// The fully stochastic image: `emitted + S_N`.

@@ -97,12 +97,15 @@ impl PendingOutput {
     /// [`Error::Encode`] naming both (`image` would have dropped the surplus silently).
     pub fn write_linear_rgb(self, colors: &[Vec3], width: u32, height: u32) -> Result<WrittenOutput> {
         let pixels = u64::from(width) * u64::from(height);
-        let data: Vec<f32> = colors.iter().flat_map(|c| c.to_array()).collect();
-        let image = image::Rgb32FImage::from_raw(width, height, data).filter(|_| colors.len() as u64 == pixels);
-        let Some(image) = image else {
+        let size_error = || {
             let message = format!("{} colours for a {width}×{height} image of {pixels} pixels", colors.len());
-            return Err(Error::Encode { path: self.path.clone(), message });
+            Error::Encode { path: self.path.clone(), message }
         };
+        if colors.len() as u64 != pixels {
+            return Err(size_error());
+        }
+        let data: Vec<f32> = colors.iter().flat_map(|c| c.to_array()).collect();
+        let image = image::Rgb32FImage::from_raw(width, height, data).ok_or_else(size_error)?;
         self.write_image(&image)
     }
 

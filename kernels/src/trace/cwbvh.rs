@@ -312,7 +312,10 @@ impl CwBvhScene<'_> {
         let tri_ray = WatertightRay::new(ray.origin, ray.direction);
         // Exact: `t_scale` is a power of two (the range's ends at most move into or out of the
         // subnormals, where the box test is conservative either way).
-        let box_tmin = ray.tmin * box_ray.t_scale();
+        let t_scale = box_ray.t_scale();
+        let box_tmin = ray.tmin * t_scale;
+        // The box test's `found.t`, updated with it.
+        let mut box_tmax = ray.tmax * t_scale;
         let mut stack = [UVec2::ZERO; STACK_SIZE];
         let mut stack_len = 0usize;
         // Start with a group whose only internal hit is the root (node 0 = first child of group 0).
@@ -334,7 +337,7 @@ impl CwBvhScene<'_> {
                 let slot = (bit - 24) ^ box_ray.octant_inv();
                 let child = internal_child(node_group.x, imask & 0xff, slot);
                 let node = &self.nodes[child as usize];
-                let hits = box_ray.child_hits(node, box_tmin, found.t * box_ray.t_scale());
+                let hits = box_ray.child_hits(node, box_tmin, box_tmax);
                 found.stats.nodes += 1;
                 self.prefetch_children(node, hits);
                 node_group = UVec2::new(node.child_base, (hits & 0xff00_0000) | (node.exponents_and_imask >> 24));
@@ -358,6 +361,7 @@ impl CwBvhScene<'_> {
                 if let Some((t, barycentrics)) = self.triangle_hit(&tri_ray, index, ray.tmin, found.t) {
                     if found.index == u32::MAX || t < found.t {
                         (found.index, found.t, found.barycentrics) = (index, t, barycentrics);
+                        box_tmax = t * t_scale;
                         if any_hit {
                             return found;
                         }
