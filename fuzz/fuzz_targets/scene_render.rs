@@ -1,7 +1,8 @@
 //! Whatever scene loads renders on the CPU (12×8 pixels) without a panic, without any stage
 //! replacing a non-finite value (sound input sanitizes nothing), and to a finite HDR image — or
-//! ends in a typed error (a scene that does not load, or one without a light). Byte 0 chooses the
-//! estimator options ([`raywave_fuzz::render_checked`]), the rest is `scene_load`'s input.
+//! ends in the typed error of a scene the render may refuse (one that does not load, whose BVH is
+//! too deep, or whose lights fail their checks). Byte 0 chooses the estimator options
+//! ([`raywave_fuzz::render_checked`]), the rest is `scene_load`'s input.
 //! `cargo +nightly fuzz run scene_render` from the repository root.
 #![no_main]
 

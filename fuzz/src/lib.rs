@@ -5,7 +5,8 @@ pub mod shapes;
 
 use raywave::denoise::DenoiseMethod;
 use raywave::render::{render, RenderOptions, RenderView};
-use raywave::{BackendOptions, DeviceChoice, StageReport};
+use raywave::shading::ShadeData;
+use raywave::{BackendOptions, DeviceChoice, Error, Scene, StageReport};
 use std::path::{Path, PathBuf};
 
 /// Writes `bytes` as a scene into `dir` and returns the path to load: `bytes[0] % 3` picks an OBJ
@@ -34,13 +35,16 @@ pub fn write_scene(dir: &Path, bytes: &[u8]) -> Option<PathBuf> {
 
 /// Renders the scene file `scene` on the CPU (12×8 pixels) into `dir`, with the estimator options
 /// `choices` picks (bit 0: `--analytic-residual`; the next bits: the denoiser — TV, SVGF or none
-/// — and 1, 2 or 4 samples per pixel), and asserts what every render must give: a typed error (a
-/// scene that does not load, or one without a light), or no stage replacing a non-finite value
-/// (sound input sanitizes nothing) and a finite HDR image.
+/// — and 1, 2 or 4 samples per pixel), and asserts what every render must give: no stage replacing
+/// a non-finite value (sound input sanitizes nothing) and a finite HDR image — or the typed error
+/// of a scene the render may refuse: one that does not load, whose BVH is too deep, or whose
+/// lights fail their checks. Any other error (options, streams, outputs) is a defect.
 pub fn render_checked(dir: &Path, scene: &Path, choices: u8) {
     let denoise = [DenoiseMethod::Tv, DenoiseMethod::Svgf, DenoiseMethod::None][(choices as usize >> 1) % 3];
+    let scene_name = scene.to_str().expect("a UTF-8 temporary path");
+    let Ok(loaded) = Scene::load(scene_name) else { return };
     let options = RenderOptions {
-        scene: scene.to_str().expect("a UTF-8 temporary path").to_owned(),
+        scene: scene_name.to_owned(),
         device: DeviceChoice::Cpu,
         width: 12,
         height: 8,
@@ -59,22 +63,31 @@ pub fn render_checked(dir: &Path, scene: &Path, choices: u8) {
         backend: BackendOptions::default(),
         settle_seconds: None,
     };
-    // `render` loads the scene before any work (after reserving its outputs): what does not load
-    // is refused there, as by `Scene::load`.
     match render(&options) {
         Ok(report) => {
             assert_eq!(StageReport::total_sanitized(&report.timings), 0, "{:?}", report.timings);
             let hdr = image::open(dir.join("out.exr")).expect("the EXR reads back").into_rgba32f();
             assert!(hdr.pixels().all(|p| p.0.iter().all(|v| v.is_finite())), "a non-finite pixel");
         }
-        Err(err) => assert!(!err.to_string().is_empty()),
+        Err(Error::SceneTooLarge { .. }) => {}
+        Err(err) => assert!(ShadeData::new(&loaded).is_err(), "a scene that loads, with valid lights, refused: {err}"),
     }
 }
 
-/// A temporary directory for one fuzzing process, created on first use and reused by every input.
+/// An empty directory for one input: `input/` inside a temporary directory of the fuzzing
+/// process, emptied before each input, so that no input reads the files an earlier one wrote (a
+/// crash then reproduces from its input alone), and a scene's `../` reaches only that directory.
 pub fn with_scratch_dir<T>(f: impl FnOnce(&Path) -> T) -> T {
     thread_local! {
         static DIR: tempfile::TempDir = tempfile::tempdir().expect("a temporary directory");
     }
-    DIR.with(|dir| f(dir.path()))
+    DIR.with(|dir| {
+        let input = dir.path().join("input");
+        match std::fs::remove_dir_all(&input) {
+            Err(err) if err.kind() != std::io::ErrorKind::NotFound => panic!("cannot empty {}: {err}", input.display()),
+            _ => {}
+        }
+        std::fs::create_dir(&input).expect("the fuzz directory is writable");
+        f(&input)
+    })
 }
