@@ -7,6 +7,7 @@ use crate::scene::Scene;
 use crate::shading::ShadeData;
 use crate::stream::{HitStream, RayStream, ShadeStream};
 use glam::{UVec2, Vec4};
+use raywave_shared::sampling::sampler_kind;
 use raywave_shared::{DenoiseParams, GenerateParams, SamplerParams, SamplerProbeParams, ShadeParams, WarpParams};
 
 /// What one run of a stage (or denoise pass) on a backend reports: its time, and how many of its
@@ -74,6 +75,19 @@ pub struct FrameOutput {
     pub timings: Vec<StageReport>,
 }
 
+/// Checks benchmark mode's busy time per timed submission ([`Backend::set_sustain_seconds`]):
+/// within 0..=1 s, on every backend, whether or not it uses it.
+pub(crate) fn check_sustain_seconds(seconds: f64) -> Result<f64> {
+    if (0.0..=1.0).contains(&seconds) {
+        Ok(seconds)
+    } else {
+        Err(crate::error::Error::InvalidParameter {
+            name: "sustain_seconds",
+            reason: format!("{seconds} is not within 0..=1 s"),
+        })
+    }
+}
+
 /// An execution backend: the CPU executor or a Vulkan device.
 pub trait Backend {
     /// Human-readable name, e.g. `cpu (2 threads)` or `vulkan:0 llvmpipe (…)`.
@@ -85,7 +99,8 @@ pub trait Backend {
     /// Benchmark mode from the next stage on, as `BackendOptions::sustain_seconds` sets it at
     /// open: each timed Vulkan submission repeats its dispatch to keep the GPU busy about
     /// `seconds` (0..=1; 0 runs every stage once), so that a measurement can be sustained while
-    /// the work around it (a many-sample reference image) runs once. The CPU backend ignores it.
+    /// the work around it (a many-sample reference image) runs once. The CPU backend checks it
+    /// and otherwise ignores it.
     fn set_sustain_seconds(&mut self, seconds: f64) -> Result<()>;
 
     /// Builds the acceleration structures for `scene`; later `trace` calls run against it.
@@ -166,8 +181,9 @@ pub fn sampler_probe_len(params: &SamplerProbeParams) -> Result<u32> {
     }
 }
 
-/// Checks that `sampler` gives samples `0..sample_count` of every pixel of a `width × height`
-/// image their own points ([`SamplerParams::indexes`]); `name` names the stage in the error.
+/// Checks that `sampler` is of a known kind ([`sampler_kind`]: the kernels draw any other as
+/// `ZSOBOL`) and gives samples `0..sample_count` of every pixel of a `width × height` image their
+/// own points ([`SamplerParams::indexes`]); `name` names the stage in the error.
 fn check_sampler(
     name: &'static str,
     sampler: &SamplerParams,
@@ -175,6 +191,12 @@ fn check_sampler(
     height: u32,
     sample_count: u32,
 ) -> Result<()> {
+    if sampler.kind >= sampler_kind::COUNT {
+        return Err(crate::error::Error::InvalidParameter {
+            name,
+            reason: format!("sampler kind {} is not one of 0..{}", sampler.kind, sampler_kind::COUNT),
+        });
+    }
     if sampler.indexes(width, height, sample_count) {
         return Ok(());
     }
@@ -256,18 +278,39 @@ pub(crate) fn check_shade_inputs(
     }
 }
 
+/// Largest length of the generate stage's `right` and `up` axes (the tangents of half the field
+/// of view, times the aspect ratio for `right`): with a unit `forward` orthogonal to them, a
+/// pixel's pinhole direction `forward + x·right + y·up` then has a squared length in
+/// [1, (1 + 2·10¹⁸)²], which `f32` holds, so it normalizes to a finite unit vector.
+pub const MAX_IMAGE_PLANE_AXIS: f32 = 1e18;
+
+/// Relative tolerance of the camera basis' documented shape ([`GenerateParams`]): `|forward|`
+/// within this of 1, and `right`, `up` orthogonal to it within this fraction of their length —
+/// far above the rounding of a basis built from normalized cross products (~10⁻⁷).
+const CAMERA_BASIS_TOLERANCE: f32 = 1e-3;
+
 /// Checks generate-stage parameters beyond the image size (which each backend checks against its
-/// own limit): a finite camera basis with a non-zero view direction and image plane, `0 ≤ tmin <
-/// tmax` finite, a finite non-negative aperture with a positive finite focus distance when it
-/// is open — what [`GenerateParams`]' fields document; a zeroed basis gave NaN ray directions —
-/// and a sampler that gives the sample its own point ([`SamplerParams::indexes`]).
+/// own limit): a finite camera basis of the shape [`GenerateParams`]' fields document — a unit
+/// `forward`, `right` and `up` orthogonal to it, within [`MAX_IMAGE_PLANE_AXIS`] and spanning a
+/// non-zero image plane (a zeroed basis gave NaN ray directions, a 10⁻³⁰ one infinite ones, a
+/// 10¹⁹ one zero ones) —, `0 ≤ tmin < tmax` finite, a finite non-negative aperture with a
+/// positive finite focus distance when it is open, and a sampler that gives the sample its own
+/// point ([`SamplerParams::indexes`]).
 pub(crate) fn check_generate_params(params: &GenerateParams) -> Result<()> {
     let basis = [params.origin, params.forward, params.right, params.up];
-    let plane = params.right.truncate().cross(params.up.truncate());
+    let (forward, right, up) = (params.forward.truncate(), params.right.truncate(), params.up.truncate());
+    let orthogonal = |axis: glam::Vec3| {
+        axis.dot(forward).abs() <= CAMERA_BASIS_TOLERANCE * axis.length() && axis.length() <= MAX_IMAGE_PLANE_AXIS
+    };
     let reason = if !basis.iter().all(|v| v.is_finite()) {
         Some("the camera's origin, forward, right and up must be finite".to_owned())
-    } else if params.forward.truncate() == glam::Vec3::ZERO || plane == glam::Vec3::ZERO {
-        Some("the camera's forward axis and its right × up image plane must be non-zero".to_owned())
+    } else if (forward.length() - 1.0).abs() > CAMERA_BASIS_TOLERANCE {
+        Some(format!("the camera's forward axis must be a unit vector (length {})", forward.length()))
+    } else if !(orthogonal(right) && orthogonal(up)) || right.cross(up) == glam::Vec3::ZERO {
+        Some(format!(
+            "the camera's right and up axes must be orthogonal to forward, at most {MAX_IMAGE_PLANE_AXIS:e} long, \
+             and span a non-zero image plane (right {right}, up {up})"
+        ))
     } else if !(params.tmin >= 0.0 && params.tmax > params.tmin && params.tmax.is_finite()) {
         Some(format!("needs 0 ≤ tmin < tmax, both finite (tmin {}, tmax {})", params.tmin, params.tmax))
     } else if !(params.lens_radius.is_finite() && params.lens_radius >= 0.0) {
@@ -394,6 +437,42 @@ mod tests {
         generate.sampler.resolution_log2 = 3;
         generate.width = 9;
         assert!(check_generate_params(&generate).is_err(), "an 8-pixel square under a 9-pixel side");
+    }
+
+    /// A sampler kind outside [`sampler_kind`], which the kernels draw as `ZSOBOL` — whose space
+    /// `indexes` had not judged for such a kind, so sample 5 of a one-sample frame repeated
+    /// sample 0's points — is refused by every stage that draws from it.
+    #[test]
+    fn an_unknown_sampler_kind_is_refused() {
+        let scene = crate::Scene::load("builtin:cornell").unwrap();
+        let mut generate = crate::frame::generate_params(&scene, 8, 8, 0);
+        generate.sampler.kind = sampler_kind::COUNT;
+        assert!(!generate.sampler.indexes(8, 8, 6), "drawn as ZSOBOL, judged as ZSOBOL");
+        let err = check_generate_params(&generate).expect_err("refused");
+        assert!(err.to_string().contains("sampler kind 3"), "{err}");
+        let mut probe = sampler_probe(8, 8, 0);
+        probe.sampler.kind = 7;
+        assert!(sampler_probe_len(&probe).is_err());
+    }
+
+    /// The camera basis must have the shape `GenerateParams` documents: a 10⁻³⁰-long basis made
+    /// 77 % of the rays' directions infinite and a 2·10¹⁹-long `forward` made them all zero, both
+    /// uncounted, before the check; a basis built from normalized cross products passes.
+    #[test]
+    fn a_camera_basis_of_another_shape_is_refused() {
+        let scene = crate::Scene::load("builtin:cornell").unwrap();
+        let good = crate::frame::generate_params(&scene, 8, 8, 0);
+        assert!(check_generate_params(&good).is_ok());
+        let v = |x, y, z| Vec4::new(x, y, z, 0.0);
+        let tiny =
+            GenerateParams { forward: v(1e-30, 0.0, 0.0), right: v(0.0, 3e-23, 0.0), up: v(0.0, 0.0, 3e-23), ..good };
+        let long = GenerateParams { forward: v(0.0, 0.0, 2e19), right: v(1.0, 0.0, 0.0), up: v(0.0, 1.0, 0.0), ..good };
+        let slanted = GenerateParams { right: good.right + good.forward * 0.01 * good.right.length(), ..good };
+        let wide = GenerateParams { right: good.right * 1e19, ..good };
+        let flat = GenerateParams { up: good.right, ..good };
+        for (name, params) in [("tiny", tiny), ("long", long), ("slanted", slanted), ("wide", wide), ("flat", flat)] {
+            assert!(check_generate_params(&params).is_err(), "{name}");
+        }
     }
 
     #[test]

@@ -78,15 +78,17 @@ impl FromStr for TraceMethod {
 /// Options for opening a backend.
 #[derive(Clone, Debug, Default)]
 pub struct BackendOptions {
-    /// Enable the Vulkan validation layers (required to be installed) and record their messages.
+    /// Enable the Vulkan validation layers (required to be installed) and record their messages;
+    /// refused with an explicit CPU choice, which has none to enable.
     pub validation: bool,
     /// The trace method; `None` picks the best the backend has (ray query, else the ray-tracing
     /// pipeline, else software traversal).
     pub trace: Option<TraceMethod>,
     /// Benchmark mode of a Vulkan backend, in seconds (`ContextOptions::sustain_seconds`: each
     /// timed submission repeats its dispatch until it keeps the GPU busy about this long, so that
-    /// the GPU holds its clocks); 0 (the default) runs every stage once. The CPU backend ignores
-    /// it: its stages run once, timed by the wall clock.
+    /// the GPU holds its clocks); 0 (the default) runs every stage once; within 0..=1, checked
+    /// for every choice of backend. The CPU backend ignores it otherwise: its stages run once,
+    /// timed by the wall clock.
     pub sustain_seconds: f64,
     /// Invocations per workgroup of each of a Vulkan backend's 1-D stream stages, for occupancy
     /// tuning (`ContextOptions::workgroup_sizes`; `None`: the preferred sizes,
@@ -98,8 +100,10 @@ pub struct BackendOptions {
 /// opened, unless `options` ask for what only Vulkan has (validation, a hardware trace method,
 /// workgroup sizes) or Vulkan refused one of them as invalid: then, as for an explicit Vulkan
 /// choice that cannot be honoured, the error says why Vulkan failed (a CPU run would silently
-/// drop what was asked). A trace method the backend lacks is an error.
+/// drop what was asked). A trace method the backend lacks is an error, and so are validation
+/// with an explicit CPU choice and a `sustain_seconds` outside 0..=1 with any.
 pub fn open_backend(choice: DeviceChoice, options: &BackendOptions) -> Result<Box<dyn Backend>> {
+    crate::backend::check_sustain_seconds(options.sustain_seconds)?;
     let cpu = || -> Result<Box<dyn Backend>> {
         match options.trace {
             None | Some(TraceMethod::Software) => Ok(Box::new(CpuBackend::new())),
@@ -110,6 +114,10 @@ pub fn open_backend(choice: DeviceChoice, options: &BackendOptions) -> Result<Bo
         }
     };
     match choice {
+        DeviceChoice::Cpu if options.validation => Err(Error::InvalidParameter {
+            name: "validation",
+            reason: "the CPU backend has no validation layers (they check Vulkan calls)".to_owned(),
+        }),
         DeviceChoice::Cpu => cpu(),
         DeviceChoice::Auto => open_vulkan(None, options).or_else(|vulkan_error| {
             let hardware_trace = options.trace.is_some_and(|method| method != TraceMethod::Software);
@@ -212,5 +220,26 @@ mod tests {
         let options = BackendOptions { trace: Some(TraceMethod::RayQuery), ..Default::default() };
         let result = open_backend(DeviceChoice::Cpu, &options);
         assert!(matches!(result, Err(Error::InvalidParameter { name: "trace", .. })));
+    }
+
+    /// What the CPU backend cannot honour or would silently take is refused whatever the choice:
+    /// validation asked of an explicit CPU choice, a busy time outside 0..=1 (it had been checked
+    /// only where a Vulkan device opened, so `auto` without one took a NaN).
+    #[test]
+    fn options_are_checked_for_the_cpu_too() {
+        let validation = BackendOptions { validation: true, ..Default::default() };
+        let result = open_backend(DeviceChoice::Cpu, &validation);
+        assert!(matches!(result, Err(Error::InvalidParameter { name: "validation", .. })));
+        for seconds in [-1.0, 1.5, f64::NAN] {
+            let options = BackendOptions { sustain_seconds: seconds, ..Default::default() };
+            for choice in [DeviceChoice::Cpu, DeviceChoice::Auto] {
+                let result = open_backend(choice, &options);
+                assert!(matches!(result, Err(Error::InvalidParameter { name: "sustain_seconds", .. })), "{seconds}");
+            }
+            let mut cpu = crate::cpu::CpuBackend::new();
+            assert!(cpu.set_sustain_seconds(seconds).is_err(), "{seconds}");
+        }
+        let options = BackendOptions { sustain_seconds: 0.5, ..Default::default() };
+        assert!(open_backend(DeviceChoice::Cpu, &options).is_ok());
     }
 }

@@ -49,9 +49,11 @@ impl SamplerParams {
     /// Whether samples `0..sample_count` of every pixel of a `width × height` image each get their
     /// own point: for `ZSOBOL`, the index fits ([`Self::fits_index`]), the square of side
     /// `2^resolution_log2` covers the image and `sample_count ≤ 2^spp_log2` — else pixels or
-    /// samples share a Morton index and repeat each other's points. Other kinds index any sample.
+    /// samples share a Morton index and repeat each other's points. `SOBOL` and `INDEPENDENT`
+    /// index any sample; the kernels draw any other kind as `ZSOBOL`, and so it is judged here.
     pub fn indexes(&self, width: u32, height: u32, sample_count: u32) -> bool {
-        self.kind != sampler_kind::ZSOBOL
+        self.kind == sampler_kind::SOBOL
+            || self.kind == sampler_kind::INDEPENDENT
             || (self.fits_index()
                 && (1u64 << self.resolution_log2) >= u64::from(width.max(height))
                 && u64::from(sample_count) <= 1u64 << self.spp_log2)

@@ -7,8 +7,8 @@ mod denoise;
 pub use bvh::{BvhQuality, CpuScene, TraversalIsa};
 
 use crate::backend::{
-    check_generate_params, check_image_size_common, check_shade_inputs, copy_probe_len, sampler_probe_len,
-    warp_probe_len, Backend, FrameOutput, StageReport,
+    check_generate_params, check_image_size_common, check_shade_inputs, check_sustain_seconds, copy_probe_len,
+    sampler_probe_len, warp_probe_len, Backend, FrameOutput, StageReport,
 };
 use crate::denoise::{DenoiseInput, DenoiseMethod};
 use crate::error::{Error, Result};
@@ -152,9 +152,10 @@ impl Backend for CpuBackend {
         check_image_size_common(width, height, MAX_PIXELS, &self.name())
     }
 
-    /// Every CPU stage runs once, timed by the wall clock: nothing to sustain.
-    fn set_sustain_seconds(&mut self, _seconds: f64) -> Result<()> {
-        Ok(())
+    /// Every CPU stage runs once, timed by the wall clock: nothing to sustain (the value is
+    /// checked as on every backend).
+    fn set_sustain_seconds(&mut self, seconds: f64) -> Result<()> {
+        check_sustain_seconds(seconds).map(|_| ())
     }
 
     fn load_scene(&mut self, scene: &Scene) -> Result<()> {

@@ -2,6 +2,7 @@
 //! ray-tracing feature detection, and device creation.
 
 use super::driver_lock;
+use crate::backend::check_sustain_seconds;
 use crate::device::TraceMethod;
 use crate::error::{Error, Result};
 use crate::workgroup::WorkgroupSizes;
@@ -535,14 +536,6 @@ pub(crate) fn open(index: usize, options: &ContextOptions) -> Result<Arc<Core>> 
 
 /// `seconds` if it is a benchmark-mode busy time ([`ContextOptions::sustain_seconds`]): within
 /// `0..=1` s, else [`Error::InvalidParameter`] naming `sustain_seconds`.
-fn check_sustain_seconds(seconds: f64) -> Result<f64> {
-    if (0.0..=1.0).contains(&seconds) {
-        Ok(seconds)
-    } else {
-        Err(Error::InvalidParameter { name: "sustain_seconds", reason: format!("{seconds} is not within 0..=1 s") })
-    }
-}
-
 impl Core {
     /// Benchmark mode's busy time per timed submission, in seconds (0: off;
     /// [`ContextOptions::sustain_seconds`]).
