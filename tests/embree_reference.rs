@@ -12,7 +12,7 @@ use raywave::Scene;
 
 #[test]
 fn embree_matches_the_cpu_trace() {
-    let (meshes, camera) = hairball(20_000, 5);
+    let (meshes, camera) = hairball(20_000, 5).expect("a hairball");
     for scene in [Scene::load("builtin:cornell").unwrap(), Scene::new("hairball", meshes, camera).unwrap()] {
         let rays = cpu::generate(&generate_params(&scene, 256, 256, 1)).expect("generate");
         let cpu_scene = CpuScene::build(&scene).unwrap();

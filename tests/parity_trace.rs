@@ -234,8 +234,8 @@ fn incoherent_rays(scene: &Scene, count: u32) -> RayStream {
 #[test]
 fn trace_matches_cpu_on_incoherent_scenes() {
     use raywave::scene::procedural::{hairball, sphere_field};
-    let (hair_meshes, hair_camera) = hairball(50_000, 4);
-    let (sphere_meshes, sphere_camera) = sphere_field(2, 4);
+    let (hair_meshes, hair_camera) = hairball(50_000, 4).expect("a hairball");
+    let (sphere_meshes, sphere_camera) = sphere_field(2, 4).expect("a sphere field");
     let scenes = [
         Scene::new("hairball", hair_meshes, hair_camera).unwrap(),
         Scene::new("spheres", sphere_meshes, sphere_camera).unwrap(),
@@ -258,7 +258,7 @@ fn trace_matches_cpu_on_incoherent_scenes() {
 
 #[test]
 fn occlusion_matches_cpu_on_every_vulkan_device() {
-    let (meshes, camera) = raywave::scene::procedural::hairball(50_000, 6);
+    let (meshes, camera) = raywave::scene::procedural::hairball(50_000, 6).expect("a hairball");
     let scene = Scene::new("hairball", meshes, camera).unwrap();
     let mut rays = incoherent_rays(&scene, 100_000);
     // Shorter intervals than the scene, so both blocked and free rays are common.

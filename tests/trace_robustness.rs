@@ -89,7 +89,7 @@ const DRIVER_LEAK_RATE_BOUND: [f64; 2] = [0.02, 0.0005];
 #[test]
 fn no_ray_leaks_through_shared_edges_and_vertices_of_closed_spheres() {
     const RAYS: u32 = 1_000_000;
-    let sphere = icosphere("sphere", Vec3::new(0.3, -0.2, 0.1), 1.0, 3, Vec3::ONE);
+    let sphere = icosphere("sphere", Vec3::new(0.3, -0.2, 0.1), 1.0, 3, Vec3::ONE).expect("an icosphere");
     let (positions, triangles) = (sphere.positions.clone(), sphere.triangles.clone());
     let scene = scene_of(vec![sphere]);
     let mut origins = Vec::with_capacity(RAYS as usize);
@@ -157,7 +157,7 @@ fn offset_secondary_rays_never_hit_their_own_convex_surface() {
     let scales = [(1e-3f32, 5e-4f32), (1.0, 0.5), (1e3, 1.0), (1e5, 1.0)];
     for (scale_index, (distance, radius)) in scales.into_iter().enumerate() {
         let centre = Vec3::splat(distance / 3f32.sqrt());
-        let sphere = icosphere("sphere", centre, radius, 3, Vec3::ONE);
+        let sphere = icosphere("sphere", centre, radius, 3, Vec3::ONE).expect("an icosphere");
         let scene = scene_of(vec![sphere.clone()]);
         // Primary rays from outside towards random points near the sphere's centre.
         let primary_origins: Vec<Vec3> =
@@ -302,7 +302,7 @@ fn axis_aligned_grazing_tiny_and_huge_cases() {
 
 #[test]
 fn kernel_traversal_matches_brute_force_on_incoherent_rays() {
-    let (meshes, _) = raywave::scene::procedural::hairball(60_000, 2);
+    let (meshes, _) = raywave::scene::procedural::hairball(60_000, 2).expect("a hairball");
     let scene = scene_of(meshes);
     let cpu_scene = CpuScene::build(&scene).unwrap();
     let mesh = &scene.meshes()[0];
@@ -338,7 +338,7 @@ fn kernel_traversal_matches_brute_force_on_incoherent_rays() {
 
 #[test]
 fn occlusion_agrees_with_closest_hit_and_exits_early() {
-    let (meshes, _) = raywave::scene::procedural::hairball(200_000, 3);
+    let (meshes, _) = raywave::scene::procedural::hairball(200_000, 3).expect("a hairball");
     let scene = scene_of(meshes);
     let cpu_scene = CpuScene::build(&scene).unwrap();
     let n = 50_000u32;

@@ -42,6 +42,7 @@ use raywave_kernels::sampling::light_select::{light_bounds, MAX_BVH_DEPTH};
 use raywave_shared::light::{light_kind, Light, LightBounds, LightBvhNode};
 
 use crate::error::{Error, Result};
+use crate::scene::MAX_COORDINATE;
 
 /// Most lights for which [`wants_bvh`] keeps the linear importance scan.
 pub const LINEAR_SCAN_MAX_LIGHTS: usize = 8;
@@ -59,8 +60,11 @@ const BUCKETS: usize = 12;
 /// `f32` axis (≈ 10⁻⁷ rad).
 const CONE_SLACK: f64 = 1e-5;
 
-/// Checks one light: finite fields, a known kind, a non-negative radiance, and an area (positive)
-/// and a power that fit in `f32`. The error names the field and the light's index.
+/// Checks one light: finite fields, a known kind, a non-negative radiance, an extent within the
+/// scene coordinate limit ([`MAX_COORDINATE`]; a quad's far corner or a sphere's side beyond
+/// `f32` had made the light BVH's boxes infinite, giving every light that shared a subtree with
+/// it probability 0), and an area (positive) and a power that fit in `f32`. The error names the
+/// field and the light's index.
 pub fn validate_light(index: usize, light: &Light) -> Result<()> {
     let fields: [(&'static str, Vec4); 4] = [
         ("light.position", light.position),
@@ -131,7 +135,17 @@ pub fn validate_light(index: usize, light: &Light) -> Result<()> {
             })
         }
     }
-    let phi = light_bounds(light).phi;
+    let bounds = light_bounds(light);
+    let extent = bounds.min.truncate().abs().max(bounds.max.truncate().abs()).max_element();
+    if !extent.is_finite() || extent > MAX_COORDINATE {
+        return Err(Error::InvalidParameter {
+            name: "light.position",
+            reason: format!(
+                "light {index}: reaches {extent:e} from the origin, beyond the coordinate limit {MAX_COORDINATE:e}"
+            ),
+        });
+    }
+    let phi = bounds.phi;
     if !phi.is_finite() {
         return Err(Error::InvalidParameter {
             name: "light.radiance",
@@ -684,7 +698,7 @@ mod tests {
         let mut sided = q;
         sided.two_sided = 2;
         let huge_quad = |radiance| Light::quad(Vec3::ZERO, Vec3::X * 1e10, Vec3::Y * 1e10, radiance, false);
-        let cases: [(Light, &str); 11] = [
+        let cases: [(Light, &str); 13] = [
             (nan, "light.position"),
             (inf_edge, "light.edge_v"),
             (Light::sphere(Vec3::ZERO, 1.0, Vec3::new(1.0, -0.5, 1.0)), "light.radiance"),
@@ -698,6 +712,13 @@ mod tests {
             (huge_quad(Vec3::ONE), "light.edge_u"),
             (huge_quad(Vec3::ZERO), "light.edge_u"),
             (Light::sphere(Vec3::ZERO, 1e19, Vec3::ZERO), "light.position"),
+            // Beyond the coordinate limit with a finite area and power: a far corner at ∞ in f32
+            // had made every enclosing box of the light BVH infinite.
+            (
+                Light::quad(Vec3::new(f32::MAX, 0.0, -1.0), Vec3::X * 1e32, Vec3::Y * 1e-14, Vec3::ONE, false),
+                "light.position",
+            ),
+            (Light::sphere(Vec3::new(0.0, 0.0, 9e7), 2e7, Vec3::ONE), "light.position"),
         ];
         for (bad, field) in cases {
             match LightBvh::build(&[good, bad, q]) {
@@ -708,7 +729,7 @@ mod tests {
                 other => panic!("{bad:?}: expected an invalid {field}, got {other:?}"),
             }
         }
-        let blinding = Light::sphere(Vec3::ZERO, 1e10, Vec3::splat(1e30));
+        let blinding = Light::sphere(Vec3::ZERO, 1e7, Vec3::splat(1e30));
         assert!(matches!(validate_light(0, &blinding), Err(Error::InvalidParameter { name: "light.radiance", .. })));
         assert!(validate_lights(&[good, q]).is_ok());
     }

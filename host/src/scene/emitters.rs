@@ -11,11 +11,13 @@
 //!   on the first triangle's plane;
 //! - both triangles wind the same way, so the mesh has one front face.
 //!
-//! Tolerance: `1e-4 · d + 16 ε · m`, with `d` the longest distance between the six triangle
-//! corners, `m` their largest absolute coordinate and `ε` the `f32` machine epsilon: a relative
-//! error of 10⁻⁴ in the shape, plus the rounding of vertices far from the origin (transformed glTF
-//! positions); at most a quarter of the shortest triangle edge, so that no corner is within it of
-//! two others. The checks run in `f64`.
+//! Tolerance: `1e-4 · h + 16 ε · m`, with `h` the smaller of the two triangles' heights over
+//! their longest edge (a parallelogram's width across its diagonal), `m` the corners' largest
+//! absolute coordinate and `ε` the `f32` machine epsilon: a relative error of 10⁻⁴ in the shape's
+//! narrower dimension — a strip light's width, not its length, which had let a strip of aspect
+//! ratio 2000 pass 15 % off in width or twisted 8° out of its plane —, plus the rounding of
+//! vertices far from the origin (transformed glTF positions); at most a quarter of the shortest
+//! triangle edge, so that no corner is within it of two others. The checks run in `f64`.
 //!
 //! **Orientation.** The light's corner is the first triangle's corner off the diagonal, `p`; its
 //! edges run from `p` to the triangle's next and previous corners in the triangle's own order.
@@ -28,7 +30,7 @@
 //! inconsistent winding) is counted as an unsupported emitter and stays plain geometry.
 
 use super::Mesh;
-use glam::Vec3;
+use glam::{DVec3, Vec3};
 use raywave_shared::Light;
 
 /// Relative shape tolerance (see the module documentation).
@@ -87,20 +89,16 @@ pub(super) fn parallelogram(mesh: &Mesh) -> Option<Parallelogram> {
     let a: [Vec3; 3] = [a[0]?, a[1]?, a[2]?];
     let b: [Vec3; 3] = [b[0]?, b[1]?, b[2]?];
     let (ad, bd) = (a.map(Vec3::as_dvec3), b.map(Vec3::as_dvec3));
-    let all = [ad[0], ad[1], ad[2], bd[0], bd[1], bd[2]];
-    let mut diameter = 0.0f64;
-    for (i, p) in all.iter().enumerate() {
-        for q in &all[i + 1..] {
-            diameter = diameter.max(p.distance(*q));
-        }
-    }
-    let magnitude = all.iter().fold(0.0f64, |m, p| m.max(p.abs().max_element()));
+    let magnitude = [ad, bd].iter().flatten().fold(0.0f64, |m, p| m.max(p.abs().max_element()));
+    let edges = |t: [DVec3; 3]| [0, 1, 2].map(|i| t[i].distance(t[(i + 1) % 3]));
+    // Twice the area over the longest edge.
+    let height = |t: [DVec3; 3]| (t[1] - t[0]).cross(t[2] - t[0]).length() / edges(t).into_iter().fold(0.0, f64::max);
     // At most a quarter of the shortest triangle edge, so that no corner lies within it of two
     // others: the rounding slack alone is 0.19 at 10⁵ from the origin, wider than a small lamp
-    // there, and the relative part is wider than a strip light of aspect ratio beyond 10⁴.
-    let shortest_edge =
-        [ad, bd].iter().flat_map(|t| (0..3).map(move |i| t[i].distance(t[(i + 1) % 3]))).fold(f64::INFINITY, f64::min);
-    let tolerance = (RELATIVE_TOLERANCE * diameter + ROUNDING_SLACK * magnitude).min(0.25 * shortest_edge);
+    // there.
+    let shortest_edge = [edges(ad), edges(bd)].into_iter().flatten().fold(f64::INFINITY, f64::min);
+    let tolerance =
+        (RELATIVE_TOLERANCE * height(ad).min(height(bd)) + ROUNDING_SLACK * magnitude).min(0.25 * shortest_edge);
 
     // Match the first triangle's corners to the second's: exactly two shared corners. Two corners
     // of a triangle lie at least the shortest edge apart, more than twice the tolerance, so no
@@ -197,8 +195,7 @@ mod tests {
     }
 
     /// A small lamp far from the origin and a thin strip light: the shape tolerance (0.19 at 10⁵
-    /// from the origin; 2·10⁻⁴ for a strip 2 long) is capped below their short sides, so each
-    /// corner still has one partner.
+    /// from the origin) is capped below their short sides, so each corner still has one partner.
     #[test]
     fn small_lights_far_out_and_thin_strips_are_parallelograms() {
         let square = [Vec3::ZERO, Vec3::X, Vec3::new(1.0, 1.0, 0.0), Vec3::Y];
@@ -226,7 +223,8 @@ mod tests {
 
     #[test]
     fn near_parallelograms_within_tolerance_are_detected() {
-        // Corners off by e in a square of diameter √2: the tolerance is 1.41e-4 (plus rounding).
+        // Corners off by e (the parallelogram's error √3·e) in a unit square, whose height over its
+        // diagonal is 1/√2: the tolerance is 7.1e-5 (plus rounding).
         let near = |e: f32| {
             let c =
                 vec![Vec3::ZERO, Vec3::new(1.0, 0.0, e), Vec3::new(1.0 + e, 1.0, 0.0), Vec3::new(0.0, 1.0 - e, 0.0)];
@@ -250,6 +248,18 @@ mod tests {
             ("three triangles", square.to_vec(), vec![[0, 1, 2], [0, 2, 3], [0, 1, 3]]),
             ("non-planar", vec![Vec3::ZERO, Vec3::X, Vec3::new(1.0, 1.0, 0.1), Vec3::Y], vec![[0, 1, 2], [0, 2, 3]]),
             ("trapezoid", vec![Vec3::ZERO, Vec3::X, Vec3::new(0.8, 1.0, 0.0), Vec3::Y], vec![[0, 1, 2], [0, 2, 3]]),
+            // A strip 2 long and 10⁻³ wide, 15 % narrower at one end, and one twisted 8.5° out of
+            // its plane there: within 10⁻⁴ of its length, far outside 10⁻⁴ of its width.
+            (
+                "narrowing strip",
+                vec![Vec3::ZERO, Vec3::new(2.0, 0.0, 0.0), Vec3::new(2.0, 0.85e-3, 0.0), Vec3::new(0.0, 1e-3, 0.0)],
+                vec![[0, 1, 3], [1, 2, 3]],
+            ),
+            (
+                "twisted strip",
+                vec![Vec3::ZERO, Vec3::new(2.0, 0.0, 0.0), Vec3::new(2.0, 1e-3, 1.5e-4), Vec3::new(0.0, 1e-3, 0.0)],
+                vec![[0, 1, 3], [1, 2, 3]],
+            ),
             ("kite", vec![Vec3::ZERO, Vec3::X, Vec3::new(1.5, 1.5, 0.0), Vec3::Y], vec![[0, 1, 2], [0, 2, 3]]),
             (
                 "sharing one corner",

@@ -150,11 +150,11 @@ impl Scene {
                 Scene::new("builtin:cornell-light-grid", cornell::light_grid_meshes(), cornell::camera())
             }
             Some("spheres") => {
-                let (meshes, camera) = procedural::sphere_field(4, 5);
+                let (meshes, camera) = procedural::sphere_field(4, 5)?;
                 Scene::new("builtin:spheres", meshes, camera)
             }
             Some("hairball") => {
-                let (meshes, camera) = procedural::hairball(200_000, 1);
+                let (meshes, camera) = procedural::hairball(200_000, 1)?;
                 Scene::new("builtin:hairball", meshes, camera)
             }
             Some(name) => {
@@ -295,17 +295,10 @@ impl Scene {
         SurfaceHit { position, normal, extent, material: mesh.material }
     }
 
-    /// Axis-aligned bounds (min, max) of every vertex used by a triangle.
+    /// Axis-aligned bounds (min, max) of every vertex used by a triangle (not of vertices no
+    /// triangle uses, nor of those only zero-area triangles used, which were dropped).
     pub fn bounds(&self) -> (Vec3, Vec3) {
-        let mut lo = Vec3::splat(f32::INFINITY);
-        let mut hi = Vec3::splat(f32::NEG_INFINITY);
-        for mesh in &self.meshes {
-            for p in &mesh.positions {
-                lo = lo.min(*p);
-                hi = hi.max(*p);
-            }
-        }
-        (lo, hi)
+        triangle_bounds(&self.meshes)
     }
 
     fn validate(&self) -> Result<()> {
@@ -432,6 +425,16 @@ fn check_indices_and_vertices(scene: &str, meshes: &[Mesh]) -> Result<()> {
     Ok(())
 }
 
+/// Axis-aligned bounds (min, max) of the vertices `meshes`' triangles use; an index past its
+/// mesh's positions (refused later, by `Scene::new`) is skipped. `(f32::MAX, f32::MIN)` per axis
+/// where no triangle is left.
+fn triangle_bounds(meshes: &[Mesh]) -> (Vec3, Vec3) {
+    meshes
+        .iter()
+        .flat_map(|mesh| mesh.triangles.iter().flatten().filter_map(|&i| mesh.positions.get(i as usize)))
+        .fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(lo, hi), p| (lo.min(*p), hi.max(*p)))
+}
+
 /// A camera on the +z side of the bounds' centre that sees the whole bounding sphere with a 45°
 /// vertical field of view — from farther, with a narrower one, where that camera would lie within
 /// 64 steps of `f32` of the centre (a small scene far from the origin). Where that camera would
@@ -440,10 +443,7 @@ fn check_indices_and_vertices(scene: &str, meshes: &[Mesh]) -> Result<()> {
 /// widened to still see the sphere (at most 120°, which sees all of it from 1.15 radii and more).
 /// Non-finite bounds are left for validation to report.
 pub(crate) fn framing_camera(meshes: &[Mesh]) -> Camera {
-    let (lo, hi) = meshes
-        .iter()
-        .flat_map(|m| m.positions.iter())
-        .fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(lo, hi), p| (lo.min(*p), hi.max(*p)));
+    let (lo, hi) = triangle_bounds(meshes);
     let centre = (lo + hi) * 0.5;
     let radius = ((hi - lo).length() * 0.5).max(1e-3);
     // At least 64 steps of f32 from the centre: far from the origin, the 45° camera of a small
@@ -493,6 +493,18 @@ mod tests {
 
     fn scene_with(mesh: Mesh) -> Result<Scene> {
         Scene::new("test", vec![mesh], cornell::camera())
+    }
+
+    /// The bounds hold the vertices triangles use, not one no triangle uses nor one only a dropped
+    /// zero-area triangle used (both had been folded in, moving a framing camera away).
+    #[test]
+    fn bounds_hold_the_vertices_triangles_use() {
+        let far = Vec3::splat(1e7);
+        let mut positions = unit_triangle();
+        positions.extend([far, far * 0.5]);
+        let scene = scene_with(triangle_mesh(positions, vec![[0, 1, 2], [3, 4, 3]])).unwrap();
+        assert_eq!(scene.dropped_degenerate(), 1);
+        assert_eq!(scene.bounds(), (Vec3::ZERO, Vec3::new(1.0, 1.0, 0.0)));
     }
 
     #[test]
@@ -611,7 +623,7 @@ mod tests {
         let trapezoid = emitter(vec![Vec3::ZERO, Vec3::X, Vec3::new(0.7, 1.0, 0.0), Vec3::Y], quad.clone(), Vec3::ONE);
         let sphere = Mesh {
             material: Material { emission: Vec3::ONE, ..Material::diffuse(Vec3::ONE) },
-            ..procedural::icosphere("ball", Vec3::ZERO, 1.0, 1, Vec3::ONE)
+            ..procedural::icosphere("ball", Vec3::ZERO, 1.0, 1, Vec3::ONE).unwrap()
         };
         let scene = Scene::new("test", vec![bent, trapezoid, sphere], cornell::camera()).unwrap();
         assert_eq!((scene.lights().len(), scene.unsupported_emitters()), (0, 3));
