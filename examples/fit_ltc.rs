@@ -27,7 +27,8 @@ struct Args {
     /// Re-fit a sample of cells and compare with the committed table instead of fitting it all.
     #[arg(long)]
     check: bool,
-    /// With `--check`: this many more cells, spread over the table, besides the fixed 12.
+    /// With `--check`: this many more cells, spread over the table, besides the fixed 12 (at most
+    /// the table's other 4084 cells' count: the spread then visits every cell).
     #[arg(long, default_value_t = 0)]
     extra: usize,
 }
@@ -76,21 +77,20 @@ fn print_errors(table: &ltc_fit::LtcTable) {
             worst.unwrap_or(0)
         );
     }
-    let mut all: Vec<f64> = table.cells.iter().map(|c| c.rel_l1_error).collect();
-    all.sort_by(f64::total_cmp);
-    println!("all cells: median {:.4}, max {:.4}", all[all.len() / 2], all[all.len() - 1]);
+    let (median, _, max) = ltc_fit::error_percentiles(table.cells.iter().map(|c| c.rel_l1_error).collect());
+    println!("all cells: median {median:.4}, max {max:.4}");
     // Without the most grazing views (cos θ < 0.21, θ > 78°), where GGX lobes are least LTC-like.
-    let mut inner: Vec<f64> = table.cells.iter().filter(|c| c.t <= 56).map(|c| c.rel_l1_error).collect();
-    inner.sort_by(f64::total_cmp);
-    println!(
-        "cells with cos θ ≥ 0.2099 (col ≤ 56): median {:.4}, p90 {:.4}, max {:.4}",
-        inner[inner.len() / 2],
-        inner[inner.len() * 9 / 10],
-        inner[inner.len() - 1]
-    );
+    let inner = table.cells.iter().filter(|c| c.t <= 56).map(|c| c.rel_l1_error).collect();
+    let (median, p90, max) = ltc_fit::error_percentiles(inner);
+    println!("cells with cos θ ≥ 0.2099 (col ≤ 56): median {median:.4}, p90 {p90:.4}, max {max:.4}");
 }
 
 fn check(cfg: &FitConfig, extra: usize) -> ExitCode {
+    let most = LTC_SIZE * LTC_SIZE - ltc_fit::CHECK_CELLS.len();
+    if extra > most {
+        eprintln!("error: --extra {extra} exceeds the table's other {most} cells");
+        return ExitCode::FAILURE;
+    }
     let start = Instant::now();
     let mut cells = ltc_fit::CHECK_CELLS.to_vec();
     cells.extend(ltc_fit::spread_cells(extra));

@@ -1276,10 +1276,14 @@ pub const CHECK_L1_TOLERANCE: f64 = 1.0e-3;
 /// depend on the warm start, so they agree to `f32` rounding.
 pub const CHECK_VALUE_TOLERANCE: f64 = 1.0e-6;
 
-/// `extra` more cells for [`check_cells`], spread over the table by a fixed stride (deterministic).
+/// `extra` more cells for [`check_cells`], spread over the table by a fixed odd stride
+/// (deterministic; the first `LTC_SIZE²` are distinct cells, later ones repeat them).
 pub fn spread_cells(extra: usize) -> Vec<(usize, usize)> {
-    let n = LTC_SIZE * LTC_SIZE;
-    (0..extra).map(|k| (k * 2_654_435_761 + 17) % n).map(|i| (i / LTC_SIZE, i % LTC_SIZE)).collect()
+    let n = (LTC_SIZE * LTC_SIZE) as u64;
+    (0..extra as u64)
+        .map(|k| (k.wrapping_mul(2_654_435_761).wrapping_add(17) % n) as usize)
+        .map(|i| (i / LTC_SIZE, i % LTC_SIZE))
+        .collect()
 }
 
 /// A spread of cells for checks: the corners, the first (sharpest) and last (roughest) rows, the
@@ -1291,6 +1295,16 @@ pub const CHECK_CELLS: [(usize, usize); 12] =
 mod tests {
     use super::*;
     use raywave_shared::ltc_table::{LTC_AMPLITUDE, LTC_FIT_VERSION, LTC_MATRIX, LTC_MATRIX_2, LTC_SIZE as TABLE_SIZE};
+
+    /// The spread visits every cell once in its first `LTC_SIZE²` steps, so `fit_ltc --check
+    /// --extra` up to the other cells' count checks distinct cells.
+    #[test]
+    fn the_check_spread_visits_every_cell_once() {
+        let mut cells = spread_cells(LTC_SIZE * LTC_SIZE);
+        cells.sort_unstable();
+        cells.dedup();
+        assert_eq!(cells.len(), LTC_SIZE * LTC_SIZE);
+    }
 
     /// SplitMix64: a small deterministic generator for the Monte Carlo checks.
     struct Rng(u64);
