@@ -31,7 +31,8 @@
 //! - **With the residual towards GGX** (`lobe_form_factors` with the GGX lobe: its own
 //!   integral by `raywave::kernels::shade::slope_quadrature`; `raywave render --analytic-residual`):
 //!   median 0.00 %, max 1.1 % over every view up to 89.9° (issue 5's ≤ 5 %, met and asserted at
-//!   ≤ 2 %); at roughness 0.05 too, every case within the reference's 3σ. Relative to the lobe's
+//!   ≤ 2 %); at roughness 0.05, below the issue's range, 19 of the 20 cases within the
+//!   reference's 3σ and the last 0.003 % beyond it (asserted ≤ 0.1 %). Relative to the lobe's
 //!   albedo: max 0.23 % (asserted ≤ 0.5 %). Its predecessor, a fixed 3 × 3 Gauss rule on a fan
 //!   of the light's triangles, left 3.2 % up to 80° and 10.0 % at 89.9° (two lights around the
 //!   mirror direction).
@@ -245,7 +246,21 @@ fn analytic_u_matches_the_f64_reference() {
         "corrected albedo-relative max {}",
         corrected.albedo_relative(1.0)
     );
+    // Below issue 5's roughness range too (module documentation).
+    let sharpest: Vec<f64> = cases.iter().filter(|c| c.roughness < 0.1).map(|c| relative_excess(c.corrected)).collect();
+    assert!(!sharpest.is_empty(), "the grid holds roughness 0.05");
+    let worst = sharpest.iter().copied().fold(0.0, f64::max);
+    let beyond = sharpest.iter().filter(|&&e| e > 0.0).count();
+    println!(
+        "corrected specular at roughness 0.05: {beyond} of {} cases beyond 3σ, by at most {worst:e}",
+        sharpest.len()
+    );
+    assert!(worst <= SHARPEST_CORRECTED_EXCESS, "corrected specular at roughness 0.05: {worst} beyond 3σ");
 }
+
+/// Largest error of the corrected specular term at roughness 0.05 beyond the reference's 3σ,
+/// relative to the reference: a regression guard, 30 × the measured 3·10⁻⁵ (module documentation).
+const SHARPEST_CORRECTED_EXCESS: f64 = 1e-3;
 
 /// Error of `ours` relative to `reference` beyond the reference's own 3σ (`rel_sigma` is its
 /// relative standard error); values below 1e-4 are compared absolutely.

@@ -137,8 +137,10 @@ fn vulkan_and_cpu_renders_agree() {
     let stdout = String::from_utf8_lossy(&vk.stdout);
     assert!(stdout.contains("timing   one frame"), "{stdout}");
     // Steady-state times (warm-up frames in benchmark mode) change the times, not the image.
-    let (steady, steady_path) = render(dir.path(), "steady.png", &["--device", "vulkan", "--settle-seconds", "0.05"]);
+    let steady_args = ["--device", "vulkan", "--settle-seconds", "0.05", "--validate"];
+    let (steady, steady_path) = render(dir.path(), "steady.png", &steady_args);
     assert!(steady.status.success(), "{}", stderr(&steady));
+    assert!(!stderr(&steady).contains("[vulkan"), "validation messages: {}", stderr(&steady));
     let stdout = String::from_utf8_lossy(&steady.stdout);
     assert!(stdout.contains("timing   steady state: the frame after"), "{stdout}");
     // In benchmark mode: each stage's time the mean of dispatches repeated back to back, more

@@ -247,8 +247,8 @@ fn repeated_dispatches_return_what_one_dispatch_returns_on_every_stage_and_devic
             backend.load_scene(&inputs.scene).expect("scene loads");
         }
         inputs.compare_every_stage(&mut Sustained, &mut single, &mut sustained);
-        vulkan::assert_clean(&single);
-        vulkan::assert_clean(&sustained);
+        vulkan::assert_clean(single);
+        vulkan::assert_clean(sustained);
     }
 }
 
@@ -275,6 +275,7 @@ fn a_large_call_after_a_one_ray_call_is_sized_by_the_time_per_ray() {
         let expected = expected.clamp(1.0, f64::from(MAX_SUSTAINED_DISPATCHES)) as u32;
         assert_eq!(after.dispatches, expected, "{name}: {} rays after one ray ({one:?}): {after:?}", rays.len());
         assert!(one.seconds > 0.0 && one.dispatches > 1, "{name}: the one-ray trace: {one:?}");
+        vulkan::assert_clean(device);
     }
 }
 
@@ -318,7 +319,7 @@ fn benchmark_mode_switches_on_and_off_between_calls() {
         device.set_sustain_seconds(0.0).expect("off");
         let (again, off) = trace(&mut device);
         assert!(off.dispatches == 1 && again == single, "{name}: benchmark mode off: {off:?}");
-        vulkan::assert_clean(&device);
+        vulkan::assert_clean(device);
     }
 }
 
@@ -348,7 +349,7 @@ fn the_error_vs_time_warm_up_measures_in_benchmark_mode_and_the_report_ends_it()
         let lines = report_error_vs_time(&mut device, &options, |_| {}).expect("report");
         assert!(lines.iter().all(|l| l.warm_up_seconds.is_some_and(|w| w >= 0.05)), "{name}: {lines:?}");
         assert_eq!(device.trace(&rays).expect("trace").1.dispatches, 1, "{name}: benchmark mode after the report");
-        vulkan::assert_clean(&device);
+        vulkan::assert_clean(device);
     }
 }
 
@@ -390,10 +391,10 @@ fn every_stage_returns_the_same_in_workgroups_of_another_size_on_every_device() 
                 backend.load_scene(&inputs.scene).expect("scene loads");
             }
             inputs.compare_every_stage(&mut Resized, preferred, &mut resized);
-            vulkan::assert_clean(&resized);
+            vulkan::assert_clean(resized);
         }
     }
-    preferred.iter().for_each(vulkan::assert_clean);
+    preferred.into_iter().for_each(vulkan::assert_clean);
 }
 
 /// A stream too long for one row of 65 535 workgroups of 32 — the x limit lavapipe and many
@@ -410,18 +411,19 @@ fn a_stream_spread_over_several_grid_rows_is_covered_exactly_once() {
     let image: Vec<Vec4> =
         (0..WIDE.0 * WIDE.1).map(|i| Vec4::new(i as f32, 1.0 / (i as f32 + 1.0), -3.0, 0.5)).collect();
     let options = ContextOptions { workgroup_sizes: Some(WorkgroupSizes::all(32)), ..Default::default() };
-    let mut narrow = vulkan::each_device_with("grid rows", &options);
-    for (preferred, narrow) in vulkan::each_device("grid rows").iter_mut().zip(&mut narrow) {
+    let narrow = vulkan::each_device_with("grid rows", &options);
+    for (mut preferred, mut narrow) in vulkan::each_device("grid rows").into_iter().zip(narrow) {
         let mut compare = Resized;
-        compare.check("generate", preferred, narrow, |d| {
+        compare.check("generate", &mut preferred, &mut narrow, |d| {
             let (rays, report) = d.generate(&generate).expect("generate");
             (rays, vec![report])
         });
-        compare.check("copy probe", preferred, narrow, |d| {
+        compare.check("copy probe", &mut preferred, &mut narrow, |d| {
             let (copy, report) = d.copy_probe(&params, &image).expect("copy probe");
             assert_eq!(copy, image, "{} copy probe", d.name());
             (copy, vec![report])
         });
+        vulkan::assert_clean(preferred);
         vulkan::assert_clean(narrow);
     }
 }

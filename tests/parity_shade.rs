@@ -24,8 +24,10 @@
 //!   a pixel's own (291 pixels) and 2.5·10⁻⁵ of the pass's largest, its stochastic samples all
 //!   within 1e-3 (`U_N` within 3.3·10⁻⁴) and no choice flip.
 //!   A real defect — a wrong light, material or buffer — moves `U` by far more than that.
-//! - The stochastic sample (`U_N`'s contribution and the shadow ray): for ≥ 99.5 % of the pixels
-//!   within 1e-3 relative, for ≥ 99.9 % within 1e-2 and the same sample. Not bit-exact, for three
+//! - The stochastic sample (`U_N`'s contribution and the shadow ray): within 1e-3 relative but for
+//!   two budgets — at most 0.5 % of the pixels between 1e-3 and 1e-2 with the same sample, at
+//!   most 0.1 % beyond that or another sample — so at least 99.4 % within 1e-3 and 99.9 % within
+//!   1e-2 and the same sample. Not bit-exact, for three
 //!   reasons. The warps' trigonometry is the kernels' own (`raywave_kernels::trig`), the same
 //!   polynomials everywhere, but a device rounds `+ − × ÷ √` its own way — an NVIDIA driver
 //!   contracts `a·b + c` into one fused multiply-add — and the LTC pdfs amplify last-bit
@@ -229,6 +231,50 @@ fn compare(cpu: &ShadeStream, device: &ShadeStream, brightest: Vec4) -> Diff {
     diff
 }
 
+/// Fails unless a device's shade pass `shades` matches the CPU's `expected` within the documented
+/// tolerances — every value finite, `U` and the emitted radiance within [`ANALYTIC_REL`] (of the
+/// pass's brightest `U`), the samples within the outlier and conditioning budgets — naming `who`;
+/// returns the differences for the totals.
+fn assert_matches_cpu(
+    who: &str,
+    expected: &ShadeStream,
+    shades: &ShadeStream,
+    rays: &RayStream,
+    hits: &HitStream,
+) -> Diff {
+    assert_finite(shades, who);
+    let diff = compare(expected, shades, brightest(expected));
+    assert_eq!(
+        diff.analytic_outside,
+        0,
+        "{who}: U or emitted beyond {ANALYTIC_REL} relative (U: {:e} of the pass's largest; emitted {:e}):\n{}",
+        diff.analytic_max_rel_to_pass,
+        diff.emitted_max_rel,
+        describe_analytic_outside(&diff, rays, hits, expected, shades)
+    );
+    common::assert_within_budget(
+        diff.sample_outliers,
+        diff.pixels,
+        OUTLIER_FRACTION,
+        &format!(
+            "{who}: samples differing beyond {CONDITIONING_REL} or another sample ({} choice flips)",
+            diff.choice_flips
+        ),
+        &diff.examples,
+    );
+    common::assert_within_budget(
+        diff.ill_conditioned,
+        diff.pixels,
+        CONDITIONING_FRACTION,
+        &format!("{who}: samples differing beyond {SAMPLE_REL}"),
+        &diff.examples,
+    );
+    if !diff.examples.is_empty() {
+        eprintln!("{who}: outliers\n{}", diff.examples.join("\n"));
+    }
+    diff
+}
+
 /// The pixels of `diff.analytic_outside_pixels`, one line each: where the camera ray hit, and `U`
 /// and the emitted radiance on the CPU and the device — what a failed parity assertion needs to
 /// be reproduced.
@@ -299,46 +345,15 @@ fn shade_matches_the_cpu_on_every_vulkan_device() {
                     let (shades, report) = device.shade(&params, &data, &rays, &hits).expect("device shade");
                     let who = format!("{}, {case}", device.name());
                     assert_eq!((report.stage, report.sanitized), ("shade", 0), "{who}");
-                    assert_finite(&shades, &who);
-                    let diff = compare(&expected, &shades, brightest(&expected));
-                    assert_eq!(
-                        diff.analytic_outside,
-                        0,
-                        "{who}: U or emitted beyond {ANALYTIC_REL} relative (U: {:e} of the pass's largest; \
-                         emitted {:e}):\n{}",
-                        diff.analytic_max_rel_to_pass,
-                        diff.emitted_max_rel,
-                        describe_analytic_outside(&diff, &rays, &hits, &expected, &shades)
-                    );
-                    common::assert_within_budget(
-                        diff.sample_outliers,
-                        diff.pixels,
-                        OUTLIER_FRACTION,
-                        &format!(
-                            "{who}: samples differing beyond {CONDITIONING_REL} or another sample ({} choice flips)",
-                            diff.choice_flips
-                        ),
-                        &diff.examples,
-                    );
-                    common::assert_within_budget(
-                        diff.ill_conditioned,
-                        diff.pixels,
-                        CONDITIONING_FRACTION,
-                        &format!("{who}: samples differing beyond {SAMPLE_REL}"),
-                        &diff.examples,
-                    );
-                    if !diff.examples.is_empty() {
-                        eprintln!("{who}: outliers\n{}", diff.examples.join("\n"));
-                    }
-                    total.add(&diff);
+                    total.add(&assert_matches_cpu(&who, &expected, &shades, &rays, &hits));
                 }
             }
         }
         for device in &devices {
-            vulkan::assert_clean(device);
+            vulkan::assert_no_messages_yet(device);
         }
     }
-    for (device, total) in devices.iter().zip(&totals) {
+    for (device, total) in devices.into_iter().zip(&totals) {
         eprintln!(
             "{}: {} samples; max difference of U {:e} of the pass's largest U ({:e} of its own, {} pixels beyond \
              {ANALYTIC_REL} of their own), emitted {:e}, U_N {:e}, shadow ray {:e} (relative, within tolerance); \
@@ -355,6 +370,7 @@ fn shade_matches_the_cpu_on_every_vulkan_device() {
             total.sample_outliers,
             total.choice_flips
         );
+        vulkan::assert_clean(device);
     }
 }
 
@@ -416,9 +432,7 @@ fn a_lamp_seen_from_behind_is_black_unless_double_sided_on_every_vulkan_device()
             }
         }
     }
-    for device in &devices {
-        vulkan::assert_clean(device);
-    }
+    devices.into_iter().for_each(vulkan::assert_clean);
 }
 
 #[test]
@@ -458,7 +472,7 @@ fn shade_without_lights_is_zero_and_traces_no_shadow_rays_on_every_vulkan_device
         assert_eq!(rays_traced, 0, "{who}: {rays_traced} shadow rays without lights");
         let (expected, _) = cpu.shade(&params, &dark_data, &rays, &hits).expect("cpu shade");
         assert_eq!(expected, shades, "{who}: differs from the CPU without lights");
-        vulkan::assert_clean(&device);
+        vulkan::assert_clean(device);
     }
 }
 
@@ -484,9 +498,10 @@ fn cornell_pass() -> CornellPass {
 }
 
 /// Hit records that are not finite — a NaN distance, infinite barycentrics, as a linking engine's
-/// own trace might hand over — shade as misses (nothing lit, no shadow ray) and are counted as
-/// sanitized, the same records and count on the CPU and every device; the other pixels are
-/// shaded as before.
+/// own trace might hand over — shade as misses (nothing lit or emitted, no shadow ray, the same
+/// record on every backend) and are counted as sanitized, the same records and count on the CPU and every
+/// device; the other pixels are shaded as before: bit for bit on the CPU, within the parity
+/// tolerances on a device.
 #[test]
 fn non_finite_hit_records_are_misses_counted_alike_on_every_backend() {
     let CornellPass { mut cpu, data, rays, mut hits, params, .. } = cornell_pass();
@@ -503,23 +518,27 @@ fn non_finite_hit_records_are_misses_counted_alike_on_every_backend() {
     let (expected, report) = cpu.shade(&params, &data, &rays, &hits).expect("cpu shade");
     eprintln!("{} of {} hit records made non-finite", broken.len(), hits.len());
     assert_eq!(report.sanitized, broken.len() as u64, "cpu");
+    let record = |s: &ShadeStream, i: usize| {
+        (s.analytic[i], s.unshadowed[i], s.emitted[i], s.shadow_origin[i], s.shadow_direction[i])
+    };
     for i in 0..hits.len() {
-        let miss = expected.analytic[i] == Vec4::ZERO && expected.shadow_direction[i].w == 0.0;
+        let (analytic, unshadowed, emitted, _, direction) = record(&expected, i);
         if broken.contains(&i) {
-            assert!(miss, "cpu: broken record {i} was shaded");
+            let miss = [analytic, unshadowed, emitted].iter().all(|&v| v == Vec4::ZERO) && direction.w == 0.0;
+            assert!(miss, "cpu: broken record {i} was shaded: {:?}", record(&expected, i));
         } else {
-            assert_eq!(expected.analytic[i], clean.analytic[i], "cpu: pixel {i} changed");
+            assert_eq!(record(&expected, i), record(&clean, i), "cpu: pixel {i} changed");
         }
     }
     for mut device in vulkan::each_device("shade sanitized count") {
         let (shades, report) = device.shade(&params, &data, &rays, &hits).expect("device shade");
-        assert_eq!(report.sanitized, broken.len() as u64, "{}", device.name());
-        assert_finite(&shades, &device.name());
+        let who = device.name();
+        assert_eq!(report.sanitized, broken.len() as u64, "{who}");
+        assert_matches_cpu(&who, &expected, &shades, &rays, &hits);
         for &i in &broken {
-            assert_eq!(shades.analytic[i], Vec4::ZERO, "{}: broken record {i} was shaded", device.name());
-            assert_eq!(shades.shadow_direction[i].w, 0.0, "{}: broken record {i} traces", device.name());
+            assert_eq!(record(&shades, i), record(&expected, i), "{who}: broken record {i}");
         }
-        vulkan::assert_clean(&device);
+        vulkan::assert_clean(device);
     }
 }
 
@@ -541,6 +560,6 @@ fn shade_rejects_mismatched_streams_on_every_backend() {
     check(&mut cpu);
     for mut device in vulkan::each_device("shade input checks") {
         check(&mut device);
-        vulkan::assert_clean(&device);
+        vulkan::assert_clean(device);
     }
 }

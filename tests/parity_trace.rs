@@ -29,12 +29,18 @@ fn hit_point(scene: &Scene, hits: &HitStream, i: usize) -> glam::Vec3 {
     a * (1.0 - bary.x - bary.y) + b * bary.x + c * bary.y
 }
 
-/// Compares two hit streams and returns the fraction of rays that agree on the hit primitive.
+/// Compares two hit streams and returns the fraction of rays that agree on the hit primitive; a
+/// miss must be written as the stream defines it (t and barycentrics 0) on both.
 fn compare(scene: &Scene, rays: &RayStream, expected: &HitStream, actual: &HitStream) -> f64 {
     assert_eq!(expected.len(), actual.len());
     let mut same = 0usize;
     for i in 0..expected.len() {
         assert!(actual.t[i].is_finite() && actual.barycentrics[i].is_finite(), "ray {i}: non-finite output");
+        for hits in [expected, actual] {
+            if hits.primitive[i] == NO_HIT {
+                assert_eq!((hits.t[i], hits.barycentrics[i]), (0.0, glam::Vec2::ZERO), "ray {i}: a miss's fields");
+            }
+        }
         let same_hit = expected.primitive[i] == actual.primitive[i] && expected.instance[i] == actual.instance[i];
         if !same_hit {
             continue;
@@ -91,7 +97,7 @@ fn trace_matches_cpu_on_every_vulkan_device() {
         let agreement = compare(&scene, &rays, &expected, &hits);
         assert!(agreement >= MIN_AGREEMENT, "{}: only {:.5} of rays agree", device.info().name, agreement);
         eprintln!("{}: {:.6} of {} rays agree with the CPU", device.info().name, agreement, rays.len());
-        vulkan::assert_clean(&device);
+        vulkan::assert_clean(device);
     }
 }
 
@@ -105,17 +111,18 @@ fn whole_frame_matches_cpu_on_every_vulkan_device() {
     for mut device in vulkan::every_device("frame parity") {
         device.load_scene(&scene).unwrap();
         let frame = device.render(&params).unwrap();
-        assert_eq!(frame.rays.pixel, expected.rays.pixel);
+        common::assert_rays_match(&expected.rays, &frame.rays, &device.name());
         assert!(compare(&scene, &frame.rays, &expected.hits, &frame.hits) >= MIN_AGREEMENT);
         assert_eq!(frame.timings.iter().map(|t| t.stage).collect::<Vec<_>>(), ["generate", "trace"]);
         assert!(frame.timings.iter().all(|t| t.sanitized == 0), "{}: {:?}", device.name(), frame.timings);
-        vulkan::assert_clean(&device);
+        vulkan::assert_clean(device);
     }
 }
 
 /// Rays that cannot be traced miss and are not occluded on every backend; the two that are not
-/// finite (a NaN origin, an infinite tmax) — not the zero direction or the empty interval — are
-/// counted as sanitized by both the closest-hit and the occlusion trace.
+/// finite (a NaN origin, an infinite tmax) — not the zero direction or the empty interval
+/// (`tmin` 0.3 > `tmax` 0.1, around a hit at t ≈ 0.26) — are counted as sanitized by both the
+/// closest-hit and the occlusion trace.
 #[test]
 fn untraceable_rays_miss_on_every_backend() {
     let scene = cornell();
@@ -124,13 +131,23 @@ fn untraceable_rays_miss_on_every_backend() {
     rays.origin = vec![
         glam::Vec4::new(f32::NAN, 0.3, 0.3, 0.0),
         glam::Vec4::new(0.3, 0.3, 0.3, 0.0),
-        glam::Vec4::new(0.3, 0.3, 0.3, 5.0),
+        glam::Vec4::new(0.3, 0.3, 0.3, 0.3),
         glam::Vec4::new(0.3, 0.3, 0.3, 0.0),
     ];
-    rays.direction =
-        vec![ok_dir, glam::Vec4::new(0.0, 0.0, 0.0, 10.0), ok_dir, glam::Vec4::new(0.0, 0.0, 1.0, f32::INFINITY)];
+    let empty_interval = glam::Vec4::new(0.0, 0.0, 1.0, 0.1);
+    rays.direction = vec![
+        ok_dir,
+        glam::Vec4::new(0.0, 0.0, 0.0, 10.0),
+        empty_interval,
+        glam::Vec4::new(0.0, 0.0, 1.0, f32::INFINITY),
+    ];
     let mut cpu_backend = raywave::cpu::CpuBackend::new();
     cpu_backend.load_scene(&scene).unwrap();
+    // Within an interval that holds it, the empty interval's ray hits the back wall.
+    let mut open = rays.clone();
+    (open.origin[2].w, open.direction[2].w) = (0.0, 10.0);
+    let t = cpu_backend.trace(&open).unwrap().0.t[2];
+    assert!(t > 0.1 && t < 0.3, "the empty interval lies around the hit ({t})");
     let (expected, report) = cpu_backend.trace(&rays).unwrap();
     assert!(expected.primitive.iter().all(|&p| p == NO_HIT));
     assert_eq!(report.sanitized, 2, "cpu trace");
@@ -143,7 +160,7 @@ fn untraceable_rays_miss_on_every_backend() {
         assert_eq!(report.sanitized, 2, "{} trace", device.name());
         let (occluded, report) = device.trace_occlusion(&rays).unwrap();
         assert_eq!((occluded, report.sanitized), (vec![0; 4], 2), "{} occlusion", device.name());
-        vulkan::assert_clean(&device);
+        vulkan::assert_clean(device);
     }
 }
 
@@ -181,10 +198,13 @@ fn the_shortest_traceable_directions_hit_what_unit_ones_hit_on_every_backend() {
         let (hits, report) = device.trace(&short_rays).unwrap();
         assert_eq!(compare(&scene, &short_rays, &short, &hits), 1.0, "{}", device.name());
         assert_eq!(report.sanitized, 0, "{}", device.name());
-        let (occluded, _) = device.trace_occlusion(&short_rays).unwrap();
-        assert_eq!(occluded, vec![1; units.len()], "{}", device.name());
-        assert_eq!(device.trace(&shorter).unwrap().0, misses, "{}", device.name());
-        vulkan::assert_clean(&device);
+        let (occluded, report) = device.trace_occlusion(&short_rays).unwrap();
+        assert_eq!((occluded, report.sanitized), (vec![1; units.len()], 0), "{}", device.name());
+        let (shorter_hits, report) = device.trace(&shorter).unwrap();
+        assert_eq!((shorter_hits, report.sanitized), (misses.clone(), 0), "{}", device.name());
+        let (occluded, report) = device.trace_occlusion(&shorter).unwrap();
+        assert_eq!((occluded, report.sanitized), (vec![0; units.len()], 0), "{}", device.name());
+        vulkan::assert_clean(device);
     }
 }
 
@@ -209,7 +229,7 @@ fn tracing_without_a_scene_is_refused_on_every_backend() {
     assert_eq!(refusals(&mut cpu::CpuBackend::new()), ["scene"; 3], "cpu");
     for mut device in vulkan::every_device("tracing without a scene") {
         assert_eq!(refusals(&mut device), ["scene"; 3], "{}", device.name());
-        vulkan::assert_clean(&device);
+        vulkan::assert_clean(device);
     }
 }
 
@@ -251,7 +271,7 @@ fn trace_matches_cpu_on_incoherent_scenes() {
             let agreement = compare(scene, &rays, &expected, &actual);
             eprintln!("{} on {}: {agreement:.6} of {} rays agree", device.name(), scene.name(), rays.len());
             assert!(agreement >= MIN_AGREEMENT, "{} on {}: {agreement}", device.name(), scene.name());
-            vulkan::assert_clean(&device);
+            vulkan::assert_clean(device);
         }
     }
 }
@@ -279,7 +299,7 @@ fn occlusion_matches_cpu_on_every_vulkan_device() {
         let agreement = agree as f64 / rays.len() as f64;
         eprintln!("{} occlusion: {agreement:.6} of {} rays agree", device.name(), rays.len());
         assert!(agreement >= MIN_AGREEMENT, "{}: {agreement}", device.name());
-        vulkan::assert_clean(&device);
+        vulkan::assert_clean(device);
     }
 }
 
@@ -307,7 +327,7 @@ fn backends_on_several_threads_at_once_match_cpu() {
                         let agreement = compare(scene, rays, expected, &hits);
                         let name = device.name();
                         assert!(agreement >= MIN_AGREEMENT, "thread {thread} round {round} {name}: {agreement}");
-                        vulkan::assert_clean(&device);
+                        vulkan::assert_clean(device);
                     }
                 }
             });

@@ -253,6 +253,6 @@ fn a_changed_scene_renders_like_the_scene_as_built_on_the_cpu() {
 fn a_changed_scene_renders_like_the_scene_as_built_on_every_vulkan_device() {
     for mut device in common::vulkan::every_device("a_changed_scene_renders_like_the_scene_as_built") {
         assert_invariant(&mut device);
-        common::vulkan::assert_clean(&device);
+        common::vulkan::assert_clean(device);
     }
 }

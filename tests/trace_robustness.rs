@@ -67,9 +67,10 @@ fn trace_on_vulkan(test: &str, scene: &Scene, rays: &RayStream) -> Vec<Traced> {
         .map(|mut device| {
             device.load_scene(scene).expect("scene loads");
             let (hits, _) = device.trace(rays).expect("trace runs");
-            common::vulkan::assert_clean(&device);
             let driver_intersection = device.trace_method() != raywave::TraceMethod::Software;
-            Traced { backend: device.name(), driver_intersection, hits }
+            let backend = device.name();
+            common::vulkan::assert_clean(device);
+            Traced { backend, driver_intersection, hits }
         })
         .collect()
 }

@@ -30,6 +30,27 @@ pub fn close(a: f32, b: f32, rel: f32, scale: f32) -> bool {
     (a - b).abs() <= rel * scale.max(a.abs()).max(b.abs())
 }
 
+/// Documented float tolerance of the generate stage's rays on a device against the CPU,
+/// relative: origins (and `tmin`) to the origin's length, directions to 1 and `tmax` to itself.
+pub const GENERATE_REL_TOLERANCE: f32 = 2e-6;
+
+/// Fails unless `actual`'s rays are `expected`'s — pixels identical, origins and directions
+/// within [`GENERATE_REL_TOLERANCE`] — naming `who` and the ray.
+pub fn assert_rays_match(expected: &raywave::RayStream, actual: &raywave::RayStream, who: &str) {
+    assert_eq!(actual.len(), expected.len(), "{who}");
+    assert_eq!(actual.pixel, expected.pixel, "{who}: pixel indices must be identical");
+    for i in 0..actual.len() {
+        let (o, e) = (actual.origin[i], expected.origin[i]);
+        let (d, f) = (actual.direction[i], expected.direction[i]);
+        let o_scale = e.truncate().length();
+        for k in 0..4 {
+            assert!(close(o[k], e[k], GENERATE_REL_TOLERANCE, o_scale), "{who}: ray {i} origin {o} vs {e}");
+            let d_scale = if k < 3 { 1.0 } else { f.w.abs() };
+            assert!(close(d[k], f[k], GENERATE_REL_TOLERANCE, d_scale), "{who}: ray {i} direction {d} vs {f}");
+        }
+    }
+}
+
 /// Fails unless at most `fraction` of `total` items are `outliers`, saying `what` they are and
 /// showing `examples` of them: how the parity tests bound the few values a device may round
 /// differently.
@@ -102,15 +123,21 @@ pub mod vulkan {
         }
     }
 
-    /// Fails if the device's validation layers reported any warning or error.
-    pub fn assert_clean(backend: &VulkanBackend) {
+    /// Fails if `backend`'s validation layers reported any warning or error so far: the check
+    /// within a test that goes on using the backend ([`assert_clean`] ends it).
+    pub fn assert_no_messages_yet(backend: &VulkanBackend) {
         let messages = backend.validation_messages();
-        assert!(
-            messages.is_empty(),
-            "{} validation messages on {}:\n{}",
-            messages.len(),
-            backend.info().name,
-            messages.join("\n")
-        );
+        let name = &backend.info().name;
+        assert!(messages.is_empty(), "{} validation messages on {name}:\n{}", messages.len(), messages.join("\n"));
+    }
+
+    /// Drops `backend` and fails if its validation layers reported any warning or error, its
+    /// teardown's included (objects still alive when the device is destroyed, say), which arrive
+    /// only as it drops.
+    pub fn assert_clean(backend: VulkanBackend) {
+        let (log, name) = (backend.validation_log(), backend.info().name.clone());
+        drop(backend);
+        let messages = log.messages();
+        assert!(messages.is_empty(), "{} validation messages on {name}:\n{}", messages.len(), messages.join("\n"));
     }
 }

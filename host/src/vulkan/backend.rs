@@ -397,7 +397,13 @@ impl VulkanBackend {
     /// Validation-layer messages of warning or error severity received so far (empty unless
     /// opened with validation, and empty when all is well).
     pub fn validation_messages(&self) -> Vec<String> {
-        self.core.validation_messages()
+        self.core.validation_log().messages()
+    }
+
+    /// The backend's validation log, which outlives it: read after dropping the backend, it holds
+    /// the messages of its teardown too.
+    pub fn validation_log(&self) -> super::context::ValidationLog {
+        self.core.validation_log()
     }
 
     /// Largest stream this device can hold in one storage buffer and cover with one dispatch.

@@ -182,13 +182,26 @@ pub(crate) struct AccelerationLimits {
 /// ([`ContextOptions::sustain_seconds`]).
 pub const MAX_SUSTAINED_DISPATCHES: u32 = 1024;
 
+/// The validation messages of warning or error severity one backend received, in arrival order,
+/// shared with it: still readable after the backend is dropped, when the messages its teardown
+/// raised (objects left alive at `vkDestroyDevice`, say) have arrived too.
+#[derive(Clone, Debug, Default)]
+pub struct ValidationLog(Arc<Mutex<Vec<String>>>);
+
+impl ValidationLog {
+    /// The messages received so far.
+    pub fn messages(&self) -> Vec<String> {
+        self.0.lock().map(|m| m.clone()).unwrap_or_default()
+    }
+}
+
 /// Instance-level state shared by every object created from it; destroyed last.
 pub(crate) struct Core {
     _entry: ash::Entry,
     pub instance: ash::Instance,
     debug: Option<(ash::ext::debug_utils::Instance, vk::DebugUtilsMessengerEXT)>,
     /// Validation messages of warning or error severity, in arrival order.
-    messages: Arc<Mutex<Vec<String>>>,
+    messages: ValidationLog,
     pub device: ash::Device,
     pub queue: vk::Queue,
     pub queue_family: u32,
@@ -226,9 +239,9 @@ impl Drop for Core {
 }
 
 impl Core {
-    /// Validation messages (warning or error severity) received so far.
-    pub fn validation_messages(&self) -> Vec<String> {
-        self.messages.lock().map(|m| m.clone()).unwrap_or_default()
+    /// The validation log ([`ValidationLog`]), shared.
+    pub fn validation_log(&self) -> ValidationLog {
+        self.messages.clone()
     }
 }
 
@@ -423,7 +436,7 @@ pub(crate) fn open(index: usize, options: &ContextOptions) -> Result<Arc<Core>> 
             });
         }
     }
-    let messages = Arc::new(Mutex::new(Vec::new()));
+    let messages = ValidationLog::default();
     let mut messenger_info = vk::DebugUtilsMessengerCreateInfoEXT::default()
         .message_severity(vk::DebugUtilsMessageSeverityFlagsEXT::WARNING | vk::DebugUtilsMessageSeverityFlagsEXT::ERROR)
         .message_type(
@@ -432,7 +445,7 @@ pub(crate) fn open(index: usize, options: &ContextOptions) -> Result<Arc<Core>> 
                 | vk::DebugUtilsMessageTypeFlagsEXT::PERFORMANCE,
         )
         .pfn_user_callback(Some(debug_callback))
-        .user_data(Arc::as_ptr(&messages) as *mut c_void);
+        .user_data(Arc::as_ptr(&messages.0) as *mut c_void);
     let instance = create_instance(&entry, options.validation, options.validation.then_some(&mut messenger_info))?;
     // From here on, every failure path destroys what was created before it.
     let debug = if options.validation {

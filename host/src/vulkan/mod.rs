@@ -14,4 +14,4 @@ mod rt_pipeline;
 pub mod spirv;
 
 pub use backend::VulkanBackend;
-pub use context::{enumerate_devices, ContextOptions, DeviceInfo, MAX_SUSTAINED_DISPATCHES};
+pub use context::{enumerate_devices, ContextOptions, DeviceInfo, ValidationLog, MAX_SUSTAINED_DISPATCHES};
