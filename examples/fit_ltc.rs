@@ -28,7 +28,7 @@ struct Args {
     #[arg(long)]
     check: bool,
     /// With `--check`: this many more cells, spread over the table, besides the fixed 12 (at most
-    /// the table's other 4084 cells' count: the spread then visits every cell).
+    /// the table's other 4084: then every cell is checked once).
     #[arg(long, default_value_t = 0)]
     extra: usize,
 }

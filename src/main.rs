@@ -322,7 +322,7 @@ struct RenderArgs {
     /// Distance of the plane in focus (default: the camera's look-at point).
     #[arg(long)]
     focus: Option<f32>,
-    /// Enable the Vulkan validation layers (must be installed).
+    /// Enable the Vulkan validation layers (must be installed; refused with `--device cpu`).
     #[arg(long)]
     validate: bool,
     /// Steady-state stage times: render untimed frames, in benchmark mode, until their times

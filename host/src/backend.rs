@@ -240,8 +240,8 @@ pub fn copy_probe_len(params: &DenoiseParams, image: &[Vec4]) -> Result<u32> {
 /// one hit per ray, `params.count` rays, a width ≥ 1, light and node counts within the data's
 /// buffers (a count past its buffer was clamped to it by the kernels — on the CPU to the slice,
 /// on Vulkan to the buffer, which holds one zeroed element where the slice is empty — so the
-/// backends would have shaded different light sets), and a sampler that gives the sample its own
-/// point in every pixel ([`SamplerParams::indexes`]).
+/// backends would have shaded different light sets), and a sampler of a known kind that gives
+/// the sample its own point in every pixel ([`check_sampler`]).
 pub(crate) fn check_shade_inputs(
     params: &ShadeParams,
     data: &ShadeData,
@@ -291,25 +291,35 @@ const CAMERA_BASIS_TOLERANCE: f32 = 1e-3;
 
 /// Checks generate-stage parameters beyond the image size (which each backend checks against its
 /// own limit): a finite camera basis of the shape [`GenerateParams`]' fields document — a unit
-/// `forward`, `right` and `up` orthogonal to it, within [`MAX_IMAGE_PLANE_AXIS`] and spanning a
-/// non-zero image plane (a zeroed basis gave NaN ray directions, a 10⁻³⁰ one infinite ones, a
-/// 10¹⁹ one zero ones) —, `0 ≤ tmin < tmax` finite, a finite non-negative aperture with a
-/// positive finite focus distance when it is open, and a sampler that gives the sample its own
-/// point ([`SamplerParams::indexes`]).
+/// `forward`, `right` and `up` orthogonal to it, long enough to normalize (squared length a
+/// normal float, ~10⁻¹⁹), within [`MAX_IMAGE_PLANE_AXIS`] and spanning a non-zero image plane (a
+/// zeroed basis gave NaN ray directions, a 10⁻³⁰ one infinite ones, a 10¹⁹ one zero ones) —,
+/// `0 ≤ tmin < tmax` finite, a finite non-negative aperture with a positive finite focus distance
+/// when it is open and a thin lens within `f32::MAX / 4` of the origin, and a sampler of a known
+/// kind that gives the sample its own point ([`check_sampler`]).
 pub(crate) fn check_generate_params(params: &GenerateParams) -> Result<()> {
     let basis = [params.origin, params.forward, params.right, params.up];
     let (forward, right, up) = (params.forward.truncate(), params.right.truncate(), params.up.truncate());
-    let orthogonal = |axis: glam::Vec3| {
-        axis.dot(forward).abs() <= CAMERA_BASIS_TOLERANCE * axis.length() && axis.length() <= MAX_IMAGE_PLANE_AXIS
+    // Long enough to normalize (the thin lens does) and to be judged, at most the bound, and
+    // orthogonal to `forward`.
+    let usable = |axis: glam::Vec3| {
+        axis.length_squared() >= f32::MIN_POSITIVE
+            && axis.length() <= MAX_IMAGE_PLANE_AXIS
+            && axis.dot(forward).abs() <= CAMERA_BASIS_TOLERANCE * axis.length()
     };
+    // The thin lens's points (origin, aperture, focal point) in f64, so that the check itself
+    // cannot overflow.
+    let lens_reach = f64::from(params.origin.truncate().abs().max_element())
+        + f64::from(params.lens_radius)
+        + f64::from(params.focus_distance) * (1.0 + f64::from(right.length()) + f64::from(up.length()));
     let reason = if !basis.iter().all(|v| v.is_finite()) {
         Some("the camera's origin, forward, right and up must be finite".to_owned())
     } else if (forward.length() - 1.0).abs() > CAMERA_BASIS_TOLERANCE {
         Some(format!("the camera's forward axis must be a unit vector (length {})", forward.length()))
-    } else if !(orthogonal(right) && orthogonal(up)) || right.cross(up) == glam::Vec3::ZERO {
+    } else if !(usable(right) && usable(up)) || right.cross(up) == glam::Vec3::ZERO {
         Some(format!(
-            "the camera's right and up axes must be orthogonal to forward, at most {MAX_IMAGE_PLANE_AXIS:e} long, \
-             and span a non-zero image plane (right {right}, up {up})"
+            "the camera's right and up axes must be orthogonal to forward, between 1e-19 and \
+             {MAX_IMAGE_PLANE_AXIS:e} long, and span a non-zero image plane (right {right}, up {up})"
         ))
     } else if !(params.tmin >= 0.0 && params.tmax > params.tmin && params.tmax.is_finite()) {
         Some(format!("needs 0 ≤ tmin < tmax, both finite (tmin {}, tmax {})", params.tmin, params.tmax))
@@ -317,6 +327,12 @@ pub(crate) fn check_generate_params(params: &GenerateParams) -> Result<()> {
         Some(format!("lens_radius {} must be finite and ≥ 0", params.lens_radius))
     } else if params.lens_radius > 0.0 && !(params.focus_distance.is_finite() && params.focus_distance > 0.0) {
         Some(format!("focus_distance {} must be finite and > 0 with an aperture", params.focus_distance))
+    } else if params.lens_radius > 0.0 && lens_reach > f64::from(f32::MAX) / 4.0 {
+        Some(format!(
+            "the thin lens reaches {lens_reach:e} from the origin (camera origin, aperture {}, focal plane at {}), \
+             beyond f32::MAX / 4, where its points' differences overflow",
+            params.lens_radius, params.focus_distance
+        ))
     } else {
         None
     };
@@ -470,7 +486,26 @@ mod tests {
         let slanted = GenerateParams { right: good.right + good.forward * 0.01 * good.right.length(), ..good };
         let wide = GenerateParams { right: good.right * 1e19, ..good };
         let flat = GenerateParams { up: good.right, ..good };
-        for (name, params) in [("tiny", tiny), ("long", long), ("slanted", slanted), ("wide", wide), ("flat", flat)] {
+        // Too short to normalize, which the thin lens does: its origins became infinite.
+        let lens = GenerateParams { lens_radius: 0.01, focus_distance: 1.0, ..good };
+        let thin = GenerateParams {
+            right: good.right * (1e-23 / good.right.length()),
+            up: good.up * (1e-16 / good.up.length()),
+            ..lens
+        };
+        // A focal plane whose point `pinhole · focus_distance` overflows.
+        let far = GenerateParams { right: good.right * 1e17, focus_distance: 1e22, ..lens };
+        assert!(check_generate_params(&lens).is_ok());
+        let cases = [
+            ("tiny", tiny),
+            ("long", long),
+            ("slanted", slanted),
+            ("wide", wide),
+            ("flat", flat),
+            ("thin", thin),
+            ("far", far),
+        ];
+        for (name, params) in cases {
             assert!(check_generate_params(&params).is_err(), "{name}");
         }
     }

@@ -101,6 +101,10 @@ pub fn generate_params_with(
     let camera = scene.camera();
     let forward = (camera.look_at - camera.position).normalize();
     let right = forward.cross(camera.up).normalize();
+    // Made orthogonal to `forward` again: with an `up` nearly along the view, the cross product
+    // is short and its rounding tilts `right` out of the image plane (beyond the generate
+    // stage's check, `backend::check_generate_params`).
+    let right = (right - forward * right.dot(forward)).normalize();
     let up = right.cross(forward);
     let tan_half_y = (camera.vertical_fov_degrees.to_radians() * 0.5).tan();
     let tan_half_x = tan_half_y * width as f32 / height as f32;
@@ -153,5 +157,25 @@ mod tests {
         assert!(p.right.x < 0.0);
         assert!((p.right.length() / p.up.length() - 2.0).abs() < 1e-5, "aspect 2:1");
         assert!(p.tmax.is_finite() && p.tmax > 1.0);
+    }
+
+    /// A scene camera whose `up` lies nearly along its view — which the scene accepts while their
+    /// cross product normalizes — gives a basis the generate stage accepts: `right` made
+    /// orthogonal to the view again after the short cross product's rounding.
+    #[test]
+    fn a_camera_looking_nearly_along_its_up_gives_a_valid_basis() {
+        let cornell = Scene::load("builtin:cornell").unwrap();
+        let mut rng = raywave_kernels::hash::CounterRng::new(5);
+        for angle in [1e-3f32, 1e-4, 1e-5, 3e-6] {
+            for _ in 0..200 {
+                let view = rng.unit_vec3();
+                let up = (view + view.any_orthonormal_vector() * angle).normalize();
+                let camera =
+                    crate::scene::Camera { position: glam::Vec3::ZERO, look_at: view, up, vertical_fov_degrees: 40.0 };
+                let Ok(scene) = Scene::new("nearly up", cornell.meshes().to_vec(), camera) else { continue };
+                let params = generate_params(&scene, 16, 9, 0);
+                crate::backend::check_generate_params(&params).unwrap_or_else(|e| panic!("{angle} {view}: {e}"));
+            }
+        }
     }
 }

@@ -137,7 +137,9 @@ pub fn validate_light(index: usize, light: &Light) -> Result<()> {
     }
     let bounds = light_bounds(light);
     let extent = bounds.min.truncate().abs().max(bounds.max.truncate().abs()).max_element();
-    if !extent.is_finite() || extent > MAX_COORDINATE {
+    // With 8 ulps of slack: the corners are rebuilt as `position + edge_u + edge_v`, rounded
+    // twice more than the mesh vertices a light was fitted to, which may lie at the limit.
+    if !extent.is_finite() || extent > MAX_COORDINATE * (1.0 + 8.0 * f32::EPSILON) {
         return Err(Error::InvalidParameter {
             name: "light.position",
             reason: format!(

@@ -1276,13 +1276,16 @@ pub const CHECK_L1_TOLERANCE: f64 = 1.0e-3;
 /// depend on the warm start, so they agree to `f32` rounding.
 pub const CHECK_VALUE_TOLERANCE: f64 = 1.0e-6;
 
-/// `extra` more cells for [`check_cells`], spread over the table by a fixed odd stride
-/// (deterministic; the first `LTC_SIZE²` are distinct cells, later ones repeat them).
+/// `extra` more cells for [`check_cells`] besides [`CHECK_CELLS`], spread over the table by a
+/// fixed odd stride (deterministic): distinct cells, none of `CHECK_CELLS`, until the table's
+/// other cells are all taken.
 pub fn spread_cells(extra: usize) -> Vec<(usize, usize)> {
     let n = (LTC_SIZE * LTC_SIZE) as u64;
-    (0..extra as u64)
+    (0..n)
         .map(|k| (k.wrapping_mul(2_654_435_761).wrapping_add(17) % n) as usize)
         .map(|i| (i / LTC_SIZE, i % LTC_SIZE))
+        .filter(|cell| !CHECK_CELLS.contains(cell))
+        .take(extra)
         .collect()
 }
 
@@ -1296,11 +1299,12 @@ mod tests {
     use super::*;
     use raywave_shared::ltc_table::{LTC_AMPLITUDE, LTC_FIT_VERSION, LTC_MATRIX, LTC_MATRIX_2, LTC_SIZE as TABLE_SIZE};
 
-    /// The spread visits every cell once in its first `LTC_SIZE²` steps, so `fit_ltc --check
-    /// --extra` up to the other cells' count checks distinct cells.
+    /// With as many extra cells as the table has besides [`CHECK_CELLS`], `fit_ltc --check
+    /// --extra` checks every cell once (the spread had re-taken the fixed cells and missed 12).
     #[test]
-    fn the_check_spread_visits_every_cell_once() {
-        let mut cells = spread_cells(LTC_SIZE * LTC_SIZE);
+    fn the_check_spread_and_the_fixed_cells_cover_the_table_once() {
+        let mut cells = spread_cells(LTC_SIZE * LTC_SIZE - CHECK_CELLS.len());
+        cells.extend(CHECK_CELLS);
         cells.sort_unstable();
         cells.dedup();
         assert_eq!(cells.len(), LTC_SIZE * LTC_SIZE);

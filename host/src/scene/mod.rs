@@ -192,10 +192,7 @@ impl Scene {
         let before: usize = meshes.iter().map(|m| m.triangles.len()).sum();
         for mesh in &mut meshes {
             let positions = &mesh.positions;
-            mesh.triangles.retain(|t| {
-                let [a, b, c] = t.map(|i| positions[i as usize]);
-                (b - a).cross(c - a) != Vec3::ZERO
-            });
+            mesh.triangles.retain(|t| has_area(t.map(|i| positions[i as usize])));
         }
         meshes.retain(|m| !m.triangles.is_empty());
         let dropped_degenerate = before - meshes.iter().map(|m| m.triangles.len()).sum::<usize>();
@@ -425,14 +422,27 @@ fn check_indices_and_vertices(scene: &str, meshes: &[Mesh]) -> Result<()> {
     Ok(())
 }
 
-/// Axis-aligned bounds (min, max) of the vertices `meshes`' triangles use; an index past its
-/// mesh's positions (refused later, by `Scene::new`) is skipped. `(f32::MAX, f32::MIN)` per axis
-/// where no triangle is left.
+/// Whether a triangle of corners `[a, b, c]` has non-zero area in `f32`: the triangles
+/// `Scene::new` keeps.
+fn has_area([a, b, c]: [Vec3; 3]) -> bool {
+    (b - a).cross(c - a) != Vec3::ZERO
+}
+
+/// Axis-aligned bounds (min, max) of the vertices `meshes`' triangles of non-zero area use — the
+/// scene `Scene::new` keeps, also where a loader frames its camera before it; a triangle with an
+/// index past its mesh's positions (refused by `Scene::new`) is skipped. `(f32::MAX, f32::MIN)`
+/// per axis where no triangle is left.
 fn triangle_bounds(meshes: &[Mesh]) -> (Vec3, Vec3) {
+    let corners = |mesh: &Mesh, t: &[u32; 3]| -> Option<[Vec3; 3]> {
+        let [a, b, c] = t.map(|i| mesh.positions.get(i as usize).copied());
+        Some([a?, b?, c?])
+    };
     meshes
         .iter()
-        .flat_map(|mesh| mesh.triangles.iter().flatten().filter_map(|&i| mesh.positions.get(i as usize)))
-        .fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(lo, hi), p| (lo.min(*p), hi.max(*p)))
+        .flat_map(|mesh| mesh.triangles.iter().filter_map(move |t| corners(mesh, t)))
+        .filter(|&corners| has_area(corners))
+        .flatten()
+        .fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(lo, hi), p| (lo.min(p), hi.max(p)))
 }
 
 /// A camera on the +z side of the bounds' centre that sees the whole bounding sphere with a 45°
@@ -496,13 +506,19 @@ mod tests {
     }
 
     /// The bounds hold the vertices triangles use, not one no triangle uses nor one only a dropped
-    /// zero-area triangle used (both had been folded in, moving a framing camera away).
+    /// zero-area triangle used (both had been folded in), and so does the camera a loader frames
+    /// before `Scene::new` drops that triangle (it had framed the empty space out to it).
     #[test]
     fn bounds_hold_the_vertices_triangles_use() {
         let far = Vec3::splat(1e7);
         let mut positions = unit_triangle();
         positions.extend([far, far * 0.5]);
-        let scene = scene_with(triangle_mesh(positions, vec![[0, 1, 2], [3, 4, 3]])).unwrap();
+        let mesh = triangle_mesh(positions, vec![[0, 1, 2], [3, 4, 3]]);
+        assert_eq!(
+            framing_camera(std::slice::from_ref(&mesh)),
+            framing_camera(&[triangle_mesh(unit_triangle(), vec![[0, 1, 2]])])
+        );
+        let scene = scene_with(mesh).unwrap();
         assert_eq!(scene.dropped_degenerate(), 1);
         assert_eq!(scene.bounds(), (Vec3::ZERO, Vec3::new(1.0, 1.0, 0.0)));
     }

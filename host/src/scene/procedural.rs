@@ -1,7 +1,7 @@
 //! Procedural scenes for tests and benchmarks: closed icospheres, a field of spheres with over a
 //! million triangles, and a "hairball" of thin random triangles for incoherent traversal.
 
-use super::{Camera, Material, Mesh, MAX_TRIANGLES};
+use super::{Camera, Material, Mesh, MAX_TRIANGLES, MAX_VERTICES};
 use crate::error::{Error, Result};
 use glam::{UVec3, Vec3};
 use raywave_kernels::hash::{pcg3d, unit_float};
@@ -133,13 +133,15 @@ pub fn sphere_field(per_axis: u32, subdivisions: u32) -> Result<(Vec<Mesh>, Came
 
 /// `count` thin random triangles ("hairs", 0.05 long and 0.001 wide, arbitrary orientation) in the
 /// unit cube, seeded by `seed`, and a camera outside the cube: the incoherent-traversal stress case
-/// (thin, overlapping, randomly oriented boxes). More than [`MAX_TRIANGLES`] is an
-/// `InvalidParameter` error.
+/// (thin, overlapping, randomly oriented boxes). More triangles than [`MAX_TRIANGLES`], or more
+/// than their three vertices each fit in [`MAX_VERTICES`], is an `InvalidParameter` error,
+/// before anything is allocated.
 pub fn hairball(count: u32, seed: u32) -> Result<(Vec<Mesh>, Camera)> {
-    if count as usize > MAX_TRIANGLES {
+    let count_fits = count as usize <= MAX_TRIANGLES && 3 * count as usize <= MAX_VERTICES;
+    if !count_fits {
         return Err(Error::InvalidParameter {
             name: "hairball",
-            reason: format!("{count} triangles exceed {MAX_TRIANGLES}"),
+            reason: format!("{count} hairs exceed {MAX_TRIANGLES} triangles or {MAX_VERTICES} vertices"),
         });
     }
     let random3 = |i: u32, stream: u32| {
@@ -213,6 +215,7 @@ mod tests {
         assert!(sphere_field(20, 7).is_err(), "8000 × 327 680 triangles");
         assert!(sphere_field(u32::MAX, 0).is_err());
         assert!(hairball(u32::MAX, 0).is_err());
+        assert!(hairball((MAX_VERTICES / 3 + 1) as u32, 0).is_err(), "its vertices exceed the limit");
     }
 
     #[test]

@@ -547,8 +547,6 @@ pub(crate) fn open(index: usize, options: &ContextOptions) -> Result<Arc<Core>> 
     }
 }
 
-/// `seconds` if it is a benchmark-mode busy time ([`ContextOptions::sustain_seconds`]): within
-/// `0..=1` s, else [`Error::InvalidParameter`] naming `sustain_seconds`.
 impl Core {
     /// Benchmark mode's busy time per timed submission, in seconds (0: off;
     /// [`ContextOptions::sustain_seconds`]).
