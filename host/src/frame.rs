@@ -104,7 +104,7 @@ pub fn generate_params_with(
     // Made orthogonal to `forward` again: with an `up` nearly along the view, the cross product
     // is short and its rounding tilts `right` out of the image plane (beyond the generate
     // stage's check, `backend::check_generate_params`).
-    let right = (right - forward * right.dot(forward)).normalize();
+    let right = right.reject_from_normalized(forward).normalize();
     let up = right.cross(forward);
     let tan_half_y = (camera.vertical_fov_degrees.to_radians() * 0.5).tan();
     let tan_half_x = tan_half_y * width as f32 / height as f32;

@@ -97,14 +97,18 @@ pub(super) fn parallelogram(mesh: &Mesh) -> Option<Parallelogram> {
     let all = [ad, bd].concat();
     let magnitude = all.iter().fold(0.0f64, |m, p| m.max(p.abs().max_element()));
     let diameter = all.iter().flat_map(|p| all.iter().map(move |q| p.distance(*q))).fold(0.0, f64::max);
-    let edges = |t: [DVec3; 3]| [0, 1, 2].map(|i| t[i].distance(t[(i + 1) % 3]));
-    // Twice the area over the longest edge.
-    let height = |t: [DVec3; 3]| (t[1] - t[0]).cross(t[2] - t[0]).length() / edges(t).into_iter().fold(0.0, f64::max);
+    // Per triangle: its shortest edge, and its height over its longest (twice the area over it).
+    let measures = |t: [DVec3; 3]| {
+        let edges = [0, 1, 2].map(|i| t[i].distance(t[(i + 1) % 3]));
+        let longest = edges.into_iter().fold(0.0, f64::max);
+        (edges.into_iter().fold(f64::INFINITY, f64::min), (t[1] - t[0]).cross(t[2] - t[0]).length() / longest)
+    };
+    let ((shortest_a, height_a), (shortest_b, height_b)) = (measures(ad), measures(bd));
     // At most a quarter of the shortest triangle edge, so that no corner lies within it of two
     // others: the rounding slack alone is 0.19 at 10⁵ from the origin, wider than a small lamp
     // there.
-    let shortest_edge = [edges(ad), edges(bd)].into_iter().flatten().fold(f64::INFINITY, f64::min);
-    let shape = (RELATIVE_TOLERANCE * diameter).min(NARROW_SIDE_TOLERANCE * height(ad).min(height(bd)));
+    let shortest_edge = shortest_a.min(shortest_b);
+    let shape = (RELATIVE_TOLERANCE * diameter).min(NARROW_SIDE_TOLERANCE * height_a.min(height_b));
     let tolerance = (shape + ROUNDING_SLACK * magnitude).min(0.25 * shortest_edge);
 
     // Match the first triangle's corners to the second's: exactly two shared corners. Two corners
