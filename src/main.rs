@@ -580,6 +580,13 @@ fn render_command(args: RenderArgs) -> raywave::Result<()> {
             report.unrendered.see_through_meshes, options.scene
         );
     }
+    if report.unrendered.deformed_meshes > 0 {
+        eprintln!(
+            "warning: {} mesh(es) of {} have a skin or weighted morph targets, which raywave does not apply: they render \
+             in their rest pose",
+            report.unrendered.deformed_meshes, options.scene
+        );
+    }
     if report.unrendered.orthographic_camera {
         eprintln!(
             "warning: the cameras of {} are orthographic, which raywave does not render: it frames the scene with a \

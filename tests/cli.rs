@@ -473,20 +473,28 @@ fn textured_and_see_through_materials_are_rendered_with_a_warning() {
     assert!(!stderr(&out).contains("have textures"), "{}", stderr(&out));
 }
 
+/// An orthographic camera is replaced by the framing one, and a skinned mesh renders in its rest
+/// pose, each with a warning.
 #[test]
-fn an_orthographic_camera_is_framed_with_a_warning() {
+fn an_orthographic_camera_and_a_skinned_mesh_render_with_warnings() {
     let dir = tempfile::tempdir().unwrap();
     let lamp = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/emissive_quad.gltf")).unwrap();
     let perspective =
         "\"type\": \"perspective\",\n   \"perspective\": {\n    \"yfov\": 0.9,\n    \"znear\": 0.01\n   }";
     let orthographic = r#""type": "orthographic", "orthographic": {"xmag": 1, "ymag": 1, "znear": 0.01, "zfar": 10}"#;
-    let text = lamp.replacen(perspective, orthographic, 1);
-    assert_ne!(text, lamp);
+    let skinned_floor = "\"name\": \"floor\",\n   \"mesh\": 0,\n   \"skin\": 0";
+    let text = lamp
+        .replacen(perspective, orthographic, 1)
+        .replacen("\"name\": \"floor\",\n   \"mesh\": 0", skinned_floor, 1)
+        .replacen("\"scene\": 0,", "\"scene\": 0,\n \"skins\": [{\"joints\": [1]}],", 1);
+    assert!(text.contains(orthographic) && text.contains(skinned_floor) && text.contains("skins"));
     let scene = dir.path().join("ortho.gltf");
     std::fs::write(&scene, text).unwrap();
     let (out, path) = render(dir.path(), "o.png", &["--device", "cpu", "--scene", scene.to_str().unwrap()]);
     assert!(out.status.success() && path.exists(), "{}", stderr(&out));
     assert!(stderr(&out).contains("are orthographic, which raywave does not render"), "{}", stderr(&out));
+    let skinned = "1 mesh(es) of";
+    assert!(stderr(&out).contains(skinned) && stderr(&out).contains("render in their rest pose"), "{}", stderr(&out));
 }
 
 /// Benchmark and report options out of range: each command fails at once with the option named
@@ -496,7 +504,7 @@ fn an_orthographic_camera_is_framed_with_a_warning() {
 /// frame is shaded or the reference converged).
 #[test]
 fn bench_and_report_options_out_of_range_are_typed_errors() {
-    let cases: [(&[&str], &str); 29] = [
+    let cases: [(&[&str], &str); 30] = [
         (&["bench", "denoise", "--no-vulkan", "--repeats", "0"], "repeats: must be at least 1"),
         (&["bench", "denoise", "--no-vulkan", "--spp", "0"], "spp: 0 is outside"),
         // Before the scene loads, which would fail too.

@@ -35,6 +35,8 @@ pub fn load(path: &Path) -> Result<Scene> {
     // materials' errors name.
     let library_error = RefCell::new(None);
     let libraries: RefCell<Vec<(PathBuf, usize)>> = RefCell::new(Vec::new());
+    // The library that defines each material name (a library named twice may define it twice).
+    let defined_in: RefCell<std::collections::HashMap<String, PathBuf>> = RefCell::default();
     let (models, materials) = tobj::load_obj_buf(&mut reader, &options, |library| {
         let library = directory.join(library);
         let fail = |message: String| {
@@ -49,6 +51,17 @@ pub fn load(path: &Path) -> Result<Scene> {
         };
         let mut lines = LineCounter::new(text.as_bytes());
         let loaded = tobj::load_mtl_buf(&mut lines).inspect_err(|e| fail(format!("line {}: {e}", lines.line())))?;
+        // tobj would give a name two libraries define the later library's material.
+        let mut defined_in = defined_in.borrow_mut();
+        for m in &loaded.0 {
+            match defined_in.get(&m.name) {
+                Some(earlier) if *earlier != library => {
+                    fail(format!("material `{}` is defined in {} too", m.name, earlier.display()));
+                    return Err(tobj::LoadError::MaterialParseError);
+                }
+                _ => defined_in.insert(m.name.clone(), library.clone()),
+            };
+        }
         libraries.borrow_mut().push((library.clone(), loaded.0.len()));
         Ok(loaded)
     })
@@ -82,7 +95,7 @@ pub fn load(path: &Path) -> Result<Scene> {
     let unrendered = Unrendered {
         textured_meshes: meshes_whose_material(has_textures),
         see_through_meshes: meshes_whose_material(is_see_through),
-        orthographic_camera: false,
+        ..Unrendered::default()
     };
     let meshes: Vec<Mesh> = models
         .into_iter()
@@ -211,6 +224,9 @@ fn is_see_through(m: &tobj::Material) -> bool {
 ///   tobj 4.0.5 turns `0` and relative indices past the start into indices near `usize::MAX` and
 ///   multiplies them, which overflows — a panic where overflow checks are on (debug and test
 ///   builds);
+/// - every face corner starts with a vertex position number (`f /1/2 …` does not): tobj keeps
+///   such corners and fails the file only when it closes the object, and [`GeometryCount`],
+///   which counts position numbers, would not have counted them;
 /// - every vertex position (`v`) a face uses has coordinates finite and within
 ///   [`MAX_COORDINATE`], after the division by its `w` if it has one. Vertices no face uses are
 ///   not loaded (tobj keeps the used ones), so they may hold anything;
@@ -221,7 +237,7 @@ fn is_see_through(m: &tobj::Material) -> bool {
 ///   glTF file that large is counted first. tobj may still make more vertices than `v` lines
 ///   (one per distinct position, texture and normal index), which [`Scene::new`] counts.
 ///
-/// Tokens that are not numbers are left to tobj, which reports them. Other errors are
+/// Other tokens that are not numbers are left to tobj, which reports them. Other errors are
 /// [`Error::SceneLoad`]s naming the line.
 fn check_vertices_and_indices(path: &Path, text: &[u8], limits: Limits) -> Result<()> {
     let load_error = |message: String| Error::SceneLoad { path: path.to_owned(), message };
@@ -415,7 +431,17 @@ fn each_vertex_and_index(
             Some(keyword @ ("f" | "l")) => {
                 for vertex in words {
                     for (kind, part) in vertex.split('/').enumerate().take(3) {
-                        let Ok(value) = part.parse::<i64>() else { continue };
+                        let Ok(value) = part.parse::<i64>() else {
+                            if kind == 0 && keyword == "f" {
+                                // tobj 4.0.5 keeps such a corner (and every one after it, in
+                                // memory, before failing the file), uncounted by the limits.
+                                return Err(format!(
+                                    "line {}: face corner `{vertex}` has no vertex position number",
+                                    index + 1
+                                ));
+                            }
+                            continue;
+                        };
                         if value == 0 || value > i64::from(u32::MAX) || value < -defined[kind] {
                             return Err(format!(
                                 "line {}: `{vertex}` holds index {value}, which names no vertex data defined before it",
@@ -446,6 +472,11 @@ fn check_material_names(
 ) -> std::result::Result<(), String> {
     // The libraries read so far, and the materials they added (tobj appends in order).
     let (mut read, mut known) = (0, 0);
+    // Each name's first material: a lookup per `usemtl` line, not a scan of every material.
+    let mut first_definition: std::collections::HashMap<&str, usize> = std::collections::HashMap::new();
+    for (index, material) in materials.iter().enumerate() {
+        first_definition.entry(material.name.as_str()).or_insert(index);
+    }
     for (index, line) in text.split(|&b| b == b'\n').enumerate() {
         let line = String::from_utf8_lossy(line);
         match line.split_whitespace().next() {
@@ -462,7 +493,7 @@ fn check_material_names(
                         "line {line_number}: `{written}` comes before any `mtllib` line, so it names no material"
                     ));
                 }
-                if !materials[..known.min(materials.len())].iter().any(|m| m.name == name) {
+                if first_definition.get(name).is_none_or(|&first| first >= known) {
                     let read_as = if line.starts_with(char::is_whitespace) {
                         format!(" (read as the name `{name}`: start the line with `usemtl`)")
                     } else {
@@ -734,6 +765,23 @@ mod tests {
         assert!(err.contains("line 5: `usemtl blue` names no material of") && !err.contains("b.mtl"), "{err}");
     }
 
+    /// A name two libraries define: tobj gave it the later library's material without a word
+    /// (an emitter in a.mtl became a grey surface from b.mtl). A library named twice is one
+    /// definition.
+    #[test]
+    fn a_material_two_libraries_define_is_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("scene.obj");
+        let triangle = "v 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl lamp\nf 1 2 3\n";
+        std::fs::write(dir.path().join("a.mtl"), "newmtl lamp\nKe 10 10 10\n").unwrap();
+        std::fs::write(dir.path().join("b.mtl"), "newmtl lamp\nKd 0.5 0.5 0.5\n").unwrap();
+        std::fs::write(&path, format!("mtllib a.mtl\nmtllib b.mtl\n{triangle}")).unwrap();
+        let err = load(&path).unwrap_err().to_string();
+        assert!(err.contains("b.mtl: material `lamp` is defined in") && err.contains("a.mtl too"), "{err}");
+        std::fs::write(&path, format!("mtllib a.mtl\nmtllib a.mtl\n{triangle}")).unwrap();
+        assert_eq!(load(&path).unwrap().meshes()[0].material.emission, Vec3::splat(10.0));
+    }
+
     /// Vertex colours on some vertices and not on others: tobj refused the file ("face vertex
     /// color index out of bounds"), naming no `v` line; raywave does not use them.
     #[test]
@@ -746,7 +794,7 @@ mod tests {
             assert_eq!(scene.meshes()[0].positions, [Vec3::ZERO, Vec3::X, Vec3::Y]);
         }
         // Line numbers still name the line at fault.
-        let err = load(obj_file("v 0 0 0 1 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 x\n").path()).unwrap_err().to_string();
+        let err = load(obj_file("v 0 0 0 1 0 0\nv 1 0 0\nv 0 1 0\nf 1 2/x 3\n").path()).unwrap_err().to_string();
         assert!(err.contains("line 4: face parse error"), "{err}");
     }
 
@@ -762,7 +810,7 @@ mod tests {
         std::fs::write(&path, format!("{square}l 1 2 3 4\n")).unwrap();
         assert!(matches!(load(&path), Err(Error::EmptyScene { dropped_degenerate: 0, .. })));
         // Line numbers still name the line at fault.
-        std::fs::write(&path, format!("{square}l 1 2\nf 1 2 x\n")).unwrap();
+        std::fs::write(&path, format!("{square}l 1 2\nf 1 2/x 3\n")).unwrap();
         let err = load(&path).unwrap_err().to_string();
         assert!(err.contains("line 8: face parse error"), "{err}");
     }
@@ -796,8 +844,15 @@ mod tests {
         assert!(not_utf8.contains("line 6: read error (not UTF-8 text"), "{not_utf8}");
         let position = error(&format!("# a comment\n{quad}v 1 zero 2\nf 1 2 3\n"));
         assert!(position.contains("line 6: position parse error"), "{position}");
-        let face = error(&format!("{quad}o quad\nf 1 2 x\nf 1 2 3\n"));
+        let face = error(&format!("{quad}o quad\nf 1 2/x 3\nf 1 2 3\n"));
         assert!(face.contains("line 6: face parse error"), "{face}");
+        // A corner without a position number, which tobj 4.0.5 keeps until the object closes
+        // (uncounted, a face line of 3·10⁸ of them took gigabytes), is refused on its line.
+        for corner in ["x", "/", "/1", "//1"] {
+            let face = error(&format!("{quad}o quad\nf 1 2 {corner}\nf 1 2 3\n"));
+            let expected = format!("line 6: face corner `{corner}` has no vertex position number");
+            assert!(face.contains(&expected), "{face}");
+        }
         let last = error(&format!("{quad}f 1 2 3\nvn 0 1"));
         assert!(last.contains("line 6: normal parse error"), "the last line, without a line break: {last}");
         // Indices that are 0, past 2³² or relative past the data defined so far (tobj 4.0.5

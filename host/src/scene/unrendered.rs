@@ -16,6 +16,11 @@ pub struct Unrendered {
     /// renders every surface opaque (a `MASK`ed-out mesh, invisible in a glTF viewer, is seen and
     /// casts shadows). MTL's `Tr` is not counted: exporters disagree on which way it runs.
     pub see_through_meshes: usize,
+    /// Meshes that a skin or morph targets would deform: glTF primitives of a node with a `skin`,
+    /// or with morph `targets` and a non-zero weight (the node's `weights`, else the mesh's; glTF
+    /// 2.0 § 3.7.2.2 defaults them to 0). raywave renders them in their rest pose: POSITION under
+    /// the node's transform, which glTF says a skinned mesh ignores.
+    pub deformed_meshes: usize,
     /// The file's only cameras were orthographic, which raywave does not render (its cameras are
     /// a pinhole or a thin lens): the scene is seen through the camera that frames its bounds,
     /// as for a file without a camera.
