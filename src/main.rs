@@ -90,7 +90,7 @@ struct SceneReportArgs {
     /// Samples per pixel of the reference image.
     #[arg(long, default_value_t = 4096)]
     reference_spp: u32,
-    /// Largest sample count measured (1, 2, 4, … up to it).
+    /// Largest sample count measured, a power of two (1, 2, 4, … up to it).
     #[arg(long, default_value_t = 64)]
     max_spp: u32,
     /// Independent repetitions averaged per measurement.

@@ -539,7 +539,8 @@ fn bench_and_report_options_out_of_range_are_typed_errors() {
         (&["report", "error-vs-time", "--reps", "4097"], "reps: 4097 is outside 1..=4096"),
         (&["report", "sampling", "--reps", "100000"], "reps: 100000 is outside 2..=4096"),
         (&["report", "sampling", "--reps", "1"], "reps: 1 is outside 2..=4096: a variance needs two repetitions"),
-        (&["report", "shade", "--max-spp", "0"], "max-spp: 0 is below 1"),
+        (&["report", "shade", "--max-spp", "0"], "max-spp: 0 is not a power of two"),
+        (&["report", "shade", "--max-spp", "48"], "max-spp: 48 is not a power of two"),
         (
             &["report", "error-vs-time", "--reference-spp", "8", "--max-spp", "4"],
             "reference-spp: 8 is below 4 × max-spp (4)",

@@ -19,7 +19,7 @@ pub struct SceneReportOptions {
     pub resolution: u32,
     /// Samples per pixel of the reference.
     pub reference_spp: u32,
-    /// Largest sample count measured (powers of two from 1).
+    /// Largest sample count measured, a power of two (the report measures powers of two from 1).
     pub max_spp: u32,
     /// Independent repetitions averaged per measurement.
     pub reps: u32,
@@ -60,7 +60,7 @@ pub fn check_reps(reps: u32, minimum: u32, why_minimum: &str) -> crate::Result<(
 }
 
 impl SceneReportOptions {
-    /// Checks the options: reps within `1..=`[`MAX_REPS`], no scene listed twice, max-spp ≥ 1,
+    /// Checks the options: reps within `1..=`[`MAX_REPS`], no scene listed twice, max-spp a power of two,
     /// reference-spp at least [`MIN_REFERENCE_FACTOR`] × max-spp, the resolution
     /// ([`check_resolution`]) and the reference's sample count
     /// ([`check_samples_per_pixel`](crate::frame::check_samples_per_pixel)); an error names the
@@ -74,8 +74,9 @@ impl SceneReportOptions {
             // Lines, plots and tables are keyed by the scene's name: a second run would merge into the first.
             return invalid("scenes", format!("{repeated} is listed twice"));
         }
-        if self.max_spp < 1 {
-            return invalid("max-spp", format!("{} is below 1", self.max_spp));
+        if !self.max_spp.is_power_of_two() {
+            let reason = format!("{} is not a power of two (the report measures 1, 2, 4, … up to it)", self.max_spp);
+            return invalid("max-spp", reason);
         }
         if u64::from(self.reference_spp) < u64::from(MIN_REFERENCE_FACTOR) * u64::from(self.max_spp) {
             let reason = format!(

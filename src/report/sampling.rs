@@ -128,7 +128,8 @@ pub struct CaseResult {
     /// Image variance of the worse estimator over that of the better one.
     pub variance_ratio: f64,
     /// Its 95 % confidence interval (`variance::variance_ratio_interval`, a jackknife over groups
-    /// of repetitions); `null` with fewer than three repetitions.
+    /// of repetitions); `null` where it cannot be formed: fewer than three repetitions, or an
+    /// image variance of 0 with a group of them left out.
     pub variance_ratio_low: Option<f64>,
     /// The interval's upper end.
     pub variance_ratio_high: Option<f64>,
@@ -167,7 +168,7 @@ impl CaseResult {
             self.variance_ratio,
             match (self.variance_ratio_low, self.variance_ratio_high) {
                 (Some(low), Some(high)) => format!("(95 %: {low:.2}–{high:.2})"),
-                _ => "(no interval: too few repetitions)".to_string(),
+                _ => "(no interval: fewer than three repetitions, or a variance of 0)".to_string(),
             },
             self.published,
             self.variance_ratio / self.published,
