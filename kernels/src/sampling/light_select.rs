@@ -44,7 +44,8 @@
 //!
 //! All functions are `no_std`, loop-bounded, allocation- and panic-free, and return finite values:
 //! importances are clamped to `[0,` [`MAX_IMPORTANCE`]`]` so that sums over up to 2³² lights stay
-//! finite, and NaN inputs give importance 0.
+//! finite; a non-finite point and a NaN power give importance 0, a NaN normal counts as no
+//! surface.
 
 use glam::{Vec2, Vec3};
 use raywave_shared::light::{light_kind, Light, LightBounds, LightBvhNode};
@@ -205,7 +206,9 @@ pub fn light_bounds(light: &Light) -> LightBounds {
 /// for transmission): pass the normal on the side where light is wanted, or `n = 0` (a medium
 /// point, or a transmissive surface) for no surface factor.
 ///
-/// Finite and in `[0, MAX_IMPORTANCE]` for every input; 0 for NaN inputs and zero power.
+/// Finite and in `[0, MAX_IMPORTANCE]` for every input; 0 for a non-finite `p` and for a NaN or
+/// zero power. A NaN normal counts as no surface (`n = 0`): the light keeps its importance, which
+/// cannot make a lit point dark.
 pub fn importance(bounds: &LightBounds, p: Vec3, n: Vec3) -> f32 {
     let phi = bounds.phi;
     if phi.is_nan() || phi <= 0.0 {

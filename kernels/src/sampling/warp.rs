@@ -387,7 +387,8 @@ fn sphere_cone(p: Vec3, c: Vec3, r: f32) -> SphereCone {
 /// (equivalent to pbrt's `cos θ = (cos θmax − 1)u₀ + 1`, written without cancellation, and
 /// `sin²θ = (1 − cos θ)(1 + cos θ)`). pbrt's small-angle branch, which samples `sin²θ =
 /// sin²θmax·u₀` under the constant pdf below, is left out: that draw's density is
-/// `cos θ/(π sin²θmax)`, up to `sin²θmax/2` off the pdf it returns, and the form used here needs no
+/// `cos θ/(π sin²θmax)`, up to `(1 − cos θmax)/(1 + cos θmax) ≈ sin²θmax/4` off the pdf it returns
+/// (relative, at the cone's axis and rim), and the form used here needs no
 /// such branch. The point on the sphere comes from the angle α at the centre,
 /// `cos α = sin²θ/sin θmax + cos θ·√(1 − sin²θ/sin²θmax)` (pbrt-v4), not from a ray intersection.
 ///
@@ -1160,7 +1161,7 @@ mod tests {
             let (x, y) = (Vec3::X, Vec3::Y);
             v.push(("quad overhead", quad(Vec3::new(-0.5, -0.5, 1.0), x, y, kind)));
             v.push(("quad crossing the horizon", quad(Vec3::new(-1.0, 2.0, -0.5), 2.0 * x, 1.5 * Vec3::Z, kind)));
-            v.push(("p on quad plane", quad(Vec3::new(-0.5, -0.5, 0.0), x, y, kind)));
+            v.push(("p on quad plane", quad(Vec3::new(0.5, -0.5, 0.0), x, y, kind)));
             v.push(("p on quad", quad(Vec3::new(-0.5, -0.5, 0.0), x, y, kind)));
             v.push(("quad edge-on", quad(Vec3::new(1.0, -0.5, 1.0e-6), x, y, kind)));
             v.push(("quad almost edge-on", quad(Vec3::new(1.0, -0.5, 1.0e-3), x, y, kind)));
