@@ -360,14 +360,25 @@ mod tests {
         let (diffuse, specular) = lobe_form_factors(&LtcLobe::single(Mat3::IDENTITY), None, quad);
         assert!(diffuse > 0.01, "the light is above the horizon: {diffuse}");
         assert_eq!(specular, diffuse);
-        // A huge light over the hemisphere holds (nearly) the whole LTC lobe at normal incidence.
+        // A huge light over the hemisphere holds (nearly) the whole LTC lobe at normal incidence,
+        // also before each form factor's clamp to [0, 1], which would hide one too large.
         let table = table();
         for roughness in [0.1f32, 0.5, 1.0] {
             let lobe = lookup(&table, roughness, 1.0);
             let frame = ShadingFrame::new(Vec3::Z, Vec3::Z);
             let big = local_quad(&frame, Vec3::ZERO, Vec3::new(-1e4, -1e4, 1.0), Vec3::X * 2e4, Vec3::Y * 2e4);
             let u = lobe_form_factors(&lobe, None, big).1;
-            assert!((u - 1.0).abs() < 2e-3, "roughness {roughness}: {u}");
+            let unclamped_form_factor = |inv_m: Mat3| {
+                let clipped = Polygon::quad(big).clip_to_horizon().map(|q| inv_m * q).clip_to_horizon();
+                (crate::shade::edge_lanes::edge_sum(&clipped.corners, clipped.count as usize) / core::f32::consts::TAU)
+                    .abs()
+            };
+            let unclamped = lobe.weight * unclamped_form_factor(lobe.inv_m)
+                + (1.0 - lobe.weight) * unclamped_form_factor(lobe.inv_m_2);
+            assert!(
+                (u - 1.0).abs() < 2e-3 && (unclamped - 1.0).abs() < 2e-3,
+                "roughness {roughness}: {u}, {unclamped}"
+            );
         }
     }
 
