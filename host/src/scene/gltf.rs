@@ -35,9 +35,11 @@ pub fn load(path: &Path) -> Result<Scene> {
         .ok_or_else(|| load_error("the file defines no scene".into()))?;
     let nodes = scene_nodes(&document, &scene).map_err(load_error)?;
     // Counted before any is read: nodes may instance one large accessor many times over. Each
-    // mesh's accessors are checked once, however many nodes instance it.
+    // mesh's accessors are checked once, however many nodes instance it, and its instances
+    // counted, so that the last one can take the geometry read for them all.
     let (mut vertices, mut triangle_count): (u64, u64) = (0, 0);
     let mut mesh_sizes: HashMap<usize, (u64, u64)> = HashMap::new();
+    let mut instances_left: HashMap<usize, usize> = HashMap::new();
     for mesh in nodes.iter().filter_map(|(node, _)| node.mesh()) {
         let (mesh_vertices, mesh_triangles) = match mesh_sizes.get(&mesh.index()) {
             Some(&size) => size,
@@ -45,6 +47,7 @@ pub fn load(path: &Path) -> Result<Scene> {
         };
         vertices = vertices.saturating_add(mesh_vertices);
         triangle_count = triangle_count.saturating_add(mesh_triangles);
+        *instances_left.entry(mesh.index()).or_default() += 1;
     }
     for (count, limit, what) in [(vertices, MAX_VERTICES, "vertices"), (triangle_count, MAX_TRIANGLES, "triangles")] {
         if count > limit as u64 {
@@ -55,7 +58,7 @@ pub fn load(path: &Path) -> Result<Scene> {
         }
     }
     let mut meshes = Vec::new();
-    // Each primitive read once: nodes may instance a mesh many times.
+    // Each primitive read once, kept while nodes still to come instance its mesh.
     let mut geometries: HashMap<(usize, usize), PrimitiveGeometry> = HashMap::new();
     let mut unrendered = Unrendered::default();
     let (mut scene_camera, mut orthographic) = (None, false);
@@ -69,6 +72,10 @@ pub fn load(path: &Path) -> Result<Scene> {
             }
         }
         if let Some(mesh) = node.mesh() {
+            let last_instance = instances_left.get_mut(&mesh.index()).is_some_and(|left| {
+                *left -= 1;
+                *left == 0
+            });
             for (index, primitive) in mesh.primitives().enumerate() {
                 if !draws_surfaces(primitive.mode()) {
                     continue;
@@ -78,14 +85,16 @@ pub fn load(path: &Path) -> Result<Scene> {
                 let name = format!("{mesh_name} primitive {index}");
                 let field = primitive_field(&mesh, index);
                 let in_primitive = |e: String| load_error(format!("{e} (in {name:?})"));
-                let geometry = match geometries.get(&(mesh.index(), index)) {
+                let key = (mesh.index(), index);
+                let geometry = match geometries.remove(&key) {
                     Some(geometry) => geometry,
-                    None => {
-                        let read = PrimitiveGeometry::read(&primitive, &buffers, &field).map_err(in_primitive)?;
-                        geometries.entry((mesh.index(), index)).or_insert(read)
-                    }
+                    None => PrimitiveGeometry::read(&primitive, &buffers, &field).map_err(in_primitive)?,
                 };
-                let (positions, triangles) = geometry.instance(&field, (node.index(), *world)).map_err(in_primitive)?;
+                if !last_instance {
+                    geometries.insert(key, geometry.clone());
+                }
+                let (positions, triangles) =
+                    geometry.into_instance(&field, (node.index(), *world)).map_err(in_primitive)?;
                 let material = material(&primitive.material()).map_err(load_error)?;
                 unrendered.textured_meshes += usize::from(has_textures(&primitive.material()));
                 unrendered.see_through_meshes += usize::from(is_see_through(&primitive.material()));
@@ -259,13 +268,15 @@ fn check_position_accessor_indices(root: &gltf::json::Root) -> std::result::Resu
     Ok(())
 }
 
-/// The vertices (at most its POSITION count and its corners) and triangles that `mesh` adds to
-/// the scene each time a node instances it, its surface primitives' POSITION accessors and
-/// indices accessors checked first ([`check_accessor`]: their counts are the file's).
+/// The vertices (at most its POSITION count and its corners) and triangles that `mesh`'s surface
+/// primitives ([`draws_surfaces`]) add to the scene each time a node instances it, their POSITION
+/// and indices accessors checked first ([`check_accessor`]: their counts are the file's).
 fn mesh_size(mesh: &gltf::Mesh, buffers: &[buffer::Data]) -> std::result::Result<(u64, u64), String> {
     let (mut vertices, mut triangles) = (0u64, 0u64);
     for (index, primitive) in mesh.primitives().enumerate() {
-        let Some(position) = primitive.get(&Semantic::Positions) else { continue };
+        let Some(position) = primitive.get(&Semantic::Positions).filter(|_| draws_surfaces(primitive.mode())) else {
+            continue;
+        };
         let field = primitive_field(mesh, index);
         check_accessor(
             &position,
@@ -295,6 +306,7 @@ const UNSIGNED: [DataType; 3] = [DataType::U8, DataType::U16, DataType::U32];
 /// nodes instance its mesh: the POSITION elements its indices use, renumbered in order of first
 /// use (primitives may share one large POSITION accessor, each drawing a range of it), and its
 /// triangles over them.
+#[derive(Clone)]
 struct PrimitiveGeometry {
     /// The POSITION element of each vertex, which errors name.
     elements: Vec<u32>,
@@ -305,22 +317,22 @@ struct PrimitiveGeometry {
 }
 
 impl PrimitiveGeometry {
-    /// Reads `primitive`, whose JSON path `field` the errors name: POSITION a VEC3 float accessor
-    /// and indices (if any) a SCALAR unsigned integer one, as glTF 2.0 requires (the `gltf`
-    /// crate's reader would panic on float indices and read other types as garbage), each inside
-    /// its buffer ([`check_accessor`]); every index below the POSITION count (which
-    /// [`Scene::new`] would report without the JSON path).
+    /// Reads `primitive`, whose JSON path `field` the errors name, its accessors checked by
+    /// [`mesh_size`] (POSITION a VEC3 float accessor and indices, if any, a SCALAR unsigned integer
+    /// one, as glTF 2.0 requires — the `gltf` crate's reader would panic on float indices and read
+    /// other types as garbage —, each inside its buffer); every index must be below the POSITION
+    /// count (which [`Scene::new`] would report without the JSON path).
     fn read(primitive: &gltf::Primitive, buffers: &[buffer::Data], field: &str) -> std::result::Result<Self, String> {
+        #[cfg(test)]
+        tests::PRIMITIVE_READS.with(|reads| reads.set(reads.get() + 1));
         let reader = primitive.reader(|buffer| buffers.get(buffer.index()).map(|data| &data.0[..]));
         let position = primitive.get(&Semantic::Positions).ok_or_else(|| format!("{field}: no POSITION attribute"))?;
         let position_field = format!("{field}.attributes.POSITION");
-        check_accessor(&position, buffers, &position_field, Dimensions::Vec3, &[DataType::F32])?;
         let accessor_positions: Vec<[f32; 3]> =
             reader.read_positions().ok_or_else(|| unreadable(&position, &position_field))?.collect();
         let mut indices: Vec<u32> = match primitive.indices() {
             Some(accessor) => {
                 let indices_field = format!("{field}.indices");
-                check_accessor(&accessor, buffers, &indices_field, Dimensions::Scalar, &UNSIGNED)?;
                 reader.read_indices().ok_or_else(|| unreadable(&accessor, &indices_field))?.into_u32().collect()
             }
             None => (0..accessor_positions.len() as u32).collect(),
@@ -357,32 +369,32 @@ impl PrimitiveGeometry {
 
     /// The positions (moved to world space by `world`, node `node`'s transform) and triangles
     /// (counter-clockwise in world space seen from the front, reversed where `world` mirrors)
-    /// of this primitive (JSON path `field`) as that node instances it; an error if a world
-    /// position is not finite and within [`MAX_COORDINATE`].
-    fn instance(
-        &self,
+    /// of this primitive (JSON path `field`) as that node instances it, made in place; an error
+    /// if a world position is not finite and within [`MAX_COORDINATE`].
+    fn into_instance(
+        mut self,
         field: &str,
         (node, world): (usize, Mat4),
     ) -> std::result::Result<(Vec<Vec3>, Vec<[u32; 3]>), String> {
-        let mut positions = Vec::with_capacity(self.positions.len());
-        for (&local, element) in self.positions.iter().zip(&self.elements) {
-            let p = world.transform_point3(local);
+        for (position, element) in self.positions.iter_mut().zip(&self.elements) {
+            let p = world.transform_point3(*position);
             if !in_range(p) {
                 return Err(format!(
                     "{field}.attributes.POSITION element {element} is at {p} in world space under nodes[{node}]'s \
                      transform; each coordinate must be finite and within ±{MAX_COORDINATE:e}"
                 ));
             }
-            positions.push(p);
+            *position = p;
         }
         // A mirroring transform makes the clockwise face the front one (glTF 2.0, 3.7.4):
         // reversing each triangle keeps the counter-clockwise front face every mesh has here,
         // which decides the side a quad light emits from. Its sign from the linear part in
         // `f64`: in `f32` a tiny scale's determinant underflows to −0 (10⁻⁴⁸ for a scale of
         // 10⁻¹⁶), and a huge one may be ∞ − ∞.
-        let mirrored = DMat3::from_mat4(world.as_dmat4()).determinant() < 0.0;
-        let oriented = |&[a, b, c]: &[u32; 3]| if mirrored { [a, c, b] } else { [a, b, c] };
-        Ok((positions, self.triangles.iter().map(oriented).collect()))
+        if DMat3::from_mat4(world.as_dmat4()).determinant() < 0.0 {
+            self.triangles.iter_mut().for_each(|triangle| triangle.swap(1, 2));
+        }
+        Ok((self.positions, self.triangles))
     }
 }
 
@@ -637,6 +649,11 @@ fn camera(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    thread_local! {
+        /// [`PrimitiveGeometry::read`]'s calls on this thread (each test runs on its own).
+        pub(super) static PRIMITIVE_READS: std::cell::Cell<usize> = const { std::cell::Cell::new(0) };
+    }
     use raywave_shared::Light;
     use std::io::Write;
 
@@ -1288,7 +1305,7 @@ mod tests {
     fn a_large_accessor_instanced_many_times_is_read_once() {
         // POSITION a sparse accessor of 2²⁰ elements, of which the quad's six indices use four,
         // under 10⁴ nodes: each instance adds its four vertices, within every limit, and the
-        // accessor is read once (in milliseconds) — read per instance, 10¹⁰ element reads took
+        // accessor is read once (counted; in milliseconds) — read per instance, 10¹⁰ element reads took
         // 54 s in the test profile, and the limits, which count the vertices kept, allowed
         // 2²⁶ instances.
         let (instances, elements) = (10_000, 1 << 20);
@@ -1301,7 +1318,9 @@ mod tests {
                 1,
             )
         });
+        PRIMITIVE_READS.with(|reads| reads.set(0));
         let scene = load(&path).unwrap();
+        assert_eq!(PRIMITIVE_READS.with(std::cell::Cell::get), 1, "the primitive read once");
         assert_eq!(scene.meshes.len(), instances);
         assert!(scene.meshes.iter().all(|mesh| mesh.positions.len() == 4), "each instance keeps the four it uses");
     }

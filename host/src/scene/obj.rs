@@ -51,11 +51,14 @@ pub fn load(path: &Path) -> Result<Scene> {
         };
         let mut lines = LineCounter::new(text.as_bytes());
         let loaded = tobj::load_mtl_buf(&mut lines).inspect_err(|e| fail(format!("line {}: {e}", lines.line())))?;
-        // tobj would give a name two libraries define the later library's material.
+        // tobj would give a name two libraries define the later library's material (one file
+        // named twice, even as `a.mtl` and `./a.mtl`, is one definition).
         let mut defined_in = defined_in.borrow_mut();
+        let same_file =
+            |a: &Path, b: &Path| a == b || a.canonicalize().ok().is_some_and(|a| b.canonicalize().ok() == Some(a));
         for m in &loaded.0 {
             match defined_in.get(&m.name) {
-                Some(earlier) if *earlier != library => {
+                Some(earlier) if !same_file(earlier, &library) => {
                     fail(format!("material `{}` is defined in {} too", m.name, earlier.display()));
                     return Err(tobj::LoadError::MaterialParseError);
                 }
@@ -224,9 +227,9 @@ fn is_see_through(m: &tobj::Material) -> bool {
 ///   tobj 4.0.5 turns `0` and relative indices past the start into indices near `usize::MAX` and
 ///   multiplies them, which overflows — a panic where overflow checks are on (debug and test
 ///   builds);
-/// - every face corner starts with a vertex position number (`f /1/2 …` does not): tobj keeps
-///   such corners and fails the file only when it closes the object, and [`GeometryCount`],
-///   which counts position numbers, would not have counted them;
+/// - no face corner leaves its vertex position number out (`f /1/2 …`): tobj keeps such corners
+///   and fails the file only when it closes the object, and [`GeometryCount`], which counts
+///   position numbers, would not have counted them;
 /// - every vertex position (`v`) a face uses has coordinates finite and within
 ///   [`MAX_COORDINATE`], after the division by its `w` if it has one. Vertices no face uses are
 ///   not loaded (tobj keeps the used ones), so they may hold anything;
@@ -431,17 +434,15 @@ fn each_vertex_and_index(
             Some(keyword @ ("f" | "l")) => {
                 for vertex in words {
                     for (kind, part) in vertex.split('/').enumerate().take(3) {
-                        let Ok(value) = part.parse::<i64>() else {
-                            if kind == 0 && keyword == "f" {
-                                // tobj 4.0.5 keeps such a corner (and every one after it, in
-                                // memory, before failing the file), uncounted by the limits.
-                                return Err(format!(
-                                    "line {}: face corner `{vertex}` has no vertex position number",
-                                    index + 1
-                                ));
-                            }
-                            continue;
-                        };
+                        if kind == 0 && keyword == "f" && part.is_empty() {
+                            // tobj 4.0.5 keeps such a corner (and every one after it, in memory,
+                            // before failing the file), uncounted by the limits.
+                            return Err(format!(
+                                "line {}: face corner `{vertex}` has no vertex position number",
+                                index + 1
+                            ));
+                        }
+                        let Ok(value) = part.parse::<i64>() else { continue };
                         if value == 0 || value > i64::from(u32::MAX) || value < -defined[kind] {
                             return Err(format!(
                                 "line {}: `{vertex}` holds index {value}, which names no vertex data defined before it",
@@ -766,7 +767,8 @@ mod tests {
     }
 
     /// A name two libraries define: tobj gave it the later library's material without a word
-    /// (an emitter in a.mtl became a grey surface from b.mtl). A library named twice is one
+    /// (an emitter in a.mtl became a grey surface from b.mtl). A library named twice (also by another
+    /// path to it) is one
     /// definition.
     #[test]
     fn a_material_two_libraries_define_is_refused() {
@@ -778,7 +780,8 @@ mod tests {
         std::fs::write(&path, format!("mtllib a.mtl\nmtllib b.mtl\n{triangle}")).unwrap();
         let err = load(&path).unwrap_err().to_string();
         assert!(err.contains("b.mtl: material `lamp` is defined in") && err.contains("a.mtl too"), "{err}");
-        std::fs::write(&path, format!("mtllib a.mtl\nmtllib a.mtl\n{triangle}")).unwrap();
+        std::fs::create_dir(dir.path().join("sub")).unwrap();
+        std::fs::write(&path, format!("mtllib a.mtl\nmtllib sub/../a.mtl\n{triangle}")).unwrap();
         assert_eq!(load(&path).unwrap().meshes()[0].material.emission, Vec3::splat(10.0));
     }
 
@@ -848,7 +851,7 @@ mod tests {
         assert!(face.contains("line 6: face parse error"), "{face}");
         // A corner without a position number, which tobj 4.0.5 keeps until the object closes
         // (uncounted, a face line of 3·10⁸ of them took gigabytes), is refused on its line.
-        for corner in ["x", "/", "/1", "//1"] {
+        for corner in ["/", "/1", "//1"] {
             let face = error(&format!("{quad}o quad\nf 1 2 {corner}\nf 1 2 3\n"));
             let expected = format!("line 6: face corner `{corner}` has no vertex position number");
             assert!(face.contains(&expected), "{face}");

@@ -370,7 +370,8 @@ mod tests {
             let u = lobe_form_factors(&lobe, None, big).1;
             let unclamped_form_factor = |inv_m: Mat3| {
                 let clipped = Polygon::quad(big).clip_to_horizon().map(|q| inv_m * q).clip_to_horizon();
-                (crate::shade::edge_lanes::edge_sum(&clipped.corners, clipped.count as usize) / core::f32::consts::TAU)
+                (crate::shade::polygon::portable_edge_sum(&clipped.corners, clipped.count as usize)
+                    / core::f32::consts::TAU)
                     .abs()
             };
             let unclamped = lobe.weight * unclamped_form_factor(lobe.inv_m)
