@@ -99,6 +99,9 @@ struct SceneReportArgs {
     /// Backend running every stage: `cpu` (default), `auto`, `vulkan` or `vulkan:N`.
     #[arg(long, default_value = "cpu")]
     device: String,
+    /// Enable the Vulkan validation layers (must be installed; refused with `--device cpu`).
+    #[arg(long)]
+    validate: bool,
     /// Print one JSON object per line instead of a table.
     #[arg(long)]
     json: bool,
@@ -121,7 +124,7 @@ impl SceneReportArgs {
         };
         // Before the backend opens, which takes a second on a software Vulkan device.
         check(&options)?;
-        let backend = raywave::open_backend(self.device.parse()?, &BackendOptions::default())?;
+        let backend = open_report_backend(&self.device, self.validate)?;
         Ok((options, backend))
     }
 }
@@ -146,9 +149,18 @@ struct SamplingReportArgs {
     /// Backend tracing the shadow rays: `cpu` (default), `auto`, `vulkan` or `vulkan:N`.
     #[arg(long, default_value = "cpu")]
     device: String,
+    /// Enable the Vulkan validation layers (must be installed; refused with `--device cpu`).
+    #[arg(long)]
+    validate: bool,
     /// Print one JSON object per line instead of a table.
     #[arg(long)]
     json: bool,
+}
+
+/// The backend a report runs on: `device` as `--device` names it, with the Vulkan validation
+/// layers if `validate` (their messages go to stderr as they arrive).
+fn open_report_backend(device: &str, validate: bool) -> raywave::Result<Box<dyn raywave::Backend>> {
+    raywave::open_backend(device.parse()?, &BackendOptions { validation: validate, ..Default::default() })
 }
 
 #[derive(Subcommand)]
@@ -489,7 +501,7 @@ fn report_sampling_command(args: SamplingReportArgs) -> raywave::Result<()> {
     let options = SamplingReportOptions { resolution: args.resolution, reps: args.reps };
     // Before the backend opens, which takes a second on a software Vulkan device.
     validate(&options)?;
-    let mut backend = raywave::open_backend(args.device.parse()?, &BackendOptions::default())?;
+    let mut backend = open_report_backend(&args.device, args.validate)?;
     report_sampling(backend.as_mut(), &options, |line| match line {
         ReportLine::Case(case, result) => print_line(if args.json { result.json() } else { result.row(case) }),
         ReportLine::Spectrum(spectrum) => print_line(spectrum.text(args.json)),

@@ -504,7 +504,7 @@ fn an_orthographic_camera_and_a_skinned_mesh_render_with_warnings() {
 /// frame is shaded or the reference converged).
 #[test]
 fn bench_and_report_options_out_of_range_are_typed_errors() {
-    let cases: [(&[&str], &str); 30] = [
+    let cases: [(&[&str], &str); 32] = [
         (&["bench", "denoise", "--no-vulkan", "--repeats", "0"], "repeats: must be at least 1"),
         (&["bench", "denoise", "--no-vulkan", "--spp", "0"], "spp: 0 is outside"),
         // Before the scene loads, which would fail too.
@@ -541,6 +541,8 @@ fn bench_and_report_options_out_of_range_are_typed_errors() {
         (&["report", "sampling", "--reps", "1"], "reps: 1 is outside 2..=4096: a variance needs two repetitions"),
         (&["report", "shade", "--max-spp", "0"], "max-spp: 0 is not a power of two"),
         (&["report", "shade", "--max-spp", "48"], "max-spp: 48 is not a power of two"),
+        (&["report", "shade", "--validate"], "the CPU backend has no validation layers"),
+        (&["report", "sampling", "--validate"], "the CPU backend has no validation layers"),
         (
             &["report", "error-vs-time", "--reference-spp", "8", "--max-spp", "4"],
             "reference-spp: 8 is below 4 × max-spp (4)",
@@ -674,7 +676,8 @@ fn shade_report_prints_json_lines() {
 }
 
 /// `report error-vs-time --settle-seconds` on a Vulkan device: the same errors, bit for bit, with
-/// milliseconds measured in benchmark mode after a warm-up that each line states.
+/// milliseconds measured in benchmark mode after a warm-up that each line states; the run without
+/// it under the validation layers, silent.
 #[cfg(feature = "vulkan")]
 #[test]
 fn error_vs_time_in_steady_state_measures_the_same_errors() {
@@ -683,7 +686,10 @@ fn error_vs_time_in_steady_state_measures_the_same_errors() {
     }
     let args = ["report", "error-vs-time", "--scenes", "builtin:cornell", "--resolution", "16"];
     let args = [&args[..], &["--reference-spp", "16", "--max-spp", "2", "--reps", "1", "--device", "vulkan", "--json"]];
-    let once = json_lines(&raywave(&args.concat()));
+    // With the validation layers, which must say nothing.
+    let once = raywave(&[&args.concat()[..], &["--validate"]].concat());
+    assert!(once.status.success() && !stderr(&once).contains("[vulkan"), "{}", stderr(&once));
+    let once = json_lines(&once);
     let steady = json_lines(&raywave(&[&args.concat()[..], &["--settle-seconds", "0.05"]].concat()));
     assert_eq!(once.len(), 2 * 5, "{once:?}");
     assert_eq!(steady.len(), once.len(), "{steady:?}");
