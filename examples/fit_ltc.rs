@@ -7,14 +7,14 @@
 //!
 //! The fit itself is `raywave::ltc_fit` (host crate); this binary prints progress and the fit
 //! error per roughness row, and writes the file atomically (a temporary file in the same folder,
-//! then a rename). `--check` re-fits a spread of cells from the committed table's warm starts and
+//! made before the fit so that an unwritable `--out` fails at once, then a rename). `--check` re-fits a spread of cells from the committed table's warm starts and
 //! compares them with the committed values; it exits with status 1 if any differs by more than the
 //! stated tolerances.
 
 use clap::Parser;
 use raywave::ltc_fit::{self, FitConfig, CHECK_L1_TOLERANCE, CHECK_VALUE_TOLERANCE, LTC_SIZE};
 use std::io::Write;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Instant;
 
@@ -39,6 +39,14 @@ fn main() -> ExitCode {
     if args.check {
         return check(&cfg, args.extra);
     }
+    // Reserved before the fit, which takes most of an hour: a path that cannot be written fails now.
+    let pending = match reserve(&args.out) {
+        Ok(pending) => pending,
+        Err(e) => {
+            eprintln!("error: cannot write {}: {e}", args.out.display());
+            return ExitCode::FAILURE;
+        }
+    };
     eprintln!("fitting {LTC_SIZE}×{LTC_SIZE} LTC cells with {cfg:?}");
     let start = Instant::now();
     let table = ltc_fit::fit_table(&cfg, &|diagonals| {
@@ -50,7 +58,7 @@ fn main() -> ExitCode {
     println!("fit: {secs:.1} s, {evals} objective evaluations");
     print_errors(&table);
     let source = ltc_fit::table_source(&table);
-    match write_atomically(&args.out, source.as_bytes()) {
+    match finish(pending, &args.out, source.as_bytes()) {
         Ok(()) => {
             println!("wrote {}", args.out.display());
             ExitCode::SUCCESS
@@ -117,15 +125,18 @@ fn check(cfg: &FitConfig, extra: usize) -> ExitCode {
     }
 }
 
-/// Writes `bytes` to a temporary file beside `path`, syncs it, then renames it over `path`.
-fn write_atomically(path: &std::path::Path, bytes: &[u8]) -> std::io::Result<()> {
-    let mut tmp = path.as_os_str().to_owned();
-    tmp.push(".tmp");
-    let tmp = PathBuf::from(tmp);
-    {
-        let mut f = std::fs::File::create(&tmp)?;
-        f.write_all(bytes)?;
-        f.sync_all()?;
-    }
-    std::fs::rename(&tmp, path)
+/// A temporary file beside `path` for the table, deleted if it is dropped unfinished.
+fn reserve(path: &Path) -> std::io::Result<tempfile::NamedTempFile> {
+    let directory = path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    tempfile::Builder::new().prefix(".fit_ltc-").tempfile_in(directory)
+}
+
+/// Writes `bytes` to the file `reserve` made, syncs it (readable by all, as a source file is),
+/// then renames it over `path`.
+fn finish(mut pending: tempfile::NamedTempFile, path: &Path, bytes: &[u8]) -> std::io::Result<()> {
+    use std::os::unix::fs::PermissionsExt;
+    pending.write_all(bytes)?;
+    pending.as_file().set_permissions(std::fs::Permissions::from_mode(0o644))?;
+    pending.as_file().sync_all()?;
+    pending.persist(path).map(drop).map_err(|e| e.error)
 }

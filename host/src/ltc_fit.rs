@@ -33,10 +33,10 @@
 //!   which fixes `Z` to the lobe's average direction and fits the other three, the frame angle `ψ`
 //!   is fitted too: at grazing views the clamped cosine's own horizon, tilted with `Z`, must line
 //!   up with the surface's, and fixing `Z` leaves up to 10 % of the LTC's mass below the surface
-//!   for views to 78° (where the horizon clipping of `U` drops it; 1.2 % with `ψ` fitted). Freeing
-//!   `ψ` (and the L1 error below) halves the fit's L1 error at roughness 0.6 (0.16 → 0.07 at
-//!   θ = 42°, 0.31 → 0.14 at 65°). At θ = 0 the lobe is rotationally symmetric and the fit is
-//!   isotropic (`ψ = 0`, `m22 = m11`, `m13 = 0`).
+//!   for views to 78° (where the horizon clipping of `U` drops it; at most 1.3 % with `ψ`
+//!   fitted). Freeing `ψ` (and the L1 error below) halves the fit's L1 error at roughness 0.6
+//!   (0.16 → 0.07 at θ = 42°, 0.31 → 0.14 at 65°). At θ = 0 the lobe is rotationally symmetric
+//!   and the fit is isotropic (`ψ = 0`, `m22 = m11`, `m13 = 0`).
 //!   Nelder–Mead works on `p = (ln m11, ln m22, m13/m11, ψ)` (one parameter, `ln m11`, when
 //!   isotropic): the log keeps `m11, m22 > 0` and gives sharp lobes (`m ~ α`) the same relative
 //!   resolution as rough ones; ltc_code optimizes `(m11, m22, m13)` directly with `m ≥ 10⁻⁷`.
@@ -1082,6 +1082,24 @@ pub struct PackedTable<'a> {
     pub amplitude: &'a [[f32; 4]],
 }
 
+impl PackedTable<'_> {
+    /// The 64-bit FNV-1a digest (Fowler–Noll–Vo; offset basis and prime of its 64-bit variant) of
+    /// every value's bits, little-endian, in the packed order ([`packed_table_source`] writes it
+    /// into the file as `LTC_VALUES_DIGEST`): a value edited in place after generation no longer
+    /// matches it, which the file's text, written from the committed values, cannot show.
+    pub fn digest(&self) -> u64 {
+        const OFFSET_BASIS: u64 = 0xcbf2_9ce4_8422_2325;
+        const PRIME: u64 = 0x0000_0100_0000_01b3;
+        self.matrix
+            .iter()
+            .chain(self.matrix_2)
+            .chain(self.amplitude)
+            .flatten()
+            .flat_map(|value| value.to_bits().to_le_bytes())
+            .fold(OFFSET_BASIS, |hash, byte| (hash ^ u64::from(byte)).wrapping_mul(PRIME))
+    }
+}
+
 impl PackedTable<'static> {
     /// The committed table.
     pub fn committed() -> Self {
@@ -1152,6 +1170,10 @@ pub const LTC_SIZE: u32 = {n};
 /// `raywave_host::ltc_fit::FIT_VERSION` of the fitter that wrote this file.
 pub const LTC_FIT_VERSION: u32 = {FIT_VERSION};
 
+/// The FNV-1a digest of every value below as written (`raywave_host::ltc_fit::PackedTable::digest`):
+/// a value edited after generation no longer matches it (tested).
+pub const LTC_VALUES_DIGEST: u64 = {digest:#018x};
+
 // `const` rather than `static`: a const is emitted only where it is used, so the SPIR-V build of
 // this crate carries no 64 KiB tables (the host uploads them as one storage buffer,
 // `LTC_MATRIX ++ LTC_MATRIX_2 ++ LTC_AMPLITUDE`; see `packed_entries`).
@@ -1163,6 +1185,7 @@ pub const LTC_FIT_VERSION: u32 = {FIT_VERSION};
         power = c.error_power,
         fs = c.fit_samples,
         ms = c.moment_samples,
+        digest = table.digest(),
     );
     let array = |s: &mut String, doc: &str, name: &str, values: &[[f32; 4]]| {
         let _ = write!(
@@ -1405,10 +1428,17 @@ mod tests {
 
     #[test]
     fn committed_file_is_what_the_generator_writes() {
-        // Same header (fit parameters, version, layout) and formatting: a hand edit or a fit with
-        // a non-default configuration shows up here.
+        // Same header (fit parameters, version, layout) and formatting: a fit with a non-default
+        // configuration, or an edit of the header or the format, shows up here; a value edited in
+        // place (the expected text is written from the committed values) in the digest the
+        // generator wrote. The re-fit of `CHECK_CELLS` and the table's own tests check values.
         let committed = include_str!("../../shared/src/ltc_table.rs");
         let generated = packed_table_source(&FitConfig::default(), PackedTable::committed());
+        assert_eq!(
+            raywave_shared::ltc_table::LTC_VALUES_DIGEST,
+            PackedTable::committed().digest(),
+            "a value of shared/src/ltc_table.rs was edited after generation"
+        );
         assert!(committed == generated, "shared/src/ltc_table.rs differs from the generator's output");
     }
 

@@ -42,8 +42,8 @@ pub struct ChiSquare {
     /// Probability that a χ² variable with `dof` degrees of freedom exceeds `statistic`
     /// (`1 − CDF`); small values reject the hypothesis that the samples follow the pdf. 0 where
     /// the statistic is infinite (samples in a cell, or pool, that expects none), and NaN where
-    /// pooling left a single cell (`dof` 0): the counts cannot test the pdf, so a check
-    /// `p_value > α` fails rather than passing without power.
+    /// pooling left a single cell (`dof` 0) or an expected count is negative or not finite (a NaN
+    /// pdf): the counts cannot test the pdf, so a check `p_value > α` fails rather than passing.
     pub p_value: f64,
     /// Integral of the pdf over the domain: the summed cell integrals (≈ 1 for a normalized pdf
     /// whose support lies in the domain).
@@ -95,7 +95,7 @@ impl Histogram {
 /// Pearson's chi-square test of `observed` counts against `expected` counts (same length),
 /// pooling cells with expected counts below [`MIN_EXPECTED`]: cells are taken in increasing
 /// order of expectation and merged until the pool reaches [`MIN_EXPECTED`]; a final pool still
-/// below it is merged into the smallest cell kept. Cells expecting exactly 0 add their samples to
+/// below it is merged into the first cell kept (the first pool, or else the smallest cell). Cells expecting exactly 0 add their samples to
 /// the pool and count them in `zero_expected_samples` (see there); empty ones are ignored.
 /// `pdf_integral` is `Σ expected / Σ observed` and `outside` is 0. See
 /// [`ChiSquare::p_value`] for a statistic that is infinite or a single cell left.
@@ -150,7 +150,12 @@ pub fn chi_square_counts(observed: &[u64], expected: &[f64]) -> ChiSquare {
         })
         .sum();
     let dof = cells.len().saturating_sub(1) as u32;
-    let p_value = if statistic == f64::INFINITY {
+    // A NaN expectation fails every comparison above: it would stay a cell of its own, add 0
+    // where nothing was observed, and count towards `dof`.
+    let sound_expectations = expected.iter().all(|e| e.is_finite() && *e >= 0.0);
+    let p_value = if !sound_expectations {
+        f64::NAN
+    } else if statistic == f64::INFINITY {
         0.0
     } else if dof == 0 {
         f64::NAN
@@ -381,7 +386,7 @@ mod tests {
         let r = chi_square_counts(&[1, 1, 1, 1, 1, 10], &[1.0, 1.0, 1.0, 1.0, 1.0, 10.0]);
         assert_eq!((r.statistic, r.dof), (0.0, 1));
         assert!((r.p_value - 1.0).abs() < 1.0e-12);
-        // A leftover pool below the threshold merges into the smallest kept cell.
+        // A leftover pool below the threshold merges into the first kept cell.
         let r = chi_square_counts(&[0, 6, 10], &[1.0, 6.0, 10.0]);
         assert_eq!(r.dof, 1);
         assert!((r.statistic - 1.0 / 7.0).abs() < 1.0e-12, "{r}");
@@ -400,6 +405,12 @@ mod tests {
         for (observed, expected) in [(&[10u64][..], &[0.0][..]), (&[100, 0], &[0.0, 4.0]), (&[3, 2], &[2.5, 2.5])] {
             let r = chi_square_counts(observed, expected);
             assert!(r.dof == 0 && (r.p_value.is_nan() || r.p_value <= 0.01), "{observed:?} against {expected:?}: {r}");
+        }
+        // A NaN, infinite or negative expectation (a broken pdf) is no pass: it had stayed a
+        // cell of its own, adding 0 where nothing was observed (p = 1 here).
+        for bad in [f64::NAN, f64::INFINITY, -1.0] {
+            let r = chi_square_counts(&[50, 50, 0], &[50.0, 50.0, bad]);
+            assert!(r.p_value.is_nan(), "{bad}: {r}");
         }
     }
 }

@@ -29,6 +29,10 @@ pub const LTC_SIZE: u32 = 64;
 /// `raywave_host::ltc_fit::FIT_VERSION` of the fitter that wrote this file.
 pub const LTC_FIT_VERSION: u32 = 4;
 
+/// The FNV-1a digest of every value below as written (`raywave_host::ltc_fit::PackedTable::digest`):
+/// a value edited after generation no longer matches it (tested).
+pub const LTC_VALUES_DIGEST: u64 = 0x260b969489373441;
+
 // `const` rather than `static`: a const is emitted only where it is used, so the SPIR-V build of
 // this crate carries no 64 KiB tables (the host uploads them as one storage buffer,
 // `LTC_MATRIX ++ LTC_MATRIX_2 ++ LTC_AMPLITUDE`; see `packed_entries`).
