@@ -7,7 +7,7 @@
 //!
 //! The fit itself is `raywave::ltc_fit` (host crate); this binary prints progress and the fit
 //! error per roughness row, and writes the file atomically (a temporary file in the same folder,
-//! made before the fit so that an unwritable `--out` fails at once, then a rename). `--check` re-fits a spread of cells from the committed table's warm starts and
+//! then a rename); an `--out` it cannot write fails before the fit. `--check` re-fits a spread of cells from the committed table's warm starts and
 //! compares them with the committed values; it exits with status 1 if any differs by more than the
 //! stated tolerances.
 
@@ -39,14 +39,11 @@ fn main() -> ExitCode {
     if args.check {
         return check(&cfg, args.extra);
     }
-    // Reserved before the fit, which takes most of an hour: a path that cannot be written fails now.
-    let pending = match reserve(&args.out) {
-        Ok(pending) => pending,
-        Err(e) => {
-            eprintln!("error: cannot write {}: {e}", args.out.display());
-            return ExitCode::FAILURE;
-        }
-    };
+    // Before the fit, which takes most of an hour: a path that cannot be written fails now.
+    if let Err(e) = check_writable(&args.out) {
+        eprintln!("error: cannot write {}: {e}", args.out.display());
+        return ExitCode::FAILURE;
+    }
     eprintln!("fitting {LTC_SIZE}×{LTC_SIZE} LTC cells with {cfg:?}");
     let start = Instant::now();
     let table = ltc_fit::fit_table(&cfg, &|diagonals| {
@@ -58,7 +55,7 @@ fn main() -> ExitCode {
     println!("fit: {secs:.1} s, {evals} objective evaluations");
     print_errors(&table);
     let source = ltc_fit::table_source(&table);
-    match finish(pending, &args.out, source.as_bytes()) {
+    match write_atomically(&args.out, source.as_bytes()) {
         Ok(()) => {
             println!("wrote {}", args.out.display());
             ExitCode::SUCCESS
@@ -125,18 +122,26 @@ fn check(cfg: &FitConfig, extra: usize) -> ExitCode {
     }
 }
 
-/// A temporary file beside `path` for the table, deleted if it is dropped unfinished.
-fn reserve(path: &Path) -> std::io::Result<tempfile::NamedTempFile> {
-    let directory = path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
-    tempfile::Builder::new().prefix(".fit_ltc-").tempfile_in(directory)
+/// Fails where `path` cannot become the table's file: it names a directory (or ends in a
+/// separator), or its folder is missing or not writable — probed with a temporary file there,
+/// removed at once (one held through the fit would stay behind if the fit is interrupted).
+fn check_writable(path: &Path) -> std::io::Result<()> {
+    if path.is_dir() || path.as_os_str().to_string_lossy().ends_with(std::path::MAIN_SEPARATOR) {
+        return Err(std::io::Error::new(std::io::ErrorKind::InvalidInput, "it names a directory"));
+    }
+    let folder = path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    tempfile::Builder::new().prefix(".fit_ltc-").tempfile_in(folder).map(drop)
 }
 
-/// Writes `bytes` to the file `reserve` made, syncs it (readable by all, as a source file is),
-/// then renames it over `path`.
-fn finish(mut pending: tempfile::NamedTempFile, path: &Path, bytes: &[u8]) -> std::io::Result<()> {
-    use std::os::unix::fs::PermissionsExt;
-    pending.write_all(bytes)?;
-    pending.as_file().set_permissions(std::fs::Permissions::from_mode(0o644))?;
-    pending.as_file().sync_all()?;
-    pending.persist(path).map(drop).map_err(|e| e.error)
+/// Writes `bytes` to a temporary file beside `path`, syncs it, then renames it over `path`.
+fn write_atomically(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
+    let mut tmp = path.as_os_str().to_owned();
+    tmp.push(".tmp");
+    let tmp = PathBuf::from(tmp);
+    {
+        let mut f = std::fs::File::create(&tmp)?;
+        f.write_all(bytes)?;
+        f.sync_all()?;
+    }
+    std::fs::rename(&tmp, path)
 }

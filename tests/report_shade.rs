@@ -4,11 +4,14 @@
 //! beats the fully stochastic estimator at 1 and 2 samples per pixel; at 1 spp, in shadowed
 //! pixels, it sits at the visibility floor (the error of any unbiased estimate made of `U` times
 //! one binary visibility sample), which on the Cornell box is above half the stochastic error over
-//! all pixels. Fixed seeds; 32² pixels, a 1024-spp reference, 16 repetitions. Each ordering is
-//! asserted at 95 % confidence: both sides' one-sided 97.5 % bounds (`rmse ± t·rmse_stderr`, the
-//! report's delta-method standard error over the repetitions, Student's t for 15 degrees of
-//! freedom) must keep the order, so that together they hold with 95 % (Bonferroni, whatever the
-//! two estimates' correlation).
+//! all pixels. Fixed seeds; 32² pixels, a 1024-spp reference, 16 repetitions. The orderings over
+//! all pixels and in shadow are asserted at 95 % confidence: both sides' one-sided 97.5 % bounds
+//! (`rmse ± t·rmse_stderr`, the report's delta-method standard error over the repetitions,
+//! Student's t for 15 degrees of freedom) must keep the order, so that together they hold with
+//! 95 % (Bonferroni, whatever the two estimates' correlation). The ratio's error in unshadowed
+//! pixels is made of rare events that most repetitions do not see (its standard error is half
+//! its value: one repetition in 16 with an event), where a t interval does not hold: that
+//! ordering is a plain margin of 10×.
 //!
 //! Measured here: Cornell box, 1 spp, ratio in shadow 1.07 × the floor (95 %: 1.03–1.12 ×); floor
 //! over all pixels 0.55 × the stochastic RMSE (0.53 × its interval's upper end) (64², 4096-spp
@@ -75,9 +78,8 @@ fn ratio_estimator_is_exact_where_lit_at_the_visibility_floor_in_shadow_and_beat
                 "{scene} {spp} spp lit: ratio {lit_ratio:.5} stochastic {lit_stochastic:.5} floor {lit_floor:.5}"
             );
             // A tenth: the rare-event error (above) is 0.0016 ± 0.0008 against 0.048 on the
-            // two-light box at 1 spp.
-            let lit = |estimator| line(scene, spp, estimator, "lit");
-            assert_below(lit("ratio"), 0.1, lit("stochastic"), options.reps, &format!("{scene} {spp} spp lit"));
+            // two-light box at 1 spp — at a twentieth it would pass by about one standard error.
+            assert!(lit_ratio < 0.1 * lit_stochastic, "{scene} {spp} spp lit: {lit_ratio} vs {lit_stochastic}");
         }
     }
     // One light of one colour, where the floor is exact for unbiased estimates: the 1-spp ratio

@@ -152,7 +152,7 @@ pub fn chi_square_counts(observed: &[u64], expected: &[f64]) -> ChiSquare {
     let dof = cells.len().saturating_sub(1) as u32;
     // A NaN expectation fails every comparison above: it would stay a cell of its own, add 0
     // where nothing was observed, and count towards `dof`.
-    let sound_expectations = expected.iter().all(|e| e.is_finite() && *e >= 0.0);
+    let sound_expectations = order.iter().all(|&i| expected[i].is_finite() && expected[i] >= 0.0);
     let p_value = if !sound_expectations {
         f64::NAN
     } else if statistic == f64::INFINITY {

@@ -90,11 +90,15 @@ pub fn load(path: &Path) -> Result<Scene> {
                     Some(geometry) => geometry,
                     None => PrimitiveGeometry::read(&primitive, &buffers, &field).map_err(in_primitive)?,
                 };
-                if !last_instance {
-                    geometries.insert(key, geometry.clone());
+                let placement = (node.index(), *world);
+                let (positions, triangles) = if last_instance {
+                    geometry.into_instance(&field, placement)
+                } else {
+                    let instance = geometry.instance(&field, placement);
+                    geometries.insert(key, geometry);
+                    instance
                 }
-                let (positions, triangles) =
-                    geometry.into_instance(&field, (node.index(), *world)).map_err(in_primitive)?;
+                .map_err(in_primitive)?;
                 let material = material(&primitive.material()).map_err(load_error)?;
                 unrendered.textured_meshes += usize::from(has_textures(&primitive.material()));
                 unrendered.see_through_meshes += usize::from(is_see_through(&primitive.material()));
@@ -306,7 +310,6 @@ const UNSIGNED: [DataType; 3] = [DataType::U8, DataType::U16, DataType::U32];
 /// nodes instance its mesh: the POSITION elements its indices use, renumbered in order of first
 /// use (primitives may share one large POSITION accessor, each drawing a range of it), and its
 /// triangles over them.
-#[derive(Clone)]
 struct PrimitiveGeometry {
     /// The POSITION element of each vertex, which errors name.
     elements: Vec<u32>,
@@ -369,33 +372,57 @@ impl PrimitiveGeometry {
 
     /// The positions (moved to world space by `world`, node `node`'s transform) and triangles
     /// (counter-clockwise in world space seen from the front, reversed where `world` mirrors)
-    /// of this primitive (JSON path `field`) as that node instances it, made in place; an error
-    /// if a world position is not finite and within [`MAX_COORDINATE`].
+    /// of this primitive (JSON path `field`) as that node instances it, in new vectors ([`place`]).
+    fn instance(
+        &self,
+        field: &str,
+        placement: (usize, Mat4),
+    ) -> std::result::Result<(Vec<Vec3>, Vec<[u32; 3]>), String> {
+        let (mut positions, mut triangles) = (self.positions.clone(), self.triangles.clone());
+        place(&mut positions, &mut triangles, &self.elements, field, placement)?;
+        Ok((positions, triangles))
+    }
+
+    /// [`Self::instance`] made in this primitive's own vectors, for its last instance.
     fn into_instance(
         mut self,
         field: &str,
-        (node, world): (usize, Mat4),
+        placement: (usize, Mat4),
     ) -> std::result::Result<(Vec<Vec3>, Vec<[u32; 3]>), String> {
-        for (position, element) in self.positions.iter_mut().zip(&self.elements) {
-            let p = world.transform_point3(*position);
-            if !in_range(p) {
-                return Err(format!(
-                    "{field}.attributes.POSITION element {element} is at {p} in world space under nodes[{node}]'s \
-                     transform; each coordinate must be finite and within ±{MAX_COORDINATE:e}"
-                ));
-            }
-            *position = p;
-        }
-        // A mirroring transform makes the clockwise face the front one (glTF 2.0, 3.7.4):
-        // reversing each triangle keeps the counter-clockwise front face every mesh has here,
-        // which decides the side a quad light emits from. Its sign from the linear part in
-        // `f64`: in `f32` a tiny scale's determinant underflows to −0 (10⁻⁴⁸ for a scale of
-        // 10⁻¹⁶), and a huge one may be ∞ − ∞.
-        if DMat3::from_mat4(world.as_dmat4()).determinant() < 0.0 {
-            self.triangles.iter_mut().for_each(|triangle| triangle.swap(1, 2));
-        }
+        place(&mut self.positions, &mut self.triangles, &self.elements, field, placement)?;
         Ok((self.positions, self.triangles))
     }
+}
+
+/// Moves `positions` (each POSITION element `elements` names, of the primitive at JSON path
+/// `field`) to world space by `world`, node `node`'s transform, and reverses `triangles` where
+/// `world` mirrors; an error if a world position is not finite and within [`MAX_COORDINATE`].
+fn place(
+    positions: &mut [Vec3],
+    triangles: &mut [[u32; 3]],
+    elements: &[u32],
+    field: &str,
+    (node, world): (usize, Mat4),
+) -> std::result::Result<(), String> {
+    for (position, element) in positions.iter_mut().zip(elements) {
+        let p = world.transform_point3(*position);
+        if !in_range(p) {
+            return Err(format!(
+                "{field}.attributes.POSITION element {element} is at {p} in world space under nodes[{node}]'s \
+                 transform; each coordinate must be finite and within ±{MAX_COORDINATE:e}"
+            ));
+        }
+        *position = p;
+    }
+    // A mirroring transform makes the clockwise face the front one (glTF 2.0, 3.7.4): reversing
+    // each triangle keeps the counter-clockwise front face every mesh has here, which decides the
+    // side a quad light emits from. Its sign from the linear part in `f64`: in `f32` a tiny
+    // scale's determinant underflows to −0 (10⁻⁴⁸ for a scale of 10⁻¹⁶), and a huge one may be
+    // ∞ − ∞.
+    if DMat3::from_mat4(world.as_dmat4()).determinant() < 0.0 {
+        triangles.iter_mut().for_each(|triangle| triangle.swap(1, 2));
+    }
+    Ok(())
 }
 
 /// How many triangles a primitive of `mode` with `corners` vertices (or indices) draws: the
@@ -736,6 +763,24 @@ mod tests {
             let light = quad_light_from(4, &quad_buffer_with(1.0, [0, 1, 3, 2, 0, 0]), &primitive, node).unwrap();
             assert_eq!(corners(&light), corners(&expected), "{primitive}");
             assert!(facing(&light).abs_diff_eq(Vec3::Z, 1e-6), "{primitive}: faces {}", facing(&light));
+        }
+    }
+
+    /// One mesh under a mirroring node and under a plain one, in either order: each instance winds
+    /// by its own transform (the geometry read once is copied for the first and taken by the last).
+    #[test]
+    fn instances_of_one_mesh_wind_by_their_own_transforms() {
+        let one = r#""nodes":[{"mesh":0,"translation":[0,0,-2]},{"camera":0,"translation":[0.5,0.5,3]}],"#;
+        for (first, second) in [("[-1,1,1]", "[1,1,1]"), ("[1,1,1]", "[-1,1,1]")] {
+            let two = format!(r#""nodes":[{{"mesh":0,"scale":{first}}},{{"mesh":0,"scale":{second}}}],"#);
+            let text = quad_gltf(6).replacen(one, &two, 1);
+            assert!(text.contains(&two));
+            let scene = load(file(&text).path()).unwrap();
+            let [a, b] = [0, 1].map(|i| scene.meshes()[i].triangles.clone());
+            let reversed: Vec<[u32; 3]> = b.iter().map(|&[x, y, z]| [x, z, y]).collect();
+            assert!(!a.is_empty() && a == reversed, "{first} then {second}: {a:?} against {b:?}");
+            let mirrored = if first == "[-1,1,1]" { 0 } else { 1 };
+            assert!(scene.meshes()[mirrored].positions.iter().all(|p| p.x <= 0.0), "{first} then {second}");
         }
     }
 

@@ -766,10 +766,9 @@ mod tests {
         assert!(err.contains("line 5: `usemtl blue` names no material of") && !err.contains("b.mtl"), "{err}");
     }
 
-    /// A name two libraries define: tobj gave it the later library's material without a word
-    /// (an emitter in a.mtl became a grey surface from b.mtl). A library named twice (also by another
-    /// path to it) is one
-    /// definition.
+    /// A name two libraries define: tobj gave it the later library's material without a word (an
+    /// emitter in a.mtl became a grey surface from b.mtl). A library named twice, also by another
+    /// path to it, is one definition.
     #[test]
     fn a_material_two_libraries_define_is_refused() {
         let dir = tempfile::tempdir().unwrap();
