@@ -347,6 +347,7 @@ fn the_error_vs_time_warm_up_measures_in_benchmark_mode_and_the_report_ends_it()
         };
         let options = ErrorVsTimeOptions { report, denoise_radius: None, settle_seconds: Some(0.05) };
         let lines = report_error_vs_time(&mut device, &options, |_| {}).expect("report");
+        assert!(!lines.is_empty(), "{name}: the report measured nothing");
         assert!(lines.iter().all(|l| l.warm_up_seconds.is_some_and(|w| w >= 0.05)), "{name}: {lines:?}");
         assert_eq!(device.trace(&rays).expect("trace").1.dispatches, 1, "{name}: benchmark mode after the report");
         vulkan::assert_clean(device);

@@ -41,6 +41,7 @@ fn assert_stratified(backend: &mut dyn Backend) {
                 padding: 0,
             };
             let bits = backend.sampler_probe(&params).expect("probe runs");
+            assert_eq!(bits.len() as u32, params.sample_count(), "{}: kind {kind} 2^{spp_log2} spp", backend.name());
             for (pixel, samples) in bits.chunks(1 << spp_log2).enumerate() {
                 assert!(is_net(samples), "{}: kind {kind} 2^{spp_log2} spp pixel {pixel} not a net", backend.name());
             }
@@ -78,6 +79,7 @@ fn sampler_bits_are_identical_on_every_vulkan_device() {
             assert_eq!(expected.len() as u32, params.sample_count());
             for device in &mut devices {
                 let bits = device.sampler_probe(&params).expect("device probe");
+                assert_eq!(bits.len(), expected.len(), "kind {kind}, {params:?} on {}", device.name());
                 let mismatches = bits.iter().zip(&expected).filter(|(a, b)| a != b).count();
                 assert_eq!(mismatches, 0, "kind {kind}, {params:?}: {mismatches} samples differ on {}", device.name());
                 vulkan::assert_no_messages_yet(device);

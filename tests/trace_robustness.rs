@@ -52,11 +52,33 @@ struct Traced {
     hits: HitStream,
 }
 
-/// Traces `rays` on the CPU and on every Vulkan device × trace method.
+/// Traces `rays` on the CPU and on every Vulkan device × trace method; each answer holds one hit
+/// record per ray (a short stream would make the counts below vacuous).
 fn trace_everywhere(test: &str, scene: &Scene, rays: &RayStream) -> Vec<Traced> {
     let cpu_hits = cpu::trace(&CpuScene::build(scene).expect("BVH builds"), rays).expect("trace");
     let cpu = Traced { backend: "cpu".to_owned(), driver_intersection: false, hits: cpu_hits };
-    std::iter::once(cpu).chain(trace_on_vulkan(test, scene, rays)).collect()
+    let traced: Vec<Traced> = std::iter::once(cpu).chain(trace_on_vulkan(test, scene, rays)).collect();
+    for t in &traced {
+        t.hits.check("trace").expect("hit fields of one length");
+        assert_eq!(t.hits.len(), rays.origin.len(), "{test}: {} answered a different number of rays", t.backend);
+    }
+    traced
+}
+
+/// Counts the rays that hit something among the first `leaving` rays, and among the rest (the
+/// control rays, each sent back into the surface it left) those that missed it or met it farther
+/// than 1.5 × their origin's distance from their start point `starts[j]`: a tracer that drops hits
+/// near a ray's origin, or an offset too large, fails the control.
+fn self_hits_and_failed_controls(traced: &Traced, rays: &RayStream, leaving: usize, starts: &[Vec3]) -> (usize, usize) {
+    let self_hits = traced.hits.primitive[..leaving].iter().filter(|&&p| p != NO_HIT).count();
+    let failed_controls = (leaving..rays.origin.len())
+        .filter(|&i| {
+            let offset = rays.origin[i].truncate().distance(starts[i - leaving]);
+            let near = traced.hits.t[i] <= 1.5 * offset; // false for a NaN distance
+            traced.hits.primitive[i] == NO_HIT || !near
+        })
+        .count();
+    (self_hits, failed_controls)
 }
 
 #[cfg(feature = "vulkan")]
@@ -176,6 +198,8 @@ fn offset_secondary_rays_never_hit_their_own_convex_surface() {
         // convex, so any hit is a false self-intersection.
         let mut origins = Vec::new();
         let mut directions = Vec::new();
+        // (origin, direction, surface point) of the control rays.
+        let mut controls = Vec::new();
         for i in 0..RAYS_PER_SCALE as usize {
             assert_ne!(primary.primitive[i], NO_HIT, "primary ray {i} at scale {distance} missed");
             let [a, b, c] = sphere.triangles[primary.primitive[i] as usize].map(|v| sphere.positions[v as usize]);
@@ -189,13 +213,27 @@ fn offset_secondary_rays_never_hit_their_own_convex_surface() {
             let d = if d.dot(n) < 0.0 { d - 2.0 * d.dot(n) * n } else { d };
             // Every 8th ray grazes: 1e-4 rad above the tangent plane.
             let d = if i % 8 == 0 { (d - d.dot(n) * n).normalize_or(n.any_orthonormal_vector()) + n * 1e-4 } else { d };
-            origins.push(offset_ray_origin(p, n, triangle_extent(a, b, c)));
+            let origin = offset_ray_origin(p, n, triangle_extent(a, b, c));
+            origins.push(origin);
             directions.push(d);
+            // Every 16th point also sends a control ray straight back in.
+            if i % 16 == 0 {
+                controls.push((origin, -n, p));
+            }
         }
+        let leaving = origins.len();
+        origins.extend(controls.iter().map(|c| c.0));
+        directions.extend(controls.iter().map(|c| c.1));
+        let starts: Vec<Vec3> = controls.iter().map(|c| c.2).collect();
         let rays = rays_from(&origins, &directions, radius * 10.0);
         for traced in trace_everywhere("self-intersection", &scene, &rays) {
-            let false_hits = traced.hits.primitive.iter().filter(|&&p| p != NO_HIT).count();
+            let (false_hits, failed) = self_hits_and_failed_controls(&traced, &rays, leaving, &starts);
             assert_eq!(false_hits, 0, "{}: {false_hits} self-hits at distance {distance}", traced.backend);
+            assert_eq!(
+                failed, 0,
+                "{}: {failed} control rays did not meet the surface they left at distance {distance}",
+                traced.backend
+            );
         }
     }
 }
@@ -220,22 +258,34 @@ fn rays_leaving_large_planes_through_the_origin_never_meet_them() {
         let extent = triangle_extent(ground.positions[0], ground.positions[1], ground.positions[2]);
         let scene = scene_of(vec![ground]);
         let stream = 40 + size_index as u32;
-        let origins: Vec<Vec3> = (0..RAYS_PER_SIZE)
+        let starts: Vec<Vec3> = (0..RAYS_PER_SIZE)
             .map(|i| {
                 let u = random3(i, stream) - 0.5;
-                offset_ray_origin(Vec3::new(u.x, 0.0, u.z) * 0.6 * half_size, Vec3::Y, extent)
+                Vec3::new(u.x, 0.0, u.z) * 0.6 * half_size
             })
             .collect();
-        let directions: Vec<Vec3> = (0..RAYS_PER_SIZE)
+        let mut origins: Vec<Vec3> = starts.iter().map(|&p| offset_ray_origin(p, Vec3::Y, extent)).collect();
+        let mut directions: Vec<Vec3> = (0..RAYS_PER_SIZE)
             .map(|i| {
                 let u = random3(i, stream + 10);
                 Vec3::new(u.x - 0.5, u.y * u.y * u.y * 0.3 + 1e-4, u.z - 0.5)
             })
             .collect();
+        // Control rays: every 16th origin straight back down.
+        let leaving = origins.len();
+        let control_starts: Vec<Vec3> = starts.iter().step_by(16).copied().collect();
+        let control_origins: Vec<Vec3> = origins.iter().step_by(16).copied().collect();
+        origins.extend(control_origins);
+        directions.resize(origins.len(), Vec3::NEG_Y);
         let rays = rays_from(&origins, &directions, 4.0 * half_size);
         for traced in trace_everywhere("large planes", &scene, &rays) {
-            let false_hits = traced.hits.primitive.iter().filter(|&&p| p != NO_HIT).count();
+            let (false_hits, failed) = self_hits_and_failed_controls(&traced, &rays, leaving, &control_starts);
             assert_eq!(false_hits, 0, "{}: {false_hits} self-hits on a plane {half_size} across", traced.backend);
+            assert_eq!(
+                failed, 0,
+                "{}: {failed} control rays did not meet the plane {half_size} across that they left",
+                traced.backend
+            );
         }
     }
 }

@@ -464,8 +464,24 @@ mod tests {
         assert_eq!(shades.bytes(), 63 * 80);
         let lit = shades.analytic.iter().filter(|u| u.max_element() > 0.0).count();
         assert!(lit > 30, "{lit} of 63 pixels lit");
+        // Each field is written: a pixel whose camera ray hit holds a unit shadow ray leaving its
+        // hit point, and most of them a positive `U_N` sample; emission is finite and ≥ 0.
+        let (mut traced, mut sampled) = (0, 0);
+        for i in 0..63 {
+            let (origin, direction) = (shades.shadow_origin[i], shades.shadow_direction[i]);
+            assert!(shades.emitted[i].is_finite() && shades.emitted[i].min_element() >= 0.0, "pixel {i}");
+            if hits.primitive[i] == raywave_shared::stream::NO_HIT || direction.w == 0.0 {
+                continue;
+            }
+            let hit_point = rays.origin[i].xyz() + hits.t[i] * rays.direction[i].xyz();
+            assert!(origin.xyz().distance(hit_point) < 1e-3, "pixel {i}: {origin} vs {hit_point}");
+            assert!((direction.xyz().length() - 1.0).abs() < 1e-5 && direction.w > 0.0, "pixel {i}: {direction}");
+            traced += 1;
+            sampled += usize::from(shades.unshadowed[i].max_element() > 0.0);
+        }
+        assert!(traced > 30 && sampled > 20, "{traced} shadow rays, {sampled} positive U_N samples of 63 pixels");
         let shadow = shadow_rays(&shades);
-        assert_eq!((shadow.origin, shadow.direction), (shades.shadow_origin.clone(), shades.shadow_direction.clone()));
+        assert!(shadow.pixel.iter().copied().eq(0..63));
         let mut accumulator = ShadeAccumulator::new(63);
         accumulator.add(&shades, &vec![0; 63]).unwrap();
         let u_n: Vec<Vec3> = shades.unshadowed.iter().map(|v| v.xyz()).collect();
