@@ -361,6 +361,8 @@ struct SphereCone {
     inside: bool,
     /// Unit axis from `p` towards `c`.
     axis: Vec3,
+    /// `|c − p|`.
+    distance: f32,
     /// sin²θmax = r²/|c − p|².
     sin2_max: f32,
     /// 1 − cos θmax, computed as `sin²θmax / (1 + cos θmax)`, which does not cancel for tiny cones.
@@ -373,13 +375,13 @@ fn sphere_cone(p: Vec3, c: Vec3, r: f32) -> SphereCone {
     let r2 = r * r;
     // `!(a > b)` so that NaN inputs take the inside (area-sampling) path, which sanitizes them.
     if !(dc2 > r2) {
-        return SphereCone { inside: true, axis: Vec3::Z, sin2_max: 1.0, one_minus_cos_max: 1.0 };
+        return SphereCone { inside: true, axis: Vec3::Z, distance: 0.0, sin2_max: 1.0, one_minus_cos_max: 1.0 };
     }
     let dc = dc2.sqrt();
     let ratio = r / dc;
     let sin2_max = ratio * ratio;
     let one_minus_cos_max = sin2_max / (1.0 + safe_sqrt(1.0 - sin2_max));
-    SphereCone { inside: false, axis: wc / dc, sin2_max, one_minus_cos_max }
+    SphereCone { inside: false, axis: wc / dc, distance: dc, sin2_max, one_minus_cos_max }
 }
 
 /// Samples the sphere light (centre `c`, radius `r > 0`) as seen from `p` uniformly within the
@@ -389,8 +391,14 @@ fn sphere_cone(p: Vec3, c: Vec3, r: f32) -> SphereCone {
 /// sin²θmax·u₀` under the constant pdf below, is left out: that draw's density is
 /// `cos θ/(π sin²θmax)`, up to `(1 − cos θmax)/(1 + cos θmax) ≈ sin²θmax/4` off the pdf it returns
 /// (relative, at the cone's axis and rim), and the form used here needs no
-/// such branch. The point on the sphere comes from the angle α at the centre,
-/// `cos α = sin²θ/sin θmax + cos θ·√(1 − sin²θ/sin²θmax)` (pbrt-v4), not from a ray intersection.
+/// such branch. The direction is built from `(θ, φ)` in the cone's frame, and the point on the
+/// sphere from the distance to the near intersection, `t = (d² − r²)/(d·cos θ + d·√(sin²θmax −
+/// sin²θ))` (`d = |c − p|`; the product form does not cancel when `p` is near the sphere).
+/// pbrt-v4 instead takes the point from the angle α at the centre, `cos α = sin²θ/sin θmax +
+/// cos θ·√(1 − sin²θ/sin²θmax)`, and the direction back from it: `cos α` rounds to 1 in `f32`
+/// for α below ~3·10⁻⁴, which `p` close to the sphere sees as a large angle — 10⁻³ off a unit
+/// sphere that direction was 3·10⁻³ rad from the drawn one at the median and 0.46 rad at worst
+/// (5·10⁻² off: 2.4·10⁻³ rad at worst); now both stay within a few ulps.
 ///
 /// pdf = 1/(2π(1 − cos θmax)) sr⁻¹, every sampled direction hits the sphere's visible side.
 /// If `p` is inside or on the sphere, falls back to [`sample_sphere_light_area`] (pbrt-v4 does the
@@ -408,13 +416,14 @@ pub fn sample_sphere_light_cone(p: Vec3, c: Vec3, r: f32, u: Vec2) -> LightSampl
     }
     let one_minus_cos = u.x * cone.one_minus_cos_max;
     let (sin2_theta, cos_theta) = (one_minus_cos * (2.0 - one_minus_cos), 1.0 - one_minus_cos);
-    let sin_max = cone.sin2_max.sqrt();
-    let cos_alpha = sin2_theta / sin_max + cos_theta * safe_sqrt(1.0 - sin2_theta / cone.sin2_max);
-    let cos_alpha = clamp_unit_interval(cos_alpha);
-    let sin_alpha = safe_sqrt(1.0 - cos_alpha * cos_alpha);
-    // pbrt-v4: n = Frame::FromZ(axis).FromLocal(−w) with w = SphericalDirection(sin α, cos α, φ).
-    let normal = -local_to_world(cone.axis, spherical_direction(sin_alpha, cos_alpha, TAU * u.y));
-    LightSample::along((c - p) + r * normal, c + r * normal, normal, 1.0 / (TAU * cone.one_minus_cos_max))
+    // Azimuth φ + π, as pbrt-v4's point at azimuth φ around the centre is seen from `p`.
+    let local = spherical_direction(safe_sqrt(sin2_theta), cos_theta, TAU * u.y);
+    let direction = local_to_world(cone.axis, Vec3::new(-local.x, -local.y, local.z));
+    let d = cone.distance;
+    let t = (d - r) * (d + r) / (d * cos_theta + d * safe_sqrt(cone.sin2_max - sin2_theta));
+    let w = t * direction;
+    let normal = (w - (c - p)).normalize_or_zero();
+    LightSample::along(w, c + r * normal, normal, 1.0 / (TAU * cone.one_minus_cos_max))
 }
 
 /// Solid-angle pdf of [`sample_sphere_light_cone`] for unit `dir` (sr⁻¹):
@@ -1277,27 +1286,40 @@ mod tests {
 
     /// The cone sampler draws uniformly in solid angle, as its constant pdf says: the sample's
     /// `1 − cos θ` is `u₀·(1 − cos θmax)`, computed here in f64 from the returned direction as
-    /// `|d × a|²/(1 + d·a)`. Cones around sin²θmax = 6.85·10⁻⁴, where pbrt-v4's small-angle branch
-    /// drew `sin²θ` uniformly instead (up to 4.3·10⁻⁵ off in this fraction, at u₀ = ½), and
-    /// wider and narrower ones.
+    /// `|d × a|²/(1 + d·a)`, and the sampled point lies on the sphere, along the direction at the
+    /// returned distance. Cones from `p` 10⁻³ off the sphere (where pbrt-v4's point from the angle
+    /// at the centre put the directions up to 0.46 rad off) to 100 radii away, and around sin²θmax
+    /// = 6.85·10⁻⁴, where pbrt-v4's small-angle branch drew `sin²θ` uniformly instead (up to
+    /// 4.3·10⁻⁵ off in this fraction, at u₀ = ½). Measured: the fraction within 2.5·10⁻⁷ at 1.001
+    /// (pbrt-v4's construction: 5.2·10⁻³), 4.4·10⁻⁷ at 3, 4.0·10⁻⁶ at 38 and 8.6·10⁻⁶ at 100 (the
+    /// f32 direction's rounding, which grows as the cone narrows).
     #[test]
-    fn sphere_cone_samples_are_uniform_in_solid_angle_for_small_cones() {
+    fn sphere_cone_samples_are_uniform_in_solid_angle_near_and_far() {
         let p = Vec3::new(0.3, -0.2, 0.1);
-        // Measured: within 2.4·10⁻⁶ at 38, 4.8·10⁻⁶ at 100 (the f32 direction's rounding, which
-        // grows as the cone narrows: 3.7·10⁻⁴ at 10⁴).
-        for distance in [10.0f32, 38.0, 38.3, 100.0] {
+        let (mut worst_fraction, mut worst_point) = (0.0f64, 0.0f32);
+        for distance in [1.001f32, 1.05, 3.0, 10.0, 38.0, 38.3, 100.0] {
             let c = p + Vec3::new(0.36, 0.48, 0.8) * distance;
             let axis = (c - p).as_dvec3().normalize();
             let sin2_max = 1.0 / (c - p).as_dvec3().length_squared();
             let one_minus_cos_max = sin2_max / (1.0 + (1.0 - sin2_max).sqrt());
             for k in 1..16 {
-                let u = Vec2::new(k as f32 / 16.0, 0.3);
-                let d = sample_sphere_light_cone(p, c, 1.0, u).direction.as_dvec3();
-                let one_minus_cos = d.cross(axis).length_squared() / (1.0 + d.dot(axis));
-                let fraction = one_minus_cos / one_minus_cos_max;
-                assert!((fraction - f64::from(u.x)).abs() < 1.0e-5, "distance {distance}, u {}: {fraction}", u.x);
+                for phi in [0.3, 0.8] {
+                    let u = Vec2::new(k as f32 / 16.0, phi);
+                    let s = sample_sphere_light_cone(p, c, 1.0, u);
+                    let d = s.direction.as_dvec3();
+                    let one_minus_cos = d.cross(axis).length_squared() / (1.0 + d.dot(axis));
+                    let fraction = (one_minus_cos / one_minus_cos_max - f64::from(u.x)).abs();
+                    // Relative to the point's coordinates, which round it.
+                    let on_sphere = ((s.point - c).length() - 1.0).abs() / (1.0 + distance);
+                    let along = (p + s.distance * s.direction - s.point).length() / (1.0 + distance);
+                    assert!(fraction < 2.0e-5, "distance {distance}, u {u}: fraction off by {fraction}");
+                    assert!(on_sphere < 1.0e-6 && along < 1.0e-6, "distance {distance}, u {u}: {on_sphere}, {along}");
+                    worst_fraction = worst_fraction.max(fraction);
+                    worst_point = worst_point.max(on_sphere).max(along);
+                }
             }
         }
+        std::println!("worst fraction {worst_fraction:.2e}, point {worst_point:.2e}");
     }
 
     /// For ordinary inputs every sample has a positive pdf that the pdf function reproduces, and
