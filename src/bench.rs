@@ -179,8 +179,8 @@ pub(crate) fn check_settle_seconds(settle_seconds: f64) -> Result<f64> {
 /// Runs `run`, which returns the seconds it measured, untimed until those times have stopped
 /// falling for `settle_seconds` ([`CPU_SETTLE_SECONDS`], [`GPU_SETTLE_SECONDS`]): in rounds
 /// (`WARM_UP_ROUND_SECONDS`, `WARM_UP_ROUND_RUNS`), each round's median against the best
-/// before it (`FALLING_FRACTION`), for at most [`MAX_WARM_UP_SECONDS`] (then with a note on
-/// stderr). Returns the warm-up's seconds. Every `raywave bench` runs it before it measures, and
+/// before it (`FALLING_FRACTION`), until the first run that ends past [`MAX_WARM_UP_SECONDS`]
+/// (then with a note on stderr). Returns the warm-up's seconds. Every `raywave bench` runs it before it measures, and
 /// so does criterion's `workgroup_size` group.
 pub fn warm_up(settle_seconds: f64, run: impl FnMut() -> Result<f64>) -> Result<f64> {
     let start = Instant::now();
@@ -194,10 +194,15 @@ fn warm_up_on(mut now: impl FnMut() -> f64, settle_seconds: f64, mut run: impl F
     loop {
         let round_start = now();
         let mut times = Vec::new();
-        while times.len() < WARM_UP_ROUND_RUNS || now() - round_start < WARM_UP_ROUND_SECONDS {
+        // A round ends early at the limit: runs that each take seconds do not fill one in time.
+        while times.is_empty()
+            || (times.len() < WARM_UP_ROUND_RUNS || now() - round_start < WARM_UP_ROUND_SECONDS)
+                && now() < MAX_WARM_UP_SECONDS
+        {
             times.push(run()?);
         }
         let (round, elapsed) = (median(times), now());
+        let compared = best.is_finite();
         if round < best * (1.0 - FALLING_FRACTION) {
             last_fall = elapsed;
         }
@@ -206,7 +211,11 @@ fn warm_up_on(mut now: impl FnMut() -> f64, settle_seconds: f64, mut run: impl F
             return Ok(elapsed);
         }
         if elapsed >= MAX_WARM_UP_SECONDS {
-            eprintln!("note: times still falling after {elapsed:.0} s of warm-up (now {round:.3e} s)");
+            if compared {
+                eprintln!("note: times still falling after {elapsed:.0} s of warm-up (now {round:.3e} s)");
+            } else {
+                eprintln!("note: warm-up ended at its {MAX_WARM_UP_SECONDS} s limit within its first round (runs of {round:.3e} s)");
+            }
             return Ok(elapsed);
         }
     }
@@ -596,6 +605,19 @@ mod tests {
     fn times_that_keep_falling_end_the_warm_up_at_its_limit() {
         let (seconds, _) = simulated_warm_up(5.0, |n| 0.9f64.powi(n as i32));
         assert!((MAX_WARM_UP_SECONDS..=MAX_WARM_UP_SECONDS + WARM_UP_ROUND_SECONDS).contains(&seconds), "{seconds}");
+    }
+
+    /// Runs of 20 s each: the warm-up stops at the first run that ends past its limit (two runs,
+    /// 40 s), not at the end of a round of three (60 s).
+    #[test]
+    fn runs_longer_than_the_limit_end_the_warm_up_within_its_first_round() {
+        let runs = Cell::new(0u32);
+        let run = || {
+            runs.set(runs.get() + 1);
+            Ok(20.0)
+        };
+        let seconds = warm_up_on(|| 20.0 * f64::from(runs.get()), 1.0, run).expect("warm-up");
+        assert_eq!((seconds, runs.get()), (40.0, 2));
     }
 
     /// On the wall clock the warm-up returns its own elapsed seconds: at least its settling time.

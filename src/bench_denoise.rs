@@ -236,6 +236,10 @@ pub fn bench_denoise(options: &DenoiseBenchOptions, mut emit: impl FnMut(&Denois
     LitFrameSettings::new(options.width, options.height, options.spp).check_on(&crate::cpu::CpuBackend::new())?;
     #[cfg_attr(not(feature = "vulkan"), allow(unused_variables))]
     let vulkan_device = options.vulkan_options.device(options.vulkan, crate::StreamStage::Denoise)?;
+    if vulkan_device.is_none() && options.peak_gbps.is_some() {
+        let reason = "no Vulkan device is measured, so nothing uses it (the CPU rows have no peak)".into();
+        return Err(crate::Error::InvalidParameter { name: "peak-gbps", reason });
+    }
     let input = frame_input(options)?;
     let mut cpu = crate::cpu::CpuBackend::new();
     let on_the_cpu = Measuring { peak_gbps: None, settle_seconds: CPU_SETTLE_SECONDS, workgroup_size: None };

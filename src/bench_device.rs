@@ -22,23 +22,27 @@ pub struct VulkanBenchOptions {
 impl VulkanBenchOptions {
     /// The device a bench measures — if `enabled` and there is one — with these options checked
     /// against it; `stage` is the stage the bench sweeps, the others run their preferred sizes.
-    /// The settling time is checked with or without a device (or the `vulkan` feature);
-    /// workgroup sizes without a device to run them are an error, not ignored.
+    /// The settling time is checked with or without a device (or the `vulkan` feature); workgroup
+    /// sizes or a settling time without a device to use them are an error, not ignored.
     #[cfg_attr(not(feature = "vulkan"), allow(unused_variables))]
     pub(crate) fn device(&self, enabled: bool, stage: StreamStage) -> Result<Option<BenchDevice>> {
         let settle_seconds = self.settle_seconds.map(check_settle_seconds).transpose()?.unwrap_or(GPU_SETTLE_SECONDS);
         // Without a device the bench measures the CPU alone, and says why unless it was asked to.
         let no_device = |why: &str| -> Result<Option<BenchDevice>> {
-            if self.workgroup_sizes.is_empty() {
-                if enabled {
-                    eprintln!("note: no Vulkan device is measured: {why}");
-                }
-                return Ok(None);
+            let device_only = [
+                ("workgroup-sizes", !self.workgroup_sizes.is_empty()),
+                ("settle-seconds", self.settle_seconds.is_some()),
+            ];
+            if let Some((name, _)) = device_only.into_iter().find(|&(_, given)| given) {
+                return Err(crate::Error::InvalidParameter {
+                    name,
+                    reason: format!("no Vulkan device is measured ({why}), so nothing uses it"),
+                });
             }
-            Err(crate::Error::InvalidParameter {
-                name: "workgroup-sizes",
-                reason: format!("no Vulkan device is measured ({why}), so none runs them"),
-            })
+            if enabled {
+                eprintln!("note: no Vulkan device is measured: {why}");
+            }
+            Ok(None)
         };
         if !enabled {
             return no_device("--no-vulkan");

@@ -717,7 +717,7 @@ fn devices(json: bool) -> raywave::Result<()> {
                     if lacks.is_empty() { String::new() } else { format!("  UNUSABLE, lacks: {}", lacks.join(", ")) };
                 print_line(format!(
                     "vulkan:{:<3} {} ({}, Vulkan {})  ray_query={} acceleration_structure={} ray_tracing_pipeline={} buffer_device_address={} workgroup_sizes={sizes}{unusable}",
-                    d["index"], d["name"].as_str().unwrap_or("?"), d["type"].as_str().unwrap_or("?"), d["api_version"].as_str().unwrap_or("?"),
+                    d["index"].to_string(), d["name"].as_str().unwrap_or("?"), d["type"].as_str().unwrap_or("?"), d["api_version"].as_str().unwrap_or("?"),
                     flag("ray_query"), flag("acceleration_structure"), flag("ray_tracing_pipeline"), flag("buffer_device_address"),
                 ));
             }

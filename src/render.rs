@@ -141,7 +141,8 @@ impl RenderOptions {
 /// Checks the options that need neither the scene nor the backend: the frame's settings
 /// ([`LitFrameSettings::check`]: lens values and filter radius in range), the samples per pixel
 /// in range (whether they fit the sampler's index at this image size is checked once the backend
-/// has checked the size), outputs that the view writes, and no file named twice.
+/// has checked the size), outputs that the view writes, no option that another makes the render
+/// ignore, and no file named twice.
 fn check_options(options: &RenderOptions) -> Result<()> {
     let invalid = |name, reason: String| Err(crate::Error::InvalidParameter { name, reason });
     options.frame_settings().check()?;
@@ -162,6 +163,13 @@ fn check_options(options: &RenderOptions) -> Result<()> {
         if let Some((name, _)) = lit_only.into_iter().find(|&(_, given)| given) {
             return invalid(name, "the normals view is neither shaded nor denoised; drop it or use --view lit".into());
         }
+    }
+    // Options that another option's value would make the render ignore.
+    if options.focus_distance.is_some() && options.lens_radius == 0.0 {
+        return invalid("focus", "a pinhole camera (no --aperture) has everything in focus; give --aperture R".into());
+    }
+    if options.denoise == DenoiseMethod::None && options.denoise_radius.is_some() {
+        return invalid("denoise-radius", "--denoise none filters nothing; drop it or choose a filter".into());
     }
     let named =
         [("out", Some(&options.out)), ("exr", options.exr.as_ref()), ("stochastic", options.stochastic.as_ref())];

@@ -121,6 +121,12 @@ impl DenoisePass {
             Self::BilateralY => "denoise bilateral y",
             Self::Composite => "denoise composite",
             Self::SvgfVariance => "svgf variance",
+            // Each iteration by its step (`MAX_ATROUS_ITERATIONS` makes them 1, 2, 4, 8), so that
+            // a timing or bench line says which it is.
+            Self::SvgfAtrous { step: 1 } => "svgf atrous step 1",
+            Self::SvgfAtrous { step: 2 } => "svgf atrous step 2",
+            Self::SvgfAtrous { step: 4 } => "svgf atrous step 4",
+            Self::SvgfAtrous { step: 8 } => "svgf atrous step 8",
             Self::SvgfAtrous { .. } => "svgf atrous",
             Self::SvgfComposite => "svgf composite",
         }

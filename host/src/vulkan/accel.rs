@@ -137,7 +137,7 @@ fn build_all(core: &Arc<Core>, builds: &[Build<'_>]) -> Result<Vec<AccelerationS
 /// `maxInstanceCount` meshes (one instance each) and `maxPrimitiveCount` triangles a mesh.
 /// Building past them is invalid usage — a lost device at best — so it is an error before
 /// anything is uploaded.
-fn check_limits(scene: &Scene, limits: &AccelerationLimits, device: &str) -> Result<()> {
+pub(crate) fn check_limits(scene: &Scene, limits: &AccelerationLimits, device: &str) -> Result<()> {
     let meshes = scene.meshes();
     let too_large = |what: String| Err(Error::SceneTooLarge { scene: scene.name().to_owned(), what });
     if meshes.len() as u64 > limits.max_instances {

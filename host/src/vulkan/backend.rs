@@ -1,7 +1,7 @@
 //! The Vulkan backend: the generate, trace and shade stages as compute dispatches over
 //! device-resident SoA streams.
 
-use super::accel::{build_scene, SceneAccel};
+use super::accel::{build_scene, check_limits, SceneAccel};
 use super::buffer::{check_storage_range, GpuBuffer};
 use super::context::{open, ContextOptions, Core, DeviceInfo};
 use super::denoise::DenoiseKernels;
@@ -528,19 +528,35 @@ impl Backend for VulkanBackend {
 
     fn load_scene(&mut self, scene: &Scene) -> Result<()> {
         let _driver = driver_lock::device_use();
-        self.scene = None;
-        self.scene = Some(match self.trace_method {
+        // Everything that can refuse the scene on the host runs first, so that a refused scene
+        // leaves the loaded one in place (as on the CPU backend). Then the old scene's device
+        // memory is freed before the new one's is allocated: a failure from here on (device
+        // memory) leaves no scene loaded.
+        let software = match self.trace_method {
             TraceMethod::RayQuery | TraceMethod::RtPipeline => {
-                DeviceScene::Accelerated(build_scene(&self.core, scene)?)
+                check_limits(scene, &self.core.accel_limits, &self.core.info.name)?;
+                None
             }
             TraceMethod::Software => {
                 let cpu = CpuScene::build_with(scene, self.software_bvh)?;
-                DeviceScene::Software {
-                    nodes: input_buffer(&self.core, cpu.nodes(), "cwbvh nodes")?,
-                    vertices: input_buffer(&self.core, cpu.vertices(), "cwbvh vertices")?,
-                    ids: input_buffer(&self.core, cpu.ids(), "cwbvh triangle ids")?,
+                for (bytes, what) in [
+                    (std::mem::size_of_val(cpu.nodes()), "cwbvh nodes"),
+                    (std::mem::size_of_val(cpu.vertices()), "cwbvh vertices"),
+                    (std::mem::size_of_val(cpu.ids()), "cwbvh triangle ids"),
+                ] {
+                    check_storage_range(&self.core.limits, bytes as u64, "scene", what)?;
                 }
+                Some(cpu)
             }
+        };
+        self.scene = None;
+        self.scene = Some(match software {
+            None => DeviceScene::Accelerated(build_scene(&self.core, scene)?),
+            Some(cpu) => DeviceScene::Software {
+                nodes: input_buffer(&self.core, cpu.nodes(), "cwbvh nodes")?,
+                vertices: input_buffer(&self.core, cpu.vertices(), "cwbvh vertices")?,
+                ids: input_buffer(&self.core, cpu.ids(), "cwbvh triangle ids")?,
+            },
         });
         Ok(())
     }

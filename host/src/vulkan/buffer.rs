@@ -29,11 +29,13 @@ pub(crate) struct GpuBuffer {
 impl Drop for GpuBuffer {
     fn drop(&mut self) {
         let _driver = driver_lock::device_use();
-        if let (Some(allocation), Ok(mut allocator)) = (self.allocation.take(), self.core.allocator.lock()) {
-            let _ = allocator.free(allocation);
-        }
         // SAFETY: the device is idle after every submission, so no command uses the buffer.
         unsafe { self.core.device.destroy_buffer(self.buffer, None) };
+        // Then its memory; a panic elsewhere while the allocator was locked leaves it usable.
+        if let Some(allocation) = self.allocation.take() {
+            let mut allocator = self.core.allocator.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+            let _ = allocator.free(allocation);
+        }
     }
 }
 
