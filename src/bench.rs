@@ -202,7 +202,6 @@ fn warm_up_on(mut now: impl FnMut() -> f64, settle_seconds: f64, mut run: impl F
             times.push(run()?);
         }
         let (round, elapsed) = (median(times), now());
-        let compared = best.is_finite();
         if round < best * (1.0 - FALLING_FRACTION) {
             last_fall = elapsed;
         }
@@ -211,11 +210,12 @@ fn warm_up_on(mut now: impl FnMut() -> f64, settle_seconds: f64, mut run: impl F
             return Ok(elapsed);
         }
         if elapsed >= MAX_WARM_UP_SECONDS {
-            if compared {
-                eprintln!("note: times still falling after {elapsed:.0} s of warm-up (now {round:.3e} s)");
-            } else {
-                eprintln!("note: warm-up ended at its {MAX_WARM_UP_SECONDS} s limit within its first round (runs of {round:.3e} s)");
-            }
+            // The times fell last `elapsed − last_fall` ago (the first round counts as a fall).
+            let steady = elapsed - last_fall;
+            eprintln!(
+                "note: warm-up ended at its {MAX_WARM_UP_SECONDS} s limit after {elapsed:.1} s, the times steady for \
+                 {steady:.1} s of the {settle_seconds} s asked (now {round:.3e} s a run)"
+            );
             return Ok(elapsed);
         }
     }

@@ -480,8 +480,10 @@ mod tests {
             sampled += usize::from(shades.unshadowed[i].max_element() > 0.0);
         }
         assert!(traced > 30 && sampled > 20, "{traced} shadow rays, {sampled} positive U_N samples of 63 pixels");
+        // The occlusion trace's rays are those shadow rays, ray i for pixel i.
         let shadow = shadow_rays(&shades);
         assert!(shadow.pixel.iter().copied().eq(0..63));
+        assert_eq!((&shadow.origin, &shadow.direction), (&shades.shadow_origin, &shades.shadow_direction));
         let mut accumulator = ShadeAccumulator::new(63);
         accumulator.add(&shades, &vec![0; 63]).unwrap();
         let u_n: Vec<Vec3> = shades.unshadowed.iter().map(|v| v.xyz()).collect();

@@ -158,10 +158,10 @@ pub(crate) fn check_limits(scene: &Scene, limits: &AccelerationLimits, device: &
     }
 }
 
-/// Builds one BLAS per mesh and a TLAS over them (identity transforms, instance i = mesh i),
-/// once the scene is checked against the device's limits ([`check_limits`]).
+/// Builds one BLAS per mesh and a TLAS over them (identity transforms, instance i = mesh i)
+/// for a scene that [`check_limits`] accepted (the caller checks it first, so that a refused
+/// scene leaves the loaded one in place).
 pub(crate) fn build_scene(core: &Arc<Core>, scene: &Scene) -> Result<SceneAccel> {
-    check_limits(scene, &core.accel_limits, &core.info.name)?;
     let meshes = scene.meshes();
     // Every mesh's vertices in one buffer and its indices in another — two uploads, each a
     // blocking submission, rather than two per mesh — and each BLAS reads its own range. The

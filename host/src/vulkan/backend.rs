@@ -544,6 +544,7 @@ impl Backend for VulkanBackend {
                     (std::mem::size_of_val(cpu.vertices()), "cwbvh vertices"),
                     (std::mem::size_of_val(cpu.ids()), "cwbvh triangle ids"),
                 ] {
+                    // `input_buffer` checks each again, as it does every input it uploads.
                     check_storage_range(&self.core.limits, bytes as u64, "scene", what)?;
                 }
                 Some(cpu)
