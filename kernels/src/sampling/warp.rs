@@ -44,9 +44,10 @@ const INV_4PI: f32 = 1.0 / (2.0 * TAU);
 /// Angular slack (radians) with which the pdf functions of cone-shaped light warps accept a
 /// direction just outside the cone: 4 `f32` ulps of 1. A direction sampled on the silhouette of
 /// a sphere light (`u₀ → 1`), built from `1 − cos θ` and turned into the world by the cone's
-/// frame, may round that far outside the exact cone; the slack keeps `pdf(sample(u))`
-/// consistent with the sampler. It widens the
-/// support by 4.8·10⁻⁷ rad, negligible against any cone `f32` directions can resolve.
+/// frame, may round that far outside the exact cone — any of its directions, for a cone
+/// narrower than that (a sphere 10⁸ radii away) —; the slack keeps `pdf(sample(u))` consistent
+/// with the sampler. It widens the support by 4.8·10⁻⁷ rad (in `1 − cos θ`: `s·sin θmax + s²/2`),
+/// negligible against any cone `f32` directions can resolve.
 pub const CONE_SLACK: f32 = 4.0 * f32::EPSILON;
 
 /// Slack with which the quad pdf functions accept a ray that hits the quad's plane just outside
@@ -347,7 +348,13 @@ impl LightSample {
     /// of which miss it. [`LightSample::none`] when any part is not finite or `w` is zero.
     fn along(w: Vec3, point: Vec3, normal: Vec3, pdf: f32) -> Self {
         let distance = w.length();
-        let direction = w / distance;
+        Self::toward(w / distance, distance, point, normal, pdf)
+    }
+
+    /// The sample towards `point` along the unit `direction` at `distance`, for a warp that
+    /// builds them itself ([`LightSample::none`] when any part is not finite or the distance is
+    /// not positive): `w = distance·direction` may be too small to square in `f32`.
+    fn toward(direction: Vec3, distance: f32, point: Vec3, normal: Vec3, pdf: f32) -> Self {
         if distance > 0.0 && distance.is_finite() && direction.is_finite() && normal.is_finite() {
             LightSample { direction, distance, pdf: sanitize_pdf(pdf), point, normal }
         } else {
@@ -372,17 +379,21 @@ struct SphereCone {
 
 fn sphere_cone(p: Vec3, c: Vec3, r: f32) -> SphereCone {
     let wc = c - p;
-    let dc2 = wc.length_squared();
-    let r2 = r * r;
+    // |c − p| scaled by its largest component, so that its square neither underflows (a sphere
+    // 10⁻²³ across) nor overflows; 0/0 is NaN, which takes the inside path.
+    let scale = wc.abs().max_element();
+    let unit_wc = wc / scale;
+    let dc = scale * unit_wc.length();
     // `!(a > b)` so that NaN inputs take the inside (area-sampling) path, which sanitizes them.
-    if !(dc2 > r2) {
+    // Judged on the distance, not its square: where |c − p| rounds to r the cone's sampler would
+    // put every point at distance 0.
+    if !(dc > r) {
         return SphereCone { inside: true, axis: Vec3::Z, distance: 0.0, sin2_max: 1.0, one_minus_cos_max: 1.0 };
     }
-    let dc = dc2.sqrt();
     let ratio = r / dc;
     let sin2_max = ratio * ratio;
     let one_minus_cos_max = sin2_max / (1.0 + safe_sqrt(1.0 - sin2_max));
-    SphereCone { inside: false, axis: wc / dc, distance: dc, sin2_max, one_minus_cos_max }
+    SphereCone { inside: false, axis: unit_wc.normalize(), distance: dc, sin2_max, one_minus_cos_max }
 }
 
 /// Samples the sphere light (centre `c`, radius `r > 0`) as seen from `p` uniformly within the
@@ -393,8 +404,10 @@ fn sphere_cone(p: Vec3, c: Vec3, r: f32) -> SphereCone {
 /// `cos θ/(π sin²θmax)`, up to `(1 − cos θmax)/(1 + cos θmax) ≈ sin²θmax/4` off the pdf it returns
 /// (relative, at the cone's axis and rim), and the form used here needs no
 /// such branch. The direction is built from `(θ, φ)` in the cone's frame, and the point on the
-/// sphere from the distance to the near intersection, `t = (d² − r²)/(d·cos θ + d·√(sin²θmax −
-/// sin²θ))` (`d = |c − p|`; the product form does not cancel when `p` is near the sphere).
+/// sphere from the distance to the near intersection, `t = (d − r)·((d + r)/d)/(cos θ + √(sin²θmax
+/// − sin²θ))` (`d = |c − p|`; the product form does not cancel when `p` is near the sphere, and
+/// forms neither `d²` nor `d·r`, which overflow or underflow at extreme scales), with
+/// `sin²θmax − sin²θ = (1 − u₀)(1 − cos θmax)(cos θ + cos θmax)`, which does not cancel at the rim.
 /// pbrt-v4 instead takes the point from the angle α at the centre, `cos α = sin²θ/sin θmax +
 /// cos θ·√(1 − sin²θ/sin²θmax)`, and the direction back from it: `cos α` rounds to 1 in `f32`
 /// for α below ~3·10⁻⁴, which `p` close to the sphere sees as a large angle — 10⁻³ off a unit
@@ -420,16 +433,18 @@ pub fn sample_sphere_light_cone(p: Vec3, c: Vec3, r: f32, u: Vec2) -> LightSampl
     // Azimuth φ + π, as pbrt-v4's point at azimuth φ around the centre is seen from `p`.
     let local = spherical_direction(safe_sqrt(sin2_theta), cos_theta, TAU * u.y);
     let direction = local_to_world(cone.axis, Vec3::new(-local.x, -local.y, local.z));
-    let (d, rim) = (cone.distance, safe_sqrt(cone.sin2_max - sin2_theta));
-    let t = (d - r) * (d + r) / (d * (cos_theta + rim));
+    let cos_max = 1.0 - cone.one_minus_cos_max;
+    let rim = safe_sqrt((1.0 - u.x) * cone.one_minus_cos_max * (cos_theta + cos_max));
+    let d = cone.distance;
+    let t = (d - r) * ((d + r) / d) / (cos_theta + rim);
     // The normal at the point from the angle α at the centre (pbrt-v4's), its terms written
     // without cancellation: cos α = (d − t·cos θ)/r = (sin²θ + cos θ·√(sin²θmax − sin²θ))/sin θmax,
     // sin α = t·sin θ/r. As `(t·ω − (c − p))/r` it lost ulp(d)/r: 0.06 rad at d = 10⁶·r.
     let sin_max = cone.sin2_max.sqrt();
     let cos_alpha = clamp_unit_interval((sin2_theta + cos_theta * rim) / sin_max);
-    let sin_alpha = (d - r) * (d + r) / (d * r * (cos_theta + rim)) * safe_sqrt(sin2_theta);
+    let sin_alpha = t / r * safe_sqrt(sin2_theta);
     let normal = -local_to_world(cone.axis, spherical_direction(sin_alpha, cos_alpha, TAU * u.y)).normalize();
-    LightSample::along(t * direction, c + r * normal, normal, 1.0 / (TAU * cone.one_minus_cos_max))
+    LightSample::toward(direction, t, c + r * normal, normal, 1.0 / (TAU * cone.one_minus_cos_max))
 }
 
 /// Solid-angle pdf of [`sample_sphere_light_cone`] for unit `dir` (sr⁻¹):
@@ -451,7 +466,9 @@ pub fn sphere_light_cone_pdf(p: Vec3, c: Vec3, r: f32, dir: Vec3) -> f32 {
         return 0.0;
     }
     let one_minus_cos = d.cross(cone.axis).length_squared() / (1.0 + cos_theta);
-    if one_minus_cos <= cone.one_minus_cos_max + cone.sin2_max.sqrt() * CONE_SLACK {
+    // 1 − cos(θmax + s) ≤ 1 − cos θmax + s·sin θmax + s²/2 for the slack angle s.
+    let slack = cone.sin2_max.sqrt() * CONE_SLACK + 0.5 * CONE_SLACK * CONE_SLACK;
+    if one_minus_cos <= cone.one_minus_cos_max + slack {
         sanitize_pdf(1.0 / (TAU * cone.one_minus_cos_max))
     } else {
         0.0
@@ -1292,13 +1309,13 @@ mod tests {
 
     /// The cone sampler draws uniformly in solid angle, as its constant pdf says: the sample's
     /// `1 − cos θ` is `u₀·(1 − cos θmax)`, computed here in f64 from the returned direction as
-    /// `|d × a|²/(1 + d·a)`, and the sampled point lies on the sphere, along the direction at the
-    /// returned distance. Cones from `p` 10⁻³ off the sphere (where pbrt-v4's point from the angle
-    /// at the centre put the directions up to 0.46 rad off) to 100 radii away, and around sin²θmax
-    /// = 6.85·10⁻⁴, where pbrt-v4's small-angle branch drew `sin²θ` uniformly instead (up to
-    /// 4.3·10⁻⁵ off in this fraction, at u₀ = ½). Measured: the fraction within 2.5·10⁻⁷ at 1.001
-    /// (pbrt-v4's construction: 5.2·10⁻³), 4.4·10⁻⁷ at 3, 4.0·10⁻⁶ at 38 and 8.6·10⁻⁶ at 100 (the
-    /// f32 direction's rounding, which grows as the cone narrows).
+    /// `|d × a|²/(1 + d·a)`, from the axis to the rim, and the sampled point lies along the
+    /// direction at the returned distance. Cones from `p` 10⁻³ off the sphere (where pbrt-v4's
+    /// point from the angle at the centre put the directions up to 0.46 rad off) to 100 radii
+    /// away, and around sin²θmax = 6.85·10⁻⁴, where pbrt-v4's small-angle branch drew `sin²θ`
+    /// uniformly instead (up to 4.3·10⁻⁵ off in this fraction, at u₀ = ½). Measured: the fraction
+    /// within 2.5·10⁻⁷ at 1.001 (pbrt-v4's construction: 5.2·10⁻³), 4.4·10⁻⁷ at 3, 4.0·10⁻⁶ at 38
+    /// and 8.6·10⁻⁶ at 100 (the f32 direction's rounding, which grows as the cone narrows).
     #[test]
     fn sphere_cone_samples_are_uniform_in_solid_angle_near_and_far() {
         let p = Vec3::new(0.3, -0.2, 0.1);
@@ -1308,55 +1325,93 @@ mod tests {
             let axis = (c - p).as_dvec3().normalize();
             let sin2_max = 1.0 / (c - p).as_dvec3().length_squared();
             let one_minus_cos_max = sin2_max / (1.0 + (1.0 - sin2_max).sqrt());
-            for k in 1..16 {
+            for k in 0..=16 {
                 for phi in [0.3, 0.8] {
-                    let u = Vec2::new(k as f32 / 16.0, phi);
+                    let u = Vec2::new((k as f32 / 16.0).min(ONE_MINUS_EPSILON), phi);
                     let s = sample_sphere_light_cone(p, c, 1.0, u);
                     let d = s.direction.as_dvec3();
                     let one_minus_cos = d.cross(axis).length_squared() / (1.0 + d.dot(axis));
                     let fraction = (one_minus_cos / one_minus_cos_max - f64::from(u.x)).abs();
                     // Relative to the point's coordinates, which round it.
-                    let on_sphere = ((s.point - c).length() - 1.0).abs() / (1.0 + distance);
                     let along = (p + s.distance * s.direction - s.point).length() / (1.0 + distance);
+                    assert!(s.pdf > 0.0, "distance {distance}, u {u}: {s:?}");
                     assert!(fraction < 2.0e-5, "distance {distance}, u {u}: fraction off by {fraction}");
-                    assert!(on_sphere < 1.0e-6 && along < 1.0e-6, "distance {distance}, u {u}: {on_sphere}, {along}");
+                    assert!(along < 1.0e-6, "distance {distance}, u {u}: the point is {along} off the ray");
                     worst_fraction = worst_fraction.max(fraction);
-                    worst_point = worst_point.max(on_sphere).max(along);
+                    worst_point = worst_point.max(along);
                 }
             }
         }
         std::println!("worst fraction {worst_fraction:.2e}, point {worst_point:.2e}");
     }
 
-    /// The cone sampler's light normal is unit length and faces `p` for spheres from 10⁻³ to
-    /// 10⁻⁸ of their distance across (1 km away, so `p`'s coordinates round too), out to the rim:
-    /// built as `(t·ω − (c − p))/r` it was 0.06 rad off at 10⁻⁶ and zero (a pdf with no normal)
-    /// below ~3·10⁻⁸.
+    /// The cone sampler's light normal is the same construction evaluated in f64 — along the
+    /// kernel's own (rounded) axis and frame, `(t·ω − d·axis)/r` — within 10⁻⁵ rad, for spheres
+    /// from 10⁻³ to 10⁻⁸ of their distance across (1 km from the origin) and from the axis out to
+    /// the rim, and it faces `p`. Built as `(t·ω − (c − p))/r` in f32 it was 0.06 rad off at 10⁻⁶
+    /// and zero below ~3·10⁻⁸; with `√(sin²θmax − sin²θ)` as written, 2.4·10⁻⁴ rad off at the rim.
     #[test]
-    fn sphere_cone_normals_are_unit_and_face_p_for_tiny_spheres() {
+    fn sphere_cone_normals_match_their_f64_construction_out_to_the_rim() {
         let p = Vec3::new(1000.0, -20.0, 3.0);
-        let mut worst_off = 0.0f64;
-        for r in [1.0e-3f32, 1.0e-5, 1.0e-6, 1.0e-7, 1.0e-8].map(|f| f * 1000.0) {
-            let c = p + Vec3::new(0.36, 0.48, 0.8) * 1000.0;
+        let mut worst = 0.0f64;
+        for ratio in [1.0e-3f32, 1.0e-5, 1.0e-6, 1.0e-7, 1.0e-8] {
+            let (c, r) = (p + Vec3::new(0.36, 0.48, 0.8) * 1000.0, ratio * 1000.0);
+            let wc = c - p;
+            let axis = wc / wc.length();
+            let (t1, t2) = axis.any_orthonormal_pair();
+            let (t1, t2, axis) = (t1.as_dvec3(), t2.as_dvec3(), axis.as_dvec3());
+            let (d, r64) = (wc.as_dvec3().length(), f64::from(r));
+            let sin2_max = (r64 / d) * (r64 / d);
+            let one_minus_cos_max = sin2_max / (1.0 + (1.0 - sin2_max).sqrt());
             for k in 0..=16 {
-                for phi in [0.0, 0.3, 0.8] {
+                for phi in [0.0f32, 0.3, 0.8] {
                     let u = Vec2::new((k as f32 / 16.0).min(ONE_MINUS_EPSILON), phi);
                     let s = sample_sphere_light_cone(p, c, r, u);
-                    let (toward_p, exact) = (
-                        -s.direction.as_dvec3(),
-                        ((c - p).as_dvec3() + f64::from(r) * s.normal.as_dvec3()).normalize(),
-                    );
-                    assert!(s.pdf > 0.0 && (s.normal.length() - 1.0).abs() < 1.0e-6, "r {r}, u {u}: {s:?}");
-                    // Facing p, and where p sees it: the normal's point lies along the direction.
-                    let facing = s.normal.as_dvec3().dot(toward_p);
-                    assert!(facing > -1.0e-3 && (k < 16 && facing > 0.0 || k == 16), "r {r}, u {u}: n·(−ω) = {facing}");
-                    let off = exact.cross(toward_p).length() / toward_p.length();
-                    assert!(off < 1.0e-6, "r {r}, u {u}: the point is {off} rad off the direction");
-                    worst_off = worst_off.max(off);
+                    let omc = f64::from(u.x) * one_minus_cos_max;
+                    let (cos, sin) = (1.0 - omc, (omc * (2.0 - omc)).sqrt());
+                    let azimuth = f64::from(TAU * u.y);
+                    let omega = -sin * azimuth.cos() * t1 - sin * azimuth.sin() * t2 + cos * axis;
+                    let t = d * cos - d * (sin2_max - sin * sin).max(0.0).sqrt();
+                    let expected = ((t * omega - d * axis) / r64).normalize();
+                    let normal = s.normal.as_dvec3();
+                    let off = normal.cross(expected).length().atan2(normal.dot(expected));
+                    let facing = normal.dot(-s.direction.as_dvec3());
+                    assert!(s.pdf > 0.0 && off < 1.0e-5, "r/d {ratio}, u {u}: the normal is {off} rad off: {s:?}");
+                    assert!(facing > 0.0 || k == 16 && facing > -1.0e-5, "r/d {ratio}, u {u}: n·(−ω) = {facing}");
+                    worst = worst.max(off);
                 }
             }
         }
-        std::println!("the point at most {worst_off:.1e} rad off the direction");
+        std::println!("normals at most {worst:.1e} rad off");
+    }
+
+    /// The cone sampler and its pdf agree, with unit directions and normals, at extreme scales
+    /// (a review's cases): a sphere 10⁻²³ across (`d·r` underflowed and every sample was lost
+    /// while the pdf was 4.4; `|c − p|²` underflows too), one 10¹⁹ away (`d·r` overflowed:
+    /// normals on the axis for directions off it), `p` within an ulp of the surface (where
+    /// `|c − p|` rounded to `r` every sample lay at distance 0 and was lost while the pdf was
+    /// 1/2π), and spheres 10⁸ and 10¹⁰ radii away, narrower than an `f32` direction resolves.
+    #[test]
+    fn sphere_cone_sample_and_pdf_agree_at_extreme_scales() {
+        let cases = [
+            (Vec3::ZERO, Vec3::new(0.0, 0.0, 3.74e-23), 1.0e-23),
+            (Vec3::ZERO, Vec3::new(0.0, 0.0, 1.8e19), 1.79e19),
+            (Vec3::ZERO, Vec3::new(0.0, 0.000_345_267, 1.0), 1.0),
+            (Vec3::new(0.0, 0.3, 0.0), Vec3::new(359_996_512.0, 480_015_328.0, 799_992_256.0), 1.0),
+            (Vec3::new(0.0, 0.3, 0.0), Vec3::new(3.6e9, 4.8e9, 8.0e9), 1.0),
+        ];
+        for (p, c, r) in cases {
+            let mut lost = 0;
+            for ui in random_samples(4096, 11) {
+                let s = sample_sphere_light_cone(p, c, r, ui);
+                let q = sphere_light_cone_pdf(p, c, r, s.direction);
+                lost += usize::from(!(s.pdf > 0.0));
+                let unit = (s.normal.length() - 1.0).abs() < 1.0e-5 && (s.direction.length() - 1.0).abs() < 1.0e-5;
+                assert!(unit && s.point.is_finite(), "p {p}, c {c}, r {r}, u {ui}: {s:?}");
+                assert!((q - s.pdf).abs() <= 1.0e-3 * s.pdf, "p {p}, c {c}, r {r}, u {ui}: pdf {q} vs {s:?}");
+            }
+            assert_eq!(lost, 0, "p {p}, c {c}, r {r}: samples without a pdf");
+        }
     }
 
     /// For ordinary inputs every sample has a positive pdf that the pdf function reproduces, and
