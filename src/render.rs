@@ -140,13 +140,17 @@ impl RenderOptions {
 
 /// Checks the options that need neither the scene nor the backend: the frame's settings
 /// ([`LitFrameSettings::check`]: lens values and filter radius in range), the samples per pixel
-/// in range (whether they fit the sampler's index at this image size is checked once the backend
-/// has checked the size), outputs that the view writes, no option that another makes the render
-/// ignore, and no file named twice.
+/// in range, the image size and the samples for it as far as no backend is needed
+/// ([`LitFrameSettings::check_size`]), outputs that the view writes, no option that another makes
+/// the render ignore, and no file named twice.
 fn check_options(options: &RenderOptions) -> Result<()> {
     let invalid = |name, reason: String| Err(crate::Error::InvalidParameter { name, reason });
-    options.frame_settings().check()?;
+    let settings = options.frame_settings();
+    settings.check()?;
     crate::frame::check_sample_count("spp", options.spp)?;
+    // The image size and the samples for it, before the scene loads and the backend opens (its
+    // own pixel limit is checked once it is open).
+    settings.check_size()?;
     if options.view == RenderView::Normals {
         for (name, given) in [("exr", options.exr.is_some()), ("stochastic", options.stochastic.is_some())] {
             if given {

@@ -198,7 +198,8 @@ fn bad_input_is_a_typed_error_without_output() {
     assert_rejected(&["--device", "cpu", "--scene", "/no/such/scene.obj"], "/no/such/scene.obj");
     assert_rejected(&["--device", "cpu", "--scene", "builtin:teapot"], "teapot");
     assert_rejected(&["--device", "cpu", "--width", "0"], "at least 1");
-    assert_rejected(&["--device", "cpu", "--width", "65536", "--height", "2048"], "exceed the limit");
+    // The CPU's own pixel limit (2²⁶), at a sample count the sampler's index holds.
+    assert_rejected(&["--device", "cpu", "--width", "65536", "--height", "2048", "--spp", "1"], "exceed the limit");
     #[cfg(feature = "vulkan")]
     assert_rejected(&["--device", "vulkan:99"], "vulkan:99");
     assert_rejected(&["--device", "gpu"], "expected auto, cpu, vulkan");
@@ -207,12 +208,16 @@ fn bad_input_is_a_typed_error_without_output() {
     assert_rejected(&["--device", "cpu", "--spp", "70000"], "spp: 70000 is outside 1..=65536");
     // Before the scene loads (this one would fail to) and the device opens (nor would it).
     assert_rejected(&["--device", "vulkan:99", "--scene", "/no/such/scene.obj", "--spp", "0"], "spp: 0 is outside");
+    // So are the image size and the samples for it, which need no backend.
+    let nowhere = ["--device", "vulkan:99", "--scene", "/no/such/scene.obj"];
+    assert_rejected(&[&nowhere[..], &["--width", "0"]].concat(), "at least 1");
+    assert_rejected(&[&nowhere[..], &["--width", "65536", "--height", "1024", "--spp", "4"]].concat(), "32-bit index");
     let sampler_overflow = ["--device", "cpu", "--width", "65536", "--height", "1024", "--spp", "4"];
     assert_rejected(&sampler_overflow, "exceed the sampler's 32-bit index");
-    // A side over 65536 is refused by every backend, whatever the sampler: the size is named.
+    // A side over 65536 is refused for every backend, whatever the sampler: the size is named.
     for sampler in ["zsobol", "sobol"] {
         let too_wide = ["--device", "cpu", "--sampler", sampler, "--width", "70000", "--height", "1", "--spp", "1"];
-        assert_rejected(&too_wide, "image size 70000×1 is invalid on cpu");
+        assert_rejected(&too_wide, "image size 70000×1 is invalid on every backend");
         assert_rejected(&too_wide, "a side of 70000 pixels exceeds 65536");
     }
     assert_rejected(&["--device", "cpu", "--view", "albedo"], "unknown view `albedo`");

@@ -3,7 +3,7 @@
 //! `emitted + U · den(S_N)/den(U_N)`. This is what `raywave render` runs; an engine that builds its
 //! own [`Scene`] ([`Scene::new`]) calls [`render_lit`] and gets the image in memory.
 
-use crate::backend::{Backend, StageReport};
+use crate::backend::{check_image_size_common, Backend, StageReport};
 use crate::denoise::{check_radius, frame_params, rgb, DenoiseInput, DenoiseMethod};
 use crate::error::{Error, Result};
 use crate::frame::{check_samples_per_pixel, generate_params_with, sampler_params};
@@ -80,6 +80,15 @@ impl LitFrameSettings {
             }
         }
         Ok(())
+    }
+
+    /// Checks the image size against the rules every backend shares (at least one pixel, a side of
+    /// at most [`crate::backend::MAX_IMAGE_SIDE`]) and the samples per pixel for that size: all of
+    /// [`Self::check_on`] but a backend's own pixel limit, so that a job can refuse them before
+    /// it loads a scene or opens a backend.
+    pub fn check_size(&self) -> Result<()> {
+        check_image_size_common(self.width, self.height, u64::MAX, "every backend")?;
+        check_samples_per_pixel("spp", self.sampler_kind, self.width, self.height, self.samples_per_pixel)
     }
 
     /// Checks every setting for a frame on `backend`: [`Self::check`], then the image size
@@ -275,6 +284,12 @@ mod tests {
         good.check_on(&CpuBackend::new()).unwrap();
         let empty = LitFrameSettings::new(0, 32, 4).check_on(&CpuBackend::new());
         assert!(matches!(empty, Err(Error::ImageSize { width: 0, .. })), "{empty:?}");
+        // Without a backend: the sides every backend shares and the sampler's index.
+        assert!(matches!(LitFrameSettings::new(0, 32, 4).check_size(), Err(Error::ImageSize { width: 0, .. })));
+        assert!(matches!(LitFrameSettings::new(65537, 1, 1).check_size(), Err(Error::ImageSize { .. })));
+        let overflow = LitFrameSettings::new(65536, 1, 2).check_size();
+        assert!(matches!(overflow, Err(Error::InvalidParameter { name: "spp", .. })), "{overflow:?}");
+        good.check_size().unwrap();
         assert_eq!(rejected_setting(LitFrameSettings { samples_per_pixel: 0, ..good }), "spp");
         assert_eq!(rejected_setting(LitFrameSettings::new(4096, 4096, 1024)), "spp");
         assert_eq!(rejected_setting(LitFrameSettings::new(65536, 1, 2)), "spp");
