@@ -347,6 +347,10 @@ fn denoise_matches_the_cpu_on_degenerate_sizes_on_every_vulkan_device() {
     all.extend(cases("1×1", params, input));
     let (params, input) = synthetic(3, 200, 12);
     all.extend(cases("3×200", params, input));
+    let (params, input) = synthetic(200, 1, 13);
+    all.extend(cases("200×1", params, input));
+    let (params, input) = synthetic(200, 3, 14);
+    all.extend(cases("200×3", params, input));
     // A single pixel has nothing to average with: the denoiser leaves it as it is.
     let mut cpu = CpuBackend::new();
     for case in &all[..3] {
@@ -354,7 +358,9 @@ fn denoise_matches_the_cpu_on_degenerate_sizes_on_every_vulkan_device() {
         assert_eq!(color, raw_composite(&case.input), "{}: a lone pixel changed", case.name);
     }
     check_parity("denoise parity (1×1)", &all[..3], 0.0);
-    check_parity("denoise parity (3×200)", &all[3..], 0.3);
+    check_parity("denoise parity (3×200)", &all[3..6], 0.3);
+    check_parity("denoise parity (200×1)", &all[6..9], 0.9);
+    check_parity("denoise parity (200×3)", &all[9..], 0.9);
 }
 
 #[test]

@@ -473,6 +473,51 @@ mod tests {
     }
 
     #[test]
+    fn normal_depth_view_faces_normals_to_the_ray_shades_depth_and_places_pixels() {
+        use crate::scene::{Camera, Material, Mesh, Scene};
+        use glam::{Vec2, Vec4};
+        use raywave_shared::stream::NO_HIT;
+        // One square in the plane z = 0, its winding facing +z.
+        let square = Mesh {
+            name: "square".into(),
+            positions: vec![
+                Vec3::new(-1.0, -1.0, 0.0),
+                Vec3::new(1.0, -1.0, 0.0),
+                Vec3::new(1.0, 1.0, 0.0),
+                Vec3::new(-1.0, 1.0, 0.0),
+            ],
+            triangles: vec![[0, 1, 2], [0, 2, 3]],
+            material: Material::diffuse(Vec3::ONE),
+        };
+        let camera = Camera { position: Vec3::Z, look_at: Vec3::ZERO, up: Vec3::Y, vertical_fov_degrees: 40.0 };
+        let scene = Scene::new("square", vec![square], camera).expect("scene");
+        // A 3 × 2 image whose rays come in a shuffled pixel order: from the front at t = 1 and at
+        // t = 2 (the farthest hit), from behind at t = 2, and three misses.
+        let (down, up) = (Vec4::new(0.0, 0.0, -1.0, 10.0), Vec4::new(0.0, 0.0, 1.0, 10.0));
+        let rays = RayStream {
+            origin: vec![Vec4::ZERO; 6],
+            direction: vec![down, up, down, up, down, down],
+            pixel: vec![4, 0, 5, 1, 3, 2],
+        };
+        let hits = HitStream {
+            t: vec![1.0, 2.0, 2.0, 0.0, 0.0, 0.0],
+            primitive: vec![0, 1, 1, NO_HIT, NO_HIT, NO_HIT],
+            instance: vec![0, 0, 0, NO_HIT, NO_HIT, NO_HIT],
+            barycentrics: vec![Vec2::splat(0.25); 6],
+        };
+        let image = normal_depth_image(&scene, &rays, &hits, 3, 2);
+        let at = |pixel: u32| image.get_pixel(pixel % 3, pixel / 3).0;
+        // Colour (0.5 + 0.5·n)·(1 − 0.6·t/t_max), rounded: the front face +z at t = 1 is
+        // (0.35, 0.35, 0.7); +z at t = 2 is (0.2, 0.2, 0.4); seen from behind, −z at t = 2, (0.2, 0.2, 0).
+        assert_eq!(at(4), [89, 89, 179]);
+        assert_eq!(at(5), [51, 51, 102]);
+        assert_eq!(at(0), [51, 51, 0]);
+        for miss in [1, 2, 3] {
+            assert_eq!(at(miss), [0, 0, 0], "pixel {miss} missed");
+        }
+    }
+
+    #[test]
     fn srgb_encoding_clamps_and_follows_the_transfer_function() {
         let infinite = Vec3::new(f32::INFINITY, f32::NEG_INFINITY, 0.0);
         let colors = [Vec3::new(0.0, 1.0, 0.5), Vec3::new(-1.0, 7.0, f32::NAN), Vec3::splat(0.002), infinite];
