@@ -12,10 +12,10 @@
 //! ([`DenoiseMethod::None`]), a filter and the composite for the others (GPU timestamps on
 //! Vulkan, wall clock on the CPU; not the host's work between them, nor uploads and readbacks)
 //! — averaged over the repetitions; with `settle_seconds`, in benchmark mode after a warm-up,
-//! the reference image still rendered once per pass ([`PreparedScene::settle`]). The G-buffer
-//! is generated and traced once per scene, and its time, added to every frame's, is that one
-//! run's: cold
-//! (the scene's first dispatch) unless `settle_seconds` traces it again after the warm-up.
+//! the reference image still rendered once per pass ([`PreparedScene::settle`]); without it, after
+//! one untimed frame of every method, so that no method is charged a pass's first run
+//! ([`PreparedScene::run_every_pass_once`]). The G-buffer's time, added to every frame's, is
+//! that of one trace made after the untimed frames.
 //!
 //! Every method is charged the same shade passes, which evaluate the analytic `U` for every
 //! light on every pass although the stochastic methods never read it: the time axis compares
@@ -54,7 +54,8 @@ pub struct ErrorVsTimeOptions {
     /// Steady-state milliseconds: measure in benchmark mode after 1-spp frames have run untimed
     /// until their times have not fallen for this many seconds (`0..=30`), per scene
     /// ([`PreparedScene::settle`]); `None`: each stage of a frame runs once, as a GPU may run it
-    /// at idle clocks (README, "On an NVIDIA H100": ~5× slower). Errors are the same either way.
+    /// at idle clocks (README, "On an NVIDIA H100": ~5× slower), after one untimed frame of every
+    /// method ([`PreparedScene::run_every_pass_once`]). Errors are the same either way.
     pub settle_seconds: Option<f64>,
 }
 
@@ -208,6 +209,17 @@ impl PreparedScene {
         Ok((image, self.gbuffer.sanitized + run.sanitized() + replaced))
     }
 
+    /// Renders one 1-spp frame of every method untimed, then traces the G-buffer again — the
+    /// same rays and hits — so that no method's time includes a pass's first run on the backend
+    /// (lavapipe compiles a pipeline at its first dispatch; the reference, composited on the
+    /// host, runs neither the composite nor the filters): each stage of a measured frame still
+    /// runs once, as a GPU may run it at idle clocks, but none runs for the first time.
+    pub fn run_every_pass_once(&mut self, backend: &mut dyn Backend, scene: &Scene) -> Result<()> {
+        self.frame(backend, 1, 0)?;
+        self.gbuffer = GBuffer::new(backend, scene, self.resolution)?;
+        Ok(())
+    }
+
     /// Switches `backend` to benchmark mode (50 ms of back-to-back dispatches per timed
     /// submission) and renders 1-spp frames untimed until their times have not fallen for
     /// `settle_seconds`, then traces the G-buffer again — the same rays and hits — so that
@@ -336,8 +348,13 @@ pub fn report_error_vs_time(
         };
         let (reference, sanitized) = prepared.reference(backend, report.reference_spp)?;
         super::warn_if_sanitized(name, report.reference_spp, sanitized);
-        let warm_up_seconds =
-            options.settle_seconds.map(|settle| prepared.settle(backend, &scene, settle)).transpose()?;
+        let warm_up_seconds = match options.settle_seconds {
+            Some(settle) => Some(prepared.settle(backend, &scene, settle)?),
+            None => {
+                prepared.run_every_pass_once(backend, &scene)?;
+                None
+            }
+        };
         let seeds: Vec<u32> = (0..report.reps).collect();
         for spp in report.spp_steps() {
             let (errors, sanitized) = prepared.errors(backend, &reference, spp, &seeds)?;
