@@ -182,6 +182,7 @@ fn parse(bytes: &[u8], base: Option<&Path>) -> std::result::Result<(Document, Ve
     let gltf::Gltf { document, blob } = gltf::Gltf::from_slice_without_validation(bytes).map_err(|e| e.to_string())?;
     check_position_accessor_indices(document.as_json())?;
     let document = Document::from_json(document.into_json()).map_err(|e| e.to_string())?;
+    check_camera_projections(document.as_json())?;
     let buffers = load_buffers(&document, base, blob)?;
     Ok((document, buffers))
 }
@@ -267,6 +268,33 @@ fn check_position_accessor_indices(root: &gltf::json::Root) -> std::result::Resu
                     ));
                 }
             }
+        }
+    }
+    Ok(())
+}
+
+/// Checks that each camera defines the projection its `type` names and not the other, as glTF 2.0
+/// requires: gltf 1.4.1's validation asks only for one of the two, and its
+/// `Camera::projection` unwraps the one `type` names (a panic on `"type":"perspective"` with only
+/// an `orthographic` object).
+fn check_camera_projections(root: &gltf::json::Root) -> std::result::Result<(), String> {
+    use gltf::json::camera::Type;
+    for (index, camera) in root.cameras.iter().enumerate() {
+        let (named, other, defines_named, defines_other) = match camera.type_ {
+            Checked::Valid(Type::Perspective) => {
+                ("perspective", "orthographic", camera.perspective.is_some(), camera.orthographic.is_some())
+            }
+            Checked::Valid(Type::Orthographic) => {
+                ("orthographic", "perspective", camera.orthographic.is_some(), camera.perspective.is_some())
+            }
+            // Refused by `Document::from_json` already.
+            Checked::Invalid => return Err(format!("cameras[{index}].type: not a camera type")),
+        };
+        if !defines_named {
+            return Err(format!("cameras[{index}].{named}: missing (the camera's type is {named})"));
+        }
+        if defines_other {
+            return Err(format!("cameras[{index}].{other}: defined, but the camera's type is {named}"));
         }
     }
     Ok(())
@@ -1096,6 +1124,34 @@ mod tests {
             // Mirrored in y (alone or with x and z: a point reflection) the lamp's front turns up.
             let expected = if scale == "[-1, 1, 1]" { Vec3::NEG_Y } else { Vec3::Y };
             assert!(facing.abs_diff_eq(expected, 1e-6), "scale {scale}: faces {facing}");
+        }
+    }
+
+    /// A camera whose `type` names a projection it does not define panicked inside the `gltf`
+    /// crate; one that defines both is as invalid. Both are errors naming the field, whether or
+    /// not a node uses the camera.
+    #[test]
+    fn a_camera_must_define_the_projection_its_type_names_and_only_it() {
+        let perspective = r#"{"type":"perspective","perspective":{"yfov":0.8,"znear":0.01}}"#;
+        let orthographic_object = r#""orthographic":{"xmag":1,"ymag":1,"znear":0.01,"zfar":10}"#;
+        let perspective_object = r#""perspective":{"yfov":0.8,"znear":0.01}"#;
+        for (camera, expected) in [
+            (format!(r#"{{"type":"perspective",{orthographic_object}}}"#), "cameras[0].perspective: missing"),
+            (format!(r#"{{"type":"orthographic",{perspective_object}}}"#), "cameras[0].orthographic: missing"),
+            (
+                format!(r#"{{"type":"perspective",{perspective_object},{orthographic_object}}}"#),
+                "cameras[0].orthographic: defined",
+            ),
+            (
+                format!(r#"{perspective},{{"type":"orthographic",{perspective_object}}}"#),
+                "cameras[1].orthographic: missing",
+            ),
+        ] {
+            let text = quad_gltf(6).replacen(perspective, &camera, 1);
+            assert_ne!(text, quad_gltf(6));
+            let f = file(&text);
+            let err = load(f.path()).unwrap_err().to_string();
+            assert!(err.contains(expected) && err.contains(&f.path().display().to_string()), "{camera}: {err}");
         }
     }
 
