@@ -217,10 +217,17 @@ pub struct ShadingFrame {
 
 impl ShadingFrame {
     /// The frame for unit normal `n` and unit view direction `v` (pointing away from the surface).
+    /// The view's part across `n` keeps a rounding error of ~ε along `n`, which normalising a
+    /// short one magnifies (a view 1.2·10⁻⁶ rad from `n` gave a tangent 0.26 along it, and `U`
+    /// 12–51 % off): the tangent is projected off `n` once more after normalising.
     pub fn new(n: Vec3, v: Vec3) -> Self {
         let projected = v - n * n.dot(v);
-        let tangent =
-            if projected.length_squared() > 1.0e-12 { projected.normalize() } else { n.any_orthonormal_vector() };
+        let tangent = if projected.length_squared() > 1.0e-12 {
+            let rough = projected.normalize();
+            (rough - n * n.dot(rough)).normalize()
+        } else {
+            n.any_orthonormal_vector()
+        };
         Self { tangent, bitangent: n.cross(tangent), normal: n }
     }
 
@@ -452,5 +459,30 @@ mod tests {
         // View along the normal: any tangent, still orthonormal.
         let frame = ShadingFrame::new(Vec3::Z, Vec3::Z);
         assert!((frame.tangent.length() - 1.0).abs() < 1e-6 && frame.tangent.dot(Vec3::Z).abs() < 1e-6);
+    }
+
+    /// Views within 10⁻⁶…10⁻³ rad of random normals: the frame stays orthonormal to 10⁻⁶ (a
+    /// tangent normalised once leant up to 0.26 towards the normal at 1.2·10⁻⁶ rad).
+    #[test]
+    fn the_frame_is_orthonormal_for_views_near_the_normal() {
+        let mut worst = 0.0f32;
+        for i in 0..20_000u32 {
+            let h = pcg3d(glam::UVec3::new(i, 17, 3));
+            let [a, b, c] = [h.x, h.y, h.z].map(unit_float);
+            let n = Vec3::new(2.0 * a - 1.0, 2.0 * b - 1.0, 2.0 * c - 1.0).normalize();
+            if !n.is_finite() {
+                continue;
+            }
+            let across = n.any_orthonormal_vector();
+            let angle = 1.0e-6 * 1000f32.powf(unit_float(h.x ^ h.y));
+            let v = (n + across * angle).normalize();
+            let frame = ShadingFrame::new(n, v);
+            let skew = [frame.tangent.dot(n), frame.bitangent.dot(n), frame.tangent.dot(frame.bitangent)]
+                .into_iter()
+                .chain([frame.tangent.length() - 1.0, frame.bitangent.length() - 1.0])
+                .fold(0.0f32, |m, x| m.max(x.abs()));
+            worst = worst.max(skew);
+        }
+        assert!(worst <= 1e-6, "worst departure from orthonormal {worst:e}");
     }
 }

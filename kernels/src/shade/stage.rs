@@ -30,6 +30,13 @@
 //! is exactly its hit probability, so the retried density stays analytic — lowered the Cornell
 //! box's stochastic RMSE at 1 spp by 15 % (64², `raywave report shade`) and left the ratio's
 //! unchanged (0.0068): the fallback pixels are too few to matter, and it departs from seed 000's MIS.
+//!
+//! **Far from the origin** the resolution is the coordinates' `f32` rounding: a shadow ray starts
+//! 64·ε·extent off its surface and stops as far before the light's plane ([`crate::offset`]), 7.6
+//! units each at 10⁶, so a point within about 15 units of a light's plane there draws no sample
+//! from it (`U_N` = 0: the ratio falls back to `U`, unshadowed), and one within about 1 unit of the
+//! plane (the facing test's tolerance) gets no `U` from it. A scene shaded there should be built
+//! near the origin and placed by the camera.
 
 // `!(x > 0.0)` sends NaN down the "no contribution" branch on purpose.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
@@ -253,8 +260,15 @@ fn hit_probabilities(light: &Light, p: Vec3, instance: u32, lobes: &Lobes) -> (f
     ltc::lobe_form_factors(&lobes.ltc, lobes.ggx, quad)
 }
 
+/// `a` at `t = 0` to `b` at `t = 1`, written `a·(1 − t) + b·t` so that both ends are exact: as
+/// `a + (b − a)·t` a tiny `b` beside a large `a` rounded to 0 at `t = 1` (a pdf of 3·10⁻⁹ beside
+/// 0.16 dropped its sample).
+fn lerp(a: f32, b: f32, t: f32) -> f32 {
+    a * (1.0 - t) + b * t
+}
+
 /// The shade stage for one camera sample at `pixel` looking along `view_direction` (from the
-/// camera) at `surface`: `U` summed over all lights, and one MIS sample of the chosen light
+/// camera, of any length) at `surface`: `U` summed over all lights, and one MIS sample of the chosen light
 /// shared by `U_N` and `S_N`. Flagged as replaced when a non-finite value was — the surface's
 /// hit record (a miss), `U` (zero) or the sample's weight (no sample).
 pub fn shade_sample(
@@ -270,7 +284,8 @@ pub fn shade_sample(
     let material = &scene.materials[surface.instance as usize];
     let p = surface.position.xyz();
     let n = surface.normal.xyz();
-    let v = -view_direction;
+    // Normalised here: the trace stage takes directions of any length.
+    let v = -view_direction.normalize_or_zero();
     let frame = ShadingFrame::new(n, v);
     let lobes = Lobes::new(material, frame, n.dot(v), scene.ltc, params.analytic_residual != 0);
     // A one-sided emitter's back is black, as the light made of it casts nothing there.
@@ -310,7 +325,7 @@ pub fn shade_sample(
     let (corner, eu, ev) = (light.position.xyz(), light.edge_u.xyz(), light.edge_v.xyz());
     let (e_d, e_s) = (luminance(lobes.diffuse), luminance(lobes.specular));
     let p_diff = if e_d + e_s > 0.0 { e_d / (e_d + e_s) } else { 1.0 };
-    let p_brdf = u_s + (u_d - u_s) * p_diff;
+    let p_brdf = lerp(u_s, u_d, p_diff);
 
     // The light's solid angle serves its sample and its pdf: computed here for a light sample,
     // below for a BRDF direction that reaches the light.
@@ -332,10 +347,10 @@ pub fn shade_sample(
     if !(distance > 0.0) || f == Vec3::ZERO {
         return result;
     }
-    let pdf_brdf = pdf_specular + (pdf_diffuse - pdf_specular) * p_diff;
+    let pdf_brdf = lerp(pdf_specular, pdf_diffuse, p_diff);
     let solid_angle = if light_sampled { solid_angle } else { warp::quad_solid_angle(p, corner, eu, ev) };
     let pdf_light = warp::quad_spherical_pdf_at_hit(eu, ev, solid_angle, direction, distance);
-    let pdf = (pdf_light + (pdf_brdf - pdf_light) * p_brdf) * choice.pmf;
+    let pdf = lerp(pdf_light, pdf_brdf, p_brdf) * choice.pmf;
     if !(pdf > 0.0) {
         return result;
     }
@@ -630,6 +645,41 @@ mod tests {
         assert_eq!(composite(u, u_n, u_n, Vec3::ZERO), Sanitized::clean(u));
         let fallback = composite(u, Vec3::ZERO, Vec3::ZERO, Vec3::ONE);
         assert_eq!(fallback, Sanitized::clean(u + Vec3::ONE), "U_N ≈ 0 falls back to U, which is not a replacement");
+    }
+
+    /// The view direction's length does not matter (the trace stage takes any): a view at 60°
+    /// from the normal given 2 and 10⁻³ long shades as given unit long, to rounding, and a zero
+    /// one stays finite. Taken as it came, the long view had read as normal incidence.
+    #[test]
+    fn the_view_direction_may_have_any_length() {
+        let table = table();
+        let materials = [material(Vec3::splat(0.5), 0.3, 0.0)];
+        let lights = [ceiling_light(Vec3::new(0.5, 0.0, 1.0), 0.4, Vec3::ONE)];
+        let scene = ShadeScene { materials: &materials, lights: LightSet::new(&lights, &[], &[]), ltc: &table };
+        let view = Vec3::new(0.75f32.sqrt(), 0.0, 0.5);
+        let shade = |scale: f32| {
+            shade_sample(&params(sampler_kind::SOBOL, 5, 3), UVec2::ZERO, -view * scale, &surface_at_origin(), &scene)
+                .value
+        };
+        let unit = shade(1.0);
+        assert!(unit.analytic.x > 0.0 && unit.shadow_direction.w > 0.0);
+        for scale in [2.0, 1e-3] {
+            let scaled = shade(scale);
+            for (a, b) in [(scaled.analytic, unit.analytic), (scaled.unshadowed, unit.unshadowed)] {
+                assert!(a.abs_diff_eq(b, 1e-5 * b.abs().max_element()), "scale {scale}: {a} against {b}");
+            }
+            assert!(scaled.shadow_direction.abs_diff_eq(unit.shadow_direction, 1e-5), "scale {scale}");
+        }
+        let zero = shade(0.0);
+        assert!(zero.analytic.is_finite() && zero.unshadowed.is_finite() && zero.shadow_direction.is_finite());
+    }
+
+    /// Both ends of the MIS blends are exact: a tiny pdf beside a large one is kept at `t = 1`.
+    #[test]
+    fn lerp_is_exact_at_both_ends() {
+        assert_eq!(lerp(0.161, 3e-9, 1.0), 3e-9);
+        assert_eq!(lerp(0.161, 3e-9, 0.0), 0.161);
+        assert_eq!(lerp(2.0, 4.0, 0.5), 3.0);
     }
 
     /// What the stage cannot compute is replaced and flagged, never passed on: a hit record that
