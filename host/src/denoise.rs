@@ -234,7 +234,8 @@ impl DenoiseInput {
     /// ([`DenoiseParams::bilateral_invocations`]; for every method, so that every backend and
     /// method accept the same images), every buffer holds `width · height` entries, the radius
     /// is within `1..=MAX_RADIUS`, the estimates average at least one sample, the edge weights
-    /// are finite and ≥ 0, and every value is finite, with the radiances (`U`, emitted, `S_N`,
+    /// are finite and ≥ 0, SVGF's `phiColor` finite and > 0 and its variance boost finite and
+    /// ≥ 0 (checked for every method, as the radius is), and every value is finite, with the radiances (`U`, emitted, `S_N`,
     /// `U_N`: rgb) and the analytic luminance (`normal.w`) not negative, and `S_N`, `U_N` at
     /// most [`MAX_FILTERED_RADIANCE`], below which the filter's sums stay finite. One NaN or
     /// negative pixel would otherwise spread through the noise estimate and the filter taps to
@@ -258,6 +259,17 @@ impl DenoiseInput {
             // A negative weight makes its stop exceed 1, and the filter's sums could then
             // overflow below MAX_FILTERED_RADIANCE.
             Some(format!("edge weights {} must be finite and ≥ 0", params.edge_weights))
+        } else if !(params.svgf.x.is_finite()
+            && params.svgf.x > 0.0
+            && params.svgf.y.is_finite()
+            && params.svgf.y >= 0.0)
+        {
+            // phiColor ≤ 0 turns SVGF's luminance stop into exp(+|Δl|/|φ|) (weights above 1,
+            // favouring the most different taps) or NaN; a negative boost zeroes the variance.
+            Some(format!(
+                "SVGF parameters {} need phiColor (x) finite and > 0, the variance boost (y) finite and ≥ 0",
+                params.svgf
+            ))
         } else {
             self.first_invalid_value(params.width)
         };
@@ -455,6 +467,19 @@ mod tests {
                     assert!(reason.contains("edge weights") && reason.contains("finite and ≥ 0"), "{reason}")
                 }
                 other => panic!("expected the edge weights refused, got {other:?}"),
+            }
+        }
+        for svgf in [
+            Vec4::new(-10.0, 4.0, 0.0, 0.0),
+            Vec4::new(0.0, 4.0, 0.0, 0.0),
+            Vec4::new(10.0, -1.0, 0.0, 0.0),
+            Vec4::splat(f32::NAN),
+        ] {
+            match input(12).check(&DenoiseParams { svgf, ..params }) {
+                Err(Error::InvalidParameter { name: "denoise", reason }) => {
+                    assert!(reason.contains("SVGF parameters"), "{reason}")
+                }
+                other => panic!("expected SVGF parameters {svgf} refused, got {other:?}"),
             }
         }
         assert!(reason(&|d| d.analytic[4].x = -1.0).contains("analytic[4]"));

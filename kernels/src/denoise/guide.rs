@@ -69,7 +69,10 @@ pub fn edge_stop(center: &Guide, tap: &Guide, weights: Vec4) -> f32 {
     let depth_center = center.position.w;
     let depth = (1.0 - weights.x * DEPTH_SCALE * (tap.position.w - depth_center).abs() / depth_center).max(0.0);
     let (n_c, n_t) = (center.normal.xyz(), tap.normal.xyz());
-    let cos = n_c.dot(n_t).max(0.0);
+    // At most 1 whatever the normals' lengths, so that every stop, and the weight, stays in
+    // [0, 1]: the filters' overflow margin (`MAX_FILTERED_RADIANCE`) counts on it, and normals
+    // 1.1 long had summed 41 taps to 39.8 (> 32) and overflowed U_N's sum.
+    let cos = n_c.dot(n_t).clamp(0.0, 1.0);
     let cos4 = (cos * cos) * (cos * cos);
     let normal = (1.0 - weights.y * (1.0 - cos4)).max(0.0);
     // In units of the centre's depth before squaring, so that the length neither overflows (an
@@ -122,6 +125,19 @@ mod tests {
         let brighter = guide(Vec3::new(0.01, 0.0, 0.0), 10.0, Vec3::Y, 1.0);
         let w = edge_stop(&c, &brighter, DEFAULT_EDGE_WEIGHTS);
         assert!((w - (1.0 - 0.9 * 0.5)).abs() < 1e-6, "analytic stop {w}");
+    }
+
+    /// Normals that are not unit long (a caller's own `DenoiseInput`) still weigh at most 1.
+    #[test]
+    fn weights_stay_in_the_unit_interval_for_normals_of_any_length() {
+        for length in [1.0f32 + 1e-6, 1.1, 2.0, 1e3] {
+            let c = guide(Vec3::ZERO, 10.0, Vec3::Y * length, 0.5);
+            let t = guide(Vec3::new(0.01, 0.0, 0.0), 10.0, Vec3::new(0.1, 1.0, 0.0).normalize() * length, 0.5);
+            for tap in [c, t] {
+                let w = edge_stop(&c, &tap, DEFAULT_EDGE_WEIGHTS);
+                assert!((0.0..=1.0).contains(&w), "normals {length} long: weight {w}");
+            }
+        }
     }
 
     #[test]

@@ -28,16 +28,23 @@ pub fn ratio_pixel(shadowed: Vec4, unshadowed: Vec4) -> Vec4 {
     shadow_ratio(shadowed.xyz(), unshadowed.xyz()).extend(if measured { 1.0 } else { 0.0 })
 }
 
-/// The ratio at the pixel nearest to `point` (clamped into the image). `(x + ½) as i32` rounds
-/// every coordinate that lies inside the image to nearest (and truncation only moves negative
-/// ones, which the clamp sends to 0 either way) without the software `round` of `no_std`.
+/// Added to a tap's offset (within ±[`MAX_RADIUS`]) before truncation and taken off after, so
+/// that the truncated sum is positive and `as i32` rounds the offset to nearest without the
+/// software `round` of `no_std`.
+const ROUNDING_SHIFT: i32 = 16;
+const _: () = assert!(MAX_RADIUS < ROUNDING_SHIFT as u32);
+
+/// The ratio at the pixel nearest to `pixel + offset` (clamped into the image). The offset is
+/// rounded on its own, in pixels, and added to the integer pixel: rounding the sum in `f32` moved
+/// the taps of pixels beyond 2²⁴ to even pixels, a staircase of repeated values.
 /// Always inlined, as is [`line_taps`]: left to itself the CPU build called it for every tap and
 /// returned the `Vec3` through memory; inlined, the 1080p noise pass takes 0.7× the time (CPU,
 /// 2 threads, alternating runs: 706 → 500 ms), with the same results.
 #[inline(always)]
-fn line_tap(point: Vec2, width: u32, height: u32, ratio: &[Vec4]) -> Vec3 {
-    let nearest = IVec2::new((point.x + 0.5) as i32, (point.y + 0.5) as i32);
-    ratio[clamped_index(nearest, width, height)].xyz()
+fn line_tap(pixel: IVec2, offset: Vec2, width: u32, height: u32, ratio: &[Vec4]) -> Vec3 {
+    let shift = ROUNDING_SHIFT as f32 + 0.5;
+    let rounded = IVec2::new((offset.x + shift) as i32, (offset.y + shift) as i32) - IVec2::splat(ROUNDING_SHIFT);
+    ratio[clamped_index(pixel + rounded, width, height)].xyz()
 }
 
 /// The lines run in the four lanes of a `Vec4`.
@@ -60,13 +67,12 @@ struct LineTaps {
 /// The taps `r` steps along the four lines through `center` with direction components `dx`,
 /// `dy` (lane `k` = line `k`): the ratio at the pixel nearest to `center + r·direction_k`.
 #[inline(always)]
-fn line_taps(center: Vec2, dx: Vec4, dy: Vec4, r: f32, width: u32, height: u32, ratio: &[Vec4]) -> LineTaps {
-    let xs = Vec4::splat(center.x) + dx * r;
-    let ys = Vec4::splat(center.y) + dy * r;
-    let t0 = line_tap(Vec2::new(xs.x, ys.x), width, height, ratio);
-    let t1 = line_tap(Vec2::new(xs.y, ys.y), width, height, ratio);
-    let t2 = line_tap(Vec2::new(xs.z, ys.z), width, height, ratio);
-    let t3 = line_tap(Vec2::new(xs.w, ys.w), width, height, ratio);
+fn line_taps(center: IVec2, dx: Vec4, dy: Vec4, r: f32, width: u32, height: u32, ratio: &[Vec4]) -> LineTaps {
+    let (xs, ys) = (dx * r, dy * r);
+    let t0 = line_tap(center, Vec2::new(xs.x, ys.x), width, height, ratio);
+    let t1 = line_tap(center, Vec2::new(xs.y, ys.y), width, height, ratio);
+    let t2 = line_tap(center, Vec2::new(xs.z, ys.z), width, height, ratio);
+    let t3 = line_tap(center, Vec2::new(xs.w, ys.w), width, height, ratio);
     LineTaps {
         red: Vec4::new(t0.x, t1.x, t2.x, t3.x),
         green: Vec4::new(t0.y, t1.y, t2.y, t3.y),
@@ -92,7 +98,7 @@ pub fn noise_estimate(params: &DenoiseParams, pixel: IVec2, ratio: &[Vec4]) -> f
     let d2 = rotate_quarter_pi(d1);
     let d3 = rotate_quarter_pi(d2);
     let (dx, dy) = (Vec4::new(d0.x, d1.x, d2.x, d3.x), Vec4::new(d0.y, d1.y, d2.y, d3.y));
-    let center = pixel.as_vec2();
+    let center = pixel;
     let mut before = line_taps(center, dx, dy, -radius as f32, width, height, ratio);
     let mut previous = line_taps(center, dx, dy, (1 - radius) as f32, width, height, ratio);
     let mut variation = Vec4::ZERO;
@@ -107,13 +113,14 @@ pub fn noise_estimate(params: &DenoiseParams, pixel: IVec2, ratio: &[Vec4]) -> f
         previous = v;
         r += 1;
     }
-    let per_line = ((variation / radius as f32).sqrt() / 1.5).clamp(Vec4::ZERO, Vec4::ONE);
-    let estimate = per_line.max_element();
-    if estimate.is_finite() {
-        estimate
-    } else {
-        1.0
+    // A ratio that is not finite (only a caller's own ratio image holds one: `ratio_pixel`'s
+    // are in [0, 1]) counts as the loudest noise, decided before the clamp, whose `max` and
+    // `min` pass NaN on in some lanes and drop it in others, by platform.
+    if !variation.element_sum().is_finite() {
+        return 1.0;
     }
+    let per_line = ((variation / radius as f32).sqrt() / 1.5).clamp(Vec4::ZERO, Vec4::ONE);
+    per_line.max_element()
 }
 
 /// The noise blur: the mean of the raw estimates in the 3×3 box around `pixel` that lies inside
@@ -178,7 +185,7 @@ mod tests {
         let mut direction = Vec2::new(cos0, sin0);
         let mut estimate: f32 = 0.0;
         for _ in 0..NOISE_LINES {
-            let tap = |r: i32| line_tap(pixel.as_vec2() + direction * r as f32, params.width, params.height, ratio);
+            let tap = |r: i32| line_tap(pixel, direction * r as f32, params.width, params.height, ratio);
             let mut variation = 0.0;
             for r in 2 - radius..=radius {
                 variation += (tap(r - 2) - 2.0 * tap(r - 1) + tap(r)).length();
@@ -216,9 +223,46 @@ mod tests {
         assert_eq!(noise_estimate(&params, IVec2::new(8, 8), &zero), 0.0);
         let nan: Vec<Vec4> = (0..256).map(|_| ratio_pixel(Vec4::splat(f32::NAN), Vec4::splat(f32::NAN))).collect();
         assert!(nan.iter().all(|r| r.is_finite()), "an undefined ratio is 1");
-        assert!(noise_estimate(&params, IVec2::new(0, 0), &vec![Vec4::splat(f32::NAN); 256]).is_finite());
+        for bad in [f32::NAN, f32::INFINITY] {
+            assert_eq!(noise_estimate(&params, IVec2::new(0, 0), &vec![Vec4::splat(bad); 256]), 1.0, "{bad}: loudest");
+        }
         let single = DenoiseParams { radius: MAX_RADIUS, ..DenoiseParams::new(1, 1) };
         assert_eq!(noise_estimate(&single, IVec2::ZERO, &zero[..1]), 0.0);
+    }
+
+    /// A row wider than 2²⁴ pixels (which `f32` cannot hold one by one): the taps of a pixel
+    /// near its end are its own neighbours, as at the row's start. Tapped at `center + offset`
+    /// rounded in `f32`, pixel 2²⁴ + 1 read only even pixels (never itself).
+    #[test]
+    fn taps_are_exact_beyond_two_to_the_24_pixels() {
+        let width = (1u32 << 24) + 64;
+        let mut rng = CounterRng::new(29);
+        let pattern: Vec<f32> = (0..64).map(|_| rng.next_f32()).collect();
+        // The same 64-pixel pattern at the start and the end of the row; constant between.
+        let ratio: Vec<Vec4> = (0..width)
+            .map(|x| {
+                let v = if x < 64 {
+                    pattern[x as usize]
+                } else if x >= width - 64 {
+                    pattern[(x - (width - 64)) as usize]
+                } else {
+                    0.5
+                };
+                Vec4::new(v, v, v, 1.0)
+            })
+            .collect();
+        for x in 20..44 {
+            let (start, end) = (IVec2::new(x, 0), IVec2::new((width - 64) as i32 + x, 0));
+            // The taps, not the estimates: a line's angle is hashed from its pixel.
+            for direction in [Vec2::X, Vec2::new(0.3f32.cos(), 0.3f32.sin())] {
+                for r in -6..=6 {
+                    let offset = direction * r as f32;
+                    let at_start = line_tap(start, offset, width, 1, &ratio);
+                    let at_end = line_tap(end, offset, width, 1, &ratio);
+                    assert_eq!(at_start, at_end, "pixel {x} from either end, tap {r} along {direction}");
+                }
+            }
+        }
     }
 
     #[test]
