@@ -606,6 +606,13 @@ fn render_command(args: RenderArgs) -> raywave::Result<()> {
             options.scene
         );
     }
+    if report.unrendered.punctual_lights > 0 {
+        eprintln!(
+            "warning: {} punctual light(s) (KHR_lights_punctual point, spot or directional) of {} light nothing: \
+             raywave renders area lights only (emissive parallelograms)",
+            report.unrendered.punctual_lights, options.scene
+        );
+    }
     if report.lights == 0 && options.view == RenderView::Lit {
         eprintln!(
             "warning: {} has no quad light, so nothing is lit (emitters glow where their front faces are seen)",

@@ -484,10 +484,10 @@ fn textured_and_see_through_materials_are_rendered_with_a_warning() {
     assert!(!stderr(&out).contains("have textures"), "{}", stderr(&out));
 }
 
-/// An orthographic camera is replaced by the framing one, and a skinned mesh renders in its rest
-/// pose, each with a warning.
+/// An orthographic camera is replaced by the framing one, a skinned mesh renders in its rest
+/// pose, and a punctual light lights nothing, each with a warning.
 #[test]
-fn an_orthographic_camera_and_a_skinned_mesh_render_with_warnings() {
+fn an_orthographic_camera_a_skinned_mesh_and_a_punctual_light_render_with_warnings() {
     let dir = tempfile::tempdir().unwrap();
     let lamp = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/emissive_quad.gltf")).unwrap();
     let perspective =
@@ -497,8 +497,24 @@ fn an_orthographic_camera_and_a_skinned_mesh_render_with_warnings() {
     let text = lamp
         .replacen(perspective, orthographic, 1)
         .replacen("\"name\": \"floor\",\n   \"mesh\": 0", skinned_floor, 1)
-        .replacen("\"scene\": 0,", "\"scene\": 0,\n \"skins\": [{\"joints\": [1]}],", 1);
+        .replacen("\"scene\": 0,", "\"scene\": 0,\n \"skins\": [{\"joints\": [1]}],", 1)
+        .replacen(
+            "\"scene\": 0,",
+            r#""scene": 0, "extensions": {"KHR_lights_punctual": {"lights": [{"type": "point"}]}},"#,
+            1,
+        )
+        // A node placing the light after the camera's (whose translation ends in 3), then in the scene.
+        .replacen(
+            "    3\n   ]\n  }\n ],",
+            "    3\n   ]\n  },\n  {\"extensions\": {\"KHR_lights_punctual\": {\"light\": 0}}}\n ],",
+            1,
+        )
+        .replacen("    1,\n    2\n   ]", "    1,\n    2,\n    3\n   ]", 1);
     assert!(text.contains(orthographic) && text.contains(skinned_floor) && text.contains("skins"));
+    assert!(
+        text.contains(r#"{"extensions": {"KHR_lights_punctual": {"light": 0}}}"#)
+            && text.contains("    2,\n    3\n   ]")
+    );
     let scene = dir.path().join("ortho.gltf");
     std::fs::write(&scene, text).unwrap();
     let (out, path) = render(dir.path(), "o.png", &["--device", "cpu", "--scene", scene.to_str().unwrap()]);
@@ -506,6 +522,7 @@ fn an_orthographic_camera_and_a_skinned_mesh_render_with_warnings() {
     assert!(stderr(&out).contains("are orthographic, which raywave does not render"), "{}", stderr(&out));
     let skinned = "1 mesh(es) of";
     assert!(stderr(&out).contains(skinned) && stderr(&out).contains("render in their rest pose"), "{}", stderr(&out));
+    assert!(stderr(&out).contains("1 punctual light(s)"), "{}", stderr(&out));
 }
 
 /// Benchmark and report options out of range: each command fails at once with the option named

@@ -2,7 +2,7 @@
 //! transforms, every triangle primitive as a mesh, metallic-roughness materials with emission
 //! (and `KHR_materials_emissive_strength`; `doubleSided` makes an emissive rectangle a two-sided
 //! light), and the first perspective camera, if any. What raywave does not render — textures,
-//! see-through materials, skins and morph targets, orthographic cameras — is counted
+//! see-through materials, skins and morph targets, orthographic cameras, punctual lights — is counted
 //! ([`Scene::unrendered`]).
 //!
 //! Bad files give an [`Error::SceneLoad`] naming the file and the JSON field, never a panic or a
@@ -63,6 +63,7 @@ pub fn load(path: &Path) -> Result<Scene> {
     let mut unrendered = Unrendered::default();
     let (mut scene_camera, mut orthographic) = (None, false);
     for (node, world) in &nodes {
+        unrendered.punctual_lights += usize::from(node.light().is_some());
         if let (None, Some(node_camera)) = (&scene_camera, node.camera()) {
             match node_camera.projection() {
                 gltf::camera::Projection::Perspective(p) => {
@@ -1258,6 +1259,21 @@ mod tests {
             let err = load(f.path()).unwrap_err().to_string();
             assert!(err.contains(expected) && err.contains(&f.path().display().to_string()), "{camera}: {err}");
         }
+    }
+
+    /// Punctual lights (`KHR_lights_punctual`), which raywave does not render, are counted per
+    /// node of the scene that places one (they had vanished without a word).
+    #[test]
+    fn punctual_lights_are_counted() {
+        let lights = r#""extensionsUsed":["KHR_lights_punctual"],"extensions":{"KHR_lights_punctual":{"lights":[{"type":"point","intensity":100},{"type":"directional"}]}},"#;
+        let text = quad_gltf(6).replacen(r#""scene":0,"#, &format!(r#""scene":0,{lights}"#), 1).replacen(
+            r#"{"camera":0,"translation":[0.5,0.5,3]}]"#,
+            r#"{"camera":0,"translation":[0.5,0.5,3]},{"extensions":{"KHR_lights_punctual":{"light":0}}},{"extensions":{"KHR_lights_punctual":{"light":1}}},{"extensions":{"KHR_lights_punctual":{"light":0}}}]"#,
+            1,
+        ).replacen(r#""nodes":[0,1]}],"#, r#""nodes":[0,1,2,3]}],"#, 1);
+        let scene = load(file(&text).path()).unwrap();
+        assert_eq!(scene.unrendered().punctual_lights, 2, "two of the three light nodes are in the scene");
+        assert_eq!(load(file(&quad_gltf(6)).path()).unwrap().unrendered().punctual_lights, 0);
     }
 
     /// raywave renders no orthographic projection: a file whose cameras are all orthographic is

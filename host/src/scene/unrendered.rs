@@ -25,4 +25,8 @@ pub struct Unrendered {
     /// a pinhole or a thin lens): the scene is seen through the camera that frames its bounds,
     /// as for a file without a camera.
     pub orthographic_camera: bool,
+    /// Nodes of the scene that place a punctual light (glTF `KHR_lights_punctual`: point, spot
+    /// and directional lights, which Blender exports its lamps as). raywave renders area lights
+    /// only (emissive parallelograms): these light nothing.
+    pub punctual_lights: usize,
 }
