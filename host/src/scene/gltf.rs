@@ -168,12 +168,46 @@ fn scene_nodes<'a>(
                 scene.index()
             ));
         }
-        let world = parent * Mat4::from_cols_array_2d(&node.transform().matrix());
+        let world = parent * local_transform(&node)?;
         let children: Vec<_> = node.children().map(|child| (child, world)).collect();
         pending.extend(children.into_iter().rev());
         nodes.push((node, world));
     }
     Ok(nodes)
+}
+
+/// Largest departure from glTF's requirements on a node's own transform that is taken as
+/// rounding: of a `matrix`'s last row from (0, 0, 0, 1), and of a `rotation`'s length from 1.
+const TRANSFORM_TOLERANCE: f32 = 1e-3;
+
+/// `node`'s own transform, checked as glTF 2.0 requires it: a `matrix` decomposable into
+/// translation, rotation and scale (its last row 0, 0, 0, 1: glam's point transform ignores that
+/// row, and it would have carried into the children's transforms), a `rotation` a unit
+/// quaternion (otherwise it also scales and shears).
+fn local_transform(node: &gltf::Node) -> std::result::Result<Mat4, String> {
+    let index = node.index();
+    match node.transform() {
+        gltf::scene::Transform::Matrix { matrix } => {
+            let last_row = [matrix[0][3], matrix[1][3], matrix[2][3], matrix[3][3]];
+            let departure = last_row.iter().zip([0.0, 0.0, 0.0, 1.0]).map(|(a, b)| (a - b).abs()).fold(0.0, f32::max);
+            if departure > TRANSFORM_TOLERANCE {
+                return Err(format!(
+                    "nodes[{index}].matrix: its last row is {last_row:?}; glTF requires 0, 0, 0, 1 (a transform \
+                     of translation, rotation and scale)"
+                ));
+            }
+            Ok(Mat4::from_cols_array_2d(&matrix))
+        }
+        transform @ gltf::scene::Transform::Decomposed { rotation, .. } => {
+            let length = glam::Vec4::from_array(rotation).length();
+            if (length - 1.0).abs() > TRANSFORM_TOLERANCE {
+                return Err(format!(
+                    "nodes[{index}].rotation: {rotation:?} is {length} long; glTF requires a unit quaternion"
+                ));
+            }
+            Ok(Mat4::from_cols_array_2d(&transform.matrix()))
+        }
+    }
 }
 
 /// Parses and validates a `.gltf` or `.glb` file's bytes and loads its buffers, resolving
@@ -1258,6 +1292,34 @@ mod tests {
             let f = file(&text);
             let err = load(f.path()).unwrap_err().to_string();
             assert!(err.contains(expected) && err.contains(&f.path().display().to_string()), "{camera}: {err}");
+        }
+    }
+
+    /// A node `matrix` that is not translation, rotation and scale (a projective last row) and a
+    /// `rotation` that is not a unit quaternion are errors naming the node's field; a rotation
+    /// off by rounding, and the identity written out, load.
+    #[test]
+    fn node_transforms_must_be_what_gltf_allows() {
+        let node = r#"{"mesh":0,"translation":[0,0,-2]}"#;
+        for (bad, expected) in [
+            (
+                r#"{"mesh":0,"matrix":[1,0,0,0, 0,1,0,0, 0,0,1,0.5, 0,0,-2,1]}"#,
+                "nodes[0].matrix: its last row is [0.0, 0.0, 0.5, 1.0]",
+            ),
+            (r#"{"mesh":0,"rotation":[0,0,1,1]}"#, "nodes[0].rotation: [0.0, 0.0, 1.0, 1.0] is 1.4142135 long"),
+            (r#"{"mesh":0,"rotation":[0,0,0,0]}"#, "nodes[0].rotation"),
+        ] {
+            let text = quad_gltf(6).replacen(node, bad, 1);
+            assert_ne!(text, quad_gltf(6));
+            let err = load(file(&text).path()).unwrap_err().to_string();
+            assert!(err.contains(expected), "{bad}: {err}");
+        }
+        for fine in [
+            r#"{"mesh":0,"matrix":[1,0,0,0, 0,1,0,0, 0,0,1,0, 0,0,-2,1]}"#,
+            r#"{"mesh":0,"rotation":[0,0,0.7071,0.7071],"translation":[0,0,-2]}"#,
+        ] {
+            let text = quad_gltf(6).replacen(node, fine, 1);
+            assert!(load(file(&text).path()).is_ok(), "{fine}");
         }
     }
 
