@@ -103,7 +103,8 @@ pub struct RenderReport {
     /// nothing ([`Scene::unsupported_emitters`]).
     pub unsupported_emitters: usize,
     /// What the scene's file asked for that raywave does not render: textures, see-through
-    /// materials, skins and morph targets, orthographic cameras ([`Scene::unrendered`]).
+    /// materials, skins and morph targets, orthographic cameras, punctual lights
+    /// ([`Scene::unrendered`]).
     pub unrendered: Unrendered,
     /// Samples per pixel traced: `spp` for the lit view, 1 for the normals view.
     pub samples_per_pixel: u32,

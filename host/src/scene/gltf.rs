@@ -39,11 +39,14 @@ pub fn load(path: &Path) -> Result<Scene> {
     // counted, so that the last one can take the geometry read for them all.
     let (mut vertices, mut triangle_count): (u64, u64) = (0, 0);
     let mut mesh_sizes: HashMap<usize, (u64, u64)> = HashMap::new();
+    let mut checked_accessors = CheckedAccessors::new();
     let mut instances_left: HashMap<usize, usize> = HashMap::new();
     for mesh in nodes.iter().filter_map(|(node, _)| node.mesh()) {
         let (mesh_vertices, mesh_triangles) = match mesh_sizes.get(&mesh.index()) {
             Some(&size) => size,
-            None => *mesh_sizes.entry(mesh.index()).or_insert(mesh_size(&mesh, &buffers).map_err(load_error)?),
+            None => *mesh_sizes
+                .entry(mesh.index())
+                .or_insert(mesh_size(&mesh, &buffers, &mut checked_accessors).map_err(load_error)?),
         };
         vertices = vertices.saturating_add(mesh_vertices);
         triangle_count = triangle_count.saturating_add(mesh_triangles);
@@ -180,10 +183,11 @@ fn scene_nodes<'a>(
 /// rounding: of a `matrix`'s last row from (0, 0, 0, 1), and of a `rotation`'s length from 1.
 const TRANSFORM_TOLERANCE: f32 = 1e-3;
 
-/// `node`'s own transform, checked as glTF 2.0 requires it: a `matrix` decomposable into
-/// translation, rotation and scale (its last row 0, 0, 0, 1: glam's point transform ignores that
-/// row, and it would have carried into the children's transforms), a `rotation` a unit
-/// quaternion (otherwise it also scales and shears).
+/// `node`'s own transform, checked as far as raywave depends on it: a `matrix` affine (its last
+/// row 0, 0, 0, 1: glam's point transform ignores that row, and it would have carried into the
+/// children's transforms) — glTF 2.0 also forbids shear, which is not checked: a sheared matrix is
+/// still a well-defined transform of the geometry —, a `rotation` a unit quaternion (otherwise
+/// it also scales and shears).
 fn local_transform(node: &gltf::Node) -> std::result::Result<Mat4, String> {
     let index = node.index();
     match node.transform() {
@@ -335,26 +339,34 @@ fn check_camera_projections(root: &gltf::json::Root) -> std::result::Result<(), 
     Ok(())
 }
 
+/// Accessors already checked ([`check_accessor`]) as POSITION (`true`) or as indices (`false`):
+/// each is checked once however many primitives share it (its sparse indices are read in full).
+type CheckedAccessors = std::collections::HashSet<(usize, bool)>;
+
 /// The vertices (at most its POSITION count and its corners) and triangles that `mesh`'s surface
 /// primitives ([`draws_surfaces`]) add to the scene each time a node instances it, their POSITION
-/// and indices accessors checked first ([`check_accessor`]: their counts are the file's).
-fn mesh_size(mesh: &gltf::Mesh, buffers: &[buffer::Data]) -> std::result::Result<(u64, u64), String> {
+/// and indices accessors checked first ([`check_accessor`]: their counts are the file's) unless
+/// `checked` holds them.
+fn mesh_size(
+    mesh: &gltf::Mesh,
+    buffers: &[buffer::Data],
+    checked: &mut CheckedAccessors,
+) -> std::result::Result<(u64, u64), String> {
     let (mut vertices, mut triangles) = (0u64, 0u64);
     for (index, primitive) in mesh.primitives().enumerate() {
         let Some(position) = primitive.get(&Semantic::Positions).filter(|_| draws_surfaces(primitive.mode())) else {
             continue;
         };
         let field = primitive_field(mesh, index);
-        check_accessor(
-            &position,
-            buffers,
-            &format!("{field}.attributes.POSITION"),
-            Dimensions::Vec3,
-            &[DataType::F32],
-        )?;
+        if checked.insert((position.index(), true)) {
+            let position_field = format!("{field}.attributes.POSITION");
+            check_accessor(&position, buffers, &position_field, Dimensions::Vec3, &[DataType::F32])?;
+        }
         let corners = match primitive.indices() {
             Some(indices) => {
-                check_accessor(&indices, buffers, &format!("{field}.indices"), Dimensions::Scalar, &UNSIGNED)?;
+                if checked.insert((indices.index(), false)) {
+                    check_accessor(&indices, buffers, &format!("{field}.indices"), Dimensions::Scalar, &UNSIGNED)?;
+                }
                 indices.count()
             }
             None => position.count(),
@@ -409,19 +421,15 @@ impl PrimitiveGeometry {
                 position.count()
             ));
         }
-        // Renumbered through a map, not an array as long as the accessor: primitives may share
-        // one POSITION accessor far larger than what each draws.
-        let mut renumbered: HashMap<u32, u32> = HashMap::new();
+        let mut renumbering = Renumbering::new(position.count(), indices.len());
         let (mut elements, mut positions) = (Vec::new(), Vec::new());
         for index in &mut indices {
-            *index = match renumbered.entry(*index) {
-                std::collections::hash_map::Entry::Occupied(vertex) => *vertex.get(),
-                std::collections::hash_map::Entry::Vacant(vertex) => {
-                    elements.push(*vertex.key());
-                    positions.push(accessor_positions.get(*vertex.key() as usize).ok_or_else(unreadable_position)?);
-                    *vertex.insert(positions.len() as u32 - 1)
-                }
-            };
+            let (vertex, first_use) = renumbering.vertex(*index, positions.len() as u32);
+            if first_use {
+                elements.push(*index);
+                positions.push(accessor_positions.get(*index as usize).ok_or_else(unreadable_position)?);
+            }
+            *index = vertex;
         }
         let triangles: Vec<[u32; 3]> = match primitive.mode() {
             Mode::TriangleStrip => strip_triangles(&indices),
@@ -458,6 +466,42 @@ impl PrimitiveGeometry {
     }
 }
 
+/// The vertex numbers of a primitive's POSITION elements, given in order of first use: in an
+/// array as long as the accessor where its indices are about as many (a lookup per index), in a
+/// map where the accessor is far larger than what they draw (primitives may share one).
+enum Renumbering {
+    /// Each element's vertex, or `u32::MAX` before its first use.
+    Dense(Vec<u32>),
+    /// The vertices of the elements used so far.
+    Sparse(HashMap<u32, u32>),
+}
+
+impl Renumbering {
+    /// For `indices` indices into an accessor of `count` elements.
+    fn new(count: usize, indices: usize) -> Self {
+        if count <= 4 * indices {
+            Self::Dense(vec![u32::MAX; count])
+        } else {
+            Self::Sparse(HashMap::new())
+        }
+    }
+
+    /// The vertex of `element` (below the count), and whether this is its first use, which gives
+    /// it the vertex `next`.
+    fn vertex(&mut self, element: u32, next: u32) -> (u32, bool) {
+        let slot = match self {
+            Self::Dense(vertices) => &mut vertices[element as usize],
+            Self::Sparse(vertices) => vertices.entry(element).or_insert(u32::MAX),
+        };
+        if *slot == u32::MAX {
+            *slot = next;
+            (next, true)
+        } else {
+            (*slot, false)
+        }
+    }
+}
+
 /// Random access to the elements of a POSITION accessor (VEC3 of `f32`, its spans checked by
 /// [`check_accessor`]): reading a primitive costs what its indices use, not the accessor's
 /// count, which the `gltf` crate's reader decodes whole — per primitive, so primitives sharing one
@@ -466,10 +510,9 @@ struct PositionElements<'a> {
     /// The base elements' bytes from the first one on, and their stride; `None`: zeros (a sparse
     /// accessor without a buffer view).
     base: Option<(&'a [u8], usize)>,
-    /// The sparse substitutions' element indices, strictly increasing ([`check_sparse_indices`]).
-    sparse_indices: Vec<usize>,
-    /// The sparse substitutions' values, packed.
-    sparse_values: &'a [u8],
+    /// The sparse substitutions' element indices, strictly increasing ([`check_sparse_indices`]),
+    /// and their values, packed; `None` for an accessor that is not sparse.
+    sparse: Option<(SparseIndices<'a>, &'a [u8])>,
 }
 
 impl<'a> PositionElements<'a> {
@@ -482,16 +525,15 @@ impl<'a> PositionElements<'a> {
             Some(view) => Some((bytes_from(view.clone(), accessor.offset())?, view.stride().unwrap_or(VEC3_F32_BYTES))),
             None => None,
         };
-        let (sparse_indices, sparse_values) = match accessor.sparse() {
+        let sparse = match accessor.sparse() {
             Some(sparse) => {
-                let indices = sparse.indices();
                 let values = sparse.values();
-                let indices = sparse_index_values(&indices, sparse.count(), buffers).ok()?.collect();
-                (indices, bytes_from(values.view(), values.offset())?)
+                let indices = SparseIndices::new(&sparse.indices(), sparse.count(), buffers).ok()?;
+                Some((indices, bytes_from(values.view(), values.offset())?))
             }
-            None => (Vec::new(), &[][..]),
+            None => None,
         };
-        Some(Self { base, sparse_indices, sparse_values })
+        Some(Self { base, sparse })
     }
 
     /// Element `index` (below the accessor's count), or `None` if its bytes lie outside the data.
@@ -501,10 +543,11 @@ impl<'a> PositionElements<'a> {
             let component = |k: usize| f32::from_le_bytes([bytes[k], bytes[k + 1], bytes[k + 2], bytes[k + 3]]);
             Some(Vec3::new(component(0), component(4), component(8)))
         };
-        match (self.sparse_indices.binary_search(&index), self.base) {
-            (Ok(k), _) => element(self.sparse_values, k * VEC3_F32_BYTES),
-            (Err(_), Some((bytes, stride))) => element(bytes, index.checked_mul(stride)?),
-            (Err(_), None) => Some(Vec3::ZERO),
+        let substitution = self.sparse.and_then(|(indices, values)| Some((indices.position(index)?, values)));
+        match (substitution, self.base) {
+            (Some((k, values)), _) => element(values, k * VEC3_F32_BYTES),
+            (None, Some((bytes, stride))) => element(bytes, index.checked_mul(stride)?),
+            (None, None) => Some(Vec3::ZERO),
         }
     }
 }
@@ -645,7 +688,8 @@ fn check_sparse_indices(
     buffers: &[buffer::Data],
 ) -> std::result::Result<(), String> {
     let mut previous: Option<usize> = None;
-    for (k, value) in sparse_index_values(indices, sparse_count, buffers)?.enumerate() {
+    let indices = SparseIndices::new(indices, sparse_count, buffers)?;
+    for (k, value) in (0..indices.len()).map(|k| (k, indices.get(k))) {
         if value >= count || previous.is_some_and(|p| value <= p) {
             return Err(format!(
                 "index {k} is {value}; sparse indices must increase strictly and stay below the count {count}"
@@ -656,23 +700,59 @@ fn check_sparse_indices(
     Ok(())
 }
 
-/// The `sparse_count` indices of a sparse accessor, tightly packed from their view as glTF 2.0
-/// stores them; an error if they lie outside their buffer.
-fn sparse_index_values<'a>(
-    indices: &gltf::accessor::sparse::Indices,
-    sparse_count: usize,
-    buffers: &'a [buffer::Data],
-) -> std::result::Result<impl Iterator<Item = usize> + 'a, &'static str> {
-    let view = indices.view();
-    let size = indices.index_type().size();
-    let start = view.offset() + indices.offset();
-    let bytes = buffers
-        .get(view.buffer().index())
-        .and_then(|data| data.get(start..start + sparse_count * size))
-        .ok_or("the indices lie outside their buffer")?;
-    Ok(bytes
-        .chunks_exact(size)
-        .map(|index| index.iter().rev().fold(0usize, |value, &byte| value << 8 | usize::from(byte))))
+/// The indices of a sparse accessor, read in place from their bytes (tightly packed from their
+/// view, as glTF 2.0 stores them): however many there are, nothing is copied.
+#[derive(Clone, Copy)]
+struct SparseIndices<'a> {
+    /// The indices' bytes, `size` each, little-endian.
+    bytes: &'a [u8],
+    /// Bytes per index (1, 2 or 4).
+    size: usize,
+}
+
+impl<'a> SparseIndices<'a> {
+    /// The `sparse_count` indices of `indices`, or an error if they lie outside their buffer.
+    fn new(
+        indices: &gltf::accessor::sparse::Indices,
+        sparse_count: usize,
+        buffers: &'a [buffer::Data],
+    ) -> std::result::Result<Self, &'static str> {
+        let view = indices.view();
+        let size = indices.index_type().size();
+        let start = view.offset().checked_add(indices.offset());
+        let end = sparse_count.checked_mul(size).and_then(|length| start?.checked_add(length));
+        let bytes = buffers
+            .get(view.buffer().index())
+            .and_then(|data| data.get(start?..end?))
+            .ok_or("the indices lie outside their buffer")?;
+        Ok(Self { bytes, size })
+    }
+
+    /// How many indices there are.
+    fn len(&self) -> usize {
+        self.bytes.len() / self.size
+    }
+
+    /// Index `k` (below [`Self::len`]).
+    fn get(&self, k: usize) -> usize {
+        let index = &self.bytes[k * self.size..(k + 1) * self.size];
+        index.iter().rev().fold(0usize, |value, &byte| value << 8 | usize::from(byte))
+    }
+
+    /// Where `element` is among the indices, which must increase strictly
+    /// ([`check_sparse_indices`]): a binary search.
+    fn position(&self, element: usize) -> Option<usize> {
+        let (mut low, mut high) = (0, self.len());
+        while low < high {
+            let middle = low + (high - low) / 2;
+            match self.get(middle).cmp(&element) {
+                std::cmp::Ordering::Less => low = middle + 1,
+                std::cmp::Ordering::Greater => high = middle,
+                std::cmp::Ordering::Equal => return Some(middle),
+            }
+        }
+        None
+    }
 }
 
 /// Checks that `count ≥ 1` elements of `size` bytes from byte `offset` of `view`, `byteStride`
@@ -988,33 +1068,46 @@ mod tests {
     }
 
     /// Primitives that share one POSITION accessor of 4·10⁶ elements (sparse, without a buffer
-    /// view: all zeros but the three it substitutes) and draw three of them: each primitive is read
-    /// at the cost of what it draws. Decoding the whole accessor per primitive, as the `gltf`
-    /// reader does, took this test 25 s (0.2 s now, 2-vCPU VM) and a file of 10⁵ such primitives
-    /// hours. No time is asserted: a regression shows as this test's time.
+    /// view: zeros but for 2·10⁵ substituted elements) and each draw three of them — element 0,
+    /// a zero, and the first two substitutions: each primitive is read at the cost of what it
+    /// draws and the accessor is checked once. Decoding the whole accessor per primitive, as the
+    /// `gltf` reader does, took a test like this one (500 primitives, 3 substitutions) 25 s on the
+    /// 2-vCPU VM and a file of 10⁵ such primitives hours; reading and checking the sparse indices
+    /// per primitive took this one 3.7 s (0.02 s now). No time is asserted: a regression shows as
+    /// this test's.
     #[test]
     fn primitives_sharing_a_huge_position_accessor_read_only_what_they_draw() {
         const ELEMENTS: usize = 4_000_000;
-        const PRIMITIVES: usize = 500;
+        const SUBSTITUTED: usize = 200_000;
+        const PRIMITIVES: usize = 2000;
         let dir = tempfile::tempdir().unwrap();
         let mut data = Vec::new();
-        for p in [[0f32, 0., 0.], [1., 0., 0.], [0., 1., 0.]] {
-            data.extend(p.iter().flat_map(|c| c.to_le_bytes()));
+        for k in 0..SUBSTITUTED {
+            let value = match k {
+                0 => [1f32, 0., 0.],
+                1 => [0., 1., 0.],
+                _ => [5., 5., 5.],
+            };
+            data.extend(value.iter().flat_map(|c| c.to_le_bytes()));
         }
-        data.extend([0u16, 1, 2, 0, 1, 2].iter().flat_map(|i| i.to_le_bytes()));
+        data.extend((1..=SUBSTITUTED as u32).flat_map(u32::to_le_bytes));
+        data.extend([0u16, 1, 2].iter().flat_map(|i| i.to_le_bytes()));
         data.resize(ELEMENTS, 0);
         std::fs::write(dir.path().join("big.bin"), &data).unwrap();
+        let (values, indices) = (12 * SUBSTITUTED, 4 * SUBSTITUTED);
         let primitive = r#"{"attributes":{"POSITION":0},"indices":1}"#;
         let primitives = vec![primitive; PRIMITIVES].join(",");
         let text = format!(
             r#"{{"asset":{{"version":"2.0"}},"scene":0,"scenes":[{{"nodes":[0]}}],"nodes":[{{"mesh":0}}],
             "meshes":[{{"primitives":[{primitives}]}}],
             "buffers":[{{"byteLength":{ELEMENTS},"uri":"big.bin"}}],
-            "bufferViews":[{{"buffer":0,"byteOffset":0,"byteLength":36}},{{"buffer":0,"byteOffset":36,"byteLength":6}},
-                           {{"buffer":0,"byteOffset":42,"byteLength":6}}],
-            "accessors":[{{"componentType":5126,"count":{ELEMENTS},"type":"VEC3","min":[0,0,0],"max":[1,1,0],
-                           "sparse":{{"count":3,"indices":{{"bufferView":1,"componentType":5123}},"values":{{"bufferView":0}}}}}},
-                         {{"bufferView":2,"componentType":5123,"count":3,"type":"SCALAR"}}]}}"#
+            "bufferViews":[{{"buffer":0,"byteOffset":0,"byteLength":{values}}},
+                           {{"buffer":0,"byteOffset":{values},"byteLength":{indices}}},
+                           {{"buffer":0,"byteOffset":{},"byteLength":6}}],
+            "accessors":[{{"componentType":5126,"count":{ELEMENTS},"type":"VEC3","min":[0,0,0],"max":[5,5,5],
+                           "sparse":{{"count":{SUBSTITUTED},"indices":{{"bufferView":1,"componentType":5125}},"values":{{"bufferView":0}}}}}},
+                         {{"bufferView":2,"componentType":5123,"count":3,"type":"SCALAR"}}]}}"#,
+            values + indices
         );
         let path = dir.path().join("shared.gltf");
         std::fs::write(&path, text).unwrap();
@@ -1024,6 +1117,34 @@ mod tests {
             assert_eq!(mesh.positions, [Vec3::ZERO, Vec3::X, Vec3::Y], "{}", mesh.name);
             assert_eq!(mesh.triangles, [[0, 1, 2]], "{}", mesh.name);
         }
+    }
+
+    /// A POSITION accessor in an interleaved buffer view (`byteStride` 24: each position followed
+    /// by 12 bytes of something else) reads every 24 bytes, as the view says.
+    #[test]
+    fn positions_in_an_interleaved_view_follow_its_stride() {
+        let mut data = Vec::new();
+        for p in [[0f32, 0., 0.], [1., 0., 0.], [1., 1., 0.], [0., 1., 0.]] {
+            data.extend(p.iter().flat_map(|c| c.to_le_bytes()));
+            data.extend([9f32; 3].iter().flat_map(|c| c.to_le_bytes()));
+        }
+        data.extend([0u16, 1, 2, 0, 2, 3].iter().flat_map(|i| i.to_le_bytes()));
+        let text = quad_gltf(6)
+            .replacen(&base64_encode(&quad_buffer()), &base64_encode(&data), 1)
+            .replacen(r#""byteLength":60"#, r#""byteLength":108"#, 1)
+            .replacen(
+                r#"{"buffer":0,"byteOffset":0,"byteLength":48}"#,
+                r#"{"buffer":0,"byteOffset":0,"byteLength":96,"byteStride":24}"#,
+                1,
+            )
+            .replacen(
+                r#"{"buffer":0,"byteOffset":48,"byteLength":12}"#,
+                r#"{"buffer":0,"byteOffset":96,"byteLength":12}"#,
+                1,
+            );
+        let scene = load(file(&text).path()).unwrap();
+        let corners = [[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]].map(|[x, y]| Vec3::new(x, y, -2.0));
+        assert_eq!(scene.meshes()[0].positions, corners);
     }
 
     /// External buffers resolve as the `gltf` crate resolves them (percent-decoded relative
