@@ -745,13 +745,20 @@ pub fn sample_quad_spherical_with_solid_angle(
     } else {
         x0
     };
-    // yv along the y edge.
+    // yv along the y edge: hv = lerp(h₀, h₁, u₁) with h = y/√(dd² + y²), then yv = hv·dd/√(1 − hv²).
+    // Seen nearly edge-on from beyond the y edge (|y| ≫ dd) every h rounds to within ulps of ±1,
+    // which left hv a few values and 1 − hv² no digits (samples 0.49 of the edge off, and a cut at
+    // 1 − hv² < 10⁻⁶ sent more onto the far edge); so h's distances to 1 and to −1, c = 1 − h and
+    // d = 1 + h, are interpolated instead, each formed without cancellation ([`edge_distances`]):
+    // the same map in real arithmetic, with 1 − hv² = c·d.
     let dd = (xu * xu + z0 * z0).sqrt();
-    let h0 = y0 / (dd * dd + y0 * y0).sqrt();
-    let h1 = y1 / (dd * dd + y1 * y1).sqrt();
-    let hv = h0 + u.y * (h1 - h0);
-    let hv2 = hv * hv;
-    let yv = if hv2 < 1.0 - 1.0e-6 { hv * dd / (1.0 - hv2).sqrt() } else { y1 };
+    let (c0, d0) = edge_distances(y0, dd);
+    let (c1, d1) = edge_distances(y1, dd);
+    let cv = c0 + u.y * (c1 - c0);
+    let dv = d0 + u.y * (d1 - d0);
+    let hv = if cv < dv { 1.0 - cv } else { dv - 1.0 };
+    // c·d = 0 only at an end at infinity: ±∞, clamped to that edge below.
+    let yv = hv * dd / (cv * dv).sqrt();
     let yv = if yv >= y1 {
         y1
     } else if yv > y0 {
@@ -770,6 +777,22 @@ pub fn sample_quad_spherical_with_solid_angle(
         LightSample { direction, distance, pdf: sanitize_pdf(pdf), point, normal }
     } else {
         LightSample::none(point, normal)
+    }
+}
+
+/// `(1 − h, 1 + h)` for `h = y/√(dd² + y²)` (`dd ≥ 0`, not both 0) of [`sample_quad_spherical`],
+/// each without cancellation: the one near 0 as `(dd/r)·(dd/(r + |y|))`, `r = √(dd² + y²)`, the
+/// other as `1 + |y|/r`; `r` from the two scaled by the larger, so that neither square
+/// overflows nor underflows.
+fn edge_distances(y: f32, dd: f32) -> (f32, f32) {
+    let scale = dd.max(y.abs());
+    let r = scale * ((dd / scale) * (dd / scale) + (y / scale) * (y / scale)).sqrt();
+    let near = (dd / r) * (dd / (r + y.abs()));
+    let far = 1.0 + y.abs() / r;
+    if y >= 0.0 {
+        (near, far)
+    } else {
+        (far, near)
     }
 }
 
@@ -1485,6 +1508,42 @@ mod tests {
         directions.sort_unstable();
         directions.dedup();
         assert!(directions.len() > samples.len() / 2, "{} distinct directions", directions.len());
+    }
+
+    /// A unit square seen nearly edge-on from beyond either `ev` edge (10⁻³ off its plane):
+    /// each sample's point along `ev` is where the inverse of `h(y) = y/√(dd² + y²)`, in `f64`, puts
+    /// `lerp(h(y₀), h(y₁), u₁)`, within 10⁻⁴ of the edge (measured 5.6·10⁻⁷).
+    /// Interpolating `h` itself, which rounds to ±1 within ulps there, put them up to 0.49 off and
+    /// sent 0.02 % onto the far edge.
+    #[test]
+    fn samples_along_the_far_edge_follow_the_drawn_fraction_edge_on() {
+        let (o, eu, ev) = (Vec3::new(-0.5, -0.5, 0.0), Vec3::X, Vec3::Y);
+        let mut worst = 0.0f64;
+        // Beyond the edge y₀, then y₁ (all y negative, then all positive), and two controls.
+        for p in [
+            Vec3::new(0.0, -1.0, -1.0e-3),
+            Vec3::new(0.0, 1.0, -1.0e-3),
+            Vec3::new(0.2, -1.5, 0.1),
+            Vec3::new(0.0, -1.0, -1.0),
+        ] {
+            assert!(quad_solid_angle(p, o, eu, ev) >= QUAD_MIN_SPHERICAL_SOLID_ANGLE, "the spherical regime at {p}");
+            for u in random_samples(20_000, 5) {
+                let s = sample_quad_spherical(p, o, eu, ev, u);
+                assert!(s.pdf > 0.0, "{p} {u}");
+                // The point's coordinates in the sampler's frame: x along eu, y along ev, from p.
+                let local = (s.point - p).as_dvec3();
+                let (x, y, z) = (local.x, local.y, local.z);
+                let (y0, y1) = (f64::from(o.y - p.y), f64::from(o.y + 1.0 - p.y));
+                let dd = (x * x + z * z).sqrt();
+                let h = |y: f64| y / (dd * dd + y * y).sqrt();
+                let hv = h(y0) + f64::from(u.y) * (h(y1) - h(y0));
+                let expected = hv * dd / (1.0 - hv * hv).sqrt();
+                let error = (y - expected).abs();
+                assert!(error < 1.0e-4, "{p} u {u}: y {y} where {expected} was drawn");
+                worst = worst.max(error);
+            }
+        }
+        std::println!("worst y error {worst:e}");
     }
 
     /// Seen nearly edge-on (`|cos θl|` ≈ 7.6·10⁻⁶), a light is widened only along the ray's
