@@ -48,8 +48,9 @@ const SAME_POINT: f32 = 1.0e-4;
 /// edge stops of the reference code [H-DX, H-CPU], with `weights` = (depth `Wd`, normal `Wn`,
 /// plane `Wp`, analytic `Wa`):
 /// - depth `max(0, 1 − Wd·4·|Δz|/z)` (relative, see `DEPTH_SCALE`);
-/// - normal `max(0, 1 − Wn·(1 − max(0, n_c·n_t)⁴))` — the reference raises `n_c·n_t` itself to
-///   the fourth power, which weighs opposite normals as equal ones; clamped here, they weigh 0;
+/// - normal `max(0, 1 − Wn·(1 − clamp(n_c·n_t, 0, 1)⁴))` — the reference raises `n_c·n_t` itself
+///   to the fourth power, which weighs opposite normals as equal ones; clamped here, they weigh
+///   0, and normals not unit long cannot lift the stop above 1;
 /// - plane `max(0, 1 − 2·Wp·max(|dq·n_t|, |dq·n_c|)/|dq|)²` (1 for coincident points);
 /// - analytic `max(0, 1 − 10·Wa·|ΔL|/max(L_c, L_t))` — relative to the luminances so it does not
 ///   depend on the lights' units (the reference uses absolute display-referred values); 1 when
