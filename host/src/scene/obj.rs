@@ -139,12 +139,22 @@ fn surfaces_only(text: &[u8]) -> std::borrow::Cow<'_, [u8]> {
             _ => None,
         }
     };
-    let lines: Vec<(&[u8], Option<Vec<u8>>)> = text.split(|&b| b == b'\n').map(|l| (l, rewritten(l))).collect();
-    if lines.iter().all(|(_, new)| new.is_none()) {
+    // Two passes rather than a list of every line (40 bytes each: 24 GB for 600 MB of blank lines).
+    let lines = || text.split(|&b| b == b'\n');
+    if lines().all(|line| rewritten(line).is_none()) {
         return std::borrow::Cow::Borrowed(text);
     }
-    let lines: Vec<Vec<u8>> = lines.into_iter().map(|(line, new)| new.unwrap_or_else(|| line.to_vec())).collect();
-    std::borrow::Cow::Owned(lines.join(&b'\n'))
+    let mut kept = Vec::with_capacity(text.len());
+    for (index, line) in lines().enumerate() {
+        if index > 0 {
+            kept.push(b'\n');
+        }
+        match rewritten(line) {
+            Some(new) => kept.extend_from_slice(&new),
+            None => kept.extend_from_slice(line),
+        }
+    }
+    std::borrow::Cow::Owned(kept)
 }
 
 /// The text of the material library at `path`, or why it cannot be used: the OS's reason, not a
