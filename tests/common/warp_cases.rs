@@ -156,6 +156,8 @@ pub fn warp_cases() -> Vec<(String, WarpParams)> {
             ("back side towards p", Vec3::new(-0.5, -0.5, -1.0), Vec3::Y, Vec3::X),
             ("far, Ω ≈ 2.5e-3", Vec3::new(-0.5, -0.5, 20.0), Vec3::X, Vec3::Y),
             ("far and grazing, Ω < 1e-3", Vec3::new(10.0, -0.5, 40.0), Vec3::Y, grazing),
+            // p 10⁻³ below its plane and beyond its ev edge: h = y/√(dd² + y²) rounds to 1 there.
+            ("edge-on beyond its ev edge", Vec3::new(-0.5, 0.5, 1.0e-3), Vec3::X, Vec3::Y),
             // Not a rectangle: the spherical-rectangle method's frame needs perpendicular edges.
             ("a 60° rhombus", Vec3::new(-0.75, -0.5, 0.6), Vec3::X, Vec3::new(0.5, 0.866_025_4, 0.0)),
         ] {
