@@ -139,18 +139,17 @@ impl RenderOptions {
     }
 }
 
-/// Checks the options that need neither the scene nor the backend: the frame's settings
-/// ([`LitFrameSettings::check`]: lens values and filter radius in range), the samples per pixel
-/// in range, the image size and the samples for it as far as no backend is needed
-/// ([`LitFrameSettings::check_size`]), outputs that the view writes, no option that another makes
-/// the render ignore, and no file named twice.
+/// Checks the options that need neither the scene nor the backend: the samples per pixel in
+/// range, the frame's settings, the image size and the samples for it as far as no backend is
+/// needed ([`LitFrameSettings::check_size`]: lens values and filter radius in range too), outputs
+/// that the view writes, no option that another makes the render ignore (but `--spp`, which has a
+/// default: the normals view traces one sample, as README says), and no file named twice.
 fn check_options(options: &RenderOptions) -> Result<()> {
     let invalid = |name, reason: String| Err(crate::Error::InvalidParameter { name, reason });
     let settings = options.frame_settings();
-    settings.check()?;
     crate::frame::check_sample_count("spp", options.spp)?;
-    // The image size and the samples for it, before the scene loads and the backend opens (its
-    // own pixel limit is checked once it is open).
+    // Before the scene loads and the backend opens (its own pixel limit is checked once it is
+    // open).
     settings.check_size()?;
     if options.view == RenderView::Normals {
         for (name, given) in [("exr", options.exr.is_some()), ("stochastic", options.stochastic.is_some())] {
@@ -199,6 +198,15 @@ pub fn render(options: &RenderOptions) -> Result<RenderReport> {
     let stochastic =
         options.stochastic.as_deref().map(|path| PendingOutput::create(path, ImageFormat::Png)).transpose()?;
     let scene = Scene::load(&options.scene)?;
+    // Before the backend opens and builds its acceleration structures: the light BVH may refuse
+    // the scene.
+    let data = if options.view == RenderView::Lit {
+        let mut data = ShadeData::new(&scene)?;
+        data.analytic_residual = options.analytic_residual;
+        Some(data)
+    } else {
+        None
+    };
     let mut backend_options = options.backend.clone();
     if settle_seconds.is_some() {
         backend_options.sustain_seconds = backend_options.sustain_seconds.max(SUSTAIN_SECONDS);
@@ -209,13 +217,6 @@ pub fn render(options: &RenderOptions) -> Result<RenderReport> {
     let settings = options.frame_settings();
     settings.check_on(backend.as_ref())?;
     backend.load_scene(&scene)?;
-    let data = if options.view == RenderView::Lit {
-        let mut data = ShadeData::new(&scene)?;
-        data.analytic_residual = options.analytic_residual;
-        Some(data)
-    } else {
-        None
-    };
     let frame = Frame { scene: &scene, settings: &settings, data: data.as_ref() };
     let (rendered, warm_up_seconds) = match settle_seconds {
         None => (frame.render(backend.as_mut())?, None),

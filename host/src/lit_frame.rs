@@ -82,19 +82,19 @@ impl LitFrameSettings {
         Ok(())
     }
 
-    /// Checks the image size against the rules every backend shares (at least one pixel, a side of
-    /// at most [`crate::backend::MAX_IMAGE_SIDE`]) and the samples per pixel for that size: all of
-    /// [`Self::check_on`] but a backend's own pixel limit, so that a job can refuse them before
-    /// it loads a scene or opens a backend.
+    /// [`Self::check`], then the image size against the rules every backend shares (at least one
+    /// pixel, a side of at most [`crate::backend::MAX_IMAGE_SIDE`]) and the samples per pixel for
+    /// that size: all of [`Self::check_on`] but a backend's own pixel limit, so that a job can
+    /// refuse them before it loads a scene or opens a backend.
     pub fn check_size(&self) -> Result<()> {
+        self.check()?;
         check_image_size_common(self.width, self.height, u64::MAX, "every backend")?;
         check_samples_per_pixel("spp", self.sampler_kind, self.width, self.height, self.samples_per_pixel)
     }
 
     /// Checks every setting for a frame on `backend`: [`Self::check`], then the image size
     /// against the backend's limits ([`Backend::check_image_size`]), then the samples per pixel
-    /// for that size ([`check_samples_per_pixel`], named `spp`, or `width/height` where the image
-    /// alone overflows the sampler's index).
+    /// for that size ([`check_samples_per_pixel`], named `spp`).
     pub fn check_on(&self, backend: &dyn Backend) -> Result<()> {
         self.check()?;
         backend.check_image_size(self.width, self.height)?;
@@ -107,9 +107,12 @@ impl LitFrameSettings {
     }
 
     /// The generate stage's parameters for sample `sample_index` of `scene`'s camera, with this
-    /// frame's lens.
+    /// frame's lens: `tmax` lengthened by the aperture's radius, since a ray from the lens's rim
+    /// starts up to that much farther from the scene than the camera (an aperture wider than the
+    /// scene had cut rays short, a darkened image with nothing counted).
     pub fn generate_params(&self, scene: &Scene, sample_index: u32) -> GenerateParams {
         let mut params = generate_params_with(scene, self.width, self.height, sample_index, self.sampler());
+        params.tmax += self.lens_radius;
         params.lens_radius = self.lens_radius;
         params.focus_distance = self.focus_distance.unwrap_or(params.focus_distance);
         params
@@ -150,8 +153,9 @@ impl LitSamples {
 
 /// Runs `settings.samples_per_pixel` samples of `scene` on `backend`, each generate → trace →
 /// shade → occlusion trace, and accumulates them. `backend` must have loaded `scene`
-/// ([`Backend::load_scene`]) and `data` must be `scene`'s ([`ShadeData::new`]); the settings and
-/// the image size are checked first, so a bad value is a typed error before any work.
+/// ([`Backend::load_scene`]) and `data` must be `scene`'s ([`ShadeData::new`]); the settings, the
+/// image size and `data` ([`ShadeData::check`]) are checked first, so a bad value is a typed error
+/// before any work.
 pub fn shade_samples(
     backend: &mut dyn Backend,
     scene: &Scene,
@@ -159,6 +163,7 @@ pub fn shade_samples(
     settings: &LitFrameSettings,
 ) -> Result<LitSamples> {
     settings.check_on(backend)?;
+    data.check()?;
     let (width, height) = (settings.width, settings.height);
     let mut samples = LitSamples {
         accumulator: ShadeAccumulator::new(width as usize * height as usize),
@@ -275,6 +280,23 @@ mod tests {
         match settings.check_on(&CpuBackend::new()) {
             Err(Error::InvalidParameter { name, .. }) => name,
             other => panic!("expected a typed error, got {other:?}"),
+        }
+    }
+
+    /// Rays from a lens wider than the Cornell box (radius 3, the box ~1.4 from the camera) reach
+    /// everything they would without a `tmax`: with `tmax` twice the camera's distance alone,
+    /// rays from the rim stopped short of the back wall.
+    #[test]
+    fn a_wide_aperture_does_not_cut_rays_short() {
+        let scene = Scene::load("builtin:cornell").unwrap();
+        let settings = LitFrameSettings { lens_radius: 3.0, ..LitFrameSettings::new(48, 32, 4) };
+        let cpu_scene = crate::cpu::CpuScene::build(&scene).unwrap();
+        for sample in 0..4 {
+            let rays = crate::cpu::generate(&settings.generate_params(&scene, sample)).unwrap();
+            let mut unbounded = rays.clone();
+            unbounded.direction.iter_mut().for_each(|d| d.w = 1.0e6);
+            let [hits, all] = [&rays, &unbounded].map(|r| crate::cpu::trace(&cpu_scene, r).unwrap().hit_count());
+            assert!(all > rays.len() / 2 && hits == all, "sample {sample}: {hits} of {all} hits within tmax");
         }
     }
 

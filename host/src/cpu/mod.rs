@@ -195,6 +195,9 @@ impl Backend for CpuBackend {
     }
 
     fn render(&mut self, params: &GenerateParams) -> Result<FrameOutput> {
+        // Before the camera rays, as the Vulkan backend checks it: no work for a frame that
+        // cannot be traced.
+        self.scene()?;
         let (rays, generate_time) = self.generate(params)?;
         let (hits, trace_time) = self.trace(&rays)?;
         Ok(FrameOutput { rays, hits, timings: vec![generate_time, trace_time] })
