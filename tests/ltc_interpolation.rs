@@ -22,7 +22,9 @@ use raywave::kernels::shade::ltc::lookup;
 use raywave::ltc_fit::{alpha_at, error_percentiles, lobe_moments, relative_l1_error, view_at, Ggx, LtcMixture};
 use raywave::shared::ltc_table::{packed_entries, LTC_SIZE};
 
-/// The first row at roughness ≥ 0.1: the centres of row 6 lie at roughness 6.5/63 = 0.103.
+/// The first row at roughness ≥ 0.1: the centres of row 6 lie at roughness 6.5/63 = 0.103. Below
+/// it the interpolation errs far beyond the cells (row 0's centres: median 0.67, max 1.98), a
+/// known limit of the table's roughness axis (README, Shading), not asserted here.
 const FIRST_ROW: usize = 6;
 
 /// Stratified samples per axis and strategy of each L1 estimate (3 × 32² directions).

@@ -117,7 +117,8 @@
 //! Cells sit **at** `i/63` (the corners of a bilinear patch, ltc_code's texel centres), so the
 //! run-time lookup is `s = clamp(r, 0, 1)·63`, `u = clamp(sqrt(1 − saturate(n·v)), 0, 1)·63`,
 //! between `floor` and `floor + 1` (clamped to 62 and 63). On a GPU texture those cells are the
-//! texels at `uv = coord·(63/64) + 0.5/64` with `coord = (r, x)`, but its bilinear filter is a
+//! texels at `uv = coord·(63/64) + 0.5/64` with `coord = (x, r)` (a row of the texture is a row
+//! of this array, one roughness; ltc_code's tables run the other way), but its bilinear filter is a
 //! plain blend of the entries, which leaves seams where neighbouring cells store their two lobes
 //! in the other order: fetch the four cells and blend them lobe by lobe as
 //! `raywave_kernels::shade::ltc::lookup` does (above).
