@@ -91,7 +91,7 @@ pub fn generate_params(scene: &Scene, width: u32, height: u32, seed: u32) -> Gen
 /// `sample_index` drawn by `sampler`; a pinhole camera focused on the camera's look-at point
 /// (set `lens_radius` for depth of field). `tmax` covers the whole scene: twice the distance from
 /// the camera to the farthest corner of the scene bounds, so it is finite and never clips geometry
-/// seen from the camera (a thin lens moves the rays' origins: add its radius, as
+/// seen from the camera (a thin lens moves the rays' origins: add twice its radius, as
 /// [`crate::lit_frame::LitFrameSettings::generate_params`] does).
 pub fn generate_params_with(
     scene: &Scene,

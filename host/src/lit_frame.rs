@@ -107,12 +107,13 @@ impl LitFrameSettings {
     }
 
     /// The generate stage's parameters for sample `sample_index` of `scene`'s camera, with this
-    /// frame's lens: `tmax` lengthened by the aperture's radius, since a ray from the lens's rim
-    /// starts up to that much farther from the scene than the camera (an aperture wider than the
-    /// scene had cut rays short, a darkened image with nothing counted).
+    /// frame's lens: `tmax` lengthened by twice the aperture's radius (a ray from the lens's rim
+    /// starts up to one radius farther from the scene than the camera; twice keeps a margin when
+    /// the radius dwarfs the scene, where `f32` would round one away): an aperture wider than the
+    /// scene had cut rays short, a darkened image with nothing counted.
     pub fn generate_params(&self, scene: &Scene, sample_index: u32) -> GenerateParams {
         let mut params = generate_params_with(scene, self.width, self.height, sample_index, self.sampler());
-        params.tmax += self.lens_radius;
+        params.tmax += 2.0 * self.lens_radius;
         params.lens_radius = self.lens_radius;
         params.focus_distance = self.focus_distance.unwrap_or(params.focus_distance);
         params

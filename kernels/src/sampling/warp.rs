@@ -643,7 +643,7 @@ fn area_pdf_at_hit(n: Vec3, dir: Vec3, distance: f32) -> f32 {
 /// subtends at `p`: C. Ureña, M. Fajardo and A. King, "An Area-Preserving Parametrization for
 /// Spherical Rectangles", EGSR 2013, following pbrt-v4 `SampleSphericalRectangle`
 /// (sampling.cpp) including its clamps: `cu` clamped to `±(1 − 2⁻²⁴)`, `xu` clamped to
-/// `[x₀, x₁]`, and `yv = y₁` unless `hv² < 1 − 10⁻⁶`. Three changes for `f32`: the solid angle
+/// `[x₀, x₁]` and `yv` to `[y₀, y₁]`. Four changes for `f32`: the solid angle
 /// comes from [`quad_solid_angle`] (pbrt sums the four corner angles minus 2π in `f64`); the first
 /// angle is `au = u₀·Ω − (g₂ + g₃)`, the same value as pbrt's
 /// `u₀(g₀ + g₁ − 2π) + (u₀ − 1)(g₂ + g₃)` without the cancellation; and for a quad seen nearly
@@ -653,7 +653,10 @@ fn area_pdf_at_hit(n: Vec3, dir: Vec3, distance: f32) -> f32 {
 /// `xu = sign(fu)·|z₀|/√(fu² − (1 − b₀²))` with `1 − b₀² = n₀ₓ² + n₀ᵧ²`, the same value without
 /// `cu`. 1–5 mm below the Cornell light the `f32` sample was up to 2.6·10⁻³ from the `f64`
 /// evaluation of pbrt's formulas — and an NVIDIA GPU's fused multiply-adds moved it by as much —
-/// now within 2·10⁻⁶ (test).
+/// now within 2·10⁻⁶ (test). Seen edge-on from beyond an `ev` edge, `hv = lerp(h₀, h₁, u₁)`,
+/// `h = y/√(dd² + y²)`, rounds to ±1 within ulps, so `yv = hv·dd/√(1 − hv²)` is formed from h's
+/// distances to ±1 instead (`edge_distances`; pbrt's cut at `hv² ≥ 1 − 10⁻⁶`, which sent those
+/// samples to `y₁`, is gone).
 ///
 /// pdf = 1/Ω sr⁻¹. Special cases, mirrored by [`quad_spherical_pdf`]:
 /// - `p` in the quad's plane or a degenerate quad (Ω = 0): the bilinear point `o + u₀eu + u₁ev`
@@ -750,13 +753,20 @@ pub fn sample_quad_spherical_with_solid_angle(
     // which left hv a few values and 1 − hv² no digits (samples 0.49 of the edge off, and a cut at
     // 1 − hv² < 10⁻⁶ sent more onto the far edge); so h's distances to 1 and to −1, c = 1 − h and
     // d = 1 + h, are interpolated instead, each formed without cancellation ([`edge_distances`]):
-    // the same map in real arithmetic, with 1 − hv² = c·d.
-    let dd = (xu * xu + z0 * z0).sqrt();
-    let (c0, d0) = edge_distances(y0, dd);
-    let (c1, d1) = edge_distances(y1, dd);
+    // the same map in real arithmetic, with 1 − hv² = c·d. Where |hv| < ½ (a light overhead), hv
+    // itself is interpolated: 1 − c would lose its relative precision (2·10⁻⁶ of the edge there).
+    let dd = scaled_length(xu, z0);
+    let (c0, d0, h0) = edge_distances(y0, dd);
+    let (c1, d1, h1) = edge_distances(y1, dd);
     let cv = c0 + u.y * (c1 - c0);
     let dv = d0 + u.y * (d1 - d0);
-    let hv = if cv < dv { 1.0 - cv } else { dv - 1.0 };
+    let hv = if cv.min(dv) > 0.5 {
+        h0 + u.y * (h1 - h0)
+    } else if cv < dv {
+        1.0 - cv
+    } else {
+        dv - 1.0
+    };
     // c·d = 0 only at an end at infinity: ±∞, clamped to that edge below.
     let yv = hv * dd / (cv * dv).sqrt();
     let yv = if yv >= y1 {
@@ -780,19 +790,28 @@ pub fn sample_quad_spherical_with_solid_angle(
     }
 }
 
-/// `(1 − h, 1 + h)` for `h = y/√(dd² + y²)` (`dd ≥ 0`, not both 0) of [`sample_quad_spherical`],
-/// each without cancellation: the one near 0 as `(dd/r)·(dd/(r + |y|))`, `r = √(dd² + y²)`, the
-/// other as `1 + |y|/r`; `r` from the two scaled by the larger, so that neither square
-/// overflows nor underflows.
-fn edge_distances(y: f32, dd: f32) -> (f32, f32) {
-    let scale = dd.max(y.abs());
-    let r = scale * ((dd / scale) * (dd / scale) + (y / scale) * (y / scale)).sqrt();
+/// `√(a² + b²)` from the two scaled by the larger, so that neither square overflows nor
+/// underflows (0 for two zeros).
+fn scaled_length(a: f32, b: f32) -> f32 {
+    let scale = a.abs().max(b.abs());
+    if scale > 0.0 {
+        scale * ((a / scale) * (a / scale) + (b / scale) * (b / scale)).sqrt()
+    } else {
+        0.0
+    }
+}
+
+/// `(1 − h, 1 + h, h)` for `h = y/√(dd² + y²)` (`dd > 0`) of [`sample_quad_spherical`], the
+/// first two without cancellation: the one near 0 as `(dd/r)·(dd/(r + |y|))`, `r = √(dd² + y²)`
+/// ([`scaled_length`]), the other as `1 + |y|/r`.
+fn edge_distances(y: f32, dd: f32) -> (f32, f32, f32) {
+    let r = scaled_length(dd, y);
     let near = (dd / r) * (dd / (r + y.abs()));
     let far = 1.0 + y.abs() / r;
     if y >= 0.0 {
-        (near, far)
+        (near, far, y / r)
     } else {
-        (far, near)
+        (far, near, y / r)
     }
 }
 
@@ -1510,40 +1529,46 @@ mod tests {
         assert!(directions.len() > samples.len() / 2, "{} distinct directions", directions.len());
     }
 
-    /// A unit square seen nearly edge-on from beyond either `ev` edge (10⁻³ off its plane):
-    /// each sample's point along `ev` is where the inverse of `h(y) = y/√(dd² + y²)`, in `f64`, puts
-    /// `lerp(h(y₀), h(y₁), u₁)`, within 10⁻⁴ of the edge (measured 5.6·10⁻⁷).
-    /// Interpolating `h` itself, which rounds to ±1 within ulps there, put them up to 0.49 off and
-    /// sent 0.02 % onto the far edge.
+    /// Each sample's point along `ev` is where the inverse of `h(y) = y/√(dd² + y²)`, in `f64`,
+    /// puts `lerp(h(y₀), h(y₁), u₁)`, within 1.5·10⁻⁶ of the edge's length, for a square seen
+    /// nearly edge-on from beyond either `ev` edge (10⁻³ off its plane), overhead (a Cornell-sized
+    /// light 2 units up, whose samples `1 − c` had put 2·10⁻⁶ off), from 10⁻²⁵ off its plane at
+    /// its edge, and two controls.
+    /// Interpolating `h` itself, which rounds to ±1 within ulps edge-on, put samples up to 0.49
+    /// off and sent 0.02 % onto the far edge.
     #[test]
     fn samples_along_the_far_edge_follow_the_drawn_fraction_edge_on() {
-        let (o, eu, ev) = (Vec3::new(-0.5, -0.5, 0.0), Vec3::X, Vec3::Y);
+        let unit = Vec3::new(-0.5, -0.5, 0.0);
         let mut worst = 0.0f64;
-        // Beyond the edge y₀, then y₁ (all y negative, then all positive), and two controls.
-        for p in [
-            Vec3::new(0.0, -1.0, -1.0e-3),
-            Vec3::new(0.0, 1.0, -1.0e-3),
-            Vec3::new(0.2, -1.5, 0.1),
-            Vec3::new(0.0, -1.0, -1.0),
+        // (p, the square's corner o, its side): edges along x and y.
+        for (p, o, side) in [
+            (Vec3::new(0.0, -1.0, -1.0e-3), unit, 1.0),
+            (Vec3::new(0.0, 1.0, -1.0e-3), unit, 1.0),
+            (Vec3::new(0.01, 0.02, -2.0), Vec3::new(-0.125, -0.125, 0.0), 0.25),
+            (Vec3::new(0.0, 0.0, 1.0e-25), Vec3::new(-0.5, -1.0, 0.0), 1.0),
+            (Vec3::new(0.2, -1.5, 0.1), unit, 1.0),
+            (Vec3::new(0.0, -1.0, -1.0), unit, 1.0),
         ] {
+            let (eu, ev) = (Vec3::X * side, Vec3::Y * side);
             assert!(quad_solid_angle(p, o, eu, ev) >= QUAD_MIN_SPHERICAL_SOLID_ANGLE, "the spherical regime at {p}");
             for u in random_samples(20_000, 5) {
                 let s = sample_quad_spherical(p, o, eu, ev, u);
                 assert!(s.pdf > 0.0, "{p} {u}");
                 // The point's coordinates in the sampler's frame: x along eu, y along ev, from p.
-                let local = (s.point - p).as_dvec3();
+                let local = s.point.as_dvec3() - p.as_dvec3();
                 let (x, y, z) = (local.x, local.y, local.z);
-                let (y0, y1) = (f64::from(o.y - p.y), f64::from(o.y + 1.0 - p.y));
+                let y0 = f64::from(o.y) - f64::from(p.y);
+                let y1 = y0 + f64::from(side);
                 let dd = (x * x + z * z).sqrt();
                 let h = |y: f64| y / (dd * dd + y * y).sqrt();
                 let hv = h(y0) + f64::from(u.y) * (h(y1) - h(y0));
                 let expected = hv * dd / (1.0 - hv * hv).sqrt();
-                let error = (y - expected).abs();
-                assert!(error < 1.0e-4, "{p} u {u}: y {y} where {expected} was drawn");
+                let error = (y - expected).abs() / f64::from(side);
+                assert!(error < 1.5e-6, "{p} u {u}: y {y} where {expected} was drawn");
                 worst = worst.max(error);
             }
         }
-        std::println!("worst y error {worst:e}");
+        std::println!("worst y error {worst:e} of the edge");
     }
 
     /// Seen nearly edge-on (`|cos θl|` ≈ 7.6·10⁻⁶), a light is widened only along the ray's
