@@ -212,10 +212,10 @@ fn warm_up_on(mut now: impl FnMut() -> f64, settle_seconds: f64, mut run: impl F
         if elapsed >= MAX_WARM_UP_SECONDS {
             // The times fell last `elapsed − last_fall` ago (the first round counts as a fall).
             let steady = elapsed - last_fall;
-            eprintln!(
+            crate::output_line::warn(&format!(
                 "note: warm-up ended at its {MAX_WARM_UP_SECONDS} s limit after {elapsed:.1} s, the times steady for \
                  {steady:.1} s of the {settle_seconds} s asked (now {round:.3e} s a run)"
-            );
+            ));
             return Ok(elapsed);
         }
     }
@@ -392,9 +392,10 @@ pub fn bench_trace(options: &TraceBenchOptions, mut emit: impl FnMut(&dyn Output
         return Err(Error::InvalidParameter { name: "threads", reason });
     }
     check_repeats(options.repeats)?;
-    #[cfg_attr(not(feature = "vulkan"), allow(unused_variables))]
-    let vulkan_device = options.vulkan_options.device(options.vulkan, crate::StreamStage::Trace)?;
     crate::Backend::check_image_size(&crate::cpu::CpuBackend::new(), options.resolution, options.resolution)?;
+    let image = [options.resolution; 2];
+    #[cfg_attr(not(feature = "vulkan"), allow(unused_variables))]
+    let vulkan_device = options.vulkan_options.device(options.vulkan, crate::StreamStage::Trace, image)?;
     let scene = Scene::load(&options.scene)?;
     let cpu_scene = CpuScene::build_with(&scene, options.bvh)?;
     emit(&BuildMeasurement {

@@ -21,11 +21,12 @@ pub struct VulkanBenchOptions {
 
 impl VulkanBenchOptions {
     /// The device a bench measures — if `enabled` and there is one — with these options checked
-    /// against it; `stage` is the stage the bench sweeps, the others run their preferred sizes.
+    /// against it, and its `image` (width, height; one stream element a pixel) in each workgroup
+    /// size measured; `stage` is the stage the bench sweeps, the others run their preferred sizes.
     /// The settling time is checked with or without a device (or the `vulkan` feature); workgroup
     /// sizes or a settling time without a device to use them are an error, not ignored.
     #[cfg_attr(not(feature = "vulkan"), allow(unused_variables))]
-    pub(crate) fn device(&self, enabled: bool, stage: StreamStage) -> Result<Option<BenchDevice>> {
+    pub(crate) fn device(&self, enabled: bool, stage: StreamStage, image: [u32; 2]) -> Result<Option<BenchDevice>> {
         let settle_seconds = self.settle_seconds.map(check_settle_seconds).transpose()?.unwrap_or(GPU_SETTLE_SECONDS);
         // Without a device the bench measures the CPU alone, and says why unless it was asked to.
         let no_device = |why: &str| -> Result<Option<BenchDevice>> {
@@ -40,7 +41,7 @@ impl VulkanBenchOptions {
                 });
             }
             if enabled {
-                eprintln!("note: no Vulkan device is measured: {why}");
+                crate::output_line::warn(&format!("note: no Vulkan device is measured: {why}"));
             }
             Ok(None)
         };
@@ -67,6 +68,9 @@ impl VulkanBenchOptions {
                 [] => vec![preferred.of(stage)],
                 sizes => sizes.to_vec(),
             };
+            for &size in &sizes {
+                info.check_image_size(image[0], image[1], &preferred.with(stage, size))?;
+            }
             Ok(Some(BenchDevice { info, settle_seconds, sizes, preferred, stage }))
         }
         #[cfg(not(feature = "vulkan"))]

@@ -76,7 +76,7 @@ pub fn bench_shade(options: &ShadeBenchOptions, mut emit: impl FnMut(&ShadeMeasu
     let (side, mut cpu) = (options.resolution, crate::cpu::CpuBackend::new());
     cpu.check_image_size(side, side)?;
     #[cfg_attr(not(feature = "vulkan"), allow(unused_variables))]
-    let vulkan_device = options.vulkan_options.device(options.vulkan, crate::StreamStage::Shade)?;
+    let vulkan_device = options.vulkan_options.device(options.vulkan, crate::StreamStage::Shade, [side, side])?;
     let scene = Scene::load(&options.scene)?;
     let data = ShadeData::new(&scene)?;
     cpu.load_scene(&scene)?;

@@ -2,7 +2,7 @@
 
 use clap::{Parser, Subcommand};
 use raywave::bench::{bench_trace, TraceBenchOptions};
-use raywave::output_line::OutputLine;
+use raywave::output_line::{warn, OutputLine};
 use raywave::render::{render, RenderOptions, RenderView};
 use raywave::{BackendOptions, DeviceChoice, TraceMethod};
 use std::path::PathBuf;
@@ -367,10 +367,16 @@ fn main() -> ExitCode {
     match std::panic::catch_unwind(std::panic::AssertUnwindSafe(run)) {
         Ok(Ok(())) => ExitCode::SUCCESS,
         Ok(Err(e)) => {
-            eprintln!("error: {e}");
+            warn(&format!("error: {e}"));
             ExitCode::FAILURE
         }
         Err(payload) if payload.is::<StdoutClosed>() => ExitCode::SUCCESS,
+        Err(payload) if payload.is::<StdoutFailed>() => {
+            if let Some(StdoutFailed(e)) = payload.downcast_ref() {
+                warn(&format!("error: cannot write standard output: {e}"));
+            }
+            ExitCode::FAILURE
+        }
         Err(payload) => std::panic::resume_unwind(payload),
     }
 }
@@ -391,7 +397,7 @@ fn remove_pending_outputs_when_interrupted() {
     let mut signals = match signal_hook::iterator::Signals::new(&handled) {
         Ok(signals) => signals,
         Err(e) => {
-            eprintln!("warning: no interrupt handling ({e}): an interrupted render may leave .raywave-… files");
+            warn(&format!("warning: no interrupt handling ({e}): an interrupted render may leave .raywave-… files"));
             return;
         }
     };
@@ -420,6 +426,10 @@ fn ignored(signal: i32) -> bool {
 /// What [`print_line`] unwinds with when stdout has closed, for `main` to catch.
 struct StdoutClosed;
 
+/// What [`print_line`] unwinds with when stdout failed otherwise (a full disk, an I/O error): the
+/// lines are the product of a bench or a report, so `main` reports the error and fails.
+struct StdoutFailed(std::io::Error);
+
 /// Keeps the memory of freed streams in the process for the next pass (glibc). Each stage of the
 /// CPU backend returns new stream buffers, megabytes a pass, and glibc's malloc by default maps
 /// blocks that large from the kernel and unmaps them when freed — its mapping threshold rises
@@ -438,15 +448,20 @@ fn keep_freed_stream_memory() -> bool {
     }
 }
 
-/// Prints one measurement line as soon as it exists; a closed stdout (e.g. piped into `head`)
-/// ends the program quietly, with success, instead of panicking. It unwinds to `main` rather
+/// Prints one measurement line as soon as it exists; a closed stdout (a broken pipe, e.g. piped
+/// into `head`) ends the program quietly, with success, instead of panicking, and any other
+/// write error (a full disk under `--json > file`) ends it with the error and a failure — it had
+/// counted as a closed stdout, so a lost bench result exited 0. It unwinds to `main` rather
 /// than exiting on the spot, so that what is on the stack is dropped on the way — a pending
 /// output file (`report error-vs-time --plot`) deletes its temporary file, a Vulkan backend
 /// releases its device; `resume_unwind` prints no panic message.
 fn print_line(line: String) {
     use std::io::Write;
-    if writeln!(std::io::stdout().lock(), "{line}").is_err() {
-        std::panic::resume_unwind(Box::new(StdoutClosed));
+    if let Err(e) = writeln!(std::io::stdout().lock(), "{line}") {
+        match e.kind() {
+            std::io::ErrorKind::BrokenPipe => std::panic::resume_unwind(Box::new(StdoutClosed)),
+            _ => std::panic::resume_unwind(Box::new(StdoutFailed(e))),
+        }
     }
 }
 
@@ -573,51 +588,51 @@ fn render_command(args: RenderArgs) -> raywave::Result<()> {
         options.scene, report.triangles, report.dropped_degenerate, report.lights
     ));
     if report.unsupported_emitters > 0 {
-        eprintln!(
+        warn(&format!(
             "warning: {} emissive mesh(es) of {} are not one planar parallelogram: they glow where seen (their front faces) but light nothing",
             report.unsupported_emitters, options.scene
-        );
+        ));
     }
     if report.unrendered.textured_meshes > 0 {
-        eprintln!(
+        warn(&format!(
             "warning: {} mesh(es) of {} have textures, which raywave does not sample: their materials' factors alone \
              apply (an emissive texture's mesh emits its factor everywhere)",
             report.unrendered.textured_meshes, options.scene
-        );
+        ));
     }
     if report.unrendered.see_through_meshes > 0 {
-        eprintln!(
+        warn(&format!(
             "warning: {} mesh(es) of {} have see-through materials (alpha blended or masked, MTL dissolve), which \
              raywave renders opaque",
             report.unrendered.see_through_meshes, options.scene
-        );
+        ));
     }
     if report.unrendered.deformed_meshes > 0 {
-        eprintln!(
+        warn(&format!(
             "warning: {} mesh(es) of {} have a skin or weighted morph targets, which raywave does not apply: they render \
              in their rest pose",
             report.unrendered.deformed_meshes, options.scene
-        );
+        ));
     }
     if report.unrendered.orthographic_camera {
-        eprintln!(
+        warn(&format!(
             "warning: the cameras of {} are orthographic, which raywave does not render: it frames the scene with a \
              perspective camera instead",
             options.scene
-        );
+        ));
     }
     if report.unrendered.punctual_lights > 0 {
-        eprintln!(
+        warn(&format!(
             "warning: {} punctual light(s) (KHR_lights_punctual point, spot or directional) of {} light nothing: \
              raywave renders area lights only (emissive parallelograms)",
             report.unrendered.punctual_lights, options.scene
-        );
+        ));
     }
     if report.lights == 0 && options.view == RenderView::Lit {
-        eprintln!(
+        warn(&format!(
             "warning: {} has no quad light, so nothing is lit (emitters glow where their front faces are seen)",
             options.scene
-        );
+        ));
     }
     let spp = report.samples_per_pixel;
     let rays = u64::from(options.width) * u64::from(options.height) * u64::from(spp);
@@ -646,10 +661,10 @@ fn render_command(args: RenderArgs) -> raywave::Result<()> {
     }
     let sanitized = raywave::StageReport::total_sanitized(&report.timings);
     if sanitized > 0 {
-        eprintln!(
+        warn(&format!(
             "warning: {sanitized} value(s) went non-finite and were replaced (rays or hits as misses, samples \
              without their contribution, colours by the emitted radiance); see the stage lines"
-        );
+        ));
     }
     Ok(())
 }

@@ -433,6 +433,32 @@ fn signal_masks(pid: &str) -> (u64, u64) {
     (mask("SigIgn:"), mask("SigCgt:"))
 }
 
+/// A full standard output (`bench … --json > file` on a full disk) is an error, not the quiet
+/// success of a closed one: it had exited 0 with the results lost. A full standard error loses
+/// the warnings only: a warning's `eprintln!` had panicked (exit 101) before the results were
+/// printed.
+#[cfg(target_os = "linux")]
+#[test]
+fn full_standard_streams() {
+    let full = || std::fs::OpenOptions::new().write(true).open("/dev/full").expect("/dev/full");
+    let lost = Command::new(env!("CARGO_BIN_EXE_raywave")).arg("devices").stdout(full()).output().unwrap();
+    let message = stderr(&lost);
+    assert!(!lost.status.success(), "{:?}: {message}", lost.status);
+    assert!(message.contains("cannot write standard output") && !message.contains("panicked"), "{message}");
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("dark.png");
+    let args = ["render", "--device", "cpu", "--scene", "builtin:hairball", "--width", "8", "--height", "8"];
+    let warned = Command::new(env!("CARGO_BIN_EXE_raywave"))
+        .args(args)
+        .args(["--out", path.to_str().unwrap()])
+        .stderr(full())
+        .output()
+        .unwrap();
+    assert!(warned.status.success(), "{:?}", warned.status);
+    let printed = String::from_utf8_lossy(&warned.stdout);
+    assert!(path.exists() && printed.lines().any(|l| l.starts_with("stage")), "{printed}");
+}
+
 /// Runs raywave with `args`, its standard output closed before it prints anything, and checks
 /// that it ends with success and without a panic.
 fn run_with_closed_stdout(args: &[&str]) {
@@ -959,6 +985,14 @@ fn trace_bench_measures_each_workgroup_size_of_each_compute_method() {
     assert_eq!(sw_sizes, [Some(64); 3], "{preferred:?}");
     let refused = [&quick[..], &["--workgroup-sizes", "64,96"]].concat();
     assert_refused_before_measuring(&refused, "workgroup-sizes: 96: this device runs the powers of two");
+    // A frame the CPU takes and the device's streams cannot hold (lavapipe: 2897²) fails before
+    // anything is measured: the CPU rows had run first, minutes at that size.
+    let side = u32::try_from(best.max_stream_len(32).isqrt() + 1).unwrap_or(u32::MAX);
+    if raywave::Backend::check_image_size(&raywave::cpu::CpuBackend::new(), side, side).is_ok() {
+        let side = side.to_string();
+        let too_large = [&base[..4], &["--resolution", &side, "--repeats", "1", "--workgroup-sizes", "32"]].concat();
+        assert_refused_before_measuring(&too_large, &format!("is invalid on vulkan:{}", best.index));
+    }
 }
 
 /// `bench shade --workgroup-sizes`: the CPU once and the Vulkan device once per shade workgroup

@@ -131,7 +131,7 @@ fn sanitized_warning(scene: &str, spp: u32, count: u64) -> Option<String> {
 /// Prints [`sanitized_warning`] on stderr, if any.
 pub(crate) fn warn_if_sanitized(scene: &str, spp: u32, count: u64) {
     if let Some(warning) = sanitized_warning(scene, spp, count) {
-        eprintln!("{warning}");
+        crate::output_line::warn(&warning);
     }
 }
 

@@ -408,12 +408,7 @@ impl VulkanBackend {
 
     /// Largest stream this device can hold in one storage buffer and cover with one dispatch.
     fn max_rays(&self) -> u64 {
-        let by_buffer = u64::from(self.core.limits.max_storage_buffer_range) / std::mem::size_of::<Vec4>() as u64;
-        // One row of workgroups, or rows of `STREAM_ROW` invocations (`kernel::dispatch_grid`).
-        let [max_x, max_y, _] = self.core.limits.max_compute_work_group_count;
-        let by_grid = (u64::from(max_x) * u64::from(self.core.workgroup_sizes.smallest()))
-            .max(u64::from(max_y) * u64::from(bindings::STREAM_ROW));
-        by_buffer.min(by_grid).min(u64::from(u32::MAX))
+        self.core.info.max_stream_len(self.core.workgroup_sizes.smallest())
     }
 
     fn generate_on_device(&self, params: &GenerateParams) -> Result<(DeviceRays, StageReport)> {

@@ -62,9 +62,41 @@ pub struct DeviceInfo {
     /// `maxComputeWorkGroupSize[0]` and `maxComputeWorkGroupInvocations` whose rows of
     /// [`STREAM_ROW`] invocations fit `maxComputeWorkGroupCount[0]`.
     pub workgroup_sizes: Vec<u32>,
+    /// `maxStorageBufferRange`, bytes: a stream of `Vec4`s holds at most a sixteenth of it
+    /// elements ([`Self::max_stream_len`]).
+    pub max_storage_buffer_range: u32,
+    /// `maxComputeWorkGroupCount`: with the workgroup size, how many invocations one dispatch
+    /// covers ([`Self::max_stream_len`]).
+    pub max_compute_work_group_count: [u32; 3],
 }
 
 impl DeviceInfo {
+    /// The longest stream (rays, hits, an image's pixels) this device holds in one storage buffer
+    /// of `Vec4`s and covers with one dispatch in workgroups of `smallest_workgroup` invocations —
+    /// the smallest size a backend runs its stages in: where those fit, every stage's do. One row
+    /// of workgroups, or rows of [`STREAM_ROW`] invocations (`kernel::dispatch_grid`).
+    pub fn max_stream_len(&self, smallest_workgroup: u32) -> u64 {
+        let by_buffer = u64::from(self.max_storage_buffer_range) / std::mem::size_of::<glam::Vec4>() as u64;
+        let [max_x, max_y, _] = self.max_compute_work_group_count;
+        let by_grid = (u64::from(max_x) * u64::from(smallest_workgroup)).max(u64::from(max_y) * u64::from(STREAM_ROW));
+        by_buffer.min(by_grid).min(u64::from(u32::MAX))
+    }
+
+    /// Checks a `width` × `height` image (one stream element a pixel) against this device with its
+    /// stages in `workgroup_sizes`: the size rules every backend shares and
+    /// [`Self::max_stream_len`], as a backend opened on it would
+    /// ([`crate::Backend::check_image_size`]) — so that a bench refuses a size the device cannot
+    /// take before it measures anything (it had measured the CPU for minutes first).
+    pub fn check_image_size(&self, width: u32, height: u32, workgroup_sizes: &WorkgroupSizes) -> Result<()> {
+        let max_pixels = self.max_stream_len(workgroup_sizes.smallest());
+        crate::backend::check_image_size_common(
+            width,
+            height,
+            max_pixels,
+            &format!("vulkan:{} {}", self.index, self.name),
+        )
+    }
+
     /// What every kernel needs and this device lacks (empty when raywave runs on it): Vulkan 1.2
     /// with `vulkanMemoryModel` (every rust-gpu module uses it) and room for
     /// [`MOST_STORAGE_BUFFERS`] storage buffers in one pass.
@@ -393,6 +425,8 @@ fn describe(instance: &ash::Instance, physical: vk::PhysicalDevice, index: usize
                 .min(props.limits.max_descriptor_set_storage_buffers)
                 .min(props.limits.max_per_stage_resources),
             workgroup_sizes: stream_workgroup_sizes(&props.limits),
+            max_storage_buffer_range: props.limits.max_storage_buffer_range,
+            max_compute_work_group_count: props.limits.max_compute_work_group_count,
         })
     }
 }
@@ -689,6 +723,8 @@ mod tests {
             timestamp_valid_bits: 64,
             storage_buffers_per_pass: 1 << 20,
             workgroup_sizes: vec![32, 64, 128, 256, 512, 1024],
+            max_storage_buffer_range: 1 << 27,
+            max_compute_work_group_count: [65535; 3],
         }
     }
 
@@ -724,5 +760,29 @@ mod tests {
         // `auto` passes over such devices.
         let devices = [DeviceInfo { index: 0, ..old }, DeviceInfo { index: 1, device_type: "CPU".into(), ..base }];
         assert_eq!(crate::device::best_vulkan_device(&devices).unwrap(), 1);
+    }
+
+    /// A stream is bounded by one storage buffer of `Vec4`s and by one dispatch grid, and an image
+    /// is checked against that before a backend opens: lavapipe's 2²⁷-byte buffers hold 2896²
+    /// pixels, not 2897².
+    #[test]
+    fn a_stream_fits_one_buffer_and_one_dispatch() {
+        let lavapipe = lavapipe();
+        assert_eq!(lavapipe.max_stream_len(32), 1 << 23);
+        let sizes = WorkgroupSizes::preferred_on(&lavapipe.workgroup_sizes);
+        assert!(lavapipe.check_image_size(2896, 2896, &sizes).is_ok());
+        let refused = lavapipe.check_image_size(2897, 2897, &sizes);
+        assert!(
+            matches!(&refused, Err(Error::ImageSize { backend, .. }) if backend == "vulkan:0 llvmpipe"),
+            "{refused:?}"
+        );
+        // A grid of 1024 workgroups in x and one row: 32-wide workgroups cover 2¹⁵ invocations,
+        // rows of `STREAM_ROW` one row's worth; the larger bounds the stream.
+        let narrow =
+            DeviceInfo { max_storage_buffer_range: u32::MAX, max_compute_work_group_count: [1024, 1, 1], ..lavapipe };
+        assert_eq!(narrow.max_stream_len(32), u64::from(STREAM_ROW));
+        let wide = DeviceInfo { max_compute_work_group_count: [u32::MAX, 1, 1], ..narrow };
+        assert_eq!(wide.max_stream_len(1), u64::from(u32::MAX) / 16);
+        assert!(wide.check_image_size(0, 1, &sizes).is_err());
     }
 }
