@@ -96,7 +96,7 @@ mod tests {
         assert_eq!(base, pcg3d(UVec3::new(1, 2, 3)));
         for changed in [UVec3::new(2, 2, 3), UVec3::new(1, 3, 3), UVec3::new(1, 2, 4)] {
             let other = pcg3d(changed);
-            // A one-bit input change flips about half of the 96 output bits.
+            // A small change of one input (1 to 3 bits) flips about half of the 96 output bits.
             let flipped = (base ^ other).to_array().iter().map(|w| w.count_ones()).sum::<u32>();
             assert!((30..=66).contains(&flipped), "{changed}: {flipped} bits flipped");
         }
