@@ -74,12 +74,15 @@ impl DeviceInfo {
     /// The longest stream (rays, hits, an image's pixels) this device holds in one storage buffer
     /// of `Vec4`s and covers with one dispatch in workgroups of `smallest_workgroup` invocations —
     /// the smallest size a backend runs its stages in: where those fit, every stage's do. One row
-    /// of workgroups, or rows of [`STREAM_ROW`] invocations (`kernel::dispatch_grid`).
+    /// of workgroups, or rows of [`STREAM_ROW`] invocations where such a row's workgroups fit
+    /// `maxComputeWorkGroupCount[0]` (`kernel::dispatch_grid`'s two grids).
     pub fn max_stream_len(&self, smallest_workgroup: u32) -> u64 {
         let by_buffer = u64::from(self.max_storage_buffer_range) / std::mem::size_of::<glam::Vec4>() as u64;
         let [max_x, max_y, _] = self.max_compute_work_group_count;
-        let by_grid = (u64::from(max_x) * u64::from(smallest_workgroup)).max(u64::from(max_y) * u64::from(STREAM_ROW));
-        by_buffer.min(by_grid).min(u64::from(u32::MAX))
+        let one_row = u64::from(max_x) * u64::from(smallest_workgroup);
+        let rows_fit = STREAM_ROW.checked_div(smallest_workgroup).is_some_and(|row| row <= max_x);
+        let rows = if rows_fit { u64::from(max_y) * u64::from(STREAM_ROW) } else { 0 };
+        by_buffer.min(one_row.max(rows)).min(u64::from(u32::MAX))
     }
 
     /// Checks a `width` × `height` image (one stream element a pixel) against this device with its
@@ -776,12 +779,19 @@ mod tests {
             matches!(&refused, Err(Error::ImageSize { backend, .. }) if backend == "vulkan:0 llvmpipe"),
             "{refused:?}"
         );
-        // A grid of 1024 workgroups in x and one row: 32-wide workgroups cover 2¹⁵ invocations,
-        // rows of `STREAM_ROW` one row's worth; the larger bounds the stream.
-        let narrow =
-            DeviceInfo { max_storage_buffer_range: u32::MAX, max_compute_work_group_count: [1024, 1, 1], ..lavapipe };
-        assert_eq!(narrow.max_stream_len(32), u64::from(STREAM_ROW));
-        let wide = DeviceInfo { max_compute_work_group_count: [u32::MAX, 1, 1], ..narrow };
+        // 65 535 workgroups in x and two rows: one row of 32-wide workgroups covers 2 097 120
+        // invocations, two rows of `STREAM_ROW` (32 768 workgroups each) 2²¹.
+        let grid = |max_compute_work_group_count| DeviceInfo {
+            max_storage_buffer_range: u32::MAX,
+            max_compute_work_group_count,
+            ..lavapipe.clone()
+        };
+        assert_eq!(grid([65_535, 2, 1]).max_stream_len(32), 2 * u64::from(STREAM_ROW));
+        assert_eq!(grid([65_535, 2, 1]).max_stream_len(1024), 65_535 * 1024);
+        // 1024 in x: a row of `STREAM_ROW` does not fit, so one row of workgroups is all.
+        assert_eq!(grid([1024, 4, 1]).max_stream_len(32), 1024 * 32);
+        assert_eq!(grid([1024, 4, 1]).max_stream_len(0), 0);
+        let wide = grid([u32::MAX, 1, 1]);
         assert_eq!(wide.max_stream_len(1), u64::from(u32::MAX) / 16);
         assert!(wide.check_image_size(0, 1, &sizes).is_err());
     }
