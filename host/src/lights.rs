@@ -946,6 +946,64 @@ mod tests {
 
     const ONE_MINUS: f32 = raywave_kernels::hash::ONE_MINUS_EPSILON;
 
+    /// Ceiling points amid an array of small LEDs in the ceiling's plane, which light none of
+    /// them, and a lamp below that lights them all: the BVH gives the lamp at least the linear
+    /// scan's pmf (measured: 1 at every cluster's centre). Inside the LED clusters' spheres their
+    /// importance had ignored where they face, and the lamp's pmf fell to 6.2·10⁻⁸ at the
+    /// clusters' centres — below 2⁻²⁴ it is never drawn. At the same points with other normals, each light that reaches
+    /// the point keeps a positive pmf: the cull of clusters out of reach is conservative.
+    #[test]
+    fn lights_bvh_culls_clusters_out_of_reach_inside_their_spheres() {
+        // 20 × 20 LEDs 5 mm across, 0.25 m apart on the ceiling y = 3, emitting downwards
+        // (x̂ × ẑ = −ŷ); a 0.2 m lamp at y = 1 emitting upwards (ẑ × x̂ = ŷ).
+        let led = |k: usize| {
+            let corner = Vec3::new((k % 20) as f32 * 0.25, 3.0, (k / 20) as f32 * 0.25);
+            Light::quad(corner, 0.005 * Vec3::X, 0.005 * Vec3::Z, Vec3::splat(2000.0), false)
+        };
+        let mut lights: Vec<Light> = (0..400).map(led).collect();
+        lights.push(Light::quad(Vec3::new(2.3, 1.0, 2.3), 0.2 * Vec3::Z, 0.2 * Vec3::X, Vec3::splat(10.0), false));
+        let lamp = 400;
+        let bvh = LightBvh::build(&lights).unwrap();
+        let mut rng = CounterRng::new(31);
+        let (mut least, mut least_of_scan, mut clusters) = (f32::INFINITY, f32::INFINITY, 0);
+        for node in bvh.nodes().iter().filter(|node| node.is_leaf == 0) {
+            let centre = (node.bounds.min.truncate() + node.bounds.max.truncate()) * 0.5;
+            if centre.y < 2.99 {
+                continue;
+            }
+            // Not on an LED, within whose own sphere (a leaf's, as in the scan) that LED still
+            // weighs as if it lit the point.
+            let led_centre = |led: &Light| led.position.truncate() + 0.0025 * (Vec3::X + Vec3::Z);
+            let on_an_led = lights[..lamp as usize].iter().any(|led| (led_centre(led) - centre).length() < 0.01);
+            if on_an_led {
+                continue;
+            }
+            clusters += 1;
+            // On the ceiling and 5 cm below it, facing down.
+            for p in [centre, centre - 0.05 * Vec3::Y] {
+                let pmf = bvh_pmf(bvh.nodes(), bvh.trails(), p, -Vec3::Y, lamp);
+                let scan = importance_pmf(&lights, p, -Vec3::Y, lamp);
+                least = least.min(pmf);
+                least_of_scan = least_of_scan.min(pmf / scan);
+            }
+            for n in [Vec3::Y, rng.unit_vec3(), rng.unit_vec3()] {
+                let p = centre + 0.01 * rng.unit_vec3();
+                for (k, light) in lights.iter().enumerate() {
+                    if contributes(light, &mut rng, p, n) {
+                        let pmf = bvh_pmf(bvh.nodes(), bvh.trails(), p, n, k as u32);
+                        assert!(pmf > 0.0, "light {k} reaches {p}, {n} but has pmf 0");
+                    }
+                }
+            }
+        }
+        std::println!(
+            "the lamp's least pmf at {clusters} LED clusters' centres: {least}, {least_of_scan} of the scan's"
+        );
+        assert!(clusters > 100 && least > 0.01, "{clusters} clusters, the lamp's pmf down to {least}");
+        assert!(least_of_scan >= 1.0 - 1e-6, "the lamp's pmf down to {least_of_scan} of the scan's");
+        check_pmfs(&bvh, &lights, 32, 200, 5.0);
+    }
+
     #[test]
     fn lights_cone_union_contains_both_cones() {
         let mut rng = CounterRng::new(21);

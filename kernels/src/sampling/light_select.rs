@@ -33,10 +33,15 @@
 //! [`bvh_pmf`] follows the trail and checks that the leaf it reaches holds the light; lights left
 //! out of the BVH (zero power) reach another light's leaf and so get pmf 0.
 //!
-//! Precision: a branch probability below 2⁻²⁴ relative to its sibling rounds the sibling's
-//! probability to 1, and each level rescales the 24-bit sample, so a subtree with pmf ≲ 2⁻²⁴ can
-//! get pmf 0 (pbrt-v4 behaves the same); such a subtree contributes at most ≈ 2⁻²⁴ of the total
-//! bound. [`bvh_pmf`] is exactly the product [`select_bvh`] forms, so MIS weights stay consistent.
+//! Precision: each level rescales the 24-bit sample, so how often a subtree is drawn moves in
+//! steps of 2⁻²⁴ (measured within 1.2–2.2 steps of `pmf · 2²⁴` at depths 8–24): a subtree whose
+//! pmf is ≲ 2⁻²⁴ is drawn with frequency 0, or at least 2⁻²⁴ whatever its pmf (`u = 0` always
+//! takes first children), and a branch probability below 2⁻²⁴ relative to its sibling rounds the
+//! sibling's to 1 (pbrt-v4 behaves the same). The pmf itself stays positive, and [`bvh_pmf`] is
+//! exactly the product [`select_bvh`] forms, so MIS weights stay consistent. A subtree never
+//! drawn holds at most ≈ 2⁻²⁴ of the total importance — a bound, which inside a cluster of
+//! lights ignores where they face, so the BVH also gives 0 to an interior node whose box no
+//! light can reach the point from (see `node_importance`).
 //! The linear scan has the same limit: its target `u·Σ I` moves in steps of 2⁻²⁴ of the total,
 //! so a light whose importance is below that step may fall between two steps and never be
 //! chosen, though [`importance_pmf`] gives it its share; the light missed is at most ≈ 2⁻²⁴ of
@@ -266,6 +271,60 @@ pub fn importance(bounds: &LightBounds, p: Vec3, n: Vec3) -> f32 {
     }
 }
 
+/// A light-BVH node's importance for `p` (surface normal `n`): [`importance`] of its bounds, and 0
+/// for an interior node with `p` inside its bounding sphere when its box is [`out_of_reach`].
+///
+/// Inside a cluster's sphere [`importance`] drops its cone and surface factors and clamps the
+/// distance at the radius of the largest light inside (clamping at the cluster's own size had
+/// starved the cluster a point stands in), so a sparse cluster of small lights about `p` weighed
+/// as if they all lit it: ceiling points amid an array of 5 mm LEDs, in their plane or just below
+/// it, which none of them lights, gave the lamp that alone lit them a pmf down to 6·10⁻⁸ —
+/// 10⁷ times the variance, and below 2⁻²⁴ never drawn, a black `U_N` where `U` is not (now 1:
+/// `raywave_host::lights`' tests). Leaves keep [`importance`] alone: a box turns with the scene and a
+/// light's own importance does not.
+fn node_importance(node: &LightBvhNode, p: Vec3, n: Vec3) -> f32 {
+    let bounds = &node.bounds;
+    let centre = (bounds.min.truncate() + bounds.max.truncate()) * 0.5;
+    let inside = (p - centre).length_squared() <= bounds.max.w * bounds.max.w;
+    if node.is_leaf == 0 && inside && out_of_reach(bounds, p, n) {
+        0.0
+    } else {
+        importance(bounds, p, n)
+    }
+}
+
+/// Whether no light inside the box of `bounds` can light `p` (surface normal `n`, need not be
+/// normalised; 0 or NaN: no surface): every corner of the box on or below `p`'s tangent plane
+/// (each light then lies below the horizon, where `U` clips it away), or — for one-sided emitters
+/// whose normals lie within `θo < π/2` of the axis and emit within `θe ≤ π/2` of them — `p` on or
+/// behind each of them, `axis·(p − c) + sin θo·|p − c| ≤ 0` at every corner `c`. Both tested
+/// functions are convex in the corner, so their largest value over the box is at a corner. A
+/// comparison with a NaN (an infinite box) counts as within reach. Lights no more than a rounding
+/// error above the horizon, whose `U` is of that order squared, may be culled.
+#[allow(clippy::neg_cmp_op_on_partial_ord)] // `!(x <= 0)`: a NaN is within reach
+fn out_of_reach(bounds: &LightBounds, p: Vec3, n: Vec3) -> bool {
+    let (lo, hi) = (bounds.min.truncate(), bounds.max.truncate());
+    let axis = bounds.axis.truncate();
+    let cos_o = bounds.cos_theta_o;
+    let one_sided_cone = bounds.two_sided == 0 && cos_o > 0.0 && bounds.cos_theta_e >= 0.0;
+    let sin_o = sin_from_cos(cos_o.min(1.0));
+    let (mut above_horizon, mut in_front) = (false, false);
+    let mut corner = 0;
+    while corner < 8 {
+        let c = Vec3::new(
+            if corner & 1 != 0 { hi.x } else { lo.x },
+            if corner & 2 != 0 { hi.y } else { lo.y },
+            if corner & 4 != 0 { hi.z } else { lo.z },
+        );
+        let w = p - c;
+        above_horizon = above_horizon || !(n.dot(-w) <= 0.0);
+        in_front = in_front || !(axis.dot(w) + sin_o * w.length() <= 0.0);
+        corner += 1;
+    }
+    let surface = n.length_squared() > 0.0;
+    (surface && !above_horizon) || (one_sided_cone && !in_front)
+}
+
 /// Uniform choice among `count` lights: index `⌊u·count⌋`, pmf `1/count`; [`LightChoice::NONE`]
 /// when `count` is 0.
 pub fn select_uniform(count: u32, u: f32) -> LightChoice {
@@ -359,10 +418,10 @@ pub fn importance_pmf(lights: &[Light], p: Vec3, n: Vec3, index: u32) -> f32 {
 }
 
 /// Probability of taking the first child of interior node `node` (children `first`, `second`):
-/// `I₀ / (I₀ + I₁)`, or 1/2 when both importances are 0.
+/// `I₀ / (I₀ + I₁)` of their [`node_importance`]s, or 1/2 when both are 0.
 fn first_child_probability(nodes: &[LightBvhNode], first: u32, second: u32, p: Vec3, n: Vec3) -> f32 {
-    let i0 = importance(&nodes[first as usize].bounds, p, n);
-    let i1 = importance(&nodes[second as usize].bounds, p, n);
+    let i0 = node_importance(&nodes[first as usize], p, n);
+    let i1 = node_importance(&nodes[second as usize], p, n);
     let sum = i0 + i1;
     if sum > 0.0 {
         i0 / sum
