@@ -234,8 +234,9 @@ impl DenoiseInput {
     /// ([`DenoiseParams::bilateral_invocations`]; for every method, so that every backend and
     /// method accept the same images), every buffer holds `width · height` entries, the radius
     /// is within `1..=MAX_RADIUS`, the estimates average at least one sample, the edge weights
-    /// are finite and ≥ 0, SVGF's `phiColor` finite and > 0 and its variance boost finite and
-    /// ≥ 0 (checked for every method, as the radius is), and every value is finite, with the radiances (`U`, emitted, `S_N`,
+    /// are finite and ≥ 0, SVGF's `phiColor` finite and > 0, its variance boost finite and ≥ 0
+    /// and its à-trous iterations within `1..=MAX_ATROUS_ITERATIONS` (checked for every method,
+    /// as the radius is), and every value is finite, with the radiances (`U`, emitted, `S_N`,
     /// `U_N`: rgb) and the analytic luminance (`normal.w`) not negative, and `S_N`, `U_N` at
     /// most [`MAX_FILTERED_RADIANCE`], below which the filter's sums stay finite. One NaN or
     /// negative pixel would otherwise spread through the noise estimate and the filter taps to
@@ -269,6 +270,12 @@ impl DenoiseInput {
             Some(format!(
                 "SVGF parameters {} need phiColor (x) finite and > 0, the variance boost (y) finite and ≥ 0",
                 params.svgf
+            ))
+        } else if !(1..=MAX_ATROUS_ITERATIONS).contains(&params.atrous_iterations) {
+            // The passes had clamped it silently: 0 ran one iteration, 8 ran four.
+            Some(format!(
+                "SVGF's à-trous iterations {} are outside 1..={MAX_ATROUS_ITERATIONS}",
+                params.atrous_iterations
             ))
         } else {
             self.first_invalid_value(params.width)
@@ -482,6 +489,15 @@ mod tests {
                 other => panic!("expected SVGF parameters {svgf} refused, got {other:?}"),
             }
         }
+        for atrous_iterations in [0, MAX_ATROUS_ITERATIONS + 1] {
+            match input(12).check(&DenoiseParams { atrous_iterations, ..params }) {
+                Err(Error::InvalidParameter { name: "denoise", reason }) => {
+                    assert!(reason.contains("à-trous iterations"), "{reason}")
+                }
+                other => panic!("expected {atrous_iterations} à-trous iterations refused, got {other:?}"),
+            }
+        }
+        assert!(input(12).check(&DenoiseParams { atrous_iterations: MAX_ATROUS_ITERATIONS, ..params }).is_ok());
         assert!(reason(&|d| d.analytic[4].x = -1.0).contains("analytic[4]"));
         assert!(reason(&|d| d.normal[5].w = -0.5).contains("normal[5] (pixel 1, 1)"));
         // Negative normals and positions are directions and points, not radiances.

@@ -179,11 +179,13 @@ pub fn shade_samples(
             StageReport::add_to(&mut samples.timings, report);
         }
         samples.hits += frame.hits.hit_count();
+        let params = data.params(settings.sampler(), width, height, sample_index);
+        // The pass checks the streams the backend returned (a backend an engine wrote may return
+        // fewer hits than rays), so the resolve step, which would panic on them, comes after it.
+        let (reports, pass_bytes) = samples.accumulator.shade_pass(backend, &params, data, &frame.rays, &frame.hits)?;
         if sample_index == 0 {
             samples.surfaces = resolve(data, &frame.rays, &frame.hits);
         }
-        let params = data.params(settings.sampler(), width, height, sample_index);
-        let (reports, pass_bytes) = samples.accumulator.shade_pass(backend, &params, data, &frame.rays, &frame.hits)?;
         for report in &reports {
             StageReport::add_to(&mut samples.timings, report);
         }

@@ -428,7 +428,9 @@ impl ShadeAccumulator {
         (image, replaced)
     }
 
-    /// The fully stochastic image: `emitted + S_N`.
+    /// The fully stochastic image: `emitted + S_N`. Unlike [`Self::ratio_image`] it replaces and
+    /// counts no overflow: with scenes' values, which [`crate::scene::MAX_EMISSION`] bounds, the
+    /// sum stays far inside `f32`; records near `f32::MAX` given to [`Self::add`] can make it ∞.
     pub fn stochastic_image(&self) -> Vec<Vec3> {
         let (s_n, e) = (self.shadowed(), self.emitted());
         s_n.iter().zip(&e).map(|(&s, &e)| s + e).collect()

@@ -42,8 +42,9 @@ pub struct ChiSquare {
     /// Probability that a χ² variable with `dof` degrees of freedom exceeds `statistic`
     /// (`1 − CDF`); small values reject the hypothesis that the samples follow the pdf. 0 where
     /// the statistic is infinite (samples in a cell, or pool, that expects none), and NaN where
-    /// pooling left a single cell (`dof` 0) or an expected count is negative or not finite (a NaN
-    /// pdf): the counts cannot test the pdf, so a check `p_value > α` fails rather than passing.
+    /// pooling left a single cell (`dof` 0), an expected count is negative or not finite (a NaN
+    /// pdf) or the counts and expectations differ in number: the counts cannot test the pdf, so
+    /// a check `p_value > α` fails rather than passing.
     pub p_value: f64,
     /// Integral of the pdf over the domain: the summed cell integrals (≈ 1 for a normalized pdf
     /// whose support lies in the domain).
@@ -92,7 +93,8 @@ impl Histogram {
     }
 }
 
-/// Pearson's chi-square test of `observed` counts against `expected` counts (same length),
+/// Pearson's chi-square test of `observed` counts against `expected` counts (same length, else
+/// the p-value is NaN),
 /// pooling cells with expected counts below [`MIN_EXPECTED`]: cells are taken in increasing
 /// order of expectation and merged until the pool reaches [`MIN_EXPECTED`]; a final pool still
 /// below it is merged into the first cell kept (the first pool, or else the smallest cell). Cells expecting exactly 0 add their samples to
@@ -152,7 +154,10 @@ pub fn chi_square_counts(observed: &[u64], expected: &[f64]) -> ChiSquare {
     let dof = cells.len().saturating_sub(1) as u32;
     // A NaN expectation fails every comparison above: it would stay a cell of its own, add 0
     // where nothing was observed, and count towards `dof`.
-    let sound_expectations = order.iter().all(|&i| expected[i].is_finite() && expected[i] >= 0.0);
+    // Slices of different lengths leave cells without a partner: unpaired counts (1000 samples
+    // beside two cells of 50 had given p = 1).
+    let sound_expectations =
+        observed.len() == expected.len() && order.iter().all(|&i| expected[i].is_finite() && expected[i] >= 0.0);
     let p_value = if !sound_expectations {
         f64::NAN
     } else if statistic == f64::INFINITY {
@@ -411,6 +416,11 @@ mod tests {
         for bad in [f64::NAN, f64::INFINITY, -1.0] {
             let r = chi_square_counts(&[50, 50, 0], &[50.0, 50.0, bad]);
             assert!(r.p_value.is_nan(), "{bad}: {r}");
+        }
+        // Counts and expectations of different lengths pair no cells for the extra ones.
+        for (observed, expected) in [(&[50u64, 50, 1000][..], &[50.0, 50.0][..]), (&[50, 50], &[50.0, 50.0, 1000.0])] {
+            let r = chi_square_counts(observed, expected);
+            assert!(r.p_value.is_nan(), "{observed:?} against {expected:?}: {r}");
         }
     }
 }

@@ -8,7 +8,7 @@
 
 /// Threads per workgroup every 1-D compute stage is compiled with (`threads(64)` in the kernels'
 /// entry points). 64 fills a wave on AMD and two warps on NVIDIA. The host may run the stream
-/// stages with another power of two (`ContextOptions::workgroup_size`); the bilateral denoise
+/// stages with another power of two (`ContextOptions::workgroup_sizes`); the bilateral denoise
 /// pass, whose workgroup-memory tile is sized by it ([`crate::denoise::TILE_LEN`]), always runs
 /// with this one.
 pub const WORKGROUP_SIZE: u32 = 64;
