@@ -10,8 +10,9 @@
 //! iterations), which uses the tiles' halos in full, and with the footprint
 //! `DenoiseParams::new` picks for the size; and the two-light box at 4 spp, where the TV filter's
 //! Gaussian is √4 narrower. And synthetic coin-flip shadows on the degenerate sizes 1 × 1 (every
-//! tap outside the image) and 3 × 200 (rows shorter than the filter radius, columns of four
-//! segments), with pixels and bands of rows that drew no light sample (`synthetic`).
+//! tap outside the image), 3 × 200 (rows shorter than the filter radius, columns of four
+//! segments), 200 × 1, 200 × 3 and 1 × 65 536 (more bilateral workgroups than a grid row holds
+//! on lavapipe), with pixels and bands of rows that drew no light sample (`synthetic`).
 //!
 //! **What is compared, and how tightly.** The colour, per channel, relative to
 //! `max(|a|, |b|, FLOOR_FRACTION · M)`, `M` the mean channel value of the CPU image (so that
@@ -351,6 +352,11 @@ fn denoise_matches_the_cpu_on_degenerate_sizes_on_every_vulkan_device() {
     all.extend(cases("200×1", params, input));
     let (params, input) = synthetic(200, 3, 14);
     all.extend(cases("200×3", params, input));
+    // 65 536 lines of one pixel: the bilateral x pass's 65 536 workgroups exceed a grid row of
+    // 65 535 (lavapipe's `maxComputeWorkGroupCount[0]`; an NVIDIA GPU's is 2³¹ − 1), so the
+    // pass spreads over rows, whose index only this pass forms from the workgroup id.
+    let (params, input) = synthetic(1, 65_536, 15);
+    all.extend(cases("1×65536", params, input));
     // A single pixel has nothing to average with: the denoiser leaves it as it is.
     let mut cpu = CpuBackend::new();
     for case in &all[..3] {
@@ -360,7 +366,8 @@ fn denoise_matches_the_cpu_on_degenerate_sizes_on_every_vulkan_device() {
     check_parity("denoise parity (1×1)", &all[..3], 0.0);
     check_parity("denoise parity (3×200)", &all[3..6], 0.3);
     check_parity("denoise parity (200×1)", &all[6..9], 0.9);
-    check_parity("denoise parity (200×3)", &all[9..], 0.9);
+    check_parity("denoise parity (200×3)", &all[9..12], 0.9);
+    check_parity("denoise parity (1×65536)", &all[12..], 0.3);
 }
 
 #[test]
