@@ -687,6 +687,36 @@ mod tests {
         }
     }
 
+    /// Under a light that fills the hemisphere, `U` is the radiance times the directional
+    /// albedos, channel by channel: `L·(base·(1 − m) + F0·magnitude + (1 − F0)·fresnel)` with
+    /// glTF's `F0 = 0.04·(1 − m) + base·m` — a metal tinted by its base colour and without a
+    /// diffuse lobe, a dielectric's specular lobe white. (The unbiasedness tests compare `U_N`
+    /// with `U`, which take the lobes' colours from the same code: a metal's untinted F0, or a
+    /// diffuse lobe kept under metal, passed them.)
+    #[test]
+    fn u_under_a_hemisphere_light_is_the_albedo_of_each_channel() {
+        let table = table();
+        let (base, radiance, roughness) = (Vec3::new(0.9, 0.5, 0.1), Vec3::new(2.0, 3.0, 4.0), 0.5);
+        // 10 × 10 and 10⁻³ above the point: both lobes' form factors within ~10⁻⁴ of 1.
+        let lights = [ceiling_light(Vec3::new(0.0, 0.0, 1.0e-3), 5.0, radiance)];
+        // Seen along the normal (the LTC lobe symmetric, all of it above the horizon).
+        let lobe = ltc::lookup(&table, roughness, 1.0);
+        for metallic in [0.0f32, 0.5, 1.0] {
+            let f0 = Vec3::splat(0.04) * (1.0 - metallic) + base * metallic;
+            let diffuse = base * (1.0 - metallic);
+            let expected = radiance * (diffuse + f0 * lobe.magnitude + (Vec3::ONE - f0) * lobe.fresnel);
+            let material = material(base, roughness, metallic);
+            let u = estimate(&lights, material, Vec3::Z, sampler_kind::SOBOL, 0, 1, unoccluded).analytic;
+            for (channel, (u, expected)) in u.into_iter().zip(expected.to_array()).enumerate() {
+                let expected = f64::from(expected);
+                assert!(
+                    (u - expected).abs() <= 2e-3 * expected,
+                    "metallic {metallic}, channel {channel}: U {u}, expected {expected}"
+                );
+            }
+        }
+    }
+
     #[test]
     fn without_occluders_the_ratio_returns_u_exactly() {
         let u = Vec3::new(0.3, 1.7, 12.5);
