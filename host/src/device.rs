@@ -96,7 +96,8 @@ pub struct BackendOptions {
     pub workgroup_sizes: Option<crate::WorkgroupSizes>,
 }
 
-/// Opens the backend `choice` names. `Auto` falls back to the CPU when no Vulkan device can be
+/// Opens the backend `choice` names. `Auto` opens the best Vulkan device that has the trace
+/// method asked for ([`best_vulkan_device_tracing`]), and falls back to the CPU when no Vulkan device can be
 /// opened, unless `options` ask for what only Vulkan has (validation, a hardware trace method,
 /// workgroup sizes) or Vulkan refused one of them as invalid: then, as for an explicit Vulkan
 /// choice that cannot be honoured, the error says why Vulkan failed (a CPU run would silently
@@ -137,7 +138,7 @@ fn open_vulkan(index: Option<usize>, options: &BackendOptions) -> Result<Box<dyn
     use crate::vulkan::{enumerate_devices, ContextOptions, VulkanBackend};
     let index = match index {
         Some(i) => i,
-        None => best_vulkan_device(&enumerate_devices()?)?,
+        None => best_vulkan_device_tracing(&enumerate_devices()?, options.trace)?,
     };
     let context = ContextOptions {
         validation: options.validation,
@@ -161,6 +162,17 @@ fn open_vulkan(_index: Option<usize>, _options: &BackendOptions) -> Result<Box<d
 #[cfg(feature = "vulkan")]
 pub fn best_vulkan_device(devices: &[crate::vulkan::DeviceInfo]) -> Result<usize> {
     best_of(devices).map(|device| device.index)
+}
+
+/// [`best_vulkan_device`] among the devices that have `trace` (`None`: any), or among all where
+/// none has it (the backend then refuses the method, saying what the device lacks): `--device
+/// auto --trace rayquery` on a machine with an NVIDIA H100 (no ray query) and lavapipe opens
+/// lavapipe, where it had opened the H100 and failed.
+#[cfg(feature = "vulkan")]
+pub fn best_vulkan_device_tracing(devices: &[crate::vulkan::DeviceInfo], trace: Option<TraceMethod>) -> Result<usize> {
+    let able: Vec<_> =
+        devices.iter().filter(|d| trace.is_none_or(|method| d.missing_for(method).is_empty())).cloned().collect();
+    best_vulkan_device(if able.is_empty() { devices } else { &able })
 }
 
 /// The device `--device auto` opens when it opens a Vulkan device, described: the

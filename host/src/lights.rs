@@ -169,6 +169,25 @@ pub fn validate_lights(lights: &[Light]) -> Result<()> {
     lights.iter().enumerate().try_for_each(|(index, light)| validate_light(index, light))
 }
 
+/// The light of the leaf `trail` leads to from the root of `nodes` (bit `d` of the trail: the
+/// second child at depth `d`), or `None` where the path leaves the array or passes
+/// [`MAX_BVH_DEPTH`] — the walk the kernels' `bvh_pmf` makes, without the probabilities.
+pub(crate) fn trail_leaf(nodes: &[LightBvhNode], trail: u32) -> Option<u32> {
+    let mut node = 0usize;
+    for depth in 0..=MAX_BVH_DEPTH {
+        let current = nodes.get(node)?;
+        if current.is_leaf != 0 {
+            return Some(current.child_or_light);
+        }
+        node = match trail.checked_shr(depth).map(|bits| bits & 1) {
+            Some(0) => node + 1,
+            Some(_) => current.child_or_light as usize,
+            None => return None,
+        };
+    }
+    None
+}
+
 /// A light BVH in the kernels' layout: depth-first nodes (node 0 the root; first child at
 /// `index + 1`, second at `child_or_light`; a leaf's `child_or_light` is its light) and, per light,
 /// its trail (bit `d` = 1 where the path takes the second child at depth `d`).

@@ -5,12 +5,12 @@
 use crate::backend::{Backend, StageReport};
 use crate::cpu::count;
 use crate::error::{Error, Result};
-use crate::lights::{wants_bvh, LightBvh};
+use crate::lights::{trail_leaf, wants_bvh, LightBvh};
 use crate::scene::{Material, Scene};
 use crate::stream::{HitStream, RayStream, ShadeStream};
 use glam::{DVec3, UVec2, Vec3, Vec4, Vec4Swizzles};
 use rayon::prelude::*;
-use raywave_kernels::sampling::light_select::LightSet;
+use raywave_kernels::sampling::light_select::{light_bounds, LightSet};
 use raywave_kernels::shade::ltc::LTC_TABLE_LEN;
 use raywave_kernels::shade::stage::{composite, resolve_surface, shade_sample, ShadeScene, Surface};
 use raywave_shared::light::light_kind;
@@ -107,7 +107,9 @@ impl ShadeData {
     /// device backend uploads them then; later changes need a new `ShadeData`: see its upload
     /// note): each material in the ranges [`Scene::new`] enforces and at least one per instance, the
     /// lights valid ([`crate::lights::validate_lights`]) and quads, a trail per light where
-    /// there is a light BVH, the LTC table complete ([`LTC_TABLE_LEN`] entries), three vertices
+    /// there is a light BVH and each light that emits at the end of its trail (lights changed
+    /// after the build need a new BVH: moved ones, whose nodes' bounds this cannot see, too), the
+    /// LTC table complete ([`LTC_TABLE_LEN`] entries), three vertices
     /// per triangle and the instances' first triangles ascending within them. Every backend's
     /// `shade` calls it; an error names the field.
     pub fn check(&self) -> Result<()> {
@@ -140,6 +142,20 @@ impl ShadeData {
                 self.lights.len()
             );
             return invalid("light_trails", reason);
+        }
+        if !self.light_nodes.is_empty() {
+            // Every light of power in the tree, at the end of its trail: a light brightened, added
+            // or reordered after the build was never drawn while `U` counted it (`U_N` biased).
+            let lost = self.lights.iter().zip(&self.light_trails).enumerate().find(|&(index, (light, &trail))| {
+                light_bounds(light).phi > 0.0 && trail_leaf(&self.light_nodes, trail) != Some(index as u32)
+            });
+            if let Some((index, _)) = lost {
+                let reason = format!(
+                    "lights[{index}] emits but its trail does not lead to its leaf: the light BVH was built for \
+                     other lights (build it again with LightBvh::build after changing them)"
+                );
+                return invalid("light_nodes", reason);
+            }
         }
         if self.materials.len() < self.first_triangle.len() {
             let reason = format!(
@@ -440,6 +456,42 @@ impl ShadeAccumulator {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A light BVH built for other lights — trails swapped, a light added after the build — is
+    /// refused, naming the field, and so is a shade pass over part of the tree: the lights it
+    /// left out had never been drawn while `U` counted them.
+    #[test]
+    fn a_light_bvh_built_for_other_lights_is_refused() {
+        let scene = Scene::load("builtin:cornell-light-grid").unwrap();
+        let data = ShadeData::new(&scene).unwrap();
+        assert!(!data.light_nodes.is_empty() && data.check().is_ok());
+        let refused = |data: &ShadeData| match data.check() {
+            Err(Error::InvalidParameter { name, reason }) => (name, reason),
+            other => panic!("expected the BVH refused, got {other:?}"),
+        };
+        let mut swapped = ShadeData::new(&scene).unwrap();
+        swapped.light_trails.swap(0, 1);
+        let (name, reason) = refused(&swapped);
+        assert!(name == "light_nodes" && reason.contains("lights[0] emits"), "{name}: {reason}");
+        let mut added = ShadeData::new(&scene).unwrap();
+        added.lights.push(added.lights[3]);
+        added.light_trails.push(added.light_trails[3]);
+        let (name, reason) = refused(&added);
+        assert!(name == "light_nodes" && reason.contains("lights[20]"), "{name}: {reason}");
+        // A light without power may lie anywhere: the tree leaves it out.
+        let mut dark = added;
+        dark.lights[20].radiance = Vec4::ZERO;
+        assert!(dark.check().is_ok());
+        let params = crate::frame::generate_params(&scene, 4, 4, 1);
+        let rays = crate::cpu::generate(&params).unwrap();
+        let hits = crate::cpu::trace(&crate::cpu::CpuScene::build(&scene).unwrap(), &rays).unwrap();
+        let mut cpu = crate::cpu::CpuBackend::new();
+        let shade_params = data.params(params.sampler, 4, 4, 0);
+        assert!(cpu.shade(&shade_params, &data, &rays, &hits).is_ok());
+        let partial = ShadeParams { light_node_count: shade_params.light_node_count - 1, ..shade_params };
+        let error = cpu.shade(&partial, &data, &rays, &hits).unwrap_err().to_string();
+        assert!(error.contains("all or none"), "{error}");
+    }
 
     #[test]
     fn identity_tells_values_and_edits_apart() {

@@ -765,6 +765,20 @@ mod tests {
         assert_eq!(crate::device::best_vulkan_device(&devices).unwrap(), 1);
     }
 
+    /// With a trace method asked for, `auto` takes the best device that has it: lavapipe beside
+    /// an H100, which has no ray query, for `rayquery`; the GPU otherwise, and where no device
+    /// has the method (the backend then says what it lacks).
+    #[test]
+    fn a_trace_method_picks_the_best_device_that_has_it() {
+        use crate::device::best_vulkan_device_tracing as best;
+        let gpu = DeviceInfo { index: 0, device_type: "DISCRETE_GPU".into(), ray_query: false, ..lavapipe() };
+        let devices = [gpu.clone(), DeviceInfo { index: 1, ..lavapipe() }];
+        assert_eq!(best(&devices, Some(TraceMethod::RayQuery)).unwrap(), 1);
+        assert_eq!(best(&devices, Some(TraceMethod::RtPipeline)).unwrap(), 0);
+        assert_eq!(best(&devices, None).unwrap(), 0);
+        assert_eq!(best(&[gpu], Some(TraceMethod::RayQuery)).unwrap(), 0);
+    }
+
     /// A stream is bounded by one storage buffer of `Vec4`s and by one dispatch grid, and an image
     /// is checked against that before a backend opens: lavapipe's 2²⁷-byte buffers hold 2896²
     /// pixels, not 2897².
