@@ -234,7 +234,6 @@ pub fn bench_denoise(options: &DenoiseBenchOptions, mut emit: impl FnMut(&Denois
     check_radius("denoise-radius", options.denoise_radius)?;
     // The frame's size and samples before any device is enumerated or scene loaded.
     LitFrameSettings::new(options.width, options.height, options.spp).check_on(&crate::cpu::CpuBackend::new())?;
-    #[cfg_attr(not(feature = "vulkan"), allow(unused_variables))]
     let image = [options.width, options.height];
     let vulkan_device = options.vulkan_options.device(options.vulkan, crate::StreamStage::Denoise, image)?;
     if vulkan_device.is_none() && options.peak_gbps.is_some() {

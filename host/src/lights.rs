@@ -969,8 +969,8 @@ mod tests {
     /// them, and a lamp below that lights them all: the BVH gives the lamp at least the linear
     /// scan's pmf (measured: 1 at every cluster's centre). Inside the LED clusters' spheres their
     /// importance had ignored where they face, and the lamp's pmf fell to 6.2·10⁻⁸ at the
-    /// clusters' centres — below 2⁻²⁴ it is never drawn. At the same points with other normals, each light that reaches
-    /// the point keeps a positive pmf: the cull of clusters out of reach is conservative.
+    /// clusters' centres — below 2⁻²⁴ it is never drawn. At the same points with other normals,
+    /// each light that reaches the point keeps a positive pmf: the cull is conservative.
     #[test]
     fn lights_bvh_culls_clusters_out_of_reach_inside_their_spheres() {
         // 20 × 20 LEDs 5 mm across, 0.25 m apart on the ceiling y = 3, emitting downwards
