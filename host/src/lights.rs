@@ -990,13 +990,6 @@ mod tests {
             if centre.y < 2.99 {
                 continue;
             }
-            // Not on an LED, within whose own sphere (a leaf's, as in the scan) that LED still
-            // weighs as if it lit the point.
-            let led_centre = |led: &Light| led.position.truncate() + 0.0025 * (Vec3::X + Vec3::Z);
-            let on_an_led = lights[..lamp as usize].iter().any(|led| (led_centre(led) - centre).length() < 0.01);
-            if on_an_led {
-                continue;
-            }
             clusters += 1;
             // On the ceiling and 5 cm below it, facing down.
             for p in [centre, centre - 0.05 * Vec3::Y] {

@@ -232,6 +232,11 @@ pub fn importance(bounds: &LightBounds, p: Vec3, n: Vec3) -> f32 {
     let light_radius = bounds.min.w;
     let d2 = dist2.max(light_radius * light_radius).max(f32::MIN_POSITIVE);
 
+    // One light (its sphere the largest light's) that is a one-sided quad (one normal).
+    let one_quad = light_radius == radius && bounds.two_sided == 0 && bounds.cos_theta_o >= 1.0;
+    if one_quad && dist2 <= radius * radius && quad_lights_nothing_from_inside(bounds, p, n) {
+        return 0.0;
+    }
     let mut cos_theta_p = 1.0;
     let mut cos_theta_pi = 1.0;
     // Inside the bounding sphere every direction may reach the lights: both factors are 1.
@@ -269,6 +274,26 @@ pub fn importance(bounds: &LightBounds, p: Vec3, n: Vec3) -> f32 {
     } else {
         0.0
     }
+}
+
+/// Whether the one one-sided quad of `bounds` (`cos θo = 1`: a single normal, the axis), whose
+/// points lie in the plane through the box centre `pc` with that normal within the sphere's
+/// radius of `pc`, lights nothing at `p` inside that sphere (surface normal `n`, 0 or NaN for
+/// none): `p` behind the plane or within 4 ε of its coordinates of it (the shade stage takes 8 ε
+/// as in the plane, where `U` = 0), or that disc wholly on or below `p`'s tangent plane. Inside
+/// the sphere [`importance`] has no cone or surface factor, so the quad otherwise weighed as if
+/// it filled `p`'s hemisphere: points on a 0.5 m ceiling lamp and beside it in its plane, lit by
+/// a wall lamp 2 m away, drew the wall lamp with a pmf of 0.012 (now 1). Both tests turn with
+/// the light.
+fn quad_lights_nothing_from_inside(bounds: &LightBounds, p: Vec3, n: Vec3) -> bool {
+    let centre = (bounds.min.truncate() + bounds.max.truncate()) * 0.5;
+    let (axis, to_p) = (bounds.axis.truncate(), p - centre);
+    let scale = p.abs().max(centre.abs()).max_element();
+    let in_front = axis.dot(to_p) > 4.0 * f32::EPSILON * scale;
+    let n_len2 = n.length_squared();
+    let n_across = safe_sqrt(n_len2 - n.dot(axis) * n.dot(axis));
+    let disc_above = bounds.max.w * n_across - n.dot(to_p) > 0.0;
+    !in_front || (n_len2 > 0.0 && !disc_above)
 }
 
 /// A light-BVH node's importance for `p` (surface normal `n`): [`importance`] of its bounds, and 0
@@ -728,19 +753,22 @@ mod tests {
     fn importance_hard_cases_are_finite() {
         let s = light_bounds(&Light::sphere(Vec3::new(1.0, 1.0, 1.0), 0.5, Vec3::ONE));
         let q = light_bounds(&Light::quad(Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::ONE, false));
-        // p at the sphere's centre, on its surface; p on the quad, on its plane outside it.
-        for (b, p) in [
-            (s, Vec3::ONE),
-            (s, Vec3::new(1.5, 1.0, 1.0)),
-            (q, Vec3::new(0.5, 0.5, 0.0)),
-            (q, Vec3::new(0.0, 0.0, 0.0)),
-            (q, Vec3::new(3.0, 0.5, 0.0)),
+        // p at the sphere's centre, on its surface (both reached); p on the quad (a quad lights
+        // nothing in its plane: 0 within its sphere), just in front of it (reached), and on its
+        // plane beyond its sphere (the cone bound keeps it there, conservatively).
+        for (b, p, reached) in [
+            (s, Vec3::ONE, true),
+            (s, Vec3::new(1.5, 1.0, 1.0), true),
+            (q, Vec3::new(0.5, 0.5, 0.0), false),
+            (q, Vec3::new(0.1, 0.2, 0.0), false),
+            (q, Vec3::new(0.5, 0.5, 1.0e-3), true),
+            (q, Vec3::new(3.0, 0.5, 0.0), true),
         ] {
             for n in [Vec3::ZERO, Vec3::Z, -Vec3::Z, Vec3::X] {
                 let value = importance(&b, p, n);
                 assert!(value.is_finite() && value >= 0.0, "{p} {n}: {value}");
             }
-            assert!(importance(&b, p, Vec3::ZERO) > 0.0, "{p}");
+            assert_eq!(importance(&b, p, Vec3::ZERO) > 0.0, reached, "{p}");
         }
         // Zero-size bounds with power, at their own point; zero power; NaN and infinite inputs.
         let mut point = s;
@@ -756,6 +784,32 @@ mod tests {
         let mut huge = s;
         huge.phi = f32::MAX;
         assert_eq!(importance(&huge, Vec3::ONE, Vec3::ZERO), MAX_IMPORTANCE);
+    }
+
+    /// Points on a ceiling lamp and beside it in its plane, inside its bounding sphere, which it
+    /// does not light, and a wall lamp that does: the scan draws the wall lamp every time. Inside
+    /// the sphere the bound had weighed the ceiling lamp as if it filled their hemisphere (the
+    /// wall lamp's pmf 0.012).
+    #[test]
+    fn a_quad_weighs_nothing_in_its_own_plane() {
+        let ceiling = Light::quad(Vec3::new(-0.25, 3.0, -0.25), Vec3::X * 0.5, Vec3::Z * 0.5, Vec3::splat(5.0), false);
+        let wall = Light::quad(Vec3::new(-2.0, 1.75, -0.25), Vec3::Y * 0.5, Vec3::Z * 0.5, Vec3::splat(5.0), false);
+        let lights = [ceiling, wall];
+        let emits = |l: &Light| l.edge_u.truncate().cross(l.edge_v.truncate());
+        let (down, right) = (emits(&ceiling), emits(&wall));
+        assert!(down.y < 0.0 && right.x > 0.0, "the ceiling lamp emits down, the wall lamp towards +x");
+        for p in [Vec3::new(0.1, 3.0, 0.05), Vec3::new(0.3, 3.0, 0.1), Vec3::new(-0.2, 3.0, -0.2)] {
+            for n in [-Vec3::Y, Vec3::ZERO] {
+                let wall_pmf = importance_pmf(&lights, p, n, 1);
+                std::println!("{p} {n}: the wall lamp's pmf {wall_pmf}");
+                assert_eq!(wall_pmf, 1.0, "{p} {n}");
+            }
+        }
+        // A centimetre below the ceiling lamp, facing up (or no surface), the lamp lights the
+        // point and dominates again.
+        for n in [Vec3::Y, Vec3::ZERO] {
+            assert!(importance_pmf(&lights, Vec3::new(0.1, 2.99, 0.05), n, 0) > 0.9, "{n}");
+        }
     }
 
     #[test]
@@ -906,18 +960,30 @@ mod tests {
         let dark = [Light::sphere(Vec3::ZERO, 1.0, Vec3::ZERO), Light::sphere(Vec3::X, 1.0, Vec3::ZERO)];
         assert_eq!(select_importance(&dark, Vec3::Y * 3.0, Vec3::ZERO, 0.7), LightChoice { index: 1, pmf: 0.5 });
 
-        // p at a sphere's centre and on a quad: that light dominates, nothing is NaN.
+        // p at a sphere's centre: that light dominates; on a quad (emitting +x), which lights
+        // nothing in its plane: the spheres share, the nearer dominating; a hair in front, the
+        // quad dominates again; nothing is NaN.
         let lights = [
             Light::sphere(Vec3::ZERO, 0.5, Vec3::ONE),
             Light::quad(Vec3::new(5.0, 0.0, 0.0), Vec3::Y, Vec3::Z, Vec3::ONE, false),
             Light::sphere(Vec3::new(-5.0, 0.0, 0.0), 0.5, Vec3::ONE),
         ];
-        for (p, dominant) in [(Vec3::ZERO, 0), (Vec3::new(5.0, 0.5, 0.5), 1)] {
+        for (p, dominant) in [(Vec3::ZERO, 0), (Vec3::new(5.0, 0.5, 0.5), 0), (Vec3::new(5.001, 0.5, 0.5), 1)] {
             for n in [Vec3::ZERO, Vec3::X, -Vec3::X] {
                 let pmfs: Vec<f32> = (0..3).map(|k| importance_pmf(&lights, p, n, k)).collect();
                 assert!(pmfs.iter().all(|q| q.is_finite()), "{pmfs:?}");
                 assert!((pmfs.iter().sum::<f32>() - 1.0).abs() < 1e-5);
-                assert!(pmfs[dominant] > 0.5, "{p} {n}: {pmfs:?}");
+                // Facing +x, on the quad's plane or in front of it, every light is behind the
+                // surface or lights nothing: the uniform fallback.
+                let none_reaches = p.x >= 5.0 && n == Vec3::X;
+                if none_reaches {
+                    assert!(pmfs.iter().all(|&q| q == 1.0 / 3.0), "{p} {n}: {pmfs:?}");
+                } else {
+                    assert!(pmfs[dominant] > 0.5, "{p} {n}: {pmfs:?}");
+                }
+                if p.x == 5.0 && !none_reaches {
+                    assert_eq!(pmfs[1], 0.0, "{p} {n}: {pmfs:?}");
+                }
             }
         }
 
