@@ -370,7 +370,7 @@ fn main() -> ExitCode {
     match std::panic::catch_unwind(std::panic::AssertUnwindSafe(run)) {
         Ok(Ok(())) => ExitCode::SUCCESS,
         Ok(Err(e)) => {
-            warn(&format!("error: {e}"));
+            warn(&format!("error: {}", named_by_flag(e)));
             ExitCode::FAILURE
         }
         Err(payload) if payload.is::<StdoutClosed>() => ExitCode::SUCCESS,
@@ -423,6 +423,17 @@ fn ignored(signal: i32) -> bool {
     unsafe {
         let mut current: libc::sigaction = std::mem::zeroed();
         libc::sigaction(signal, std::ptr::null(), &mut current) == 0 && current.sa_sigaction == libc::SIG_IGN
+    }
+}
+
+/// `error` with the option it names as the command line spells it: the library names its
+/// `BackendOptions::validation` field, the flag is `--validate`.
+fn named_by_flag(error: raywave::Error) -> raywave::Error {
+    match error {
+        raywave::Error::InvalidParameter { name: "validation", reason } => {
+            raywave::Error::InvalidParameter { name: "validate", reason }
+        }
+        other => other,
     }
 }
 

@@ -198,6 +198,10 @@ fn bad_input_is_a_typed_error_without_output() {
     assert_rejected(&["--device", "cpu", "--scene", "/no/such/scene.obj"], "/no/such/scene.obj");
     assert_rejected(&["--device", "cpu", "--scene", "builtin:teapot"], "teapot");
     assert_rejected(&["--device", "cpu", "--width", "0"], "at least 1");
+    assert_rejected(
+        &["--device", "cpu", "--validate"],
+        "invalid parameter validate: the CPU backend has no validation",
+    );
     // The CPU's own pixel limit (2²⁶), at a sample count the sampler's index holds.
     assert_rejected(&["--device", "cpu", "--width", "65536", "--height", "2048", "--spp", "1"], "exceed the limit");
     #[cfg(feature = "vulkan")]
@@ -598,8 +602,9 @@ fn bench_and_report_options_out_of_range_are_typed_errors() {
         (&["report", "sampling", "--reps", "1"], "reps: 1 is outside 2..=4096: a variance needs two repetitions"),
         (&["report", "shade", "--max-spp", "0"], "max-spp: 0 is not a power of two"),
         (&["report", "shade", "--max-spp", "48"], "max-spp: 48 is not a power of two"),
-        (&["report", "shade", "--validate"], "the CPU backend has no validation layers"),
-        (&["report", "sampling", "--validate"], "the CPU backend has no validation layers"),
+        // The flag named, not the library's `validation` field.
+        (&["report", "shade", "--validate"], "validate: the CPU backend has no validation layers"),
+        (&["report", "sampling", "--validate"], "validate: the CPU backend has no validation layers"),
         (
             &["report", "error-vs-time", "--reference-spp", "8", "--max-spp", "4"],
             "reference-spp: 8 is below 4 × max-spp (4)",
