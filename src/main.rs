@@ -374,13 +374,13 @@ fn main() -> ExitCode {
             ExitCode::FAILURE
         }
         Err(payload) if payload.is::<StdoutClosed>() => ExitCode::SUCCESS,
-        Err(payload) if payload.is::<StdoutFailed>() => {
-            if let Some(StdoutFailed(e)) = payload.downcast_ref() {
-                warn(&format!("error: cannot write standard output: {e}"));
+        Err(payload) => match payload.downcast::<StdoutFailed>() {
+            Ok(failed) => {
+                warn(&format!("error: cannot write standard output: {}", failed.0));
+                ExitCode::FAILURE
             }
-            ExitCode::FAILURE
-        }
-        Err(payload) => std::panic::resume_unwind(payload),
+            Err(payload) => std::panic::resume_unwind(payload),
+        },
     }
 }
 

@@ -234,7 +234,7 @@ pub fn importance(bounds: &LightBounds, p: Vec3, n: Vec3) -> f32 {
 
     // One light (its sphere the largest light's) that is a one-sided quad (one normal).
     let one_quad = light_radius == radius && bounds.two_sided == 0 && bounds.cos_theta_o >= 1.0;
-    if one_quad && dist2 <= radius * radius && quad_lights_nothing_from_inside(bounds, p, n) {
+    if one_quad && dist2 <= radius * radius && quad_lights_nothing_from_inside(bounds, p, center, n) {
         return 0.0;
     }
     let mut cos_theta_p = 1.0;
@@ -277,16 +277,15 @@ pub fn importance(bounds: &LightBounds, p: Vec3, n: Vec3) -> f32 {
 }
 
 /// Whether the one one-sided quad of `bounds` (`cos θo = 1`: a single normal, the axis), whose
-/// points lie in the plane through the box centre `pc` with that normal within the sphere's
-/// radius of `pc`, lights nothing at `p` inside that sphere (surface normal `n`, 0 or NaN for
+/// points lie in the plane through the box centre `pc` (`centre`) with that normal within the
+/// sphere's radius of `pc`, lights nothing at `p` inside that sphere (surface normal `n`, 0 or NaN for
 /// none): `p` behind the plane or within 4 ε of its coordinates of it (the shade stage takes 8 ε
 /// as in the plane, where `U` = 0), or that disc wholly on or below `p`'s tangent plane. Inside
 /// the sphere [`importance`] has no cone or surface factor, so the quad otherwise weighed as if
 /// it filled `p`'s hemisphere: points on a 0.5 m ceiling lamp and beside it in its plane, lit by
 /// a wall lamp 2 m away, drew the wall lamp with a pmf of 0.012 (now 1). Both tests turn with
 /// the light.
-fn quad_lights_nothing_from_inside(bounds: &LightBounds, p: Vec3, n: Vec3) -> bool {
-    let centre = (bounds.min.truncate() + bounds.max.truncate()) * 0.5;
+fn quad_lights_nothing_from_inside(bounds: &LightBounds, p: Vec3, centre: Vec3, n: Vec3) -> bool {
     let (axis, to_p) = (bounds.axis.truncate(), p - centre);
     let scale = p.abs().max(centre.abs()).max_element();
     let in_front = axis.dot(to_p) > 4.0 * f32::EPSILON * scale;
@@ -309,13 +308,13 @@ fn quad_lights_nothing_from_inside(bounds: &LightBounds, p: Vec3, n: Vec3) -> bo
 /// light's own importance does not.
 fn node_importance(node: &LightBvhNode, p: Vec3, n: Vec3) -> f32 {
     let bounds = &node.bounds;
-    let centre = (bounds.min.truncate() + bounds.max.truncate()) * 0.5;
-    let inside = (p - centre).length_squared() <= bounds.max.w * bounds.max.w;
-    if node.is_leaf == 0 && inside && out_of_reach(bounds, p, n) {
-        0.0
-    } else {
-        importance(bounds, p, n)
+    if node.is_leaf == 0 {
+        let centre = (bounds.min.truncate() + bounds.max.truncate()) * 0.5;
+        if (p - centre).length_squared() <= bounds.max.w * bounds.max.w && out_of_reach(bounds, p, n) {
+            return 0.0;
+        }
     }
+    importance(bounds, p, n)
 }
 
 /// Whether no light inside the box of `bounds` can light `p` (surface normal `n`, need not be
