@@ -100,7 +100,8 @@ struct SceneReportArgs {
     /// Backend running every stage: `cpu` (default), `auto`, `vulkan` or `vulkan:N`.
     #[arg(long, default_value = "cpu")]
     device: String,
-    /// Enable the Vulkan validation layers (must be installed; refused with `--device cpu`).
+    /// Enable the Vulkan validation layers (must be installed; refused with `--device cpu`); any
+    /// warning or error they report is printed and fails the command (exit status 1).
     #[arg(long)]
     validate: bool,
     /// Print one JSON object per line instead of a table.
@@ -150,7 +151,8 @@ struct SamplingReportArgs {
     /// Backend tracing the shadow rays: `cpu` (default), `auto`, `vulkan` or `vulkan:N`.
     #[arg(long, default_value = "cpu")]
     device: String,
-    /// Enable the Vulkan validation layers (must be installed; refused with `--device cpu`).
+    /// Enable the Vulkan validation layers (must be installed; refused with `--device cpu`); any
+    /// warning or error they report is printed and fails the command (exit status 1).
     #[arg(long)]
     validate: bool,
     /// Print one JSON object per line instead of a table.
@@ -159,7 +161,8 @@ struct SamplingReportArgs {
 }
 
 /// The backend a report runs on: `device` as `--device` names it, with the Vulkan validation
-/// layers if `validate` (their messages go to stderr as they arrive).
+/// layers if `validate` (their messages go to stderr as they arrive, and the report ends with an
+/// error if there were any: [`raywave::close_backend`]).
 fn open_report_backend(device: &str, validate: bool) -> raywave::Result<Box<dyn raywave::Backend>> {
     raywave::open_backend(device.parse()?, &BackendOptions { validation: validate, ..Default::default() })
 }
@@ -336,7 +339,8 @@ struct RenderArgs {
     /// Distance of the plane in focus (default: the camera's look-at point).
     #[arg(long)]
     focus: Option<f32>,
-    /// Enable the Vulkan validation layers (must be installed; refused with `--device cpu`).
+    /// Enable the Vulkan validation layers (must be installed; refused with `--device cpu`); any
+    /// warning or error they report is printed and fails the command (exit status 1).
     #[arg(long)]
     validate: bool,
     /// Steady-state stage times: render untimed frames, in benchmark mode, until their times
@@ -534,13 +538,15 @@ fn report_sampling_command(args: SamplingReportArgs) -> raywave::Result<()> {
     report_sampling(backend.as_mut(), &options, |line| match line {
         ReportLine::Case(case, result) => print_line(if args.json { result.json() } else { result.row(case) }),
         ReportLine::Spectrum(spectrum) => print_line(spectrum.text(args.json)),
-    })
+    })?;
+    raywave::close_backend(backend)
 }
 
 fn report_shade_command(args: ShadeReportArgs) -> raywave::Result<()> {
     let json = args.common.json;
     let (options, mut backend) = args.common.open(args.resolution, |options| options.check())?;
-    raywave::report::shade::report_shade(backend.as_mut(), &options, |line| print_line(line.text(json)))
+    raywave::report::shade::report_shade(backend.as_mut(), &options, |line| print_line(line.text(json)))?;
+    raywave::close_backend(backend)
 }
 
 fn report_error_vs_time_command(args: ErrorVsTimeArgs) -> raywave::Result<()> {
@@ -563,11 +569,11 @@ fn report_error_vs_time_command(args: ErrorVsTimeArgs) -> raywave::Result<()> {
             print_line(row.row());
         }
     }
+    let title = format!("{}², R = {}, {}", options.report.resolution, options.radius(), backend.name());
+    // Before the plot: a run the validation layers faulted draws none.
+    raywave::close_backend(backend)?;
     match pending {
-        Some(output) => {
-            let title = format!("{}², R = {}, {}", options.report.resolution, options.radius(), backend.name());
-            plot(&lines, &title, output)
-        }
+        Some(output) => plot(&lines, &title, output),
         None => Ok(()),
     }
 }

@@ -3,7 +3,7 @@
 //! `U · den(S_N)/den(U_N)` (or another denoiser, or none) → image files.
 
 use crate::bench::{check_settle_seconds, warm_up, SUSTAIN_SECONDS};
-use crate::{open_backend, Backend, BackendOptions, DeviceChoice, Result, Scene, StageReport};
+use crate::{close_backend, open_backend, Backend, BackendOptions, DeviceChoice, Result, Scene, StageReport};
 use glam::Vec3;
 use image::{ImageFormat, RgbImage};
 use raywave_host::denoise::DenoiseMethod;
@@ -189,7 +189,9 @@ fn check_options(options: &RenderOptions) -> Result<()> {
 
 /// Renders `options.scene` into `options.out` (and the optional EXR and stochastic images).
 /// Every input is checked before work starts, and the output files appear together, each
-/// complete, or not at all.
+/// complete, or not at all: a render with validation layers
+/// ([`BackendOptions::validation`]) that reported anything, teardown included, is an
+/// [`crate::Error::Validation`] and writes nothing.
 pub fn render(options: &RenderOptions) -> Result<RenderReport> {
     check_options(options)?;
     let settle_seconds = options.settle_seconds.map(check_settle_seconds).transpose()?;
@@ -225,8 +227,10 @@ pub fn render(options: &RenderOptions) -> Result<RenderReport> {
             (frame.render(backend.as_mut())?, Some(warm_up_seconds))
         }
     };
+    let backend_name = backend.name();
+    close_backend(backend)?;
     let report = RenderReport {
-        backend: backend.name(),
+        backend: backend_name,
         triangles: scene.triangle_count(),
         dropped_degenerate: scene.dropped_degenerate(),
         lights: scene.lights().len(),

@@ -923,6 +923,48 @@ fn trace_and_shade_benches_measure_the_cpu_alone() {
     assert!((rate - rate_of(line, "samples")).abs() <= 1e-12 * rate, "{line:?}");
 }
 
+/// A command run with `--validate` fails (exit status 1) when the validation layers reported
+/// anything, after printing it: a render writes no image, and a report prints its lines but draws
+/// no plot. The messages are provoked by the layers' best-practices checks, which warn on every
+/// run (raywave enables `VK_EXT_debug_utils` for the layers, itself a "special use" warning);
+/// `VK_LAYER_ENABLES` turns them on (Khronos validation layers 1.3.239, Debian 12's). Without
+/// them the same commands pass with `--validate` (`vulkan_and_cpu_renders_agree`,
+/// `error_vs_time_in_steady_state_measures_the_same_errors`).
+#[cfg(feature = "vulkan")]
+#[test]
+fn validation_messages_fail_the_command_and_write_nothing() {
+    if vulkan_devices("validation messages").is_none() {
+        return;
+    }
+    let best_practices = |args: &[&str]| {
+        Command::new(env!("CARGO_BIN_EXE_raywave"))
+            .args(args)
+            .env("VK_LAYER_ENABLES", "VK_VALIDATION_FEATURE_ENABLE_BEST_PRACTICES_EXT")
+            .output()
+            .expect("raywave runs")
+    };
+    let assert_failed_by_validation = |out: &Output, what: &str| {
+        let message = stderr(out);
+        assert_eq!(out.status.code(), Some(1), "{what}: {message}");
+        assert!(message.contains("[vulkan WARNING]"), "{what}: no message provoked: {message}");
+        assert!(message.contains("the Vulkan validation layers reported"), "{what}: {message}");
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let image = dir.path().join("validated.png");
+    let args = ["render", "--device", "vulkan", "--validate", "--width", "16", "--height", "16", "--spp", "1"];
+    let rendered = best_practices(&[&args[..], &["--out", image.to_str().unwrap()]].concat());
+    assert_failed_by_validation(&rendered, "render");
+    assert!(!image.exists() && rendered.stdout.is_empty(), "a faulted render wrote {}", image.display());
+
+    let plot = dir.path().join("validated-plot.png");
+    let args = ["report", "error-vs-time", "--scenes", "builtin:cornell", "--resolution", "8", "--reference-spp", "4"];
+    let args = [&args[..], &["--max-spp", "1", "--reps", "1", "--device", "vulkan", "--validate", "--json", "--plot"]];
+    let reported = best_practices(&[&args.concat()[..], &[plot.to_str().unwrap()]].concat());
+    assert_failed_by_validation(&reported, "error-vs-time");
+    assert_eq!(json_lines(&reported).len(), 5, "the report's lines come first: {}", stderr(&reported));
+    assert!(!plot.exists(), "a faulted report drew {}", plot.display());
+}
+
 /// The Vulkan devices, or `None` after a loud SKIP (a failure under CI) when there are none.
 #[cfg(feature = "vulkan")]
 fn vulkan_devices(test: &str) -> Option<Vec<raywave::vulkan::DeviceInfo>> {

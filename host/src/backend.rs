@@ -9,6 +9,7 @@ use crate::stream::{HitStream, RayStream, ShadeStream};
 use glam::{UVec2, Vec4};
 use raywave_shared::sampling::sampler_kind;
 use raywave_shared::{DenoiseParams, GenerateParams, SamplerParams, SamplerProbeParams, ShadeParams, WarpParams};
+use std::sync::{Arc, Mutex};
 
 /// What one run of a stage (or denoise pass) on a backend reports: its time, and how many of its
 /// invocations had to replace a non-finite value (DESIGN rule 5).
@@ -88,6 +89,19 @@ pub(crate) fn check_sustain_seconds(seconds: f64) -> Result<f64> {
     }
 }
 
+/// The validation messages of warning or error severity one Vulkan backend received, in arrival
+/// order, shared with it: still readable after the backend is dropped, when the messages its
+/// teardown raised (objects left alive at `vkDestroyDevice`, say) have arrived too.
+#[derive(Clone, Debug, Default)]
+pub struct ValidationLog(pub(crate) Arc<Mutex<Vec<String>>>);
+
+impl ValidationLog {
+    /// The messages received so far.
+    pub fn messages(&self) -> Vec<String> {
+        self.0.lock().map(|m| m.clone()).unwrap_or_default()
+    }
+}
+
 /// An execution backend: the CPU executor or a Vulkan device.
 pub trait Backend {
     /// Human-readable name, e.g. `cpu (2 threads)` or `vulkan:0 llvmpipe (…)`.
@@ -155,6 +169,14 @@ pub trait Backend {
 
     /// Runs the warp probe: `params.count` warped directions (xyz) with their pdfs (w).
     fn warp_probe(&mut self, params: &WarpParams) -> Result<Vec<Vec4>>;
+
+    /// The log of this backend's validation-layer messages, which outlives it
+    /// ([`crate::device::close_backend`] reads it after the drop). `None` for a backend without
+    /// validation layers (the CPU); a Vulkan backend's log stays empty unless it was opened with
+    /// validation.
+    fn validation_log(&self) -> Option<ValidationLog> {
+        None
+    }
 }
 
 /// Largest probe (samples of the sampler or warp probe) any backend runs: 2²⁴ samples.

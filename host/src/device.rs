@@ -133,6 +133,18 @@ pub fn open_backend(choice: DeviceChoice, options: &BackendOptions) -> Result<Bo
     }
 }
 
+/// Drops `backend` and fails with [`Error::Validation`] if its validation layers reported any
+/// warning or error, its teardown's included (objects still alive when the device is destroyed,
+/// say), which arrive only as it drops. A backend without validation closes with `Ok`.
+pub fn close_backend(backend: Box<dyn Backend>) -> Result<()> {
+    let (log, name) = (backend.validation_log(), backend.name());
+    drop(backend);
+    match log.map(|log| log.messages().len()) {
+        Some(count) if count > 0 => Err(Error::Validation { backend: name, count }),
+        _ => Ok(()),
+    }
+}
+
 #[cfg(feature = "vulkan")]
 fn open_vulkan(index: Option<usize>, options: &BackendOptions) -> Result<Box<dyn Backend>> {
     use crate::vulkan::{enumerate_devices, ContextOptions, VulkanBackend};

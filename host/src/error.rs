@@ -125,6 +125,15 @@ pub enum Error {
         /// The missing extensions or features.
         missing: Vec<String>,
     },
+    /// The Vulkan validation layers reported warnings or errors while a backend ran or closed
+    /// ([`crate::device::close_backend`]); the messages went to stderr as they arrived.
+    #[error("{backend}: the Vulkan validation layers reported {count} warning(s) or error(s), printed above")]
+    Validation {
+        /// The backend's name.
+        backend: String,
+        /// How many messages arrived.
+        count: usize,
+    },
     /// A Vulkan call failed.
     #[error("Vulkan call {call} failed: {result}")]
     Vulkan {

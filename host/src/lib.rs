@@ -21,8 +21,8 @@ pub mod visualize;
 pub mod vulkan;
 pub mod workgroup;
 
-pub use backend::{Backend, FrameOutput, StageReport};
-pub use device::{open_backend, BackendOptions, DeviceChoice, TraceMethod};
+pub use backend::{Backend, FrameOutput, StageReport, ValidationLog};
+pub use device::{close_backend, open_backend, BackendOptions, DeviceChoice, TraceMethod};
 pub use error::{Error, Result};
 pub use scene::Scene;
 pub use stream::{HitStream, RayStream};

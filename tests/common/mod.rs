@@ -135,7 +135,8 @@ pub mod vulkan {
     /// teardown's included (objects still alive when the device is destroyed, say), which arrive
     /// only as it drops.
     pub fn assert_clean(backend: VulkanBackend) {
-        let (log, name) = (backend.validation_log(), backend.info().name.clone());
+        let log = raywave::Backend::validation_log(&backend).expect("a Vulkan backend has a validation log");
+        let name = backend.info().name.clone();
         drop(backend);
         let messages = log.messages();
         assert!(messages.is_empty(), "{} validation messages on {name}:\n{}", messages.len(), messages.join("\n"));

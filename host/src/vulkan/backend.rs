@@ -395,15 +395,10 @@ impl VulkanBackend {
     }
 
     /// Validation-layer messages of warning or error severity received so far (empty unless
-    /// opened with validation, and empty when all is well).
+    /// opened with validation, and empty when all is well). [`Backend::validation_log`] outlives
+    /// the backend: read after dropping it, it holds the messages of its teardown too.
     pub fn validation_messages(&self) -> Vec<String> {
         self.core.validation_log().messages()
-    }
-
-    /// The backend's validation log, which outlives it: read after dropping the backend, it holds
-    /// the messages of its teardown too.
-    pub fn validation_log(&self) -> super::context::ValidationLog {
-        self.core.validation_log()
     }
 
     /// Largest stream this device can hold in one storage buffer and cover with one dispatch.
@@ -664,6 +659,10 @@ impl Backend for VulkanBackend {
         let samples = probe_buffer::<Vec4>(&self.core, count, "warp probe")?;
         self.warp_probe.dispatch(&[Resource::Buffer(&samples)], bytemuck::bytes_of(params), count)?;
         samples.read(count as usize)
+    }
+
+    fn validation_log(&self) -> Option<crate::backend::ValidationLog> {
+        Some(self.core.validation_log())
     }
 }
 

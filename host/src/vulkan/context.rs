@@ -2,7 +2,7 @@
 //! ray-tracing feature detection, and device creation.
 
 use super::driver_lock;
-use crate::backend::check_sustain_seconds;
+use crate::backend::{check_sustain_seconds, ValidationLog};
 use crate::device::TraceMethod;
 use crate::error::{Error, Result};
 use crate::workgroup::WorkgroupSizes;
@@ -216,19 +216,6 @@ pub(crate) struct AccelerationLimits {
 /// Most dispatches one timed submission repeats in benchmark mode
 /// ([`ContextOptions::sustain_seconds`]).
 pub const MAX_SUSTAINED_DISPATCHES: u32 = 1024;
-
-/// The validation messages of warning or error severity one backend received, in arrival order,
-/// shared with it: still readable after the backend is dropped, when the messages its teardown
-/// raised (objects left alive at `vkDestroyDevice`, say) have arrived too.
-#[derive(Clone, Debug, Default)]
-pub struct ValidationLog(Arc<Mutex<Vec<String>>>);
-
-impl ValidationLog {
-    /// The messages received so far.
-    pub fn messages(&self) -> Vec<String> {
-        self.0.lock().map(|m| m.clone()).unwrap_or_default()
-    }
-}
 
 /// Instance-level state shared by every object created from it; destroyed last.
 pub(crate) struct Core {

@@ -13,5 +13,6 @@ mod pass;
 mod rt_pipeline;
 pub mod spirv;
 
+pub use crate::backend::ValidationLog;
 pub use backend::VulkanBackend;
-pub use context::{enumerate_devices, ContextOptions, DeviceInfo, ValidationLog, MAX_SUSTAINED_DISPATCHES};
+pub use context::{enumerate_devices, ContextOptions, DeviceInfo, MAX_SUSTAINED_DISPATCHES};
