@@ -277,7 +277,11 @@ pub fn render_lit(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::backend::FrameOutput;
     use crate::cpu::CpuBackend;
+    use crate::stream::{HitStream, RayStream, ShadeStream};
+    use glam::{UVec2, Vec4};
+    use raywave_shared::{SamplerProbeParams, ShadeParams, WarpParams};
 
     fn rejected_setting(settings: LitFrameSettings) -> &'static str {
         match settings.check_on(&CpuBackend::new()) {
@@ -398,5 +402,80 @@ mod tests {
         let params = data.params(settings.sampler(), 16, 12, 0);
         repeated.shade_pass(&mut cpu, &params, &data, &first.rays, &first.hits).unwrap();
         assert_ne!(frame.unshadowed(), repeated.unshadowed());
+    }
+
+    /// An engine's backend that returns one hit fewer than it generated rays: the CPU backend
+    /// otherwise.
+    struct ShortHits(CpuBackend);
+
+    impl Backend for ShortHits {
+        fn name(&self) -> String {
+            "short hits".into()
+        }
+        fn check_image_size(&self, width: u32, height: u32) -> Result<()> {
+            self.0.check_image_size(width, height)
+        }
+        fn set_sustain_seconds(&mut self, seconds: f64) -> Result<()> {
+            self.0.set_sustain_seconds(seconds)
+        }
+        fn load_scene(&mut self, scene: &Scene) -> Result<()> {
+            self.0.load_scene(scene)
+        }
+        fn generate(&mut self, params: &GenerateParams) -> Result<(RayStream, StageReport)> {
+            self.0.generate(params)
+        }
+        fn trace(&mut self, rays: &RayStream) -> Result<(HitStream, StageReport)> {
+            self.0.trace(rays)
+        }
+        fn trace_occlusion(&mut self, rays: &RayStream) -> Result<(Vec<u32>, StageReport)> {
+            self.0.trace_occlusion(rays)
+        }
+        fn shade(
+            &mut self,
+            params: &ShadeParams,
+            data: &ShadeData,
+            rays: &RayStream,
+            hits: &HitStream,
+        ) -> Result<(ShadeStream, StageReport)> {
+            self.0.shade(params, data, rays, hits)
+        }
+        fn denoise(
+            &mut self,
+            method: DenoiseMethod,
+            params: &DenoiseParams,
+            input: &DenoiseInput,
+        ) -> Result<(Vec<Vec4>, Vec<StageReport>)> {
+            self.0.denoise(method, params, input)
+        }
+        fn copy_probe(&mut self, params: &DenoiseParams, image: &[Vec4]) -> Result<(Vec<Vec4>, StageReport)> {
+            self.0.copy_probe(params, image)
+        }
+        fn render(&mut self, params: &GenerateParams) -> Result<FrameOutput> {
+            let mut frame = self.0.render(params)?;
+            let kept = frame.hits.len() - 1;
+            let hits = &mut frame.hits;
+            (hits.t.truncate(kept), hits.primitive.truncate(kept), hits.instance.truncate(kept));
+            hits.barycentrics.truncate(kept);
+            Ok(frame)
+        }
+        fn sampler_probe(&mut self, params: &SamplerProbeParams) -> Result<Vec<UVec2>> {
+            self.0.sampler_probe(params)
+        }
+        fn warp_probe(&mut self, params: &WarpParams) -> Result<Vec<Vec4>> {
+            self.0.warp_probe(params)
+        }
+    }
+
+    /// A backend an engine wrote that returns fewer hits than rays gets a typed error from
+    /// `shade_samples`: the shade pass checks the streams before the G-buffer's resolve step,
+    /// which indexes the hits by ray, reads them.
+    #[test]
+    fn a_backend_returning_too_few_hits_is_an_error_not_a_panic() {
+        let scene = Scene::load("builtin:cornell").unwrap();
+        let data = ShadeData::new(&scene).unwrap();
+        let mut short = ShortHits(CpuBackend::new());
+        short.load_scene(&scene).unwrap();
+        let result = shade_samples(&mut short, &scene, &data, &LitFrameSettings::new(8, 8, 1));
+        assert!(matches!(result, Err(Error::InvalidParameter { .. })), "{result:?}");
     }
 }
