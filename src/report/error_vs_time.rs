@@ -518,6 +518,7 @@ pub fn plot(lines: &[ErrorVsTimeLine], title: &str, output: PendingOutput) -> Re
                 .map_err(|e| plot_error(&e))?;
             chart
                 .configure_mesh()
+                .x_label_formatter(&one_two_five)
                 .x_desc("time per frame (ms)")
                 .y_desc("relMSE")
                 .label_style(("sans-serif", 14))
@@ -550,9 +551,26 @@ pub fn plot(lines: &[ErrorVsTimeLine], title: &str, output: PendingOutput) -> Re
     output.finish_image(&image)
 }
 
+/// A log axis's tick label: the value where its leading digit is 1, 2 or 5, else nothing (the
+/// default labelled every tick, so 60 to 100 ms ran together).
+fn one_two_five(value: &f64) -> String {
+    let leading = value / 10f64.powf(value.log10().floor());
+    if [1.0, 2.0, 5.0].iter().any(|digit| (leading - digit).abs() < 1e-6) {
+        format!("{value}")
+    } else {
+        String::new()
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_time_axis_labels_one_two_five_steps() {
+        let labels: Vec<String> = [10.0, 20.0, 30.0, 50.0, 60.0, 100.0, 0.5, 700.0].iter().map(one_two_five).collect();
+        assert_eq!(labels, ["10", "20", "", "50", "", "100", "0.5", ""]);
+    }
 
     fn line(method: &'static str, spp: u32, relmse: f64, ms: f64) -> ErrorVsTimeLine {
         ErrorVsTimeLine {

@@ -19,7 +19,9 @@ pub fn mean_flip(image: &[Vec3], reference: &[Vec3], width: u32, height: u32) ->
     let encode =
         |colors: &[Vec3]| nv_flip::FlipImageRgb8::with_data(width, height, srgb_image(colors, width, height).as_raw());
     let error_map = nv_flip::flip(encode(reference), encode(image), nv_flip::DEFAULT_PIXELS_PER_DEGREE);
-    f64::from(nv_flip::FlipPool::from_image(&error_map).mean())
+    // The mean in f64: nv-flip's `FlipPool::mean` sums in f32, 0.97 % low over a 1024² map of 0.03.
+    let errors = error_map.to_vec();
+    errors.iter().map(|&e| f64::from(e)).sum::<f64>() / errors.len() as f64
 }
 
 #[cfg(test)]
@@ -37,5 +39,18 @@ mod tests {
         let (small, large) =
             (mean_flip(&slightly, &reference, width, height), mean_flip(&very, &reference, width, height));
         assert!(0.0 < small && small < large && large <= 1.0, "{small} {large}");
+    }
+
+    /// Two flat images differ by the same FLIP error at every pixel, whatever their size: the
+    /// mean over a 1024² map (the reports' largest) is that of a 16² one. Summed in f32 it had
+    /// come out 0.97 % low for an error of 0.03.
+    #[test]
+    fn the_mean_holds_over_the_largest_report_image() {
+        let mean_of_flat = |side: u32| {
+            let pixels = (side * side) as usize;
+            mean_flip(&vec![Vec3::splat(0.5); pixels], &vec![Vec3::splat(0.45); pixels], side, side)
+        };
+        let (small, large) = (mean_of_flat(16), mean_of_flat(1024));
+        assert!(small > 0.0 && (large - small).abs() <= 1e-5 * small, "{large} against {small}");
     }
 }

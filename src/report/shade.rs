@@ -42,7 +42,10 @@ pub struct ShadeLine {
     /// The standard error of `rmse` over the repetitions, by the delta method: the standard error
     /// of the repetitions' mean squared error ([`Repeated::standard_error`]) over `2·rmse`. ±t
     /// times it is a 95 % confidence interval, t = 3.18 for 4 repetitions, 1.96 for many; absent
-    /// for one repetition and for the `visibility-floor`, which is no mean of repetitions.
+    /// for one repetition and for the `visibility-floor`, which is no mean of repetitions. It
+    /// covers the repetitions' spread only, not the reference's error they share: in the ratio
+    /// estimate's `lit` region, where that is almost all of the error (the reference's rarely
+    /// blocked samples), every repetition can have the same error and the standard error be 0.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub rmse_stderr: Option<f64>,
     /// Pixels in the region.
