@@ -454,7 +454,9 @@ mod tests {
             let mut frame = self.0.render(params)?;
             let kept = frame.hits.len() - 1;
             let hits = &mut frame.hits;
-            (hits.t.truncate(kept), hits.primitive.truncate(kept), hits.instance.truncate(kept));
+            hits.t.truncate(kept);
+            hits.primitive.truncate(kept);
+            hits.instance.truncate(kept);
             hits.barycentrics.truncate(kept);
             Ok(frame)
         }

@@ -107,8 +107,9 @@ impl ShadeData {
     /// device backend uploads them then; later changes need a new `ShadeData`: see its upload
     /// note): each material in the ranges [`Scene::new`] enforces and at least one per instance, the
     /// lights valid ([`crate::lights::validate_lights`]) and quads, a trail per light where
-    /// there is a light BVH and each light that emits at the end of its trail (lights changed
-    /// after the build need a new BVH: moved ones, whose nodes' bounds this cannot see, too), the
+    /// there is a light BVH and each light that emits at the end of its trail, in a leaf with its
+    /// own bounds (lights changed after the build need a new BVH: a moved light whose leaf still
+    /// holds its old bounds is refused; an interior node's stale bounds are not looked at), the
     /// LTC table complete ([`LTC_TABLE_LEN`] entries), three vertices
     /// per triangle and the instances' first triangles ascending within them. Every backend's
     /// `shade` calls it; an error names the field.
@@ -144,15 +145,22 @@ impl ShadeData {
             return invalid("light_trails", reason);
         }
         if !self.light_nodes.is_empty() {
-            // Every light of power in the tree, at the end of its trail: a light brightened, added
-            // or reordered after the build was never drawn while `U` counted it (`U_N` biased).
+            // Every light of power in the tree, at the end of its trail, in a leaf with its bounds
+            // (bit for bit): a light brightened, added or reordered after the build was never
+            // drawn while `U` counted it (`U_N` biased), and a moved one was weighed where it had
+            // been (pmf 0 where it now shines).
             let lost = self.lights.iter().zip(&self.light_trails).enumerate().find(|&(index, (light, &trail))| {
-                light_bounds(light).phi > 0.0 && trail_leaf(&self.light_nodes, trail) != Some(index as u32)
+                let bounds = light_bounds(light);
+                bounds.phi > 0.0
+                    && !trail_leaf(&self.light_nodes, trail).is_some_and(|leaf| {
+                        leaf.child_or_light == index as u32
+                            && bytemuck::bytes_of(&leaf.bounds) == bytemuck::bytes_of(&bounds)
+                    })
             });
             if let Some((index, _)) = lost {
                 let reason = format!(
-                    "lights[{index}] emits but its trail does not lead to its leaf: the light BVH was built for \
-                     other lights (build it again with LightBvh::build after changing them)"
+                    "lights[{index}] emits but its trail does not lead to its leaf with its bounds: the light BVH \
+                     was built for other lights (build it again with LightBvh::build after changing them)"
                 );
                 return invalid("light_nodes", reason);
             }
@@ -457,9 +465,10 @@ impl ShadeAccumulator {
 mod tests {
     use super::*;
 
-    /// A light BVH built for other lights — trails swapped, a light added after the build — is
-    /// refused, naming the field, and so is a shade pass over part of the tree: the lights it
-    /// left out had never been drawn while `U` counted them.
+    /// A light BVH built for other lights — trails swapped, a light added or moved after the
+    /// build — is refused, naming the field, and so is a shade pass over part of the tree: the
+    /// lights it left out had never been drawn while `U` counted them, and a moved one was
+    /// weighed where it had been.
     #[test]
     fn a_light_bvh_built_for_other_lights_is_refused() {
         let scene = Scene::load("builtin:cornell-light-grid").unwrap();
@@ -478,6 +487,10 @@ mod tests {
         added.light_trails.push(added.light_trails[3]);
         let (name, reason) = refused(&added);
         assert!(name == "light_nodes" && reason.contains("lights[20]"), "{name}: {reason}");
+        let mut moved = ShadeData::new(&scene).unwrap();
+        moved.lights[5].position += Vec4::new(0.25, 0.0, 0.0, 0.0);
+        let (name, reason) = refused(&moved);
+        assert!(name == "light_nodes" && reason.contains("lights[5]"), "{name}: {reason}");
         // A light without power may lie anywhere: the tree leaves it out.
         let mut dark = added;
         dark.lights[20].radiance = Vec4::ZERO;

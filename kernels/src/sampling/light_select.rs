@@ -5,13 +5,16 @@
 //! with Adaptive Tree Splitting" (HPG 2018), as pbrt-v4 implements it in `LightBounds::Importance`
 //! (lights.cpp:107-160): `Φ · cos θ' / d²` with `θ' = max(0, θw − θo − θb)` and, at a surface, the
 //! factor `cos(max(0, θi − θb))` (see [`importance`]). It is zero only where no point of the light
-//! can emit towards the point, or where the whole light lies below the surface, so a light that
-//! contributes is never given probability 0.
+//! can emit towards the point, or where the whole light lies below the surface (within rounding:
+//! see [`quad_lights_nothing`] and `out_of_reach`), so a light that contributes is never given
+//! probability 0. For one quad light — each light of the scan, each BVH leaf — the zero set is
+//! the shade stage's own where its `U` is 0 ([`light_importance`]).
 //!
 //! Three ways to choose, each a pure function with a matching pmf function:
 //!
 //! - [`select_uniform`] / [`uniform_pmf`]: `1/N`.
-//! - [`select_importance`] / [`importance_pmf`]: a linear scan over the lights, `pmf = I_k / Σ I`.
+//! - [`select_importance`] / [`importance_pmf`]: a linear scan over the lights, `pmf = I_k / Σ I`
+//!   with `I_k` the [`light_importance`].
 //!   Cost: about 1.5·N importance evaluations per choice, exact per-light importance. When every
 //!   importance is zero (all lights behind the surface, or all of zero power) it falls back to the
 //!   uniform choice, so it returns a light whenever there is one; that light contributes nothing
@@ -37,8 +40,10 @@
 //! steps of 2⁻²⁴ (measured within 1.2–2.2 steps of `pmf · 2²⁴` at depths 8–24): a subtree whose
 //! pmf is ≲ 2⁻²⁴ is drawn with frequency 0, or at least 2⁻²⁴ whatever its pmf (`u = 0` always
 //! takes first children), and a branch probability below 2⁻²⁴ relative to its sibling rounds the
-//! sibling's to 1 (pbrt-v4 behaves the same). The pmf itself stays positive, and [`bvh_pmf`] is
-//! exactly the product [`select_bvh`] forms, so MIS weights stay consistent. A subtree never
+//! sibling's to 1 (pbrt-v4 behaves the same). The pmf itself stays positive — each branch
+//! probability is its own importance's share, not 1 minus its sibling's — unless the product
+//! underflows (a subtree below ≈ 10⁻³⁸ of the total, never drawn), and [`bvh_pmf`] is exactly
+//! the product [`select_bvh`] forms, so MIS weights stay consistent. A subtree never
 //! drawn holds at most ≈ 2⁻²⁴ of the total importance — a bound, which inside a cluster of
 //! lights ignores where they face, so the BVH also gives 0 to an interior node whose box no
 //! light can reach the point from (see `node_importance`).
@@ -231,12 +236,6 @@ pub fn importance(bounds: &LightBounds, p: Vec3, n: Vec3) -> f32 {
     }
     let light_radius = bounds.min.w;
     let d2 = dist2.max(light_radius * light_radius).max(f32::MIN_POSITIVE);
-
-    // One light (its sphere the largest light's) that is a one-sided quad (one normal).
-    let one_quad = light_radius == radius && bounds.two_sided == 0 && bounds.cos_theta_o >= 1.0;
-    if one_quad && dist2 <= radius * radius && quad_lights_nothing_from_inside(bounds, p, center, n) {
-        return 0.0;
-    }
     let mut cos_theta_p = 1.0;
     let mut cos_theta_pi = 1.0;
     // Inside the bounding sphere every direction may reach the lights: both factors are 1.
@@ -276,23 +275,79 @@ pub fn importance(bounds: &LightBounds, p: Vec3, n: Vec3) -> f32 {
     }
 }
 
-/// Whether the one one-sided quad of `bounds` (`cos θo = 1`: a single normal, the axis), whose
-/// points lie in the plane through the box centre `pc` (`centre`) with that normal within the
-/// sphere's radius of `pc`, lights nothing at `p` inside that sphere (surface normal `n`, 0 or NaN for
-/// none): `p` behind the plane or within 4 ε of its coordinates of it (the shade stage takes 8 ε
-/// as in the plane, where `U` = 0), or that disc wholly on or below `p`'s tangent plane. Inside
-/// the sphere [`importance`] has no cone or surface factor, so the quad otherwise weighed as if
-/// it filled `p`'s hemisphere: points on a 0.5 m ceiling lamp and beside it in its plane, lit by
-/// a wall lamp 2 m away, drew the wall lamp with a pmf of 0.012 (now 1). Both tests turn with
-/// the light.
-fn quad_lights_nothing_from_inside(bounds: &LightBounds, p: Vec3, centre: Vec3, n: Vec3) -> bool {
-    let (axis, to_p) = (bounds.axis.truncate(), p - centre);
-    let scale = p.abs().max(centre.abs()).max_element();
-    let in_front = axis.dot(to_p) > 4.0 * f32::EPSILON * scale;
-    let n_len2 = n.length_squared();
-    let n_across = safe_sqrt(n_len2 - n.dot(axis) * n.dot(axis));
-    let disc_above = bounds.max.w * n_across - n.dot(to_p) > 0.0;
-    !in_front || (n_len2 > 0.0 && !disc_above)
+/// How far from a quad light's plane a point counts as lying in it, relative to the larger of the
+/// point's and the light's corner's largest coordinate: 8 ε, 8 to 16 ulp of that coordinate. A hit
+/// point lies a few ulp off its triangle's plane (the Cornell lamp's hits 0–2 ulp by their ray
+/// parameter, on the CPU and an H100), and the side test's own rounding adds up to 1.6 ε (a
+/// simulation of tilted lights of 1 mm to 1000 units up to 10⁴ out): about 2× headroom.
+pub const IN_LIGHT_PLANE_TOLERANCE: f32 = 8.0 * f32::EPSILON;
+
+/// Whether `p` is on the emitting side of quad light `light` — the shade stage's test, which
+/// light selection shares so that it gives 0 exactly where the stage's `U` is 0. Not where `p`
+/// lies in the light's plane (within [`IN_LIGHT_PLANE_TOLERANCE`]): a light lights nothing there
+/// — a point beside it sees it edge-on — and on its own surface rounding alone would decide the
+/// side, between `U` = 0 and a light that fills the hemisphere (the back of a one-sided lamp
+/// speckled with full `U`, differently on each backend).
+pub fn quad_faces(light: &Light, p: Vec3) -> bool {
+    let corner = light.position.truncate();
+    let normal = light.edge_u.truncate().cross(light.edge_v.truncate());
+    let side = normal.dot(p - corner);
+    let emitting_side = side > 0.0 || (light.two_sided != 0 && side < 0.0);
+    // The tolerance (a square root) only for the lights that pass the sign test.
+    emitting_side && side.abs() > IN_LIGHT_PLANE_TOLERANCE * p.abs().max(corner.abs()).max_element() * normal.length()
+}
+
+/// Whether quad light `light` lights nothing at `p` (surface normal `n`, need not be normalised;
+/// 0 or NaN: no surface), by the shade stage's own zero set: `p` not on its emitting side
+/// ([`quad_faces`]: behind a one-sided quad, or in its plane), or every corner of the quad on or
+/// below `p`'s tangent plane, where the horizon clips it away (a corner a rounding error above
+/// it, whose `U` is of that order squared, may count as below). False for a sphere light.
+///
+/// [`importance`]'s bound has no cone or surface factor inside a light's bounding sphere, so
+/// without this test a quad weighed as if it filled the hemisphere of points on it, beside it in
+/// its plane, or just below its edge: points on a 0.5 m ceiling lamp, lit by a wall lamp 2 m
+/// away, drew the wall lamp with a pmf of 0.012 (now 1). A bound-only version of the test,
+/// against the box centre's plane, had culled points a few µm in front of a lamp whose `U` was
+/// 1 (its band scaled with the centre's coordinates, not the stage's), and lost a normal's tilt
+/// of up to 3.5·10⁻⁴ rad to cancellation.
+#[allow(clippy::neg_cmp_op_on_partial_ord)] // `!(h <= 0)`: a NaN height counts as above
+pub fn quad_lights_nothing(light: &Light, p: Vec3, n: Vec3) -> bool {
+    if light.kind != light_kind::QUAD {
+        return false;
+    }
+    if !quad_faces(light, p) {
+        return true;
+    }
+    if !(n.length_squared() > 0.0) {
+        return false;
+    }
+    let to_corner = light.position.truncate() - p;
+    let (eu, ev) = (light.edge_u.truncate(), light.edge_v.truncate());
+    let corners = [to_corner, to_corner + eu, to_corner + ev, to_corner + eu + ev];
+    let mut i = 0;
+    while i < 4 {
+        if !(n.dot(corners[i]) <= 0.0) {
+            return false;
+        }
+        i += 1;
+    }
+    true
+}
+
+/// One light's importance at `p` (surface normal `n`): [`importance`] of its
+/// [`light_bounds`], and 0 where the shade stage's `U` is 0 for a quad ([`quad_lights_nothing`]).
+/// What the linear scan weighs each light by, and the BVH each leaf.
+pub fn light_importance(light: &Light, p: Vec3, n: Vec3) -> f32 {
+    light_importance_in(light, &light_bounds(light), p, n)
+}
+
+/// [`light_importance`] with the light's bounds at hand (a BVH leaf's).
+fn light_importance_in(light: &Light, bounds: &LightBounds, p: Vec3, n: Vec3) -> f32 {
+    if quad_lights_nothing(light, p, n) {
+        0.0
+    } else {
+        importance(bounds, p, n)
+    }
 }
 
 /// A light-BVH node's importance for `p` (surface normal `n`): [`importance`] of its bounds, and 0
@@ -304,11 +359,17 @@ fn quad_lights_nothing_from_inside(bounds: &LightBounds, p: Vec3, centre: Vec3, 
 /// as if they all lit it: ceiling points amid an array of 5 mm LEDs, in their plane or just below
 /// it, which none of them lights, gave the lamp that alone lit them a pmf down to 6·10⁻⁸ —
 /// 10⁷ times the variance, and below 2⁻²⁴ never drawn, a black `U_N` where `U` is not (now 1:
-/// `raywave_host::lights`' tests). Leaves keep [`importance`] alone: a box turns with the scene and a
-/// light's own importance does not.
-fn node_importance(node: &LightBvhNode, p: Vec3, n: Vec3) -> f32 {
+/// `raywave_host::lights`' tests). A leaf weighs its light by [`light_importance`] (its own
+/// bounds, and 0 where the shade stage's `U` is 0), so that a box, which turns with the scene,
+/// never decides for one light; a leaf whose light index is beyond `set`'s lights keeps
+/// [`importance`] of its bounds.
+fn node_importance(set: &LightSet, node: &LightBvhNode, p: Vec3, n: Vec3) -> f32 {
     let bounds = &node.bounds;
-    if node.is_leaf == 0 {
+    if node.is_leaf != 0 {
+        if node.child_or_light < set.light_count() {
+            return light_importance_in(&set.lights[node.child_or_light as usize], bounds, p, n);
+        }
+    } else {
         let centre = (bounds.min.truncate() + bounds.max.truncate()) * 0.5;
         if (p - centre).length_squared() <= bounds.max.w * bounds.max.w && out_of_reach(bounds, p, n) {
             return 0.0;
@@ -318,8 +379,11 @@ fn node_importance(node: &LightBvhNode, p: Vec3, n: Vec3) -> f32 {
 }
 
 /// Whether no light inside the box of `bounds` can light `p` (surface normal `n`, need not be
-/// normalised; 0 or NaN: no surface): every corner of the box on or below `p`'s tangent plane
-/// (each light then lies below the horizon, where `U` clips it away), or — for one-sided emitters
+/// normalised; 0 or NaN: no surface): every corner of the box on or below `p`'s tangent plane,
+/// within 4 ε of the larger coordinate of `p` and the corner above it (each light then lies
+/// below the horizon, or a rounding error above it, where `U` clips it away: a hit point lies a
+/// few ulp off its triangle's plane, and ceiling points amid coplanar LEDs, 1 ulp above their
+/// plane, had given the lamp that lit them a pmf of 6·10⁻⁸ again), or — for one-sided emitters
 /// whose normals lie within `θo < π/2` of the axis and emit within `θe ≤ π/2` of them — `p` on or
 /// behind each of them, `axis·(p − c) + sin θo·|p − c| ≤ 0` at every corner `c`. Both tested
 /// functions are convex in the corner, so their largest value over the box is at a corner. A
@@ -332,6 +396,7 @@ fn out_of_reach(bounds: &LightBounds, p: Vec3, n: Vec3) -> bool {
     let cos_o = bounds.cos_theta_o;
     let one_sided_cone = bounds.two_sided == 0 && cos_o > 0.0 && bounds.cos_theta_e >= 0.0;
     let sin_o = sin_from_cos(cos_o.min(1.0));
+    let horizon_band = 4.0 * f32::EPSILON * n.length();
     let (mut above_horizon, mut in_front) = (false, false);
     let mut corner = 0;
     while corner < 8 {
@@ -341,7 +406,8 @@ fn out_of_reach(bounds: &LightBounds, p: Vec3, n: Vec3) -> bool {
             if corner & 4 != 0 { hi.z } else { lo.z },
         );
         let w = p - c;
-        above_horizon = above_horizon || !(n.dot(-w) <= 0.0);
+        let scale = p.abs().max(c.abs()).max_element();
+        above_horizon = above_horizon || !(n.dot(-w) <= horizon_band * scale);
         in_front = in_front || !(axis.dot(w) + sin_o * w.length() <= 0.0);
         corner += 1;
     }
@@ -373,7 +439,7 @@ fn total_importance(lights: &[Light], count: u32, p: Vec3, n: Vec3) -> f32 {
     let mut total = 0.0;
     let mut i = 0;
     while i < count {
-        total += importance(&light_bounds(&lights[i as usize]), p, n);
+        total += light_importance(&lights[i as usize], p, n);
         i += 1;
     }
     total
@@ -398,7 +464,7 @@ fn scan_select(lights: &[Light], count: u32, p: Vec3, n: Vec3, u: f32) -> LightC
     let mut last = LightChoice::NONE;
     let mut i = 0;
     while i < count {
-        let weight = importance(&light_bounds(&lights[i as usize]), p, n);
+        let weight = light_importance(&lights[i as usize], p, n);
         if weight > 0.0 {
             last = LightChoice { index: i, pmf: weight / total };
             running += weight;
@@ -425,10 +491,10 @@ fn scan_pmf(lights: &[Light], count: u32, p: Vec3, n: Vec3, index: u32) -> f32 {
     if total.is_nan() || total <= 0.0 {
         return uniform_pmf(count, index);
     }
-    importance(&light_bounds(&lights[index as usize]), p, n) / total
+    light_importance(&lights[index as usize], p, n) / total
 }
 
-/// Chooses a light with probability proportional to its [`importance`] at `p` (normal `n`, or 0)
+/// Chooses a light with probability proportional to its [`light_importance`] at `p` (normal `n`, or 0)
 /// by a linear scan: the total, then the inverse CDF at `u`. Falls back to [`select_uniform`] when
 /// every importance is 0. [`LightChoice::NONE`] for an empty list.
 pub fn select_importance(lights: &[Light], p: Vec3, n: Vec3, u: f32) -> LightChoice {
@@ -441,21 +507,25 @@ pub fn importance_pmf(lights: &[Light], p: Vec3, n: Vec3, index: u32) -> f32 {
     scan_pmf(lights, lights.len() as u32, p, n, index)
 }
 
-/// Probability of taking the first child of interior node `node` (children `first`, `second`):
-/// `I₀ / (I₀ + I₁)` of their [`node_importance`]s, or 1/2 when both are 0.
-fn first_child_probability(nodes: &[LightBvhNode], first: u32, second: u32, p: Vec3, n: Vec3) -> f32 {
-    let i0 = node_importance(&nodes[first as usize], p, n);
-    let i1 = node_importance(&nodes[second as usize], p, n);
+/// Probabilities of taking the first and the second child of an interior node (children `first`,
+/// `second`): `I₀ / (I₀ + I₁)` and `I₁ / (I₀ + I₁)` of their [`node_importance`]s, or 1/2 each
+/// when both are 0. The second is not `1 − p₀`, which rounds to 0 when `I₁ < 2⁻²⁵ I₀` and had
+/// given every light under a dim second child pmf 0, though it was the first child's positive
+/// share when the children were the other way round.
+fn child_probabilities(set: &LightSet, first: u32, second: u32, p: Vec3, n: Vec3) -> (f32, f32) {
+    let i0 = node_importance(set, &set.nodes[first as usize], p, n);
+    let i1 = node_importance(set, &set.nodes[second as usize], p, n);
     let sum = i0 + i1;
     if sum > 0.0 {
-        i0 / sum
+        (i0 / sum, i1 / sum)
     } else {
-        0.5
+        (0.5, 0.5)
     }
 }
 
-/// [`select_bvh`] over the first `count` nodes (`count ≤ nodes.len()`).
-fn bvh_select(nodes: &[LightBvhNode], count: u32, p: Vec3, n: Vec3, u: f32) -> LightChoice {
+/// [`select_bvh`] over `set`'s nodes.
+fn bvh_select(set: &LightSet, p: Vec3, n: Vec3, u: f32) -> LightChoice {
+    let (nodes, count) = (set.nodes, set.node_count());
     if count == 0 {
         return LightChoice::NONE;
     }
@@ -473,14 +543,14 @@ fn bvh_select(nodes: &[LightBvhNode], count: u32, p: Vec3, n: Vec3, u: f32) -> L
         if depth == MAX_BVH_DEPTH || first >= count || second >= count {
             break;
         }
-        let p_first = first_child_probability(nodes, first, second, p, n);
+        let (p_first, p_second) = child_probabilities(set, first, second, p, n);
         if u < p_first {
             u = (u / p_first).min(ONE_MINUS_EPSILON);
             pmf *= p_first;
             node = first;
         } else {
             u = ((u - p_first) / (1.0 - p_first)).min(ONE_MINUS_EPSILON);
-            pmf *= 1.0 - p_first;
+            pmf *= p_second;
             node = second;
         }
         depth += 1;
@@ -489,12 +559,13 @@ fn bvh_select(nodes: &[LightBvhNode], count: u32, p: Vec3, n: Vec3, u: f32) -> L
     LightChoice::NONE
 }
 
-/// [`bvh_pmf`] over the first `count` nodes (`count ≤ nodes.len()`).
-fn bvh_light_pmf(nodes: &[LightBvhNode], count: u32, trails: &[u32], p: Vec3, n: Vec3, light: u32) -> f32 {
-    if count == 0 || light as usize >= trails.len() {
+/// [`bvh_pmf`] over `set`'s nodes.
+fn bvh_light_pmf(set: &LightSet, p: Vec3, n: Vec3, light: u32) -> f32 {
+    let (nodes, count) = (set.nodes, set.node_count());
+    if count == 0 || light as usize >= set.trails.len() {
         return 0.0;
     }
-    let trail = trails[light as usize];
+    let trail = set.trails[light as usize];
     let mut node = 0u32;
     let mut pmf = 1.0f32;
     let mut depth = 0u32;
@@ -508,12 +579,12 @@ fn bvh_light_pmf(nodes: &[LightBvhNode], count: u32, trails: &[u32], p: Vec3, n:
         if depth == MAX_BVH_DEPTH || first >= count || second >= count {
             break;
         }
-        let p_first = first_child_probability(nodes, first, second, p, n);
+        let (p_first, p_second) = child_probabilities(set, first, second, p, n);
         if (trail >> depth) & 1 == 0 {
             pmf *= p_first;
             node = first;
         } else {
-            pmf *= 1.0 - p_first;
+            pmf *= p_second;
             node = second;
         }
         depth += 1;
@@ -521,21 +592,22 @@ fn bvh_light_pmf(nodes: &[LightBvhNode], count: u32, trails: &[u32], p: Vec3, n:
     0.0
 }
 
-/// Chooses a light by stochastic descent of the light BVH `nodes` (layout in the module docs):
-/// at each interior node the first child with probability `I₀/(I₀ + I₁)` (1/2 if both are 0),
-/// `u` rescaled to `[0, 1)` for the next level, the pmf the product of the branch probabilities.
+/// Chooses one of `lights` by stochastic descent of their light BVH `nodes` (layout in the module
+/// docs): at each interior node the first child with probability `I₀/(I₀ + I₁)` (1/2 if both are
+/// 0), `u` rescaled to `[0, 1)` for the next level, the pmf the product of the branch
+/// probabilities; a leaf weighs its light by [`light_importance`].
 /// [`LightChoice::NONE`] for an empty or malformed tree. A one-node tree returns its light with
 /// pmf 1. With 24-bit samples, the decisions below depth ≈ 20 reuse few remaining bits.
-pub fn select_bvh(nodes: &[LightBvhNode], p: Vec3, n: Vec3, u: f32) -> LightChoice {
-    bvh_select(nodes, nodes.len() as u32, p, n, u)
+pub fn select_bvh(lights: &[Light], nodes: &[LightBvhNode], p: Vec3, n: Vec3, u: f32) -> LightChoice {
+    bvh_select(&LightSet::new(lights, nodes, &[]), p, n, u)
 }
 
 /// Probability that [`select_bvh`] chooses `light` at `p`, `n`: the product of the branch
 /// probabilities along `trails[light]`, bit-identical to the pmf [`select_bvh`] returns for it;
 /// 0 when the trail does not end at that light's leaf (a light left out of the BVH) or `light` is
 /// out of range of `trails`.
-pub fn bvh_pmf(nodes: &[LightBvhNode], trails: &[u32], p: Vec3, n: Vec3, light: u32) -> f32 {
-    bvh_light_pmf(nodes, nodes.len() as u32, trails, p, n, light)
+pub fn bvh_pmf(lights: &[Light], nodes: &[LightBvhNode], trails: &[u32], p: Vec3, n: Vec3, light: u32) -> f32 {
+    bvh_light_pmf(&LightSet::new(lights, nodes, trails), p, n, light)
 }
 
 /// A scene's lights as light selection reads them: the light list and, for scenes with many
@@ -586,9 +658,8 @@ impl<'a> LightSet<'a> {
         if lights == 0 {
             return LightChoice::NONE;
         }
-        let nodes = self.node_count();
-        if nodes > 0 {
-            let choice = bvh_select(self.nodes, nodes, p, n, u);
+        if self.node_count() > 0 {
+            let choice = bvh_select(self, p, n, u);
             if choice.index < lights {
                 choice
             } else {
@@ -605,9 +676,8 @@ impl<'a> LightSet<'a> {
         if index >= lights {
             return 0.0;
         }
-        let nodes = self.node_count();
-        if nodes > 0 {
-            bvh_light_pmf(self.nodes, nodes, self.trails, p, n, index)
+        if self.node_count() > 0 {
+            bvh_light_pmf(self, p, n, index)
         } else {
             scan_pmf(self.lights, lights, p, n, index)
         }
@@ -712,7 +782,7 @@ mod tests {
             let p = rng.vec3(-5.0, 5.0);
             let n = if case % 5 == 0 { Vec3::ZERO } else { rng.unit_vec3() };
             let points = light_points(&light, &mut rng, 48);
-            let value = importance(&light_bounds(&light), p, n);
+            let value = light_importance(&light, p, n);
             assert!(value.is_finite() && value >= 0.0);
             if contributes(&light, &points, p, n, 1e-4) {
                 contributing += 1;
@@ -750,24 +820,25 @@ mod tests {
 
     #[test]
     fn importance_hard_cases_are_finite() {
-        let s = light_bounds(&Light::sphere(Vec3::new(1.0, 1.0, 1.0), 0.5, Vec3::ONE));
-        let q = light_bounds(&Light::quad(Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::ONE, false));
-        // p at the sphere's centre, on its surface (both reached); p on the quad (a quad lights
-        // nothing in its plane: 0 within its sphere), just in front of it (reached), and on its
-        // plane beyond its sphere (the cone bound keeps it there, conservatively).
-        for (b, p, reached) in [
-            (s, Vec3::ONE, true),
-            (s, Vec3::new(1.5, 1.0, 1.0), true),
-            (q, Vec3::new(0.5, 0.5, 0.0), false),
-            (q, Vec3::new(0.1, 0.2, 0.0), false),
-            (q, Vec3::new(0.5, 0.5, 1.0e-3), true),
-            (q, Vec3::new(3.0, 0.5, 0.0), true),
+        let sphere = Light::sphere(Vec3::new(1.0, 1.0, 1.0), 0.5, Vec3::ONE);
+        let quad = Light::quad(Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::ONE, false);
+        let s = light_bounds(&sphere);
+        // p at the sphere's centre, on its surface (both reached); p on the quad and on its plane
+        // beyond its sphere (a quad lights nothing in its plane, the shade stage's own test), and
+        // just in front of it (reached).
+        for (light, p, reached) in [
+            (sphere, Vec3::ONE, true),
+            (sphere, Vec3::new(1.5, 1.0, 1.0), true),
+            (quad, Vec3::new(0.5, 0.5, 0.0), false),
+            (quad, Vec3::new(0.1, 0.2, 0.0), false),
+            (quad, Vec3::new(0.5, 0.5, 1.0e-3), true),
+            (quad, Vec3::new(3.0, 0.5, 0.0), false),
         ] {
             for n in [Vec3::ZERO, Vec3::Z, -Vec3::Z, Vec3::X] {
-                let value = importance(&b, p, n);
+                let value = light_importance(&light, p, n);
                 assert!(value.is_finite() && value >= 0.0, "{p} {n}: {value}");
             }
-            assert_eq!(importance(&b, p, Vec3::ZERO) > 0.0, reached, "{p}");
+            assert_eq!(light_importance(&light, p, Vec3::ZERO) > 0.0, reached, "{p}");
         }
         // Zero-size bounds with power, at their own point; zero power; NaN and infinite inputs.
         let mut point = s;
@@ -808,6 +879,62 @@ mod tests {
         // point and dominates again.
         for n in [Vec3::Y, Vec3::ZERO] {
             assert!(importance_pmf(&lights, Vec3::new(0.1, 2.99, 0.05), n, 0) > 0.9, "{n}");
+        }
+    }
+
+    /// Where the shade stage's `U` of a lamp is not 0, selection gives it a positive pmf: at points
+    /// a few µm in front of a 10 m lamp with a corner at the origin (a band the cull had scaled by
+    /// the lamp's centre, 5 m out, not by the stage's coordinates: pmf 0 where the lamp filled the
+    /// hemisphere), and just below a 1 m lamp from a normal tilted 2·10⁻⁴ rad towards it (a tilt
+    /// the disc test had lost to cancellation: pmf 0). A second lamp takes the rest.
+    #[test]
+    fn a_lamp_whose_u_is_not_zero_keeps_its_pmf() {
+        let floor_lamp = Light::quad(Vec3::ZERO, Vec3::Z * 10.0, Vec3::X * 10.0, Vec3::ONE, false);
+        let other = Light::quad(Vec3::new(3.0, -5.0, 3.0), Vec3::Z, Vec3::X, Vec3::ONE, false);
+        for h in [1.0e-7, 1.0e-6, 2.0e-6, 3.0e-6] {
+            let p = Vec3::new(0.1, h, 0.1);
+            assert!(quad_faces(&floor_lamp, p), "{h}: the stage lights p");
+            let pmf = importance_pmf(&[floor_lamp, other], p, -Vec3::Y, 0);
+            assert!(pmf > 0.9, "{h}: the lamp's pmf {pmf}");
+        }
+        let ceiling_lamp = Light::quad(Vec3::new(-0.5, 3.0, -0.5), Vec3::X, Vec3::Z, Vec3::ONE, false);
+        let other = Light::quad(Vec3::new(3.0, 3.5, -0.5), Vec3::X, Vec3::Z, Vec3::ONE, false);
+        let (p, n) = (Vec3::new(0.3, 3.0 - 5.0e-5, 0.0), Vec3::new(2.0e-4, 1.0, 0.0).normalize());
+        assert!(quad_faces(&ceiling_lamp, p));
+        let pmf = importance_pmf(&[ceiling_lamp, other], p, n, 0);
+        assert!(pmf > 0.9, "the ceiling lamp's pmf {pmf}");
+    }
+
+    /// A dim light beside a bright one keeps its positive pmf in the BVH whichever child it is, as
+    /// in the scan: as the second child, `1 − p₀` had rounded to 0 for it.
+    #[test]
+    fn a_dim_second_child_keeps_its_pmf() {
+        let bright = Light::quad(Vec3::new(-2.0, 2.0, -0.5), Vec3::X, Vec3::Z, Vec3::ONE, false);
+        let dim = Light::quad(Vec3::new(1.0, 2.0, -0.5), Vec3::X, Vec3::Z, Vec3::splat(1.0e-8), false);
+        let (p, n) = (Vec3::ZERO, Vec3::Y);
+        let scanned = importance_pmf(&[bright, dim], p, n, 1);
+        assert!(scanned > 0.0 && scanned < 1.0e-7, "{scanned}");
+        for lights in [[bright, dim], [dim, bright]] {
+            let leaf = |k: u32| LightBvhNode {
+                bounds: light_bounds(&lights[k as usize]),
+                child_or_light: k,
+                is_leaf: 1,
+                padding: [0; 2],
+            };
+            let (a, b) = (leaf(0).bounds, leaf(1).bounds);
+            let (lo, hi) = (a.min.min(b.min).truncate(), a.max.max(b.max).truncate());
+            let root = LightBounds {
+                min: lo.extend(a.min.w.max(b.min.w)),
+                max: hi.extend(0.5 * (hi - lo).length()),
+                phi: a.phi + b.phi,
+                cos_theta_o: -1.0,
+                ..a
+            };
+            let nodes =
+                [LightBvhNode { bounds: root, child_or_light: 2, is_leaf: 0, padding: [0; 2] }, leaf(0), leaf(1)];
+            let index = if lights[0].radiance == dim.radiance { 0 } else { 1 };
+            let pmf = bvh_pmf(&lights, &nodes, &[0b0, 0b1], p, n, index);
+            assert!((pmf - scanned).abs() <= 1.0e-6 * scanned, "dim light {index}: pmf {pmf}, scan {scanned}");
         }
     }
 
@@ -892,7 +1019,7 @@ mod tests {
             let p = rng.vec3(-0.1, 0.6);
             let n = if rng.next_f32() < 0.5 { rng.unit_vec3() } else { Vec3::ZERO };
             for light in &lights {
-                let at_unit_scale = importance(&light_bounds(light), p, n);
+                let at_unit_scale = light_importance(light, p, n);
                 for scale in [1e-3f32, 1e-2, 10.0, 1e3] {
                     let scaled = Light {
                         position: light.position * scale,
@@ -900,7 +1027,7 @@ mod tests {
                         edge_v: light.edge_v * scale,
                         ..*light
                     };
-                    let value = importance(&light_bounds(&scaled), p * scale, n);
+                    let value = light_importance(&scaled, p * scale, n);
                     let close = (value - at_unit_scale).abs() <= 1e-4 * at_unit_scale.max(value) + 1e-30;
                     assert!(close, "p {p}, n {n}, ×{scale}: {value} against {at_unit_scale}");
                 }
@@ -927,8 +1054,8 @@ mod tests {
                 edge_v: (turn * light.edge_v.truncate()).extend(0.0),
                 ..light
             };
-            let before = importance(&light_bounds(&light), p, n);
-            let after = importance(&light_bounds(&turned), turn * p, turn * n);
+            let before = light_importance(&light, p, n);
+            let after = light_importance(&turned, turn * p, turn * n);
             // Rounding may move a point across the cut-off angle, where the importance is ~0.
             let scale = light_bounds(&light).phi / (p - light.position.truncate()).length_squared();
             let close = (after - before).abs() <= 1e-3 * before.max(after) + 1e-4 * scale;
@@ -948,7 +1075,7 @@ mod tests {
         ];
         let (p, n) = (Vec3::ZERO, Vec3::Y);
         for k in 0..3 {
-            assert_eq!(importance(&light_bounds(&lights[k]), p, n), 0.0);
+            assert_eq!(light_importance(&lights[k], p, n), 0.0);
             assert_eq!(importance_pmf(&lights, p, n, k as u32), 1.0 / 3.0);
         }
         assert_eq!(select_importance(&lights, p, n, 0.5), LightChoice { index: 1, pmf: 1.0 / 3.0 });
@@ -1041,36 +1168,36 @@ mod tests {
         for case in 0..2_000 {
             let p = rng.vec3(-6.0, 6.0);
             let n = if case % 3 == 0 { Vec3::ZERO } else { rng.unit_vec3() };
-            let sum: f32 = (0..3).map(|k| bvh_pmf(&nodes, &trails, p, n, k)).sum();
+            let sum: f32 = (0..3).map(|k| bvh_pmf(&lights, &nodes, &trails, p, n, k)).sum();
             assert!((sum - 1.0).abs() < 1e-5, "sum {sum}");
-            let choice = select_bvh(&nodes, p, n, rng.next_f32());
+            let choice = select_bvh(&lights, &nodes, p, n, rng.next_f32());
             assert!(choice.is_valid());
-            assert_eq!(choice.pmf, bvh_pmf(&nodes, &trails, p, n, choice.index));
+            assert_eq!(choice.pmf, bvh_pmf(&lights, &nodes, &trails, p, n, choice.index));
             let set = LightSet::new(&lights, &nodes, &trails);
             assert_eq!(set.pmf(p, n, choice.index), choice.pmf);
         }
-        assert_eq!(bvh_pmf(&nodes, &trails, Vec3::ZERO, Vec3::ZERO, 3), 0.0);
+        assert_eq!(bvh_pmf(&lights, &nodes, &trails, Vec3::ZERO, Vec3::ZERO, 3), 0.0);
         // A light whose trail leads elsewhere (left out of the tree) has pmf 0.
-        assert_eq!(bvh_pmf(&nodes, &[0, 0, 0], Vec3::ZERO, Vec3::ZERO, 2), 0.0);
+        assert_eq!(bvh_pmf(&lights, &nodes, &[0, 0, 0], Vec3::ZERO, Vec3::ZERO, 2), 0.0);
     }
 
     #[test]
     fn empty_single_and_malformed_trees() {
         let light = Light::sphere(Vec3::ZERO, 1.0, Vec3::ONE);
-        assert_eq!(select_bvh(&[], Vec3::ZERO, Vec3::ZERO, 0.5), LightChoice::NONE);
-        assert_eq!(bvh_pmf(&[], &[], Vec3::ZERO, Vec3::ZERO, 0), 0.0);
+        assert_eq!(select_bvh(&[], &[], Vec3::ZERO, Vec3::ZERO, 0.5), LightChoice::NONE);
+        assert_eq!(bvh_pmf(&[], &[], &[], Vec3::ZERO, Vec3::ZERO, 0), 0.0);
         let single = [LightBvhNode { bounds: light_bounds(&light), child_or_light: 0, is_leaf: 1, padding: [0; 2] }];
-        assert_eq!(select_bvh(&single, Vec3::X * 3.0, Vec3::X, 0.3), LightChoice { index: 0, pmf: 1.0 });
-        assert_eq!(bvh_pmf(&single, &[0], Vec3::X * 3.0, Vec3::X, 0), 1.0);
+        assert_eq!(select_bvh(&[light], &single, Vec3::X * 3.0, Vec3::X, 0.3), LightChoice { index: 0, pmf: 1.0 });
+        assert_eq!(bvh_pmf(&[light], &single, &[0], Vec3::X * 3.0, Vec3::X, 0), 1.0);
         // A child index out of range, and a cycle deeper than 32 levels: no light, no panic.
         let mut broken = single;
         broken[0].is_leaf = 0;
         broken[0].child_or_light = 9;
-        assert_eq!(select_bvh(&broken, Vec3::ZERO, Vec3::ZERO, 0.3), LightChoice::NONE);
-        assert_eq!(bvh_pmf(&broken, &[0], Vec3::ZERO, Vec3::ZERO, 0), 0.0);
+        assert_eq!(select_bvh(&[light], &broken, Vec3::ZERO, Vec3::ZERO, 0.3), LightChoice::NONE);
+        assert_eq!(bvh_pmf(&[light], &broken, &[0], Vec3::ZERO, Vec3::ZERO, 0), 0.0);
         let cycle = [LightBvhNode { bounds: light_bounds(&light), child_or_light: 0, is_leaf: 0, padding: [0; 2] }; 2];
-        assert_eq!(select_bvh(&cycle, Vec3::X, Vec3::ZERO, 0.9), LightChoice::NONE);
-        assert_eq!(bvh_pmf(&cycle, &[u32::MAX], Vec3::X, Vec3::ZERO, 0), 0.0);
+        assert_eq!(select_bvh(&[light], &cycle, Vec3::X, Vec3::ZERO, 0.9), LightChoice::NONE);
+        assert_eq!(bvh_pmf(&[light], &cycle, &[u32::MAX], Vec3::X, Vec3::ZERO, 0), 0.0);
     }
 
     #[test]
@@ -1080,12 +1207,11 @@ mod tests {
         let mut rng = CounterRng::new(41);
         let lights = [random_light(&mut rng), Light::sphere(Vec3::ZERO, 1.0, Vec3::ONE)];
         for light in lights {
-            let bounds = light_bounds(&light);
             let mut zero_seen = false;
             for k in 0..2000 {
                 let p = if k == 0 { Vec3::NAN } else { rng.vec3(-4.0, 4.0) };
                 let n = if k % 7 == 0 { Vec3::ZERO } else { rng.unit_vec3() };
-                let weight = importance(&bounds, p, n);
+                let weight = light_importance(&light, p, n);
                 zero_seen |= weight == 0.0;
                 let scanned = if weight > 0.0 { weight / weight } else { uniform_pmf(1, 0) };
                 let choice = select_importance(&[light], p, n, rng.next_f32());
@@ -1106,10 +1232,10 @@ mod tests {
         let tree = LightSet::new(&lights, &nodes, &trails);
         for k in 0..3 {
             assert_eq!(linear.pmf(p, n, k), importance_pmf(&lights, p, n, k));
-            assert_eq!(tree.pmf(p, n, k), bvh_pmf(&nodes, &trails, p, n, k));
+            assert_eq!(tree.pmf(p, n, k), bvh_pmf(&lights, &nodes, &trails, p, n, k));
         }
         assert_eq!(linear.select(p, n, 0.4), select_importance(&lights, p, n, 0.4));
-        assert_eq!(tree.select(p, n, 0.4), select_bvh(&nodes, p, n, 0.4));
+        assert_eq!(tree.select(p, n, 0.4), select_bvh(&lights, &nodes, p, n, 0.4));
         // Dummy one-element buffers with zero counts: no light, and the scan, respectively.
         let none = LightSet { light_count: 0, ..tree };
         assert_eq!(none.select(p, n, 0.4), LightChoice::NONE);

@@ -44,7 +44,7 @@
 use super::ggx::GgxLobe;
 use super::ltc::{self, LtcLobe, ShadingFrame};
 use crate::offset::{offset_ray_origin, ray_stop_before, triangle_extent};
-use crate::sampling::light_select::{luminance, LightSet};
+use crate::sampling::light_select::{luminance, quad_faces, LightSet};
 use crate::sampling::{dims, sampler, warp};
 use crate::sanitized::Sanitized;
 use glam::{UVec2, Vec3, Vec4, Vec4Swizzles};
@@ -227,33 +227,13 @@ impl Lobes {
     }
 }
 
-/// How far from a quad light's plane a point counts as lying in it, relative to the larger of the
-/// point's and the light's corner's largest coordinate: 8 ε, 8 to 16 ulp of that coordinate. A hit
-/// point lies a few ulp off its triangle's plane (the Cornell lamp's hits 0–2 ulp by their ray
-/// parameter, on the CPU and an H100), and the side test's own rounding adds up to 1.6 ε (a
-/// simulation of tilted lights of 1 mm to 1000 units up to 10⁴ out): about 2× headroom.
-const IN_LIGHT_PLANE_TOLERANCE: f32 = 8.0 * f32::EPSILON;
-
-/// Whether `p` is on the emitting side of quad light `light`. Not where `p` lies in the light's
-/// plane (within [`IN_LIGHT_PLANE_TOLERANCE`]): a light lights nothing there — a point beside it
-/// sees it edge-on — and on its own surface rounding alone would decide the side, between `U` = 0
-/// and a light that fills the hemisphere (the back of a one-sided lamp speckled with full `U`,
-/// differently on each backend). Points of the mesh a light is made of are excluded by identity
-/// too ([`Light::mesh`]); the plane test covers lights made of no mesh and other geometry in
-/// their plane.
-fn faces(light: &Light, p: Vec3) -> bool {
-    let corner = light.position.xyz();
-    let normal = light.edge_u.xyz().cross(light.edge_v.xyz());
-    let side = normal.dot(p - corner);
-    let emitting_side = side > 0.0 || (light.two_sided != 0 && side < 0.0);
-    // The tolerance (a square root) only for the lights that pass the sign test.
-    emitting_side && side.abs() > IN_LIGHT_PLANE_TOLERANCE * p.abs().max(corner.abs()).max_element() * normal.length()
-}
-
 /// Hit probabilities `(U_D, U_S)` of `light` at `p`, a point of scene mesh `instance`, for
-/// `lobes`; zero if `p` sees its back or lies on the light itself ([`Light::mesh`]).
+/// `lobes`; zero if `p` sees its back or lies in its plane ([`quad_faces`], the test light
+/// selection shares), or on the light itself: points of the mesh a light is made of are excluded
+/// by identity too ([`Light::mesh`]; an emitter mesh may bend off the light's plane by the fit's
+/// 10⁻⁴), the plane test covers lights made of no mesh and other geometry in their plane.
 fn hit_probabilities(light: &Light, p: Vec3, instance: u32, lobes: &Lobes) -> (f32, f32) {
-    if light.mesh == instance || !faces(light, p) {
+    if light.mesh == instance || !quad_faces(light, p) {
         return (0.0, 0.0);
     }
     let quad = ltc::local_quad(&lobes.frame, p, light.position.xyz(), light.edge_u.xyz(), light.edge_v.xyz());
