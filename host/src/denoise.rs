@@ -7,7 +7,10 @@ use crate::shading::ShadeAccumulator;
 use glam::{Vec3, Vec4};
 use raywave_kernels::sampling::light_select::luminance;
 use raywave_kernels::shade::stage::{Surface, SMALLEST_RADIANCE};
-use raywave_shared::denoise::{axis, MAX_FILTERED_RADIANCE, MAX_RADIUS};
+use raywave_shared::denoise::{
+    axis, MAX_EDGE_WEIGHT, MAX_FILTERED_RADIANCE, MAX_RADIUS, MAX_SVGF_PHI_COLOR, MAX_SVGF_VARIANCE_BOOST,
+    MIN_EDGE_WEIGHT, MIN_SVGF_PHI_COLOR,
+};
 use raywave_shared::DenoiseParams;
 
 /// A denoiser of the shadow term.
@@ -233,14 +236,17 @@ impl DenoiseInput {
     /// Checks the inputs against `params`: the bilateral passes' invocation counts fit 32 bits
     /// ([`DenoiseParams::bilateral_invocations`]; for every method, so that every backend and
     /// method accept the same images), every buffer holds `width · height` entries, the radius
-    /// is within `1..=MAX_RADIUS`, the estimates average at least one sample, the edge weights
-    /// are finite and ≥ 0, SVGF's `phiColor` finite and > 0, its variance boost finite and ≥ 0
-    /// and its à-trous iterations within `1..=MAX_ATROUS_ITERATIONS` (checked for every method,
-    /// as the radius is), and every value is finite, with the radiances (`U`, emitted, `S_N`,
-    /// `U_N`: rgb) and the analytic luminance (`normal.w`) not negative, and `S_N`, `U_N` at
-    /// most [`MAX_FILTERED_RADIANCE`], below which the filter's sums stay finite. One NaN or
-    /// negative pixel would otherwise spread through the noise estimate and the filter taps to
-    /// its neighbours (a 7 × 7 block at R = 3), or leave the stage as NaN (an emitted NaN).
+    /// is within `1..=MAX_RADIUS`, the estimates average at least one sample, each edge weight
+    /// is 0 or within [[`MIN_EDGE_WEIGHT`], [`MAX_EDGE_WEIGHT`]], SVGF's `phiColor` within
+    /// [[`MIN_SVGF_PHI_COLOR`], [`MAX_SVGF_PHI_COLOR`]], its variance boost within
+    /// [0, [`MAX_SVGF_VARIANCE_BOOST`]] (so that every scaled weight in the kernels is finite and
+    /// normal; the error names the field), SVGF's à-trous iterations within
+    /// `1..=MAX_ATROUS_ITERATIONS` (checked for every method, as the radius is), and every value
+    /// is finite, with the radiances (`U`, emitted, `S_N`, `U_N`: rgb) and the analytic
+    /// luminance (`normal.w`) not negative, and `S_N`, `U_N` at most [`MAX_FILTERED_RADIANCE`],
+    /// below which the filter's sums stay finite. One NaN or negative pixel would otherwise spread
+    /// through the noise estimate and the filter taps to its neighbours (a 7 × 7 block at R = 3),
+    /// or leave the stage as NaN (an emitted NaN).
     /// Cost: one read of the six buffers, about 20 ms for a 1920 × 1080 frame on the 2-vCPU test
     /// machine (≈ 10 GB/s, memory-bound; the upload to a Vulkan device reads them once more).
     pub fn check(&self, params: &DenoiseParams) -> Result<()> {
@@ -256,21 +262,8 @@ impl DenoiseInput {
             Some(reason)
         } else if params.samples_per_pixel == 0 {
             Some("samples per pixel is 0 (the estimates average at least one sample)".to_owned())
-        } else if !(params.edge_weights.is_finite() && params.edge_weights.min_element() >= 0.0) {
-            // A negative weight makes its stop exceed 1, and the filter's sums could then
-            // overflow below MAX_FILTERED_RADIANCE.
-            Some(format!("edge weights {} must be finite and ≥ 0", params.edge_weights))
-        } else if !(params.svgf.x.is_finite()
-            && params.svgf.x > 0.0
-            && params.svgf.y.is_finite()
-            && params.svgf.y >= 0.0)
-        {
-            // phiColor ≤ 0 turns SVGF's luminance stop into exp(+|Δl|/|φ|) (weights above 1,
-            // favouring the most different taps) or NaN; a negative boost zeroes the variance.
-            Some(format!(
-                "SVGF parameters {} need phiColor (x) finite and > 0, the variance boost (y) finite and ≥ 0",
-                params.svgf
-            ))
+        } else if let Some(reason) = weight_problem(params) {
+            Some(reason)
         } else if !(1..=MAX_ATROUS_ITERATIONS).contains(&params.atrous_iterations) {
             // The passes had clamped it silently: 0 ran one iteration, 8 ran four.
             Some(format!(
@@ -341,6 +334,43 @@ impl ValueRule {
     }
 }
 
+/// Why `params`' filter weights fall outside the limits within which every scaled weight in the
+/// kernels is finite and normal, naming the field, or `None`: each edge weight 0 or within
+/// [[`MIN_EDGE_WEIGHT`], [`MAX_EDGE_WEIGHT`]], SVGF's `phiColor` (`svgf.x`) within
+/// [[`MIN_SVGF_PHI_COLOR`], [`MAX_SVGF_PHI_COLOR`]] and its variance boost (`svgf.y`) within
+/// [0, [`MAX_SVGF_VARIANCE_BOOST`]] (NaN is in none). Beyond them the filter had silently done
+/// nothing (`Wd` = 10³⁸) or a GPU flushing a subnormal `phiColor` had dropped taps the CPU kept
+/// (the limits' docs). Below them: a negative edge weight lifts its stop above 1 (the filter's
+/// sums could then overflow below [`MAX_FILTERED_RADIANCE`]), `phiColor` ≤ 0 turns the luminance
+/// stop into `exp(+|Δl|/|φ|)` (favouring the most different taps) or NaN, and a negative boost
+/// zeroes the variance.
+fn weight_problem(params: &DenoiseParams) -> Option<String> {
+    const EDGE_FIELDS: [&str; 4] = [
+        "edge_weights.x (depth Wd)",
+        "edge_weights.y (normal Wn)",
+        "edge_weights.z (plane Wp)",
+        "edge_weights.w (analytic Wa)",
+    ];
+    let edge_range = MIN_EDGE_WEIGHT..=MAX_EDGE_WEIGHT;
+    for (field, weight) in EDGE_FIELDS.into_iter().zip(params.edge_weights.to_array()) {
+        if !(weight == 0.0 || edge_range.contains(&weight)) {
+            return Some(format!(
+                "edge weight {field} = {weight:e} is neither 0 nor within [{MIN_EDGE_WEIGHT:e}, {MAX_EDGE_WEIGHT:e}]"
+            ));
+        }
+    }
+    let (phi_color, boost) = (params.svgf.x, params.svgf.y);
+    if !(MIN_SVGF_PHI_COLOR..=MAX_SVGF_PHI_COLOR).contains(&phi_color) {
+        Some(format!(
+            "SVGF phiColor (svgf.x) = {phi_color:e} is outside [{MIN_SVGF_PHI_COLOR:e}, {MAX_SVGF_PHI_COLOR:e}]"
+        ))
+    } else if !(0.0..=MAX_SVGF_VARIANCE_BOOST).contains(&boost) {
+        Some(format!("SVGF variance boost (svgf.y) = {boost:e} is outside [0, {MAX_SVGF_VARIANCE_BOOST:e}]"))
+    } else {
+        None
+    }
+}
+
 /// Why `radius` cannot be a filter radius, or `None` if it can: it must be within
 /// `1..=MAX_RADIUS`, the pixels a Vulkan bilateral workgroup keeps on each side of its segment.
 fn radius_problem(radius: u32) -> Option<String> {
@@ -394,6 +424,7 @@ pub fn rgb(color: &[Vec4]) -> Vec<Vec3> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use raywave_shared::denoise::{DEFAULT_EDGE_WEIGHTS, DEFAULT_SVGF_PHI_COLOR, DEFAULT_SVGF_VARIANCE_BOOST};
 
     fn input(pixels: usize) -> DenoiseInput {
         let v = vec![Vec4::ZERO; pixels];
@@ -445,6 +476,51 @@ mod tests {
         assert!(reason(input(1), widest).contains("pixels but buffers"), "a dispatch of 2^32 − 64 fits");
     }
 
+    /// Edge weights, `phiColor` and the variance boost are refused outside the limits within
+    /// which the kernels' scaled weights stay finite and normal, the error naming the field: at
+    /// `Wd` = 10³⁸ `4·Wd` had overflowed and every tap's depth stop been NaN, so 0 (the filter
+    /// did nothing), and a subnormal `phiColor` had been 0 on a GPU flushing subnormals.
+    #[test]
+    fn check_refuses_filter_weights_beyond_their_limits_naming_the_field() {
+        let params = DenoiseParams::new(4, 3);
+        let refusal = |edited: DenoiseParams| match input(12).check(&edited) {
+            Err(Error::InvalidParameter { name: "denoise", reason }) => reason,
+            other => panic!("expected {edited:?} refused, got {other:?}"),
+        };
+        let edge = |field: usize, weight: f32| {
+            let mut weights = DEFAULT_EDGE_WEIGHTS.to_array();
+            weights[field] = weight;
+            DenoiseParams { edge_weights: Vec4::from_array(weights), ..params }
+        };
+        let fields = ["edge_weights.x (depth Wd)", "edge_weights.y", "edge_weights.z", "edge_weights.w (analytic Wa)"];
+        for (i, field) in fields.into_iter().enumerate() {
+            for weight in [1.0e38, 3.4e37, MAX_EDGE_WEIGHT * 1.01, -0.5, 1.0e-39, MIN_EDGE_WEIGHT * 0.99, f32::NAN] {
+                let reason = refusal(edge(i, weight));
+                assert!(reason.contains(field) && reason.contains("neither 0 nor within"), "{weight}: {reason}");
+            }
+            for weight in [0.0, MIN_EDGE_WEIGHT, MAX_EDGE_WEIGHT] {
+                assert!(input(12).check(&edge(i, weight)).is_ok(), "{field} = {weight}");
+            }
+        }
+        let svgf = |phi_color: f32, boost: f32| DenoiseParams { svgf: Vec4::new(phi_color, boost, 0.0, 0.0), ..params };
+        for phi_color in [1.0e-39, 1.0e-34, MIN_SVGF_PHI_COLOR * 0.99, MAX_SVGF_PHI_COLOR * 1.01, 0.0, -10.0, f32::NAN]
+        {
+            let reason = refusal(svgf(phi_color, DEFAULT_SVGF_VARIANCE_BOOST));
+            assert!(reason.contains("phiColor (svgf.x)") && reason.contains("outside"), "{phi_color}: {reason}");
+        }
+        for boost in [-1.0, MAX_SVGF_VARIANCE_BOOST * 1.01, f32::INFINITY, f32::NAN] {
+            let reason = refusal(svgf(DEFAULT_SVGF_PHI_COLOR, boost));
+            assert!(reason.contains("variance boost (svgf.y)") && reason.contains("outside"), "{boost}: {reason}");
+        }
+        for (phi_color, boost) in [(MIN_SVGF_PHI_COLOR, 0.0), (MAX_SVGF_PHI_COLOR, MAX_SVGF_VARIANCE_BOOST)] {
+            assert!(input(12).check(&svgf(phi_color, boost)).is_ok(), "{phi_color}, {boost}");
+        }
+        // The documented defaults, which every caller (CLI, reports, benches) passes.
+        assert_eq!(params.edge_weights, DEFAULT_EDGE_WEIGHTS);
+        assert_eq!(params.svgf, Vec4::new(DEFAULT_SVGF_PHI_COLOR, DEFAULT_SVGF_VARIANCE_BOOST, 0.0, 0.0));
+        assert!(input(12).check(&params).is_ok());
+    }
+
     #[test]
     fn check_names_the_buffer_and_pixel_of_a_value_the_filter_cannot_take() {
         let params = DenoiseParams::new(4, 3);
@@ -467,28 +543,6 @@ mod tests {
         let huge = reason(&|d| d.unshadowed[7].z = MAX_FILTERED_RADIANCE * 2.0);
         assert!(huge.contains("unshadowed[7] (pixel 3, 1)") && huge.contains("exceeds MAX_FILTERED_RADIANCE"));
         assert!(reason(&|d| d.shadowed[2].x = f32::MAX).contains("shadowed[2]"));
-        for weights in [Vec4::new(1.0, -0.5, 1.0, 0.1), Vec4::splat(f32::NAN)] {
-            let weighted = DenoiseParams { edge_weights: weights, ..params };
-            match input(12).check(&weighted) {
-                Err(Error::InvalidParameter { name: "denoise", reason }) => {
-                    assert!(reason.contains("edge weights") && reason.contains("finite and ≥ 0"), "{reason}")
-                }
-                other => panic!("expected the edge weights refused, got {other:?}"),
-            }
-        }
-        for svgf in [
-            Vec4::new(-10.0, 4.0, 0.0, 0.0),
-            Vec4::new(0.0, 4.0, 0.0, 0.0),
-            Vec4::new(10.0, -1.0, 0.0, 0.0),
-            Vec4::splat(f32::NAN),
-        ] {
-            match input(12).check(&DenoiseParams { svgf, ..params }) {
-                Err(Error::InvalidParameter { name: "denoise", reason }) => {
-                    assert!(reason.contains("SVGF parameters"), "{reason}")
-                }
-                other => panic!("expected SVGF parameters {svgf} refused, got {other:?}"),
-            }
-        }
         for atrous_iterations in [0, MAX_ATROUS_ITERATIONS + 1] {
             match input(12).check(&DenoiseParams { atrous_iterations, ..params }) {
                 Err(Error::InvalidParameter { name: "denoise", reason }) => {

@@ -44,6 +44,42 @@ pub const DEFAULT_SVGF_PHI_COLOR: f32 = 10.0;
 /// history of `h` frames, and a single frame has `h = 1` (SVGFFilterMoments).
 pub const DEFAULT_SVGF_VARIANCE_BOOST: f32 = 4.0;
 
+/// Largest edge-stop weight the denoiser accepts (each of [`DenoiseParams::edge_weights`]): 10⁶.
+/// The stops scale the weights by at most 10 (`4·Wd`, `10·Wa`, see
+/// `raywave_kernels::denoise::guide::edge_stop`), which then stay finite: a zero difference gives
+/// the stop 1, and a product with a difference overflows only where the exact stop is 0 anyway.
+/// At `Wd` = 10³⁸ (or `Wa` above `f32::MAX/10` ≈ 3.4·10³⁷) the scaled weight itself had overflowed to ∞, ∞·0 made the
+/// stop of every tap at the same depth NaN and so 0, and the filter silently did nothing. 10⁶
+/// already zeroes the depth stop at a relative depth difference of 2.5·10⁻⁷ (a few ulp) and the
+/// others at differences of 10⁻⁶ or less.
+pub const MAX_EDGE_WEIGHT: f32 = 1.0e6;
+
+/// Smallest nonzero edge-stop weight the denoiser accepts: 10⁻⁶, so that the scaled weights
+/// `4·Wd`, `10·Wa`, `2·Wp` are normal numbers; a subnormal weight would be 0 on a GPU that
+/// flushes subnormals and not on the CPU (a parity break wherever its product with a large
+/// relative depth difference matters). Such a weight moves the normal, plane and analytic stops
+/// by at most 10⁻⁵; 0 (accepted) turns a stop off.
+pub const MIN_EDGE_WEIGHT: f32 = 1.0e-6;
+
+/// Smallest SVGF `phiColor` the denoiser accepts: 10⁻⁶. The luminance stops divide by it (the
+/// moments pass) and by `phiColor·√(10⁻¹⁰ + variance)` ≥ 10⁻¹¹ (the à-trous iterations), which
+/// stay normal above it: a subnormal `phiColor` (below 1.2·10⁻³⁸, or below ~10⁻³³ for the
+/// à-trous scale) is 0 on a GPU that flushes subnormals, where `|Δl|/0` drops taps the CPU
+/// keeps. At 10⁻⁶ the stops already reject any tap whose ratio luminance differs by more than
+/// about 10⁻⁴ (10⁻⁹ at the à-trous scale's least).
+pub const MIN_SVGF_PHI_COLOR: f32 = 1.0e-6;
+
+/// Largest SVGF `phiColor` the denoiser accepts: 10⁶, where the luminance stops are 1 for any
+/// difference of shadow ratios (at most 10⁴) to within 10⁻²; with the variance at most
+/// [`MAX_SVGF_VARIANCE_BOOST`] times 10⁸ (ratios up to 10⁴), the à-trous scale stays below 10¹³.
+pub const MAX_SVGF_PHI_COLOR: f32 = 1.0e6;
+
+/// Largest SVGF variance boost the denoiser accepts: 10⁶. The ratio's luminance is at most 10⁴
+/// (`shadow_ratio` clamps), its variance at most 10⁸, and the boosted variance at most 10¹⁴;
+/// above ~3·10³⁰ the product could overflow, and the moments pass turns a non-finite variance
+/// into 0 — the opposite of a large boost.
+pub const MAX_SVGF_VARIANCE_BOOST: f32 = 1.0e6;
+
 /// Filter axis of a bilateral pass.
 pub mod axis {
     /// Along image rows (x).

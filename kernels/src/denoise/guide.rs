@@ -58,7 +58,11 @@ const SAME_POINT: f32 = 1.0e-4;
 ///   default `Wa` = 0.09 this stop only lowers a tap's weight, to 0.1 at the least, and never
 ///   rejects it — as the reference's does for luminances within [0, 1].
 ///
-/// 0 when the tap has no surface.
+/// 0 when the tap has no surface. The host keeps each weight 0 or within
+/// [`MIN_EDGE_WEIGHT`](raywave_shared::denoise::MIN_EDGE_WEIGHT) …
+/// [`MAX_EDGE_WEIGHT`](raywave_shared::denoise::MAX_EDGE_WEIGHT), where `4·Wd` and `10·Wa` are
+/// finite and normal (an infinite one times a zero difference had made every tap's stop NaN, so
+/// 0).
 ///
 /// Always inlined: called for every tap of the bilateral and à-trous passes, it was a call per tap
 /// in the CPU build; inlined, the SVGF baseline takes 0.8× the time on the CPU (README).
@@ -107,7 +111,7 @@ pub fn edge_stop(center: &Guide, tap: &Guide, weights: Vec4) -> f32 {
 mod tests {
     use super::*;
     use glam::Vec3;
-    use raywave_shared::denoise::DEFAULT_EDGE_WEIGHTS;
+    use raywave_shared::denoise::{DEFAULT_EDGE_WEIGHTS, MAX_EDGE_WEIGHT};
 
     fn guide(p: Vec3, depth: f32, n: Vec3, l: f32) -> Guide {
         Guide { position: p.extend(depth), normal: n.extend(l) }
@@ -159,5 +163,23 @@ mod tests {
         let nan = guide(Vec3::splat(f32::NAN), 1.0, Vec3::Y, f32::NAN);
         let c = guide(Vec3::ZERO, 1.0, Vec3::Y, 0.5);
         assert_eq!(edge_stop(&c, &nan, DEFAULT_EDGE_WEIGHTS), 0.0);
+    }
+
+    /// At the largest weights the host accepts, a tap identical to its centre still weighs 1 and
+    /// a differing one 0. Beyond the limit, at `Wd` = 10³⁸ (or `Wa` = 10³⁸), the scaled
+    /// weight overflowed, ∞·0 made even the identical tap's stop NaN, so 0: why the host refuses
+    /// such weights (`DenoiseInput::check`).
+    #[test]
+    fn the_largest_accepted_weights_keep_identical_taps_and_reject_different_ones() {
+        let c = guide(Vec3::ZERO, 10.0, Vec3::Y, 0.5);
+        let largest = Vec4::splat(MAX_EDGE_WEIGHT);
+        assert_eq!(edge_stop(&c, &c, largest), 1.0);
+        let farther = guide(Vec3::ZERO, 10.0 * (1.0 + 4.0 * f32::EPSILON), Vec3::Y, 0.5);
+        assert_eq!(edge_stop(&c, &farther, largest), 0.0, "a relative depth difference of 4 ulp");
+        let brighter = guide(Vec3::ZERO, 10.0, Vec3::Y, 0.5 * (1.0 + 4.0 * f32::EPSILON));
+        assert_eq!(edge_stop(&c, &brighter, largest), 0.0, "a relative luminance difference of 4 ulp");
+        for beyond in [Vec4::new(1.0e38, 1.0, 1.0, 0.1), Vec4::new(1.0, 1.0, 1.0, 1.0e38)] {
+            assert_eq!(edge_stop(&c, &c, beyond), 0.0, "{beyond}: the failure the limit prevents");
+        }
     }
 }

@@ -229,7 +229,9 @@ pub fn atrous_step(params: &DenoiseParams, pixel: IVec2, ratio: &[Vec4], positio
 mod tests {
     use super::*;
     use crate::hash::CounterRng;
-    use raywave_shared::denoise::{DEFAULT_SVGF_PHI_COLOR, MAX_RADIUS};
+    use raywave_shared::denoise::{
+        DEFAULT_SVGF_PHI_COLOR, MAX_RADIUS, MAX_SVGF_PHI_COLOR, MAX_SVGF_VARIANCE_BOOST, MIN_SVGF_PHI_COLOR,
+    };
     use std::{vec, vec::Vec};
 
     struct Image {
@@ -446,6 +448,22 @@ mod tests {
         let variance = 4.0 * m1 * (1.0 - m1);
         assert_eq!(out.truncate(), Vec3::ONE);
         assert!((out.w - variance).abs() < 1e-5, "{} vs {variance} (without the stop: 4·48/49²)", out.w);
+    }
+
+    /// Within the `phiColor` and variance boost the host accepts, the luminance stops divide by
+    /// normal, finite scales: the moments pass by `phiColor` itself, the à-trous iterations by
+    /// `phiColor·√(VARIANCE_EPSILON + var)` ≥ 10⁻¹¹, so a GPU flushing subnormals computes them
+    /// as the CPU does (a `phiColor` below ~10⁻³³ had made the à-trous scale subnormal); with
+    /// ratios up to `shadow_ratio`'s 10⁴ the variance, and the scale, stay finite.
+    #[test]
+    fn the_luminance_stops_scales_stay_normal_and_finite_within_the_accepted_limits() {
+        let smallest = MIN_SVGF_PHI_COLOR * VARIANCE_EPSILON.sqrt();
+        assert!(MIN_SVGF_PHI_COLOR.is_normal() && smallest.is_normal(), "{smallest}");
+        assert!((1.0e4 / smallest).is_finite());
+        let largest_variance = 1.0e4f32 * 1.0e4 * MAX_SVGF_VARIANCE_BOOST;
+        let largest = MAX_SVGF_PHI_COLOR * (VARIANCE_EPSILON + largest_variance).sqrt();
+        assert!(largest_variance.is_finite() && largest.is_normal(), "{largest}");
+        assert!(!(1.0e-34f32 * VARIANCE_EPSILON.sqrt()).is_normal(), "below the limit: subnormal");
     }
 
     #[test]
