@@ -34,14 +34,26 @@
 //! changes the weights of taps that all come from the same neighbourhood, it never brings in a
 //! tap across an edge stop.
 //!
-//! Measured on lavapipe (llvmpipe 15.0.6, 256 bits): every pixel of every case within 7.5e-7
-//! relative (no outlier beyond 1e-3 among 67 500 scene and 1 803 synthetic pixels) — llvmpipe
-//! evaluates `exp`/`sqrt` close to libm and made no discrete decision differently. [`REL_ALL`]
-//! = 5e-2 is therefore not a measured bound but the guard for a device whose `exp` is at the
-//! edge of the spec: a pass-through decision that flips at `g = 0.5 px` changes a pixel by at
-//! most the weight `2·e⁻⁴ ≈ 3.7 %` of its neighbours per pass, and a moved noise-line tap changes
-//! one raw estimate, which the 3×3 blur divides among nine pixels. No hardware GPU was available
-//! to measure when this was written.
+//! Measured on lavapipe (llvmpipe 15.0.6, 256 bits) when this test was written, before the
+//! 4-spp scene case and the 200 × 1, 200 × 3 and 1 × 65 536 synthetic cases were added: every
+//! pixel of every case then present within 7.5e-7 relative (no outlier beyond 1e-3 among its
+//! 67 500 scene and 1 803 synthetic pixels) — llvmpipe evaluates `exp`/`sqrt` close to libm and
+//! made no discrete decision differently. That figure was not measured on the later cases, which
+//! are held to the tolerances below like the rest; no hardware GPU was available to measure when
+//! it was written.
+//!
+//! [`REL_ALL`] = 5e-2 is a guard for a device whose `exp` is at the edge of the spec, not a
+//! bound on what a flipped decision can do. A pass-through decision that flips at `g = 0.5 px`
+//! changes `den(S_N)` and `den(U_N)` each by at most the weight `2·e⁻⁴ ≈ 3.7 %` of the
+//! neighbours' values per pass, but the composite takes their ratio `U·den(S_N)/den(U_N)`, which
+//! moves by the weight's share of the `U_N` sum times the difference between the centre's ratio
+//! and its neighbours': where the centre's own `U_N` is small against theirs, that share is
+//! large. In a 5 × 1 image whose centre has ratio 0.45 and `U_N = 0.02·U` and whose neighbours
+//! have ratio 0.55 and `U_N = U`, filtered at R = 2 and 1 spp, a noise estimate just either side
+//! of the threshold 1/6 makes the centre 0.450 or 0.515, 14 % apart: a device deciding such a
+//! pixel the other way would fail this test. The value stays for want of a principled bound. A
+//! moved noise-line tap changes one raw estimate, which the 3×3 blur divides among nine pixels
+//! (the radius it then gives is subject to the same flips).
 //!
 //! Besides parity, on every backend: no NaN or Inf in any output; one timing per pass of
 //! [`DenoiseMethod::passes`], finite and non-negative, among them TV's noise estimate, noise blur,
@@ -82,7 +94,8 @@ const SCENES: [&str; 2] = ["builtin:cornell-two-lights", "builtin:cornell"];
 
 /// Relative tolerance that all but [`OUTLIER_FRACTION`] of the pixels must meet.
 const REL: f32 = 1.0e-3;
-/// Relative tolerance every pixel must meet.
+/// Relative tolerance every pixel must meet: a guard, not a bound on a flipped decision (module
+/// docs).
 const REL_ALL: f32 = 5.0e-2;
 /// Fraction of an image's pixels that may differ beyond [`REL`] (threshold decisions).
 const OUTLIER_FRACTION: f64 = 1.0e-3;
