@@ -958,9 +958,19 @@ pub fn sample_ggx_vndf(v: Vec3, alpha: Vec2, u: Vec2) -> Vec3 {
     let a = ggx_alpha(alpha);
     // Stretch the view into the hemisphere configuration (α = 1).
     let vh = Vec3::new(a.x * v.x, a.y * v.y, v.z).normalize_or(Vec3::Z);
-    // Orthonormal basis around vh (T1 = +x when vh is the normal).
-    let lensq = vh.x * vh.x + vh.y * vh.y;
-    let t1 = if lensq > 0.0 { Vec3::new(-vh.y, vh.x, 0.0) / lensq.sqrt() } else { Vec3::X };
+    // Orthonormal basis around vh (T1 = +x when vh is the normal). (−vh.y, vh.x) is scaled by its
+    // larger component before it is normalised: its squared length is subnormal for |vh.xy|
+    // below 1.1·10⁻¹⁹, where dividing by the root of `vh.x² + vh.y²` had made |T1| 0.71 … 1.07
+    // (slopes 7 % too wide) and a GPU flushing subnormals had taken the `Vec3::X` branch. A
+    // subnormal component is 0 on such a GPU, so the fallback takes every pair below the
+    // smallest normal f32 on every backend.
+    let largest = vh.x.abs().max(vh.y.abs());
+    let t1 = if largest >= f32::MIN_POSITIVE {
+        let t = Vec2::new(-vh.y, vh.x) / largest;
+        (t / t.length()).extend(0.0)
+    } else {
+        Vec3::X
+    };
     let t2 = vh.cross(t1);
     // Uniform point on the disk, warped onto the visible half of the projected hemisphere.
     let r = u.x.sqrt();
@@ -1767,6 +1777,38 @@ mod tests {
             }
             let integral = sum * (TAU as f64) / (n_theta * n_phi) as f64;
             assert!((integral - 1.0).abs() < 2.0e-3, "α {alpha}: ∫D cos = {integral}");
+        }
+    }
+
+    /// Views a hair off the normal sample the normal's slopes, up to a rotation about it. At
+    /// v = (4·10⁻¹⁹, 0, 1) and α = 10⁻⁴ the stretched view's |vh.xy| is 4·10⁻²³, whose square is
+    /// subnormal: the tangent had been divided by the root of that square, |T1| = 1.07, and the
+    /// median of tan θh/α had been 1.0735 instead of 1 (the median of the slope distribution at
+    /// normal incidence, whose CDF is t²/(1 + t²)).
+    #[test]
+    fn ggx_vndf_samples_views_a_hair_off_the_normal_like_the_normal() {
+        let alpha = Vec2::splat(GGX_MIN_ALPHA);
+        let slope = |h: Vec3| Vec2::new(h.x, h.y).length() / h.z / GGX_MIN_ALPHA;
+        // Stratified in u.x, which alone sets the slope at normal incidence (t = √(u.x/(1 − u.x))).
+        let grid: Vec<Vec2> =
+            (0..4096).map(|i| Vec2::new((i as f32 + 0.5) / 4096.0, (i as f32 * 0.618_034).fract())).collect();
+        let views = [
+            Vec3::new(4.0e-19, 0.0, 1.0),
+            Vec3::new(0.0, -1.0e-19, 1.0),
+            Vec3::new(3.0e-20, 2.0e-20, 1.0),
+            Vec3::new(2.0e-15, 1.0e-16, 1.0),
+            Vec3::new(1.0e-36, 0.0, 1.0),
+        ];
+        for v in views {
+            let mut slopes = Vec::new();
+            for &u in &grid {
+                let (tilted, normal) = (slope(sample_ggx_vndf(v, alpha, u)), slope(sample_ggx_vndf(Vec3::Z, alpha, u)));
+                assert!((tilted - normal).abs() <= 1.0e-5 * normal.max(1.0), "v {v}, u {u}: {tilted} vs {normal}");
+                slopes.push(tilted);
+            }
+            slopes.sort_by(f32::total_cmp);
+            let median = slopes[slopes.len() / 2];
+            assert!((median - 1.0).abs() < 1.0e-3, "v {v}: median tan θh/α {median}");
         }
     }
 
