@@ -7,7 +7,7 @@ use crate::scene::Scene;
 use crate::shading::ShadeData;
 use crate::stream::{HitStream, RayStream, ShadeStream};
 use glam::{UVec2, Vec4};
-use raywave_shared::sampling::sampler_kind;
+use raywave_shared::sampling::{sampler_kind, warp_kind};
 use raywave_shared::{DenoiseParams, GenerateParams, SamplerParams, SamplerProbeParams, ShadeParams, WarpParams};
 use std::sync::{Arc, Mutex};
 
@@ -233,8 +233,15 @@ fn check_sampler(
 }
 
 /// Number of samples the warp probe `params` covers (sample `i` of pixel (0, 0)), checked against
-/// [`MAX_PROBE_SAMPLES`] and the sampler's index space.
+/// [`MAX_PROBE_SAMPLES`] and the sampler's index space, and its warp kind against
+/// [`warp_kind::COUNT`] (an unknown kind had returned zeros with `Ok`).
 pub fn warp_probe_len(params: &WarpParams) -> Result<u32> {
+    if params.kind >= warp_kind::COUNT {
+        return Err(crate::error::Error::InvalidParameter {
+            name: "warp probe",
+            reason: format!("warp kind {} is not one of 0..{}", params.kind, warp_kind::COUNT),
+        });
+    }
     check_sampler("warp probe", &params.sampler, 1, 1, params.count)?;
     if u64::from(params.count) <= MAX_PROBE_SAMPLES {
         Ok(params.count)
@@ -438,6 +445,30 @@ mod tests {
             [(1 << 12, 1 << 12, 1), (1 << 20, 1 << 20, 24), (257, 4_278_255_361, 24), (1, 1, 32), (1, 1, u32::MAX)];
         for (width, height, spp_log2) in refused {
             assert!(sampler_probe_len(&sobol(width, height, spp_log2)).is_err(), "{width}×{height}, 2^{spp_log2}");
+        }
+    }
+
+    /// A warp probe of an unknown kind is refused naming the kind; it had returned zeros with
+    /// `Ok` (the kernels draw nothing for it).
+    #[test]
+    fn a_warp_probe_of_an_unknown_kind_is_refused() {
+        let warp = |kind: u32| WarpParams {
+            kind,
+            count: 4,
+            padding: [0; 2],
+            sampler: SamplerParams { kind: sampler_kind::SOBOL, seed: 0, spp_log2: 2, resolution_log2: 0 },
+            a: Vec4::ZERO,
+            b: Vec4::ZERO,
+            c: Vec4::ZERO,
+        };
+        assert_eq!(warp_probe_len(&warp(warp_kind::COUNT - 1)).ok(), Some(4));
+        for kind in [warp_kind::COUNT, u32::MAX] {
+            match warp_probe_len(&warp(kind)) {
+                Err(crate::error::Error::InvalidParameter { name: "warp probe", reason }) => {
+                    assert!(reason.contains(&format!("warp kind {kind} is not one of 0..10")), "{reason}")
+                }
+                other => panic!("expected warp kind {kind} refused, got {other:?}"),
+            }
         }
     }
 
