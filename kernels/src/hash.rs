@@ -8,8 +8,10 @@ use glam::UVec3;
 pub const ONE_MINUS_EPSILON: f32 = 1.0 - 1.0 / 16_777_216.0;
 
 /// The `pcg3d` hash of Jarzynski & Olano, "Hash Functions for GPU Rendering", JCGT 9(3), 2020:
-/// three rounds of an LCG step and cross-multiplication that mix all three inputs into all three
-/// outputs. Chosen there as the best quality/speed trade-off for 3-D inputs.
+/// one LCG step on each component, a round of cross-multiplication (each component plus the
+/// product of the other two), a `>> 16` xorshift of each, and a second round of
+/// cross-multiplication, which together mix all three inputs into all three outputs. Chosen there
+/// as the best quality/speed trade-off for 3-D inputs.
 pub fn pcg3d(v: UVec3) -> UVec3 {
     // LCG constants from Numerical Recipes, as in the paper.
     let mut x = v.x.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
@@ -57,12 +59,14 @@ impl CounterRng {
         unit_float(pcg3d(UVec3::new(self.counter, self.seed, 0x6c67)).x)
     }
 
-    /// The next float in `[lo, hi)`.
+    /// The next float in `[lo, hi]`: `lo + (hi − lo)·u` with `u ≤ 1 − 2⁻²⁴` can still round to
+    /// `hi` (0.5 + 1.0·(1 − 2⁻²⁴) is 1.5 in `f32`), so callers that need `hi` excluded must not
+    /// rely on it.
     pub fn range(&mut self, lo: f32, hi: f32) -> f32 {
         lo + (hi - lo) * self.next_f32()
     }
 
-    /// A vector with each component uniform in `[lo, hi)`.
+    /// A vector with each component uniform in `[lo, hi]` (see [`Self::range`]).
     pub fn vec3(&mut self, lo: f32, hi: f32) -> glam::Vec3 {
         glam::Vec3::new(self.range(lo, hi), self.range(lo, hi), self.range(lo, hi))
     }

@@ -16,5 +16,3 @@ pub const SHADE_STRATEGY: u32 = 2;
 pub const SHADE_LIGHT_SELECT: u32 = 3;
 /// Shade: the 2-D point warped to a light sample or a BRDF/ambient-occlusion direction.
 pub const SHADE_DIRECTION: u32 = 4;
-/// First slot not yet allocated; later stages (probe rays) start here.
-pub const FIRST_FREE: u32 = 5;
