@@ -23,13 +23,15 @@ pub(crate) const TAN_PI_8: f32 = 0.414_213_57;
 /// `atan t ≈ t + t·z·(((c₇·z + c₅)·z + c₃)·z + c₁)`, `z = t²`, on `|t| ≤ tan(π/8)`.
 pub(crate) const ATAN_POLYNOMIAL: [f32; 4] = [8.053_744_5e-2, -1.387_768_6e-1, 1.997_771_1e-1, -3.333_295e-1];
 
-/// `(sin x, cos x)` for `x` in `[−2π, 2π]` to within a few `f32` ulps (tested: 2 where the result
-/// is above 10⁻³, 10 at the zeros `kπ/2`): Cody–Waite reduction by π/2 in three parts (S. L.
-/// Moshier's Cephes `sinf` constants, doubled: the first two have so few significant bits that
-/// `k` times either is exact for `|k| ≤ 4`, and no fused multiply–add changes those steps) to
-/// `|r| ≤ π/4`, then Taylor polynomials to r⁹ and r¹⁰ (truncation below 2·10⁻⁹). Meant for that
-/// range, which every caller keeps to: beyond it the error grows with `|x|` (the third
-/// constant's rounding times `k`), and past ~10⁸ the result is no longer bounded by 1.
+/// `(sin x, cos x)` for `x` in `[−4π, 4π]` to within a few `f32` ulps (tested over that range:
+/// 2 where the result is above 10⁻³, 10 at the zeros `kπ/2`; measured 1.2 and 8.6): Cody–Waite
+/// reduction by π/2 in three parts (S. L. Moshier's Cephes `sinf` constants, doubled: the first
+/// two have 8 and 11 significant bits, so `k` times either is exact for the `|k| ≤ 8` of that
+/// range (and up to 2¹³), and no fused multiply–add changes those steps) to `|r| ≤ π/4`, then
+/// Taylor polynomials to r⁹ and r¹⁰ (truncation below 2·10⁻⁹). Meant for that range, which
+/// every caller keeps to (most within `[−2π, 2π]`; `slope_quadrature`'s azimuth integral runs
+/// its last gap to just under 4π): beyond it the error grows with `|x|` (the third constant's
+/// rounding times `k`), and past ~10⁸ the result is no longer bounded by 1.
 pub fn sin_cos(x: f32) -> (f32, f32) {
     // π/2 = PI_2_A + PI_2_B + PI_2_C; A = 201/128 (8 significant bits), B 11 bits (Cephes `sinf`'s
     // DP1, DP2, DP3 for π/4, times 2). A two-part split with A = FRAC_PI_2 (24 bits) rounded
@@ -133,16 +135,17 @@ mod tests {
 
     #[test]
     fn sin_cos_is_within_a_few_ulps_of_libm() {
-        // A fine sweep of [−2π, 2π] and the f32s nearest each zero kπ/2 with their neighbours,
-        // where the reduction's rounding shows most (a two-part split had been 8·10⁷ ulps off
-        // at 3π/2, 1.2·10⁻⁷ absolute, within the absolute bound this test used to have).
-        let sweep = (-200_000..=200_000).map(|i| i as f32 * (TAU / 100_000.0));
-        let zeros = (-4..=4).flat_map(|k| {
+        // A fine sweep of [−4π, 4π] (`slope_quadrature`'s last azimuth gap runs to just under
+        // 4π) and the f32s nearest each zero kπ/2 with their neighbours, where the reduction's
+        // rounding shows most (a two-part split had been 8·10⁷ ulps off at 3π/2, 1.2·10⁻⁷
+        // absolute, within the absolute bound this test used to have).
+        let sweep = (-400_000..=400_000).map(|i| i as f32 * (TAU / 100_000.0));
+        let zeros = (-8..=8).flat_map(|k| {
             let nearest = (f64::from(k) * core::f64::consts::FRAC_PI_2) as f32;
             (-8..=8).map(move |step: i32| f32::from_bits(nearest.to_bits().wrapping_add_signed(step)))
         });
         let (mut worst, mut worst_above_milli) = (0.0f64, 0.0f64);
-        for x in sweep.chain(zeros).filter(|x| x.abs() <= TAU) {
+        for x in sweep.chain(zeros).filter(|x| x.abs() <= 2.0 * TAU) {
             let (s, c) = sin_cos(x);
             for (value, exact) in [(s, f64::from(x).sin()), (c, f64::from(x).cos())] {
                 let error = ulps(value, exact);
