@@ -184,14 +184,16 @@ fn scene_nodes<'a>(
 const TRANSFORM_TOLERANCE: f32 = 1e-3;
 
 /// `node`'s own transform, checked as far as raywave depends on it: a `matrix` affine (its last
-/// row 0, 0, 0, 1: glam's point transform ignores that row, and it would have carried into the
-/// children's transforms) — glTF 2.0 also forbids shear, which is not checked: a sheared matrix is
-/// still a well-defined transform of the geometry —, a `rotation` a unit quaternion (otherwise
-/// it also scales and shears).
+/// row 0, 0, 0, 1 within [`TRANSFORM_TOLERANCE`], then set to exactly that: glam's point transform
+/// ignores that row, but kept in the product with the parent it would carry the parent's
+/// translation into the children's linear parts — a last row of (0.0009, 0, 0, 1) under a parent
+/// translated by 1000 made a child's lamp 1.9 times wider) — glTF 2.0 also forbids shear, which
+/// is not checked: a sheared matrix is still a well-defined transform of the geometry —, a
+/// `rotation` a unit quaternion (otherwise it also scales and shears).
 fn local_transform(node: &gltf::Node) -> std::result::Result<Mat4, String> {
     let index = node.index();
     match node.transform() {
-        gltf::scene::Transform::Matrix { matrix } => {
+        gltf::scene::Transform::Matrix { mut matrix } => {
             let last_row = [matrix[0][3], matrix[1][3], matrix[2][3], matrix[3][3]];
             let departure = last_row.iter().zip([0.0, 0.0, 0.0, 1.0]).map(|(a, b)| (a - b).abs()).fold(0.0, f32::max);
             if departure > TRANSFORM_TOLERANCE {
@@ -199,6 +201,10 @@ fn local_transform(node: &gltf::Node) -> std::result::Result<Mat4, String> {
                     "nodes[{index}].matrix: its last row is {last_row:?}; glTF requires 0, 0, 0, 1 (a transform \
                      of translation, rotation and scale)"
                 ));
+            }
+            // Columns first: the last row is each column's last element.
+            for (column, exact) in matrix.iter_mut().zip([0.0, 0.0, 0.0, 1.0]) {
+                column[3] = exact;
             }
             Ok(Mat4::from_cols_array_2d(&matrix))
         }
@@ -1442,6 +1448,25 @@ mod tests {
             let text = quad_gltf(6).replacen(node, fine, 1);
             assert!(load(file(&text).path()).is_ok(), "{fine}");
         }
+    }
+
+    /// A `matrix` whose last row is off (0, 0, 0, 1) by less than [`TRANSFORM_TOLERANCE`] is taken
+    /// as rounding and made exact: kept, its 0.0009 carried the parent's translation by 1000 into
+    /// the child's linear part, and the unit lamp came out 1.9 wide.
+    #[test]
+    fn a_matrix_last_row_off_by_rounding_is_made_exact() {
+        let nodes = r#""nodes":[{"mesh":0,"translation":[0,0,-2]},{"camera":0,"translation":[0.5,0.5,3]}],"#;
+        let parented = r#""nodes":[{"translation":[1000,0,0],"children":[2]},{"camera":0,"translation":[0.5,0.5,3]},
+            {"mesh":0,"matrix":[1,0,0,0.0009, 0,1,0,0, 0,0,1,0, 0,0,-2,1]}],"#;
+        let text = quad_gltf(6).replacen(nodes, parented, 1);
+        assert_ne!(text, quad_gltf(6));
+        let scene = load(file(&text).path()).unwrap();
+        let light = scene.lights()[0];
+        let (u, v) = (light.edge_u.truncate(), light.edge_v.truncate());
+        assert!((u.length() - 1.0).abs() < 1e-4 && (v.length() - 1.0).abs() < 1e-4, "edges {u} and {v}");
+        let xs = scene.meshes()[0].positions.iter().map(|p| p.x);
+        let (lo, hi) = xs.fold((f32::MAX, f32::MIN), |(lo, hi), x| (lo.min(x), hi.max(x)));
+        assert_eq!((lo, hi), (1000.0, 1001.0));
     }
 
     /// Punctual lights (`KHR_lights_punctual`), which raywave does not render, are counted per
