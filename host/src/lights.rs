@@ -136,10 +136,7 @@ pub fn validate_light(index: usize, light: &Light) -> Result<()> {
         }
     }
     let bounds = light_bounds(light);
-    let extent = bounds.min.truncate().abs().max(bounds.max.truncate().abs()).max_element();
-    // With 8 ulps of slack: the corners are rebuilt as `position + edge_u + edge_v`, rounded
-    // twice more than the mesh vertices a light was fitted to, which may lie at the limit.
-    if !extent.is_finite() || extent > MAX_COORDINATE * (1.0 + 8.0 * f32::EPSILON) {
+    if let Err(extent) = reach_within_limit(&bounds) {
         return Err(Error::InvalidParameter {
             name: "light.position",
             reason: format!(
@@ -155,6 +152,22 @@ pub fn validate_light(index: usize, light: &Light) -> Result<()> {
         });
     }
     Ok(())
+}
+
+/// Whether the light of `bounds` (`light_bounds`, whose box holds a quad's corners rebuilt as
+/// `position + edge_u + edge_v` in `f32`, as the kernels rebuild them) stays within
+/// [`MAX_COORDINATE`] of the origin on every axis, with 8 ulps of slack: the rebuilt corners are
+/// rounded twice more than the mesh vertices a light was fitted to, which may lie at the limit.
+/// `Err` holds how far it reaches. [`validate_light`] refuses a light that does not; the scene's
+/// derived lights are checked with it before they are made, so that such a light is no light
+/// rather than a scene that fails to load.
+pub(crate) fn reach_within_limit(bounds: &LightBounds) -> std::result::Result<(), f32> {
+    let extent = bounds.min.truncate().abs().max(bounds.max.truncate().abs()).max_element();
+    if extent.is_finite() && extent <= MAX_COORDINATE * (1.0 + 8.0 * f32::EPSILON) {
+        Ok(())
+    } else {
+        Err(extent)
+    }
 }
 
 /// Checks every light with [`validate_light`] and that their count fits the kernels' `u32`

@@ -31,11 +31,19 @@
 //! towards `edge_u × edge_v`) — or from both faces where the material is
 //! [`Material::double_sided`](super::Material::double_sided). The second triangle must agree.
 //!
+//! **Reach.** The light's corners are rebuilt from its corner and edges in `f32`
+//! (`corner + edge_u + edge_v`, as the kernels and light validation rebuild them), which may land
+//! off the mesh's fourth corner by up to the tolerance: a parallelogram whose rebuilt corners
+//! pass the coordinate limit (`crate::lights::reach_within_limit`), though every vertex is within
+//! it, is no light — light validation would refuse it and fail the whole scene.
+//!
 //! Everything else that emits (more or fewer triangles, non-planar or non-parallelogram shapes,
-//! inconsistent winding) is counted as an unsupported emitter and stays plain geometry.
+//! inconsistent winding, a rebuilt corner out of range) is counted as an unsupported emitter and
+//! stays plain geometry.
 
 use super::Mesh;
 use glam::{DVec3, Vec3};
+use raywave_kernels::sampling::light_select::light_bounds;
 use raywave_shared::Light;
 
 /// Relative shape tolerance (see the module documentation).
@@ -148,6 +156,9 @@ pub(super) fn parallelogram(mesh: &Mesh) -> Option<Parallelogram> {
     if !area.is_finite() || area.length() < f32::MIN_POSITIVE || area.as_dvec3().dot(normal) <= 0.0 {
         return None;
     }
+    // The corners rebuilt as the light's validation rebuilds them (its radiance plays no part).
+    let rebuilt = light_bounds(&Light::quad(corner, edge_u, edge_v, Vec3::ZERO, false));
+    crate::lights::reach_within_limit(&rebuilt).ok()?;
     Some(Parallelogram { corner, edge_u, edge_v })
 }
 
@@ -251,6 +262,20 @@ mod tests {
         let scene = crate::scene::Scene::new("tiny lamp", vec![mesh], crate::scene::cornell::camera());
         let scene = scene.expect("a scene with a too-small lamp loads");
         assert!(scene.lights().is_empty());
+    }
+
+    /// A parallelogram within the tolerance whose every vertex lies within the coordinate limit,
+    /// but whose fourth corner rebuilt as `corner + edge_u + edge_v` lands 5000 past it: no light,
+    /// and the scene loads (light validation refused the light, which failed the whole scene).
+    #[test]
+    fn a_light_whose_rebuilt_corner_passes_the_coordinate_limit_is_no_light_and_the_scene_loads() {
+        let corners = [Vec3::ZERO, Vec3::new(1e8, 5e3, 0.0), Vec3::new(1e8, 1e8, 0.0), Vec3::new(5e3, 1e8, 0.0)];
+        let mesh = emissive(corners.to_vec(), vec![[0, 1, 3], [1, 2, 3]]);
+        assert_eq!(parallelogram(&mesh), None);
+        let scene = crate::scene::Scene::new("far lamp", vec![mesh], crate::scene::cornell::camera());
+        let scene = scene.expect("a scene with a lamp at the coordinate limit loads");
+        assert!(scene.lights().is_empty());
+        assert_eq!(scene.unsupported_emitters(), 1);
     }
 
     #[test]

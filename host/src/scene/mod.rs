@@ -210,8 +210,11 @@ impl Scene {
     }
 
     /// The analytic lights: one [`Light::quad`] per emissive mesh whose triangles form
-    /// one planar parallelogram (two triangles sharing a diagonal, matched within a relative
-    /// tolerance of 10⁻⁴), in mesh order, with the mesh's emission as radiance. Each emits on
+    /// one planar parallelogram (two triangles sharing a diagonal, matched within the tolerance
+    /// the `emitters` module documents: 10⁻⁴ of the shape's size, at most 5 % of its narrower side,
+    /// plus the rounding of coordinates far from the origin, capped at a quarter of the shortest
+    /// edge) whose corners, rebuilt from the light's edges, stay within [`MAX_COORDINATE`], in
+    /// mesh order, with the mesh's emission as radiance. Each emits on
     /// the side its triangles' counter-clockwise winding faces (the glTF and OBJ front face), or
     /// from both where its material is [`Material::double_sided`]:
     /// the light's corner is the first triangle's corner off the diagonal and its edges run to
