@@ -30,8 +30,13 @@ fn random_direction(i: u32, stream: u32) -> Vec3 {
 }
 
 fn scene_of(meshes: Vec<Mesh>) -> Scene {
-    let camera =
-        Camera { position: Vec3::new(0.0, 0.0, -10.0), look_at: Vec3::ZERO, up: Vec3::Y, vertical_fov_degrees: 40.0 };
+    let camera = Camera {
+        position: Vec3::new(0.0, 0.0, -10.0),
+        look_at: Vec3::ZERO,
+        up: Vec3::Y,
+        vertical_fov_degrees: 40.0,
+        mirrored: false,
+    };
     Scene::new("robustness", meshes, camera).expect("valid test scene")
 }
 

@@ -89,7 +89,8 @@ pub fn generate_params(scene: &Scene, width: u32, height: u32, seed: u32) -> Gen
 
 /// Generate-stage parameters for `scene`'s camera at `width × height` (both ≥ 1), sample
 /// `sample_index` drawn by `sampler`; a pinhole camera focused on the camera's look-at point
-/// (set `lens_radius` for depth of field). `tmax` covers the whole scene: twice the distance from
+/// (set `lens_radius` for depth of field), its image right axis `forward × up`, or the reverse
+/// for a [`crate::scene::Camera::mirrored`] one. `tmax` covers the whole scene: twice the distance from
 /// the camera to the farthest corner of the scene bounds, so it is finite and never clips geometry
 /// seen from the camera (a thin lens moves the rays' origins: add twice its radius, as
 /// [`crate::lit_frame::LitFrameSettings::generate_params`] does).
@@ -108,6 +109,8 @@ pub fn generate_params_with(
     // stage's check, `backend::check_generate_params`).
     let right = right.reject_from_normalized(forward).normalize();
     let up = right.cross(forward);
+    // Reversed after `up` is formed from it, so that `up` keeps the camera's up side.
+    let right = if camera.mirrored { -right } else { right };
     let tan_half_y = (camera.vertical_fov_degrees.to_radians() * 0.5).tan();
     let tan_half_x = tan_half_y * width as f32 / height as f32;
     let (lo, hi) = scene.bounds();
@@ -172,8 +175,13 @@ mod tests {
             for _ in 0..200 {
                 let view = rng.unit_vec3();
                 let up = (view + view.any_orthonormal_vector() * angle).normalize();
-                let camera =
-                    crate::scene::Camera { position: glam::Vec3::ZERO, look_at: view, up, vertical_fov_degrees: 40.0 };
+                let camera = crate::scene::Camera {
+                    position: glam::Vec3::ZERO,
+                    look_at: view,
+                    up,
+                    vertical_fov_degrees: 40.0,
+                    mirrored: false,
+                };
                 let Ok(scene) = Scene::new("nearly up", cornell.meshes().to_vec(), camera) else { continue };
                 let params = generate_params(&scene, 16, 9, 0);
                 crate::backend::check_generate_params(&params).unwrap_or_else(|e| panic!("{angle} {view}: {e}"));

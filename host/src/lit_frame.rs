@@ -244,6 +244,7 @@ pub struct LitFrame {
 ///     look_at: Vec3::ZERO,
 ///     up: Vec3::Y,
 ///     vertical_fov_degrees: 45.0,
+///     mirrored: false,
 /// };
 /// let scene = Scene::new("engine scene", vec![floor, block, lamp], camera)?;
 /// assert_eq!(scene.lights().len(), 1);

@@ -489,7 +489,8 @@ mod tests {
             triangles: vec![[0, 1, 2], [0, 2, 3]],
             material: Material::diffuse(Vec3::ONE),
         };
-        let camera = Camera { position: Vec3::Z, look_at: Vec3::ZERO, up: Vec3::Y, vertical_fov_degrees: 40.0 };
+        let camera =
+            Camera { position: Vec3::Z, look_at: Vec3::ZERO, up: Vec3::Y, vertical_fov_degrees: 40.0, mirrored: false };
         let scene = Scene::new("square", vec![square], camera).expect("scene");
         // A 3 × 2 image whose rays come in a shuffled pixel order: from the front at t = 1 and at
         // t = 2 (the farthest hit), from behind at t = 2, and three misses.

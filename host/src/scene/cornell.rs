@@ -175,5 +175,6 @@ pub fn camera() -> Camera {
         look_at: Vec3::new(278.0, 273.0, 0.0) * MM,
         up: Vec3::Y,
         vertical_fov_degrees: 2.0 * (12.5f32 / 35.0).atan().to_degrees(),
+        mirrored: false,
     }
 }

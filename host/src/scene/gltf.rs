@@ -583,13 +583,18 @@ fn place(
     }
     // A mirroring transform makes the clockwise face the front one (glTF 2.0, 3.7.4): reversing
     // each triangle keeps the counter-clockwise front face every mesh has here, which decides the
-    // side a quad light emits from. Its sign from the linear part in `f64`: in `f32` a tiny
-    // scale's determinant underflows to −0 (10⁻⁴⁸ for a scale of 10⁻¹⁶), and a huge one may be
-    // ∞ − ∞.
-    if DMat3::from_mat4(world.as_dmat4()).determinant() < 0.0 {
+    // side a quad light emits from.
+    if mirrors(world) {
         triangles.iter_mut().for_each(|triangle| triangle.swap(1, 2));
     }
     Ok(())
+}
+
+/// Whether the world transform `world` mirrors (its linear part's determinant is negative). The
+/// sign is taken in `f64`: in `f32` a tiny scale's determinant underflows to −0 (10⁻⁴⁸ for a scale
+/// of 10⁻¹⁶), and a huge one may be ∞ − ∞.
+fn mirrors(world: Mat4) -> bool {
+    DMat3::from_mat4(world.as_dmat4()).determinant() < 0.0
 }
 
 /// How many triangles a primitive of `mode` with `corners` vertices (or indices) draws: the
@@ -850,8 +855,9 @@ fn material(m: &gltf::Material) -> std::result::Result<Material, String> {
 }
 
 /// The camera of node `node` (world transform `world`) with perspective projection `p`: the
-/// node looks along its −z with +y up; an error names the node whose transform leaves it degenerate
-/// or beyond [`MAX_COORDINATE`], or the field.
+/// node looks along its −z with +y up and its +x to the image's right — [`Camera::mirrored`] where
+/// `world` mirrors, since there +x is `up × forward`; an error names the node whose transform
+/// leaves it degenerate or beyond [`MAX_COORDINATE`], or the field.
 fn camera(
     node: &gltf::Node,
     camera: &gltf::Camera,
@@ -867,6 +873,7 @@ fn camera(
         look_at: world.transform_point3(Vec3::NEG_Z),
         up: world.transform_vector3(Vec3::Y),
         vertical_fov_degrees: yfov.to_degrees(),
+        mirrored: mirrors(world),
     };
     if !(in_range(camera_at.position) && in_range(camera_at.look_at)) {
         return Err(format!(
@@ -1509,6 +1516,49 @@ mod tests {
         assert!(!scene.unrendered().orthographic_camera);
         assert_eq!(scene.camera().position, Vec3::new(0.5, 0.5, 3.0));
         assert!(!load(file(&quad_gltf(6)).path()).unwrap().unrendered().orthographic_camera);
+    }
+
+    /// [`quad_gltf`] with its mesh and camera nodes under a root node of `transform` (JSON members).
+    fn quad_gltf_under(transform: &str) -> String {
+        let text = quad_gltf(6).replacen(r#""nodes":[0,1]}],"#, r#""nodes":[2]}],"#, 1).replacen(
+            r#"{"camera":0,"translation":[0.5,0.5,3]}]"#,
+            &format!(r#"{{"camera":0,"translation":[0.5,0.5,3]}},{{{transform},"children":[0,1]}}]"#),
+            1,
+        );
+        assert_ne!(text, quad_gltf(6));
+        text
+    }
+
+    /// A scene and its camera under a mirroring root (`scale: [1, 1, −1]`, as converters add):
+    /// the image's right axis is the camera node's world +x, the mirror of the plain scene's, so
+    /// each pixel's ray is the mirror of the plain scene's ray for that pixel and sees the same
+    /// (mirrored) triangle — the image is the plain one, where it had come out left-right flipped.
+    #[test]
+    fn a_mirrored_scene_and_camera_render_the_plain_image() {
+        use crate::backend::Backend;
+        let plain = load(file(&quad_gltf_under(r#""scale":[1,1,1]"#)).path()).unwrap();
+        let mirrored = load(file(&quad_gltf_under(r#""scale":[1,1,-1]"#)).path()).unwrap();
+        assert!(!plain.camera().mirrored && mirrored.camera().mirrored);
+        let mirror = Vec3::new(1.0, 1.0, -1.0);
+        let (p, m) =
+            (crate::frame::generate_params(&plain, 16, 12, 0), crate::frame::generate_params(&mirrored, 16, 12, 0));
+        // World +x of the camera node is +x either way: `right` is along it.
+        for params in [p, m] {
+            assert!(params.right.truncate().normalize().abs_diff_eq(Vec3::X, 1e-6), "{}", params.right);
+        }
+        for (a, b) in [(p.forward, m.forward), (p.right, m.right), (p.up, m.up), (p.origin, m.origin)] {
+            assert!((a.truncate() * mirror).abs_diff_eq(b.truncate(), 1e-6), "{a} against {b}");
+        }
+        let hits = |scene: &Scene, params| {
+            let mut cpu = crate::cpu::CpuBackend::new();
+            cpu.load_scene(scene).unwrap();
+            let (rays, _) = cpu.generate(&params).unwrap();
+            let (hits, _) = cpu.trace(&rays).unwrap();
+            (hits.instance, hits.primitive)
+        };
+        let (plain_hits, mirrored_hits) = (hits(&plain, p), hits(&mirrored, m));
+        assert!(plain_hits.0.iter().any(|&i| i == 0) && plain_hits.0.iter().any(|&i| i != 0), "{plain_hits:?}");
+        assert_eq!(plain_hits, mirrored_hits);
     }
 
     #[test]

@@ -85,6 +85,13 @@ pub struct Camera {
     pub up: Vec3,
     /// Full vertical field of view in degrees, in (0, 180).
     pub vertical_fov_degrees: f32,
+    /// Whether the image is mirrored left to right: its right axis is `up × forward` rather than
+    /// the usual `forward × up`. A camera placed by a mirroring transform (a glTF camera node whose
+    /// world transform has a negative determinant, as under the root `scale: [1, 1, −1]` that
+    /// converters add over the whole scene) has image right along its transformed +x, which is
+    /// `up × forward` there: without this flag the mirrored scene rendered as a mirror image of
+    /// what viewers show. `false` for every camera not placed by such a transform.
+    pub mirrored: bool,
 }
 
 impl Camera {
@@ -489,7 +496,7 @@ pub(crate) fn framing_camera(meshes: &[Mesh]) -> Camera {
     };
     let position = if position.is_finite() { position } else { Vec3::Z };
     let centre = if centre.is_finite() { centre } else { Vec3::ZERO };
-    Camera { position, look_at: centre, up: Vec3::Y, vertical_fov_degrees }
+    Camera { position, look_at: centre, up: Vec3::Y, vertical_fov_degrees, mirrored: false }
 }
 
 #[cfg(test)]

@@ -127,6 +127,7 @@ pub fn sphere_field(per_axis: u32, subdivisions: u32) -> Result<(Vec<Mesh>, Came
         look_at: Vec3::splat(extent * 0.5),
         up: Vec3::Y,
         vertical_fov_degrees: 50.0,
+        mirrored: false,
     };
     Ok((meshes, camera))
 }
@@ -162,6 +163,7 @@ pub fn hairball(count: u32, seed: u32) -> Result<(Vec<Mesh>, Camera)> {
         look_at: Vec3::splat(0.5),
         up: Vec3::Y,
         vertical_fov_degrees: 45.0,
+        mirrored: false,
     };
     Ok((vec![mesh], camera))
 }
