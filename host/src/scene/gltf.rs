@@ -1,7 +1,8 @@
 //! glTF 2.0 scenes (through the `gltf` crate): the default scene's node hierarchy with its
 //! transforms, every triangle primitive as a mesh, metallic-roughness materials with emission
 //! (and `KHR_materials_emissive_strength`; `doubleSided` makes an emissive rectangle a two-sided
-//! light), and the first perspective camera, if any. What raywave does not render — textures,
+//! light), and the first perspective camera, if any — looking at the point along its view at the
+//! depth of the scene's centre, which sets the default focus ([`PlacedCamera::aimed`]). What raywave does not render — textures,
 //! see-through materials, skins and morph targets, orthographic cameras, punctual lights — is counted
 //! ([`Scene::unrendered`]).
 //!
@@ -13,10 +14,11 @@
 
 use super::regular_file::{read_regular_file, ReadError};
 use super::{
-    framing_camera, in_range, Camera, Material, Mesh, Scene, Unrendered, MAX_COORDINATE, MAX_TRIANGLES, MAX_VERTICES,
+    framing_camera, in_range, triangle_bounds, Camera, Material, Mesh, Scene, Unrendered, MAX_COORDINATE,
+    MAX_TRIANGLES, MAX_VERTICES,
 };
 use crate::error::{Error, Result};
-use glam::{DMat3, Mat4, Vec3};
+use glam::{DMat3, DVec3, Mat4, Vec3};
 use gltf::accessor::{DataType, Dimensions};
 use gltf::json::validation::Checked;
 use gltf::mesh::Mode;
@@ -64,13 +66,13 @@ pub fn load(path: &Path) -> Result<Scene> {
     // Each primitive read once, kept while nodes still to come instance its mesh.
     let mut geometries: HashMap<(usize, usize), PrimitiveGeometry> = HashMap::new();
     let mut unrendered = Unrendered::default();
-    let (mut scene_camera, mut orthographic) = (None, false);
+    let (mut placed_camera, mut orthographic) = (None, false);
     for (node, world) in &nodes {
         unrendered.punctual_lights += usize::from(node.light().is_some());
-        if let (None, Some(node_camera)) = (&scene_camera, node.camera()) {
+        if let (None, Some(node_camera)) = (&placed_camera, node.camera()) {
             match node_camera.projection() {
                 gltf::camera::Projection::Perspective(p) => {
-                    scene_camera = Some(camera(node, &node_camera, &p, *world).map_err(load_error)?);
+                    placed_camera = Some(PlacedCamera::new(node, &node_camera, &p, *world).map_err(load_error)?);
                 }
                 gltf::camera::Projection::Orthographic(_) => orthographic = true,
             }
@@ -111,8 +113,11 @@ pub fn load(path: &Path) -> Result<Scene> {
             }
         }
     }
-    unrendered.orthographic_camera = orthographic && scene_camera.is_none();
-    let camera = scene_camera.unwrap_or_else(|| framing_camera(&meshes));
+    unrendered.orthographic_camera = orthographic && placed_camera.is_none();
+    let camera = match placed_camera {
+        Some(placed) => placed.aimed(&meshes).map_err(load_error)?,
+        None => framing_camera(&meshes),
+    };
     Ok(Scene::new(&path.display().to_string(), meshes, camera)?.with_unrendered(unrendered))
 }
 
@@ -854,45 +859,117 @@ fn material(m: &gltf::Material) -> std::result::Result<Material, String> {
     Ok(material)
 }
 
-/// The camera of node `node` (world transform `world`) with perspective projection `p`: the
-/// node looks along its −z with +y up and its +x to the image's right — [`Camera::mirrored`] where
-/// `world` mirrors, since there +x is `up × forward`; an error names the node whose transform
-/// leaves it degenerate or beyond [`MAX_COORDINATE`], or the field.
-fn camera(
-    node: &gltf::Node,
-    camera: &gltf::Camera,
-    p: &gltf::camera::Perspective,
-    world: Mat4,
-) -> std::result::Result<Camera, String> {
-    let yfov = p.yfov();
-    if !(yfov > 0.0 && yfov < std::f32::consts::PI) {
-        return Err(format!("cameras[{}].perspective.yfov is {yfov} rad; it must be in (0, π)", camera.index()));
+/// The least distance from a glTF camera to its look-at point, in units of `f32::EPSILON` times
+/// the camera position's largest coordinate, so that the point does not round onto the camera
+/// (the framing camera's 64 steps; see [`PlacedCamera::aimed`]).
+const LOOK_AT_RESOLUTION: f64 = 64.0;
+
+/// A glTF perspective camera as its node places it, before the scene's geometry gives it a
+/// look-at point ([`PlacedCamera::aimed`]).
+struct PlacedCamera {
+    /// The camera's node, which errors name.
+    node: usize,
+    /// The camera (`cameras[…]`), which errors name.
+    camera: usize,
+    /// The node's world origin.
+    position: Vec3,
+    /// The unit view direction: the node's −z through the linear part of its world transform.
+    forward: DVec3,
+    /// The unit up direction: the node's +y through that linear part.
+    up: Vec3,
+    /// The full vertical field of view, in degrees.
+    vertical_fov_degrees: f32,
+    /// Whether the world transform mirrors ([`Camera::mirrored`]).
+    mirrored: bool,
+}
+
+impl PlacedCamera {
+    /// The camera of node `node` (world transform `world`) with perspective projection `p`: the
+    /// node looks along its −z with +y up and its +x to the image's right — [`Camera::mirrored`]
+    /// where `world` mirrors, since there +x is `up × forward`. The directions come from the
+    /// linear part of `world` alone (in `f64`), not from two transformed points, which a node
+    /// scale of 0.01 put 0.01 apart and, far from the origin, rounded 0.25° off the view. An error
+    /// names the node whose transform puts the camera beyond [`MAX_COORDINATE`] or collapses its
+    /// view or up axis, or the field.
+    fn new(
+        node: &gltf::Node,
+        camera: &gltf::Camera,
+        p: &gltf::camera::Perspective,
+        world: Mat4,
+    ) -> std::result::Result<Self, String> {
+        let yfov = p.yfov();
+        if !(yfov > 0.0 && yfov < std::f32::consts::PI) {
+            return Err(format!("cameras[{}].perspective.yfov is {yfov} rad; it must be in (0, π)", camera.index()));
+        }
+        let (node, camera) = (node.index(), camera.index());
+        let position = world.transform_point3(Vec3::ZERO);
+        if !in_range(position) {
+            return Err(format!(
+                "nodes[{node}] (camera {camera}): its world transform puts the camera at {position}; each \
+                 coordinate must be finite and within ±{MAX_COORDINATE:e}"
+            ));
+        }
+        let linear = DMat3::from_mat4(world.as_dmat4());
+        let forward = (linear * DVec3::NEG_Z).normalize();
+        let up = (linear * DVec3::Y).normalize();
+        if !(forward.is_finite() && up.is_finite() && forward.cross(up).normalize().as_vec3().is_finite()) {
+            return Err(format!(
+                "nodes[{node}] (camera {camera}): its world transform collapses the camera's view or up axis \
+                 (a zero scale?)"
+            ));
+        }
+        let vertical_fov_degrees = yfov.to_degrees();
+        Ok(Self { node, camera, position, forward, up: up.as_vec3(), vertical_fov_degrees, mirrored: mirrors(world) })
     }
-    let camera_at = Camera {
-        position: world.transform_point3(Vec3::ZERO),
-        look_at: world.transform_point3(Vec3::NEG_Z),
-        up: world.transform_vector3(Vec3::Y),
-        vertical_fov_degrees: yfov.to_degrees(),
-        mirrored: mirrors(world),
-    };
-    if !(in_range(camera_at.position) && in_range(camera_at.look_at)) {
-        return Err(format!(
-            "nodes[{}] (camera {}): its world transform puts the camera at {} looking at {}; each coordinate \
-             must be finite and within ±{MAX_COORDINATE:e}",
-            node.index(),
-            camera.index(),
-            camera_at.position,
-            camera_at.look_at
-        ));
+
+    /// The camera looking at the point along its view at the depth of the bounds' centre of
+    /// `meshes` (the scene's triangles of non-zero area) — at least half the bounds' radius
+    /// (half their diagonal) away, for a camera inside the scene or past its centre, and at least
+    /// [`LOOK_AT_RESOLUTION`] `f32` steps of the camera position's largest coordinate, so that it
+    /// does not round onto the camera; at most as far as the coordinate limit lets it lie. Its
+    /// distance is the thin lens's default focus distance (`frame::generate_params_with`): the
+    /// plane through the scene's centre is in focus. The view direction rebuilt from the two points
+    /// is off by at most the point's `f32` rounding over that distance, the order of the camera
+    /// position's own rounding seen from the scene. (A point one local unit along the view, as it
+    /// had been, put the focus 1 cm away under a root scale of 0.01, and 0.01 from a camera 3000
+    /// from the origin it turned the view 0.25°.) An error names the node where the point still
+    /// falls out of range or onto the camera.
+    fn aimed(&self, meshes: &[Mesh]) -> std::result::Result<Camera, String> {
+        let (lo, hi) = triangle_bounds(meshes);
+        let (lo, hi, position) = (lo.as_dvec3(), hi.as_dvec3(), self.position.as_dvec3());
+        let (centre, radius) = ((lo + hi) * 0.5, (hi - lo).length() * 0.5);
+        // No triangle (an empty scene, which `Scene::new` refuses): any distance.
+        let scene_depth =
+            if lo.cmple(hi).all() { (centre - position).dot(self.forward).max(0.5 * radius) } else { 1.0 };
+        // Near the origin, a floor that `f32` still normalizes over.
+        let magnitude = position.abs().max_element().max(1e-12);
+        let resolvable = LOOK_AT_RESOLUTION * f64::from(f32::EPSILON) * magnitude;
+        // Along each axis the view moves on, the room before the coordinate limit (0.999 of it,
+        // so that the point does not round past the limit).
+        let room = (0..3)
+            .filter(|&axis| self.forward[axis] != 0.0)
+            .map(|axis| {
+                let limit = f64::from(MAX_COORDINATE).copysign(self.forward[axis]);
+                0.999 * (limit - position[axis]) / self.forward[axis]
+            })
+            .fold(f64::INFINITY, f64::min);
+        let distance = scene_depth.max(resolvable).min(room);
+        let camera = Camera {
+            position: self.position,
+            look_at: (position + self.forward * distance).as_vec3(),
+            up: self.up,
+            vertical_fov_degrees: self.vertical_fov_degrees,
+            mirrored: self.mirrored,
+        };
+        if !(in_range(camera.look_at) && camera.has_view_basis()) {
+            return Err(format!(
+                "nodes[{}] (camera {}): the camera at {} looks at {} (along its view, at the depth of the \
+                 scene's centre), which lies beyond ±{MAX_COORDINATE:e} or on the camera",
+                self.node, self.camera, camera.position, camera.look_at
+            ));
+        }
+        Ok(camera)
     }
-    if !camera_at.has_view_basis() {
-        return Err(format!(
-            "nodes[{}] (camera {}): its world transform collapses the camera's view or up axis (a zero scale?)",
-            node.index(),
-            camera.index()
-        ));
-    }
-    Ok(camera_at)
 }
 
 #[cfg(test)]
@@ -1300,9 +1377,9 @@ mod tests {
                 "meshes[1].primitives[0].attributes.POSITION element 0 is at [NaN, NaN, NaN] in world space under nodes[1]",
             ),
             (
-                "\"camera\": 0,",
-                "\"camera\": 0, \"scale\": [1e9, 1e9, 1e9],",
-                "nodes[2] (camera 0): its world transform puts the camera at",
+                "0.75,\n    3\n",
+                "0.75,\n    3e9\n",
+                "nodes[2] (camera 0): its world transform puts the camera at [0, 0.75, 3000000000]",
             ),
         ];
         for (from, to, field) in cases {
@@ -1559,6 +1636,50 @@ mod tests {
         let (plain_hits, mirrored_hits) = (hits(&plain, p), hits(&mirrored, m));
         assert!(plain_hits.0.iter().any(|&i| i == 0) && plain_hits.0.iter().any(|&i| i != 0), "{plain_hits:?}");
         assert_eq!(plain_hits, mirrored_hits);
+    }
+
+    /// The scene and its camera under a root scale of 0.01 (and a root translation of 3000, far from
+    /// the origin), the camera 300 local units from the quad: the camera looks at the point along
+    /// its view at the depth of the quad's centre, about 3 away, which is the default focus
+    /// distance (it had been one local unit, 0.01), and its view direction, turned 0.3 rad about y
+    /// and 0.2 about x, is the node's within 10⁻⁴ rad (the look-at point's rounding near 3000,
+    /// 1.2·10⁻⁴ per axis, over 3; taken from two points 0.01 apart it was 3.2·10⁻³ off).
+    /// A camera past the scene's centre looks half the bounds' radius ahead.
+    #[test]
+    fn a_gltf_camera_looks_and_focuses_at_the_depth_of_the_scene_centre() {
+        use glam::{DQuat, Vec4Swizzles};
+        let (ay, ax) = (0.3f64, 0.2f64);
+        let turn = DQuat::from_rotation_y(ay) * DQuat::from_rotation_x(ax);
+        let [x, y, z, w] = turn.to_array();
+        let camera_node = format!(r#"{{"camera":0,"translation":[0.5,0.5,300],"rotation":[{x},{y},{z},{w}]}}"#);
+        let text = quad_gltf_under(r#""translation":[3000,0,0],"scale":[0.01,0.01,0.01]"#).replacen(
+            r#"{"camera":0,"translation":[0.5,0.5,3]}"#,
+            &camera_node,
+            1,
+        );
+        let scene = load(file(&text).path()).unwrap();
+        let camera = *scene.camera();
+        let forward = turn * DVec3::NEG_Z;
+        let centre = DVec3::new(3000.005, 0.005, -0.02);
+        let depth = (centre - camera.position.as_dvec3()).dot(forward);
+        let params = crate::frame::generate_params(&scene, 16, 12, 0);
+        assert!(
+            (f64::from(params.focus_distance) / depth - 1.0).abs() < 1e-3,
+            "{} against {depth}",
+            params.focus_distance
+        );
+        assert!((depth - 3.0).abs() < 0.5, "{depth}");
+        let angle = params.forward.xyz().as_dvec3().angle_between(forward);
+        assert!(angle < 1e-4, "the view is {angle} rad off");
+        // Past the centre, near the origin: the quad spans 0.01 (radius 0.0071) around z = −0.02.
+        let inside = quad_gltf_under(r#""scale":[0.01,0.01,0.01]"#).replacen(
+            r#"{"camera":0,"translation":[0.5,0.5,3]}"#,
+            r#"{"camera":0,"translation":[0.5,0.5,-2.5]}"#,
+            1,
+        );
+        let params = crate::frame::generate_params(&load(file(&inside).path()).unwrap(), 16, 12, 0);
+        let half_radius = 0.5 * 0.5 * 0.01 * 2f32.sqrt();
+        assert!((params.focus_distance / half_radius - 1.0).abs() < 1e-3, "{}", params.focus_distance);
     }
 
     #[test]

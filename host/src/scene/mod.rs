@@ -79,7 +79,11 @@ impl Material {
 pub struct Camera {
     /// Eye position in scene units.
     pub position: Vec3,
-    /// A point the camera looks at.
+    /// A point the camera looks at. Its distance from `position` is also the thin lens's default
+    /// focus distance (`frame::generate_params_with`), so a loader puts it where the scene is: a
+    /// glTF camera looks at the point along its view at the depth of the scene bounds' centre
+    /// (at least half the bounds' radius away; the glTF loader's `PlacedCamera::aimed`), a
+    /// framing camera at the bounds' centre.
     pub look_at: Vec3,
     /// Approximate up direction (need not be orthogonal to the view direction).
     pub up: Vec3,
