@@ -509,15 +509,14 @@ pub fn plot(lines: &[ErrorVsTimeLine], title: &str, output: PendingOutput) -> Re
                 let (lo, hi) = v.iter().fold((f64::MAX, f64::MIN), |(a, b), &x| (a.min(x), b.max(x)));
                 (lo / 1.5)..(hi * 1.5)
             };
+            let time_range = range(&ms);
+            let time_ticks = log_ticks(&time_range, &[1.0, 2.0, 5.0]);
             let mut chart = ChartBuilder::on(panel)
                 .caption(format!("{scene} — {title}"), ("sans-serif", 20))
                 .margin(12)
                 .x_label_area_size(40)
                 .y_label_area_size(70)
-                .build_cartesian_2d(
-                    range(&ms).log_scale().with_key_points(log_ticks(&range(&ms), &[1.0, 2.0, 5.0])),
-                    range(&err).log_scale(),
-                )
+                .build_cartesian_2d(time_range.log_scale().with_key_points(time_ticks), range(&err).log_scale())
                 .map_err(|e| plot_error(&e))?;
             chart
                 .configure_mesh()
