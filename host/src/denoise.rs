@@ -160,6 +160,43 @@ impl DenoisePass {
     }
 }
 
+/// Which working buffers a method's passes write beyond its inputs: a backend (raywave's, or an
+/// engine's that runs the passes itself) allocates those at the image's size and no others (rule 4
+/// of the design, model only what the frame needs), so that `--denoise none`, the composite
+/// alone, takes none of them.
+#[derive(Copy, Clone, Debug, PartialEq, Eq)]
+pub struct WorkingBuffers {
+    /// The raw and the blurred TV noise estimate ([`DenoisePass::Noise`], [`DenoisePass::NoiseBlur`]).
+    pub noise: bool,
+    /// What the bilateral passes write: the filtered `S_N` and `U_N`.
+    pub filtered: bool,
+    /// The ratio image ([`DenoisePass::Ratio`]).
+    pub ratio: bool,
+    /// What the SVGF passes write: the filtered ratio.
+    pub filtered_ratio: bool,
+}
+
+impl WorkingBuffers {
+    /// The buffers `passes` write.
+    pub fn for_passes(passes: &[DenoisePass]) -> Self {
+        let written_by = |wanted: fn(&DenoisePass) -> bool| passes.iter().any(wanted);
+        Self {
+            noise: written_by(|pass| matches!(pass, DenoisePass::Noise | DenoisePass::NoiseBlur)),
+            filtered: written_by(|pass| matches!(pass, DenoisePass::BilateralX | DenoisePass::BilateralY)),
+            ratio: written_by(|pass| *pass == DenoisePass::Ratio),
+            filtered_ratio: written_by(|pass| {
+                matches!(pass, DenoisePass::SvgfVariance | DenoisePass::SvgfAtrous { .. })
+            }),
+        }
+    }
+
+    /// Whether a pass reads the geometry guides, position and normal: the edge-stopping filters
+    /// (bilateral and SVGF), which are the passes that write the filtered buffers.
+    pub fn guides_read(self) -> bool {
+        self.filtered || self.filtered_ratio
+    }
+}
+
 /// Everything a denoiser reads, one entry per pixel of a `width × height` image (row-major).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct DenoiseInput {
@@ -584,6 +621,19 @@ mod tests {
         assert_eq!(DenoiseMethod::Tv.passes(&many), vec![DenoisePass::Composite]);
         assert_eq!(DenoiseMethod::Svgf.passes(&many), DenoiseMethod::Svgf.passes(&params), "SVGF keeps its passes");
         assert_eq!(DenoiseMethod::None.passes(&params), vec![DenoisePass::Composite], "no filter at any N");
+    }
+
+    #[test]
+    fn each_method_needs_only_the_working_buffers_its_passes_write() {
+        let params = DenoiseParams::new(128, 128);
+        let needs = |method: DenoiseMethod| WorkingBuffers::for_passes(&method.passes(&params));
+        let none = WorkingBuffers { noise: false, filtered: false, ratio: false, filtered_ratio: false };
+        assert_eq!(needs(DenoiseMethod::None), none);
+        assert!(!needs(DenoiseMethod::None).guides_read());
+        assert_eq!(needs(DenoiseMethod::Tv), WorkingBuffers { noise: true, filtered: true, ratio: true, ..none });
+        assert!(needs(DenoiseMethod::Tv).guides_read());
+        assert_eq!(needs(DenoiseMethod::Svgf), WorkingBuffers { ratio: true, filtered_ratio: true, ..none });
+        assert!(needs(DenoiseMethod::Svgf).guides_read());
     }
 
     #[test]

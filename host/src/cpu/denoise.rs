@@ -3,7 +3,7 @@
 
 use super::count;
 use crate::backend::StageReport;
-use crate::denoise::{DenoiseInput, DenoiseMethod, DenoisePass};
+use crate::denoise::{DenoiseInput, DenoiseMethod, DenoisePass, WorkingBuffers};
 use glam::{IVec2, Vec4};
 use rayon::prelude::*;
 use raywave_kernels::denoise::bilateral::{bilateral_pass, ImageLine};
@@ -35,20 +35,17 @@ struct Working {
 impl Working {
     /// The buffers `passes` write, for `input`.
     fn for_passes(passes: &[DenoisePass], input: &DenoiseInput) -> Self {
-        let written_by = |wanted: fn(&DenoisePass) -> bool| if passes.iter().any(wanted) { input.len() } else { 0 };
-        let noise = written_by(|pass| matches!(pass, DenoisePass::Noise | DenoisePass::NoiseBlur));
-        let filtered = written_by(|pass| matches!(pass, DenoisePass::BilateralX | DenoisePass::BilateralY));
-        let filtered_ratio =
-            written_by(|pass| matches!(pass, DenoisePass::SvgfVariance | DenoisePass::SvgfAtrous { .. }));
+        let needs = WorkingBuffers::for_passes(passes);
+        let sized = |needed: bool| if needed { input.len() } else { 0 };
         Self {
-            noise_raw: written_zeros(noise),
-            noise: written_zeros(noise),
+            noise_raw: written_zeros(sized(needs.noise)),
+            noise: written_zeros(sized(needs.noise)),
             shadowed: input.shadowed.clone(),
             unshadowed: input.unshadowed.clone(),
-            filtered_shadowed: written_zeros(filtered),
-            filtered_unshadowed: written_zeros(filtered),
-            ratio: written_zeros(written_by(|pass| *pass == DenoisePass::Ratio)),
-            filtered_ratio: written_zeros(filtered_ratio),
+            filtered_shadowed: written_zeros(sized(needs.filtered)),
+            filtered_unshadowed: written_zeros(sized(needs.filtered)),
+            ratio: written_zeros(sized(needs.ratio)),
+            filtered_ratio: written_zeros(sized(needs.filtered_ratio)),
             color: written_zeros(input.len()),
         }
     }

@@ -6,7 +6,7 @@ use super::context::Core;
 use super::kernel::ComputeKernel;
 use super::pass::Resource;
 use crate::backend::StageReport;
-use crate::denoise::{bilateral_invocations, DenoiseInput, DenoiseMethod, DenoisePass};
+use crate::denoise::{bilateral_invocations, DenoiseInput, DenoiseMethod, DenoisePass, WorkingBuffers};
 use crate::error::{Error, Result};
 use ash::vk;
 use glam::Vec4;
@@ -72,8 +72,9 @@ impl DenoiseKernels {
         Ok((copy.read(pixels as usize)?, timing.report("copy probe", 0)))
     }
 
-    /// Runs `method` on `input` (already checked against `params`): uploads the inputs, runs
-    /// every pass on the device and reads the colour back. Timings are the passes'
+    /// Runs `method` on `input` (already checked against `params`): uploads the inputs its passes
+    /// read, allocates the working buffers they write ([`WorkingBuffers`]), runs every pass on the
+    /// device and reads the colour back. Timings are the passes'
     /// ([`super::pass::Pass::run`]: GPU timestamps where the device has them).
     pub fn run(
         &self,
@@ -83,30 +84,42 @@ impl DenoiseKernels {
         input: &DenoiseInput,
     ) -> Result<(Vec<Vec4>, Vec<StageReport>)> {
         let pixels = params.pixels();
-        let position = GpuBuffer::storage_with(core, &input.position, "denoise position")?;
-        let normal = GpuBuffer::storage_with(core, &input.normal, "denoise normal")?;
+        let passes = method.passes(params);
+        // Only what the passes use is allocated at the image's size; any other buffer is an
+        // empty one (`GpuBuffer::new`'s least size, 4 bytes) that no pass binds.
+        let needs = WorkingBuffers::for_passes(&passes);
+        let sized = |needed: bool| if needed { pixels } else { 0 };
+        let guide = |data: &[Vec4], name| {
+            if needs.guides_read() {
+                GpuBuffer::storage_with(core, data, name)
+            } else {
+                GpuBuffer::storage::<Vec4>(core, 0, name)
+            }
+        };
+        let position = guide(&input.position, "denoise position")?;
+        let normal = guide(&input.normal, "denoise normal")?;
         let analytic = GpuBuffer::storage_with(core, &input.analytic, "denoise analytic")?;
         let emitted = GpuBuffer::storage_with(core, &input.emitted, "denoise emitted")?;
         // Ping-pong pairs: [0] holds the current S_N / U_N / ratio, [1] receives the next.
         let mut shadowed = [
             GpuBuffer::storage_with(core, &input.shadowed, "S_N")?,
-            GpuBuffer::storage::<Vec4>(core, pixels, "S_N filtered")?,
+            GpuBuffer::storage::<Vec4>(core, sized(needs.filtered), "S_N filtered")?,
         ];
         let mut unshadowed = [
             GpuBuffer::storage_with(core, &input.unshadowed, "U_N")?,
-            GpuBuffer::storage::<Vec4>(core, pixels, "U_N filtered")?,
+            GpuBuffer::storage::<Vec4>(core, sized(needs.filtered), "U_N filtered")?,
         ];
         let mut ratio = [
-            GpuBuffer::storage::<Vec4>(core, pixels, "ratio")?,
-            GpuBuffer::storage::<Vec4>(core, pixels, "ratio filtered")?,
+            GpuBuffer::storage::<Vec4>(core, sized(needs.ratio), "ratio")?,
+            GpuBuffer::storage::<Vec4>(core, sized(needs.filtered_ratio), "ratio filtered")?,
         ];
-        let noise_raw = GpuBuffer::storage::<f32>(core, pixels, "noise raw")?;
-        let noise = GpuBuffer::storage::<f32>(core, pixels, "noise")?;
+        let noise_raw = GpuBuffer::storage::<f32>(core, sized(needs.noise), "noise raw")?;
+        let noise = GpuBuffer::storage::<f32>(core, sized(needs.noise), "noise")?;
         let color = GpuBuffer::storage::<Vec4>(core, pixels, "denoised colour")?;
         // Only the composites, the denoiser's boundary, count (their last binding).
         let counter = GpuBuffer::counter(core, "denoise")?;
         let mut timings = Vec::new();
-        for pass in method.passes(params) {
+        for pass in passes {
             let b = Resource::Buffer;
             let timing = match pass {
                 DenoisePass::Ratio => self.ratio.dispatch(
