@@ -182,8 +182,14 @@ pub fn best_vulkan_device(devices: &[crate::vulkan::DeviceInfo]) -> Result<usize
 /// lavapipe, where it had opened the H100 and failed.
 #[cfg(feature = "vulkan")]
 pub fn best_vulkan_device_tracing(devices: &[crate::vulkan::DeviceInfo], trace: Option<TraceMethod>) -> Result<usize> {
-    let able: Vec<_> =
-        devices.iter().filter(|d| trace.is_none_or(|method| d.missing_for(method).is_empty())).cloned().collect();
+    // Among the devices that run the kernels too: else one that has the method but cannot run
+    // the kernels hides another that can (and would say what it lacks for the method).
+    let able: Vec<_> = devices
+        .iter()
+        .filter(|d| d.missing_for_kernels().is_empty())
+        .filter(|d| trace.is_none_or(|method| d.missing_for(method).is_empty()))
+        .cloned()
+        .collect();
     best_vulkan_device(if able.is_empty() { devices } else { &able })
 }
 

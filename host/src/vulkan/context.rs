@@ -2,6 +2,7 @@
 //! ray-tracing feature detection, and device creation.
 
 use super::driver_lock;
+use super::kernel::stream_rows_fit;
 use crate::backend::{check_sustain_seconds, ValidationLog};
 use crate::device::TraceMethod;
 use crate::error::{Error, Result};
@@ -60,7 +61,7 @@ pub struct DeviceInfo {
     /// The workgroup sizes this device runs the 1-D stream stages with
     /// ([`ContextOptions::workgroup_sizes`]), ascending: the powers of two within
     /// `maxComputeWorkGroupSize[0]` and `maxComputeWorkGroupInvocations` whose rows of
-    /// [`STREAM_ROW`] invocations fit `maxComputeWorkGroupCount[0]`.
+    /// [`STREAM_ROW`] invocations are whole workgroups that fit `maxComputeWorkGroupCount[0]`.
     pub workgroup_sizes: Vec<u32>,
     /// `maxStorageBufferRange`, bytes: a stream of `Vec4`s holds at most a sixteenth of it
     /// elements ([`Self::max_stream_len`]).
@@ -80,7 +81,7 @@ impl DeviceInfo {
         let by_buffer = u64::from(self.max_storage_buffer_range) / std::mem::size_of::<glam::Vec4>() as u64;
         let [max_x, max_y, _] = self.max_compute_work_group_count;
         let one_row = u64::from(max_x) * u64::from(smallest_workgroup);
-        let rows_fit = STREAM_ROW.checked_div(smallest_workgroup).is_some_and(|row| row <= max_x);
+        let rows_fit = stream_rows_fit(smallest_workgroup, max_x);
         let rows = if rows_fit { u64::from(max_y) * u64::from(STREAM_ROW) } else { 0 };
         by_buffer.min(one_row.max(rows)).min(u64::from(u32::MAX))
     }
@@ -592,7 +593,7 @@ fn stream_workgroup_sizes(limits: &vk::PhysicalDeviceLimits) -> Vec<u32> {
     let most = limits.max_compute_work_group_size[0].min(limits.max_compute_work_group_invocations);
     (0..u32::BITS)
         .map(|k| 1 << k)
-        .filter(|&size| size <= most && STREAM_ROW / size <= limits.max_compute_work_group_count[0])
+        .filter(|&size| size <= most && stream_rows_fit(size, limits.max_compute_work_group_count[0]))
         .collect()
 }
 
@@ -695,6 +696,13 @@ mod tests {
         assert_eq!(stream_workgroup_sizes(&wide), [1, 2, 4, 8, 16, 32, 64, 128, 256, 512]);
         let narrow = vk::PhysicalDeviceLimits { max_compute_work_group_size: [128, 128, 64], ..limits };
         assert_eq!(stream_workgroup_sizes(&narrow), [32, 64, 128]);
+        // A workgroup wider than a row of `STREAM_ROW` would make rows of no workgroups.
+        let huge = vk::PhysicalDeviceLimits {
+            max_compute_work_group_size: [u32::MAX; 3],
+            max_compute_work_group_invocations: u32::MAX,
+            ..wide
+        };
+        assert_eq!(stream_workgroup_sizes(&huge).last(), Some(&STREAM_ROW));
     }
 
     /// A device as lavapipe describes itself: every feature, generous limits.
@@ -763,7 +771,11 @@ mod tests {
         assert_eq!(best(&devices, Some(TraceMethod::RayQuery)).unwrap(), 1);
         assert_eq!(best(&devices, Some(TraceMethod::RtPipeline)).unwrap(), 0);
         assert_eq!(best(&devices, None).unwrap(), 0);
-        assert_eq!(best(&[gpu], Some(TraceMethod::RayQuery)).unwrap(), 0);
+        assert_eq!(best(std::slice::from_ref(&gpu), Some(TraceMethod::RayQuery)).unwrap(), 0);
+        // A device with ray query that cannot run the kernels does not hide one that can: that
+        // one opens (and its backend then says it lacks ray query).
+        let unable = DeviceInfo { index: 1, storage_buffers_per_pass: 4, ..lavapipe() };
+        assert_eq!(best(&[gpu, unable], Some(TraceMethod::RayQuery)).unwrap(), 0);
     }
 
     /// A stream is bounded by one storage buffer of `Vec4`s and by one dispatch grid, and an image

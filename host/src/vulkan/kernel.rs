@@ -85,9 +85,15 @@ pub(crate) fn dispatch_grid(
     if groups <= max_x {
         return Some(if groups == 0 { (0, 0) } else { (groups, 1) });
     }
-    let x = STREAM_ROW / workgroup_size;
     let y = invocations.div_ceil(STREAM_ROW);
-    (x <= max_x && y <= max_y).then_some((x, y))
+    (stream_rows_fit(workgroup_size, max_x) && y <= max_y).then_some((STREAM_ROW / workgroup_size, y))
+}
+
+/// Whether a row of [`STREAM_ROW`] invocations is a whole number of workgroups of
+/// `workgroup_size`, at least one and at most `max_x` (`maxComputeWorkGroupCount[0]`): a
+/// workgroup wider than the row would make a row of 0 workgroups, a grid that runs nothing.
+pub(crate) fn stream_rows_fit(workgroup_size: u32, max_x: u32) -> bool {
+    STREAM_ROW.checked_div(workgroup_size).is_some_and(|row| (1..=max_x).contains(&row))
 }
 
 #[cfg(test)]
@@ -106,6 +112,11 @@ mod tests {
         assert_eq!(dispatch_grid(&limits, 3 * STREAM_ROW, 16), None, "2^16 workgroups of 16 per row");
         let wide = vk::PhysicalDeviceLimits { max_compute_work_group_count: [u32::MAX, 65_535, 65_535], ..limits };
         assert_eq!(dispatch_grid(&wide, u32::MAX, 1), Some((u32::MAX, 1)));
+        // A workgroup wider than a row has no rows: none of 0 workgroups that would run nothing.
+        let narrow = vk::PhysicalDeviceLimits { max_compute_work_group_count: [1, 65_535, 1], ..limits };
+        assert_eq!(dispatch_grid(&narrow, 3 * STREAM_ROW, 2 * STREAM_ROW), None);
+        assert!(!stream_rows_fit(2 * STREAM_ROW, u32::MAX) && !stream_rows_fit(0, u32::MAX));
+        assert!(stream_rows_fit(STREAM_ROW, 1) && !stream_rows_fit(STREAM_ROW / 2, 1));
     }
 
     #[test]
