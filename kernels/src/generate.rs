@@ -51,7 +51,14 @@ pub fn generate_ray(ray_index: u32, params: &GenerateParams) -> CameraRay {
         // Scaled before its length is taken: `|focus − origin|²` overflows f32 from about 10¹⁹
         // (a far focus plane with a wide field of view), which left rays without a direction.
         let to_focus = focus - origin;
-        direction = (to_focus / to_focus.abs().max_element()).normalize();
+        let scale = to_focus.abs().max_element();
+        // A focus point that rounds onto the lens point (a focus distance and aperture below the
+        // origin's rounding: 10⁻⁹ at 0.8) leaves no direction to it, and 0/0 had made the ray
+        // NaN: that ray keeps the pinhole's. `MIN_POSITIVE`, not 0, so that a GPU flushing a
+        // subnormal scale to 0 takes the same branch.
+        if scale >= f32::MIN_POSITIVE {
+            direction = (to_focus / scale).normalize();
+        }
     }
     CameraRay { origin: origin.extend(params.tmin), direction: direction.extend(params.tmax), pixel: ray_index }
 }
@@ -179,6 +186,19 @@ mod tests {
                 let d = generate_ray(i, &p).direction.xyz();
                 assert!(d.is_finite() && (d.length() - 1.0).abs() < 1e-5, "{lens_radius} {focus_distance}: {d}");
             }
+        }
+    }
+
+    /// A focus distance and aperture below the origin's rounding put the focus point on the lens
+    /// point: the ray keeps the pinhole's direction (it had been 0/0, NaN, for every pixel).
+    #[test]
+    fn a_focus_point_on_the_lens_point_keeps_the_pinhole_direction() {
+        let pinhole = params(4, 4);
+        let p = GenerateParams { lens_radius: 1e-9, focus_distance: 1e-9, ..pinhole };
+        for i in 0..p.ray_count() {
+            let ray = generate_ray(i, &p);
+            assert_eq!(ray.origin, pinhole.origin, "the lens offset rounds away");
+            assert_eq!(ray.direction, generate_ray(i, &pinhole).direction);
         }
     }
 }
