@@ -55,6 +55,9 @@ pub struct PendingOutput {
     path: PathBuf,
     format: ImageFormat,
     temp: PendingFile,
+    /// The permissions of the regular file the output replaces, which it keeps; `None` for a new
+    /// file, created with a new file's (`0o666` less the umask, on Unix).
+    replaced: Option<std::fs::Permissions>,
 }
 
 impl PendingOutput {
@@ -87,8 +90,10 @@ impl PendingOutput {
             };
             return Err(output_error(std::io::Error::new(kind, reason)));
         }
-        let temp = PendingFile::create_in(dir).map_err(output_error)?;
-        Ok(Self { path: path.to_owned(), format, temp })
+        // Not a symbolic link's: moving the output into place replaces the link itself.
+        let replaced = path.symlink_metadata().ok().filter(std::fs::Metadata::is_file).map(|m| m.permissions());
+        let temp = PendingFile::create_in(dir, replaced.is_none()).map_err(output_error)?;
+        Ok(Self { path: path.to_owned(), format, temp, replaced })
     }
 
     /// Encodes linear radiance `colors` (row-major, `width · height`) as 32-bit float RGB in the
@@ -139,11 +144,10 @@ impl PendingOutput {
         let temp = &mut self.temp.temp;
         temp.write_all(bytes).map_err(output_error)?;
         temp.as_file().sync_all().map_err(output_error)?;
-        // The temporary file is private (0600); a finished image is an ordinary file.
-        #[cfg(unix)]
-        {
-            use std::os::unix::fs::PermissionsExt;
-            temp.as_file().set_permissions(std::fs::Permissions::from_mode(0o644)).map_err(output_error)?;
+        // A replaced file's permissions, which had been widened to 0644 (and a new file's
+        // narrowed umask ignored): its temporary file was created private (0600).
+        if let Some(permissions) = self.replaced {
+            temp.as_file().set_permissions(permissions).map_err(output_error)?;
         }
         Ok(WrittenOutput { path: self.path, temp: self.temp })
     }
@@ -278,9 +282,20 @@ struct PendingFile {
 impl PendingFile {
     /// A new temporary file in `dir`, listed before anyone can see it: the list stays locked
     /// while the file is created, so [`remove_pending_outputs`] finds every file that exists.
-    fn create_in(dir: &Path) -> std::io::Result<Self> {
+    /// `as_new_file`: created with the permissions of any new file (on Unix `0o666` less the
+    /// umask, as `File::create` makes it), else private (`0o600`) until given those of the file
+    /// it replaces.
+    fn create_in(dir: &Path, as_new_file: bool) -> std::io::Result<Self> {
+        let mut names = temporary_names();
+        #[cfg(unix)]
+        if as_new_file {
+            use std::os::unix::fs::PermissionsExt;
+            names.permissions(std::fs::Permissions::from_mode(0o666));
+        }
+        #[cfg(not(unix))]
+        let _ = as_new_file;
         let mut pending = lock(&PENDING);
-        let temp = temporary_names().tempfile_in(dir)?;
+        let temp = names.tempfile_in(dir)?;
         let path = temp.path().to_owned();
         pending.push(path.clone());
         Ok(Self { temp, listed: Listed(path) })
@@ -437,13 +452,28 @@ mod tests {
         assert!(!path.exists());
         pending.finish_image(&RgbImage::new(2, 2)).unwrap();
         assert!(path.exists());
-        #[cfg(unix)]
-        {
-            use std::os::unix::fs::PermissionsExt;
-            let mode = std::fs::metadata(&path).unwrap().permissions().mode() & 0o777;
-            assert_eq!(mode, 0o644, "a finished image is readable by others, like any written file");
-        }
         drop(dir);
+    }
+
+    /// A finished image has the permissions of any new file (the umask's, where it had been 0644
+    /// whatever the umask), and one that replaces a file keeps that file's (a private image had
+    /// become readable by everyone).
+    #[cfg(unix)]
+    #[test]
+    fn an_output_has_a_new_files_permissions_or_keeps_the_replaced_files() {
+        use std::os::unix::fs::PermissionsExt;
+        let dir = tempfile::tempdir().unwrap();
+        let mode = |path: &Path| std::fs::metadata(path).unwrap().permissions().mode() & 0o7777;
+        let reference = dir.path().join("reference.png");
+        std::fs::File::create(&reference).unwrap();
+        let path = dir.path().join("out.png");
+        PendingOutput::create(&path, ImageFormat::Png).unwrap().finish_image(&RgbImage::new(2, 2)).unwrap();
+        assert_eq!(mode(&path), mode(&reference), "a new file's permissions");
+        for private in [0o600, 0o640, 0o604] {
+            std::fs::set_permissions(&path, std::fs::Permissions::from_mode(private)).unwrap();
+            PendingOutput::create(&path, ImageFormat::Png).unwrap().finish_image(&RgbImage::new(2, 2)).unwrap();
+            assert_eq!(mode(&path), private, "the replaced file's permissions");
+        }
     }
 
     #[test]
