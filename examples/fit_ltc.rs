@@ -21,15 +21,16 @@ use std::time::Instant;
 #[derive(Parser)]
 #[command(about = "Fit the GGX LTC table (raywave::ltc_fit) or check the committed one")]
 struct Args {
-    /// Where to write the generated Rust source.
-    #[arg(long, default_value = "shared/src/ltc_table.rs")]
+    /// Where to write the generated Rust source (not with `--check`, which writes nothing).
+    #[arg(long, default_value = "shared/src/ltc_table.rs", conflicts_with = "check")]
     out: PathBuf,
     /// Re-fit a sample of cells and compare with the committed table instead of fitting it all.
     #[arg(long)]
     check: bool,
     /// With `--check`: this many more cells, spread over the table, besides the fixed 12 (at most
-    /// the table's other 4084: then every cell is checked once).
-    #[arg(long, default_value_t = 0)]
+    /// the table's other 4084: then every cell is checked once). Only with `--check`: without it
+    /// the command would start the full fit.
+    #[arg(long, default_value_t = 0, requires = "check")]
     extra: usize,
 }
 
@@ -129,19 +130,58 @@ fn check_writable(path: &Path) -> std::io::Result<()> {
     if path.is_dir() || path.as_os_str().to_string_lossy().ends_with(std::path::MAIN_SEPARATOR) {
         return Err(std::io::Error::new(std::io::ErrorKind::InvalidInput, "it names a directory"));
     }
-    let folder = path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
-    tempfile::Builder::new().prefix(".fit_ltc-").tempfile_in(folder).map(drop)
+    tempfile::Builder::new().prefix(".fit_ltc-").tempfile_in(folder_of(path)).map(drop)
 }
 
-/// Writes `bytes` to a temporary file beside `path`, syncs it, then renames it over `path`.
+/// The folder `path` lies in (`.` for a bare file name).
+fn folder_of(path: &Path) -> &Path {
+    path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."))
+}
+
+/// Writes `bytes` to a temporary file beside `path`, syncs it, then renames it over `path`. On any
+/// error the temporary file is deleted (dropping it, or `persist`'s error, does), so a failed
+/// write leaves `path` as it was and nothing beside it.
 fn write_atomically(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
-    let mut tmp = path.as_os_str().to_owned();
-    tmp.push(".tmp");
-    let tmp = PathBuf::from(tmp);
-    {
-        let mut f = std::fs::File::create(&tmp)?;
-        f.write_all(bytes)?;
-        f.sync_all()?;
+    let mut tmp = tempfile::Builder::new().prefix(".fit_ltc-").tempfile_in(folder_of(path))?;
+    tmp.write_all(bytes)?;
+    tmp.as_file().sync_all()?;
+    tmp.persist(path).map(drop).map_err(|e| e.error)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn extra_needs_check_and_out_conflicts_with_it() {
+        let parse = |args: &[&str]| Args::try_parse_from(std::iter::once("fit_ltc").chain(args.iter().copied()));
+        // `--extra` without `--check` would start the full fit and overwrite the table.
+        assert!(parse(&["--extra", "100"]).is_err());
+        // `--check` writes nothing: an `--out` beside it would be ignored.
+        assert!(parse(&["--check", "--out", "x.rs"]).is_err());
+        let check = parse(&["--check", "--extra", "3"]).expect("--check --extra");
+        assert!(check.check && check.extra == 3);
+        let fit = parse(&["--out", "x.rs"]).expect("--out");
+        assert!(!fit.check && fit.out == Path::new("x.rs"));
+        assert_eq!(parse(&[]).expect("no arguments").out, Path::new("shared/src/ltc_table.rs"));
     }
-    std::fs::rename(&tmp, path)
+
+    #[test]
+    fn a_failed_write_leaves_no_temporary_file() {
+        let dir = tempfile::tempdir().unwrap();
+        // A directory where the file should go: the rename over it fails after the write.
+        let blocked = dir.path().join("blocked.rs");
+        std::fs::create_dir(&blocked).unwrap();
+        assert!(write_atomically(&blocked, b"table").is_err());
+        let names =
+            |dir: &Path| -> Vec<_> { std::fs::read_dir(dir).unwrap().map(|e| e.unwrap().file_name()).collect() };
+        assert_eq!(names(dir.path()), ["blocked.rs"]);
+
+        let out = dir.path().join("table.rs");
+        write_atomically(&out, b"table").unwrap();
+        assert_eq!(std::fs::read(&out).unwrap(), b"table");
+        let mut written = names(dir.path());
+        written.sort();
+        assert_eq!(written, ["blocked.rs", "table.rs"]);
+    }
 }
