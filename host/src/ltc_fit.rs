@@ -135,8 +135,11 @@
 //!   ([`sphere_form_factor`]). That last one has its **own** coordinates on the same grid:
 //!   `row ↔ (z_F + 1)/2`, `col ↔ |F|`, where `F` is the vector form factor of the (unclipped)
 //!   light in the LTC's cosine space (with the 1/2π of the edge integral built in) and
-//!   `z_F = F.z/|F|`; the form factor is then `|F|·sphere`. Polygons can use horizon clipping
-//!   instead and ignore `sphere`.
+//!   `z_F = F.z/|F|`; the form factor is then `|F|·sphere`. The column is kept for sphere lights
+//!   (that clipless horizon-clipping variant); **no kernel reads it**: raywave's shade stage
+//!   integrates quad lights only (it refuses sphere lights), clips them to the horizon instead,
+//!   and its lookup interpolates `sphere` with the other amplitudes but returns only magnitude,
+//!   fresnel and `w`.
 
 use glam::{DMat3, DVec3, Mat3};
 use rayon::prelude::*;
@@ -634,7 +637,9 @@ pub fn nelder_mead<const D: usize>(
 // The fit
 // ---------------------------------------------------------------------------------------------
 
-/// Parameters of the fit (all recorded in the generated file's header).
+/// Parameters of the fit. Every one that affects the stored values is recorded in the generated
+/// file's header; [`FitConfig::error_samples`], which sets only the precision of the reported
+/// error ([`CellFit::rel_l1_error`]), is not.
 #[derive(Copy, Clone, Debug, PartialEq)]
 pub struct FitConfig {
     /// `n`: each error evaluation uses `n²` samples of each LTC lobe and `n²` BRDF samples
@@ -1016,7 +1021,7 @@ pub fn fit_table(cfg: &FitConfig, progress: &(dyn Fn(usize) + Sync)) -> LtcTable
 }
 
 // ---------------------------------------------------------------------------------------------
-// Sphere form factor (the clipless path)
+// Sphere form factor (the clipless path: stored for sphere lights, read by no kernel)
 // ---------------------------------------------------------------------------------------------
 
 /// Projected solid angle `∫_cap max(0, cos θ) dω` of a spherical cap of angular radius `σ`
@@ -1049,7 +1054,8 @@ pub fn sphere_cap_projected_solid_angle(z: f64, sin2_sigma: f64) -> f64 {
 
 /// The clipless-path table value: the horizon-clipped form factor of a sphere cap divided by its
 /// unclipped vector form factor length `|F| = sin² σ`, as a function of `z = cos ω` and `len = |F|`:
-/// `I(ω, σ)/(π·len)` (= `max(z, 0)` when `len = 0`). ltc_code's `ltc_2.w`.
+/// `I(ω, σ)/(π·len)` (= `max(z, 0)` when `len = 0`). ltc_code's `ltc_2.w`. Stored for sphere lights;
+/// unused by the quad path, which clips each quad to the horizon (see the module documentation).
 pub fn sphere_form_factor(z: f64, len: f64) -> f64 {
     if len <= 0.0 {
         return z.max(0.0);
@@ -1079,7 +1085,7 @@ pub struct PackedTable<'a> {
     pub matrix: &'a [[f32; 4]],
     /// `LTC_MATRIX_2`: the second lobe's.
     pub matrix_2: &'a [[f32; 4]],
-    /// `LTC_AMPLITUDE`: `(magnitude, fresnel, weight, sphere)`.
+    /// `LTC_AMPLITUDE`: `(magnitude, fresnel, weight, sphere)` (`sphere` read by no kernel).
     pub amplitude: &'a [[f32; 4]],
 }
 
@@ -1163,7 +1169,8 @@ pub fn packed_table_source(c: &FitConfig, table: PackedTable<'_>) -> String {
 //! * `LTC_AMPLITUDE[i] = (magnitude, fresnel, w, sphere)`: specular albedo
 //!   `F0·magnitude + (1 − F0)·fresnel`; `w` the first lobe's weight; `sphere` is the
 //!   horizon-clipped sphere form factor over `|F|` at `row = 63·(z + 1)/2`, `col = 63·|F|`
-//!   (clipless path).
+//!   (clipless path), kept for sphere lights and read by no kernel: the shade stage integrates
+//!   quad lights only, clipped to the horizon.
 
 /// Cells per table axis.
 pub const LTC_SIZE: u32 = {n};
@@ -1433,7 +1440,8 @@ mod tests {
     #[test]
     fn committed_file_is_what_the_generator_writes() {
         // Same header (fit parameters, version, layout) and formatting: a fit with a non-default
-        // configuration, or an edit of the header or the format, shows up here; a value edited in
+        // value of a parameter the header records (every one but `error_samples`, which changes
+        // no stored value), or an edit of the header or the format, shows up here; a value edited in
         // place (the expected text is written from the committed values) in the digest the
         // generator wrote. The re-fit of `CHECK_CELLS` and the table's own tests check values.
         let committed = include_str!("../../shared/src/ltc_table.rs");

@@ -21,7 +21,8 @@
 //! * `LTC_AMPLITUDE[i] = (magnitude, fresnel, w, sphere)`: specular albedo
 //!   `F0·magnitude + (1 − F0)·fresnel`; `w` the first lobe's weight; `sphere` is the
 //!   horizon-clipped sphere form factor over `|F|` at `row = 63·(z + 1)/2`, `col = 63·|F|`
-//!   (clipless path).
+//!   (clipless path), kept for sphere lights and read by no kernel: the shade stage integrates
+//!   quad lights only, clipped to the horizon.
 
 /// Cells per table axis.
 pub const LTC_SIZE: u32 = 64;

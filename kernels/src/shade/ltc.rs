@@ -72,7 +72,10 @@ impl LtcLobe {
 
 /// Bilinear lookup of the lobe for perceptual `roughness` ∈ [0, 1] and `cos_theta_v = n·v`
 /// (clamped to [0, 1]) in `table` ([`LTC_TABLE_LEN`] entries): rows are roughness, columns
-/// `sqrt(1 − n·v)`, samples at `i/63`, as the table's header documents.
+/// `sqrt(1 − n·v)`, samples at `i/63`, as the table's header documents. Of each cell's amplitudes
+/// `(magnitude, fresnel, w, sphere)` the lobe takes the first three; the fourth, the sphere form
+/// factor, is kept in the table for sphere lights (the clipless horizon-clipping variant) and
+/// unused by this quad path, which clips each light to the horizon.
 ///
 /// The four cells' mixtures are blended lobe by lobe, each lobe's `M⁻¹` weighted by the mass it
 /// carries in its cell (bilinear weight × lobe weight), after each cell's two lobes are put in
