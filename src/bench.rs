@@ -142,8 +142,13 @@ pub const CPU_SETTLE_SECONDS: f64 = 0.5;
 /// 1980 MHz boost at once, for a few seconds, which load then keeps.
 pub const GPU_SETTLE_SECONDS: f64 = 5.0;
 
-/// Longest warm-up: past it the measurement starts even if the times are still falling.
-pub const MAX_WARM_UP_SECONDS: f64 = 30.0;
+/// Longest the times may keep falling: a warm-up of settling time `S` ends at the first run that
+/// ends past `S +` this, even if they still fall. Measured beyond `S` (the first round counts as
+/// a fall, so a limit of its own would leave settling times near it unreachable).
+pub const MAX_FALLING_SECONDS: f64 = 30.0;
+
+/// Longest settling time accepted (`--settle-seconds`).
+pub const MAX_SETTLE_SECONDS: f64 = 30.0;
 
 /// The warm-up runs in rounds of at least this long and at least [`WARM_UP_ROUND_RUNS`] runs.
 const WARM_UP_ROUND_SECONDS: f64 = 0.25;
@@ -164,14 +169,14 @@ const FALLING_FRACTION: f64 = 0.02;
 pub const SUSTAIN_SECONDS: f64 = 0.05;
 
 /// `settle_seconds` (`--settle-seconds`) if it is a settling time the warm-up takes:
-/// finite, within `0..=`[`MAX_WARM_UP_SECONDS`]; else a typed error naming `settle-seconds`.
+/// finite, within `0..=`[`MAX_SETTLE_SECONDS`]; else a typed error naming `settle-seconds`.
 pub(crate) fn check_settle_seconds(settle_seconds: f64) -> Result<f64> {
-    if (0.0..=MAX_WARM_UP_SECONDS).contains(&settle_seconds) {
+    if (0.0..=MAX_SETTLE_SECONDS).contains(&settle_seconds) {
         Ok(settle_seconds)
     } else {
         Err(Error::InvalidParameter {
             name: "settle-seconds",
-            reason: format!("{settle_seconds} is not within 0..={MAX_WARM_UP_SECONDS} s"),
+            reason: format!("{settle_seconds} is not within 0..={MAX_SETTLE_SECONDS} s"),
         })
     }
 }
@@ -179,8 +184,8 @@ pub(crate) fn check_settle_seconds(settle_seconds: f64) -> Result<f64> {
 /// Runs `run`, which returns the seconds it measured, untimed until those times have stopped
 /// falling for `settle_seconds` ([`CPU_SETTLE_SECONDS`], [`GPU_SETTLE_SECONDS`]): in rounds
 /// (`WARM_UP_ROUND_SECONDS`, `WARM_UP_ROUND_RUNS`), each round's median against the best
-/// before it (`FALLING_FRACTION`), until the first run that ends past [`MAX_WARM_UP_SECONDS`]
-/// (then with a note on stderr). Returns the warm-up's seconds. Every `raywave bench` runs it before it measures, and
+/// before it (`FALLING_FRACTION`), until the first run that ends past `settle_seconds +`
+/// [`MAX_FALLING_SECONDS`] (then with a note on stderr). Returns the warm-up's seconds. Every `raywave bench` runs it before it measures, and
 /// so does criterion's `workgroup_size` group.
 pub fn warm_up(settle_seconds: f64, run: impl FnMut() -> Result<f64>) -> Result<f64> {
     let start = Instant::now();
@@ -191,13 +196,13 @@ pub fn warm_up(settle_seconds: f64, run: impl FnMut() -> Result<f64>) -> Result<
 /// simulated one in the tests, so that they do not depend on how fast the machine runs them.
 fn warm_up_on(mut now: impl FnMut() -> f64, settle_seconds: f64, mut run: impl FnMut() -> Result<f64>) -> Result<f64> {
     let (mut best, mut last_fall) = (f64::INFINITY, 0.0);
+    let limit = settle_seconds + MAX_FALLING_SECONDS;
     loop {
         let round_start = now();
         let mut times = Vec::new();
         // A round ends early at the limit: runs that each take seconds do not fill one in time.
         while times.is_empty()
-            || (times.len() < WARM_UP_ROUND_RUNS || now() - round_start < WARM_UP_ROUND_SECONDS)
-                && now() < MAX_WARM_UP_SECONDS
+            || (times.len() < WARM_UP_ROUND_RUNS || now() - round_start < WARM_UP_ROUND_SECONDS) && now() < limit
         {
             times.push(run()?);
         }
@@ -209,12 +214,13 @@ fn warm_up_on(mut now: impl FnMut() -> f64, settle_seconds: f64, mut run: impl F
         if elapsed - last_fall >= settle_seconds {
             return Ok(elapsed);
         }
-        if elapsed >= MAX_WARM_UP_SECONDS {
+        if elapsed >= limit {
             // The times fell last `elapsed − last_fall` ago (the first round counts as a fall).
             let steady = elapsed - last_fall;
             crate::output_line::warn(&format!(
-                "note: warm-up ended at its {MAX_WARM_UP_SECONDS} s limit after {elapsed:.1} s, the times steady for \
-                 {steady:.1} s of the {settle_seconds} s asked (now {round:.3e} s a run)"
+                "note: warm-up ended at its {limit} s limit ({settle_seconds} s settling + {MAX_FALLING_SECONDS} s) \
+                 after {elapsed:.1} s, the times steady for {steady:.1} s of the {settle_seconds} s asked (now \
+                 {round:.3e} s a run)"
             ));
             return Ok(elapsed);
         }
@@ -601,11 +607,25 @@ mod tests {
         assert_eq!(simulated_warm_up(0.0, |_| 1e-3), (WARM_UP_ROUND_SECONDS, 16));
     }
 
-    /// Times that never stop falling end the warm-up at [`MAX_WARM_UP_SECONDS`].
+    /// Times that never stop falling end the warm-up [`MAX_FALLING_SECONDS`] past its settling
+    /// time.
     #[test]
     fn times_that_keep_falling_end_the_warm_up_at_its_limit() {
         let (seconds, _) = simulated_warm_up(5.0, |n| 0.9f64.powi(n as i32));
-        assert!((MAX_WARM_UP_SECONDS..=MAX_WARM_UP_SECONDS + WARM_UP_ROUND_SECONDS).contains(&seconds), "{seconds}");
+        let limit = 5.0 + MAX_FALLING_SECONDS;
+        assert!((limit..=limit + WARM_UP_ROUND_SECONDS).contains(&seconds), "{seconds}");
+    }
+
+    /// The longest settling time accepted is one steady times meet: they end the warm-up by
+    /// settling, its first round's end (the first fall) plus the settling time, not at the limit
+    /// (which once lay at 30 s from the start, so that a settling time near 30 s was never met).
+    #[test]
+    fn steady_times_meet_the_longest_settling_time_accepted() {
+        let settle = check_settle_seconds(MAX_SETTLE_SECONDS).expect("the longest settling time");
+        let (seconds, _) = simulated_warm_up(settle, |_| 1e-3);
+        let settled = WARM_UP_ROUND_SECONDS + settle;
+        assert!((settled..=settled + WARM_UP_ROUND_SECONDS).contains(&seconds), "{seconds} s");
+        assert!(seconds < settle + MAX_FALLING_SECONDS, "{seconds} s: ended at the limit");
     }
 
     /// Runs of 20 s each: the warm-up stops at the first run that ends past its limit (two runs,

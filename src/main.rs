@@ -64,8 +64,9 @@ struct ErrorVsTimeArgs {
     plot: Option<PathBuf>,
     /// Steady-state milliseconds: per scene, after its reference, run 1-spp frames untimed in
     /// benchmark mode until their times have not fallen for S seconds (0..=30; 0 still runs one
-    /// warm-up round, at least 3 frames and 0.25 s), then measure in benchmark mode (default:
-    /// each stage once, as a GPU may run it at idle clocks).
+    /// warm-up round, at least 3 frames and 0.25 s; times still falling S + 30 s in end it, with
+    /// a note), then measure in benchmark mode (default: each stage once, as a GPU may run it at
+    /// idle clocks).
     #[arg(long, value_name = "S")]
     settle_seconds: Option<f64>,
     #[command(flatten)]
@@ -256,7 +257,7 @@ struct VulkanBenchArgs {
     workgroup_sizes: Vec<u32>,
     /// Seconds the Vulkan times must have stopped falling before they are measured (0..=30;
     /// default 5, for the GPU's clocks to rise; 0 still runs one warm-up round, at least 3 runs
-    /// and 0.25 s).
+    /// and 0.25 s; times still falling S + 30 s in end it, with a note).
     #[arg(long)]
     settle_seconds: Option<f64>,
 }
@@ -345,8 +346,9 @@ struct RenderArgs {
     validate: bool,
     /// Steady-state stage times: render untimed frames, in benchmark mode, until their times
     /// have not fallen for S seconds (0..=30; 0 still renders one warm-up round, at least 3
-    /// frames and 0.25 s), then time one more (default: one frame, whose single dispatches a GPU
-    /// may run at idle clocks). The image is the same.
+    /// frames and 0.25 s; times still falling S + 30 s in end it, with a note), then time one
+    /// more (default: one frame, whose single dispatches a GPU may run at idle clocks). The image
+    /// is the same.
     #[arg(long, value_name = "S")]
     settle_seconds: Option<f64>,
     /// Output PNG file.
