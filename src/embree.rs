@@ -16,6 +16,8 @@ const BUFFER_TYPE_VERTEX: u32 = 1;
 const FORMAT_UINT3: u32 = 0x5003;
 const FORMAT_FLOAT3: u32 = 0x9003;
 const BUILD_QUALITY_HIGH: u32 = 2;
+/// `RTC_ERROR_NONE`.
+const ERROR_NONE: u32 = 0;
 
 /// `struct RTCRay` (rtcore_ray.h).
 #[repr(C, align(16))]
@@ -67,6 +69,7 @@ const _: () = assert!(std::mem::size_of::<RtcIntersectContext>() == 24);
 unsafe extern "C" {
     fn rtcNewDevice(config: *const std::ffi::c_char) -> *mut c_void;
     fn rtcReleaseDevice(device: *mut c_void);
+    fn rtcGetDeviceError(device: *mut c_void) -> u32;
     fn rtcNewScene(device: *mut c_void) -> *mut c_void;
     fn rtcSetSceneBuildQuality(scene: *mut c_void, quality: u32);
     fn rtcReleaseScene(scene: *mut c_void);
@@ -108,6 +111,30 @@ impl Drop for EmbreeScene {
             rtcReleaseDevice(self.device);
         }
     }
+}
+
+/// The first error Embree recorded on `device` since the last call (`rtcGetDeviceError`, which
+/// clears it) as the module's typed error, naming the call it was found after: Embree's commits
+/// return nothing, and a failed one (out of memory, say) leaves a scene every ray misses.
+///
+/// # Safety
+/// `device` is a live Embree device.
+unsafe fn check_device(device: *mut c_void, after: &str) -> Result<()> {
+    // SAFETY: the caller's.
+    let code = unsafe { rtcGetDeviceError(device) };
+    if code == ERROR_NONE {
+        return Ok(());
+    }
+    // `enum RTCError` (rtcore_device.h).
+    let what = match code {
+        2 => "invalid argument",
+        3 => "invalid operation",
+        4 => "out of memory",
+        5 => "unsupported CPU",
+        6 => "cancelled",
+        _ => "unknown error",
+    };
+    Err(Error::InvalidParameter { name: "embree", reason: format!("{after}: {what} (RTCError {code})") })
 }
 
 fn context() -> RtcIntersectContext {
@@ -163,11 +190,13 @@ impl EmbreeScene {
                 rtcCommitGeometry(geometry);
                 let id = rtcAttachGeometry(handle, geometry);
                 rtcReleaseGeometry(geometry);
+                check_device(device, &format!("rtcCommitGeometry of mesh {index}"))?;
                 if id != index as u32 {
                     return Err(unavailable("geometry ids are not dense"));
                 }
             }
             rtcCommitScene(handle);
+            check_device(device, "rtcCommitScene")?;
             this.build_time = start.elapsed();
             Ok(this)
         }
@@ -206,5 +235,35 @@ impl EmbreeScene {
         // SAFETY: as in `closest_hit`.
         unsafe { rtcOccluded1(self.scene, &mut context, &mut rtc) };
         rtc.tfar == f32::NEG_INFINITY
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// An error Embree records (here a build quality it does not know) is the module's typed error
+    /// naming the call it followed, and is read once: the check after it passes. `build` runs this
+    /// check after every `rtcCommitGeometry` and after `rtcCommitScene`, whose failures (out of
+    /// memory) a test cannot bring about.
+    #[test]
+    fn a_device_error_is_a_typed_error_naming_the_call() {
+        // SAFETY: plain Embree API calls on a device and scene released at the end.
+        unsafe {
+            let device = rtcNewDevice(std::ptr::null());
+            assert!(!device.is_null());
+            let scene = rtcNewScene(device);
+            assert!(check_device(device, "rtcNewScene").is_ok());
+            rtcSetSceneBuildQuality(scene, 99);
+            let error = check_device(device, "rtcSetSceneBuildQuality").unwrap_err();
+            assert!(
+                matches!(&error, Error::InvalidParameter { name: "embree", reason }
+                    if reason.starts_with("rtcSetSceneBuildQuality: ")),
+                "{error}"
+            );
+            assert!(check_device(device, "rtcSetSceneBuildQuality").is_ok(), "read twice");
+            rtcReleaseScene(scene);
+            rtcReleaseDevice(device);
+        }
     }
 }
