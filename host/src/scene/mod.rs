@@ -469,7 +469,10 @@ fn triangle_bounds(meshes: &[Mesh]) -> (Vec3, Vec3) {
 pub(crate) fn framing_camera(meshes: &[Mesh]) -> Camera {
     let (lo, hi) = triangle_bounds(meshes);
     let centre = (lo + hi) * 0.5;
-    let radius = ((hi - lo).length() * 0.5).max(1e-3);
+    // At least √(f32::MIN_POSITIVE) ≈ 10⁻¹⁹, only so that the camera's distance has a normal
+    // square and its view direction normalizes: a floor of 10⁻³ framed a scene 3·10⁻⁵ across from
+    // 70 times too far, and no camera ray hit it.
+    let radius = ((hi - lo).length() * 0.5).max(f32::MIN_POSITIVE.sqrt());
     // At least 64 steps of f32 from the centre: far from the origin, the 45° camera of a small
     // scene (a 1 mm triangle at z = 10⁵) rounded onto its look-at point and was refused as
     // degenerate. Farther away, the field of view narrows to keep the scene framed.
@@ -535,6 +538,33 @@ mod tests {
         let scene = scene_with(mesh).unwrap();
         assert_eq!(scene.dropped_degenerate(), 1);
         assert_eq!(scene.bounds(), (Vec3::ZERO, Vec3::new(1.0, 1.0, 0.0)));
+    }
+
+    /// A 2 × 2 wall and a 0.4 × 0.4 lamp 1 above it, scaled by 2⁻¹³ (≈ 10⁻⁴) and 2⁻²⁰ (≈ 10⁻⁶):
+    /// the framing camera's rays hit it exactly as at scale 1 (a power of two scales the camera
+    /// and the hits without rounding). A floor of 10⁻³ on the radius had framed the 10⁻⁴ scene from
+    /// 5 times too far and the 10⁻⁶ one from 700 times, where no ray hit.
+    #[test]
+    fn tiny_scenes_are_framed_as_at_scale_one() {
+        let hits = |scale: f32| {
+            let quad = |half: f32, z: f32| {
+                let corners = [[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]];
+                corners.map(|[x, y]| Vec3::new(x * half, y * half, z) * scale).to_vec()
+            };
+            let meshes: Vec<Mesh> = [(1.0, 0.0), (0.2, 1.0)]
+                .into_iter()
+                .map(|(half, z)| triangle_mesh(quad(half, z), vec![[0, 1, 2], [0, 2, 3]]))
+                .collect();
+            let camera = framing_camera(&meshes);
+            let scene = Scene::new("tiny", meshes, camera).unwrap();
+            let rays = crate::cpu::generate(&crate::frame::generate_params(&scene, 32, 32, 0)).unwrap();
+            crate::cpu::trace(&crate::cpu::CpuScene::build(&scene).unwrap(), &rays).unwrap().hit_count()
+        };
+        let at_one = hits(1.0);
+        assert!(at_one > 32 * 32 / 8, "{at_one} hits at scale 1");
+        for log2 in [-13, -20] {
+            assert_eq!(hits(2f32.powi(log2)), at_one, "scale 2^{log2}");
+        }
     }
 
     #[test]
