@@ -314,6 +314,11 @@ pub(crate) fn check_shade_inputs(
 /// [1, (1 + 2·10¹⁸)²], which `f32` holds, so it normalizes to a finite unit vector.
 pub const MAX_IMAGE_PLANE_AXIS: f32 = 1e18;
 
+/// Least squared length of the generate stage's `right` and `up` axes: a normal float (lengths
+/// from ~1.1·10⁻¹⁹), so that they normalize — the thin lens does — and can be judged orthogonal
+/// to `forward`.
+pub const MIN_IMAGE_PLANE_AXIS_SQUARED: f32 = f32::MIN_POSITIVE;
+
 /// Relative tolerance of the camera basis' documented shape ([`GenerateParams`]): `|forward|`
 /// within this of 1, and `right`, `up` orthogonal to it within this fraction of their length —
 /// far above the rounding of a basis built from normalized cross products (~10⁻⁷).
@@ -333,7 +338,7 @@ pub(crate) fn check_generate_params(params: &GenerateParams) -> Result<()> {
     // Long enough to normalize (the thin lens does) and to be judged, at most the bound, and
     // orthogonal to `forward`.
     let usable = |axis: glam::Vec3| {
-        axis.length_squared() >= f32::MIN_POSITIVE
+        axis.length_squared() >= MIN_IMAGE_PLANE_AXIS_SQUARED
             && axis.length() <= MAX_IMAGE_PLANE_AXIS
             && axis.dot(forward).abs() <= CAMERA_BASIS_TOLERANCE * axis.length()
     };

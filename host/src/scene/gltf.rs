@@ -901,6 +901,27 @@ impl PlacedCamera {
         if !(yfov > 0.0 && yfov < std::f32::consts::PI) {
             return Err(format!("cameras[{}].perspective.yfov is {yfov} rad; it must be in (0, π)", camera.index()));
         }
+        // The field of view in degrees, as the camera keeps it, and the image plane's half height
+        // that the generate stage forms from it (`frame::generate_params_with`): 3.1415925 rad
+        // rounded to 180°, which `Scene::new` refuses, and 10⁻³⁰ rad gave a half height that the
+        // generate stage refuses — neither error named the field.
+        let vertical_fov_degrees = yfov.to_degrees();
+        let half_height = (vertical_fov_degrees.to_radians() * 0.5).tan();
+        if vertical_fov_degrees >= 180.0 {
+            return Err(format!(
+                "cameras[{}].perspective.yfov is {yfov} rad, which rounds to {vertical_fov_degrees}° in f32; it \
+                 must be below 180°",
+                camera.index()
+            ));
+        }
+        if half_height * half_height < crate::backend::MIN_IMAGE_PLANE_AXIS_SQUARED {
+            return Err(format!(
+                "cameras[{}].perspective.yfov is {yfov:e} rad; the image plane's half height tan(yfov / 2) = \
+                 {half_height:e} must be at least {:e} to normalize in f32",
+                camera.index(),
+                crate::backend::MIN_IMAGE_PLANE_AXIS_SQUARED.sqrt()
+            ));
+        }
         let (node, camera) = (node.index(), camera.index());
         let position = world.transform_point3(Vec3::ZERO);
         if !in_range(position) {
@@ -918,7 +939,6 @@ impl PlacedCamera {
                  (a zero scale?)"
             ));
         }
-        let vertical_fov_degrees = yfov.to_degrees();
         Ok(Self { node, camera, position, forward, up: up.as_vec3(), vertical_fov_degrees, mirrored: mirrors(world) })
     }
 
@@ -1352,6 +1372,14 @@ mod tests {
             ("\"metallicFactor\": 0", "\"metallicFactor\": -1", "materials[0].pbrMetallicRoughness.metallicFactor"),
             ("\"emissiveFactor\": [\n    1,", "\"emissiveFactor\": [\n    3e38,", "materials[1].emissiveFactor"),
             ("\"yfov\": 0.9", "\"yfov\": 4.0", "cameras[0].perspective.yfov is 4 rad"),
+            // Within (0, π), but 180° once in degrees, or an image plane too small to normalize:
+            // once refused by `Scene::new` and the generate stage without naming the field.
+            (
+                "\"yfov\": 0.9",
+                "\"yfov\": 3.1415925",
+                "cameras[0].perspective.yfov is 3.1415925 rad, which rounds to 180° in f32; it must be below 180°",
+            ),
+            ("\"yfov\": 0.9", "\"yfov\": 1e-30", "cameras[0].perspective.yfov is 1e-30 rad; the image plane's"),
             (
                 "\"camera\": 0,",
                 "\"camera\": 0, \"scale\": [0, 0, 0],",
@@ -1388,6 +1416,12 @@ mod tests {
             let f = file(&text);
             let err = load(f.path()).unwrap_err();
             assert!(matches!(err, Error::SceneLoad { .. }) && err.to_string().contains(field), "{field}: {err}");
+        }
+        // Just inside both of yfov's bounds: the scene loads and the generate stage takes its camera.
+        for yfov in ["3.14159", "1e-18"] {
+            let f = file(&lamp.replacen("\"yfov\": 0.9", &format!("\"yfov\": {yfov}"), 1));
+            let scene = load(f.path()).unwrap_or_else(|e| panic!("yfov {yfov}: {e}"));
+            crate::backend::check_generate_params(&crate::frame::generate_params(&scene, 4, 4, 0)).unwrap();
         }
     }
 
