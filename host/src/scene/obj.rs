@@ -362,8 +362,10 @@ fn coordinates(words: &str) -> Vec<f32> {
 /// the face: tobj fans each one out from its first corner, which covers a convex face (or one
 /// whose first corner sees all the others) but fills a concave one's notch with a triangle that
 /// faces backwards — wrong geometry without a word. Each fan triangle's normal must point along
-/// the face's own (Newell's) normal; an error names the face's line. Faces with missing or
-/// unreadable corners are left to tobj and [`check_vertices_and_indices`].
+/// the face's own (Newell's) normal, and that normal must not vanish against the triangles'
+/// areas, as it does where they cancel (a self-crossing face of zero net area); an error names
+/// the face's line. Faces with missing or unreadable corners are left to tobj and
+/// [`check_vertices_and_indices`].
 fn check_polygon_fans(text: &[u8]) -> std::result::Result<(), String> {
     // Every vertex position as tobj keeps it (f32, 12 bytes each); NaN where a line has fewer
     // than three numbers.
@@ -397,15 +399,24 @@ fn check_polygon_fans(text: &[u8]) -> std::result::Result<(), String> {
         let Some(points) = corners.iter().map(corner).collect::<Option<Vec<DVec3>>>() else { continue };
         let n = points.len();
         let normal: DVec3 = (0..n).map(|i| points[i].cross(points[(i + 1) % n])).sum();
-        let folds = (1..n - 1).any(|i| {
-            let fan = (points[i] - points[0]).cross(points[i + 1] - points[0]);
-            // A little below 0 still counts as collinear corners, not as a fold.
-            fan.dot(normal) < -1e-9 * fan.length() * normal.length()
-        });
+        // The fan's triangles, as twice their area vectors (which sum to `normal`).
+        let fan = || (1..n - 1).map(|i| (points[i] - points[0]).cross(points[i + 1] - points[0]));
+        // A little below 0 still counts as collinear corners, not as a fold.
+        let folds = fan().any(|triangle| triangle.dot(normal) < -1e-9 * triangle.length() * normal.length());
         if folds {
             return Err(format!(
                 "line {line}: this {n}-cornered face is not convex where it is split into triangles from its \
                  first corner, which would fill its notch with a backward-facing triangle; split it into \
+                 triangles or convex faces"
+            ));
+        }
+        // A face whose triangles' areas cancel (a bowtie symmetric about its crossing) has no
+        // normal for them to disagree with: one of them faces backwards all the same.
+        let area: f64 = fan().map(DVec3::length).sum();
+        if normal.length() < 1e-9 * area {
+            return Err(format!(
+                "line {line}: this {n}-cornered face crosses itself so that its area cancels out, and the \
+                 triangles it is split into from its first corner would face opposite ways; split it into \
                  triangles or convex faces"
             ));
         }
@@ -837,6 +848,12 @@ mod tests {
         // The same corners from the notch: every fan triangle faces the same way — it is the face.
         let from_the_notch = "v 0 0 0\nv 2 0 0\nv 2 2 0\nv 1.5 0.5 0\nf 4 1 2 3\n";
         assert_eq!(load(obj_file(from_the_notch).path()).unwrap().triangle_count(), 2);
+        // A bowtie symmetric about its crossing: its lobes' areas cancel, so its Newell normal is
+        // zero and no fan triangle points against it, but the fan's two triangles face opposite
+        // ways (it loaded as such).
+        let bowtie = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 4 3\n";
+        let err = load(obj_file(bowtie).path()).unwrap_err().to_string();
+        assert!(err.contains("line 5: this 4-cornered face crosses itself so that its area cancels out"), "{err}");
         // Convex faces, a pentagon far from the origin with three collinear corners, a face that
         // refers to corners defined after it, and quads wound either way all load.
         let convex = "v 1e5 0 0\nv 100002 0 0\nv 100004 0 0\nv 100004 2 0\nv 1e5 2 0\nf 1 2 3 4 5\nf 5 4 3 2 1\n";
