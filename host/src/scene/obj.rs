@@ -22,12 +22,13 @@ pub fn load(path: &Path) -> Result<Scene> {
     if path.is_dir() {
         return Err(load_error("is a directory".into()));
     }
-    let text = read_regular_file(path, u64::MAX).map_err(|e| load_error(e.to_string()))?;
-    check_vertices_and_indices(path, &text, Limits { positions: MAX_VERTICES, triangles: MAX_TRIANGLES })?;
-    check_polygon_fans(&text).map_err(load_error)?;
+    let bytes = read_regular_file(path, u64::MAX).map_err(|e| load_error(e.to_string()))?;
+    let text = without_byte_order_mark(&bytes);
+    check_vertices_and_indices(path, text, Limits { positions: MAX_VERTICES, triangles: MAX_TRIANGLES })?;
+    check_polygon_fans(text).map_err(load_error)?;
     let options = tobj::LoadOptions { triangulate: true, single_index: true, ..Default::default() };
     // tobj reads line by line and stops at its first error, so the reader's line is the one at fault.
-    let surfaces = surfaces_only(&text);
+    let surfaces = surfaces_only(text);
     let mut reader = LineCounter::new(&surfaces[..]);
     let directory = path.parent().unwrap_or(Path::new(""));
     // tobj's material-library errors carry no text of their own: the first one's is kept here.
@@ -79,7 +80,7 @@ pub fn load(path: &Path) -> Result<Scene> {
         }
     };
     let libraries = libraries.into_inner();
-    check_material_names(&text, &libraries, &materials).map_err(load_error)?;
+    check_material_names(text, &libraries, &materials).map_err(load_error)?;
     // Each MTL entry as a material, checked once, naming its library (tobj appends each
     // library's materials in the order read).
     let library_of = libraries.iter().flat_map(|(library, count)| std::iter::repeat_n(library, *count));
@@ -121,6 +122,13 @@ pub fn load(path: &Path) -> Result<Scene> {
     Ok(Scene::new(&name, meshes, camera)?.with_unrendered(unrendered))
 }
 
+/// `bytes` without a leading UTF-8 byte-order mark (EF BB BF), which Windows editors write: kept,
+/// it made the first line's keyword one that no reader knows (an OBJ's `mtllib`, an MTL's
+/// `newmtl`), and the file failed on a later line for want of it.
+fn without_byte_order_mark(bytes: &[u8]) -> &[u8] {
+    bytes.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(bytes)
+}
+
 /// The OBJ `text` as raywave reads it, line numbers kept:
 /// - polylines (`l`) blanked: tobj 4.0.5 reads them as faces, so `l 1 2 3 4` around a square
 ///   became a filled quad (under an emissive material, a quad light), and a polyline has no area
@@ -157,16 +165,18 @@ fn surfaces_only(text: &[u8]) -> std::borrow::Cow<'_, [u8]> {
     std::borrow::Cow::Owned(kept)
 }
 
-/// The text of the material library at `path`, or why it cannot be used: the OS's reason, not a
-/// regular file, or the line at fault — one that is not UTF-8 text, or a colour (`Ka`, `Kd`, `Ks`, `Ke`) with
+/// The text of the material library at `path`, less a leading byte-order mark
+/// ([`without_byte_order_mark`]), or why it cannot be used: the OS's reason, not a regular file,
+/// or the line at fault — one that is not UTF-8 text, or a colour (`Ka`, `Kd`, `Ks`, `Ke`) with
 /// fewer than three numbers, refused here before tobj parses the text: tobj 4.0.5 panics on one
 /// (found by fuzzing the loader). Also refused, because tobj would drop them without a word: a
 /// property before the first `newmtl` (it belongs to no material), and a material name defined
 /// twice (the later definition would hide the earlier).
 fn read_material_library(path: &Path) -> std::result::Result<String, String> {
     let bytes = read_regular_file(path, u64::MAX).map_err(|e| e.to_string())?;
-    let text = String::from_utf8(bytes).map_err(|e| {
-        let valid = &e.as_bytes()[..e.utf8_error().valid_up_to()];
+    let bytes = without_byte_order_mark(&bytes);
+    let text = std::str::from_utf8(bytes).map_err(|e| {
+        let valid = &bytes[..e.valid_up_to()];
         format!("line {}: not UTF-8 text", 1 + valid.iter().filter(|&&b| b == b'\n').count())
     })?;
     let mut defined: std::collections::HashMap<&str, usize> = std::collections::HashMap::new();
@@ -192,7 +202,7 @@ fn read_material_library(path: &Path) -> std::result::Result<String, String> {
             _ => {}
         }
     }
-    Ok(text)
+    Ok(text.to_owned())
 }
 
 /// tobj's error `error`, raised while its reader was in line `line`, with that line: the line at
@@ -834,6 +844,26 @@ mod tests {
         assert!(matches!(load(&path), Err(Error::EmptyScene { dropped_degenerate: 0, .. })));
         // Line numbers still name the line at fault.
         std::fs::write(&path, format!("{square}l 1 2\nf 1 2/x 3\n")).unwrap();
+        let err = load(&path).unwrap_err().to_string();
+        assert!(err.contains("line 8: face parse error"), "{err}");
+    }
+
+    /// A UTF-8 byte-order mark (which Windows editors write) before an OBJ's `mtllib` line or an
+    /// MTL's first `newmtl` is no part of them: it had made the OBJ's `usemtl` come "before any
+    /// `mtllib` line", and the MTL's `newmtl` a property of no material. Line numbers still count
+    /// from the line it starts.
+    #[test]
+    fn a_byte_order_mark_is_no_part_of_the_first_line() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("scene.obj");
+        let obj = "mtllib lamp.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nusemtl lamp\nf 1 2 3 4\n";
+        for (obj_mark, mtl_mark) in [("\u{feff}", ""), ("", "\u{feff}"), ("\u{feff}", "\u{feff}")] {
+            std::fs::write(dir.path().join("lamp.mtl"), format!("{mtl_mark}newmtl lamp\nKe 1 1 1\n")).unwrap();
+            std::fs::write(&path, format!("{obj_mark}{obj}")).unwrap();
+            let scene = load(&path).unwrap_or_else(|e| panic!("{obj_mark:?} {mtl_mark:?}: {e}"));
+            assert_eq!(scene.lights().len(), 1, "the lamp material's quad is a light");
+        }
+        std::fs::write(&path, format!("\u{feff}{obj}f 1 2 x\n")).unwrap();
         let err = load(&path).unwrap_err().to_string();
         assert!(err.contains("line 8: face parse error"), "{err}");
     }
