@@ -60,7 +60,7 @@ pub fn check_reps(reps: u32, minimum: u32, why_minimum: &str) -> crate::Result<(
 }
 
 impl SceneReportOptions {
-    /// Checks the options: reps within `1..=`[`MAX_REPS`], no scene listed twice, max-spp a power of two,
+    /// Checks the options: reps within `1..=`[`MAX_REPS`], no scene name empty or listed twice, max-spp a power of two,
     /// reference-spp at least [`MIN_REFERENCE_FACTOR`] × max-spp, the resolution
     /// ([`check_resolution`]) and the reference's sample count
     /// ([`check_samples_per_pixel`](crate::frame::check_samples_per_pixel)); an error names the
@@ -68,6 +68,16 @@ impl SceneReportOptions {
     pub fn check(&self) -> crate::Result<()> {
         let invalid = |name, reason: String| Err(crate::Error::InvalidParameter { name, reason });
         check_reps(self.reps, 1, "")?;
+        if let Some(index) = self.scenes.iter().position(|s| s.trim().is_empty()) {
+            // `--scenes ,` had been refused as a scene `` listed twice, and a trailing comma as
+            // a scene `` of unsupported format.
+            let reason = format!(
+                "entry {} of {} is empty: a comma must stand between two scene names",
+                index + 1,
+                self.scenes.len()
+            );
+            return invalid("scenes", reason);
+        }
         if let Some(repeated) =
             self.scenes.iter().enumerate().find_map(|(i, s)| self.scenes[..i].contains(s).then_some(s))
         {
@@ -192,6 +202,31 @@ pub(crate) fn sum_from_zero(values: impl Iterator<Item = f64>) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// An empty name in `--scenes` (a leading, doubled or trailing comma) is refused as such.
+    #[test]
+    fn an_empty_scene_name_is_refused() {
+        let options = |scenes: &[&str]| SceneReportOptions {
+            scenes: scenes.iter().map(|&s| s.to_owned()).collect(),
+            resolution: 16,
+            reference_spp: 64,
+            max_spp: 4,
+            reps: 1,
+        };
+        options(&["builtin:cornell"]).check().unwrap();
+        for (scenes, expected) in [
+            (&["", ""][..], "entry 1 of 2 is empty"),
+            (&["builtin:cornell", ""], "entry 2 of 2 is empty"),
+            (&["builtin:cornell", " ", "builtin:cornell-two-lights"], "entry 2 of 3 is empty"),
+        ] {
+            match options(scenes).check() {
+                Err(crate::Error::InvalidParameter { name: "scenes", reason }) => {
+                    assert!(reason.starts_with(expected), "{scenes:?}: {reason}")
+                }
+                other => panic!("{scenes:?}: {other:?}"),
+            }
+        }
+    }
 
     #[test]
     fn only_sanitized_values_warn_and_the_warning_names_scene_and_count() {
