@@ -233,6 +233,7 @@ fn parse(bytes: &[u8], base: Option<&Path>) -> std::result::Result<(Document, Ve
     check_position_accessor_indices(document.as_json())?;
     let document = Document::from_json(document.into_json()).map_err(|e| e.to_string())?;
     check_camera_projections(document.as_json())?;
+    check_node_matrices_alone(document.as_json())?;
     let buffers = load_buffers(&document, base, blob)?;
     Ok((document, buffers))
 }
@@ -345,6 +346,37 @@ fn check_camera_projections(root: &gltf::json::Root) -> std::result::Result<(), 
         }
         if defines_other {
             return Err(format!("cameras[{index}].{other}: defined, but the camera's type is {named}"));
+        }
+    }
+    Ok(())
+}
+
+/// Checks that no node has a `matrix` beside a `translation`, `rotation` or `scale` that says
+/// otherwise: glTF 2.0 allows one or the other, and the `gltf` crate takes the matrix and drops
+/// the rest without a word (a node's translation had vanished). Both load where they agree —
+/// each entry within [`TRANSFORM_TOLERANCE`] of the larger of 1 and the matrix's largest — as an
+/// exporter that writes both means them.
+fn check_node_matrices_alone(root: &gltf::json::Root) -> std::result::Result<(), String> {
+    for (index, node) in root.nodes.iter().enumerate() {
+        let Some(matrix) = node.matrix else { continue };
+        if node.translation.is_none() && node.rotation.is_none() && node.scale.is_none() {
+            continue;
+        }
+        let decomposed = Mat4::from_scale_rotation_translation(
+            Vec3::from(node.scale.unwrap_or([1.0; 3])),
+            glam::Quat::from_array(node.rotation.map_or([0.0, 0.0, 0.0, 1.0], |rotation| rotation.0)),
+            Vec3::from(node.translation.unwrap_or([0.0; 3])),
+        );
+        let largest = matrix.iter().fold(1.0f32, |largest, entry| largest.max(entry.abs()));
+        // The largest difference, NaN where any is (a composition that overflowed): `f32::max`
+        // would pass over it.
+        let differences = (Mat4::from_cols_array(&matrix) - decomposed).to_cols_array();
+        let departure = differences.iter().fold(0.0f32, |d, e| if e.is_nan() || e.abs() > d { e.abs() } else { d });
+        if departure.is_nan() || departure > TRANSFORM_TOLERANCE * largest {
+            return Err(format!(
+                "nodes[{index}]: has both a matrix and a translation, rotation or scale, which differ (by up to \
+                 {departure}); glTF allows one or the other"
+            ));
         }
     }
     Ok(())
@@ -659,6 +691,18 @@ fn check_accessor(
         return error(format!(
             "count {count} is outside 1..={limit} (an element per byte of the buffers, at most 2³²−1)"
         ));
+    }
+    // Misaligned data had been read as it lay and refused for the garbage values that gave.
+    let component = accessor.data_type().size();
+    if let Some(view) = accessor.view() {
+        let (offset, in_buffer) = (accessor.offset(), view.offset() as u128 + accessor.offset() as u128);
+        if offset % component != 0 || in_buffer % component as u128 != 0 {
+            return error(format!(
+                "byteOffset {offset} (byte {in_buffer} of its buffer, through bufferViews[{}]) is not a multiple \
+                 of its component size, {component} bytes, as glTF 2.0 requires",
+                view.index()
+            ));
+        }
     }
     let size = accessor.size();
     if let Err(what) = check_span(accessor.view(), accessor.offset(), count, size, buffers) {
@@ -1310,7 +1354,15 @@ mod tests {
                 r#""count":40"#,
                 "40 elements of 12 bytes from byte 0 reach past the end of bufferViews[0]",
             ),
-            (r#""byteOffset":48"#, r#""byteOffset":58"#, "bufferViews[1] (byteOffset 58, byteLength 12) reaches past"),
+            (r#""byteOffset":48"#, r#""byteOffset":52"#, "bufferViews[1] (byteOffset 52, byteLength 12) reaches past"),
+            // Misaligned: once read as they lay, and refused for the garbage values.
+            (
+                r#""count":4,"type":"VEC3""#,
+                r#""count":3,"byteOffset":2,"type":"VEC3""#,
+                "POSITION: accessor 0: byteOffset 2 (byte 2 of its buffer, through bufferViews[0]) is not a multiple \
+                 of its component size, 4 bytes",
+            ),
+            (r#""byteOffset":48"#, r#""byteOffset":47"#, "indices: accessor 1: byteOffset 0 (byte 47 of its buffer"),
             (r#""count":4"#, r#""count":0"#, "POSITION: accessor 0: count 0 is outside"),
             (r#""count":4"#, r#""count":4,"byteOffset":18446744073709551608"#, "from byte 18446744073709551608 reach"),
             (
@@ -1540,9 +1592,10 @@ mod tests {
         }
     }
 
-    /// A node `matrix` that is not translation, rotation and scale (a projective last row) and a
-    /// `rotation` that is not a unit quaternion are errors naming the node's field; a rotation
-    /// off by rounding, and the identity written out, load.
+    /// A node `matrix` that is not translation, rotation and scale (a projective last row), a
+    /// `rotation` that is not a unit quaternion, and a matrix beside a translation that differs are
+    /// errors naming the node (and its field); a rotation off by rounding, the identity written
+    /// out, and a matrix beside the same translation and scale, load.
     #[test]
     fn node_transforms_must_be_what_gltf_allows() {
         let node = r#"{"mesh":0,"translation":[0,0,-2]}"#;
@@ -1553,6 +1606,11 @@ mod tests {
             ),
             (r#"{"mesh":0,"rotation":[0,0,1,1]}"#, "nodes[0].rotation: [0.0, 0.0, 1.0, 1.0] is 1.4142135 long"),
             (r#"{"mesh":0,"rotation":[0,0,0,0]}"#, "nodes[0].rotation"),
+            // A matrix beside a translation it does not hold: the crate had dropped the translation.
+            (
+                r#"{"mesh":0,"matrix":[1,0,0,0, 0,1,0,0, 0,0,1,0, 0,0,0,1],"translation":[0,0,-2]}"#,
+                "nodes[0]: has both a matrix and a translation, rotation or scale, which differ (by up to 2)",
+            ),
         ] {
             let text = quad_gltf(6).replacen(node, bad, 1);
             assert_ne!(text, quad_gltf(6));
@@ -1562,6 +1620,8 @@ mod tests {
         for fine in [
             r#"{"mesh":0,"matrix":[1,0,0,0, 0,1,0,0, 0,0,1,0, 0,0,-2,1]}"#,
             r#"{"mesh":0,"rotation":[0,0,0.7071,0.7071],"translation":[0,0,-2]}"#,
+            // Both, saying the same.
+            r#"{"mesh":0,"matrix":[1,0,0,0, 0,1,0,0, 0,0,1,0, 0,0,-2,1],"translation":[0,0,-2],"scale":[1,1,1]}"#,
         ] {
             let text = quad_gltf(6).replacen(node, fine, 1);
             assert!(load(file(&text).path()).is_ok(), "{fine}");
