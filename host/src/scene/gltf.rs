@@ -692,17 +692,9 @@ fn check_accessor(
             "count {count} is outside 1..={limit} (an element per byte of the buffers, at most 2³²−1)"
         ));
     }
-    // Misaligned data had been read as it lay and refused for the garbage values that gave.
     let component = accessor.data_type().size();
-    if let Some(view) = accessor.view() {
-        let (offset, in_buffer) = (accessor.offset(), view.offset() as u128 + accessor.offset() as u128);
-        if offset % component != 0 || in_buffer % component as u128 != 0 {
-            return error(format!(
-                "byteOffset {offset} (byte {in_buffer} of its buffer, through bufferViews[{}]) is not a multiple \
-                 of its component size, {component} bytes, as glTF 2.0 requires",
-                view.index()
-            ));
-        }
+    if let Err(what) = check_alignment(accessor.view(), accessor.offset(), component) {
+        return error(what);
     }
     let size = accessor.size();
     if let Err(what) = check_span(accessor.view(), accessor.offset(), count, size, buffers) {
@@ -724,6 +716,14 @@ fn check_accessor(
             }
         }
         let index_size = indices.index_type().size();
+        for (part, view, offset, component) in [
+            ("sparse.indices", indices.view(), indices.offset(), index_size),
+            ("sparse.values", values.view(), values.offset(), component),
+        ] {
+            if let Err(what) = check_alignment(Some(view), offset, component) {
+                return error(format!("{part}: {what}"));
+            }
+        }
         if let Err(what) = check_span(Some(indices.view()), indices.offset(), sparse.count(), index_size, buffers) {
             return error(format!("sparse.indices: {what}"));
         }
@@ -813,6 +813,23 @@ impl<'a> SparseIndices<'a> {
         }
         None
     }
+}
+
+/// Checks that data at byte `offset` of `view` starts at a multiple of its `component` size, both
+/// in the view and in its buffer, as glTF 2.0 requires: misaligned data had been read as it lay
+/// and refused for the garbage values that gave. No view (a sparse accessor's zero base) is
+/// aligned.
+fn check_alignment(view: Option<buffer::View>, offset: usize, component: usize) -> std::result::Result<(), String> {
+    let Some(view) = view else { return Ok(()) };
+    let in_buffer = view.offset() as u128 + offset as u128;
+    if !offset.is_multiple_of(component) || !in_buffer.is_multiple_of(component as u128) {
+        return Err(format!(
+            "byteOffset {offset} (byte {in_buffer} of its buffer, through bufferViews[{}]) is not a multiple of \
+             its component size, {component} bytes, as glTF 2.0 requires",
+            view.index()
+        ));
+    }
+    Ok(())
 }
 
 /// Checks that `count ≥ 1` elements of `size` bytes from byte `offset` of `view`, `byteStride`
@@ -1810,6 +1827,10 @@ mod tests {
             let err = load(file(&sparse(count, offset)).path()).unwrap_err().to_string();
             assert!(err.contains("sparse.indices: index") && err.contains(expected), "{err}");
         }
+        // Indices one byte into their view: u16s read across their bytes, once refused (or not)
+        // for what that gave.
+        let err = load(file(&sparse(4, 1)).path()).unwrap_err().to_string();
+        assert!(err.contains("sparse.indices: byteOffset 1 (byte 49 of its buffer"), "{err}");
         // A strided index view, which glTF 2.0 forbids for sparse data: the check read the
         // indices packed (0, 1, 2: valid), the reader strided (0, 2, 2: never checked).
         let strided = sparse(4, 0).replacen(r#""byteLength":12}"#, r#""byteLength":12,"byteStride":4}"#, 1);
