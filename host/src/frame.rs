@@ -111,7 +111,7 @@ pub fn generate_params_with(
     let up = right.cross(forward);
     // Reversed after `up` is formed from it, so that `up` keeps the camera's up side.
     let right = if camera.mirrored { -right } else { right };
-    let tan_half_y = (camera.vertical_fov_degrees.to_radians() * 0.5).tan();
+    let tan_half_y = image_plane_half_height(camera.vertical_fov_degrees);
     let tan_half_x = tan_half_y * width as f32 / height as f32;
     let (lo, hi) = scene.bounds();
     let far = (lo - camera.position).abs().max((hi - camera.position).abs()).length();
@@ -130,6 +130,13 @@ pub fn generate_params_with(
         padding: 0,
         sampler,
     }
+}
+
+/// The generate stage's image-plane half height, `tan(fov / 2)`, for a vertical field of view in
+/// degrees (a camera's `vertical_fov_degrees`): the length of its `up` axis, which a scene loader
+/// checks against [`crate::backend::MIN_IMAGE_PLANE_AXIS_SQUARED`] exactly as formed here.
+pub(crate) fn image_plane_half_height(vertical_fov_degrees: f32) -> f32 {
+    (vertical_fov_degrees.to_radians() * 0.5).tan()
 }
 
 #[cfg(test)]

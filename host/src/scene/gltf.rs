@@ -967,7 +967,7 @@ impl PlacedCamera {
         // rounded to 180°, which `Scene::new` refuses, and 10⁻³⁰ rad gave a half height that the
         // generate stage refuses — neither error named the field.
         let vertical_fov_degrees = yfov.to_degrees();
-        let half_height = (vertical_fov_degrees.to_radians() * 0.5).tan();
+        let half_height = crate::frame::image_plane_half_height(vertical_fov_degrees);
         if vertical_fov_degrees >= 180.0 {
             return Err(format!(
                 "cameras[{}].perspective.yfov is {yfov} rad, which rounds to {vertical_fov_degrees}° in f32; it \
