@@ -81,7 +81,7 @@ pub enum Error {
     },
     /// The scene is larger than raywave handles: more vertices than [`crate::scene::MAX_VERTICES`],
     /// more triangles or meshes than the streams' 32-bit indices, or a BVH deeper than the
-    /// traversal stack.
+    /// traversal walks (`raywave_kernels::trace::cwbvh::MAX_TREE_DEPTH`).
     #[error("scene {scene} is too large: {what}")]
     SceneTooLarge {
         /// The scene (file path or built-in name).

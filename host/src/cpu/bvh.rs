@@ -9,7 +9,7 @@ use obvhs::cwbvh::{builder::build_cwbvh_from_tris, CwBvh};
 use obvhs::ray::{Ray as BvhRay, RayHit};
 use obvhs::triangle::Triangle;
 use obvhs::BvhBuildParams;
-use raywave_kernels::trace::cwbvh::{CwBvhScene, STACK_SIZE};
+use raywave_kernels::trace::cwbvh::{CwBvhScene, MAX_TREE_DEPTH};
 use raywave_kernels::trace::{ClosestHitQuery, Hit, OcclusionQuery, Ray};
 use raywave_kernels::triangle::WatertightRay;
 use raywave_shared::bvh::CwBvhNode;
@@ -117,7 +117,7 @@ impl TraversalIsa {
 
 impl CpuScene {
     /// Builds the CWBVH with the default preset ([`BvhQuality::default`]). Fails if the tree is
-    /// deeper than the kernels' traversal stack.
+    /// deeper than the kernels' traversal stack walks ([`MAX_TREE_DEPTH`]).
     pub fn build(scene: &Scene) -> Result<Self> {
         Self::build_with(scene, BvhQuality::default())
     }
@@ -139,10 +139,10 @@ impl CpuScene {
         let obvhs = build_cwbvh_from_tris(&flat, quality.params(), &mut core_time);
         let nodes: Vec<CwBvhNode> = bytemuck::cast_slice(&obvhs.nodes).to_vec();
         let depth = tree_depth(&nodes);
-        if depth >= STACK_SIZE as u32 {
+        if depth > MAX_TREE_DEPTH {
             return Err(Error::SceneTooLarge {
                 scene: scene.name().to_owned(),
-                what: format!("its BVH is {depth} levels deep, and the traversal stack holds {STACK_SIZE}"),
+                what: format!("its BVH is {depth} levels deep, and the traversal walks at most {MAX_TREE_DEPTH}"),
             });
         }
         let order = &obvhs.primitive_indices;
@@ -278,7 +278,8 @@ impl OcclusionQuery for CpuScene {
     }
 }
 
-/// Depth of the tree (root = 1): the longest chain of internal children.
+/// Depth of the tree (root = 1): the longest chain of internal nodes, as
+/// [`MAX_TREE_DEPTH`] counts it.
 fn tree_depth(nodes: &[CwBvhNode]) -> u32 {
     let mut deepest = 0;
     let mut pending = vec![(0u32, 1u32)];
@@ -312,6 +313,24 @@ mod tests {
         assert_eq!(&bytemuck::bytes_of(&shared.child_bounds)[8..16], &original.child_max_x);
         assert_eq!(&bytemuck::bytes_of(&shared.child_bounds)[40..48], &original.child_max_z);
         assert!(tree_depth(&cpu.nodes) >= 1);
+    }
+
+    #[test]
+    fn tree_depth_is_the_longest_chain_of_internal_nodes() {
+        // Only the internal-child mask and the first child's index matter here.
+        let node = |imask: u32, child_base: u32| CwBvhNode {
+            exponents_and_imask: imask << 24,
+            child_base,
+            ..bytemuck::Zeroable::zeroed()
+        };
+        assert_eq!(tree_depth(&[node(0, 0)]), 1, "a root holding only leaves");
+        // Root → internal children 1 (slot 2) and 2 (slot 5); node 2 → 3 (slot 0) → 4 (slot 7);
+        // node 1 holds leaves. The longest chain is 0, 2, 3, 4.
+        let nodes = [node(0b10_0100, 1), node(0, 0), node(0b1, 3), node(0b1000_0000, 4), node(0, 0)];
+        assert_eq!(tree_depth(&nodes), 4);
+        // The same with the deep branch in the first slot: order does not matter.
+        let nodes = [node(0b10_0100, 1), node(0b1, 3), node(0, 0), node(0b1000_0000, 4), node(0, 0)];
+        assert_eq!(tree_depth(&nodes), 4);
     }
 
     #[test]

@@ -14,11 +14,18 @@ use raywave_shared::bvh::CwBvhNode;
 #[cfg(target_arch = "x86_64")]
 mod avx2;
 
-/// Traversal stack depth. A node group is pushed at most once per level below the root, so a
-/// tree shallower than this never fills it: the host refuses deeper trees when it builds them
-/// (`CpuScene::build_with`, `Error::SceneTooLarge`), since obvhs's builder promises no depth and
-/// a full stack would drop the groups it cannot push.
+/// Traversal stack depth: node groups waiting to be expanded. A full stack drops the groups it
+/// cannot push (their subtrees go untested), so trees deeper than [`MAX_TREE_DEPTH`] are refused.
 pub const STACK_SIZE: usize = 32;
+
+/// The deepest tree (root = level 1, counting internal nodes) the traversal walks without
+/// dropping a group: [`STACK_SIZE`] + 1. The stack holds groups of strictly increasing level
+/// (a group is pushed before its level's expanded child is walked, and popped only when that
+/// child's subtree is done), one per level whose nodes form a group of siblings — levels 2 to
+/// the depth; the root's own group is never pushed. The host refuses deeper trees when it
+/// builds them (`CpuScene::build_with`, `Error::SceneTooLarge`), since obvhs's builder
+/// promises no depth.
+pub const MAX_TREE_DEPTH: u32 = STACK_SIZE as u32 + 1;
 
 /// Slack on the far side of every box test: 1 + 2·γ(10) with γ(n) = n·ε/(1 − n·ε), ε = 2⁻²⁴
 /// (Ize, "Robust BVH Ray Traversal", JCGT 2(2), 2013, whose slab takes three roundings;
@@ -583,6 +590,73 @@ mod tests {
             hits_seen += u32::from(expected != 0);
         }
         assert!(hits_seen > 5_000, "too few rays hit a child ({hits_seen}) for the comparison to mean much");
+    }
+
+    /// A caterpillar tree `depth` levels deep (root = 1) and its triangles: each chain node's
+    /// internal children are a side node holding one triangle (slot 0) and the next chain node
+    /// (slot 1); the last chain node holds one triangle too. A ray whose direction is negative on
+    /// every axis (inverted octant 0) expands slot 1 first, pushing the side node's group at
+    /// every level from 2 to `depth`. The deepest side node's triangle is the closest along that
+    /// ray (`t` = 1), the others at `t` ≥ 3.
+    fn caterpillar(depth: u32) -> (std::vec::Vec<CwBvhNode>, std::vec::Vec<Vec4>, std::vec::Vec<UVec2>) {
+        // A grid from −8 in cells of 1/16: every child box spans [−8, 7.94] on each axis.
+        let exponents = 123 | 123 << 8 | 123 << 16;
+        let node = |imask: u32, child_base: u32, primitive_base: u32, child_meta: u32| CwBvhNode {
+            origin: [-8.0; 3],
+            exponents_and_imask: exponents | imask << 24,
+            child_base,
+            primitive_base,
+            child_meta: [child_meta, 0],
+            child_bounds: [0, 0, u32::MAX, u32::MAX, 0, 0, u32::MAX, u32::MAX, 0, 0, u32::MAX, u32::MAX],
+        };
+        // Internal children in slots 0 and 1 (meta 0b001_11xxx); one triangle at offset 0.
+        let (two_internal, one_triangle) = ((0x38 | 0x39 << 8), 0x20);
+        // Chain node k (level k) is node 2(k − 1); its side child at level k + 1 is node 2k − 1,
+        // which holds triangle k − 1. The last chain node holds triangle `depth` − 1.
+        let mut nodes = std::vec::Vec::new();
+        for level in 1..depth {
+            nodes.push(node(0b11, 2 * level - 1, 0, two_internal));
+            nodes.push(node(0, 0, level - 1, one_triangle));
+        }
+        nodes.push(node(0, 0, depth - 1, one_triangle));
+        // The ray below runs from (4, 4, 4) along −(1, 1, 1): a triangle across the diagonal
+        // at (s, s, s) is hit at t = 4 − s.
+        let triangle_at = |s: f32| {
+            [Vec3::new(s + 1.0, s - 1.0, s), Vec3::new(s, s + 1.0, s - 1.0), Vec3::new(s - 1.0, s, s + 1.0)]
+                .map(|v| v.extend(0.0))
+        };
+        let deepest_side = depth - 2;
+        let vertices = (0..depth)
+            .flat_map(|triangle| triangle_at(if triangle == deepest_side { 3.0 } else { 1.0 - 0.01 * triangle as f32 }))
+            .collect();
+        let ids = (0..depth).map(|triangle| UVec2::new(0, triangle)).collect();
+        (nodes, vertices, ids)
+    }
+
+    #[test]
+    fn a_tree_max_tree_depth_deep_fills_the_stack_without_dropping_a_group() {
+        let ray = Ray { origin: Vec3::splat(4.0), direction: Vec3::splat(-1.0), tmin: 0.0, tmax: 100.0 };
+        let closest = |depth: u32| {
+            let (nodes, vertices, ids) = caterpillar(depth);
+            let scene = CwBvhScene { nodes: &nodes, vertices: &vertices, ids: &ids };
+            let hit = scene.closest_hit(&ray);
+            assert_eq!(scene.occluded(&ray), hit.t < ray.tmax, "depth {depth}");
+            #[cfg(target_arch = "x86_64")]
+            if std::is_x86_feature_detected!("avx2") {
+                // SAFETY: AVX2 (and the rest of x86-64-v3 with it on every such CPU) was detected.
+                let wide = unsafe { scene.closest_hit_x86_64_v3(&ray) };
+                assert_eq!((wide.primitive, wide.t), (hit.primitive, hit.t), "depth {depth}");
+            }
+            (hit.primitive, hit.t)
+        };
+        for depth in 2..=MAX_TREE_DEPTH {
+            assert_eq!(closest(depth), (depth - 2, 1.0), "depth {depth}: the deepest side node's triangle");
+        }
+        // One level deeper the stack is full when the deepest side node's group comes: it is
+        // dropped, and the ray hits the first side node's triangle (t = 4 − 0.99) instead. This
+        // is why the host refuses such trees; it shows the limit is exactly the stack's.
+        let too_deep = MAX_TREE_DEPTH + 1;
+        assert_eq!(closest(too_deep), (0, 3.0), "depth {too_deep}");
     }
 
     #[test]
