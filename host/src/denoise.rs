@@ -5,6 +5,7 @@
 use crate::error::{Error, Result};
 use crate::shading::ShadeAccumulator;
 use glam::{Vec3, Vec4};
+use raywave_kernels::denoise::guide::is_surface_depth;
 use raywave_kernels::sampling::light_select::luminance;
 use raywave_kernels::shade::stage::{Surface, SMALLEST_RADIANCE};
 use raywave_shared::denoise::{
@@ -221,7 +222,7 @@ impl DenoiseInput {
         let analytic = accumulator.analytic();
         let position = surfaces
             .iter()
-            .map(|s| if s.position.is_finite() && s.position.w > 0.0 { s.position } else { Vec4::ZERO })
+            .map(|s| if s.position.is_finite() && is_surface_depth(s.position.w) { s.position } else { Vec4::ZERO })
             .collect();
         let normal = surfaces.iter().zip(&analytic).map(|(s, &u)| s.normal.truncate().extend(luminance(u))).collect();
         let four = |v: Vec<Vec3>| v.into_iter().map(|c| c.extend(0.0)).collect();
@@ -247,7 +248,7 @@ impl DenoiseInput {
             .shadowed
             .iter()
             .zip(&self.position)
-            .filter(|(_, p)| p.w > 0.0)
+            .filter(|(_, p)| is_surface_depth(p.w))
             .fold((glam::DVec4::ZERO, 0usize), |(sum, count), (&s, _)| (sum + s.as_dvec4(), count + 1));
         let mean = (sum / count.max(1) as f64).as_vec4();
         // A channel no light reaches (mean 0) takes any constant: its S_N is 0 everywhere.
@@ -611,6 +612,21 @@ mod tests {
         let baseline = large.stochastic();
         assert_eq!(baseline.unshadowed[0], Vec4::new(1e37, 3.0, 1.0, 0.0), "the unlit channel takes 1");
         assert_eq!(baseline.analytic, baseline.unshadowed);
+    }
+
+    /// A subnormal depth (a camera a hair from a wall) is no surface, as on a GPU that flushes it
+    /// to 0: the G-buffer drops it, and the stochastic baseline's mean leaves it out.
+    #[test]
+    fn subnormal_depths_count_as_no_surface() {
+        let surface = |depth: f32| Surface { position: Vec4::new(1.0, 2.0, 3.0, depth), ..Surface::MISS };
+        let surfaces = [surface(0.5), surface(1e-40), surface(f32::MIN_POSITIVE)];
+        let frame = DenoiseInput::new(&surfaces, &ShadeAccumulator::new(3));
+        assert_eq!(frame.position, [surfaces[0].position, Vec4::ZERO, surfaces[2].position]);
+        let mut frame = input(2);
+        frame.position[0].w = 1.0;
+        frame.position[1].w = 1e-40;
+        frame.shadowed = vec![Vec4::new(2.0, 2.0, 2.0, 0.0), Vec4::new(6.0, 6.0, 6.0, 0.0)];
+        assert_eq!(frame.stochastic().unshadowed[0], Vec4::new(2.0, 2.0, 2.0, 0.0), "the mean of the one surface");
     }
 
     #[test]

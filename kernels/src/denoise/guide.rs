@@ -6,8 +6,8 @@ use glam::{Vec4, Vec4Swizzles};
 /// A pixel's surface as the edge stops see it.
 #[derive(Copy, Clone, Debug, PartialEq)]
 pub struct Guide {
-    /// Surface point (xyz, scene units) and its depth along the camera ray (w, > 0); w = 0 where
-    /// the camera ray hit nothing (such pixels are never filtered nor weigh as taps of the
+    /// Surface point (xyz, scene units) and its depth along the camera ray (w, at least 2⁻¹²⁶:
+    /// [`is_surface_depth`]); w = 0 where the camera ray hit nothing (such pixels are never filtered nor weigh as taps of the
     /// bilateral and à-trous passes; the noise lines and SVGF's variance prefilter read them,
     /// their ratio the fallback 1 and their variance 0).
     pub position: Vec4,
@@ -19,10 +19,18 @@ impl Guide {
     /// A pixel without a surface (a miss, or a tap outside the image).
     pub const NONE: Guide = Guide { position: Vec4::ZERO, normal: Vec4::ZERO };
 
-    /// Whether a camera ray hit a surface here.
+    /// Whether a camera ray hit a surface here ([`is_surface_depth`]).
     pub fn is_surface(&self) -> bool {
-        self.position.w > 0.0
+        is_surface_depth(self.position.w)
     }
+}
+
+/// Whether a depth (hit distance along the camera ray) marks a surface: depths below the
+/// smallest normal `f32` (2⁻¹²⁶) count as none, like 0 and NaN, on every backend — a GPU may
+/// flush a subnormal hit distance (a camera a hair from a wall) to 0 where the CPU keeps it, as
+/// with [`SMALLEST_WEIGHT`].
+pub fn is_surface_depth(depth: f32) -> bool {
+    depth >= f32::MIN_POSITIVE
 }
 
 /// Filter weights below the smallest normal `f32` (2⁻¹²⁶) count as 0, on every backend: a GPU may
@@ -127,6 +135,10 @@ mod tests {
         let behind = guide(Vec3::new(0.0, -5.0, 0.0), 15.0, Vec3::Y, 0.5);
         assert_eq!(edge_stop(&c, &behind, DEFAULT_EDGE_WEIGHTS), 0.0, "depth jump off the plane");
         assert_eq!(edge_stop(&c, &Guide::NONE, DEFAULT_EDGE_WEIGHTS), 0.0, "no surface");
+        let subnormal = guide(Vec3::new(0.01, 0.0, 0.0), 1e-40, Vec3::Y, 0.5);
+        assert!(!subnormal.is_surface(), "a subnormal depth, which a GPU may flush to 0");
+        assert_eq!(edge_stop(&c, &subnormal, DEFAULT_EDGE_WEIGHTS), 0.0, "a subnormal depth");
+        assert!(guide(Vec3::ZERO, f32::MIN_POSITIVE, Vec3::Y, 0.5).is_surface());
         let brighter = guide(Vec3::new(0.01, 0.0, 0.0), 10.0, Vec3::Y, 1.0);
         let w = edge_stop(&c, &brighter, DEFAULT_EDGE_WEIGHTS);
         assert!((w - (1.0 - 0.9 * 0.5)).abs() < 1e-6, "analytic stop {w}");
