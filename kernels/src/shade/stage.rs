@@ -532,6 +532,8 @@ mod tests {
             }
             analytic = s.analytic.xyz().as_dvec3().to_array();
             assert!(s.unshadowed.is_finite() && s.shadow_direction.is_finite() && s.shadow_origin.is_finite());
+            // A shadow ray leaves the lit side, offset along the normal (+z), towards the light.
+            assert!(!has_ray || (s.shadow_origin.z > 0.0 && s.shadow_direction.z > 0.0), "sample {i}: {s:?}");
         }
         let mean_and_error = |sums: [[f64; 2]; 3]| {
             sums.map(|[sum, sum2]| {
@@ -673,19 +675,21 @@ mod tests {
     /// glTF's `F0 = 0.04·(1 − m) + base·m` — a metal tinted by its base colour and without a
     /// diffuse lobe, a dielectric's specular lobe white. (The unbiasedness tests compare `U_N`
     /// with `U`, which take the lobes' colours from the same code: a metal's untinted F0, or a
-    /// diffuse lobe kept under metal, passed them.)
+    /// diffuse lobe kept under metal, passed them.) The albedos are read from the committed
+    /// table at a grid cell, not through the lookup under test.
     #[test]
     fn u_under_a_hemisphere_light_is_the_albedo_of_each_channel() {
-        let table = table();
-        let (base, radiance, roughness) = (Vec3::new(0.9, 0.5, 0.1), Vec3::new(2.0, 3.0, 4.0), 0.5);
+        use raywave_shared::ltc_table::LTC_AMPLITUDE;
+        // Grid row 32 (roughness 32/63), column 0 (seen along the normal: the LTC lobe
+        // symmetric, all of it above the horizon).
+        let (base, radiance, roughness) = (Vec3::new(0.9, 0.5, 0.1), Vec3::new(2.0, 3.0, 4.0), 32.0 / 63.0);
+        let [magnitude, fresnel, _, _] = LTC_AMPLITUDE[32 * 64];
         // 10 × 10 and 10⁻³ above the point: both lobes' form factors within ~10⁻⁴ of 1.
         let lights = [ceiling_light(Vec3::new(0.0, 0.0, 1.0e-3), 5.0, radiance)];
-        // Seen along the normal (the LTC lobe symmetric, all of it above the horizon).
-        let lobe = ltc::lookup(&table, roughness, 1.0);
         for metallic in [0.0f32, 0.5, 1.0] {
             let f0 = Vec3::splat(0.04) * (1.0 - metallic) + base * metallic;
             let diffuse = base * (1.0 - metallic);
-            let expected = radiance * (diffuse + f0 * lobe.magnitude + (Vec3::ONE - f0) * lobe.fresnel);
+            let expected = radiance * (diffuse + f0 * magnitude + (Vec3::ONE - f0) * fresnel);
             let material = material(base, roughness, metallic);
             let u = estimate(&lights, material, Vec3::Z, sampler_kind::SOBOL, 0, 1, unoccluded).analytic;
             for (channel, (u, expected)) in u.into_iter().zip(expected.to_array()).enumerate() {
@@ -705,6 +709,17 @@ mod tests {
         assert_eq!(composite(u, u_n, u_n, Vec3::ZERO), Sanitized::clean(u));
         let fallback = composite(u, Vec3::ZERO, Vec3::ZERO, Vec3::ONE);
         assert_eq!(fallback, Sanitized::clean(u + Vec3::ONE), "U_N ≈ 0 falls back to U, which is not a replacement");
+    }
+
+    /// The ratio keeps values above 1 up to 10⁴ — the stochastic+tv baseline divides `S_N` by
+    /// an image mean, which a bright pixel exceeds — and clamps beyond, and below 0.
+    #[test]
+    fn the_shadow_ratio_is_clamped_to_its_documented_range() {
+        let ratio = shadow_ratio(Vec3::new(3.0, 2.0e5, -1.0), Vec3::ONE);
+        assert_eq!(ratio, Vec3::new(3.0, 1.0e4, 0.0));
+        assert_eq!(shadow_ratio(Vec3::new(0.25, 0.0, 1.0), Vec3::new(1.0, 2.0, 1.0)), Vec3::new(0.25, 0.0, 1.0));
+        let below = SMALLEST_RADIANCE / 2.0;
+        assert_eq!(shadow_ratio(Vec3::splat(0.5), Vec3::new(0.0, below, f32::NAN)), Vec3::ONE, "U_N ≈ 0 or NaN: 1");
     }
 
     /// The view direction's length does not matter (the trace stage takes any): a view at 60°
