@@ -581,7 +581,16 @@ pub fn spherical_triangle_area(a: Vec3, b: Vec3, c: Vec3) -> f32 {
 fn quad_hit(g: &QuadGeometry, eu: Vec3, ev: Vec3, d: Vec3) -> f32 {
     let denom = d.dot(g.n);
     let t = g.po.dot(g.n) / denom;
-    if !(t > 0.0) || !t.is_finite() {
+    // No point of the quad is farther from `p` than `|o − p| + |eu| + |ev|` (the triangle
+    // inequality). A ray meeting the plane beyond twice that misses the quad, however the slack
+    // below widens it: nearly parallel to the plane (`|cos θl|` below ~16 ε), its slack along the
+    // ray, `~QUAD_EDGE_SLACK·t/cos²θl` of the height above the plane, outgrows the distance by
+    // which it misses, `~t·tan θl`, and would accept it wherever it meets the plane (10⁴ light
+    // widths away). A sampled direction's own `t` is off by a relative few ε/`|cos θl|` — near 1
+    // only where the shade stage's shadow ray has no room before the light anyway
+    // (`offset::ray_stop_before`).
+    let farthest = g.po.length() + eu.length() + ev.length();
+    if !(t > 0.0) || !(t <= 2.0 * farthest) {
         return 0.0;
     }
     // Hit point relative to o, then its coordinates in the (eu, ev) basis (any parallelogram):
@@ -1591,6 +1600,24 @@ mod tests {
         assert_eq!(quad_ray_distance(p, o, eu, ev, towards(Vec3::new(1.25, 0.4, 0.0))), 0.0, "beside the light");
         assert!(quad_ray_distance(p, o, eu, ev, towards(Vec3::new(1.499, 0.249, 0.0))) > 0.0, "inside its far corner");
         assert!(quad_ray_distance(p, o, eu, ev, towards(Vec3::new(1.0001, 0.0, 0.0))) > 0.0, "inside its near edge");
+    }
+
+    /// Rays nearly parallel to a light's plane (`|cos θl|` of 10⁻⁵ … 10⁻⁷) from a point 10⁻²
+    /// above it meet the plane 10³ … 10⁵ light widths beside it: they miss, and every quad pdf is
+    /// 0 there. The slack along the ray, which grows as `1/cos²θl`, had accepted those from
+    /// `|cos θl|` ≈ 2·10⁻⁶ on (distance 10⁴, area pdf 10¹⁴).
+    #[test]
+    fn rays_nearly_parallel_to_a_light_miss_it_far_beside_it() {
+        let (p, o, eu, ev) = (Vec3::ZERO, Vec3::new(-0.5, -0.5, -0.01), Vec3::X, Vec3::Y);
+        for e in [1e-5f32, 1e-6, 3e-7, 1e-7] {
+            let d = Vec3::new(-1.0, 0.0, -e).normalize();
+            assert_eq!(quad_ray_distance(p, o, eu, ev, d), 0.0, "e {e}");
+            assert_eq!(quad_area_pdf(p, o, eu, ev, d), 0.0, "e {e}");
+            assert_eq!(quad_spherical_pdf(p, o, eu, ev, d), 0.0, "e {e}");
+        }
+        // A control: the same plane reached inside the light, at 0.2 from its centre.
+        let inside = Vec3::new(-0.2, 0.0, -0.01).normalize();
+        assert!(quad_ray_distance(p, o, eu, ev, inside) > 0.0 && quad_area_pdf(p, o, eu, ev, inside) > 0.0);
     }
 
     #[test]
