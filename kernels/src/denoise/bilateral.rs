@@ -255,6 +255,35 @@ mod tests {
         assert!((ratio - 0.5).abs() < 0.1, "{ratio}");
     }
 
+    /// The outermost taps, at r = ±R, count with their Gaussian weight and the taps beyond them
+    /// not at all: the filtered value is the closed form of the weights over |r| ≤ R.
+    #[test]
+    fn the_taps_at_plus_and_minus_the_radius_count_and_none_beyond() {
+        // Pixel 20 of a 41-pixel strip on one plane (every edge stop 1) at R = 10 and noise 1:
+        // g = min(1, 1.5)·10/√1 = 10 px, so the tap at r weighs e^−(r/10)², e^−1 at r = ±10 — a
+        // normal float far above SMALLEST_WEIGHT. Only the taps at and beyond ±R see light: 1
+        // at x ≤ 10, ½ at x ≥ 30, so S_N filters to U·(1 + ½)·e^−1 / Σ_{|r|≤10} e^−(r/10)²;
+        // without the taps at ±R it would be 0, with those at ±11 larger.
+        let visibility: Vec<f32> = (0..41)
+            .map(|x| match x {
+                ..=10 => 1.0,
+                30.. => 0.5,
+                _ => 0.0,
+            })
+            .collect();
+        let p = strip(&visibility);
+        assert_eq!(p.params.radius, 10);
+        let weight = |r: i32| (-(f64::from(r) / 10.0).powi(2)).exp();
+        let total: f64 = (-10..=10).map(weight).sum();
+        let expected = (1.0 + 0.5) * weight(10) / total;
+        let (s, _) = filter(&p, 20, 1.0);
+        for channel in 0..3 {
+            let want = f64::from(p.unshadowed[20][channel]) * expected;
+            let got = f64::from(s[channel]);
+            assert!((got / want - 1.0).abs() < 1e-6, "channel {channel}: {got} vs {want}");
+        }
+    }
+
     #[test]
     fn subnormal_weights_count_as_zero_on_every_backend() {
         // g = 15 · 0.0684 = 1.026 px: the taps at r = ±10 weigh e^−95 ≈ 5·10⁻⁴², a subnormal a

@@ -450,6 +450,34 @@ mod tests {
         assert!((out.w - variance).abs() < 1e-5, "{} vs {variance} (without the stop: 4·48/49²)", out.w);
     }
 
+    #[test]
+    fn one_atrous_step_carries_the_variance_with_squared_normalised_weights() {
+        // The centre of a 5 × 5 plane at spacing 1: every tap is inside, on the plane (edge stops
+        // 1) and at the same ratio (luminance stop e^0 = 1), so tap (dx, dy) weighs the B3
+        // spline's h(dx)·h(dy), h = [1, 4, 6, 4, 1]/16, up to a common factor. The variances
+        // differ per pixel (and are exact in f32), so the carried w must be Σ wᵢ²·vᵢ / (Σ wᵢ)²,
+        // which no common factor of the weights changes (÷ Σ wᵢ alone would give (64/9)× that,
+        // the kernel summing to (8/3)² with its centre at 1).
+        let img = plane(5, 5, |_, _| 0.25);
+        let variance = |x: i32, y: i32| f64::from(1 + x + 5 * y) / 64.0;
+        let ratio: Vec<Vec4> = (0..25).map(|i| Vec3::splat(0.25).extend(variance(i % 5, i / 5) as f32)).collect();
+        let h = [1.0, 4.0, 6.0, 4.0, 1.0].map(|k: f64| k / 16.0);
+        let (mut carried, mut total) = (0.0, 0.0);
+        for (y, hy) in h.iter().enumerate() {
+            for (x, hx) in h.iter().enumerate() {
+                let w = hx * hy;
+                carried += w * w * variance(x as i32, y as i32);
+                total += w;
+            }
+        }
+        let expected = carried / (total * total);
+        let params = DenoiseParams { step: 1, ..img.params };
+        let out = atrous_step(&params, IVec2::new(2, 2), &ratio, &img.position, &img.normal);
+        assert!((out.truncate() - Vec3::splat(0.25)).abs().max_element() < 1e-6, "{out}");
+        let w = f64::from(out.w);
+        assert!((w / expected - 1.0).abs() < 1e-6, "{w} vs {expected}");
+    }
+
     /// Within the `phiColor` and variance boost the host accepts, the luminance stops divide by
     /// normal, finite scales: the moments pass by `phiColor` itself, the à-trous iterations by
     /// `phiColor·√(VARIANCE_EPSILON + var)` ≥ 10⁻¹¹, so a GPU flushing subnormals computes them
