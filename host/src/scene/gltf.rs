@@ -9,8 +9,10 @@
 //! Bad files give an [`Error::SceneLoad`] naming the file and the JSON field, never a panic or a
 //! hang: on top of the `gltf` crate's validation this checks what that crate trusts (POSITION
 //! accessor indices, the accessor types of POSITION and indices, accessor counts and spans
-//! against their buffer views and buffers) and that the node hierarchy is a tree. Images are not
-//! loaded (textures are not sampled), so a missing texture file is no error.
+//! against their buffer views and buffers), that the node hierarchy is a tree, and what glTF 2.0
+//! forbids that the crate takes (such as `normalized` POSITION or indices, a mesh without
+//! primitives). Images are not loaded (textures are not
+//! sampled), so a missing texture file is no error.
 
 use super::regular_file::{read_regular_file, ReadError};
 use super::{
@@ -234,6 +236,7 @@ fn parse(bytes: &[u8], base: Option<&Path>) -> std::result::Result<(Document, Ve
     let document = Document::from_json(document.into_json()).map_err(|e| e.to_string())?;
     check_camera_projections(document.as_json())?;
     check_node_matrices_alone(document.as_json())?;
+    check_meshes_have_primitives(document.as_json())?;
     let buffers = load_buffers(&document, base, blob)?;
     Ok((document, buffers))
 }
@@ -382,9 +385,39 @@ fn check_node_matrices_alone(root: &gltf::json::Root) -> std::result::Result<(),
     Ok(())
 }
 
-/// Accessors already checked ([`check_accessor`]) as POSITION (`true`) or as indices (`false`):
-/// each is checked once however many primitives share it (its sparse indices are read in full).
-type CheckedAccessors = std::collections::HashSet<(usize, bool)>;
+/// Checks that every mesh has a primitive, as glTF 2.0 requires (`mesh.primitives`: at least one
+/// item): the `gltf` crate takes an empty array, and such a mesh added nothing without a word.
+fn check_meshes_have_primitives(root: &gltf::json::Root) -> std::result::Result<(), String> {
+    match root.meshes.iter().position(|mesh| mesh.primitives.is_empty()) {
+        Some(index) => Err(format!("meshes[{index}].primitives: empty; glTF 2.0 requires at least one primitive")),
+        None => Ok(()),
+    }
+}
+
+/// What a primitive reads an accessor as, which sets what glTF 2.0 allows it ([`check_accessor`]).
+#[derive(Clone, Copy, PartialEq, Eq, Hash)]
+enum AccessorUse {
+    /// A POSITION attribute: VEC3 of `f32`.
+    Position,
+    /// Vertex indices: SCALAR unsigned integers, tightly packed — glTF 2.0 gives a `byteStride`
+    /// to vertex attributes alone.
+    Indices,
+}
+
+impl AccessorUse {
+    /// The element type glTF 2.0 requires: its dimensions and the component types it allows
+    /// (none normalized).
+    fn element(self) -> (Dimensions, &'static [DataType]) {
+        match self {
+            Self::Position => (Dimensions::Vec3, &[DataType::F32]),
+            Self::Indices => (Dimensions::Scalar, &[DataType::U8, DataType::U16, DataType::U32]),
+        }
+    }
+}
+
+/// Accessors already checked ([`check_accessor`]) for each use: each is checked once however
+/// many primitives share it (its sparse indices are read in full).
+type CheckedAccessors = std::collections::HashSet<(usize, AccessorUse)>;
 
 /// The vertices (at most its POSITION count and its corners) and triangles that `mesh`'s surface
 /// primitives ([`draws_surfaces`]) add to the scene each time a node instances it, their POSITION
@@ -401,14 +434,14 @@ fn mesh_size(
             continue;
         };
         let field = primitive_field(mesh, index);
-        if checked.insert((position.index(), true)) {
+        if checked.insert((position.index(), AccessorUse::Position)) {
             let position_field = format!("{field}.attributes.POSITION");
-            check_accessor(&position, buffers, &position_field, Dimensions::Vec3, &[DataType::F32])?;
+            check_accessor(&position, buffers, &position_field, AccessorUse::Position)?;
         }
         let corners = match primitive.indices() {
             Some(indices) => {
-                if checked.insert((indices.index(), false)) {
-                    check_accessor(&indices, buffers, &format!("{field}.indices"), Dimensions::Scalar, &UNSIGNED)?;
+                if checked.insert((indices.index(), AccessorUse::Indices)) {
+                    check_accessor(&indices, buffers, &format!("{field}.indices"), AccessorUse::Indices)?;
                 }
                 indices.count()
             }
@@ -420,9 +453,6 @@ fn mesh_size(
     }
     Ok((vertices, triangles))
 }
-
-/// The component types glTF 2.0 allows an indices accessor.
-const UNSIGNED: [DataType; 3] = [DataType::U8, DataType::U16, DataType::U32];
 
 /// One surface primitive ([`surface_triangles`]) as its accessors hold it, read once however many
 /// nodes instance its mesh: the POSITION elements its indices use, renumbered in order of first
@@ -667,24 +697,35 @@ fn fan_triangles(indices: &[u32]) -> Vec<[u32; 3]> {
     indices.windows(2).skip(1).map(|w| [w[0], w[1], indices[0]]).collect()
 }
 
-/// Checks what the `gltf` crate's reader trusts of an accessor read at `field`: its element type
-/// (one glTF allows there), `count ≥ 1` (glTF's minimum) and at most one element per byte of the
-/// file's buffers and below 2³² (32-bit indices; a sparse accessor without a buffer view would
-/// otherwise allocate `count` zeros, however large), `1 ≤ sparse.count ≤ count`, and that its
-/// elements, and its sparse indices and values, lie inside their buffer views and buffers
+/// Checks what the `gltf` crate's reader trusts of an accessor read at `field` as `use_`, and what
+/// glTF 2.0 forbids there that the crate takes: its element type (one glTF allows there, not
+/// `normalized` — which the reader ignored, and glTF forbids for float and 32-bit components), no
+/// `byteStride` on an indices view, `count ≥ 1` (glTF's minimum) and at most one element per byte
+/// of the file's buffers and below 2³² (32-bit indices; a sparse accessor without a buffer view
+/// would otherwise allocate `count` zeros, however large), `1 ≤ sparse.count ≤ count`, and that
+/// its elements, and its sparse indices and values, lie inside their buffer views and buffers
 /// ([`check_span`]).
 fn check_accessor(
     accessor: &gltf::Accessor,
     buffers: &[buffer::Data],
     field: &str,
-    dimensions: Dimensions,
-    data_types: &[DataType],
+    use_: AccessorUse,
 ) -> std::result::Result<(), String> {
     let error = |what: String| Err(format!("{field}: accessor {}: {what}", accessor.index()));
     let count = accessor.count();
-    if accessor.dimensions() != dimensions || !data_types.contains(&accessor.data_type()) {
+    let (dimensions, data_types) = use_.element();
+    if accessor.dimensions() != dimensions || !data_types.contains(&accessor.data_type()) || accessor.normalized() {
         let (found, found_type) = (accessor.dimensions(), accessor.data_type());
-        return error(format!("holds {found:?} of {found_type:?}, glTF requires {dimensions:?} of {data_types:?}"));
+        let normalized = if accessor.normalized() { "normalized " } else { "" };
+        return error(format!(
+            "holds {found:?} of {normalized}{found_type:?}, glTF requires {dimensions:?} of {data_types:?} (not \
+             normalized)"
+        ));
+    }
+    if let (AccessorUse::Indices, Some(view)) = (use_, accessor.view()) {
+        if let Err(what) = check_packed(&view, "indices") {
+            return error(what);
+        }
     }
     let limit = buffers.iter().map(|data| data.len()).sum::<usize>().min(u32::MAX as usize);
     if !(1..=limit).contains(&count) {
@@ -708,11 +749,8 @@ fn check_accessor(
         // The reader steps through a strided view, this check and glTF 2.0 (which forbids the
         // stride there) do not: with one, the check passed indices the reader never read.
         for (part, view) in [("sparse.indices", indices.view()), ("sparse.values", values.view())] {
-            if let Some(stride) = view.stride() {
-                return error(format!(
-                    "{part}: bufferViews[{}] has byteStride {stride}, which glTF 2.0 forbids for sparse data",
-                    view.index()
-                ));
+            if let Err(what) = check_packed(&view, "sparse data") {
+                return error(format!("{part}: {what}"));
             }
         }
         let index_size = indices.index_type().size();
@@ -812,6 +850,17 @@ impl<'a> SparseIndices<'a> {
             }
         }
         None
+    }
+}
+
+/// Checks that `view`, which holds `what`, has no `byteStride`: glTF 2.0 gives one to vertex
+/// attributes alone, so indices and sparse data are tightly packed.
+fn check_packed(view: &buffer::View, what: &str) -> std::result::Result<(), String> {
+    match view.stride() {
+        Some(stride) => {
+            Err(format!("bufferViews[{}] has byteStride {stride}, which glTF 2.0 forbids for {what}", view.index()))
+        }
+        None => Ok(()),
     }
 }
 
@@ -1935,6 +1984,54 @@ mod tests {
             f.write_all(&glb).unwrap();
             let err = load(f.path()).unwrap_err();
             assert!(err.to_string().contains("shorter than the header"), "{err}");
+        }
+    }
+
+    /// What glTF 2.0 forbids and the `gltf` crate took without a word, refused naming the field:
+    /// normalized POSITION or indices (the reader ignored the flag), a mesh without primitives (it
+    /// added nothing), a strided view under indices (the reader stepped through it).
+    #[test]
+    fn normalized_accessors_meshes_without_primitives_and_strided_indices_are_errors() {
+        let cases = [
+            (
+                r#""componentType":5126,"count":4"#,
+                r#""componentType":5126,"normalized":true,"count":4"#,
+                "meshes[0].primitives[0].attributes.POSITION: accessor 0: holds Vec3 of normalized F32, glTF requires \
+                 Vec3 of [F32] (not normalized)",
+            ),
+            (
+                r#""componentType":5123,"count":6"#,
+                r#""componentType":5123,"normalized":true,"count":6"#,
+                "meshes[0].primitives[0].indices: accessor 1: holds Scalar of normalized U16",
+            ),
+            (
+                r#""indices":1,"material":0}]}"#,
+                r#""indices":1,"material":0}]},{"primitives":[]}"#,
+                "meshes[1].primitives: empty; glTF 2.0 requires at least one primitive",
+            ),
+        ];
+        for (from, to, expected) in cases {
+            let text = quad_gltf(6);
+            assert!(text.contains(from), "{from}");
+            match load(file(&text.replacen(from, to, 1)).path()) {
+                Err(err @ Error::SceneLoad { .. }) => assert!(err.to_string().contains(expected), "{to}: {err}"),
+                other => panic!("{to}: expected a SceneLoad error containing {expected:?}, got {other:?}"),
+            }
+        }
+        // Three indices four bytes apart (0, 1, 2 between 7s): the reader stepped through them and
+        // the triangle loaded.
+        let strided = quad_gltf(3)
+            .replacen(&base64_encode(&quad_buffer()), &base64_encode(&quad_buffer_with(1.0, [0, 7, 1, 7, 2, 7])), 1)
+            .replacen(r#""byteOffset":48,"byteLength":12}"#, r#""byteOffset":48,"byteLength":12,"byteStride":4}"#, 1);
+        match load(file(&strided).path()) {
+            Err(err @ Error::SceneLoad { .. }) => assert!(
+                err.to_string().contains(
+                    "meshes[0].primitives[0].indices: accessor 1: bufferViews[1] has byteStride 4, which glTF 2.0 \
+                     forbids for indices"
+                ),
+                "{err}"
+            ),
+            other => panic!("a strided indices view: expected a SceneLoad error, got {other:?}"),
         }
     }
 
