@@ -11,7 +11,7 @@
 //! accessor indices, the accessor types of POSITION and indices, accessor counts and spans
 //! against their buffer views and buffers), that the node hierarchy is a tree, and what glTF 2.0
 //! forbids that the crate takes (such as `normalized` POSITION or indices, a mesh without
-//! primitives). Images are not loaded (textures are not
+//! primitives, a GLB length other than the file's). Images are not loaded (textures are not
 //! sampled), so a missing texture file is no error.
 
 use super::regular_file::{read_regular_file, ReadError};
@@ -241,15 +241,22 @@ fn parse(bytes: &[u8], base: Option<&Path>) -> std::result::Result<(Document, Ve
     Ok((document, buffers))
 }
 
-/// Checks a GLB header's total length (bytes 8–11) against its own 12 bytes: gltf 1.4.1's
-/// `Glb::from_slice` subtracts 12 from it unchecked, which panics with overflow checks on (debug
-/// and test builds) and wraps without them. Text glTF (no `glTF` magic) passes untouched.
+/// Checks that a GLB header's total length (bytes 8–11) is the file's size, as glTF 2.0
+/// requires (§ 4.4.2: "the total length of the Binary glTF, including header and all chunks"):
+/// gltf 1.4.1's `Glb::from_slice` subtracts 12 from it unchecked, which panics with overflow
+/// checks on (debug and test builds) and wraps without them; it refuses a length past the end
+/// without saying which, and reads the chunks to the end of the file whatever a shorter length
+/// says. Text glTF (no `glTF` magic) passes untouched.
 fn check_glb_length(bytes: &[u8]) -> std::result::Result<(), String> {
     let [b'g', b'l', b'T', b'F', _, _, _, _, l0, l1, l2, l3, ..] = *bytes else { return Ok(()) };
-    match u32::from_le_bytes([l0, l1, l2, l3]) {
-        length @ 0..12 => Err(format!("GLB header: length {length} is shorter than the header")),
-        _ => Ok(()),
+    let length = u32::from_le_bytes([l0, l1, l2, l3]);
+    if u64::from(length) != bytes.len() as u64 {
+        return Err(format!(
+            "GLB header: length {length} is not the file's size, {} bytes; glTF 2.0 requires them equal",
+            bytes.len()
+        ));
     }
+    Ok(())
 }
 
 /// Every buffer's data (`gltf::import_buffers`, with errors that name the buffer and its source);
@@ -1974,16 +1981,43 @@ mod tests {
         assert!(err.contains("meshes[0] primitive 0"), "{err}");
     }
 
+    /// A GLB header's length must be the file's size (glTF 2.0 § 4.4.2): one shorter than the
+    /// header itself overflowed inside the `gltf` crate (a panic with overflow checks on), one
+    /// shorter than the file loaded (the crate reads the chunks to the end of the file), and one
+    /// longer failed without naming the header's length.
     #[test]
-    fn a_glb_header_shorter_than_itself_is_an_error() {
+    fn a_glb_header_length_other_than_the_file_size_is_an_error() {
+        let glb_file = |bytes: &[u8]| {
+            let mut f = tempfile::Builder::new().suffix(".glb").tempfile().unwrap();
+            f.write_all(bytes).unwrap();
+            f
+        };
         for length in [0u32, 11] {
             let mut glb = b"glTF".to_vec();
             glb.extend_from_slice(&2u32.to_le_bytes());
             glb.extend_from_slice(&length.to_le_bytes());
-            let mut f = tempfile::Builder::new().suffix(".glb").tempfile().unwrap();
-            f.write_all(&glb).unwrap();
-            let err = load(f.path()).unwrap_err();
-            assert!(err.to_string().contains("shorter than the header"), "{err}");
+            let err = load(glb_file(&glb).path()).unwrap_err();
+            let expected = format!("GLB header: length {length} is not the file's size, 12 bytes");
+            assert!(err.to_string().contains(&expected), "{err}");
+        }
+        // quad_gltf in a JSON chunk padded with spaces (its buffer keeps its data URI).
+        let mut json = quad_gltf(6).into_bytes();
+        json.resize(json.len().next_multiple_of(4), b' ');
+        let size = 12 + 8 + json.len() as u32;
+        let glb = |length: u32| {
+            let mut glb = b"glTF".to_vec();
+            for word in [2, length, json.len() as u32] {
+                glb.extend_from_slice(&word.to_le_bytes());
+            }
+            glb.extend_from_slice(b"JSON");
+            glb.extend_from_slice(&json);
+            glb
+        };
+        assert_eq!(load(glb_file(&glb(size)).path()).unwrap().triangle_count(), 2);
+        for length in [size - 4, size + 4] {
+            let err = load(glb_file(&glb(length)).path()).unwrap_err();
+            let expected = format!("GLB header: length {length} is not the file's size, {size} bytes");
+            assert!(matches!(err, Error::SceneLoad { .. }) && err.to_string().contains(&expected), "{err}");
         }
     }
 
