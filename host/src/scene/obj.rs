@@ -168,10 +168,12 @@ fn surfaces_only(text: &[u8]) -> std::borrow::Cow<'_, [u8]> {
 /// The text of the material library at `path`, less a leading byte-order mark
 /// ([`without_byte_order_mark`]), or why it cannot be used: the OS's reason, not a regular file,
 /// or the line at fault — one that is not UTF-8 text, or a colour (`Ka`, `Kd`, `Ks`, `Ke`) with
-/// fewer than three numbers, refused here before tobj parses the text: tobj 4.0.5 panics on one
-/// (found by fuzzing the loader). Also refused, because tobj would drop them without a word: a
-/// property before the first `newmtl` (it belongs to no material), and a material name defined
-/// twice (the later definition would hide the earlier).
+/// other than three words, refused here before tobj parses the text: tobj 4.0.5 panics on fewer
+/// (found by fuzzing the loader) and ignores what follows the third. Also refused, because tobj
+/// would drop them without a word: a property before the first `newmtl` (it belongs to no
+/// material), and a material name defined twice (the later definition would hide the earlier);
+/// and an `Ns` that is not one finite number ≥ 0 (a Phong exponent, [`mtl_material`]), which tobj
+/// takes from its first word and the roughness had taken a negative one as 0.
 fn read_material_library(path: &Path) -> std::result::Result<String, String> {
     let bytes = read_regular_file(path, u64::MAX).map_err(|e| e.to_string())?;
     let bytes = without_byte_order_mark(&bytes);
@@ -182,10 +184,18 @@ fn read_material_library(path: &Path) -> std::result::Result<String, String> {
     let mut defined: std::collections::HashMap<&str, usize> = std::collections::HashMap::new();
     for (index, line) in text.lines().enumerate() {
         let mut words = line.split_whitespace();
-        let (key, arguments) = (words.next(), words.count());
+        let key = words.next();
+        let arguments: Vec<&str> = words.collect();
         match key {
-            Some(key @ ("Ka" | "Kd" | "Ks" | "Ke")) if arguments < 3 => {
-                return Err(format!("line {}: `{key}` needs three numbers", index + 1));
+            Some(key @ ("Ka" | "Kd" | "Ks" | "Ke")) if arguments.len() != 3 => {
+                return Err(format!("line {}: `{key}` needs three numbers, not {}", index + 1, arguments.len()));
+            }
+            Some("Ns") if !is_exponent(&arguments) => {
+                return Err(format!(
+                    "line {}: `Ns {}`: the specular exponent must be one finite number ≥ 0",
+                    index + 1,
+                    arguments.join(" ")
+                ));
             }
             Some("newmtl") => {
                 let name = line.trim_start()["newmtl".len()..].trim();
@@ -203,6 +213,11 @@ fn read_material_library(path: &Path) -> std::result::Result<String, String> {
         }
     }
     Ok(text.to_owned())
+}
+
+/// Whether `words`, those after an MTL `Ns`, are one Phong exponent: a finite number ≥ 0.
+fn is_exponent(words: &[&str]) -> bool {
+    matches!(words, [ns] if ns.parse::<f32>().is_ok_and(|ns| ns.is_finite() && ns >= 0.0))
 }
 
 /// tobj's error `error`, raised while its reader was in line `line`, with that line: the line at
@@ -550,7 +565,8 @@ fn check_material_names(
 /// the perceptual roughness and metalness. Without `Pr` the roughness follows the Phong exponent
 /// `Ns` by Walter et al. 2007's correspondence `α = √(2/(Ns + 2))` (§5.2; roughness = √α), and
 /// is 1 without either; without `Pm` the surface is a dielectric. A `Pr` or `Pm` that is not a
-/// number, or a value out of range ([`Material::check`]), is an error naming the MTL keyword.
+/// number, or a value out of range ([`Material::check`]), is an error naming the MTL keyword;
+/// `Ns` is finite and ≥ 0 ([`read_material_library`] refused other lines).
 fn mtl_material(m: &tobj::Material) -> std::result::Result<Material, String> {
     let pbr = |key: &str| {
         m.unknown_param
@@ -558,8 +574,7 @@ fn mtl_material(m: &tobj::Material) -> std::result::Result<Material, String> {
             .map(|v| v.trim().parse::<f32>().map_err(|_| format!("`{key} {v}` is not a number")))
             .transpose()
     };
-    // A NaN `Ns` stays NaN (`max` would turn it into 0, a roughness of 1), which the check refuses.
-    let from_exponent = |ns: f32| if ns.is_nan() { ns } else { (2.0 / (ns.max(0.0) + 2.0)).sqrt().sqrt() };
+    let from_exponent = |ns: f32| (2.0 / (ns + 2.0)).sqrt().sqrt();
     let roughness = pbr("Pr")?.or_else(|| m.shininess.map(from_exponent));
     let material = Material {
         base_color: m.diffuse.map_or(DEFAULT_ALBEDO, Vec3::from_array),
@@ -572,7 +587,7 @@ fn mtl_material(m: &tobj::Material) -> std::result::Result<Material, String> {
         let keyword = match field {
             "material.base_color" => "Kd",
             "material.emission" => "Ke",
-            "material.roughness" => "Pr (or Ns)",
+            "material.roughness" => "Pr",
             _ => "Pm",
         };
         format!("{keyword}: {reason}")
@@ -722,15 +737,32 @@ mod tests {
         let err = load(&path).unwrap_err().to_string();
         assert!(err.contains("(read as the name `usemtl lamp`: start the line with `usemtl`)"), "{err}");
         std::fs::write(&path, obj).unwrap();
-        // A colour with fewer than three numbers (tobj 4.0.5 panics on one) or a number that does
-        // not parse names the library and its line.
+        // A colour with other than three numbers (tobj 4.0.5 panics on fewer and ignored a fourth),
+        // an `Ns` that is not one finite number ≥ 0 (a negative one was taken as 0, an infinite
+        // one as a mirror) or a number that does not parse names the library and its line.
         let library = dir.path().join("scene.mtl");
         for (text, expected) in [
-            ("newmtl floor\nKd 0.5\nnewmtl lamp\nnewmtl metal\n", "scene.mtl: line 2: `Kd` needs three numbers"),
+            ("newmtl floor\nKd 0.5\nnewmtl lamp\nnewmtl metal\n", "scene.mtl: line 2: `Kd` needs three numbers, not 1"),
             ("newmtl floor\nnewmtl lamp\n  Ke 1 1\nnewmtl metal\n", "scene.mtl: line 3: `Ke` needs three numbers"),
             ("newmtl floor\nKa\n", "scene.mtl: line 2: `Ka` needs three numbers"),
+            (
+                "newmtl floor\nnewmtl lamp\nKe 1 1 1 1\nnewmtl metal\n",
+                "scene.mtl: line 3: `Ke` needs three numbers, not 4",
+            ),
+            (
+                "newmtl floor\nKd 0.5 0.5 0.5 0.5\nnewmtl lamp\nnewmtl metal\n",
+                "scene.mtl: line 2: `Kd` needs three numbers, not 4",
+            ),
             ("newmtl floor\nKs 1 2 x\n", "scene.mtl: line 2: material"),
-            ("newmtl floor\n\nNs many\n", "scene.mtl: line 3: material"),
+            ("newmtl floor\n\nNi many\n", "scene.mtl: line 3: material"),
+            (
+                "newmtl floor\nNs -5\nnewmtl lamp\nnewmtl metal\n",
+                "scene.mtl: line 2: `Ns -5`: the specular exponent must be one finite number ≥ 0",
+            ),
+            ("newmtl floor\n\nNs nan\nnewmtl lamp\nnewmtl metal\n", "scene.mtl: line 3: `Ns nan`: the specular"),
+            ("newmtl floor\nNs inf\nnewmtl lamp\nnewmtl metal\n", "scene.mtl: line 2: `Ns inf`: the specular"),
+            ("newmtl floor\nNs 10 20\nnewmtl lamp\nnewmtl metal\n", "scene.mtl: line 2: `Ns 10 20`: the specular"),
+            ("newmtl floor\nNs many\nnewmtl lamp\nnewmtl metal\n", "scene.mtl: line 2: `Ns many`: the specular"),
             // tobj would drop these without a word: a lamp's `Ke` before its `newmtl`, and a
             // second `lamp` hiding the first.
             ("# lamp\nKe 10 10 10\nnewmtl lamp\n", "scene.mtl: line 2: `Ke` before the first `newmtl`"),
@@ -743,9 +775,10 @@ mod tests {
             let err = load(&path).unwrap_err().to_string();
             assert!(err.contains("material library") && err.contains(expected), "{text:?}: {err}");
         }
-        std::fs::write(&library, "newmtl floor\nNs nan\nnewmtl lamp\nnewmtl metal\n").unwrap();
-        let err = load(&path).unwrap_err().to_string();
-        assert!(err.contains("scene.mtl: material `floor`: Pr (or Ns): has NaN"), "{err}");
+        // `Ns 0`, the least exponent, is the roughest surface.
+        std::fs::write(&library, "newmtl floor\nNs 0\nnewmtl lamp\nnewmtl metal\n").unwrap();
+        let scene = load(&path).unwrap();
+        assert_eq!(scene.meshes().iter().find(|m| m.name == "floor (floor)").unwrap().material.roughness, 1.0);
         for (not_a_file, expected) in [("/dev/zero", "/dev/zero: not a regular file"), (".", "/.: not a regular file")]
         {
             let scene = dir.path().join("device.obj");
