@@ -138,13 +138,7 @@ impl CpuScene {
         let mut core_time = Duration::ZERO;
         let obvhs = build_cwbvh_from_tris(&flat, quality.params(), &mut core_time);
         let nodes: Vec<CwBvhNode> = bytemuck::cast_slice(&obvhs.nodes).to_vec();
-        let depth = tree_depth(&nodes);
-        if depth > MAX_TREE_DEPTH {
-            return Err(Error::SceneTooLarge {
-                scene: scene.name().to_owned(),
-                what: format!("its BVH is {depth} levels deep, and the traversal walks at most {MAX_TREE_DEPTH}"),
-            });
-        }
+        check_tree_depth(scene.name(), tree_depth(&nodes))?;
         let order = &obvhs.primitive_indices;
         let vertices = order
             .iter()
@@ -278,6 +272,18 @@ impl OcclusionQuery for CpuScene {
     }
 }
 
+/// Refuses a tree deeper than the traversal walks without dropping a subtree
+/// ([`MAX_TREE_DEPTH`]) as [`Error::SceneTooLarge`] of `scene`.
+fn check_tree_depth(scene: &str, depth: u32) -> Result<()> {
+    if depth > MAX_TREE_DEPTH {
+        return Err(Error::SceneTooLarge {
+            scene: scene.to_owned(),
+            what: format!("its BVH is {depth} levels deep, and the traversal walks at most {MAX_TREE_DEPTH}"),
+        });
+    }
+    Ok(())
+}
+
 /// Depth of the tree (root = 1): the longest chain of internal nodes, as
 /// [`MAX_TREE_DEPTH`] counts it.
 fn tree_depth(nodes: &[CwBvhNode]) -> u32 {
@@ -331,6 +337,23 @@ mod tests {
         // The same with the deep branch in the first slot: order does not matter.
         let nodes = [node(0b10_0100, 1), node(0b1, 3), node(0, 0), node(0b1000_0000, 4), node(0, 0)];
         assert_eq!(tree_depth(&nodes), 4);
+    }
+
+    /// The deepest tree the traversal walks whole (33 levels, the kernels' test shows) is
+    /// taken, one level deeper refused.
+    #[test]
+    fn trees_deeper_than_the_traversal_walks_are_refused() {
+        assert_eq!(MAX_TREE_DEPTH, 33);
+        assert!(check_tree_depth("deep.obj", MAX_TREE_DEPTH).is_ok());
+        match check_tree_depth("deep.obj", MAX_TREE_DEPTH + 1) {
+            Err(Error::SceneTooLarge { scene, what }) => {
+                assert_eq!(
+                    (scene.as_str(), what.as_str()),
+                    ("deep.obj", "its BVH is 34 levels deep, and the traversal walks at most 33")
+                )
+            }
+            other => panic!("expected SceneTooLarge, got {other:?}"),
+        }
     }
 
     #[test]

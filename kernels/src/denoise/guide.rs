@@ -7,9 +7,9 @@ use glam::{Vec4, Vec4Swizzles};
 #[derive(Copy, Clone, Debug, PartialEq)]
 pub struct Guide {
     /// Surface point (xyz, scene units) and its depth along the camera ray (w, at least 2⁻¹²⁶:
-    /// [`is_surface_depth`]); w = 0 where the camera ray hit nothing (such pixels are never filtered nor weigh as taps of the
-    /// bilateral and à-trous passes; the noise lines and SVGF's variance prefilter read them,
-    /// their ratio the fallback 1 and their variance 0).
+    /// [`is_surface_depth`]); w = 0 where the camera ray hit nothing (such pixels are never
+    /// filtered nor weigh as taps of the bilateral and à-trous passes; the noise lines and SVGF's
+    /// variance prefilter read them, their ratio the fallback 1 and their variance 0).
     pub position: Vec4,
     /// Unit surface normal facing the camera (xyz) and the luminance of the analytic `U` (w).
     pub normal: Vec4,
