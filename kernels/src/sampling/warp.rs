@@ -582,15 +582,16 @@ fn quad_hit(g: &QuadGeometry, eu: Vec3, ev: Vec3, d: Vec3) -> f32 {
     let denom = d.dot(g.n);
     let t = g.po.dot(g.n) / denom;
     // No point of the quad is farther from `p` than `|o − p| + |eu| + |ev|` (the triangle
-    // inequality). A ray meeting the plane beyond twice that misses the quad, however the slack
-    // below widens it: nearly parallel to the plane (`|cos θl|` below ~16 ε), its slack along the
+    // inequality), whose square is at most `3·(|o − p|² + |eu|² + |ev|²)` (Cauchy–Schwarz). A ray
+    // meeting the plane beyond twice that — compared in squares, without roots — misses the quad,
+    // however the slack below widens it: nearly parallel to the plane (`|cos θl|` below ~16 ε), its slack along the
     // ray, `~QUAD_EDGE_SLACK·t/cos²θl` of the height above the plane, outgrows the distance by
     // which it misses, `~t·tan θl`, and would accept it wherever it meets the plane (10⁴ light
     // widths away). A sampled direction's own `t` is off by a relative few ε/`|cos θl|` — near 1
     // only where the shade stage's shadow ray has no room before the light anyway
     // (`offset::ray_stop_before`).
-    let farthest = g.po.length() + eu.length() + ev.length();
-    if !(t > 0.0) || !(t <= 2.0 * farthest) {
+    let farthest_squared = 3.0 * (g.po.length_squared() + eu.length_squared() + ev.length_squared());
+    if !(t > 0.0) || !(t * t <= 4.0 * farthest_squared) {
         return 0.0;
     }
     // Hit point relative to o, then its coordinates in the (eu, ev) basis (any parallelogram):
