@@ -168,8 +168,9 @@ fn surfaces_only(text: &[u8]) -> std::borrow::Cow<'_, [u8]> {
 /// The text of the material library at `path`, less a leading byte-order mark
 /// ([`without_byte_order_mark`]), or why it cannot be used: the OS's reason, not a regular file,
 /// or the line at fault — one that is not UTF-8 text, or a colour (`Ka`, `Kd`, `Ks`, `Ke`) with
-/// other than three words, refused here before tobj parses the text: tobj 4.0.5 panics on fewer
-/// (found by fuzzing the loader) and ignores what follows the third. Also refused, because tobj
+/// other than three words (before any trailing `#` comment), refused here before tobj parses the
+/// text: tobj 4.0.5 panics on fewer (found by fuzzing the loader) and ignores what follows the
+/// third. Also refused, because tobj
 /// would drop them without a word: a property before the first `newmtl` (it belongs to no
 /// material), and a material name defined twice (the later definition would hide the earlier);
 /// and an `Ns` that is not one finite number ≥ 0 (a Phong exponent, [`mtl_material`]), which tobj
@@ -185,7 +186,8 @@ fn read_material_library(path: &Path) -> std::result::Result<String, String> {
     for (index, line) in text.lines().enumerate() {
         let mut words = line.split_whitespace();
         let key = words.next();
-        let arguments: Vec<&str> = words.collect();
+        // A trailing comment (`Kd 1 1 1 # red`), which tobj reads past, is no argument.
+        let arguments: Vec<&str> = words.take_while(|word| !word.starts_with('#')).collect();
         match key {
             Some(key @ ("Ka" | "Kd" | "Ks" | "Ke")) if arguments.len() != 3 => {
                 return Err(format!("line {}: `{key}` needs three numbers, not {}", index + 1, arguments.len()));
@@ -775,10 +777,12 @@ mod tests {
             let err = load(&path).unwrap_err().to_string();
             assert!(err.contains("material library") && err.contains(expected), "{text:?}: {err}");
         }
-        // `Ns 0`, the least exponent, is the roughest surface.
-        std::fs::write(&library, "newmtl floor\nNs 0\nnewmtl lamp\nnewmtl metal\n").unwrap();
+        // `Ns 0`, the least exponent, is the roughest surface; a trailing comment is no argument.
+        std::fs::write(&library, "newmtl floor\nNs 0 # rough\nKd 0.25 0.5 1 #blue\nnewmtl lamp\nnewmtl metal\n")
+            .unwrap();
         let scene = load(&path).unwrap();
-        assert_eq!(scene.meshes().iter().find(|m| m.name == "floor (floor)").unwrap().material.roughness, 1.0);
+        let floor = &scene.meshes().iter().find(|m| m.name == "floor (floor)").unwrap().material;
+        assert_eq!((floor.roughness, floor.base_color), (1.0, Vec3::new(0.25, 0.5, 1.0)));
         for (not_a_file, expected) in [("/dev/zero", "/dev/zero: not a regular file"), (".", "/.: not a regular file")]
         {
             let scene = dir.path().join("device.obj");
