@@ -1256,8 +1256,13 @@ mod tests {
     }
 
     fn file(text: &str) -> tempfile::NamedTempFile {
-        let mut f = tempfile::Builder::new().suffix(".gltf").tempfile().unwrap();
-        f.write_all(text.as_bytes()).unwrap();
+        file_of(".gltf", text.as_bytes())
+    }
+
+    /// A temporary file named `*suffix` holding `bytes`.
+    fn file_of(suffix: &str, bytes: &[u8]) -> tempfile::NamedTempFile {
+        let mut f = tempfile::Builder::new().suffix(suffix).tempfile().unwrap();
+        f.write_all(bytes).unwrap();
         f
     }
 
@@ -1987,11 +1992,7 @@ mod tests {
     /// longer failed without naming the header's length.
     #[test]
     fn a_glb_header_length_other_than_the_file_size_is_an_error() {
-        let glb_file = |bytes: &[u8]| {
-            let mut f = tempfile::Builder::new().suffix(".glb").tempfile().unwrap();
-            f.write_all(bytes).unwrap();
-            f
-        };
+        let glb_file = |bytes: &[u8]| file_of(".glb", bytes);
         for length in [0u32, 11] {
             let mut glb = b"glTF".to_vec();
             glb.extend_from_slice(&2u32.to_le_bytes());
