@@ -186,8 +186,7 @@ fn read_material_library(path: &Path) -> std::result::Result<String, String> {
     for (index, line) in text.lines().enumerate() {
         let mut words = line.split_whitespace();
         let key = words.next();
-        // A trailing comment (`Kd 1 1 1 # red`), which tobj reads past, is no argument.
-        let arguments: Vec<&str> = words.take_while(|word| !word.starts_with('#')).collect();
+        let arguments: Vec<&str> = before_comment(words).collect();
         match key {
             Some(key @ ("Ka" | "Kd" | "Ks" | "Ke")) if arguments.len() != 3 => {
                 return Err(format!("line {}: `{key}` needs three numbers, not {}", index + 1, arguments.len()));
@@ -215,6 +214,12 @@ fn read_material_library(path: &Path) -> std::result::Result<String, String> {
         }
     }
     Ok(text.to_owned())
+}
+
+/// The words of an MTL line before any trailing `#` comment (`Kd 1 1 1 # red`), which tobj reads
+/// past for the keys it parses itself, and raywave for `Pr` and `Pm` ([`mtl_material`]).
+fn before_comment<'a>(words: impl Iterator<Item = &'a str>) -> impl Iterator<Item = &'a str> {
+    words.take_while(|word| !word.starts_with('#'))
 }
 
 /// Whether `words`, those after an MTL `Ns`, are one Phong exponent: a finite number ≥ 0.
@@ -564,7 +569,8 @@ fn check_material_names(
 
 /// The material of an MTL entry: `Kd` is the base colour ([`DEFAULT_ALBEDO`] without it), `Ke`
 /// the emitted radiance, and the PBR extension's `Pr`/`Pm` (as Blender and 3ds Max write it)
-/// the perceptual roughness and metalness. Without `Pr` the roughness follows the Phong exponent
+/// the perceptual roughness and metalness, each one number (a trailing `#` comment is no part of
+/// it, as for the keys tobj reads). Without `Pr` the roughness follows the Phong exponent
 /// `Ns` by Walter et al. 2007's correspondence `α = √(2/(Ns + 2))` (§5.2; roughness = √α), and
 /// is 1 without either; without `Pm` the surface is a dielectric. A `Pr` or `Pm` that is not a
 /// number, or a value out of range ([`Material::check`]), is an error naming the MTL keyword;
@@ -573,7 +579,10 @@ fn mtl_material(m: &tobj::Material) -> std::result::Result<Material, String> {
     let pbr = |key: &str| {
         m.unknown_param
             .get(key)
-            .map(|v| v.trim().parse::<f32>().map_err(|_| format!("`{key} {v}` is not a number")))
+            .map(|v| match before_comment(v.split_whitespace()).collect::<Vec<_>>()[..] {
+                [value] => value.parse::<f32>().map_err(|_| format!("`{key} {value}` is not a number")),
+                ref words => Err(format!("`{key}` needs one number, not {}", words.len())),
+            })
             .transpose()
     };
     let from_exponent = |ns: f32| (2.0 / (ns + 2.0)).sqrt().sqrt();
@@ -711,6 +720,14 @@ mod tests {
                 "newmtl floor\nnewmtl lamp\nnewmtl metal\nPr 0.5x\n",
                 "scene.mtl: material `metal`: `Pr 0.5x` is not a number",
             ),
+            (
+                "newmtl floor\nnewmtl lamp\nnewmtl metal\nPm 0.5 0.5 # two\n",
+                "scene.mtl: material `metal`: `Pm` needs one number, not 2",
+            ),
+            (
+                "newmtl floor\nnewmtl lamp\nnewmtl metal\nPr\n",
+                "scene.mtl: material `metal`: `Pr` needs one number, not 0",
+            ),
             ("newmtl floor\nnewmtl lamp\nnewmtl metal\nPm 2\n", "scene.mtl: material `metal`: Pm: has 2"),
             ("newmtl floor\nnewmtl lmap\nnewmtl metal\n", "line 19: `usemtl lamp` names no material of"),
         ] {
@@ -777,12 +794,18 @@ mod tests {
             let err = load(&path).unwrap_err().to_string();
             assert!(err.contains("material library") && err.contains(expected), "{text:?}: {err}");
         }
-        // `Ns 0`, the least exponent, is the roughest surface; a trailing comment is no argument.
-        std::fs::write(&library, "newmtl floor\nNs 0 # rough\nKd 0.25 0.5 1 #blue\nnewmtl lamp\nnewmtl metal\n")
-            .unwrap();
+        // `Ns 0`, the least exponent, is the roughest surface; a trailing comment is no argument,
+        // of the keys tobj reads nor of `Pr` and `Pm`, which raywave reads.
+        std::fs::write(
+            &library,
+            "newmtl floor\nNs 0 # rough\nKd 0.25 0.5 1 #blue\nnewmtl lamp\nnewmtl metal\nPr 0.25 # x\nPm 1 #metal\n",
+        )
+        .unwrap();
         let scene = load(&path).unwrap();
-        let floor = &scene.meshes().iter().find(|m| m.name == "floor (floor)").unwrap().material;
+        let material = |name: &str| scene.meshes().iter().find(|m| m.name == name).unwrap().material;
+        let (floor, metal) = (material("floor (floor)"), material("chip (metal)"));
         assert_eq!((floor.roughness, floor.base_color), (1.0, Vec3::new(0.25, 0.5, 1.0)));
+        assert_eq!((metal.roughness, metal.metallic), (0.25, 1.0));
         for (not_a_file, expected) in [("/dev/zero", "/dev/zero: not a regular file"), (".", "/.: not a regular file")]
         {
             let scene = dir.path().join("device.obj");
