@@ -89,8 +89,10 @@ impl Surface {
 /// the incoming `direction`. `triangles` holds three `Vec4` vertices per triangle in (instance,
 /// primitive) order, instance `m` starting at triangle `first_triangle[m]`. Malformed indices (an
 /// instance or primitive that is [`NO_HIT`] or beyond that instance's triangles) or a degenerate
-/// triangle give [`Surface::MISS`]; a hit distance or barycentrics that are not finite give a
-/// miss flagged as [`Surface::replaced`].
+/// triangle give [`Surface::MISS`], and so does a `direction` the trace stage would not trace
+/// (shorter than [`crate::trace::MIN_DIRECTION`]); a hit distance, barycentrics or `direction`
+/// that are not finite give a miss flagged as [`Surface::replaced`] (a NaN direction had read as
+/// a front face seen head-on: a wrong, finite, unflagged sample).
 pub fn resolve_surface(
     direction: Vec3,
     hit_t: f32,
@@ -100,10 +102,11 @@ pub fn resolve_surface(
     triangles: &[Vec4],
     first_triangle: &[u32],
 ) -> Surface {
-    if !(hit_t.is_finite() && barycentrics.is_finite()) {
+    if !(hit_t.is_finite() && barycentrics.is_finite() && direction.is_finite()) {
         return Surface { replaced: true, ..Surface::MISS };
     }
-    if instance == NO_HIT || instance as usize >= first_triangle.len() {
+    let untraceable = direction.abs().max_element() < crate::trace::MIN_DIRECTION;
+    if untraceable || instance == NO_HIT || instance as usize >= first_triangle.len() {
         return Surface::MISS;
     }
     // The instance's triangles run from its first to the next instance's (or the last).
@@ -249,7 +252,8 @@ fn lerp(a: f32, b: f32, t: f32) -> f32 {
 }
 
 /// The shade stage for one camera sample at `pixel` looking along `view_direction` (from the
-/// camera, of any length) at `surface`: `U` summed over all lights, and one MIS sample of the chosen light
+/// camera, of any length: the direction [`resolve_surface`] resolved `surface` with) at
+/// `surface`: `U` summed over all lights, and one MIS sample of the chosen light
 /// shared by `U_N` and `S_N`. Flagged as replaced when a non-finite value was — the surface's
 /// hit record (a miss), `U` (zero) or the sample's weight (no sample).
 pub fn shade_sample(
@@ -763,8 +767,13 @@ mod tests {
     #[test]
     fn non_finite_values_are_replaced_and_flagged() {
         let triangles = [Vec4::ZERO, Vec4::X, Vec4::Y];
-        for (t, barycentrics) in [(f32::NAN, glam::Vec2::splat(0.25)), (1.0, glam::Vec2::new(f32::INFINITY, 0.0))] {
-            let s = resolve_surface(Vec3::Z, t, 0, 0, barycentrics, &triangles, &[0]);
+        for (direction, t, barycentrics) in [
+            (Vec3::Z, f32::NAN, glam::Vec2::splat(0.25)),
+            (Vec3::Z, 1.0, glam::Vec2::new(f32::INFINITY, 0.0)),
+            (Vec3::new(0.0, f32::NAN, 1.0), 1.0, glam::Vec2::splat(0.25)),
+            (Vec3::new(f32::NEG_INFINITY, 0.0, 1.0), 1.0, glam::Vec2::splat(0.25)),
+        ] {
+            let s = resolve_surface(direction, t, 0, 0, barycentrics, &triangles, &[0]);
             assert_eq!(s, Surface { replaced: true, ..Surface::MISS });
             let table = table();
             let scene = ShadeScene { materials: &[], lights: LightSet::new(&[], &[], &[]), ltc: &table };
@@ -943,6 +952,10 @@ mod tests {
         assert_eq!(resolve_surface(Vec3::Z, 2.0, NO_HIT, 0, glam::Vec2::ZERO, &triangles, &[0]), Surface::MISS);
         assert_eq!(resolve_surface(Vec3::Z, 2.0, 0, 5, glam::Vec2::ZERO, &triangles, &[0]), Surface::MISS);
         assert_eq!(resolve_surface(Vec3::Z, 2.0, 3, 0, glam::Vec2::ZERO, &triangles, &[0]), Surface::MISS);
+        // A direction the trace stage would not trace has no surface; the shortest it traces does.
+        let along = |z: f32| resolve_surface(Vec3::new(0.0, 0.0, z), 2.0, 0, 0, glam::Vec2::ZERO, &triangles, &[0]);
+        assert_eq!((along(0.0), along(0.5 * crate::trace::MIN_DIRECTION)), (Surface::MISS, Surface::MISS));
+        assert_eq!(along(crate::trace::MIN_DIRECTION).normal, Vec4::new(0.0, 0.0, -1.0, 0.0));
         // Two instances of one triangle each: a primitive past instance 0's own triangles, and
         // NO_HIT as the primitive of instance 1 (whose first + primitive wrapped to triangle 0).
         let two = [triangles, triangles.map(|v| v + Vec4::Z)].concat();
