@@ -17,6 +17,5 @@ pub mod output_line;
 pub mod render;
 pub mod report;
 
+// The host re-exports `shared`, `kernels` and `glam` too.
 pub use raywave_host::*;
-pub use raywave_kernels as kernels;
-pub use raywave_shared as shared;

@@ -217,7 +217,9 @@ pub struct DenoiseInput {
 
 impl DenoiseInput {
     /// The inputs of a frame: the accumulated estimates and the G-buffer of `surfaces` (the
-    /// surface each pixel's camera ray hit; the first sample's when the camera jitters).
+    /// surface each pixel's camera ray hit; the first sample's when the camera jitters). Both are
+    /// one entry per pixel; a `surfaces` of another length than the accumulator's gives buffers
+    /// of different lengths, which [`DenoiseInput::check`] (run by every denoiser) refuses.
     pub fn new(surfaces: &[Surface], accumulator: &ShadeAccumulator) -> Self {
         let analytic = accumulator.analytic();
         let position = surfaces

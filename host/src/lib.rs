@@ -21,6 +21,15 @@ pub mod visualize;
 pub mod vulkan;
 pub mod workgroup;
 
+/// The glam version the host's and the kernels' signatures use (0.34, the one spirv-std 0.11
+/// builds against), so an engine can name `Vec3` and friends without pinning it itself.
+pub use glam;
+/// The kernels, as plain `no_std` functions: what the backends run, and what an engine's own
+/// code (CPU or rust-gpu) can call.
+pub use raywave_kernels as kernels;
+/// The host/kernel contract: the parameter structs, the lights and the binding numbers.
+pub use raywave_shared as shared;
+
 pub use backend::{Backend, FrameOutput, StageReport, ValidationLog};
 pub use device::{close_backend, open_backend, BackendOptions, DeviceChoice, TraceMethod};
 pub use error::{Error, Result};

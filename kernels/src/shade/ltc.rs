@@ -98,6 +98,10 @@ impl LtcLobe {
 /// where `ft > ½`: the densities either side are up to 0.015 (across `ft = ½`) and 0.017
 /// (across `fs = ½`) apart in L1 (of 2; the same at ±2·10⁻³ and ±2·10⁻⁴), so any light's `U_S`,
 /// which differs by at most half the L1 distance, steps by at most 0.9 % of `E_S`.
+///
+/// # Panics
+/// On the CPU, like slice indexing, if `table` holds fewer than [`LTC_TABLE_LEN`] entries (the
+/// host's `ShadeData` always holds the whole table; a SPIR-V access out of bounds is undefined).
 pub fn lookup(table: &[Vec4], roughness: f32, cos_theta_v: f32) -> LtcLobe {
     let last = (LTC_SIZE - 1) as f32;
     let r = if roughness > 0.0 { roughness.min(1.0) } else { 0.0 };
