@@ -230,4 +230,46 @@ mod tests {
             }
         }
     }
+
+    /// A ray sent from far away to a small surface near the world origin (a shading point 10² to
+    /// 10⁴ from a 0.1 × 0.1 light quad): the ray test subtracts the origin, so its rounding is
+    /// ulps of the *origin's* coordinates, not of the surface's. Stopped by [`ray_stop_before`],
+    /// no ray meets the quad in raywave's watertight triangle test, and none stops further short
+    /// than twice the offset of the origin's extent over the cosine to the plane. A stop lifted
+    /// by the surface's extent alone (ulps of 0.4) falls inside that rounding at every distance.
+    #[test]
+    fn a_ray_from_far_away_stops_before_a_small_surface_near_the_origin() {
+        let mut rng = crate::hash::CounterRng::new(23);
+        let normal = Vec3::new(0.3, -0.8, 0.52).normalize();
+        let eu = 0.1 * normal.any_orthonormal_vector();
+        let ev = normal.cross(eu);
+        let corner = Vec3::new(0.3, -0.2, 0.1) - 0.5 * (eu + ev);
+        let vertices = [corner, corner + eu, corner + eu + ev, corner + ev];
+        let extent = triangle_extent(vertices[0], vertices[1], vertices[2]).max(triangle_extent(
+            vertices[0],
+            vertices[2],
+            vertices[3],
+        ));
+        for distance in [1e2f32, 1e3, 1e4] {
+            for _ in 0..5_000 {
+                let target = corner + rng.next_f32() * eu + rng.next_f32() * ev;
+                let cos = 0.05f32.powf(rng.next_f32());
+                let side = if rng.next_f32() < 0.5 { 1.0 } else { -1.0 };
+                let along = (eu * rng.range(-1.0, 1.0) + ev * rng.range(-1.0, 1.0)).normalize();
+                let origin = target + distance * (side * cos * normal + (1.0 - cos * cos).sqrt() * along);
+                let direction = (target - origin).normalize();
+                let length = (target - origin).length();
+                let t = ray_stop_before(origin, direction, target, normal, extent);
+                let case = std::format!("distance {distance}, cos {cos}: t {t} of {length}");
+                assert!(t > 0.0 && t < length, "{case}");
+                let ray = WatertightRay::new(origin, direction);
+                for [a, b, c] in [[0, 1, 2], [0, 2, 3]] {
+                    let hit = ray.intersect(vertices[a], vertices[b], vertices[c], 0.0, t);
+                    assert!(hit.is_none(), "{case}: meets the quad");
+                }
+                let lift = offset_distance(origin.abs().max_element());
+                assert!(length - t <= 2.0 * lift / direction.dot(normal).abs(), "{case}");
+            }
+        }
+    }
 }
