@@ -342,4 +342,37 @@ mod tests {
             assert!((cross_seed / n as f64).abs() < 0.0065, "kind {kind}: seed correlation");
         }
     }
+
+    /// Across the 32 × 32 pixels of an image, each of a pixel's first two samples falls in the
+    /// lower half of [0, 1) for about half the pixels, in every dimension and either coordinate,
+    /// at every sample count, odd powers of 2 included. There the lowest digit of the index is a
+    /// single bit, scrambled like the others by a hash of the digits above it (pbrt-v4's
+    /// `ZSobolSampler`); left unscrambled it is the sample index's lowest bit, which is the first
+    /// Sobol' point's top bit in both coordinates — every pixel's sample 0 in the same half of
+    /// every dimension's square, the same half of every light for the whole frame. Binomial(1024,
+    /// ½) has σ = 16: the test allows 5σ.
+    #[test]
+    fn zsobol_samples_are_balanced_across_pixels_at_every_sample_count() {
+        for spp_log2 in 0..=5 {
+            let p = params(sampler_kind::ZSOBOL, spp_log2);
+            for dimension in [0u32, 1, 4] {
+                for s in [0u32, 1].into_iter().filter(|&s| s < 1 << spp_log2) {
+                    let mut lower = [0u32; 2];
+                    for y in 0..32 {
+                        for x in 0..32 {
+                            let u = sample_2d(&p, UVec2::new(x, y), s, dimension);
+                            lower[0] += u32::from(u.x < 0.5);
+                            lower[1] += u32::from(u.y < 0.5);
+                        }
+                    }
+                    for count in lower {
+                        assert!(
+                            count.abs_diff(512) < 80,
+                            "spp 2^{spp_log2}, dim {dimension}, sample {s}: {count} of 1024"
+                        );
+                    }
+                }
+            }
+        }
+    }
 }
