@@ -237,7 +237,8 @@ pub(crate) mod tests {
             (Vec3::new(-0.5, -0.5, 1.0), Vec3::X, Vec3::Y),      // centred overhead
             (Vec3::new(0.5, -0.3, 0.2), Vec3::X * 2.0, Vec3::Y), // low, off to the side
             (Vec3::new(-0.5, 1.0, -0.5), Vec3::X, Vec3::Z),      // vertical, crossing the horizon
-            (Vec3::new(-1.0, 2.0, -1.0), Vec3::X * 2.0, Vec3::Z * 0.5), // mostly below the horizon
+            (Vec3::new(-1.0, 2.0, -1.0), Vec3::X * 2.0, Vec3::Z * 1.25), // mostly below the horizon
+            (Vec3::new(0.2, 0.5, -0.25), Vec3::Y, Vec3::new(0.3, 0.0, 1.0)), // a quarter below, slanted
         ];
         for (corner, u, v) in cases {
             let q = [corner, corner + u, corner + u + v, corner + v];
