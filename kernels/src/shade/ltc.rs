@@ -540,6 +540,37 @@ mod tests {
         assert!((frame.tangent.length() - 1.0).abs() < 1e-6 && frame.tangent.dot(Vec3::Z).abs() < 1e-6);
     }
 
+    /// The specular albedo is Schlick's Fresnel split in F0, `F0·magnitude + (1 − F0)·fresnel`
+    /// per channel: a surface of F0 = 1 reflects the magnitude alone, one of F0 = 0 only the
+    /// Fresnel term, and between them the albedo is linear in F0 — checked per channel on a lobe
+    /// with distinct amplitudes. No other kernel test separated the two terms.
+    #[test]
+    fn specular_albedo_is_the_schlick_split_sum() {
+        let lobe = LtcLobe { magnitude: 0.8, fresnel: 0.1, ..LtcLobe::single(Mat3::IDENTITY) };
+        assert_eq!(lobe.specular_albedo(Vec3::ONE), Vec3::splat(0.8));
+        assert_eq!(lobe.specular_albedo(Vec3::ZERO), Vec3::splat(0.1));
+        let albedo = lobe.specular_albedo(Vec3::new(0.04, 0.5, 0.9));
+        let expected = Vec3::new(0.04 * 0.8 + 0.96 * 0.1, 0.5 * 0.8 + 0.5 * 0.1, 0.9 * 0.8 + 0.1 * 0.1);
+        assert!((albedo - expected).abs().max_element() < 1e-6, "{albedo} vs {expected}");
+    }
+
+    /// Roughness and `n·v` outside [0, 1] are clamped, as documented: the lobe is exactly the
+    /// one at the nearest end. The host refuses such roughness in scene files, but the stage
+    /// takes whatever the material buffer holds; past row 63 the bilinear weights had
+    /// extrapolated the last two rows (`fs` of 32 at roughness 1.5).
+    #[test]
+    fn roughness_and_cosine_outside_the_unit_interval_are_clamped() {
+        let table = table();
+        for cos_v in [0.0, 0.37, 1.0] {
+            assert_eq!(lookup(&table, 1.5, cos_v), lookup(&table, 1.0, cos_v), "cos {cos_v}");
+            assert_eq!(lookup(&table, -0.3, cos_v), lookup(&table, 0.0, cos_v), "cos {cos_v}");
+        }
+        for roughness in [0.0, 0.41, 1.0] {
+            assert_eq!(lookup(&table, roughness, 1.8), lookup(&table, roughness, 1.0), "roughness {roughness}");
+            assert_eq!(lookup(&table, roughness, -0.5), lookup(&table, roughness, 0.0), "roughness {roughness}");
+        }
+    }
+
     /// Views within 10⁻⁶…10⁻³ rad of random normals: the frame stays orthonormal to 10⁻⁶ (a
     /// tangent normalised once leant up to 0.26 towards the normal at 1.2·10⁻⁶ rad).
     #[test]
