@@ -144,6 +144,43 @@ mod tests {
         assert!((w - (1.0 - 0.9 * 0.5)).abs() < 1e-6, "analytic stop {w}");
     }
 
+    /// Opposite normals weigh 0 (the two faces of a thin wall, or a normal flipped by the
+    /// camera-facing rule across a silhouette), however close the points: the reference's
+    /// `(n_c·n_t)⁴` alone weighs them as equal ones, which the clamp of the cosine to [0, 1]
+    /// prevents. Normals 120° apart weigh 0 as well, and 60° apart `1 − Wn·(1 − ½⁴)` (the
+    /// plane stop is 1 there: the tap lies along the line where both planes meet).
+    #[test]
+    fn opposite_and_steep_normals_weigh_by_the_clamped_cosine() {
+        let c = guide(Vec3::ZERO, 10.0, Vec3::Y, 0.5);
+        let tap = |n: Vec3| guide(Vec3::new(0.0, 0.0, 0.01), 10.0, n, 0.5);
+        assert_eq!(edge_stop(&c, &tap(Vec3::NEG_Y), DEFAULT_EDGE_WEIGHTS), 0.0, "opposite normals");
+        let (sin, cos) = 120f32.to_radians().sin_cos();
+        assert_eq!(edge_stop(&c, &tap(Vec3::new(sin, cos, 0.0)), DEFAULT_EDGE_WEIGHTS), 0.0, "120° apart");
+        let weights = Vec4::new(1.0, 0.5, 1.5, 0.09);
+        let (sin, cos) = 60f32.to_radians().sin_cos();
+        let w = edge_stop(&c, &tap(Vec3::new(sin, cos, 0.0)), weights);
+        let expected = 1.0 - 0.5 * (1.0 - cos.powi(4));
+        assert!((w - expected).abs() < 1e-6, "60° apart: {w} vs {expected}");
+    }
+
+    /// The plane stop takes the larger distance of the tap from either surface's plane, so it is
+    /// the same seen from either pixel: a tap in its own plane but off the centre's (an offset
+    /// along the tap's tangent, not the centre's) is still stopped, by `(1 − 2·Wp·|dq·n_c|/|dq|)²`
+    /// — only the plane stop weighs here (the other weights 0).
+    #[test]
+    fn the_plane_stop_measures_both_planes() {
+        let n_t = Vec3::new(0.1, 1.0, 0.0).normalize();
+        let offset = Vec3::new(1.0, -0.1, 0.0) * 0.01;
+        assert!(offset.dot(n_t).abs() < 1e-9, "the tap lies in its own plane");
+        let c = guide(Vec3::ZERO, 10.0, Vec3::Y, 0.5);
+        let t = guide(offset, 10.0, n_t, 0.5);
+        let plane_only = Vec4::new(0.0, 0.0, 1.0, 0.0);
+        let expected = (1.0 - 2.0 * offset.dot(Vec3::Y).abs() / offset.length()).powi(2);
+        let w = edge_stop(&c, &t, plane_only);
+        assert!((w - expected).abs() < 1e-5 && expected < 0.7, "{w} vs {expected}");
+        assert_eq!(edge_stop(&t, &c, plane_only), w, "the same from the tap's side");
+    }
+
     /// Normals that are not unit long (a caller's own `DenoiseInput`) still weigh at most 1.
     #[test]
     fn weights_stay_in_the_unit_interval_for_normals_of_any_length() {

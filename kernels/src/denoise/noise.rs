@@ -221,6 +221,26 @@ mod tests {
         }
     }
 
+    /// A radius outside 1…[`MAX_RADIUS`] is clamped into it, as documented: the host refuses
+    /// such radii (`check_radius`), but the kernel takes what the parameters hold. Radius 0 had
+    /// divided the variation by 0, and the NaN estimate read as a quiet 0 on coin-flip noise.
+    #[test]
+    fn radii_outside_the_range_are_clamped_into_it() {
+        let mut rng = CounterRng::new(41);
+        let values: Vec<f32> = (0..24 * 16).map(|_| if rng.next_f32() < 0.5 { 1.0 } else { 0.0 }).collect();
+        let r = image(24, 16, |x, y| values[(y * 24 + x) as usize]);
+        let with = |radius| DenoiseParams { radius, ..DenoiseParams::new(24, 16) };
+        for p in [IVec2::new(12, 8), IVec2::new(0, 0), IVec2::new(23, 5)] {
+            let smallest = noise_estimate(&with(1), p, &r);
+            assert!(smallest > 0.0, "{p}: coin flips are noisy at R = 1");
+            assert_eq!(noise_estimate(&with(0), p, &r), smallest, "{p}: R = 0");
+            let largest = noise_estimate(&with(MAX_RADIUS), p, &r);
+            for radius in [MAX_RADIUS + 1, u32::MAX] {
+                assert_eq!(noise_estimate(&with(radius), p, &r), largest, "{p}: R = {radius}");
+            }
+        }
+    }
+
     #[test]
     fn undefined_ratios_count_as_unshadowed_and_stay_finite() {
         let params = DenoiseParams { radius: MAX_RADIUS, ..DenoiseParams::new(16, 16) };
