@@ -704,7 +704,7 @@ mod tests {
     use super::*;
     use crate::hash::{pcg3d, unit_float, CounterRng};
     use glam::UVec3;
-    use std::vec::Vec;
+    use std::{vec, vec::Vec};
 
     fn random_light(rng: &mut CounterRng) -> Light {
         let radiance = Vec3::new(rng.range(0.1, 5.0), rng.range(0.1, 5.0), rng.range(0.1, 5.0));
@@ -1348,6 +1348,54 @@ mod tests {
             [interior(root, 4), interior(left, 3), leaf(0), leaf(1), interior(right, 6), leaf(2), leaf(3)],
             [0b00, 0b10, 0b01, 0b11],
         )
+    }
+
+    /// A spine of `depth` interior nodes, each with a dim sphere light as its first child and
+    /// the rest of the spine as its second, ending in a bright light's leaf at depth `depth`:
+    /// the deepest leaf the walk can reach when `depth` is [`MAX_BVH_DEPTH`]. Node `2k` is the
+    /// spine at depth `k`, node `2k + 1` light `k`'s leaf; the last node is the bright light's.
+    fn spine_tree(depth: u32) -> (Vec<Light>, Vec<LightBvhNode>, Vec<u32>) {
+        let lights: Vec<Light> = (0..=depth)
+            .map(|k| {
+                let radiance = if k == depth { Vec3::ONE } else { Vec3::splat(1e-6) };
+                Light::sphere(Vec3::new(k as f32 * 0.1, 3.0, 0.0), 0.05, radiance)
+            })
+            .collect();
+        let leaf = |k: u32| LightBvhNode {
+            bounds: light_bounds(&lights[k as usize]),
+            child_or_light: k,
+            is_leaf: 1,
+            padding: [0; 2],
+        };
+        let mut nodes = vec![leaf(depth)];
+        for k in (0..depth).rev() {
+            let bounds = union_bounds(&leaf(k).bounds, &nodes[0].bounds, Vec3::Z, -1.0);
+            let spine = LightBvhNode { bounds, child_or_light: 2 * k + 2, is_leaf: 0, padding: [0; 2] };
+            nodes.splice(0..0, [spine, leaf(k)]);
+        }
+        // Light k < depth: k second children, then a first; the bright light: `depth` seconds.
+        let trails = (0..=depth).map(|k| ((1u64 << k) - 1) as u32).collect();
+        (lights, nodes, trails)
+    }
+
+    /// The walk reaches a leaf at [`MAX_BVH_DEPTH`], the deepest the host's builder makes, and no
+    /// deeper: at depth 32 the bright light at the end of a spine of dim ones is drawn with
+    /// nearly all the probability, and its pmf agrees; one level deeper the tree is malformed
+    /// (no light, pmf 0). A walk that stopped a level early had never drawn a light at depth 32.
+    #[test]
+    fn the_walk_reaches_leaves_at_the_largest_depth_and_no_deeper() {
+        let (p, n) = (Vec3::new(1.6, 0.0, 0.0), Vec3::Y);
+        let (lights, nodes, trails) = spine_tree(MAX_BVH_DEPTH);
+        assert_eq!(nodes.len() as u32, 2 * MAX_BVH_DEPTH + 1);
+        let deepest = MAX_BVH_DEPTH;
+        let choice = select_bvh(&lights, &nodes, p, n, 0.5);
+        assert_eq!(choice.index, deepest, "{choice:?}");
+        assert!(choice.pmf > 0.99, "{choice:?}");
+        assert_eq!(bvh_pmf(&lights, &nodes, &trails, p, n, deepest), choice.pmf);
+        let total: f32 = (0..=deepest).map(|k| bvh_pmf(&lights, &nodes, &trails, p, n, k)).sum();
+        assert!((total - 1.0).abs() < 1e-5, "the pmfs sum to {total}");
+        let (lights, nodes, _) = spine_tree(MAX_BVH_DEPTH + 1);
+        assert!(!select_bvh(&lights, &nodes, p, n, 0.5).is_valid(), "a leaf at depth 33");
     }
 
     /// The tree walk draws each light as often as its pmf says: over 2¹⁶ stratified `u` at random
