@@ -63,7 +63,7 @@ use raywave::shared::sampling::sampler_kind;
 use raywave::shared::stream::NO_HIT;
 use raywave::shared::ShadeParams;
 use raywave::stream::{HitStream, RayStream, ShadeStream};
-use raywave::{Backend, Scene};
+use raywave::{Backend, Error, Scene};
 
 /// Odd sizes, so rows do not align with workgroups and the last workgroup is partial.
 const WIDTH: u32 = 97;
@@ -560,6 +560,64 @@ fn shade_rejects_mismatched_streams_on_every_backend() {
     check(&mut cpu);
     for mut device in vulkan::each_device("shade input checks") {
         check(&mut device);
+        vulkan::assert_clean(device);
+    }
+}
+
+/// What a backend refuses of an engine that rebuilt its scene, alike on the CPU and every device:
+/// after `load_scene` of the Cornell box rebuilt with its tall block moved, the box's old shade
+/// data and another scene's are refused naming both scenes (they had been shaded with `Ok`, the
+/// new geometry's hits resolved on old triangles — on a device from the data it had cached), and
+/// so is a compacted ray stream (one ray dropped), naming the first ray out of place; the moved
+/// scene's own data is shaded, the device's samples within the parity tolerances of the CPU's.
+#[test]
+fn shade_refuses_another_scenes_data_and_compacted_streams_on_every_backend() {
+    let scene = common::cornell();
+    let mut meshes = scene.meshes().to_vec();
+    let tall = meshes.iter().position(|m| m.name == "tall block").expect("the tall block");
+    meshes[tall].positions.iter_mut().for_each(|p| p.x += 0.05);
+    let moved = Scene::new(scene.name(), meshes, *scene.camera()).expect("moved scene");
+    let other = Scene::load("builtin:cornell-two-lights").expect("built-in scene loads");
+    let [stale, other_data, fresh] = [&scene, &other, &moved].map(|s| ShadeData::new(s).expect("shade data"));
+    let mut cpu = CpuBackend::new();
+    cpu.load_scene(&moved).expect("cpu scene");
+    let (rays, hits, sampler) = camera_pass(&mut cpu, &moved, sampler_kind::ZSOBOL, 0);
+    let params = |data: &ShadeData| data.params(sampler, WIDTH, HEIGHT, 0);
+    let mut compacted = rays.clone();
+    let mut compacted_hits = hits.clone();
+    compacted.origin.remove(0);
+    compacted.direction.remove(0);
+    compacted.pixel.remove(0);
+    compacted_hits.t.remove(0);
+    compacted_hits.primitive.remove(0);
+    compacted_hits.instance.remove(0);
+    compacted_hits.barycentrics.remove(0);
+    let check = |backend: &mut dyn Backend| {
+        let who = backend.name();
+        backend.load_scene(&scene).expect("scene loads");
+        backend.shade(&params(&stale), &stale, &rays, &hits).expect("the loaded scene's data");
+        backend.load_scene(&moved).expect("moved scene loads");
+        for data in [&stale, &other_data] {
+            match backend.shade(&params(data), data, &rays, &hits) {
+                Err(Error::SceneMismatch { data: built, loaded }) => {
+                    assert_eq!((built, loaded), (data.scene().to_string(), moved.identity().to_string()), "{who}")
+                }
+                other => panic!("{who}: expected {} refused, got {:?}", data.scene(), other.map(|_| ())),
+            }
+        }
+        let count = compacted.len() as u32;
+        match backend.shade(&ShadeParams { count, ..params(&fresh) }, &fresh, &compacted, &compacted_hits) {
+            Err(Error::InvalidParameter { name: "shade", reason }) => {
+                assert!(reason.contains("rays.pixel[0] = 1"), "{who}: {reason}")
+            }
+            other => panic!("{who}: expected the compacted stream refused, got {:?}", other.map(|_| ())),
+        }
+        backend.shade(&params(&fresh), &fresh, &rays, &hits).expect("the moved scene's data").0
+    };
+    let expected = check(&mut cpu);
+    for mut device in vulkan::each_device("shade scene identity") {
+        let shades = check(&mut device);
+        assert_matches_cpu(&device.name(), &expected, &shades, &rays, &hits);
         vulkan::assert_clean(device);
     }
 }

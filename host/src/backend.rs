@@ -3,10 +3,11 @@
 
 use crate::denoise::{DenoiseInput, DenoiseMethod};
 use crate::error::Result;
-use crate::scene::Scene;
+use crate::scene::{Scene, SceneIdentity};
 use crate::shading::ShadeData;
 use crate::stream::{HitStream, RayStream, ShadeStream};
 use glam::{UVec2, Vec4};
+use rayon::prelude::*;
 use raywave_shared::sampling::{sampler_kind, warp_kind};
 use raywave_shared::{DenoiseParams, GenerateParams, SamplerParams, SamplerProbeParams, ShadeParams, WarpParams};
 use std::sync::{Arc, Mutex};
@@ -103,7 +104,11 @@ impl ValidationLog {
 }
 
 /// An execution backend: the CPU executor or a Vulkan device.
-pub trait Backend {
+///
+/// `Send`, so that an engine can move a backend (the `Box<dyn Backend>` of
+/// [`crate::open_backend`]) to its render thread; a backend is used by one thread at a time
+/// (its methods take `&mut self`).
+pub trait Backend: Send {
     /// Human-readable name, e.g. `cpu (2 threads)` or `vulkan:0 llvmpipe (…)`.
     fn name(&self) -> String;
 
@@ -117,7 +122,9 @@ pub trait Backend {
     /// and otherwise ignores it.
     fn set_sustain_seconds(&mut self, seconds: f64) -> Result<()>;
 
-    /// Builds the acceleration structures for `scene`; later `trace` calls run against it.
+    /// Builds the acceleration structures for `scene` and records its [`Scene::identity`]; later
+    /// `trace` calls run against it, and `shade` takes only [`ShadeData`] built from it (or a
+    /// clone of it). A scene refused here leaves the loaded one in place.
     fn load_scene(&mut self, scene: &Scene) -> Result<()>;
 
     /// Runs the generate stage.
@@ -132,9 +139,14 @@ pub trait Backend {
 
     /// Runs the shade stage: resolves each camera ray's hit (`rays[i]`, `hits[i]`, pixel `i` of a
     /// `params.width`-wide image) into a surface of `data`'s scene and shades one sample of it.
-    /// `params.count` must equal the number of rays and of hits. Backends that keep `data` on a
-    /// device upload it once and reuse it while the same `data` is passed (see
-    /// [`ShadeData::identity`]).
+    /// The streams are dense, one ray per pixel in pixel order as the generate stage writes them:
+    /// `rays.pixel[i]` must be `i` (a compacted stream, misses dropped, is refused naming the
+    /// first ray out of place — its samples would have been drawn for the wrong pixels), and
+    /// `params.count` must equal the number of rays and of hits. With a scene loaded, `data` must
+    /// be built from it ([`ShadeData::check_scene`]: [`crate::Error::SceneMismatch`] otherwise);
+    /// without one (hits from an engine's own trace) any scene's data is taken. Every check is
+    /// [`check_shade_inputs`]'s. Backends that keep `data` on a device upload it once and reuse
+    /// it while the same `data` is passed (see [`ShadeData::identity`]).
     fn shade(
         &mut self,
         params: &ShadeParams,
@@ -265,18 +277,24 @@ pub fn copy_probe_len(params: &DenoiseParams, image: &[Vec4]) -> Result<u32> {
     }
 }
 
-/// Checks the inputs of the shade stage every backend shares: the data ([`ShadeData::check`]),
-/// one hit per ray, `params.count` rays, a width ≥ 1, light and node counts within the data's
-/// buffers (a count past its buffer was clamped to it by the kernels — on the CPU to the slice,
-/// on Vulkan to the buffer, which holds one zeroed element where the slice is empty — so the
-/// backends would have shaded different light sets), and a sampler of a known kind that gives
-/// the sample its own point in every pixel ([`check_sampler`]).
-pub(crate) fn check_shade_inputs(
+/// Checks the inputs of the shade stage every backend shares, for an engine's own [`Backend`]
+/// too: `data` built from `loaded`, the scene the backend has loaded, if any
+/// ([`ShadeData::check_scene`]), the data itself ([`ShadeData::check`]), streams whose fields
+/// agree in length, one hit per ray, `params.count` rays, a width ≥ 1, dense rays (`rays.pixel[i]
+/// = i`: the stage shades invocation `i` as pixel `(i mod width, i div width)` and ignores the
+/// field), light and node counts within the data's buffers (a count past its buffer was clamped
+/// to it by the kernels — on the CPU to the slice, on Vulkan to the buffer, which holds one
+/// zeroed element where the slice is empty — so the backends would have shaded different light
+/// sets), and a sampler of a known kind that gives the sample its own point in every pixel
+/// ([`SamplerParams::indexes`]). Errors name the stage (`shade`) and the field at fault.
+pub fn check_shade_inputs(
     params: &ShadeParams,
     data: &ShadeData,
+    loaded: Option<&SceneIdentity>,
     rays: &RayStream,
     hits: &HitStream,
 ) -> Result<()> {
+    data.check_scene(loaded)?;
     data.check()?;
     rays.check("shade")?;
     hits.check("shade")?;
@@ -286,6 +304,12 @@ pub(crate) fn check_shade_inputs(
         Some(format!("params.count = {} but {} rays", params.count, hits.len()))
     } else if params.width == 0 {
         Some("params.width must be at least 1".to_owned())
+    } else if let Some(i) = rays.pixel.par_iter().enumerate().position_first(|(i, &pixel)| pixel as usize != i) {
+        Some(format!(
+            "rays.pixel[{i}] = {}: the stage takes dense streams, ray i for pixel i as generate writes them \
+             (a compacted stream would shade its samples for the wrong pixels)",
+            rays.pixel[i]
+        ))
     } else if params.light_count as usize > data.lights.len() {
         Some(format!("params.light_count = {} but the data has {} lights", params.light_count, data.lights.len()))
     } else if params.light_node_count != 0 && params.light_node_count as usize != data.light_nodes.len() {
@@ -331,8 +355,10 @@ const CAMERA_BASIS_TOLERANCE: f32 = 1e-3;
 /// zeroed basis gave NaN ray directions, a 10⁻³⁰ one infinite ones, a 10¹⁹ one zero ones) —,
 /// `0 ≤ tmin < tmax` finite, a finite non-negative aperture with a positive finite focus distance
 /// when it is open and a thin lens within `f32::MAX / 4` of the origin, and a sampler of a known
-/// kind that gives the sample its own point ([`check_sampler`]).
-pub(crate) fn check_generate_params(params: &GenerateParams) -> Result<()> {
+/// kind that gives the sample its own point ([`SamplerParams::indexes`]). Every backend's
+/// `generate` and `render` call it, beside its own image-size check; an engine's own [`Backend`]
+/// can too. Errors name the stage (`generate`).
+pub fn check_generate_params(params: &GenerateParams) -> Result<()> {
     let basis = [params.origin, params.forward, params.right, params.up];
     let (forward, right, up) = (params.forward.truncate(), params.right.truncate(), params.up.truncate());
     // Long enough to normalize (the thin lens does) and to be judged, at most the bound, and
@@ -567,6 +593,21 @@ mod tests {
         for (name, params) in cases {
             assert!(check_generate_params(&params).is_err(), "{name}");
         }
+    }
+
+    /// An opened backend, boxed as `open_backend` returns it, moves to another thread (an
+    /// engine's render thread) and runs there: `Backend` is `Send`, which this checks at compile
+    /// time.
+    #[test]
+    fn a_boxed_backend_moves_to_another_thread() {
+        fn assert_send<T: Send>(_: &T) {}
+        let mut backend = crate::open_backend(crate::DeviceChoice::Cpu, &Default::default()).unwrap();
+        assert_send(&backend);
+        let scene = crate::Scene::load("builtin:cornell").unwrap();
+        backend.load_scene(&scene).unwrap();
+        let params = crate::frame::generate_params(&scene, 4, 3, 0);
+        let frame = std::thread::spawn(move || backend.render(&params)).join().expect("the render thread");
+        assert_eq!(frame.unwrap().hits.len(), 12);
     }
 
     #[test]

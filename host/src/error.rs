@@ -158,6 +158,20 @@ pub enum Error {
         /// What the encoder reported.
         message: String,
     },
+    /// The shade stage was given [`crate::shading::ShadeData`] built from another scene than the
+    /// one the backend loaded last ([`crate::Backend::load_scene`]): stale data after the scene
+    /// was rebuilt (an object moved), or another scene's. The trace runs against the loaded
+    /// scene, so shading its hits with that data's triangles and materials gave a wrong image.
+    #[error(
+        "the shade data was built from {data}, but the backend has {loaded} loaded: build it again from the \
+         loaded scene (ShadeData::new)"
+    )]
+    SceneMismatch {
+        /// The scene the shade data was built from ([`crate::scene::SceneIdentity`], as text).
+        data: String,
+        /// The scene the backend loaded, as text.
+        loaded: String,
+    },
     /// A parameter is outside its valid range.
     #[error("invalid parameter {name}: {reason}")]
     InvalidParameter {

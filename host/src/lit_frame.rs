@@ -155,8 +155,8 @@ impl LitSamples {
 /// Runs `settings.samples_per_pixel` samples of `scene` on `backend`, each generate → trace →
 /// shade → occlusion trace, and accumulates them. `backend` must have loaded `scene`
 /// ([`Backend::load_scene`]) and `data` must be `scene`'s ([`ShadeData::new`]); the settings, the
-/// image size and `data` ([`ShadeData::check`]) are checked first, so a bad value is a typed error
-/// before any work.
+/// image size, `data`'s scene ([`ShadeData::check_scene`]) and `data` ([`ShadeData::check`]) are
+/// checked first, so a bad value is a typed error before any work.
 pub fn shade_samples(
     backend: &mut dyn Backend,
     scene: &Scene,
@@ -164,6 +164,7 @@ pub fn shade_samples(
     settings: &LitFrameSettings,
 ) -> Result<LitSamples> {
     settings.check_on(backend)?;
+    data.check_scene(Some(scene.identity()))?;
     data.check()?;
     let (width, height) = (settings.width, settings.height);
     let mut samples = LitSamples {

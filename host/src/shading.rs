@@ -6,7 +6,7 @@ use crate::backend::{Backend, StageReport};
 use crate::cpu::count;
 use crate::error::{Error, Result};
 use crate::lights::{trail_leaf, wants_bvh, LightBvh};
-use crate::scene::{Material, Scene};
+use crate::scene::{Material, Scene, SceneIdentity};
 use crate::stream::{HitStream, RayStream, ShadeStream};
 use glam::{DVec3, UVec2, Vec3, Vec4, Vec4Swizzles};
 use rayon::prelude::*;
@@ -26,6 +26,13 @@ use std::sync::atomic::{AtomicU64, Ordering};
 /// number) is sure to be uploaded again: a vector whose length changed is noticed, but one
 /// replaced by another of the same length may sit at the old one's freed address, and values
 /// edited in place change neither. To change any buffer's contents, build a new `ShadeData`.
+///
+/// It belongs to the scene it was built from ([`ShadeData::scene`]): a backend with a scene
+/// loaded shades only data built from that scene or a clone of it, and refuses any other
+/// ([`Error::SceneMismatch`]) — the trace runs against the loaded scene, so after loading a
+/// rebuilt scene (an object moved) the old data would shade its hits with old triangles and
+/// materials. Build the data again after each `load_scene` of a new scene. Edits to the public
+/// fields (an engine's own lights, [`Light::NO_MESH`]) keep the scene.
 pub struct ShadeData {
     /// Material per instance (mesh).
     pub materials: Vec<MaterialParams>,
@@ -48,6 +55,8 @@ pub struct ShadeData {
     pub analytic_residual: bool,
     /// Unique per value (see [`ShadeData::identity`]).
     serial: u64,
+    /// The scene this data was built from.
+    scene: SceneIdentity,
 }
 
 /// What identifies the contents of a [`ShadeData`] for a backend's upload cache: a number unique
@@ -99,6 +108,7 @@ impl ShadeData {
             first_triangle,
             analytic_residual: false,
             serial,
+            scene: scene.identity().clone(),
         })
     }
 
@@ -188,6 +198,25 @@ impl ShadeData {
             return invalid("triangles", reason);
         }
         Ok(())
+    }
+
+    /// The scene this data was built from ([`Scene::identity`]), kept through edits of the
+    /// public fields.
+    pub fn scene(&self) -> &SceneIdentity {
+        &self.scene
+    }
+
+    /// Checks that this data was built from `loaded`, the scene a backend has loaded (or a clone
+    /// of it): [`Error::SceneMismatch`] naming both otherwise. `None` — no scene loaded, the hits
+    /// coming from an engine's own trace — accepts the data of any scene. Every backend's `shade`
+    /// calls it ([`crate::backend::check_shade_inputs`]).
+    pub fn check_scene(&self, loaded: Option<&SceneIdentity>) -> Result<()> {
+        match loaded {
+            Some(loaded) if *loaded != self.scene => {
+                Err(Error::SceneMismatch { data: self.scene.to_string(), loaded: loaded.to_string() })
+            }
+            _ => Ok(()),
+        }
     }
 
     /// This value's identity for upload caches: the same `ShadeData` value with buffers of the

@@ -12,7 +12,7 @@ use crate::backend::{
 };
 use crate::denoise::{DenoiseInput, DenoiseMethod};
 use crate::error::{Error, Result};
-use crate::scene::Scene;
+use crate::scene::{Scene, SceneIdentity};
 use crate::shading::{self, ShadeData};
 use crate::stream::{HitStream, RayStream, ShadeStream};
 use glam::{UVec2, Vec4};
@@ -33,7 +33,8 @@ pub const MAX_PIXELS: u64 = 1 << 26;
 /// The CPU backend.
 #[derive(Default)]
 pub struct CpuBackend {
-    scene: Option<CpuScene>,
+    /// The loaded scene's BVH, and the scene's identity, which shade data must match.
+    scene: Option<(CpuScene, SceneIdentity)>,
 }
 
 impl CpuBackend {
@@ -46,6 +47,7 @@ impl CpuBackend {
     fn scene(&self) -> Result<&CpuScene> {
         self.scene
             .as_ref()
+            .map(|(scene, _)| scene)
             .ok_or(Error::InvalidParameter { name: "scene", reason: "trace needs a loaded scene".into() })
     }
 }
@@ -159,7 +161,7 @@ impl Backend for CpuBackend {
     }
 
     fn load_scene(&mut self, scene: &Scene) -> Result<()> {
-        self.scene = Some(CpuScene::build(scene)?);
+        self.scene = Some((CpuScene::build(scene)?, scene.identity().clone()));
         Ok(())
     }
 
@@ -187,7 +189,8 @@ impl Backend for CpuBackend {
         rays: &RayStream,
         hits: &HitStream,
     ) -> Result<(ShadeStream, StageReport)> {
-        check_shade_inputs(params, data, rays, hits)?;
+        let loaded = self.scene.as_ref().map(|(_, identity)| identity);
+        check_shade_inputs(params, data, loaded, rays, hits)?;
         Ok(timed("shade", || {
             let surfaces = shading::resolve(data, rays, hits);
             shading::shade(params, data, rays, &surfaces)
@@ -398,5 +401,115 @@ mod tests {
         assert_eq!(name_of(ShadeAccumulator::new(17).add(&shades, &[0; 16]).unwrap_err()), "accumulate");
         accumulator.add(&shades, &[0; 16]).unwrap();
         assert_eq!(accumulator.samples(), 1, "only the valid pass counted");
+    }
+
+    /// The Cornell box (loaded on a CPU backend), the same box with its tall block moved 5 cm
+    /// along x, built apart as an engine rebuilds its scene, and a frame's generate parameters.
+    fn cornell_and_moved() -> (Scene, Scene, GenerateParams) {
+        let scene = Scene::load("builtin:cornell").unwrap();
+        let mut meshes = scene.meshes().to_vec();
+        meshes[TALL_BLOCK as usize].positions.iter_mut().for_each(|p| p.x += 0.05);
+        let moved = Scene::new(scene.name(), meshes, *scene.camera()).unwrap();
+        assert_ne!(scene, moved);
+        let params = crate::frame::generate_params(&scene, 8, 6, 1);
+        (scene, moved, params)
+    }
+
+    /// Shade data of another scene than the loaded one — the old data after loading the scene
+    /// rebuilt with an object moved, or another scene's — is refused naming both scenes: it had
+    /// been shaded with `Ok`, the trace's new geometry resolved on old triangles. Data of the
+    /// loaded scene, of a clone of it, and with an engine's own light added is shaded; and
+    /// without a loaded scene (hits of an engine's own trace) any data is.
+    #[test]
+    fn shade_data_of_another_scene_than_the_loaded_one_is_refused() {
+        use crate::shading::ShadeData;
+        let (scene, moved, params) = cornell_and_moved();
+        let other = Scene::load("builtin:cornell-two-lights").unwrap();
+        let (old_data, other_data) = (ShadeData::new(&scene).unwrap(), ShadeData::new(&other).unwrap());
+        let shade_params = |data: &ShadeData| data.params(params.sampler, 8, 6, 0);
+        let mut cpu = CpuBackend::new();
+        let frame = generate(&params).unwrap();
+        let hits = trace(&CpuScene::build(&scene).unwrap(), &frame).unwrap();
+        for data in [&old_data, &other_data] {
+            assert!(cpu.shade(&shade_params(data), data, &frame, &hits).is_ok(), "no scene loaded");
+        }
+        cpu.load_scene(&scene).unwrap();
+        let frame = cpu.render(&params).unwrap();
+        cpu.shade(&shade_params(&old_data), &old_data, &frame.rays, &frame.hits).unwrap();
+
+        cpu.load_scene(&moved).unwrap();
+        let frame = cpu.render(&params).unwrap();
+        for data in [&old_data, &other_data] {
+            match cpu.shade(&shade_params(data), data, &frame.rays, &frame.hits) {
+                Err(error @ Error::SceneMismatch { .. }) => {
+                    let message = error.to_string();
+                    let (built, loaded) = (data.scene().to_string(), moved.identity().to_string());
+                    assert!(built != loaded && message.contains(&built) && message.contains(&loaded), "{message}");
+                }
+                other => panic!("expected {} refused on {}, got {other:?}", data.scene(), moved.identity()),
+            }
+        }
+        let mut fresh = ShadeData::new(&moved.clone()).unwrap();
+        assert_eq!(fresh.scene(), moved.identity(), "a clone is the same scene");
+        cpu.shade(&shade_params(&fresh), &fresh, &frame.rays, &frame.hits).unwrap();
+        let mut lamp = fresh.lights[0];
+        lamp.position.z -= 0.1;
+        lamp.mesh = raywave_shared::Light::NO_MESH;
+        fresh.lights.push(lamp);
+        assert_eq!(shade_params(&fresh).light_count, 2);
+        cpu.shade(&shade_params(&fresh), &fresh, &frame.rays, &frame.hits).expect("an engine's own light");
+    }
+
+    /// `shade_samples` checks that its data is its scene's before any work: before the backend
+    /// renders (this one has no scene, which `render` would have refused first).
+    #[test]
+    fn shade_samples_refuses_another_scenes_data_before_rendering() {
+        let (scene, moved, _) = cornell_and_moved();
+        let data = crate::shading::ShadeData::new(&scene).unwrap();
+        let settings = crate::lit_frame::LitFrameSettings::new(8, 6, 1);
+        let result = crate::lit_frame::shade_samples(&mut CpuBackend::new(), &moved, &data, &settings);
+        assert!(matches!(result, Err(crate::Error::SceneMismatch { .. })), "{:?}", result.err());
+    }
+
+    /// The shade stage shades ray `i` as pixel `i` and reads no `pixel` field: a compacted stream
+    /// (rays dropped before shading) or a reordered one is refused naming the first ray out of
+    /// place. Both had been shaded with `Ok`, each sample drawn for the wrong pixel.
+    #[test]
+    fn a_compacted_or_reordered_ray_stream_is_refused_by_shade() {
+        let (scene, _, params) = cornell_and_moved();
+        let data = crate::shading::ShadeData::new(&scene).unwrap();
+        let mut cpu = CpuBackend::new();
+        cpu.load_scene(&scene).unwrap();
+        let frame = cpu.render(&params).unwrap();
+        let (rays, hits) = (&frame.rays, &frame.hits);
+        let shade_params = data.params(params.sampler, 8, 6, 0);
+        cpu.shade(&shade_params, &data, rays, hits).expect("a dense stream");
+        let mut refused = |rays: &RayStream, hits: &HitStream| {
+            let params = ShadeParams { count: rays.len() as u32, ..shade_params };
+            match cpu.shade(&params, &data, rays, hits) {
+                Err(Error::InvalidParameter { name: "shade", reason }) => reason,
+                other => panic!("expected the stream refused, got {other:?}"),
+            }
+        };
+        // Rays that hit the floor dropped, as a compaction pass drops the rays it is done with.
+        let kept: Vec<usize> = (0..rays.len()).filter(|&i| hits.instance[i] != FLOOR).collect();
+        let first = kept.iter().enumerate().position(|(k, &i)| k != i).expect("a floor ray dropped");
+        let compacted = RayStream {
+            origin: kept.iter().map(|&i| rays.origin[i]).collect(),
+            direction: kept.iter().map(|&i| rays.direction[i]).collect(),
+            pixel: kept.iter().map(|&i| rays.pixel[i]).collect(),
+        };
+        let compacted_hits = HitStream {
+            t: kept.iter().map(|&i| hits.t[i]).collect(),
+            primitive: kept.iter().map(|&i| hits.primitive[i]).collect(),
+            instance: kept.iter().map(|&i| hits.instance[i]).collect(),
+            barycentrics: kept.iter().map(|&i| hits.barycentrics[i]).collect(),
+        };
+        let reason = refused(&compacted, &compacted_hits);
+        assert!(reason.contains(&format!("rays.pixel[{first}] = {}", kept[first])), "{reason}");
+        let mut swapped = rays.clone();
+        swapped.pixel.swap(3, 4);
+        let reason = refused(&swapped, hits);
+        assert!(reason.contains("rays.pixel[3] = 4"), "{reason}");
     }
 }

@@ -4,6 +4,7 @@
 mod cornell;
 mod emitters;
 mod gltf;
+mod identity;
 mod line_counter;
 mod obj;
 pub mod procedural;
@@ -12,6 +13,7 @@ mod unrendered;
 
 use crate::error::{Error, Result};
 use glam::{Vec2, Vec3};
+pub use identity::SceneIdentity;
 use raywave_shared::Light;
 use std::path::Path;
 pub use unrendered::Unrendered;
@@ -133,9 +135,14 @@ impl SurfaceHit {
 }
 
 /// A validated scene: meshes, a camera and the quad lights derived from the emissive meshes.
-/// Construct it with [`Scene::load`] or [`Scene::new`], which both validate.
-#[derive(Clone, Debug, PartialEq)]
+/// Construct it with [`Scene::load`] or [`Scene::new`], which both validate. Its geometry and
+/// materials cannot be changed once built (to move an object, build a new scene; the view moves
+/// with [`Scene::set_camera`]), and each build has its own
+/// [`Scene::identity`]; `==` compares the contents, not the identity.
+#[derive(Clone, Debug)]
 pub struct Scene {
+    /// Given by [`Scene::new`], kept by clones.
+    identity: SceneIdentity,
     name: String,
     meshes: Vec<Mesh>,
     camera: Camera,
@@ -145,6 +152,16 @@ pub struct Scene {
     dropped_degenerate: usize,
     unrendered: Unrendered,
     lights: emitters::DerivedLights,
+}
+
+impl PartialEq for Scene {
+    /// Equal contents — name, meshes, camera, counts and lights — whatever the identities.
+    fn eq(&self, other: &Self) -> bool {
+        // The bounds follow from the meshes.
+        let Scene { identity: _, bounds: _, name, meshes, camera, dropped_degenerate, unrendered, lights } = self;
+        (name, meshes, camera, dropped_degenerate, unrendered, lights)
+            == (&other.name, &other.meshes, &other.camera, &other.dropped_degenerate, &other.unrendered, &other.lights)
+    }
 }
 
 /// Names of the built-in scenes, usable as `builtin:NAME`: the Cornell box; the Cornell box lit by
@@ -214,6 +231,7 @@ impl Scene {
         let dropped_degenerate = before - meshes.iter().map(|m| m.triangles.len()).sum::<usize>();
         let lights = if u32::try_from(meshes.len()).is_ok() { emitters::derive(&meshes) } else { Default::default() };
         let scene = Scene {
+            identity: SceneIdentity::new(name),
             name: name.to_owned(),
             bounds: triangle_bounds(&meshes),
             meshes,
@@ -280,6 +298,13 @@ impl Scene {
     /// The scene's name (file path or `builtin:NAME`).
     pub fn name(&self) -> &str {
         &self.name
+    }
+
+    /// This build's identity, which its clones share: what [`crate::shading::ShadeData`] records
+    /// of the scene it lays out and a backend of the scene it loaded, so that `shade` can refuse
+    /// the data of another scene ([`crate::Error::SceneMismatch`]).
+    pub fn identity(&self) -> &SceneIdentity {
+        &self.identity
     }
 
     /// The meshes, in instance order.

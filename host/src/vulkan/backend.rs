@@ -17,7 +17,7 @@ use crate::cpu::CpuScene;
 use crate::denoise::{DenoiseInput, DenoiseMethod};
 use crate::device::TraceMethod;
 use crate::error::{Error, Result};
-use crate::scene::Scene;
+use crate::scene::{Scene, SceneIdentity};
 use crate::shading::{ShadeData, ShadeDataIdentity};
 use crate::stream::{HitStream, RayStream, ShadeStream};
 use crate::workgroup::WorkgroupSizes;
@@ -226,7 +226,8 @@ pub struct VulkanBackend {
     trace_method: TraceMethod,
     /// [`ContextOptions::software_bvh`]: the preset [`TraceMethod::Software`] builds.
     software_bvh: crate::cpu::BvhQuality,
-    scene: Option<DeviceScene>,
+    /// The loaded scene on the device, and the scene's identity, which shade data must match.
+    scene: Option<(DeviceScene, SceneIdentity)>,
     /// The shade stage's scene data, cached across `shade` calls.
     shade_data: Option<DeviceShadeData>,
     core: Arc<Core>,
@@ -426,6 +427,7 @@ impl VulkanBackend {
     fn loaded_scene(&self) -> Result<&DeviceScene> {
         self.scene
             .as_ref()
+            .map(|(scene, _)| scene)
             .ok_or(Error::InvalidParameter { name: "scene", reason: "trace needs a loaded scene".into() })
     }
 
@@ -541,14 +543,15 @@ impl Backend for VulkanBackend {
             }
         };
         self.scene = None;
-        self.scene = Some(match software {
+        let device_scene = match software {
             None => DeviceScene::Accelerated(build_scene(&self.core, scene)?),
             Some(cpu) => DeviceScene::Software {
                 nodes: input_buffer(&self.core, cpu.nodes(), "cwbvh nodes")?,
                 vertices: input_buffer(&self.core, cpu.vertices(), "cwbvh vertices")?,
                 ids: input_buffer(&self.core, cpu.ids(), "cwbvh triangle ids")?,
             },
-        });
+        };
+        self.scene = Some((device_scene, scene.identity().clone()));
         Ok(())
     }
 
@@ -585,7 +588,8 @@ impl Backend for VulkanBackend {
         hits: &HitStream,
     ) -> Result<(ShadeStream, StageReport)> {
         let _driver = driver_lock::device_use();
-        check_shade_inputs(params, data, rays, hits)?;
+        let loaded = self.scene.as_ref().map(|(_, identity)| identity);
+        check_shade_inputs(params, data, loaded, rays, hits)?;
         let len = self.check_stream(hits.len(), "hits")?;
         let core = &self.core;
         let scene = load_shade_data(core, &mut self.shade_data, data)?;
@@ -692,7 +696,7 @@ mod tests {
             let mut backend = VulkanBackend::open(device.index, &options, Some(TraceMethod::Software)).unwrap();
             assert_eq!(backend.software_bvh(), quality);
             backend.load_scene(&scene).unwrap();
-            let Some(DeviceScene::Software { nodes, .. }) = &backend.scene else { panic!("a software scene") };
+            let Some((DeviceScene::Software { nodes, .. }, _)) = &backend.scene else { panic!("a software scene") };
             let expected = nodes_of(quality);
             let uploaded: Vec<raywave_shared::bvh::CwBvhNode> = nodes.read(expected.len()).unwrap();
             assert!(uploaded == expected, "{quality:?}: the uploaded nodes are not the preset's tree");
