@@ -269,8 +269,10 @@ pub fn shade_sample(
     let material = &scene.materials[surface.instance as usize];
     let p = surface.position.xyz();
     let n = surface.normal.xyz();
-    // Normalised here: the trace stage takes directions of any length.
-    let v = -view_direction.normalize_or_zero();
+    // Normalised here: the trace stage takes directions of any length. Scaled to a largest
+    // component of 1 first: a traceable direction 10²⁵ long, whose square overflows, had
+    // normalised to 0 (a finite, wrong, unflagged sample), and one 10⁻²⁰ long has a subnormal one.
+    let v = -(view_direction / view_direction.abs().max_element()).normalize_or_zero();
     let frame = ShadingFrame::new(n, v);
     let lobes = Lobes::new(material, frame, n.dot(v), scene.ltc, params.analytic_residual != 0);
     // A one-sided emitter's back is black, as the light made of it casts nothing there.
@@ -727,8 +729,9 @@ mod tests {
     }
 
     /// The view direction's length does not matter (the trace stage takes any): a view at 60°
-    /// from the normal given 2 and 10⁻³ long shades as given unit long, to rounding, and a zero
-    /// one stays finite. Taken as it came, the long view had read as normal incidence.
+    /// from the normal given 2, 10⁻³, 10²⁵ and 10⁻²⁰ long shades as given unit long, to rounding,
+    /// and a zero one stays finite. Taken as it came, the long view had read as normal incidence;
+    /// normalised as it came, the 10²⁵ one (its square ∞) as grazing.
     #[test]
     fn the_view_direction_may_have_any_length() {
         let table = table();
@@ -742,7 +745,7 @@ mod tests {
         };
         let unit = shade(1.0);
         assert!(unit.analytic.x > 0.0 && unit.shadow_direction.w > 0.0);
-        for scale in [2.0, 1e-3] {
+        for scale in [2.0, 1e-3, 1e25, 1e-20] {
             let scaled = shade(scale);
             for (a, b) in [(scaled.analytic, unit.analytic), (scaled.unshadowed, unit.unshadowed)] {
                 assert!(a.abs_diff_eq(b, 1e-5 * b.abs().max_element()), "scale {scale}: {a} against {b}");
