@@ -124,7 +124,8 @@ pub trait Backend: Send {
 
     /// Builds the acceleration structures for `scene` and records its [`Scene::identity`]; later
     /// `trace` calls run against it, and `shade` takes only [`ShadeData`] built from it (or a
-    /// clone of it). A scene refused here leaves the loaded one in place.
+    /// clone of it). A scene refused here leaves the loaded one in place (on Vulkan, a failure to
+    /// allocate its device memory leaves none loaded).
     fn load_scene(&mut self, scene: &Scene) -> Result<()>;
 
     /// Runs the generate stage.
@@ -596,13 +597,11 @@ mod tests {
     }
 
     /// An opened backend, boxed as `open_backend` returns it, moves to another thread (an
-    /// engine's render thread) and runs there: `Backend` is `Send`, which this checks at compile
-    /// time.
+    /// engine's render thread) and runs there: `Backend` is `Send`, which `thread::spawn` checks
+    /// at compile time.
     #[test]
     fn a_boxed_backend_moves_to_another_thread() {
-        fn assert_send<T: Send>(_: &T) {}
         let mut backend = crate::open_backend(crate::DeviceChoice::Cpu, &Default::default()).unwrap();
-        assert_send(&backend);
         let scene = crate::Scene::load("builtin:cornell").unwrap();
         backend.load_scene(&scene).unwrap();
         let params = crate::frame::generate_params(&scene, 4, 3, 0);

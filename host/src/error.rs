@@ -159,17 +159,18 @@ pub enum Error {
         message: String,
     },
     /// The shade stage was given [`crate::shading::ShadeData`] built from another scene than the
-    /// one the backend loaded last ([`crate::Backend::load_scene`]): stale data after the scene
-    /// was rebuilt (an object moved), or another scene's. The trace runs against the loaded
-    /// scene, so shading its hits with that data's triangles and materials gave a wrong image.
+    /// one it was to shade — the scene the backend loaded last ([`crate::Backend::load_scene`]),
+    /// or the one [`crate::lit_frame::shade_samples`] renders: stale data after the scene was
+    /// rebuilt (an object moved), or another scene's. The trace runs against the loaded scene, so
+    /// shading its hits with that data's triangles and materials gave a wrong image.
     #[error(
-        "the shade data was built from {data}, but the backend has {loaded} loaded: build it again from the \
-         loaded scene (ShadeData::new)"
+        "the shade data was built from {data}, but is to shade {loaded} (the scene loaded on the backend, or \
+         the frame's): build it again from that scene (ShadeData::new)"
     )]
     SceneMismatch {
         /// The scene the shade data was built from ([`crate::scene::SceneIdentity`], as text).
         data: String,
-        /// The scene the backend loaded, as text.
+        /// The scene it was to shade, as text.
         loaded: String,
     },
     /// A parameter is outside its valid range.

@@ -403,14 +403,11 @@ mod tests {
         assert_eq!(accumulator.samples(), 1, "only the valid pass counted");
     }
 
-    /// The Cornell box (loaded on a CPU backend), the same box with its tall block moved 5 cm
-    /// along x, built apart as an engine rebuilds its scene, and a frame's generate parameters.
+    /// The Cornell box, the same box with its tall block moved
+    /// ([`crate::scene::tests::cornell_and_moved`]) and a frame's generate parameters.
     fn cornell_and_moved() -> (Scene, Scene, GenerateParams) {
-        let scene = Scene::load("builtin:cornell").unwrap();
-        let mut meshes = scene.meshes().to_vec();
-        meshes[TALL_BLOCK as usize].positions.iter_mut().for_each(|p| p.x += 0.05);
-        let moved = Scene::new(scene.name(), meshes, *scene.camera()).unwrap();
-        assert_ne!(scene, moved);
+        let (scene, moved) = crate::scene::tests::cornell_and_moved();
+        assert_eq!(scene.meshes()[TALL_BLOCK as usize].name, "tall block");
         let params = crate::frame::generate_params(&scene, 8, 6, 1);
         (scene, moved, params)
     }

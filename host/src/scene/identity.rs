@@ -55,9 +55,7 @@ mod tests {
         assert_eq!(scene.clone().identity(), scene.identity());
         assert_ne!(again.identity(), scene.identity());
         assert_eq!(again, scene, "equal contents");
-        let mut meshes = scene.meshes().to_vec();
-        meshes[1].positions[0].y += 0.01;
-        let moved = Scene::new(scene.name(), meshes, *scene.camera()).unwrap();
+        let (_, moved) = crate::scene::tests::cornell_and_moved();
         assert_ne!(moved.identity(), scene.identity());
         assert_ne!(moved, scene);
         let text = moved.identity().to_string();

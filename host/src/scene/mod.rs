@@ -425,9 +425,15 @@ pub const MAX_EMISSION: f32 = 1.0e20;
 
 /// Checks that camera `c` of scene `scene` can view: its position and look-at point finite, within
 /// [`MAX_COORDINATE`] and apart, not in line with its up direction, and its vertical field of
-/// view in (0°, 180°).
+/// view in (0°, 180°), wide enough that the generate stage's image plane has a half height of at
+/// least √[`MIN_IMAGE_PLANE_AXIS_SQUARED`](crate::backend::MIN_IMAGE_PLANE_AXIS_SQUARED) (a
+/// field of view of 10⁻³⁶° had passed, to be refused by the generate stage, without the camera
+/// named).
 fn check_camera(scene: &str, c: &Camera) -> Result<()> {
-    let fov_ok = c.vertical_fov_degrees > 0.0 && c.vertical_fov_degrees < 180.0;
+    let half_height = crate::frame::image_plane_half_height(c.vertical_fov_degrees);
+    let fov_ok = c.vertical_fov_degrees > 0.0
+        && c.vertical_fov_degrees < 180.0
+        && half_height * half_height >= crate::backend::MIN_IMAGE_PLANE_AXIS_SQUARED;
     let finite = in_range(c.position) && in_range(c.look_at) && c.up.is_finite();
     if !(finite && fov_ok && c.has_view_basis()) {
         return Err(Error::InvalidParameter {
@@ -435,7 +441,8 @@ fn check_camera(scene: &str, c: &Camera) -> Result<()> {
             reason: format!(
                 "{scene}: degenerate camera {c:?} (the position and look-at point must be finite and within \
                  ±{MAX_COORDINATE:e}, apart, and not in line with the up direction; the vertical field of \
-                 view in (0°, 180°))"
+                 view in (0°, 180°), its tan(fov / 2) at least {:e})",
+                crate::backend::MIN_IMAGE_PLANE_AXIS_SQUARED.sqrt()
             ),
         });
     }
@@ -555,8 +562,18 @@ pub(crate) fn framing_camera(meshes: &[Mesh]) -> Camera {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
+
+    /// The Cornell box and the same box with its tall block (mesh 6) moved 5 cm along x, built
+    /// apart as an engine rebuilds its scene after moving an object.
+    pub(crate) fn cornell_and_moved() -> (Scene, Scene) {
+        let scene = Scene::load("builtin:cornell").unwrap();
+        let mut meshes = scene.meshes().to_vec();
+        meshes[6].positions.iter_mut().for_each(|p| p.x += 0.05);
+        let moved = Scene::new(scene.name(), meshes, *scene.camera()).unwrap();
+        (scene, moved)
+    }
 
     fn triangle_mesh(positions: Vec<Vec3>, triangles: Vec<[u32; 3]>) -> Mesh {
         Mesh { name: "m".into(), positions, triangles, material: Material::diffuse(Vec3::ONE) }
@@ -606,6 +623,7 @@ mod tests {
             ("on its look-at point", Camera { look_at: moved.position, ..moved }),
             ("looking along its up", Camera { up: Vec3::NEG_Z, ..moved }),
             ("a 180° field of view", Camera { vertical_fov_degrees: 180.0, ..moved }),
+            ("a 10⁻³⁶° field of view", Camera { vertical_fov_degrees: 1e-36, ..moved }),
         ] {
             let err = scene.set_camera(camera).unwrap_err();
             assert!(err.to_string().contains("degenerate camera"), "{what}: {err}");
