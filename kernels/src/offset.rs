@@ -163,6 +163,56 @@ mod tests {
         }
     }
 
+    /// The corners of a 0.1 × 0.1 quad centred at `centre` in the plane of unit `normal`, and the
+    /// larger extent of its two triangles.
+    fn small_quad(centre: Vec3, normal: Vec3) -> ([Vec3; 4], f32) {
+        let eu = 0.1 * normal.any_orthonormal_vector();
+        let ev = normal.cross(eu);
+        let corner = centre - 0.5 * (eu + ev);
+        let vertices = [corner, corner + eu, corner + eu + ev, corner + ev];
+        let extent = triangle_extent(vertices[0], vertices[1], vertices[2]).max(triangle_extent(
+            vertices[0],
+            vertices[2],
+            vertices[3],
+        ));
+        (vertices, extent)
+    }
+
+    /// `rays` rays sent from `distance` away, from either side, to random points of `quad` (of
+    /// unit `normal` and triangle extent `extent`) at cosines to its normal from 1 down to
+    /// `min_cos`: each stopped by [`ray_stop_before`] before its target, none meets the quad in
+    /// raywave's watertight triangle test, and none stops further short than twice `lift` (of
+    /// the ray's origin) over the cosine to the plane.
+    fn check_rays_stop_before_the_quad(
+        rng: &mut crate::hash::CounterRng,
+        (quad, extent): ([Vec3; 4], f32),
+        normal: Vec3,
+        distance: f32,
+        min_cos: f32,
+        rays: u32,
+        lift: impl Fn(Vec3) -> f32,
+    ) {
+        let (corner, eu, ev) = (quad[0], quad[1] - quad[0], quad[3] - quad[0]);
+        for _ in 0..rays {
+            let target = corner + rng.next_f32() * eu + rng.next_f32() * ev;
+            let cos = min_cos.powf(rng.next_f32());
+            let side = if rng.next_f32() < 0.5 { 1.0 } else { -1.0 };
+            let along = (eu * rng.range(-1.0, 1.0) + ev * rng.range(-1.0, 1.0)).normalize();
+            let origin = target + distance * (side * cos * normal + (1.0 - cos * cos).sqrt() * along);
+            let direction = (target - origin).normalize();
+            let length = (target - origin).length();
+            let t = ray_stop_before(origin, direction, target, normal, extent);
+            let case = std::format!("distance {distance}, normal {normal}, cos {cos}: t {t} of {length}");
+            assert!(t > 0.0 && t < length, "{case}");
+            let ray = WatertightRay::new(origin, direction);
+            for [a, b, c] in [[0, 1, 2], [0, 2, 3]] {
+                let hit = ray.intersect(quad[a], quad[b], quad[c], 0.0, t);
+                assert!(hit.is_none(), "{case}: meets the quad");
+            }
+            assert!(length - t <= 2.0 * lift(origin) / direction.dot(normal).abs(), "{case}");
+        }
+    }
+
     /// Rays sent from 0.4 away to random points of a 0.1 × 0.1 quad (two triangles, in an
     /// axis-aligned and in a tilted plane) at cosines to its normal from 1 down to 10⁻³ — or down
     /// to where the ray's start is 4 offsets from the plane — with the quad up to 1 km from the
@@ -173,38 +223,11 @@ mod tests {
         let mut rng = crate::hash::CounterRng::new(11);
         for scale in [0.0f32, 1.0, 1e2, 1e3] {
             for normal in [Vec3::Y, Vec3::new(0.3, -0.8, 0.52).normalize()] {
-                let centre = scale * Vec3::new(1.0, -0.5, 0.7);
-                let eu = 0.1 * normal.any_orthonormal_vector();
-                let ev = normal.cross(eu);
-                let corner = centre - 0.5 * (eu + ev);
-                let vertices = [corner, corner + eu, corner + eu + ev, corner + ev];
-                let extent = triangle_extent(vertices[0], vertices[1], vertices[2]).max(triangle_extent(
-                    vertices[0],
-                    vertices[2],
-                    vertices[3],
-                ));
+                let quad = small_quad(scale * Vec3::new(1.0, -0.5, 0.7), normal);
                 // The origins lie within 0.4 of the quad: their extent is at most that much more.
-                let lift = offset_distance(extent + 0.4);
+                let lift = offset_distance(quad.1 + 0.4);
                 let min_cos = (4.0 * lift / 0.4).max(1e-3);
-                for _ in 0..20_000 {
-                    let target = corner + rng.next_f32() * eu + rng.next_f32() * ev;
-                    let cos = min_cos.powf(rng.next_f32());
-                    let side = if rng.next_f32() < 0.5 { 1.0 } else { -1.0 };
-                    let along = (eu * rng.range(-1.0, 1.0) + ev * rng.range(-1.0, 1.0)).normalize();
-                    let origin = target + 0.4 * (side * cos * normal + (1.0 - cos * cos).sqrt() * along);
-                    let direction = (target - origin).normalize();
-                    let distance = (target - origin).length();
-                    let t = ray_stop_before(origin, direction, target, normal, extent);
-                    let case = std::format!("scale {scale}, normal {normal}, cos {cos}: t {t} of {distance}");
-                    assert!(t > 0.0 && t < distance, "{case}");
-                    let ray = WatertightRay::new(origin, direction);
-                    for [a, b, c] in [[0, 1, 2], [0, 2, 3]] {
-                        let hit = ray.intersect(vertices[a], vertices[b], vertices[c], 0.0, t);
-                        assert!(hit.is_none(), "{case}: meets the quad");
-                    }
-                    let cos_to_plane = direction.dot(normal).abs();
-                    assert!(distance - t <= 2.0 * lift / cos_to_plane, "{case}");
-                }
+                check_rays_stop_before_the_quad(&mut rng, quad, normal, 0.4, min_cos, 20_000, |_| lift);
             }
         }
     }
@@ -241,35 +264,10 @@ mod tests {
     fn a_ray_from_far_away_stops_before_a_small_surface_near_the_origin() {
         let mut rng = crate::hash::CounterRng::new(23);
         let normal = Vec3::new(0.3, -0.8, 0.52).normalize();
-        let eu = 0.1 * normal.any_orthonormal_vector();
-        let ev = normal.cross(eu);
-        let corner = Vec3::new(0.3, -0.2, 0.1) - 0.5 * (eu + ev);
-        let vertices = [corner, corner + eu, corner + eu + ev, corner + ev];
-        let extent = triangle_extent(vertices[0], vertices[1], vertices[2]).max(triangle_extent(
-            vertices[0],
-            vertices[2],
-            vertices[3],
-        ));
+        let quad = small_quad(Vec3::new(0.3, -0.2, 0.1), normal);
         for distance in [1e2f32, 1e3, 1e4] {
-            for _ in 0..5_000 {
-                let target = corner + rng.next_f32() * eu + rng.next_f32() * ev;
-                let cos = 0.05f32.powf(rng.next_f32());
-                let side = if rng.next_f32() < 0.5 { 1.0 } else { -1.0 };
-                let along = (eu * rng.range(-1.0, 1.0) + ev * rng.range(-1.0, 1.0)).normalize();
-                let origin = target + distance * (side * cos * normal + (1.0 - cos * cos).sqrt() * along);
-                let direction = (target - origin).normalize();
-                let length = (target - origin).length();
-                let t = ray_stop_before(origin, direction, target, normal, extent);
-                let case = std::format!("distance {distance}, cos {cos}: t {t} of {length}");
-                assert!(t > 0.0 && t < length, "{case}");
-                let ray = WatertightRay::new(origin, direction);
-                for [a, b, c] in [[0, 1, 2], [0, 2, 3]] {
-                    let hit = ray.intersect(vertices[a], vertices[b], vertices[c], 0.0, t);
-                    assert!(hit.is_none(), "{case}: meets the quad");
-                }
-                let lift = offset_distance(origin.abs().max_element());
-                assert!(length - t <= 2.0 * lift / direction.dot(normal).abs(), "{case}");
-            }
+            let lift = |origin: Vec3| offset_distance(origin.abs().max_element());
+            check_rays_stop_before_the_quad(&mut rng, quad, normal, distance, 0.05, 5_000, lift);
         }
     }
 }

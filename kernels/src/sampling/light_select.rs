@@ -915,12 +915,7 @@ mod tests {
         let scanned = importance_pmf(&[bright, dim], p, n, 1);
         assert!(scanned > 0.0 && scanned < 1.0e-7, "{scanned}");
         for lights in [[bright, dim], [dim, bright]] {
-            let leaf = |k: u32| LightBvhNode {
-                bounds: light_bounds(&lights[k as usize]),
-                child_or_light: k,
-                is_leaf: 1,
-                padding: [0; 2],
-            };
+            let leaf = |k: u32| leaf_node(&lights, k);
             let (a, b) = (leaf(0).bounds, leaf(1).bounds);
             let (lo, hi) = (a.min.min(b.min).truncate(), a.max.max(b.max).truncate());
             let root = LightBounds {
@@ -1125,14 +1120,14 @@ mod tests {
         }
     }
 
+    /// The leaf node of light `k` of `lights`.
+    fn leaf_node(lights: &[Light], k: u32) -> LightBvhNode {
+        LightBvhNode { bounds: light_bounds(&lights[k as usize]), child_or_light: k, is_leaf: 1, padding: [0; 2] }
+    }
+
     /// A hand-built tree over three lights: root → (leaf 0, interior → (leaf 1, leaf 2)).
     fn three_light_tree(lights: &[Light; 3]) -> ([LightBvhNode; 5], [u32; 3]) {
-        let leaf = |k: u32| LightBvhNode {
-            bounds: light_bounds(&lights[k as usize]),
-            child_or_light: k,
-            is_leaf: 1,
-            padding: [0; 2],
-        };
+        let leaf = |k: u32| leaf_node(lights, k);
         let union = |a: &LightBounds, b: &LightBounds| {
             let (lo, hi) = (a.min.min(b.min).truncate(), a.max.max(b.max).truncate());
             LightBounds {
@@ -1333,12 +1328,7 @@ mod tests {
     /// A balanced tree over four lights: root → (interior → (leaf 0, leaf 1), interior → (leaf 2,
     /// leaf 3)), every interior node a first child as well as a second one.
     fn four_light_tree(lights: &[Light; 4]) -> ([LightBvhNode; 7], [u32; 4]) {
-        let leaf = |k: u32| LightBvhNode {
-            bounds: light_bounds(&lights[k as usize]),
-            child_or_light: k,
-            is_leaf: 1,
-            padding: [0; 2],
-        };
+        let leaf = |k: u32| leaf_node(lights, k);
         let interior = |bounds, second| LightBvhNode { bounds, child_or_light: second, is_leaf: 0, padding: [0; 2] };
         let union = |a: &LightBounds, b: &LightBounds| union_bounds(a, b, Vec3::Z, -1.0);
         let left = union(&leaf(0).bounds, &leaf(1).bounds);
@@ -1361,12 +1351,7 @@ mod tests {
                 Light::sphere(Vec3::new(k as f32 * 0.1, 3.0, 0.0), 0.05, radiance)
             })
             .collect();
-        let leaf = |k: u32| LightBvhNode {
-            bounds: light_bounds(&lights[k as usize]),
-            child_or_light: k,
-            is_leaf: 1,
-            padding: [0; 2],
-        };
+        let leaf = |k: u32| leaf_node(&lights, k);
         let mut nodes = vec![leaf(depth)];
         for k in (0..depth).rev() {
             let bounds = union_bounds(&leaf(k).bounds, &nodes[0].bounds, Vec3::Z, -1.0);
