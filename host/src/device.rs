@@ -100,11 +100,12 @@ pub struct BackendOptions {
 /// method asked for
 #[cfg_attr(feature = "vulkan", doc = "([`best_vulkan_device_tracing`]),")]
 #[cfg_attr(not(feature = "vulkan"), doc = "(`best_vulkan_device_tracing`, with the `vulkan` feature),")]
-/// and falls back to the CPU when no Vulkan device can be opened, unless `options` ask for what only Vulkan has (validation, a hardware trace method,
-/// workgroup sizes) or Vulkan refused one of them as invalid: then, as for an explicit Vulkan
-/// choice that cannot be honoured, the error says why Vulkan failed (a CPU run would silently
-/// drop what was asked). A trace method the backend lacks is an error, and so are validation
-/// with an explicit CPU choice and a `sustain_seconds` outside 0..=1 with any.
+/// and falls back to the CPU when no Vulkan device can be opened, unless `options` ask for what
+/// only Vulkan has (validation, a hardware trace method, workgroup sizes) or Vulkan refused one of
+/// them as invalid: then, as for an explicit Vulkan choice that cannot be honoured, the error says
+/// why Vulkan failed (a CPU run would silently drop what was asked). A trace method the backend
+/// lacks is an error, and so are validation with an explicit CPU choice and a `sustain_seconds`
+/// outside 0..=1 with any.
 pub fn open_backend(choice: DeviceChoice, options: &BackendOptions) -> Result<Box<dyn Backend>> {
     crate::backend::check_sustain_seconds(options.sustain_seconds)?;
     let cpu = || -> Result<Box<dyn Backend>> {
