@@ -1325,6 +1325,27 @@ mod tests {
         assert!(contributing > 5_000 && culled > 90, "contributing {contributing}, culled {culled}");
     }
 
+    /// A node of two coplanar one-sided quads facing down (emitter cone of half-angle 0, emission
+    /// within π/2) weighs 0 at points behind them inside its sphere, where no light of it shines,
+    /// and more than 0 in front: the one-sided cone cull. Turned off, the behind points kept the
+    /// node's full importance (variance only: `U` there is 0), and no test had noticed.
+    #[test]
+    fn a_node_of_one_sided_quads_weighs_nothing_behind_them() {
+        let down = |x: f32| Light::quad(Vec3::new(x, 2.0, -0.5), Vec3::X, Vec3::Z, Vec3::ONE, false);
+        let lights = [down(-1.0), down(0.2)];
+        let bounds = union_bounds(&light_bounds(&lights[0]), &light_bounds(&lights[1]), Vec3::NEG_Y, 1.0);
+        let node = LightBvhNode { bounds, child_or_light: 2, is_leaf: 0, padding: [0; 2] };
+        let set = LightSet::new(&lights, &[], &[]);
+        for x in [-0.8f32, 0.0, 0.7] {
+            for n in [Vec3::ZERO, Vec3::Y, Vec3::NEG_Y, Vec3::X] {
+                let behind = node_importance(&set, &node, Vec3::new(x, 2.3, 0.1), n);
+                assert_eq!(behind, 0.0, "behind at x {x}, n {n}");
+            }
+            let in_front = node_importance(&set, &node, Vec3::new(x, 1.7, 0.1), Vec3::Y);
+            assert!(in_front > 0.0, "in front at x {x}: {in_front}");
+        }
+    }
+
     /// A balanced tree over four lights: root → (interior → (leaf 0, leaf 1), interior → (leaf 2,
     /// leaf 3)), every interior node a first child as well as a second one.
     fn four_light_tree(lights: &[Light; 4]) -> ([LightBvhNode; 7], [u32; 4]) {
