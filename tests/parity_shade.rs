@@ -497,6 +497,51 @@ fn cornell_pass() -> CornellPass {
     CornellPass { cpu, data, rays, hits, params, sampler }
 }
 
+/// Camera-ray directions a linking engine might hand over with valid hits: one with a NaN
+/// component shades as a miss and is counted as sanitized (it had shaded a finite, wrong sample,
+/// uncounted), and one 2⁸⁰ times longer — its square overflows `f32` — shades exactly as the
+/// unit one did (it had shaded as seen at grazing); alike on the CPU, bit for bit, and on every
+/// device within the parity tolerances, with the same count.
+#[test]
+fn non_finite_and_huge_view_directions_shade_alike_on_every_backend() {
+    let CornellPass { mut cpu, data, mut rays, hits, params, .. } = cornell_pass();
+    let (clean, _) = cpu.shade(&params, &data, &rays, &hits).expect("cpu shade");
+    let hit: Vec<usize> = (0..hits.len()).filter(|&i| hits.instance[i] != NO_HIT).collect();
+    let broken: Vec<usize> = hit.iter().copied().filter(|i| i % 29 == 3).collect();
+    let huge: Vec<usize> = hit.iter().copied().filter(|i| i % 29 == 17).collect();
+    assert!(broken.len() > 10 && huge.len() > 10, "{} broken, {} huge", broken.len(), huge.len());
+    for &i in &broken {
+        rays.direction[i].y = f32::NAN;
+    }
+    for &i in &huge {
+        rays.direction[i] *= 2f32.powi(80);
+    }
+    let (expected, report) = cpu.shade(&params, &data, &rays, &hits).expect("cpu shade");
+    assert_eq!(report.sanitized, broken.len() as u64, "cpu");
+    let record = |s: &ShadeStream, i: usize| {
+        (s.analytic[i], s.unshadowed[i], s.emitted[i], s.shadow_origin[i], s.shadow_direction[i])
+    };
+    for i in 0..hits.len() {
+        if broken.contains(&i) {
+            let (analytic, unshadowed, emitted, _, direction) = record(&expected, i);
+            let miss = [analytic, unshadowed, emitted].iter().all(|&v| v == Vec4::ZERO) && direction.w == 0.0;
+            assert!(miss, "cpu: record {i} of a NaN direction was shaded: {:?}", record(&expected, i));
+        } else {
+            assert_eq!(record(&expected, i), record(&clean, i), "cpu: pixel {i} changed");
+        }
+    }
+    for mut device in vulkan::each_device("shade view directions") {
+        let (shades, report) = device.shade(&params, &data, &rays, &hits).expect("device shade");
+        let who = device.name();
+        assert_eq!(report.sanitized, broken.len() as u64, "{who}");
+        assert_matches_cpu(&who, &expected, &shades, &rays, &hits);
+        for &i in &broken {
+            assert_eq!(record(&shades, i), record(&expected, i), "{who}: record {i} of a NaN direction");
+        }
+        vulkan::assert_clean(device);
+    }
+}
+
 /// Hit records that are not finite — a NaN distance, infinite barycentrics, as a linking engine's
 /// own trace might hand over — shade as misses (nothing lit or emitted, no shadow ray, the same
 /// record on every backend) and are counted as sanitized, the same records and count on the CPU and every
