@@ -28,7 +28,8 @@ mod spirv {
         name: &'static str,
         capabilities: &'static [Capability],
         extensions: &'static [&'static str],
-        /// Features of `raywave-kernels` that expose the variant's entry points.
+        /// Features of `raywave-kernels` that expose the variant's entry points (`ray-query` and
+        /// `ray-tracing` imply `entry-points`, the compute kernels every variant emits).
         features: &'static [&'static str],
     }
 
@@ -36,7 +37,7 @@ mod spirv {
     /// 1.2 device; entry points behind the kernels' `ray-query` and `ray-tracing` features come from
     /// the variant that enables them.
     const VARIANTS: &[Variant] = &[
-        Variant { name: "base", capabilities: &[], extensions: &[], features: &[] },
+        Variant { name: "base", capabilities: &[], extensions: &[], features: &["entry-points"] },
         Variant {
             name: "ray-query",
             capabilities: &[Capability::RayQueryKHR],

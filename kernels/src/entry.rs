@@ -5,18 +5,9 @@
 //! [`raywave_shared::bindings::WORKGROUP_SIZE`].
 
 use glam::{UVec3, Vec4};
-use raywave_shared::bindings::{STREAM_ROW, WORKGROUP_SIZE};
+use raywave_shared::bindings::{stream_index, WORKGROUP_SIZE};
 use raywave_shared::GenerateParams;
 use spirv_std::spirv;
-
-/// The stream index of an invocation in a 2-D grid of 1-D workgroups: row `y` starts at
-/// `y · STREAM_ROW`. The host spreads a stream over more than one row only when it needs more
-/// workgroups than `maxComputeWorkGroupCount[0]` (at least 65 535), and then sends rows of exactly
-/// [`STREAM_ROW`] invocations, so the index does not depend on the workgroup size the host picked
-/// ([`raywave_shared::bindings::WORKGROUP_SIZE`] or another).
-pub fn stream_index(global_id: UVec3) -> u32 {
-    global_id.y * STREAM_ROW + global_id.x
-}
 
 /// The value of an invocation's result, counting the invocation in its stage's counter if it
 /// replaced a non-finite value (DESIGN rule 5, [`crate::sanitized`]): element 0 of a one-`u32`
@@ -590,19 +581,5 @@ pub fn svgf_composite(
         let k = i as usize;
         let c = crate::shade::stage::apply_visibility(analytic[k].xyz(), ratio[k].xyz(), emitted[k].xyz());
         color[k] = counted(c, replaced).extend(1.0);
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn stream_index_is_row_major_over_rows_of_stream_row_invocations() {
-        assert_eq!(stream_index(UVec3::new(5, 0, 0)), 5);
-        // A single-row dispatch may run past `STREAM_ROW` in x.
-        assert_eq!(stream_index(UVec3::new(STREAM_ROW + 3, 0, 0)), STREAM_ROW + 3);
-        assert_eq!(stream_index(UVec3::new(0, 1, 0)), STREAM_ROW);
-        assert_eq!(stream_index(UVec3::new(7, 2, 0)), 2 * STREAM_ROW + 7);
     }
 }

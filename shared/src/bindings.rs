@@ -16,8 +16,17 @@ pub const WORKGROUP_SIZE: u32 = 64;
 /// Invocations per row of a stream stage's dispatch grid when the stream needs more than one
 /// row: 2^20, a multiple of every power-of-two workgroup size up to 1024 whose rows of
 /// `STREAM_ROW / size` workgroups stay within the 65 535 every Vulkan device allows in x for
-/// sizes from 32 up. Kernels index streams as `y · STREAM_ROW + x` (`entry::stream_index`).
+/// sizes from 32 up. Kernels index streams as `y · STREAM_ROW + x` ([`stream_index`]).
 pub const STREAM_ROW: u32 = 1 << 20;
+
+/// The stream index of an invocation in a 2-D grid of 1-D workgroups: row `y` starts at
+/// `y · STREAM_ROW`. The host spreads a stream over more than one row only when it needs more
+/// workgroups than `maxComputeWorkGroupCount[0]` (at least 65 535), and then sends rows of exactly
+/// [`STREAM_ROW`] invocations, so the index does not depend on the workgroup size the host picked
+/// ([`WORKGROUP_SIZE`] or another). Every stream stage's entry point starts from it.
+pub fn stream_index(global_id: glam::UVec3) -> u32 {
+    global_id.y * STREAM_ROW + global_id.x
+}
 
 /// Bindings of the generate stage (set 0).
 pub mod generate {
@@ -142,4 +151,19 @@ pub mod denoise {
     pub const SVGF_COMPOSITE: u32 = 5;
     /// `copy_probe` (the bandwidth roof, not a pass of any denoiser): an image in; its copy out.
     pub const COPY_PROBE: u32 = 2;
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::UVec3;
+
+    #[test]
+    fn stream_index_is_row_major_over_rows_of_stream_row_invocations() {
+        assert_eq!(stream_index(UVec3::new(5, 0, 0)), 5);
+        // A single-row dispatch may run past `STREAM_ROW` in x.
+        assert_eq!(stream_index(UVec3::new(STREAM_ROW + 3, 0, 0)), STREAM_ROW + 3);
+        assert_eq!(stream_index(UVec3::new(0, 1, 0)), STREAM_ROW);
+        assert_eq!(stream_index(UVec3::new(7, 2, 0)), 2 * STREAM_ROW + 7);
+    }
 }

@@ -19,7 +19,7 @@ impl ComputeKernel {
     /// Builds the pipeline of SPIR-V entry point `entry` with descriptor set 0 laid out as
     /// `bindings`, `push_constant_bytes` of push constants and workgroups of `workgroup_size`
     /// invocations (a size other than the compiled `WORKGROUP_SIZE` only for stages indexed by
-    /// `entry::stream_index`, already checked against the device by [`super::context::open`]).
+    /// `raywave_shared::bindings::stream_index`, already checked against the device by [`super::context::open`]).
     pub fn new(
         core: &Arc<Core>,
         entry: &'static str,
@@ -73,7 +73,7 @@ impl ComputeKernel {
 
 /// Workgroup grid `(x, y)` covering `invocations` in workgroups of `workgroup_size`: one row
 /// where `maxComputeWorkGroupCount[0]` workgroups suffice, else rows of exactly [`STREAM_ROW`]
-/// invocations (`entry::stream_index`); `None` if that needs more rows than the y limit or more
+/// invocations (`raywave_shared::bindings::stream_index`); `None` if that needs more rows than the y limit or more
 /// workgroups per row than the x limit.
 pub(crate) fn dispatch_grid(
     limits: &vk::PhysicalDeviceLimits,

@@ -22,7 +22,7 @@ pub fn module(entry: &str) -> Result<&'static [u8]> {
 /// `LocalSize` execution mode set to `(local_size_x, 1, 1)` in place of the
 /// `(WORKGROUP_SIZE, 1, 1)` it was compiled with (`threads(64)`), so that the pipeline runs
 /// workgroups of that many invocations. Only stages whose code does not depend on the size may
-/// be given one (every 1-D stream stage: `entry::stream_index`); the kernel must not also carry
+/// be given one (every 1-D stream stage: `raywave_shared::bindings::stream_index`); the kernel must not also carry
 /// a `WorkgroupSize` built-in, which would override the execution mode.
 pub fn words(entry: &str, local_size_x: Option<u32>) -> Result<Vec<u32>> {
     let code = ash::util::read_spv(&mut std::io::Cursor::new(module(entry)?))
