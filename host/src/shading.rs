@@ -609,6 +609,19 @@ mod tests {
         assert_ne!(f32_mean, u, "the f32 sum this replaced rounds off");
     }
 
+    /// Before any pass the means are 0, not 0/0: an accumulator of no samples (a G-buffer built
+    /// before the first pass, `DenoiseInput::new` on it) gives finite zeros, and so do its images.
+    #[test]
+    fn an_empty_accumulator_averages_to_zeros() {
+        let accumulator = ShadeAccumulator::new(2);
+        assert_eq!(accumulator.samples(), 0);
+        for means in [accumulator.analytic(), accumulator.unshadowed(), accumulator.shadowed(), accumulator.emitted()] {
+            assert_eq!(means, [Vec3::ZERO; 2]);
+        }
+        assert_eq!(accumulator.ratio_image(), (vec![Vec3::ZERO; 2], 0));
+        assert_eq!(accumulator.stochastic_image(), [Vec3::ZERO; 2]);
+    }
+
     #[test]
     fn the_accumulator_refuses_unsound_records_and_counts_replaced_composites() {
         let mut shades = ShadeStream::zeroed(3);

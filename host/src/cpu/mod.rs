@@ -370,7 +370,7 @@ mod tests {
         let valid = ShadeData::new(&scene).unwrap();
         let shade_params = valid.params(params.sampler, 4, 4, 0);
         type Edit = fn(&mut ShadeData);
-        let edits: [(Edit, &str); 7] = [
+        let edits: [(Edit, &str); 12] = [
             (|d| d.materials[0].emission_metallic.w = f32::NAN, "material.metallic"),
             (|d| d.materials[1].base_color_roughness.x = 2.0, "material.base_color"),
             (|d| d.ltc.clear(), "ltc"),
@@ -379,6 +379,14 @@ mod tests {
             (|d| d.lights[0] = raywave_shared::Light::sphere(glam::Vec3::Y, 0.1, glam::Vec3::ONE), "light.kind"),
             (|d| d.materials.truncate(1), "materials"),
             (|d| d.light_nodes.push(bytemuck::Zeroable::zeroed()), "light_trails"),
+            // Each rule at its boundary, one step past it: one material short of the instances,
+            // one LTC entry too many, one vertex short of whole triangles, the last instance
+            // starting past the last triangle (still ascending), an emission flag of 2.
+            (|d| _ = d.materials.pop(), "materials"),
+            (|d| d.ltc.push(Vec4::ZERO), "ltc"),
+            (|d| _ = d.triangles.pop(), "triangles"),
+            (|d| *d.first_triangle.last_mut().unwrap() = (d.triangles.len() / 3 + 1) as u32, "triangles"),
+            (|d| d.materials[0].two_sided_emission = 2, "material.two_sided_emission"),
         ];
         for (edit, field) in edits {
             let mut data = ShadeData::new(&scene).unwrap();
