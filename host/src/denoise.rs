@@ -631,6 +631,50 @@ mod tests {
         assert_eq!(frame.stochastic().unshadowed[0], Vec4::new(2.0, 2.0, 2.0, 0.0), "the mean of the one surface");
     }
 
+    /// The G-buffer of [`DenoiseInput::new`]: each surface's point (none where it is not finite)
+    /// and its normal beside the analytic luminance `lum(U)`, which the analytic edge stop `Wa`
+    /// compares — the luminance, not another measure of `U` such as its largest channel.
+    #[test]
+    fn the_g_buffer_holds_surface_points_normals_and_the_analytic_luminance() {
+        let surface = |position: Vec4| Surface { position, normal: Vec4::new(0.0, 0.6, 0.8, 0.0), ..Surface::MISS };
+        let point = Vec4::new(1.0, 2.0, 3.0, 0.5);
+        let surfaces = [
+            surface(point),
+            surface(Vec4::new(f32::NAN, 2.0, 3.0, 0.5)),
+            surface(Vec4::new(f32::INFINITY, 0.0, 0.0, 1.0)),
+        ];
+        let u = Vec3::new(0.2, 0.7, 0.1);
+        let mut shades = crate::stream::ShadeStream::zeroed(3);
+        shades.analytic.fill(u.extend(0.0));
+        let mut accumulator = ShadeAccumulator::new(3);
+        accumulator.add(&shades, &[0; 3]).unwrap();
+        let frame = DenoiseInput::new(&surfaces, &accumulator);
+        assert_eq!(frame.position, [point, Vec4::ZERO, Vec4::ZERO], "a non-finite point is no surface");
+        assert_ne!(luminance(u), u.max_element());
+        assert_eq!(frame.normal, [Vec4::new(0.0, 0.6, 0.8, luminance(u)); 3]);
+        assert_eq!(frame.analytic, [u.extend(0.0); 3]);
+    }
+
+    /// The SVGF baseline runs Falcor's schedule: the ratio, its variance, à-trous iterations whose
+    /// tap spacing doubles from 1 (steps 1, 2, 4, 8 at `MAX_ATROUS_ITERATIONS`), the composite.
+    #[test]
+    fn svgf_runs_its_atrous_steps_from_one_doubling() {
+        let atrous = |iterations: u32| {
+            let params = DenoiseParams { atrous_iterations: iterations, ..DenoiseParams::new(64, 64) };
+            let passes = DenoiseMethod::Svgf.passes(&params);
+            let (first, last) = (&passes[..2], passes[passes.len() - 1]);
+            assert_eq!(
+                (first, last),
+                (&[DenoisePass::Ratio, DenoisePass::SvgfVariance][..], DenoisePass::SvgfComposite)
+            );
+            passes[2..passes.len() - 1].to_vec()
+        };
+        let step = |step| DenoisePass::SvgfAtrous { step };
+        assert_eq!(atrous(MAX_ATROUS_ITERATIONS), [step(1), step(2), step(4), step(8)]);
+        assert_eq!(atrous(2), [step(1), step(2)]);
+        assert_eq!(step(8).name(), "svgf atrous step 8");
+    }
+
     #[test]
     fn an_identity_tv_filter_runs_only_the_composite() {
         let params = DenoiseParams::new(128, 128);

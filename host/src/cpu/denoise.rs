@@ -175,6 +175,30 @@ mod tests {
     use crate::denoise::TV_PASSES;
     use raywave_kernels::hash::CounterRng;
 
+    /// A composite that overflows `f32` (`E + U · S_N/U_N` with `U` and `E` of 3·10³⁸, inputs the
+    /// check accepts) is replaced and counted in the composite pass's report, as the Vulkan
+    /// entry point's counter counts it: the report is how a caller learns that a pixel was lost.
+    #[test]
+    fn an_overflowing_composite_is_replaced_and_counted() {
+        let params = DenoiseParams::new(2, 1);
+        let radiance = |v: f32| vec![Vec4::new(v, v, v, 0.0); 2];
+        let mut input = DenoiseInput {
+            position: vec![Vec4::ZERO; 2],
+            normal: vec![Vec4::ZERO; 2],
+            analytic: radiance(1.0),
+            emitted: radiance(0.0),
+            shadowed: radiance(0.5),
+            unshadowed: radiance(0.5),
+        };
+        input.analytic[1].x = 3e38;
+        input.emitted[1].x = 3e38;
+        input.check(&params).unwrap();
+        let (color, reports) = denoise(DenoiseMethod::None, &params, &input);
+        assert!(color.iter().all(|c| c.is_finite()), "{color:?}");
+        assert_eq!(color[0], Vec4::ONE, "the sound pixel: U · S_N/U_N");
+        assert_eq!(reports.iter().map(|r| (r.stage, r.sanitized)).collect::<Vec<_>>(), [("denoise composite", 1)]);
+    }
+
     /// Where [`DenoiseParams::tv_filter_is_identity`] lets the TV method skip to its composite,
     /// its full passes give that image bit for bit: coin-flip visibility over a tilted plane,
     /// U_N varying and sometimes 0, a few pixels without a surface, at N = 4R² samples. One
