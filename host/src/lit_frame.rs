@@ -391,11 +391,18 @@ mod tests {
         // rendered and shaded with their own sample indices, which a pass that repeated another's
         // index in generate or in shade would not match.
         let mut expected = ShadeAccumulator::new(16 * 12);
+        let (mut hits, mut stream_bytes) = (0, 0);
         for index in 0..3 {
             let rendered = cpu.render(&settings.generate_params(&scene, index)).unwrap();
             let params = data.params(settings.sampler(), 16, 12, index);
-            expected.shade_pass(&mut cpu, &params, &data, &rendered.rays, &rendered.hits).unwrap();
+            let (_, pass_bytes) =
+                expected.shade_pass(&mut cpu, &params, &data, &rendered.rays, &rendered.hits).unwrap();
+            hits += rendered.hits.hit_count();
+            stream_bytes = rendered.rays.bytes() + rendered.hits.bytes() + pass_bytes;
         }
+        // The counts `raywave render` reports: every sample's hits, and one sample's streams
+        // (rays, hits, the shade stream, shadow rays, occlusion).
+        assert_eq!((samples.hits, samples.stream_bytes), (hits, stream_bytes));
         let frame = &samples.accumulator;
         assert_eq!((frame.analytic(), frame.unshadowed()), (expected.analytic(), expected.unshadowed()));
         assert_eq!(frame.shadowed(), expected.shadowed());
@@ -404,6 +411,22 @@ mod tests {
         let params = data.params(settings.sampler(), 16, 12, 0);
         repeated.shade_pass(&mut cpu, &params, &data, &first.rays, &first.hits).unwrap();
         assert_ne!(frame.unshadowed(), repeated.unshadowed());
+    }
+
+    /// The settings reach the stages' parameters: the lens (aperture and the focus distance,
+    /// which otherwise is the camera's look-at distance) and the seed, which draws the samples
+    /// and the noise estimate's line angles.
+    #[test]
+    fn the_lens_and_the_seed_reach_the_stages() {
+        let scene = Scene::load("builtin:cornell").unwrap();
+        let pinhole = LitFrameSettings::new(16, 12, 2);
+        let look_at = crate::frame::generate_params(&scene, 16, 12, 0).focus_distance;
+        assert_eq!(pinhole.generate_params(&scene, 1).focus_distance, look_at);
+        let lens = LitFrameSettings { lens_radius: 0.05, focus_distance: Some(2.5), seed: 7, ..pinhole };
+        let params = lens.generate_params(&scene, 1);
+        assert_ne!(look_at, 2.5);
+        assert_eq!((params.lens_radius, params.focus_distance, params.sampler.seed), (0.05, 2.5, 7));
+        assert_eq!((lens.denoise_params(2).seed, lens.denoise_params(2).samples_per_pixel), (7, 2));
     }
 
     /// An engine's backend that returns one hit fewer than it generated rays: the CPU backend
