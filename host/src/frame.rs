@@ -158,6 +158,30 @@ mod tests {
         assert_eq!(name(sampler_kind::ZSOBOL, 65536, 2), Some("spp"));
         assert_eq!(name(sampler_kind::ZSOBOL, 65536, 1), None);
         assert_eq!(name(sampler_kind::SOBOL, 65537, 4), None, "its own index has no such limit");
+        // The longer side sizes the square, whichever it is: a portrait frame's too.
+        assert_eq!(sampler_params(sampler_kind::ZSOBOL, 0, 3, 17, 4).resolution_log2, 5);
+        assert!(check_samples_per_pixel("spp", sampler_kind::ZSOBOL, 1, 65536, 1).is_ok());
+    }
+
+    /// `tmax` reaches every vertex from the camera (twice the farthest corner of the bounds), also
+    /// for a camera inside the scene by one corner, where the nearest corner is a hair away.
+    #[test]
+    fn tmax_reaches_the_farthest_vertex() {
+        let cornell = Scene::load("builtin:cornell").unwrap();
+        let (lo, _) = cornell.bounds();
+        let camera = crate::scene::Camera {
+            position: lo + glam::Vec3::splat(0.02),
+            look_at: lo + glam::Vec3::splat(0.5),
+            ..*cornell.camera()
+        };
+        let corner = Scene::new("corner camera", cornell.meshes().to_vec(), camera).unwrap();
+        for scene in [&cornell, &corner] {
+            let eye = scene.camera().position;
+            let farthest =
+                scene.meshes().iter().flat_map(|m| &m.positions).map(|p| p.distance(eye)).fold(0.0, f32::max);
+            let tmax = generate_params(scene, 16, 9, 0).tmax;
+            assert!(tmax >= 2.0 * farthest, "{}: tmax {tmax}, farthest vertex {farthest}", scene.name());
+        }
     }
 
     #[test]

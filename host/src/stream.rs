@@ -168,3 +168,17 @@ fn check_field_lengths(stage: &'static str, stream: &str, fields: &[(&str, usize
     let reason = format!("the {stream} stream's fields differ in length: {}", listed.join(", "));
     Err(Error::InvalidParameter { name: stage, reason })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A hit is a record whose primitive is not `NO_HIT`; primitive 0, its mesh's first
+    /// triangle, is one (the count `raywave render` reports).
+    #[test]
+    fn hit_count_counts_the_records_that_name_a_primitive() {
+        let mut hits = HitStream::zeroed(4);
+        hits.primitive = vec![0, NO_HIT, 7, NO_HIT];
+        assert_eq!(hits.hit_count(), 2);
+    }
+}
