@@ -344,6 +344,23 @@ pub const MAX_IMAGE_PLANE_AXIS: f32 = 1e18;
 /// to `forward`.
 pub const MIN_IMAGE_PLANE_AXIS_SQUARED: f32 = f32::MIN_POSITIVE;
 
+/// Largest thin-lens aperture radius as a multiple of the focus distance. A ray from the lens's
+/// rim is aimed at its point on the focal plane along a direction rounded to `f32`, so it misses
+/// that point by about 1.2·10⁻⁷ of the focus distance per unit of this ratio (measured:
+/// `thin_lens_rays_meet_their_focal_point_up_to_the_aperture_limit`). Under the old limit alone
+/// (an aperture of 10⁸ scene units), `raywave render --aperture 1e6 … 1e8` on the Cornell box
+/// (focus 0.8) missed by scene-sized amounts: the share of camera rays that hit drifted from 73 %
+/// to 32 %, and the CPU and lavapipe's ray query disagreed on 13 % of the rays at 10⁷, nothing
+/// counted. At 10³ the miss is 1.2·10⁻⁴ of the focus distance — a pixel of the focal plane at
+/// 8192 pixels across a 53° view — and the f-number `f/2R`, 5·10⁻⁴, is beyond any lens.
+pub const MAX_APERTURE_TO_FOCUS: f32 = 1e3;
+
+/// Whether a thin lens of aperture radius `lens_radius` focused at `focus_distance` is within
+/// [`MAX_APERTURE_TO_FOCUS`] (a pinhole always is).
+pub fn aperture_fits_focus(lens_radius: f32, focus_distance: f32) -> bool {
+    lens_radius == 0.0 || lens_radius <= MAX_APERTURE_TO_FOCUS * focus_distance
+}
+
 /// Relative tolerance of the camera basis' documented shape ([`GenerateParams`]): `|forward|`
 /// within this of 1, and `right`, `up` orthogonal to it within this fraction of their length —
 /// far above the rounding of a basis built from normalized cross products (~10⁻⁷).
@@ -355,7 +372,8 @@ const CAMERA_BASIS_TOLERANCE: f32 = 1e-3;
 /// normal float, ~10⁻¹⁹), within [`MAX_IMAGE_PLANE_AXIS`] and spanning a non-zero image plane (a
 /// zeroed basis gave NaN ray directions, a 10⁻³⁰ one infinite ones, a 10¹⁹ one zero ones) —,
 /// `0 ≤ tmin < tmax` finite, a finite non-negative aperture with a positive finite focus distance
-/// when it is open and a thin lens within `f32::MAX / 4` of the origin, and a sampler of a known
+/// when it is open, at most [`MAX_APERTURE_TO_FOCUS`] times it, and a thin lens within
+/// `f32::MAX / 4` of the origin, and a sampler of a known
 /// kind that gives the sample its own point ([`SamplerParams::indexes`]). Every backend's
 /// `generate` and `render` call it, beside its own image-size check; an engine's own [`Backend`]
 /// can too. Errors name the stage (`generate`).
@@ -389,6 +407,12 @@ pub fn check_generate_params(params: &GenerateParams) -> Result<()> {
         Some(format!("lens_radius {} must be finite and ≥ 0", params.lens_radius))
     } else if params.lens_radius > 0.0 && !(params.focus_distance.is_finite() && params.focus_distance > 0.0) {
         Some(format!("focus_distance {} must be finite and > 0 with an aperture", params.focus_distance))
+    } else if !aperture_fits_focus(params.lens_radius, params.focus_distance) {
+        Some(format!(
+            "lens_radius {} exceeds {MAX_APERTURE_TO_FOCUS:e} × focus_distance {}: rays from the lens's rim would \
+             miss their focal point by f32 rounding of the radius",
+            params.lens_radius, params.focus_distance
+        ))
     } else if params.lens_radius > 0.0 && lens_reach > f64::from(f32::MAX) / 4.0 {
         Some(format!(
             "the thin lens reaches {lens_reach:e} from the origin (camera origin, aperture {}, focal plane at {}), \
@@ -555,6 +579,50 @@ mod tests {
         let mut probe = sampler_probe(8, 8, 0);
         probe.sampler.kind = 7;
         assert!(sampler_probe_len(&probe).is_err());
+    }
+
+    /// The measurement behind [`MAX_APERTURE_TO_FOCUS`]: every ray of the Cornell box's camera
+    /// (focus 0.8) at 32², 4 samples, crosses the focal plane (found in f64) where its pinhole ray
+    /// does, within 1.2·10⁻⁷ of the focus distance per unit of the ratio of aperture to focus:
+    /// 1.9·10⁻⁷ at 1, 1.2·10⁻⁴ at the limit of 10³, 0.13 at 10⁶ and 1.1 at 10⁷ (inside the old
+    /// limit of 10⁸ scene units). The limit is accepted, a radius above it refused.
+    #[test]
+    fn thin_lens_rays_meet_their_focal_point_up_to_the_aperture_limit() {
+        let scene = crate::Scene::load("builtin:cornell").unwrap();
+        let pinhole = crate::frame::generate_params(&scene, 32, 32, 0);
+        let focus = pinhole.focus_distance;
+        let worst_miss = |ratio: f32| {
+            let lens = GenerateParams { lens_radius: ratio * focus, ..pinhole };
+            let mut worst: f64 = 0.0;
+            for sample_index in 0..4 {
+                for i in 0..lens.ray_count() {
+                    let ray = raywave_kernels::generate::generate_ray(i, &GenerateParams { sample_index, ..lens });
+                    let aim = raywave_kernels::generate::generate_ray(i, &GenerateParams { sample_index, ..pinhole });
+                    let f64s = |v: Vec4| glam::DVec3::new(v.x.into(), v.y.into(), v.z.into());
+                    let forward = f64s(pinhole.forward).normalize();
+                    let camera = f64s(pinhole.origin);
+                    // The focal plane `(x − camera)·forward = focus`, and where each ray meets it.
+                    let meet = |origin: glam::DVec3, direction: glam::DVec3| {
+                        origin
+                            + direction * ((f64::from(focus) - (origin - camera).dot(forward)) / direction.dot(forward))
+                    };
+                    let target = meet(f64s(aim.origin), f64s(aim.direction));
+                    let crossing = meet(f64s(ray.origin), f64s(ray.direction));
+                    worst = worst.max(crossing.distance(target) / f64::from(focus));
+                }
+            }
+            worst
+        };
+        for ratio in [1.0, 10.0, 100.0, MAX_APERTURE_TO_FOCUS] {
+            let miss = worst_miss(ratio);
+            assert!(miss < 2e-7 * f64::from(ratio), "ratio {ratio}: rays miss by {miss:e} of the focus distance");
+        }
+        assert!(worst_miss(1e6) > 0.1, "beyond the limit, where it was accepted before");
+        let at_limit = GenerateParams { lens_radius: MAX_APERTURE_TO_FOCUS * focus, ..pinhole };
+        assert!(check_generate_params(&at_limit).is_ok());
+        let over = GenerateParams { lens_radius: at_limit.lens_radius * 1.01, ..pinhole };
+        let err = check_generate_params(&over).expect_err("refused").to_string();
+        assert!(err.contains("lens_radius") && err.contains("focus_distance"), "{err}");
     }
 
     /// The camera basis must have the shape `GenerateParams` documents: a 10⁻³⁰-long basis made

@@ -3,7 +3,7 @@
 //! `emitted + U · den(S_N)/den(U_N)`. This is what `raywave render` runs; an engine that builds its
 //! own [`Scene`] ([`Scene::new`]) calls [`render_lit`] and gets the image in memory.
 
-use crate::backend::{check_image_size_common, Backend, StageReport};
+use crate::backend::{aperture_fits_focus, check_image_size_common, Backend, StageReport, MAX_APERTURE_TO_FOCUS};
 use crate::denoise::{check_radius, frame_params, rgb, DenoiseInput, DenoiseMethod};
 use crate::error::{Error, Result};
 use crate::frame::{check_samples_per_pixel, generate_params_with, sampler_params};
@@ -32,7 +32,8 @@ pub struct LitFrameSettings {
     pub sampler_kind: u32,
     /// Seed of the sampler and of the noise estimate's line angles.
     pub seed: u32,
-    /// Thin-lens aperture radius in scene units, in `[0, MAX_LENS_DISTANCE]` (0: a pinhole).
+    /// Thin-lens aperture radius in scene units, in `[0, MAX_LENS_DISTANCE]` (0: a pinhole) and
+    /// at most [`MAX_APERTURE_TO_FOCUS`] times the focus distance.
     pub lens_radius: f32,
     /// Distance of the plane in focus, in `(0, MAX_LENS_DISTANCE]`; `None` focuses on the
     /// camera's look-at point.
@@ -63,8 +64,9 @@ impl LitFrameSettings {
     }
 
     /// Checks the settings that need neither the backend nor the image size: the sampler kind,
-    /// the lens and the filter radius. Errors name the setting as `raywave render` spells its
-    /// option (`sampler`, `aperture`, `focus`, `denoise-radius`).
+    /// the lens (its ratio of aperture to focus where the focus distance is set; see
+    /// [`Self::check_lens`] for the camera's) and the filter radius. Errors name the setting as
+    /// `raywave render` spells its option (`sampler`, `aperture`, `focus`, `denoise-radius`).
     pub fn check(&self) -> Result<()> {
         let invalid = |name, reason: String| Err(Error::InvalidParameter { name, reason });
         if self.sampler_kind >= sampler_kind::COUNT {
@@ -78,8 +80,15 @@ impl LitFrameSettings {
             if !(focus > 0.0 && focus <= MAX_LENS_DISTANCE) {
                 return invalid("focus", format!("{focus} is outside (0, {MAX_LENS_DISTANCE:e}]"));
             }
+            return check_aperture(self.lens_radius, focus);
         }
         Ok(())
+    }
+
+    /// Checks the aperture against the focus distance this frame uses on `scene`: the one set, or
+    /// the camera's look-at distance. [`shade_samples`] calls it before any work.
+    pub fn check_lens(&self, scene: &Scene) -> Result<()> {
+        check_aperture(self.lens_radius, self.generate_params(scene, 0).focus_distance)
     }
 
     /// [`Self::check`], then the image size against the rules every backend shares (at least one
@@ -152,11 +161,25 @@ impl LitSamples {
     }
 }
 
+/// The aperture `lens_radius` against the focus distance `focus`: at most
+/// [`MAX_APERTURE_TO_FOCUS`] times it (an error naming `aperture` otherwise).
+fn check_aperture(lens_radius: f32, focus: f32) -> Result<()> {
+    if aperture_fits_focus(lens_radius, focus) {
+        return Ok(());
+    }
+    let reason = format!(
+        "{lens_radius} exceeds {MAX_APERTURE_TO_FOCUS:e} × the focus distance {focus}: rays from the lens's rim \
+         would miss the plane in focus by f32 rounding of the aperture"
+    );
+    Err(Error::InvalidParameter { name: "aperture", reason })
+}
+
 /// Runs `settings.samples_per_pixel` samples of `scene` on `backend`, each generate → trace →
 /// shade → occlusion trace, and accumulates them. `backend` must have loaded `scene`
 /// ([`Backend::load_scene`]) and `data` must be `scene`'s ([`ShadeData::new`]); the settings, the
-/// image size, `data`'s scene ([`ShadeData::check_scene`]) and `data` ([`ShadeData::check`]) are
-/// checked first, so a bad value is a typed error before any work.
+/// image size, the lens on `scene`'s camera ([`LitFrameSettings::check_lens`]), `data`'s scene
+/// ([`ShadeData::check_scene`]) and `data` ([`ShadeData::check`]) are checked first, so a bad
+/// value is a typed error before any work.
 pub fn shade_samples(
     backend: &mut dyn Backend,
     scene: &Scene,
@@ -164,6 +187,7 @@ pub fn shade_samples(
     settings: &LitFrameSettings,
 ) -> Result<LitSamples> {
     settings.check_on(backend)?;
+    settings.check_lens(scene)?;
     data.check_scene(Some(scene.identity()))?;
     data.check()?;
     let (width, height) = (settings.width, settings.height);
@@ -343,6 +367,34 @@ mod tests {
         }
         for focus in [0.0, f32::INFINITY, f32::NAN] {
             assert_eq!(rejected_setting(LitFrameSettings { focus_distance: Some(focus), ..good }), "focus");
+        }
+        // An aperture wider than `MAX_APERTURE_TO_FOCUS` focus distances (2 here), within the
+        // absolute limit: refused where the focus distance is set.
+        let focused = LitFrameSettings { focus_distance: Some(2.0), ..good };
+        LitFrameSettings { lens_radius: 2.0 * MAX_APERTURE_TO_FOCUS, ..focused }.check().unwrap();
+        assert_eq!(
+            rejected_setting(LitFrameSettings { lens_radius: 2.1 * MAX_APERTURE_TO_FOCUS, ..focused }),
+            "aperture"
+        );
+    }
+
+    /// Focused on the camera's look-at point (0.8 away in the Cornell box), an aperture of
+    /// `MAX_APERTURE_TO_FOCUS` look-at distances renders and a wider one is refused, naming the
+    /// aperture, before any stage runs: `raywave render --aperture 1e6` had rendered a frame whose
+    /// rays missed their focal points by scene-sized amounts.
+    #[test]
+    fn an_aperture_too_wide_for_the_cameras_focus_is_refused_before_any_work() {
+        let scene = Scene::load("builtin:cornell").unwrap();
+        let data = ShadeData::new(&scene).unwrap();
+        let mut cpu = CpuBackend::new();
+        cpu.load_scene(&scene).unwrap();
+        let look_at = crate::frame::generate_params(&scene, 4, 4, 0).focus_distance;
+        let settings = |lens_radius| LitFrameSettings { lens_radius, ..LitFrameSettings::new(4, 4, 1) };
+        settings(1e6).check().unwrap();
+        assert!(shade_samples(&mut cpu, &scene, &data, &settings(MAX_APERTURE_TO_FOCUS * look_at)).is_ok());
+        match shade_samples(&mut cpu, &scene, &data, &settings(1.01 * MAX_APERTURE_TO_FOCUS * look_at)) {
+            Err(Error::InvalidParameter { name: "aperture", reason }) => assert!(reason.contains("focus"), "{reason}"),
+            other => panic!("expected the aperture refused, got {other:?}"),
         }
     }
 
