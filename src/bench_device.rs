@@ -23,11 +23,18 @@ impl VulkanBenchOptions {
     /// The device a bench measures — if `enabled` and there is one — with these options checked
     /// against it, and its `image` (width, height; one stream element a pixel) in each workgroup
     /// size measured; `stage` is the stage the bench sweeps, the others run their preferred sizes.
-    /// The settling time is checked with or without a device (or the `vulkan` feature); workgroup
-    /// sizes or a settling time without a device to use them are an error, not ignored.
+    /// The settling time, and that no workgroup size is listed twice, are checked with or without
+    /// a device (or the `vulkan` feature); workgroup sizes or a settling time without a device to
+    /// use them are an error, not ignored.
     #[cfg_attr(not(feature = "vulkan"), allow(unused_variables))]
     pub(crate) fn device(&self, enabled: bool, stage: StreamStage, image: [u32; 2]) -> Result<Option<BenchDevice>> {
         let settle_seconds = self.settle_seconds.map(check_settle_seconds).transpose()?.unwrap_or(GPU_SETTLE_SECONDS);
+        let sizes = &self.workgroup_sizes;
+        if let Some(repeated) = sizes.iter().enumerate().find_map(|(i, s)| sizes[..i].contains(s).then_some(s)) {
+            // Lines are keyed by the size: a second run of it printed a second line of that key.
+            let reason = format!("{repeated} is listed twice");
+            return Err(crate::Error::InvalidParameter { name: "workgroup-sizes", reason });
+        }
         // Without a device the bench measures the CPU alone, and says why unless it was asked to.
         let no_device = |why: &str| -> Result<Option<BenchDevice>> {
             let device_only = [

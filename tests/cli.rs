@@ -206,6 +206,9 @@ fn bad_input_is_a_typed_error_without_output() {
     assert_rejected(&["--device", "cpu", "--width", "65536", "--height", "2048", "--spp", "1"], "exceed the limit");
     #[cfg(feature = "vulkan")]
     assert_rejected(&["--device", "vulkan:99"], "vulkan:99");
+    // And names the devices there are ("there is one Vulkan device, vulkan:0", or "… to vulkan:N").
+    #[cfg(feature = "vulkan")]
+    assert_rejected(&["--device", "vulkan:99"], "Vulkan device");
     assert_rejected(&["--device", "gpu"], "expected auto, cpu, vulkan");
     assert_rejected(&["--device", "cpu", "--sampler", "halton"], "unknown sampler `halton`");
     assert_rejected(&["--device", "cpu", "--spp", "0"], "spp: 0 is outside 1..=65536");
@@ -562,7 +565,7 @@ fn an_orthographic_camera_a_skinned_mesh_and_a_punctual_light_render_with_warnin
 /// frame is shaded or the reference converged).
 #[test]
 fn bench_and_report_options_out_of_range_are_typed_errors() {
-    let cases: [(&[&str], &str); 34] = [
+    let cases: [(&[&str], &str); 35] = [
         (&["bench", "denoise", "--no-vulkan", "--repeats", "0"], "repeats: must be at least 1"),
         (&["bench", "denoise", "--no-vulkan", "--spp", "0"], "spp: 0 is outside"),
         // Before the scene loads, which would fail too.
@@ -576,7 +579,11 @@ fn bench_and_report_options_out_of_range_are_typed_errors() {
         (&["report", "error-vs-time", "--denoise-radius", "11"], "denoise-radius: radius 11 outside 1..=10"),
         (&["report", "error-vs-time", "--settle-seconds", "31"], "settle-seconds: 31 is not within 0..=30 s"),
         (&["bench", "trace", "--no-vulkan", "--repeats", "0"], "repeats: must be at least 1"),
-        (&["bench", "trace", "--no-vulkan", "--resolution", "0"], "at least 1"),
+        // Named as the option, not as the CPU backend's image size.
+        (
+            &["bench", "trace", "--no-vulkan", "--resolution", "0"],
+            "resolution: 0×0 rays: width and height must be at least 1",
+        ),
         (&["bench", "trace", "--no-vulkan", "--threads", "0"], "threads: 0 is outside 1..="),
         (&["bench", "trace", "--no-vulkan", "--bvh", "best"], "bvh: \"best\": expected fast, medium or slow"),
         // Sizes no device runs were ignored without a word.
@@ -592,7 +599,9 @@ fn bench_and_report_options_out_of_range_are_typed_errors() {
         (&["bench", "trace", "--settle-seconds", "31"], "settle-seconds: 31 is not within 0..=30 s"),
         (&["bench", "trace", "--settle-seconds", "NaN"], "settle-seconds: NaN is not within"),
         (&["bench", "shade", "--no-vulkan", "--repeats", "0"], "repeats: must be at least 1"),
-        (&["bench", "shade", "--no-vulkan", "--resolution", "0"], "at least 1"),
+        (&["bench", "shade", "--no-vulkan", "--resolution", "0"], "resolution: 0×0 rays: width and height"),
+        // Measured twice, two lines of one key.
+        (&["bench", "shade", "--no-vulkan", "--workgroup-sizes", "64,64"], "workgroup-sizes: 64 is listed twice"),
         (&["bench", "shade", "--settle-seconds=-1"], "settle-seconds: -1 is not within 0..=30 s"),
         (&["report", "shade", "--resolution", "1024", "--reference-spp", "8192"], "reference-spp: 8192 samples"),
         // Each named: one message named the report and listed every condition.

@@ -503,7 +503,11 @@ pub(crate) fn open(index: usize, options: &ContextOptions) -> Result<Arc<Core>> 
             destroy_instance(&instance, &debug);
             return Err(Error::DeviceChoice {
                 requested: format!("vulkan:{index}"),
-                reason: format!("there are {} Vulkan devices (indices 0..{})", list.len(), list.len()),
+                reason: match list.len() {
+                    0 => "there is no Vulkan device".to_owned(),
+                    1 => "there is one Vulkan device, vulkan:0".to_owned(),
+                    n => format!("there are {n} Vulkan devices, vulkan:0 to vulkan:{}", n - 1),
+                },
             });
         }
         Err(e) => {
