@@ -476,25 +476,92 @@ mod tests {
         assert!(matches!(result, Err(crate::Error::SceneMismatch { .. })), "{:?}", result.err());
     }
 
+    /// A rendered 8×6 Cornell frame on a loaded CPU backend, its shade data and shade parameters
+    /// (sample 0 of one).
+    fn shade_fixture() -> (CpuBackend, ShadeData, FrameOutput, ShadeParams) {
+        let (scene, _, params) = cornell_and_moved();
+        let data = ShadeData::new(&scene).unwrap();
+        let mut cpu = CpuBackend::new();
+        cpu.load_scene(&scene).unwrap();
+        let frame = cpu.render(&params).unwrap();
+        let shade_params = data.params(params.sampler, 8, 6, 0);
+        (cpu, data, frame, shade_params)
+    }
+
+    /// The reason of a shade-stage refusal (`InvalidParameter` naming `shade`), or a panic naming
+    /// what came back instead.
+    fn shade_refusal(result: Result<(ShadeStream, StageReport)>) -> String {
+        match result {
+            Err(Error::InvalidParameter { name: "shade", reason }) => reason,
+            other => panic!("expected the shade stage to refuse, got {:?}", other.map(|(shades, _)| shades.len())),
+        }
+    }
+
+    /// One hit per ray: a ray stream one ray longer or shorter than its (self-consistent) hit
+    /// stream, with `params.count` the hit count as the other checks want it, is refused naming
+    /// both lengths. Each stream passes its own field-length check and the dense-pixel check, so
+    /// only this one stands between them and the kernels: without it a longer ray stream panicked
+    /// (`resolve` indexed the hits past their end) and a shorter one was shaded with `Ok`, fewer
+    /// records than `params.count`.
+    #[test]
+    fn shade_refuses_a_ray_stream_of_another_length_than_its_hits() {
+        let (mut cpu, data, frame, params) = shade_fixture();
+        let (rays, hits) = (&frame.rays, &frame.hits);
+        let mut longer = rays.clone();
+        longer.origin.push(Vec4::ZERO);
+        longer.direction.push(Vec4::Z);
+        longer.pixel.push(rays.len() as u32);
+        let mut shorter = rays.clone();
+        shorter.origin.pop();
+        shorter.direction.pop();
+        shorter.pixel.pop();
+        for rays in [&longer, &shorter] {
+            let reason = shade_refusal(cpu.shade(&params, &data, rays, hits));
+            assert!(reason.contains(&format!("{} rays but 48 hits", rays.len())), "{reason}");
+        }
+        assert_eq!(cpu.shade(&params, &data, rays, hits).expect("matched streams").0.len(), 48);
+    }
+
+    /// `params.width = 0` is refused naming the width: the stage lays invocation `i` out as pixel
+    /// `(i mod width, i div width)`, and the sampler check sizes the image as `count ÷ width`
+    /// rounded up — without this check a zero width divided by zero there and panicked.
+    #[test]
+    fn shade_refuses_a_zero_width() {
+        let (mut cpu, data, frame, params) = shade_fixture();
+        let reason = shade_refusal(cpu.shade(&ShadeParams { width: 0, ..params }, &data, &frame.rays, &frame.hits));
+        assert!(reason.contains("params.width must be at least 1"), "{reason}");
+    }
+
+    /// The shade stage checks its sample index against the sampler's space as generate does, at the
+    /// exact boundary: under a 4-sample ZSOBOL space sample 3 is shaded and sample 4 — which would
+    /// redraw sample 0's points for every pixel, so the frame's light samples stop being
+    /// independent — is refused naming the ZSOBOL space. The check counts `sample_index + 1`
+    /// samples; counting `sample_index` let index 4 through.
+    #[test]
+    fn shade_refuses_the_first_sample_index_past_the_sampler_space() {
+        let (mut cpu, data, frame, params) = shade_fixture();
+        let sampler = crate::frame::sampler_params(raywave_shared::sampling::sampler_kind::ZSOBOL, 1, 8, 6, 4);
+        assert_eq!(sampler.spp_log2, 2);
+        let at = |sample_index| ShadeParams { sampler, sample_index, ..params };
+        assert!(cpu.shade(&at(3), &data, &frame.rays, &frame.hits).is_ok(), "the last sample of four");
+        let reason = shade_refusal(cpu.shade(&at(4), &data, &frame.rays, &frame.hits));
+        assert!(
+            reason.contains("ZSOBOL sampler's space") && reason.contains("repeats points for 5 samples"),
+            "{reason}"
+        );
+    }
+
     /// The shade stage shades ray `i` as pixel `i` and reads no `pixel` field: a compacted stream
     /// (rays dropped before shading) or a reordered one is refused naming the first ray out of
     /// place. Both had been shaded with `Ok`, each sample drawn for the wrong pixel.
     #[test]
     fn a_compacted_or_reordered_ray_stream_is_refused_by_shade() {
-        let (scene, _, params) = cornell_and_moved();
-        let data = crate::shading::ShadeData::new(&scene).unwrap();
-        let mut cpu = CpuBackend::new();
-        cpu.load_scene(&scene).unwrap();
-        let frame = cpu.render(&params).unwrap();
+        let (mut cpu, data, frame, shade_params) = shade_fixture();
         let (rays, hits) = (&frame.rays, &frame.hits);
-        let shade_params = data.params(params.sampler, 8, 6, 0);
         cpu.shade(&shade_params, &data, rays, hits).expect("a dense stream");
         let mut refused = |rays: &RayStream, hits: &HitStream| {
             let params = ShadeParams { count: rays.len() as u32, ..shade_params };
-            match cpu.shade(&params, &data, rays, hits) {
-                Err(Error::InvalidParameter { name: "shade", reason }) => reason,
-                other => panic!("expected the stream refused, got {other:?}"),
-            }
+            shade_refusal(cpu.shade(&params, &data, rays, hits))
         };
         // Rays that hit the floor dropped, as a compaction pass drops the rays it is done with.
         let kept: Vec<usize> = (0..rays.len()).filter(|&i| hits.instance[i] != FLOOR).collect();
