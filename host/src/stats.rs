@@ -375,6 +375,36 @@ mod tests {
         assert!(r.p_value > 0.01 && (r.pdf_integral - 1.0).abs() < 1.0e-9, "{r}");
     }
 
+    /// The cell integrals are exact for cubics per axis, as [`SUBDIVISIONS`] documents: the
+    /// 2-point Gauss–Legendre nodes at `mid ± h/(2√3)` integrate `4x³·3y²` on the square and
+    /// `(z³ + 1)/4π` on the sphere to rounding, per cell, with one sub-interval or three. Every
+    /// warp test's pdf is constant or linear over its cells, which any rule symmetric about the
+    /// midpoint integrates exactly: nodes at `mid ± h/4` (4x³ to 0.875 on `[0, 1]`) passed them
+    /// all, and would have misjudged the curved lobes the rule is there for.
+    #[test]
+    fn cell_integrals_are_exact_for_cubics() {
+        let close = |got: f64, exact: f64, what: &str| assert!((got - exact).abs() <= 1e-14, "{what}: {got} ≠ {exact}");
+        for subdivisions in [1, 3] {
+            let h = unit_square_histogram(&[[0.5, 0.5]], |[x, y]| 4.0 * x.powi(3) * 3.0 * y * y, 2, 2, subdivisions);
+            for (cell, &expected) in h.expected.iter().enumerate() {
+                let (x0, y0) = ((cell / 2) as f64 * 0.5, (cell % 2) as f64 * 0.5);
+                let exact = ((x0 + 0.5).powi(4) - x0.powi(4)) * ((y0 + 0.5).powi(3) - y0.powi(3));
+                close(expected, exact, &format!("square cell {cell}, {subdivisions} sub-intervals"));
+            }
+            close(h.pdf_integral, 1.0, "the square");
+
+            let (n_theta, n_phi) = (4, 3);
+            let h = sphere_histogram(&[Vec3::Z], |d| (d.z.powi(3) + 1.0) / (4.0 * PI), n_theta, n_phi, subdivisions);
+            for (cell, &expected) in h.expected.iter().enumerate() {
+                let z0 = -1.0 + 2.0 * (cell / n_phi as usize) as f64 / n_theta as f64;
+                let z1 = z0 + 2.0 / n_theta as f64;
+                let exact = ((z1.powi(4) - z0.powi(4)) / 4.0 + z1 - z0) * (2.0 * PI / n_phi as f64) / (4.0 * PI);
+                close(expected, exact, &format!("sphere cell {cell}, {subdivisions} sub-intervals"));
+            }
+            close(h.pdf_integral, 1.0, "the sphere");
+        }
+    }
+
     #[test]
     fn samples_outside_the_domain_are_counted() {
         let samples = [[0.5, 0.5], [1.5, 0.5], [f64::NAN, 0.1], [1.0, 1.0]];
