@@ -234,6 +234,29 @@ mod tests {
         }
     }
 
+    /// A lamp 10⁵ from the origin, tilted off every axis, whose corners carry their own `f32`
+    /// rounding (an ulp there is 0.0078): the rounding bends it 0.002 out of a parallelogram, 15
+    /// times the shape tolerance of a lamp its size (10⁻⁴ of its diameter), and the rounding slack
+    /// `16 ε · m` (0.19 at 10⁵) is what still makes it a quad light — a scene's light, not an
+    /// unsupported emitter left as plain geometry. Without the slack it was refused. (The other
+    /// far lamps in these tests are axis-aligned: their corners share rounded coordinates, whose
+    /// errors cancel.)
+    #[test]
+    fn a_lamp_whose_corners_carry_f32_rounding_far_out_is_a_light() {
+        let far = DVec3::new(1e5, -6e4, 3e4);
+        let (u, v) = (DVec3::new(0.8, 0.36, -0.48), DVec3::new(0.1, 0.6, 0.45));
+        let corners = [far, far + u, far + u + v, far + v].map(DVec3::as_vec3);
+        let bend = corners.map(Vec3::as_dvec3);
+        let bend = (bend[0] + bend[2] - bend[1] - bend[3]).length();
+        let shape = RELATIVE_TOLERANCE * (u + v).length();
+        assert!(bend > 10.0 * shape, "the rounding bends it {bend}, within the shape tolerance {shape}");
+        let mesh = emissive(corners.to_vec(), vec![[0, 1, 2], [0, 2, 3]]);
+        let q = parallelogram(&mesh).expect("a quad light despite the rounding");
+        assert!(same_corner_set(quad_corners(&q), corners, 0.01), "{q:?}");
+        let scene = crate::scene::Scene::new("far lamp", vec![mesh], crate::scene::cornell::camera()).unwrap();
+        assert_eq!((scene.lights().len(), scene.unsupported_emitters()), (1, 0));
+    }
+
     /// A 2 m × 1 mm strip light in any orientation, its coordinates written to 10 µm (five
     /// decimals, as exporters write them): its shape error, up to 3.5 % of its width, is within
     /// the 5 % the narrow side allows.
@@ -276,6 +299,34 @@ mod tests {
         let scene = scene.expect("a scene with a lamp at the coordinate limit loads");
         assert!(scene.lights().is_empty());
         assert_eq!(scene.unsupported_emitters(), 1);
+    }
+
+    /// A lamp at the coordinate limit, every vertex within it and an exact parallelogram, whose
+    /// corner rebuilt as `corner + edge_u + edge_v` rounds one ulp (8) past it: `edge_u` =
+    /// 10⁸ − 8 − (−4) rounds up to 10⁸ and `corner + edge_u` = 10⁸ − 4 ties up to 10⁸ again. It is
+    /// a light: `reach_within_limit`'s 8-ulp slack is for such double rounding of vertices at the
+    /// limit. Without the slack it was an unsupported emitter, plain geometry.
+    #[test]
+    fn a_lamp_at_the_coordinate_limit_whose_rebuilt_corner_rounds_past_it_is_a_light() {
+        let limit = crate::scene::MAX_COORDINATE;
+        let (height, last) = (1e3, limit - 8.0);
+        assert_eq!(last.next_up(), limit, "the ulp below the limit");
+        let corners = [
+            Vec3::new(-4.0, 0.0, 0.0),
+            Vec3::new(last, 0.0, 0.0),
+            Vec3::new(limit, height, 0.0),
+            Vec3::new(4.0, height, 0.0),
+        ];
+        let mesh = emissive(corners.to_vec(), vec![[0, 1, 3], [1, 2, 3]]);
+        let q = parallelogram(&mesh).expect("a quad light at the limit");
+        assert_eq!(
+            (q.corner, q.edge_u, q.edge_v),
+            (corners[0], Vec3::new(limit, 0.0, 0.0), Vec3::new(8.0, height, 0.0))
+        );
+        let rebuilt = light_bounds(&Light::quad(q.corner, q.edge_u, q.edge_v, Vec3::ZERO, false));
+        assert_eq!(rebuilt.max.x, limit + 8.0, "the rebuilt corner one ulp past the limit");
+        let scene = crate::scene::Scene::new("lamp at the limit", vec![mesh], crate::scene::cornell::camera()).unwrap();
+        assert_eq!((scene.lights().len(), scene.unsupported_emitters()), (1, 0));
     }
 
     #[test]
