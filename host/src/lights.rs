@@ -986,6 +986,29 @@ mod tests {
 
     const ONE_MINUS: f32 = raywave_kernels::hash::ONE_MINUS_EPSILON;
 
+    /// An engine's own lights ([`Light::NO_MESH`]), each of a power `validate_light` accepts
+    /// (3.1·10³⁸ W, within `f32`) but together past `f32::MAX`: the clusters' powers, summed in
+    /// `f64`, are stored clamped to `f32::MAX` — every node's power finite (`as f32` had made them
+    /// ∞, non-finite data handed to the kernels, whose importance clamp alone then kept the pmfs
+    /// finite) — and the BVH still holds its children's bounds and selects with pmfs that sum to
+    /// 1, positive for every light that reaches the point, the dim one too.
+    #[test]
+    fn lights_bvh_of_powers_past_f32_max_keeps_finite_node_powers() {
+        // Quads, the lights the shade stage integrates: 1 m², two-sided, 2π·5·10³⁷ ≈ 3.1·10³⁸ W each.
+        let quad = |corner: Vec3, radiance: f32| Light::quad(corner, Vec3::X, Vec3::Z, Vec3::splat(radiance), true);
+        let mut lights: Vec<Light> = (0..10).map(|k| quad(Vec3::new(2.0 * k as f32, 0.0, 0.0), 5e37)).collect();
+        lights.push(quad(Vec3::new(0.0, 8.0, 0.0), 1.0));
+        assert!(lights.iter().all(|light| light.mesh == Light::NO_MESH));
+        let total: f64 = lights.iter().map(|light| f64::from(light_bounds(light).phi)).sum();
+        assert!(total > 5.0 * f64::from(f32::MAX), "{total}");
+        let bvh = LightBvh::build(&lights).expect("each power fits f32");
+        check_structure(&bvh, &lights, MAX_BVH_DEPTH);
+        let powers: Vec<f32> = bvh.nodes().iter().map(|node| node.bounds.phi).collect();
+        assert!(powers.iter().all(|phi| phi.is_finite() && *phi > 0.0), "{powers:?}");
+        assert_eq!(powers[0], f32::MAX, "the root's power clamped");
+        check_pmfs(&bvh, &lights, 41, 200, 10.0);
+    }
+
     /// Ceiling points amid an array of small LEDs in the ceiling's plane, which light none of
     /// them, and a lamp below that lights them all: the BVH gives the lamp at least the linear
     /// scan's pmf (measured: 1 at every cluster's centre). Inside the LED clusters' spheres their
