@@ -1,5 +1,5 @@
 //! An engine links the kernels into its own rust-gpu shader crate: building the fixture
-//! `tests/data/engine-shader` (one compute entry point that calls `raywave_kernels::trig::sin_cos`)
+//! `host/tests/data/engine-shader` (one compute entry point that calls `raywave_kernels::trig::sin_cos`)
 //! must give a module with the engine's entry point alone. rust-gpu emits every `#[spirv(...)]`
 //! entry point of every crate it links, so before the kernels' `entry` module went behind the
 //! `entry-points` feature an engine's module carried raywave's 15 compute kernels as well. The

@@ -1,5 +1,5 @@
 //! An engine's compute shader that uses a raywave kernel function (the fixture of
-//! `tests/engine_shader.rs`).
+//! `host/tests/engine_shader.rs`).
 #![no_std]
 
 use glam::UVec3;
