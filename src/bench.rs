@@ -385,7 +385,7 @@ pub(crate) fn check_repeats(repeats: u32) -> Result<()> {
 
 /// Checks a benchmark's `--resolution`, camera rays per side, against the CPU backend's image
 /// size (every bench measures the CPU at it), naming the option rather than the backend.
-pub(crate) fn check_resolution(side: u32) -> Result<()> {
+pub(crate) fn check_rays_per_side(side: u32) -> Result<()> {
     match crate::Backend::check_image_size(&crate::cpu::CpuBackend::new(), side, side) {
         Err(Error::ImageSize { reason, .. }) => {
             Err(Error::InvalidParameter { name: "resolution", reason: format!("{side}×{side} rays: {reason}") })
@@ -409,7 +409,7 @@ pub fn bench_trace(options: &TraceBenchOptions, mut emit: impl FnMut(&dyn Output
         return Err(Error::InvalidParameter { name: "threads", reason });
     }
     check_repeats(options.repeats)?;
-    check_resolution(options.resolution)?;
+    check_rays_per_side(options.resolution)?;
     let image = [options.resolution; 2];
     #[cfg_attr(not(feature = "vulkan"), allow(unused_variables))]
     let vulkan_device = options.vulkan_options.device(options.vulkan, crate::StreamStage::Trace, image)?;

@@ -8,7 +8,7 @@
 //! dispatch repeated to keep the GPU busy, `crate::BackendOptions::sustain_seconds`), timed by
 //! GPU timestamps around the dispatch, without the uploads and readbacks around it.
 
-use crate::bench::{check_repeats, check_resolution, measure, CPU_SETTLE_SECONDS};
+use crate::bench::{check_rays_per_side, check_repeats, measure, CPU_SETTLE_SECONDS};
 use crate::frame::{generate_params, sampler_params};
 use crate::shading::ShadeData;
 use crate::shared::sampling::sampler_kind;
@@ -74,7 +74,7 @@ impl crate::output_line::OutputLine for ShadeMeasurement {
 pub fn bench_shade(options: &ShadeBenchOptions, mut emit: impl FnMut(&ShadeMeasurement)) -> Result<()> {
     check_repeats(options.repeats)?;
     let (side, mut cpu) = (options.resolution, crate::cpu::CpuBackend::new());
-    check_resolution(side)?;
+    check_rays_per_side(side)?;
     #[cfg_attr(not(feature = "vulkan"), allow(unused_variables))]
     let vulkan_device = options.vulkan_options.device(options.vulkan, crate::StreamStage::Shade, [side, side])?;
     let scene = Scene::load(&options.scene)?;

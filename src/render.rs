@@ -200,6 +200,8 @@ pub fn render(options: &RenderOptions) -> Result<RenderReport> {
     let stochastic =
         options.stochastic.as_deref().map(|path| PendingOutput::create(path, ImageFormat::Png)).transpose()?;
     let scene = Scene::load(&options.scene)?;
+    // The lens against the camera's focus distance, in either view, before any work.
+    options.frame_settings().check_lens(&scene)?;
     // Before the backend opens and builds its acceleration structures: the light BVH may refuse
     // the scene.
     let data = if options.view == RenderView::Lit {

@@ -355,10 +355,17 @@ pub const MIN_IMAGE_PLANE_AXIS_SQUARED: f32 = f32::MIN_POSITIVE;
 /// 8192 pixels across a 53° view — and the f-number `f/2R`, 5·10⁻⁴, is beyond any lens.
 pub const MAX_APERTURE_TO_FOCUS: f32 = 1e3;
 
-/// Whether a thin lens of aperture radius `lens_radius` focused at `focus_distance` is within
-/// [`MAX_APERTURE_TO_FOCUS`] (a pinhole always is).
-pub fn aperture_fits_focus(lens_radius: f32, focus_distance: f32) -> bool {
-    lens_radius == 0.0 || lens_radius <= MAX_APERTURE_TO_FOCUS * focus_distance
+/// Why a thin lens of aperture radius `lens_radius` focused at `focus_distance` is refused — it
+/// is wider than [`MAX_APERTURE_TO_FOCUS`] focus distances —, or `None` (a pinhole always
+/// passes; non-finite values are other checks' to refuse).
+pub fn aperture_refusal(lens_radius: f32, focus_distance: f32) -> Option<String> {
+    let widest = MAX_APERTURE_TO_FOCUS * focus_distance;
+    (lens_radius > 0.0 && (lens_radius > widest || widest.is_nan())).then(|| {
+        format!(
+            "{lens_radius} exceeds {MAX_APERTURE_TO_FOCUS:e} × the focus distance {focus_distance}: rays from the \
+             lens's rim would miss their points on the plane in focus by the f32 rounding of their directions"
+        )
+    })
 }
 
 /// Relative tolerance of the camera basis' documented shape ([`GenerateParams`]): `|forward|`
@@ -407,12 +414,8 @@ pub fn check_generate_params(params: &GenerateParams) -> Result<()> {
         Some(format!("lens_radius {} must be finite and ≥ 0", params.lens_radius))
     } else if params.lens_radius > 0.0 && !(params.focus_distance.is_finite() && params.focus_distance > 0.0) {
         Some(format!("focus_distance {} must be finite and > 0 with an aperture", params.focus_distance))
-    } else if !aperture_fits_focus(params.lens_radius, params.focus_distance) {
-        Some(format!(
-            "lens_radius {} exceeds {MAX_APERTURE_TO_FOCUS:e} × focus_distance {}: rays from the lens's rim would \
-             miss their focal point by f32 rounding of the radius",
-            params.lens_radius, params.focus_distance
-        ))
+    } else if let Some(reason) = aperture_refusal(params.lens_radius, params.focus_distance) {
+        Some(format!("lens_radius {reason}"))
     } else if params.lens_radius > 0.0 && lens_reach > f64::from(f32::MAX) / 4.0 {
         Some(format!(
             "the thin lens reaches {lens_reach:e} from the origin (camera origin, aperture {}, focal plane at {}), \
@@ -615,14 +618,16 @@ mod tests {
         };
         for ratio in [1.0, 10.0, 100.0, MAX_APERTURE_TO_FOCUS] {
             let miss = worst_miss(ratio);
-            assert!(miss < 2e-7 * f64::from(ratio), "ratio {ratio}: rays miss by {miss:e} of the focus distance");
+            // Plus 1: at small ratios the pinhole ray's own rounding is most of the miss.
+            let bound = 2e-7 * (1.0 + f64::from(ratio));
+            assert!(miss < bound, "ratio {ratio}: rays miss by {miss:e} of the focus distance");
         }
         assert!(worst_miss(1e6) > 0.1, "beyond the limit, where it was accepted before");
         let at_limit = GenerateParams { lens_radius: MAX_APERTURE_TO_FOCUS * focus, ..pinhole };
         assert!(check_generate_params(&at_limit).is_ok());
         let over = GenerateParams { lens_radius: at_limit.lens_radius * 1.01, ..pinhole };
         let err = check_generate_params(&over).expect_err("refused").to_string();
-        assert!(err.contains("lens_radius") && err.contains("focus_distance"), "{err}");
+        assert!(err.contains("lens_radius") && err.contains("focus distance"), "{err}");
     }
 
     /// The camera basis must have the shape `GenerateParams` documents: a 10⁻³⁰-long basis made

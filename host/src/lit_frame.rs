@@ -3,7 +3,7 @@
 //! `emitted + U · den(S_N)/den(U_N)`. This is what `raywave render` runs; an engine that builds its
 //! own [`Scene`] ([`Scene::new`]) calls [`render_lit`] and gets the image in memory.
 
-use crate::backend::{aperture_fits_focus, check_image_size_common, Backend, StageReport, MAX_APERTURE_TO_FOCUS};
+use crate::backend::{aperture_refusal, check_image_size_common, Backend, StageReport};
 use crate::denoise::{check_radius, frame_params, rgb, DenoiseInput, DenoiseMethod};
 use crate::error::{Error, Result};
 use crate::frame::{check_samples_per_pixel, generate_params_with, sampler_params};
@@ -33,7 +33,7 @@ pub struct LitFrameSettings {
     /// Seed of the sampler and of the noise estimate's line angles.
     pub seed: u32,
     /// Thin-lens aperture radius in scene units, in `[0, MAX_LENS_DISTANCE]` (0: a pinhole) and
-    /// at most [`MAX_APERTURE_TO_FOCUS`] times the focus distance.
+    /// at most [`MAX_APERTURE_TO_FOCUS`](crate::backend::MAX_APERTURE_TO_FOCUS) times the focus distance.
     pub lens_radius: f32,
     /// Distance of the plane in focus, in `(0, MAX_LENS_DISTANCE]`; `None` focuses on the
     /// camera's look-at point.
@@ -80,15 +80,22 @@ impl LitFrameSettings {
             if !(focus > 0.0 && focus <= MAX_LENS_DISTANCE) {
                 return invalid("focus", format!("{focus} is outside (0, {MAX_LENS_DISTANCE:e}]"));
             }
-            return check_aperture(self.lens_radius, focus);
+            return check_aperture(self.lens_radius, focus, "");
         }
         Ok(())
     }
 
     /// Checks the aperture against the focus distance this frame uses on `scene`: the one set, or
-    /// the camera's look-at distance. [`shade_samples`] calls it before any work.
+    /// the camera's look-at distance (at most [`MAX_APERTURE_TO_FOCUS`](crate::backend::MAX_APERTURE_TO_FOCUS) times it; an error naming
+    /// `aperture`). [`shade_samples`] calls it before any work; a job can call it as soon as the
+    /// scene has loaded.
     pub fn check_lens(&self, scene: &Scene) -> Result<()> {
-        check_aperture(self.lens_radius, self.generate_params(scene, 0).focus_distance)
+        let camera_focus = if self.focus_distance.is_none() {
+            " (the camera's look-at distance: set the focus distance, --focus, or narrow the aperture)"
+        } else {
+            ""
+        };
+        check_aperture(self.lens_radius, self.generate_params(scene, 0).focus_distance, camera_focus)
     }
 
     /// [`Self::check`], then the image size against the rules every backend shares (at least one
@@ -161,17 +168,13 @@ impl LitSamples {
     }
 }
 
-/// The aperture `lens_radius` against the focus distance `focus`: at most
-/// [`MAX_APERTURE_TO_FOCUS`] times it (an error naming `aperture` otherwise).
-fn check_aperture(lens_radius: f32, focus: f32) -> Result<()> {
-    if aperture_fits_focus(lens_radius, focus) {
-        return Ok(());
+/// The aperture `lens_radius` against the focus distance `focus` ([`aperture_refusal`]): an
+/// error naming `aperture`, its reason followed by `note` (where the focus distance came from).
+fn check_aperture(lens_radius: f32, focus: f32, note: &str) -> Result<()> {
+    match aperture_refusal(lens_radius, focus) {
+        Some(reason) => Err(Error::InvalidParameter { name: "aperture", reason: format!("{reason}{note}") }),
+        None => Ok(()),
     }
-    let reason = format!(
-        "{lens_radius} exceeds {MAX_APERTURE_TO_FOCUS:e} × the focus distance {focus}: rays from the lens's rim \
-         would miss the plane in focus by f32 rounding of the aperture"
-    );
-    Err(Error::InvalidParameter { name: "aperture", reason })
 }
 
 /// Runs `settings.samples_per_pixel` samples of `scene` on `backend`, each generate → trace →
@@ -303,7 +306,7 @@ pub fn render_lit(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::backend::FrameOutput;
+    use crate::backend::{FrameOutput, MAX_APERTURE_TO_FOCUS};
     use crate::cpu::CpuBackend;
     use crate::stream::{HitStream, RayStream, ShadeStream};
     use glam::{UVec2, Vec4};
@@ -393,7 +396,9 @@ mod tests {
         settings(1e6).check().unwrap();
         assert!(shade_samples(&mut cpu, &scene, &data, &settings(MAX_APERTURE_TO_FOCUS * look_at)).is_ok());
         match shade_samples(&mut cpu, &scene, &data, &settings(1.01 * MAX_APERTURE_TO_FOCUS * look_at)) {
-            Err(Error::InvalidParameter { name: "aperture", reason }) => assert!(reason.contains("focus"), "{reason}"),
+            Err(Error::InvalidParameter { name: "aperture", reason }) => {
+                assert!(reason.contains("the camera's look-at distance"), "{reason}")
+            }
             other => panic!("expected the aperture refused, got {other:?}"),
         }
     }
