@@ -15,7 +15,7 @@ use raywave_kernels::shade::ltc::LTC_TABLE_LEN;
 use raywave_kernels::shade::stage::{composite, resolve_surface, shade_sample, ShadeScene, Surface};
 use raywave_shared::light::light_kind;
 use raywave_shared::ltc_table::packed_entries;
-use raywave_shared::{Light, LightBvhNode, MaterialParams, SamplerParams, ShadeParams};
+use raywave_shared::{Light, LightBounds, LightBvhNode, MaterialParams, SamplerParams, ShadeParams};
 use std::sync::atomic::{AtomicU64, Ordering};
 
 /// Everything the shade stage reads about a scene, laid out as its buffers.
@@ -119,7 +119,8 @@ impl ShadeData {
     /// lights valid ([`crate::lights::validate_lights`]) and quads, a trail per light where
     /// there is a light BVH and each light that emits at the end of its trail, in a leaf with its
     /// own bounds (lights changed after the build need a new BVH: a moved light whose leaf still
-    /// holds its old bounds is refused; an interior node's stale bounds are not looked at), the
+    /// holds its old bounds is refused; an interior node's stale bounds are not looked at, but
+    /// every node's bounds must be finite with a power `φ ≥ 0`), the
     /// LTC table complete ([`LTC_TABLE_LEN`] entries), three vertices
     /// per triangle and the instances' first triangles ascending within them. Every backend's
     /// `shade` calls it; an error names the field.
@@ -153,6 +154,15 @@ impl ShadeData {
                 self.lights.len()
             );
             return invalid("light_trails", reason);
+        }
+        let unsound = |b: &LightBounds| {
+            let finite = b.min.is_finite() && b.max.is_finite() && b.axis.is_finite();
+            !(finite && b.phi >= 0.0 && b.phi.is_finite() && b.cos_theta_o.is_finite() && b.cos_theta_e.is_finite())
+        };
+        if let Some(index) = self.light_nodes.iter().position(|node| unsound(&node.bounds)) {
+            // The selection's importances are products of these: a NaN or ∞ made its pmfs NaN.
+            let reason = format!("light_nodes[{index}]'s bounds are not finite with a power ≥ 0");
+            return invalid("light_nodes", reason);
         }
         if !self.light_nodes.is_empty() {
             // Every light of power in the tree, at the end of its trail, in a leaf with its bounds
@@ -520,6 +530,16 @@ mod tests {
         moved.lights[5].position += Vec4::new(0.25, 0.0, 0.0, 0.0);
         let (name, reason) = refused(&moved);
         assert!(name == "light_nodes" && reason.contains("lights[5]"), "{name}: {reason}");
+        // An interior node edited to a power or a box that is not finite.
+        let edits: [fn(&mut LightBvhNode); 3] =
+            [|n| n.bounds.phi = f32::INFINITY, |n| n.bounds.phi = f32::NAN, |n| n.bounds.min.x = f32::NEG_INFINITY];
+        for edit in edits {
+            let mut edited = ShadeData::new(&scene).unwrap();
+            assert_eq!(edited.light_nodes[0].is_leaf, 0, "the root of 20 lights");
+            edit(&mut edited.light_nodes[0]);
+            let (name, reason) = refused(&edited);
+            assert!(name == "light_nodes" && reason.contains("light_nodes[0]'s bounds"), "{name}: {reason}");
+        }
         // A light without power may lie anywhere: the tree leaves it out.
         let mut dark = added;
         dark.lights[20].radiance = Vec4::ZERO;
