@@ -516,30 +516,8 @@ fn non_finite_and_huge_view_directions_shade_alike_on_every_backend() {
     for &i in &huge {
         rays.direction[i] *= 2f32.powi(80);
     }
-    let (expected, report) = cpu.shade(&params, &data, &rays, &hits).expect("cpu shade");
-    assert_eq!(report.sanitized, broken.len() as u64, "cpu");
-    let record = |s: &ShadeStream, i: usize| {
-        (s.analytic[i], s.unshadowed[i], s.emitted[i], s.shadow_origin[i], s.shadow_direction[i])
-    };
-    for i in 0..hits.len() {
-        if broken.contains(&i) {
-            let (analytic, unshadowed, emitted, _, direction) = record(&expected, i);
-            let miss = [analytic, unshadowed, emitted].iter().all(|&v| v == Vec4::ZERO) && direction.w == 0.0;
-            assert!(miss, "cpu: record {i} of a NaN direction was shaded: {:?}", record(&expected, i));
-        } else {
-            assert_eq!(record(&expected, i), record(&clean, i), "cpu: pixel {i} changed");
-        }
-    }
-    for mut device in vulkan::each_device("shade view directions") {
-        let (shades, report) = device.shade(&params, &data, &rays, &hits).expect("device shade");
-        let who = device.name();
-        assert_eq!(report.sanitized, broken.len() as u64, "{who}");
-        assert_matches_cpu(&who, &expected, &shades, &rays, &hits);
-        for &i in &broken {
-            assert_eq!(record(&shades, i), record(&expected, i), "{who}: record {i} of a NaN direction");
-        }
-        vulkan::assert_clean(device);
-    }
+    let pass = ShadePass { data: &data, params: &params, rays: &rays, hits: &hits };
+    assert_broken_records_are_counted_misses("shade view directions", &mut cpu, pass, &clean, &broken);
 }
 
 /// Hit records that are not finite — a NaN distance, infinite barycentrics, as a linking engine's
@@ -560,27 +538,53 @@ fn non_finite_hit_records_are_misses_counted_alike_on_every_backend() {
             hits.barycentrics[i].y = f32::INFINITY;
         }
     }
-    let (expected, report) = cpu.shade(&params, &data, &rays, &hits).expect("cpu shade");
     eprintln!("{} of {} hit records made non-finite", broken.len(), hits.len());
+    let pass = ShadePass { data: &data, params: &params, rays: &rays, hits: &hits };
+    assert_broken_records_are_counted_misses("shade sanitized count", &mut cpu, pass, &clean, &broken);
+}
+
+/// What one shade pass reads besides its backend.
+struct ShadePass<'a> {
+    data: &'a ShadeData,
+    params: &'a ShadeParams,
+    rays: &'a RayStream,
+    hits: &'a HitStream,
+}
+
+/// The check both sanitizing tests make of `pass`, whose streams were altered at the `broken`
+/// records: on `cpu` those records shade as misses (nothing lit or emitted, no shadow ray) and
+/// every other record as in `clean`, the unaltered streams' shading, bit for bit; on every
+/// device (`test`, the name `each_device` reports) the records match the CPU's within the parity
+/// tolerances and the broken ones exactly; everywhere the stage counts exactly the broken records
+/// as sanitized.
+fn assert_broken_records_are_counted_misses(
+    test: &str,
+    cpu: &mut CpuBackend,
+    pass: ShadePass,
+    clean: &ShadeStream,
+    broken: &[usize],
+) {
+    let ShadePass { data, params, rays, hits } = pass;
+    let (expected, report) = cpu.shade(params, data, rays, hits).expect("cpu shade");
     assert_eq!(report.sanitized, broken.len() as u64, "cpu");
     let record = |s: &ShadeStream, i: usize| {
         (s.analytic[i], s.unshadowed[i], s.emitted[i], s.shadow_origin[i], s.shadow_direction[i])
     };
     for i in 0..hits.len() {
-        let (analytic, unshadowed, emitted, _, direction) = record(&expected, i);
         if broken.contains(&i) {
+            let (analytic, unshadowed, emitted, _, direction) = record(&expected, i);
             let miss = [analytic, unshadowed, emitted].iter().all(|&v| v == Vec4::ZERO) && direction.w == 0.0;
             assert!(miss, "cpu: broken record {i} was shaded: {:?}", record(&expected, i));
         } else {
-            assert_eq!(record(&expected, i), record(&clean, i), "cpu: pixel {i} changed");
+            assert_eq!(record(&expected, i), record(clean, i), "cpu: pixel {i} changed");
         }
     }
-    for mut device in vulkan::each_device("shade sanitized count") {
-        let (shades, report) = device.shade(&params, &data, &rays, &hits).expect("device shade");
+    for mut device in vulkan::each_device(test) {
+        let (shades, report) = device.shade(params, data, rays, hits).expect("device shade");
         let who = device.name();
         assert_eq!(report.sanitized, broken.len() as u64, "{who}");
-        assert_matches_cpu(&who, &expected, &shades, &rays, &hits);
-        for &i in &broken {
+        assert_matches_cpu(&who, &expected, &shades, rays, hits);
+        for &i in broken {
             assert_eq!(record(&shades, i), record(&expected, i), "{who}: broken record {i}");
         }
         vulkan::assert_clean(device);

@@ -381,16 +381,22 @@ mod tests {
         );
     }
 
+    /// The Cornell box, its shade data, and a CPU backend that has loaded it.
+    fn cornell_on_the_cpu() -> (Scene, ShadeData, CpuBackend) {
+        let scene = Scene::load("builtin:cornell").unwrap();
+        let data = ShadeData::new(&scene).unwrap();
+        let mut cpu = CpuBackend::new();
+        cpu.load_scene(&scene).unwrap();
+        (scene, data, cpu)
+    }
+
     /// Focused on the camera's look-at point (0.8 away in the Cornell box), an aperture of
     /// `MAX_APERTURE_TO_FOCUS` look-at distances renders and a wider one is refused, naming the
     /// aperture, before any stage runs: `raywave render --aperture 1e6` had rendered a frame whose
     /// rays missed their focal points by scene-sized amounts.
     #[test]
     fn an_aperture_too_wide_for_the_cameras_focus_is_refused_before_any_work() {
-        let scene = Scene::load("builtin:cornell").unwrap();
-        let data = ShadeData::new(&scene).unwrap();
-        let mut cpu = CpuBackend::new();
-        cpu.load_scene(&scene).unwrap();
+        let (scene, data, mut cpu) = cornell_on_the_cpu();
         let look_at = crate::frame::generate_params(&scene, 4, 4, 0).focus_distance;
         let settings = |lens_radius| LitFrameSettings { lens_radius, ..LitFrameSettings::new(4, 4, 1) };
         settings(1e6).check().unwrap();
@@ -429,10 +435,7 @@ mod tests {
 
     #[test]
     fn samples_count_hits_resolve_the_first_sample_and_draw_their_own_points() {
-        let scene = Scene::load("builtin:cornell").unwrap();
-        let data = ShadeData::new(&scene).unwrap();
-        let mut cpu = CpuBackend::new();
-        cpu.load_scene(&scene).unwrap();
+        let (scene, data, mut cpu) = cornell_on_the_cpu();
         let settings = LitFrameSettings::new(16, 12, 3);
         let samples = shade_samples(&mut cpu, &scene, &data, &settings).unwrap();
         assert_eq!(samples.accumulator.samples(), 3);
