@@ -3,6 +3,7 @@
 
 use crate::denoise::{DenoiseInput, DenoiseMethod};
 use crate::error::Result;
+use crate::lit_sample::{LitSample, LitSampleRequest};
 use crate::scene::{Scene, SceneIdentity};
 use crate::shading::ShadeData;
 use crate::stream::{HitStream, RayStream, ShadeStream};
@@ -176,6 +177,15 @@ pub trait Backend: Send {
     /// Runs generate → trace as one frame, keeping the ray stream on the backend in between.
     fn render(&mut self, params: &GenerateParams) -> Result<FrameOutput>;
 
+    /// Runs one lit sample — generate → trace → shade → occlusion trace — and returns what the
+    /// accumulator adds up ([`LitSample`]), with the checks and errors of those stage calls. By
+    /// default it is [`crate::lit_sample::compose`] of them, every stream passing through the
+    /// host; a backend may keep the streams on its device in between (the Vulkan backend does),
+    /// giving the same values bit for bit.
+    fn lit_sample(&mut self, request: &LitSampleRequest<'_>) -> Result<LitSample> {
+        crate::lit_sample::compose(self, request)
+    }
+
     /// Runs the sampler probe: the raw bits of every sample `params` covers, in invocation order
     /// (bit-identical on every backend).
     fn sampler_probe(&mut self, params: &SamplerProbeParams) -> Result<Vec<UVec2>>;
@@ -301,16 +311,32 @@ pub fn check_shade_inputs(
     hits.check("shade")?;
     let reason = if rays.len() != hits.len() {
         Some(format!("{} rays but {} hits", rays.len(), hits.len()))
-    } else if params.count as usize != hits.len() {
-        Some(format!("params.count = {} but {} rays", params.count, hits.len()))
+    } else {
+        rays.pixel.par_iter().enumerate().position_first(|(i, &pixel)| pixel as usize != i).map(|i| {
+            format!(
+                "rays.pixel[{i}] = {}: the stage takes dense streams, ray i for pixel i as generate writes them \
+                 (a compacted stream would shade its samples for the wrong pixels)",
+                rays.pixel[i]
+            )
+        })
+    };
+    match reason {
+        Some(reason) => Err(crate::error::Error::InvalidParameter { name: "shade", reason }),
+        None => check_shade_params(params, data, hits.len()),
+    }
+}
+
+/// The checks of [`check_shade_inputs`] that need no streams, for a dense pass of `count` camera
+/// rays — as the generate stage writes them, one per pixel in pixel order, which a backend that
+/// keeps them on its device ([`Backend::lit_sample`]) takes as they are: `params.count` equal to
+/// `count`, a width of at least 1, light and node counts within the data's buffers and the
+/// sampler. `data` itself is checked by the caller ([`ShadeData::check_scene`],
+/// [`ShadeData::check`]). Errors name the stage (`shade`) and the field at fault.
+pub fn check_shade_params(params: &ShadeParams, data: &ShadeData, count: usize) -> Result<()> {
+    let reason = if params.count as usize != count {
+        Some(format!("params.count = {} but {count} rays", params.count))
     } else if params.width == 0 {
         Some("params.width must be at least 1".to_owned())
-    } else if let Some(i) = rays.pixel.par_iter().enumerate().position_first(|(i, &pixel)| pixel as usize != i) {
-        Some(format!(
-            "rays.pixel[{i}] = {}: the stage takes dense streams, ray i for pixel i as generate writes them \
-             (a compacted stream would shade its samples for the wrong pixels)",
-            rays.pixel[i]
-        ))
     } else if params.light_count as usize > data.lights.len() {
         Some(format!("params.light_count = {} but the data has {} lights", params.light_count, data.lights.len()))
     } else if params.light_node_count != 0 && params.light_node_count as usize != data.light_nodes.len() {

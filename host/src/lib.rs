@@ -11,6 +11,7 @@ pub mod error;
 pub mod frame;
 pub mod lights;
 pub mod lit_frame;
+pub mod lit_sample;
 pub mod ltc_fit;
 pub mod scene;
 pub mod shading;

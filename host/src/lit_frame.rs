@@ -3,10 +3,11 @@
 //! `emitted + U · den(S_N)/den(U_N)`. This is what `raywave render` runs; an engine that builds its
 //! own [`Scene`] ([`Scene::new`]) calls [`render_lit`] and gets the image in memory.
 
-use crate::backend::{aperture_refusal, check_image_size_common, Backend, StageReport};
+use crate::backend::{aperture_refusal, check_image_size_common, check_shade_inputs, Backend, StageReport};
 use crate::denoise::{check_radius, frame_params, rgb, DenoiseInput, DenoiseMethod};
 use crate::error::{Error, Result};
 use crate::frame::{check_samples_per_pixel, generate_params_with, sampler_params};
+use crate::lit_sample::LitSampleRequest;
 use crate::scene::{Scene, MAX_COORDINATE};
 use crate::shading::{resolve, ShadeAccumulator, ShadeData};
 use glam::Vec3;
@@ -202,22 +203,28 @@ pub fn shade_samples(
         stream_bytes: 0,
     };
     for sample_index in 0..settings.samples_per_pixel {
-        let frame = backend.render(&settings.generate_params(scene, sample_index))?;
-        for report in &frame.timings {
+        let generate = settings.generate_params(scene, sample_index);
+        let shade = data.params(settings.sampler(), width, height, sample_index);
+        let request =
+            LitSampleRequest { generate: &generate, shade: &shade, data, keep_camera_streams: sample_index == 0 };
+        let sample = backend.lit_sample(&request)?;
+        samples.accumulator.add_sample(&sample)?;
+        if let Some((rays, hits)) = &sample.camera {
+            // The sample's shade stage checked these streams (a backend an engine wrote may
+            // return fewer hits than rays), and the resolve step would panic on them; a backend
+            // that returned them without shading them is refused as one that returned too few.
+            check_shade_inputs(&shade, data, Some(scene.identity()), rays, hits)?;
+            samples.surfaces = resolve(data, rays, hits);
+        }
+        for report in sample.camera_timings.iter().chain(&sample.pass_timings) {
             StageReport::add_to(&mut samples.timings, report);
         }
-        samples.hits += frame.hits.hit_count();
-        let params = data.params(settings.sampler(), width, height, sample_index);
-        // The pass checks the streams the backend returned (a backend an engine wrote may return
-        // fewer hits than rays), so the resolve step, which would panic on them, comes after it.
-        let (reports, pass_bytes) = samples.accumulator.shade_pass(backend, &params, data, &frame.rays, &frame.hits)?;
-        if sample_index == 0 {
-            samples.surfaces = resolve(data, &frame.rays, &frame.hits);
-        }
-        for report in &reports {
-            StageReport::add_to(&mut samples.timings, report);
-        }
-        samples.stream_bytes = frame.rays.bytes() + frame.hits.bytes() + pass_bytes;
+        samples.hits += sample.hits;
+        samples.stream_bytes = sample.stream_bytes;
+    }
+    if samples.surfaces.is_empty() && settings.samples_per_pixel > 0 {
+        let reason = "the backend's first lit sample returned no camera streams".to_owned();
+        return Err(Error::InvalidParameter { name: "lit_sample", reason });
     }
     Ok(samples)
 }
@@ -308,6 +315,7 @@ mod tests {
     use super::*;
     use crate::backend::{FrameOutput, MAX_APERTURE_TO_FOCUS};
     use crate::cpu::CpuBackend;
+    use crate::lit_sample::LitSample;
     use crate::stream::{HitStream, RayStream, ShadeStream};
     use glam::{UVec2, Vec4};
     use raywave_shared::{SamplerProbeParams, ShadeParams, WarpParams};
@@ -489,13 +497,32 @@ mod tests {
         assert_eq!((lens.denoise_params(2).seed, lens.denoise_params(2).samples_per_pixel), (7, 2));
     }
 
-    /// An engine's backend that returns one hit fewer than it generated rays: the CPU backend
-    /// otherwise.
-    struct ShortHits(CpuBackend);
+    /// How an engine's backend [`Faulty`] gets its streams wrong.
+    #[derive(Clone, Copy, Debug)]
+    enum Fault {
+        /// Its frames hold one hit fewer than they generated rays.
+        ShortHits,
+        /// Its lit samples' camera streams hold one hit fewer than rays (the sample itself sound).
+        ShortCameraHits,
+        /// Its first lit sample returns no camera streams.
+        NoCameraStreams,
+    }
 
-    impl Backend for ShortHits {
+    /// An engine's backend with a [`Fault`]: the CPU backend otherwise.
+    struct Faulty(CpuBackend, Fault);
+
+    /// The hit stream one record shorter.
+    fn drop_last_hit(hits: &mut HitStream) {
+        let kept = hits.len() - 1;
+        hits.t.truncate(kept);
+        hits.primitive.truncate(kept);
+        hits.instance.truncate(kept);
+        hits.barycentrics.truncate(kept);
+    }
+
+    impl Backend for Faulty {
         fn name(&self) -> String {
-            "short hits".into()
+            format!("{:?}", self.1)
         }
         fn check_image_size(&self, width: u32, height: u32) -> Result<()> {
             self.0.check_image_size(width, height)
@@ -537,13 +564,19 @@ mod tests {
         }
         fn render(&mut self, params: &GenerateParams) -> Result<FrameOutput> {
             let mut frame = self.0.render(params)?;
-            let kept = frame.hits.len() - 1;
-            let hits = &mut frame.hits;
-            hits.t.truncate(kept);
-            hits.primitive.truncate(kept);
-            hits.instance.truncate(kept);
-            hits.barycentrics.truncate(kept);
+            if let Fault::ShortHits = self.1 {
+                drop_last_hit(&mut frame.hits);
+            }
             Ok(frame)
+        }
+        fn lit_sample(&mut self, request: &LitSampleRequest<'_>) -> Result<LitSample> {
+            let mut sample = crate::lit_sample::compose(self, request)?;
+            match self.1 {
+                Fault::ShortHits => {}
+                Fault::ShortCameraHits => sample.camera.iter_mut().for_each(|(_, hits)| drop_last_hit(hits)),
+                Fault::NoCameraStreams => sample.camera = None,
+            }
+            Ok(sample)
         }
         fn sampler_probe(&mut self, params: &SamplerProbeParams) -> Result<Vec<UVec2>> {
             self.0.sampler_probe(params)
@@ -553,16 +586,24 @@ mod tests {
         }
     }
 
-    /// A backend an engine wrote that returns fewer hits than rays gets a typed error from
-    /// `shade_samples`: the shade pass checks the streams before the G-buffer's resolve step,
-    /// which indexes the hits by ray, reads them.
+    /// A backend an engine wrote that returns fewer hits than rays, or a lit sample without the
+    /// camera streams the G-buffer is resolved from, gets a typed error from `shade_samples`
+    /// naming the stage: the streams are checked before the G-buffer's resolve step, which
+    /// indexes the hits by ray, reads them (the shade pass checks a frame's; `shade_samples` the
+    /// camera streams a lit sample returns, which need not be the ones it shaded).
     #[test]
     fn a_backend_returning_too_few_hits_is_an_error_not_a_panic() {
         let scene = Scene::load("builtin:cornell").unwrap();
         let data = ShadeData::new(&scene).unwrap();
-        let mut short = ShortHits(CpuBackend::new());
-        short.load_scene(&scene).unwrap();
-        let result = shade_samples(&mut short, &scene, &data, &LitFrameSettings::new(8, 8, 1));
-        assert!(matches!(result, Err(Error::InvalidParameter { .. })), "{result:?}");
+        for (fault, stage) in
+            [(Fault::ShortHits, "shade"), (Fault::ShortCameraHits, "shade"), (Fault::NoCameraStreams, "lit_sample")]
+        {
+            let mut faulty = Faulty(CpuBackend::new(), fault);
+            faulty.load_scene(&scene).unwrap();
+            match shade_samples(&mut faulty, &scene, &data, &LitFrameSettings::new(8, 8, 1)) {
+                Err(Error::InvalidParameter { name, .. }) => assert_eq!(name, stage, "{fault:?}"),
+                other => panic!("{fault:?}: {:?}", other.map(|_| "accepted")),
+            }
+        }
     }
 }

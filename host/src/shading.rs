@@ -6,6 +6,7 @@ use crate::backend::{Backend, StageReport};
 use crate::cpu::count;
 use crate::error::{Error, Result};
 use crate::lights::{trail_leaf, wants_bvh, LightBvh};
+use crate::lit_sample::{shade_and_occlude, LitSample};
 use crate::scene::{Material, Scene, SceneIdentity};
 use crate::stream::{HitStream, RayStream, ShadeStream};
 use glam::{DVec3, UVec2, Vec3, Vec4, Vec4Swizzles};
@@ -384,14 +385,18 @@ impl ShadeAccumulator {
         rays: &RayStream,
         hits: &HitStream,
     ) -> Result<([StageReport; 2], u64)> {
-        let (shades, shade_time) = backend.shade(params, data, rays, hits)?;
-        let shadow_rays = shadow_rays(&shades);
-        let (occluded, occlusion_time) = backend.trace_occlusion(&shadow_rays)?;
+        let (shades, occluded, reports, bytes) = shade_and_occlude(backend, params, data, rays, hits)?;
         self.add(&shades, &occluded)?;
-        let reports = [shade_time, occlusion_time];
         self.sanitized += StageReport::total_sanitized(&reports);
-        let bytes = shades.bytes() + std::mem::size_of_val(occluded.as_slice()) as u64 + shadow_rays.bytes();
         Ok((reports, bytes))
+    }
+
+    /// Adds one lit sample ([`crate::Backend::lit_sample`]) as [`Self::add`] adds a pass, with
+    /// the same checks, and counts what its shade and occlusion stages sanitized.
+    pub fn add_sample(&mut self, sample: &LitSample) -> Result<()> {
+        self.add_records(&sample.analytic, &sample.unshadowed, &sample.emitted, &sample.occluded)?;
+        self.sanitized += StageReport::total_sanitized(&sample.pass_timings);
+        Ok(())
     }
 
     /// Adds one pass: its shade stream and the occlusion of its shadow rays (1 = blocked), both
@@ -401,21 +406,34 @@ impl ShadeAccumulator {
     /// black stochastic one without a word).
     pub fn add(&mut self, shades: &ShadeStream, occluded: &[u32]) -> Result<()> {
         shades.check("accumulate")?;
+        self.add_records(&shades.analytic, &shades.unshadowed, &shades.emitted, occluded)
+    }
+
+    /// [`Self::add`] of a pass's three accumulated fields, whose lengths are checked here.
+    fn add_records(
+        &mut self,
+        analytic: &[Vec4],
+        unshadowed: &[Vec4],
+        emitted: &[Vec4],
+        occluded: &[u32],
+    ) -> Result<()> {
         let pixels = self.analytic.len();
-        if shades.len() != pixels || occluded.len() != pixels {
+        if [analytic.len(), unshadowed.len(), emitted.len(), occluded.len()] != [pixels; 4] {
             let reason = format!(
-                "{} shade records and {} occlusion results for an accumulator of {pixels} pixels",
-                shades.len(),
+                "{} / {} / {} analytic / unshadowed / emitted records and {} occlusion results for an \
+                 accumulator of {pixels} pixels",
+                analytic.len(),
+                unshadowed.len(),
+                emitted.len(),
                 occluded.len()
             );
             return Err(Error::InvalidParameter { name: "accumulate", reason });
         }
         // One pass over the three fields; the field at fault is named afterwards.
         let unsound = |v: &Vec4| !(v.xyz().is_finite() && v.xyz().min_element() >= 0.0);
-        let records = shades.analytic.par_iter().zip(&shades.unshadowed).zip(&shades.emitted);
+        let records = analytic.par_iter().zip(unshadowed).zip(emitted);
         if let Some(record) = records.position_first(|((u, u_n), e)| unsound(u) || unsound(u_n) || unsound(e)) {
-            let fields =
-                [("analytic", &shades.analytic), ("unshadowed", &shades.unshadowed), ("emitted", &shades.emitted)];
+            let fields = [("analytic", analytic), ("unshadowed", unshadowed), ("emitted", emitted)];
             if let Some((field, values)) = fields.into_iter().find(|(_, values)| unsound(&values[record])) {
                 let reason = format!("shade record {record}: {field} {} is not finite and ≥ 0", values[record].xyz());
                 return Err(Error::InvalidParameter { name: "accumulate", reason });
@@ -426,7 +444,7 @@ impl ShadeAccumulator {
         // part of a CPU pass's bookkeeping.
         let sums =
             self.analytic.par_iter_mut().zip(&mut self.unshadowed).zip(&mut self.shadowed).zip(&mut self.emitted);
-        let passes = shades.analytic.par_iter().zip(&shades.unshadowed).zip(&shades.emitted).zip(occluded);
+        let passes = analytic.par_iter().zip(unshadowed).zip(emitted).zip(occluded);
         sums.zip(passes).for_each(|((((analytic, unshadowed), shadowed), emitted), (((u, u_n), e), &blocked))| {
             let u_n = u_n.xyz().as_dvec3();
             *analytic += u.xyz().as_dvec3();

@@ -86,15 +86,20 @@ impl HitStream {
         self.t.is_empty()
     }
 
-    /// Records whose ray hit something (primitive not `NO_HIT`).
+    /// Records whose ray hit something ([`count_hits`] of the primitives).
     pub fn hit_count(&self) -> usize {
-        self.primitive.iter().filter(|&&p| p != NO_HIT).count()
+        count_hits(&self.primitive)
     }
 
     /// Bytes the stream occupies.
     pub fn bytes(&self) -> u64 {
         self.len() as u64 * u64::from(HIT_STREAM_BYTES_PER_RAY)
     }
+}
+
+/// How many of a hit stream's `primitive` field hit something (not `NO_HIT`).
+pub fn count_hits(primitive: &[u32]) -> usize {
+    primitive.iter().filter(|&&p| p != NO_HIT).count()
 }
 
 /// The shade stream: what the shade stage writes, one record per camera ray (ray `i` is pixel `i`

@@ -10,20 +10,22 @@ use super::kernel::{dispatch_grid, ComputeKernel};
 use super::pass::Resource;
 use super::rt_pipeline::{RtPipelineKernel, CLOSEST_HIT_SHADERS, OCCLUSION_SHADERS};
 use crate::backend::{
-    check_generate_params, check_image_size_common, check_shade_inputs, copy_probe_len, sampler_probe_len,
-    warp_probe_len, Backend, FrameOutput, StageReport,
+    check_generate_params, check_image_size_common, check_shade_inputs, check_shade_params, copy_probe_len,
+    sampler_probe_len, warp_probe_len, Backend, FrameOutput, StageReport,
 };
 use crate::cpu::CpuScene;
 use crate::denoise::{DenoiseInput, DenoiseMethod};
 use crate::device::TraceMethod;
 use crate::error::{Error, Result};
+use crate::lit_sample::{LitSample, LitSampleRequest};
 use crate::scene::{Scene, SceneIdentity};
 use crate::shading::{ShadeData, ShadeDataIdentity};
-use crate::stream::{HitStream, RayStream, ShadeStream};
+use crate::stream::{count_hits, HitStream, RayStream, ShadeStream, SHADE_STREAM_BYTES_PER_RAY};
 use crate::workgroup::WorkgroupSizes;
 use ash::vk;
 use bytemuck::Pod;
 use glam::{UVec2, Vec2, Vec4};
+use raywave_shared::stream::{HIT_STREAM_BYTES_PER_RAY, RAY_STREAM_BYTES_PER_RAY};
 use raywave_shared::{
     bindings, DenoiseParams, GenerateParams, SamplerProbeParams, ShadeParams, TraceParams, WarpParams,
 };
@@ -121,14 +123,13 @@ impl DeviceHits {
     }
 }
 
-/// The shade stream on the device: the shade stage's five outputs.
+/// The shade stream on the device: the shade stage's five outputs, the last two the shadow rays
+/// the occlusion trace reads.
 struct DeviceShades {
     analytic: GpuBuffer,
     unshadowed: GpuBuffer,
     emitted: GpuBuffer,
-    shadow_origin: GpuBuffer,
-    shadow_direction: GpuBuffer,
-    len: u32,
+    shadow: DevicePaths,
 }
 
 impl DeviceShades {
@@ -137,20 +138,22 @@ impl DeviceShades {
             analytic: GpuBuffer::storage::<Vec4>(core, len, "shade analytic")?,
             unshadowed: GpuBuffer::storage::<Vec4>(core, len, "shade unshadowed")?,
             emitted: GpuBuffer::storage::<Vec4>(core, len, "shade emitted")?,
-            shadow_origin: GpuBuffer::storage::<Vec4>(core, len, "shadow ray origin")?,
-            shadow_direction: GpuBuffer::storage::<Vec4>(core, len, "shadow ray direction")?,
-            len,
+            shadow: DevicePaths {
+                origin: GpuBuffer::storage::<Vec4>(core, len, "shadow ray origin")?,
+                direction: GpuBuffer::storage::<Vec4>(core, len, "shadow ray direction")?,
+                len,
+            },
         })
     }
 
     fn read(&self) -> Result<ShadeStream> {
-        let n = self.len as usize;
+        let n = self.shadow.len as usize;
         Ok(ShadeStream {
             analytic: self.analytic.read(n)?,
             unshadowed: self.unshadowed.read(n)?,
             emitted: self.emitted.read(n)?,
-            shadow_origin: self.shadow_origin.read(n)?,
-            shadow_direction: self.shadow_direction.read(n)?,
+            shadow_origin: self.shadow.origin.read(n)?,
+            shadow_direction: self.shadow.direction.read(n)?,
         })
     }
 }
@@ -505,6 +508,45 @@ fn load_shade_data<'a>(
     Ok(loaded.insert(current))
 }
 
+/// Runs the shade stage `kernel` over `hits.len` camera rays whose directions `direction` holds,
+/// against the shade data `scene` on the device; the shade stream stays there. A function of the
+/// backend's fields, not a method, so that `scene` may borrow the backend's shade data.
+fn shade_on_device(
+    core: &Arc<Core>,
+    kernel: &ComputeKernel,
+    scene: &DeviceShadeData,
+    params: &ShadeParams,
+    direction: &GpuBuffer,
+    hits: &DeviceHits,
+) -> Result<(DeviceShades, StageReport)> {
+    let out = DeviceShades::new(core, hits.len)?;
+    let counter = GpuBuffer::counter(core, "shade")?;
+    let resources = [
+        direction,
+        &hits.t,
+        &hits.primitive,
+        &hits.instance,
+        &hits.barycentrics,
+        &scene.triangles,
+        &scene.first_triangle,
+        &scene.materials,
+        &scene.lights,
+        &scene.light_nodes,
+        &scene.light_trails,
+        &scene.ltc,
+        &out.analytic,
+        &out.unshadowed,
+        &out.emitted,
+        &out.shadow.origin,
+        &out.shadow.direction,
+        &counter,
+    ]
+    .map(Resource::Buffer);
+    let timing = kernel.dispatch(&resources, bytemuck::bytes_of(params), hits.len)?;
+    let report = timing.report("shade", counter.read_count()?);
+    Ok((out, report))
+}
+
 impl Backend for VulkanBackend {
     fn name(&self) -> String {
         format!("vulkan:{} {} (trace: {})", self.core.info.index, self.core.info.name, self.trace_method.name())
@@ -595,31 +637,56 @@ impl Backend for VulkanBackend {
         let scene = load_shade_data(core, &mut self.shade_data, data)?;
         let direction = GpuBuffer::storage_with(core, &rays.direction, "ray direction")?;
         let hits = DeviceHits::upload(core, hits, len)?;
-        let out = DeviceShades::new(core, len)?;
-        let counter = GpuBuffer::counter(core, "shade")?;
-        let resources = [
-            &direction,
-            &hits.t,
-            &hits.primitive,
-            &hits.instance,
-            &hits.barycentrics,
-            &scene.triangles,
-            &scene.first_triangle,
-            &scene.materials,
-            &scene.lights,
-            &scene.light_nodes,
-            &scene.light_trails,
-            &scene.ltc,
-            &out.analytic,
-            &out.unshadowed,
-            &out.emitted,
-            &out.shadow_origin,
-            &out.shadow_direction,
-            &counter,
-        ]
-        .map(Resource::Buffer);
-        let timing = self.shade_kernel.dispatch(&resources, bytemuck::bytes_of(params), len)?;
-        Ok((out.read()?, timing.report("shade", counter.read_count()?)))
+        let (out, report) = shade_on_device(core, &self.shade_kernel, scene, params, &direction, &hits)?;
+        Ok((out.read()?, report))
+    }
+
+    /// The lit sample with every stream on the device, from the camera rays to the occlusion
+    /// results: what comes back is the three accumulated shade fields, the occlusion results and
+    /// the hits' primitives (to count the hits), 56 bytes a pixel, and the camera streams when
+    /// asked. The checks of the composed stages, before any work: the scene loaded, the camera,
+    /// the shade data and parameters for the dense stream generate writes.
+    fn lit_sample(&mut self, request: &LitSampleRequest<'_>) -> Result<LitSample> {
+        let _driver = driver_lock::device_use();
+        let (scene, identity) = self
+            .scene
+            .as_ref()
+            .ok_or(Error::InvalidParameter { name: "scene", reason: "trace needs a loaded scene".into() })?;
+        self.check_image_size(request.generate.width, request.generate.height)?;
+        check_generate_params(request.generate)?;
+        request.data.check_scene(Some(identity))?;
+        request.data.check()?;
+        check_shade_params(request.shade, request.data, request.generate.ray_count() as usize)?;
+        let (rays, generate_time) = self.generate_on_device(request.generate)?;
+        let (hits, trace_time) = self.trace_on_device(scene, &rays.paths)?;
+        let data = load_shade_data(&self.core, &mut self.shade_data, request.data)?;
+        let (shades, shade_time) =
+            shade_on_device(&self.core, &self.shade_kernel, data, request.shade, &rays.paths.direction, &hits)?;
+        let occluded = GpuBuffer::storage::<u32>(&self.core, hits.len, "occluded")?;
+        let occlusion_time =
+            self.run_trace_kernel("occlusion", &self.occlusion, scene, &shades.shadow, &[&occluded])?;
+        let n = hits.len as usize;
+        let camera = if request.keep_camera_streams { Some((rays.read()?, hits.read()?)) } else { None };
+        let hit_count = match &camera {
+            Some((_, hits)) => hits.hit_count(),
+            None => count_hits(&hits.primitive.read::<u32>(n)?),
+        };
+        let pixels = u64::from(hits.len);
+        Ok(LitSample {
+            analytic: shades.analytic.read(n)?,
+            unshadowed: shades.unshadowed.read(n)?,
+            emitted: shades.emitted.read(n)?,
+            occluded: occluded.read(n)?,
+            hits: hit_count,
+            camera,
+            camera_timings: vec![generate_time, trace_time],
+            pass_timings: [shade_time, occlusion_time],
+            // Camera rays, hits, the shade stream (with the shadow rays) and occlusion results.
+            stream_bytes: pixels
+                * u64::from(
+                    RAY_STREAM_BYTES_PER_RAY + HIT_STREAM_BYTES_PER_RAY + SHADE_STREAM_BYTES_PER_RAY + u32::BITS / 8,
+                ),
+        })
     }
 
     fn render(&mut self, params: &GenerateParams) -> Result<FrameOutput> {

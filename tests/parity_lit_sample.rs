@@ -1,0 +1,112 @@
+//! A lit sample with its streams kept on the device (`Backend::lit_sample` on Vulkan: camera
+//! rays, hits, the shade stream and the shadow rays never leave it) must be the sample composed
+//! from the backend's own stage calls (`lit_sample::compose`, every stream through the host) bit
+//! for bit: the same kernels on the same inputs. On every device and trace method, for the Cornell
+//! box with and without the quadrature residual and for the light grid (the light BVH), at two
+//! sample indices, with and without the camera streams; the same sanitized counts, stage order and
+//! hit count; and the same refusals, before any work, for what the composed stages refuse.
+#![cfg(feature = "vulkan")]
+
+mod common;
+
+use common::vulkan;
+use raywave::frame::{generate_params_with, sampler_params};
+use raywave::lit_sample::{compose, LitSample, LitSampleRequest};
+use raywave::shading::ShadeData;
+use raywave::shared::sampling::sampler_kind;
+use raywave::shared::{GenerateParams, ShadeParams};
+use raywave::{Backend, Scene};
+
+const WIDTH: u32 = 40;
+const HEIGHT: u32 = 30;
+
+/// The camera and shade parameters of sample `sample_index` (of 8) of `scene` at this test's size.
+fn params(scene: &Scene, data: &ShadeData, sample_index: u32) -> (GenerateParams, ShadeParams) {
+    let sampler = sampler_params(sampler_kind::ZSOBOL, 7, WIDTH, HEIGHT, 8);
+    let generate = generate_params_with(scene, WIDTH, HEIGHT, sample_index, sampler);
+    (generate, data.params(sampler, WIDTH, HEIGHT, sample_index))
+}
+
+/// Fails unless two lit samples agree in everything but the seconds and the stream bytes (the
+/// composed sample counts the host's copy of the shadow rays too), naming the field.
+fn assert_same(case: &str, a: &LitSample, b: &LitSample) {
+    assert!(a.analytic == b.analytic, "{case}: analytic");
+    assert!(a.unshadowed == b.unshadowed, "{case}: unshadowed");
+    assert!(a.emitted == b.emitted, "{case}: emitted");
+    assert!(a.occluded == b.occluded, "{case}: occluded");
+    assert!(a.camera == b.camera, "{case}: camera streams");
+    assert_eq!(a.hits, b.hits, "{case}: hits");
+    let reports = |s: &LitSample| -> Vec<_> {
+        s.camera_timings.iter().chain(&s.pass_timings).map(|r| (r.stage, r.sanitized, r.dispatches)).collect()
+    };
+    assert_eq!(reports(a), reports(b), "{case}: stages");
+}
+
+#[test]
+fn device_resident_lit_samples_are_the_composed_stages_bit_for_bit() {
+    let scenes = [("builtin:cornell", false), ("builtin:cornell", true), ("builtin:cornell-light-grid", false)];
+    for mut backend in vulkan::every_device("device_resident_lit_samples") {
+        let name = backend.name();
+        for (scene_name, analytic_residual) in scenes {
+            let scene = Scene::load(scene_name).expect("built-in scene");
+            let mut data = ShadeData::new(&scene).expect("shade data");
+            data.analytic_residual = analytic_residual;
+            backend.load_scene(&scene).expect("scene loads");
+            for (sample_index, keep_camera_streams) in [(0, true), (1, false)] {
+                let case = format!("{name}, {scene_name} residual {analytic_residual}, sample {sample_index}");
+                let (generate, shade) = params(&scene, &data, sample_index);
+                let request = LitSampleRequest { generate: &generate, shade: &shade, data: &data, keep_camera_streams };
+                let resident = backend.lit_sample(&request).expect("device-resident lit sample");
+                let composed = compose(&mut backend, &request).expect("composed lit sample");
+                assert_same(&case, &resident, &composed);
+                // A sample that shades nothing, or traces every shadow ray blocked, would agree too.
+                let lit = resident.occluded.iter().filter(|&&blocked| blocked == 0).count();
+                assert!(resident.hits > WIDTH as usize * HEIGHT as usize / 2, "{case}: {} hits", resident.hits);
+                assert!(lit > 0 && lit < resident.occluded.len(), "{case}: {lit} unblocked shadow rays");
+                assert!(resident.unshadowed.iter().any(|u| u.x > 0.0), "{case}: no U_N");
+                assert_eq!(resident.camera.is_some(), keep_camera_streams, "{case}");
+                let pixels = u64::from(WIDTH * HEIGHT);
+                assert_eq!((resident.stream_bytes, composed.stream_bytes), (140 * pixels, 176 * pixels), "{case}");
+            }
+        }
+        vulkan::assert_clean(backend);
+    }
+}
+
+#[test]
+fn device_resident_lit_samples_refuse_what_the_composed_stages_refuse() {
+    let scene = common::cornell();
+    let other = Scene::load("builtin:cornell-two-lights").expect("built-in scene");
+    let data = ShadeData::new(&scene).expect("shade data");
+    let other_data = ShadeData::new(&other).expect("shade data");
+    for mut backend in vulkan::each_device("device_resident_lit_sample_refusals") {
+        let name = backend.name();
+        let (generate, shade) = params(&scene, &data, 0);
+        let request = LitSampleRequest { generate: &generate, shade: &shade, data: &data, keep_camera_streams: false };
+        let refusal = |backend: &mut raywave::vulkan::VulkanBackend, request: &LitSampleRequest<'_>| {
+            let message = |result: raywave::Result<LitSample>, how: &str| match result {
+                Ok(_) => panic!("{how}: accepted"),
+                Err(e) => e.to_string(),
+            };
+            (message(backend.lit_sample(request), "on the device"), message(compose(backend, request), "composed"))
+        };
+        let (resident, composed) = refusal(&mut backend, &request);
+        assert_eq!(resident, composed, "{name}: no scene loaded");
+        assert!(resident.contains("loaded scene"), "{name}: {resident}");
+        backend.load_scene(&scene).expect("scene loads");
+        let wrong_count = ShadeParams { count: shade.count - 1, ..shade };
+        let no_light_nodes = ShadeParams { light_count: data.lights.len() as u32 + 1, ..shade };
+        let flat = GenerateParams { width: 0, ..generate };
+        let cases = [
+            ("another scene's data", LitSampleRequest { data: &other_data, ..request }),
+            ("a count one short", LitSampleRequest { shade: &wrong_count, ..request }),
+            ("a light past the data's", LitSampleRequest { shade: &no_light_nodes, ..request }),
+            ("an image 0 wide", LitSampleRequest { generate: &flat, ..request }),
+        ];
+        for (what, case) in cases {
+            let (resident, composed) = refusal(&mut backend, &case);
+            assert_eq!(resident, composed, "{name}: {what}");
+        }
+        vulkan::assert_clean(backend);
+    }
+}
