@@ -38,7 +38,7 @@
 //! beyond 5 %, at most 0.03 % of the albedo (the fan: 3 beyond 5 %). A light with an edge
 //! exactly in the plane of incidence and the mirror direction on that edge starts every azimuth
 //! on the light's boundary, and the radial integral jumps at a break: such lights take each
-//! gap's ends from inside it ([`CENTRE_ON_EDGE`]; they had come out up to 1.1 % low). The price:
+//! gap's ends from inside it (`CENTRE_ON_EDGE`; they had come out up to 1.1 % low). The price:
 //! each radial integral solves a quadratic per edge and evaluates `G₂` at 3 nodes per piece of an
 //! interval, and a light takes about 14 of them on the Cornell box's surfaces (the gaps between
 //! breakpoints that the light does not reach cost one each), 100–200 as a thin grazing strip —
