@@ -3,8 +3,9 @@
 //! from the backend's own stage calls (`lit_sample::compose`, every stream through the host) bit
 //! for bit: the same kernels on the same inputs. On every device and trace method, for the Cornell
 //! box with and without the quadrature residual and for the light grid (the light BVH), at two
-//! sample indices, with and without the camera streams; the same sanitized counts, stage order and
-//! hit count; and the same refusals, before any work, for what the composed stages refuse.
+//! sample indices, with and without the camera streams; the same stage order, hit count and
+//! sanitized counts (0 on these scenes); and the same refusals, before any work, for what the
+//! composed stages refuse.
 #![cfg(feature = "vulkan")]
 
 mod common;
@@ -95,17 +96,23 @@ fn device_resident_lit_samples_refuse_what_the_composed_stages_refuse() {
         assert!(resident.contains("loaded scene"), "{name}: {resident}");
         backend.load_scene(&scene).expect("scene loads");
         let wrong_count = ShadeParams { count: shade.count - 1, ..shade };
-        let no_light_nodes = ShadeParams { light_count: data.lights.len() as u32 + 1, ..shade };
-        let flat = GenerateParams { width: 0, ..generate };
+        let extra_light = ShadeParams { light_count: data.lights.len() as u32 + 1, ..shade };
+        let other_sample = ShadeParams { sample_index: 1, ..shade };
+        let (flat, flat_shade) = (GenerateParams { width: 0, ..generate }, ShadeParams { width: 0, ..shade });
+        let wider = ShadeParams { width: WIDTH + 1, ..shade };
+        // Each refusal, and the words that say why: the two paths could agree on another reason.
         let cases = [
-            ("another scene's data", LitSampleRequest { data: &other_data, ..request }),
-            ("a count one short", LitSampleRequest { shade: &wrong_count, ..request }),
-            ("a light past the data's", LitSampleRequest { shade: &no_light_nodes, ..request }),
-            ("an image 0 wide", LitSampleRequest { generate: &flat, ..request }),
+            ("another scene's data", LitSampleRequest { data: &other_data, ..request }, "ShadeData::new"),
+            ("a count one short", LitSampleRequest { shade: &wrong_count, ..request }, "params.count"),
+            ("a light past the data's", LitSampleRequest { shade: &extra_light, ..request }, "params.light_count"),
+            ("another sample's shading", LitSampleRequest { shade: &other_sample, ..request }, "sample_index"),
+            ("another image's shading", LitSampleRequest { shade: &wider, ..request }, "shade.width"),
+            ("an image 0 wide", LitSampleRequest { generate: &flat, shade: &flat_shade, ..request }, "at least 1"),
         ];
-        for (what, case) in cases {
+        for (what, case, why) in cases {
             let (resident, composed) = refusal(&mut backend, &case);
             assert_eq!(resident, composed, "{name}: {what}");
+            assert!(resident.contains(why), "{name}: {what}: {resident}");
         }
         vulkan::assert_clean(backend);
     }

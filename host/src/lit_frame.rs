@@ -157,8 +157,9 @@ pub struct LitSamples {
     pub timings: Vec<StageReport>,
     /// Camera rays that hit geometry, over all samples.
     pub hits: usize,
-    /// Bytes of the SoA streams one sample used: rays, hits, the shade stream, shadow rays and
-    /// occlusion results.
+    /// Bytes of the SoA streams one sample used ([`crate::lit_sample::LitSample::stream_bytes`]):
+    /// rays, hits, the shade stream, occlusion results and, on a backend whose shadow rays pass
+    /// through the host, their copy.
     pub stream_bytes: u64,
 }
 
@@ -209,10 +210,14 @@ pub fn shade_samples(
             LitSampleRequest { generate: &generate, shade: &shade, data, keep_camera_streams: sample_index == 0 };
         let sample = backend.lit_sample(&request)?;
         samples.accumulator.add_sample(&sample)?;
-        if let Some((rays, hits)) = &sample.camera {
-            // The sample's shade stage checked these streams (a backend an engine wrote may
-            // return fewer hits than rays), and the resolve step would panic on them; a backend
-            // that returned them without shading them is refused as one that returned too few.
+        if sample_index == 0 {
+            // The G-buffer is the first sample's. Its streams are checked again here: the
+            // resolve step would panic on fewer hits than rays, and a backend an engine wrote
+            // may return other streams than the ones it shaded.
+            let Some((rays, hits)) = &sample.camera else {
+                let reason = "the backend's first lit sample returned no camera streams".to_owned();
+                return Err(Error::InvalidParameter { name: "lit_sample", reason });
+            };
             check_shade_inputs(&shade, data, Some(scene.identity()), rays, hits)?;
             samples.surfaces = resolve(data, rays, hits);
         }
@@ -221,10 +226,6 @@ pub fn shade_samples(
         }
         samples.hits += sample.hits;
         samples.stream_bytes = sample.stream_bytes;
-    }
-    if samples.surfaces.is_empty() && settings.samples_per_pixel > 0 {
-        let reason = "the backend's first lit sample returned no camera streams".to_owned();
-        return Err(Error::InvalidParameter { name: "lit_sample", reason });
     }
     Ok(samples)
 }

@@ -1,15 +1,15 @@
 //! One lit sample of a frame as a backend runs it — generate → trace → shade → occlusion trace —
 //! with what comes back to the host cut to what the accumulator adds up ([`LitSample`]).
 //!
-//! Composed from a backend's stage calls ([`compose`]), every stream passes through the host
-//! between stages; on Vulkan that was about 240 bytes a pixel down and up again per sample and a
-//! blocking submission per buffer. [`crate::Backend::lit_sample`] lets a backend keep the streams
+//! Composed from a backend's stage calls ([`compose`]), every stream but the camera rays passes
+//! through the host between stages; on Vulkan that is 208 bytes a pixel per sample (140 read back,
+//! 68 uploaded again), each buffer a blocking copy of its own. [`crate::Backend::lit_sample`] lets a backend keep the streams
 //! on its device from the camera rays to the occlusion results instead, as the Vulkan backend
 //! does; it must give the composed sample's values bit for bit (the same kernels on the same
 //! inputs), which `tests/parity_lit_sample.rs` checks.
 
 use crate::backend::{Backend, StageReport};
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::shading::{shadow_rays, ShadeData};
 use crate::stream::{HitStream, RayStream, ShadeStream};
 use glam::Vec4;
@@ -29,9 +29,33 @@ pub struct LitSampleRequest<'a> {
     pub keep_camera_streams: bool,
 }
 
+impl LitSampleRequest<'_> {
+    /// Checks that `shade` is for `generate`'s image and sample: the same width, sample index
+    /// and sampler (the ray and hit counts are the shade stage's own check). A mismatch had been
+    /// shaded as asked — samples drawn for other pixels or another sample of the sequence —
+    /// without a word. An error naming `lit_sample` and the field otherwise.
+    pub fn check(&self) -> Result<()> {
+        let (generate, shade) = (self.generate, self.shade);
+        let reason = if shade.width != generate.width {
+            Some(format!("shade.width = {} but generate.width = {}", shade.width, generate.width))
+        } else if shade.sample_index != generate.sample_index {
+            Some(format!(
+                "shade.sample_index = {} but generate.sample_index = {}",
+                shade.sample_index, generate.sample_index
+            ))
+        } else if shade.sampler != generate.sampler {
+            Some(format!("shade.sampler = {:?} but generate.sampler = {:?}", shade.sampler, generate.sampler))
+        } else {
+            None
+        };
+        reason.map_or(Ok(()), |reason| Err(Error::InvalidParameter { name: "lit_sample", reason }))
+    }
+}
+
 /// One lit sample's results, one record per pixel (ray `i` is pixel `i`): the shade stage's
-/// outputs that the accumulator sums and the occlusion of each shadow ray.
-#[derive(Clone, Debug, PartialEq)]
+/// outputs that the accumulator sums and the occlusion of each shadow ray. (Not `PartialEq`: two
+/// runs differ in their reports' seconds.)
+#[derive(Clone, Debug)]
 pub struct LitSample {
     /// Analytic unshadowed radiance `U` (rgb; w = 0).
     pub analytic: Vec<Vec4>,
@@ -58,7 +82,7 @@ pub struct LitSample {
 /// its shadow rays, both stages' reports and the bytes of the streams the pass used (shade stream,
 /// shadow rays, occlusion results). The pass [`compose`] and
 /// [`crate::shading::ShadeAccumulator::shade_pass`] run.
-pub fn shade_and_occlude<B: Backend + ?Sized>(
+pub(crate) fn shade_and_occlude<B: Backend + ?Sized>(
     backend: &mut B,
     params: &ShadeParams,
     data: &ShadeData,
@@ -72,10 +96,12 @@ pub fn shade_and_occlude<B: Backend + ?Sized>(
     Ok((shades, occluded, [shade_time, occlusion_time], bytes))
 }
 
-/// The lit sample of `request` from `backend`'s stage calls — [`Backend::render`], then
-/// [`shade_and_occlude`] — every stream passing through the host: what
-/// [`Backend::lit_sample`] does unless a backend keeps the streams on its device.
+/// The lit sample of `request` ([`LitSampleRequest::check`]) from `backend`'s stage calls —
+/// [`Backend::render`], then the shade stage and the occlusion trace of its shadow rays — every
+/// stream but the camera rays passing through the host: what [`Backend::lit_sample`] does unless
+/// a backend keeps the streams on its device.
 pub fn compose<B: Backend + ?Sized>(backend: &mut B, request: &LitSampleRequest<'_>) -> Result<LitSample> {
+    request.check()?;
     let frame = backend.render(request.generate)?;
     let (shades, occluded, pass_timings, pass_bytes) =
         shade_and_occlude(backend, request.shade, request.data, &frame.rays, &frame.hits)?;
@@ -90,4 +116,42 @@ pub fn compose<B: Backend + ?Sized>(backend: &mut B, request: &LitSampleRequest<
         camera_timings: frame.timings,
         pass_timings,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::cpu::CpuBackend;
+    use crate::frame::{generate_params_with, sampler_params};
+    use crate::scene::Scene;
+    use raywave_shared::sampling::sampler_kind;
+    use raywave_shared::SamplerParams;
+
+    /// Shading for another image, sample or sampler than the camera rays' is refused before any
+    /// work, naming the field; the matching request is shaded.
+    #[test]
+    fn a_request_shades_the_camera_rays_own_image_and_sample() {
+        let scene = Scene::load("builtin:cornell").unwrap();
+        let data = ShadeData::new(&scene).unwrap();
+        let mut cpu = CpuBackend::new();
+        cpu.load_scene(&scene).unwrap();
+        let sampler = sampler_params(sampler_kind::ZSOBOL, 3, 16, 12, 4);
+        let generate = generate_params_with(&scene, 16, 12, 1, sampler);
+        let shade = data.params(sampler, 16, 12, 1);
+        let request = LitSampleRequest { generate: &generate, shade: &shade, data: &data, keep_camera_streams: false };
+        assert_eq!(compose(&mut cpu, &request).unwrap().analytic.len(), 16 * 12);
+        let mismatches = [
+            (ShadeParams { width: 12, count: 16 * 12, ..shade }, "shade.width = 12"),
+            (ShadeParams { sample_index: 2, ..shade }, "shade.sample_index = 2"),
+            (ShadeParams { sampler: SamplerParams { seed: 4, ..sampler }, ..shade }, "shade.sampler"),
+        ];
+        for (shade, what) in mismatches {
+            match compose(&mut cpu, &LitSampleRequest { shade: &shade, ..request }) {
+                Err(Error::InvalidParameter { name: "lit_sample", reason }) => {
+                    assert!(reason.contains(what), "{reason}")
+                }
+                other => panic!("{what}: {:?}", other.map(|_| "accepted")),
+            }
+        }
+    }
 }

@@ -457,8 +457,9 @@ impl ShadeAccumulator {
         Ok(())
     }
 
-    /// Values the stages of this accumulator's [`Self::shade_pass`]es sanitized — shade samples
-    /// and shadow rays that went non-finite ([`StageReport::sanitized`]); 0 on sound input.
+    /// Values the shade and occlusion stages of this accumulator's [`Self::shade_pass`]es and
+    /// [`Self::add_sample`]s sanitized — shade samples and shadow rays that went non-finite
+    /// ([`StageReport::sanitized`]); 0 on sound input.
     pub fn sanitized(&self) -> u64 {
         self.sanitized
     }

@@ -428,10 +428,7 @@ impl VulkanBackend {
 
     /// The scene the trace kernels read, if one is loaded.
     fn loaded_scene(&self) -> Result<&DeviceScene> {
-        self.scene
-            .as_ref()
-            .map(|(scene, _)| scene)
-            .ok_or(Error::InvalidParameter { name: "scene", reason: "trace needs a loaded scene".into() })
+        loaded(&self.scene).map(|(scene, _)| scene)
     }
 
     /// Runs `kernel` over `rays` (checked against the device, [`Self::check_stream`]) in `scene`
@@ -488,6 +485,16 @@ impl VulkanBackend {
         let report = self.run_trace_kernel("trace", &self.trace, scene, rays, &outputs)?;
         Ok((hits, report))
     }
+}
+
+/// The loaded scene and its identity, or an error naming the stage that needs it. A function of
+/// the backend's `scene` field, not a method, so that the scene may be borrowed beside the shade
+/// data (`lit_sample`).
+fn loaded(scene: &Option<(DeviceScene, SceneIdentity)>) -> Result<(&DeviceScene, &SceneIdentity)> {
+    scene
+        .as_ref()
+        .map(|(scene, identity)| (scene, identity))
+        .ok_or(Error::InvalidParameter { name: "scene", reason: "trace needs a loaded scene".into() })
 }
 
 /// The shade data in `loaded` — `data`'s, uploaded unless the buffers already hold it; the old
@@ -644,14 +651,13 @@ impl Backend for VulkanBackend {
     /// The lit sample with every stream on the device, from the camera rays to the occlusion
     /// results: what comes back is the three accumulated shade fields, the occlusion results and
     /// the hits' primitives (to count the hits), 56 bytes a pixel, and the camera streams when
-    /// asked. The checks of the composed stages, before any work: the scene loaded, the camera,
-    /// the shade data and parameters for the dense stream generate writes.
+    /// asked (the composed stages move 208). The checks of the composed stages, in their order
+    /// and before any work: the request, the scene loaded, the camera, the shade data and
+    /// parameters for the dense stream generate writes.
     fn lit_sample(&mut self, request: &LitSampleRequest<'_>) -> Result<LitSample> {
         let _driver = driver_lock::device_use();
-        let (scene, identity) = self
-            .scene
-            .as_ref()
-            .ok_or(Error::InvalidParameter { name: "scene", reason: "trace needs a loaded scene".into() })?;
+        request.check()?;
+        let (scene, identity) = loaded(&self.scene)?;
         self.check_image_size(request.generate.width, request.generate.height)?;
         check_generate_params(request.generate)?;
         request.data.check_scene(Some(identity))?;
