@@ -307,6 +307,18 @@ pub fn check_shade_inputs(
 ) -> Result<()> {
     data.check_scene(loaded)?;
     data.check()?;
+    check_shade_streams(params, data, rays, hits)
+}
+
+/// The checks of [`check_shade_inputs`] after the data's own: the streams, one hit per ray, dense
+/// rays, then [`check_shade_params`]. For callers that have checked `data` already (a lit frame
+/// checks the camera streams a backend returned before resolving its G-buffer).
+pub(crate) fn check_shade_streams(
+    params: &ShadeParams,
+    data: &ShadeData,
+    rays: &RayStream,
+    hits: &HitStream,
+) -> Result<()> {
     rays.check("shade")?;
     hits.check("shade")?;
     let reason = if rays.len() != hits.len() {

@@ -3,7 +3,7 @@
 //! `emitted + U · den(S_N)/den(U_N)`. This is what `raywave render` runs; an engine that builds its
 //! own [`Scene`] ([`Scene::new`]) calls [`render_lit`] and gets the image in memory.
 
-use crate::backend::{aperture_refusal, check_image_size_common, check_shade_inputs, Backend, StageReport};
+use crate::backend::{aperture_refusal, check_image_size_common, check_shade_streams, Backend, StageReport};
 use crate::denoise::{check_radius, frame_params, rgb, DenoiseInput, DenoiseMethod};
 use crate::error::{Error, Result};
 use crate::frame::{check_samples_per_pixel, generate_params_with, sampler_params};
@@ -211,14 +211,14 @@ pub fn shade_samples(
         let sample = backend.lit_sample(&request)?;
         samples.accumulator.add_sample(&sample)?;
         if sample_index == 0 {
-            // The G-buffer is the first sample's. Its streams are checked again here: the
-            // resolve step would panic on fewer hits than rays, and a backend an engine wrote
-            // may return other streams than the ones it shaded.
+            // The G-buffer is the first sample's. Its streams are checked again here (`data` was
+            // checked above): the resolve step would panic on fewer hits than rays, and a
+            // backend an engine wrote may return other streams than the ones it shaded.
             let Some((rays, hits)) = &sample.camera else {
                 let reason = "the backend's first lit sample returned no camera streams".to_owned();
                 return Err(Error::InvalidParameter { name: "lit_sample", reason });
             };
-            check_shade_inputs(&shade, data, Some(scene.identity()), rays, hits)?;
+            check_shade_streams(&shade, data, rays, hits)?;
             samples.surfaces = resolve(data, rays, hits);
         }
         for report in sample.camera_timings.iter().chain(&sample.pass_timings) {

@@ -410,9 +410,14 @@ impl VulkanBackend {
         self.core.info.max_stream_len(self.core.workgroup_sizes.smallest())
     }
 
-    fn generate_on_device(&self, params: &GenerateParams) -> Result<(DeviceRays, StageReport)> {
+    /// The generate stage's checks on this device: the image size, then the camera's parameters.
+    fn check_generate(&self, params: &GenerateParams) -> Result<()> {
         self.check_image_size(params.width, params.height)?;
-        check_generate_params(params)?;
+        check_generate_params(params)
+    }
+
+    /// The generate stage over `params`, which the caller has checked ([`Self::check_generate`]).
+    fn generate_on_device(&self, params: &GenerateParams) -> Result<(DeviceRays, StageReport)> {
         let rays = DeviceRays::new(&self.core, params.ray_count())?;
         let timing = self.generate.dispatch(
             &[
@@ -606,6 +611,7 @@ impl Backend for VulkanBackend {
 
     fn generate(&mut self, params: &GenerateParams) -> Result<(RayStream, StageReport)> {
         let _driver = driver_lock::device_use();
+        self.check_generate(params)?;
         let (rays, timing) = self.generate_on_device(params)?;
         Ok((rays.read()?, timing))
     }
@@ -658,8 +664,7 @@ impl Backend for VulkanBackend {
         let _driver = driver_lock::device_use();
         request.check()?;
         let (scene, identity) = loaded(&self.scene)?;
-        self.check_image_size(request.generate.width, request.generate.height)?;
-        check_generate_params(request.generate)?;
+        self.check_generate(request.generate)?;
         request.data.check_scene(Some(identity))?;
         request.data.check()?;
         check_shade_params(request.shade, request.data, request.generate.ray_count() as usize)?;
@@ -698,8 +703,9 @@ impl Backend for VulkanBackend {
     fn render(&mut self, params: &GenerateParams) -> Result<FrameOutput> {
         let _driver = driver_lock::device_use();
         let scene = self.loaded_scene()?;
+        self.check_generate(params)?;
         let (rays, generate_time) = self.generate_on_device(params)?;
-        // generate_on_device checked the image against max_rays: the stream fits every pass.
+        // check_generate checked the image against max_rays: the stream fits every pass.
         let (hits, trace_time) = self.trace_on_device(scene, &rays.paths)?;
         Ok(FrameOutput { rays: rays.read()?, hits: hits.read()?, timings: vec![generate_time, trace_time] })
     }

@@ -119,8 +119,8 @@ pub fn ggx_integral(clipped: &Polygon, ggx: &GgxLobe) -> f32 {
     }
     let mut breaks = [0.0f32; MAX_BREAKS];
     let count = edges.azimuth_breaks(ggx.view(), &mut breaks);
-    let one_sided_ends = edges.through_centre;
-    let total = adaptive_azimuth_integral(&breaks, count, one_sided_ends, |phi| radial_integral(&edges, ggx, phi));
+    let total =
+        adaptive_azimuth_integral(&breaks, count, edges.through_centre, |phi| radial_integral(&edges, ggx, phi));
     let value = total / TAU;
     if value.is_finite() && value > 0.0 {
         value
