@@ -374,6 +374,48 @@ fn shade_matches_the_cpu_on_every_vulkan_device() {
     }
 }
 
+/// The Cornell box with its lamp squashed to a strip 10⁻⁵ m wide (about 2·10⁻⁵ of its distance
+/// from the room; its radiance raised as much, so it gives the same power): its `U` comes from
+/// the strip's centre lines (`kernels/src/shade/thin_strip.rs`) on the CPU and on every device,
+/// which agree within the main test's tolerances, with and without the residual (whose `U_S`
+/// still integrates the corners).
+#[test]
+fn a_thin_strip_lamp_shades_alike_on_every_vulkan_device() {
+    let mut cpu = CpuBackend::new();
+    let mut devices = vulkan::each_device("shade parity, thin strip lamp");
+    let cornell = Scene::load("builtin:cornell").expect("built-in scene loads");
+    let lamp = cornell.light_mesh(0);
+    let mut meshes = cornell.meshes().to_vec();
+    let positions = &mut meshes[lamp].positions;
+    let (low, high) =
+        positions.iter().fold((glam::Vec3::INFINITY, glam::Vec3::NEG_INFINITY), |(lo, hi), &p| (lo.min(p), hi.max(p)));
+    let (centre, width) = (0.5 * (low.x + high.x), 1.0e-5);
+    let squash = width / (high.x - low.x);
+    positions.iter_mut().for_each(|p| p.x = centre + (p.x - centre) * squash);
+    meshes[lamp].material.emission /= squash;
+    let scene = Scene::new("cornell, thin strip lamp", meshes, *cornell.camera()).expect("scene");
+    let light = scene.lights()[0];
+    assert!(light.edge_u.truncate().length().min(light.edge_v.truncate().length()) < 2.0 * width, "a strip: {light:?}");
+    cpu.load_scene(&scene).expect("cpu scene");
+    let data = ShadeData::new(&scene).expect("shade data");
+    for (sample_index, analytic_residual) in CASES {
+        let case = format!("thin strip lamp, sample {sample_index} residual {analytic_residual}");
+        let (rays, hits, sampler) = camera_pass(&mut cpu, &scene, sampler_kind::ZSOBOL, sample_index);
+        let params = ShadeParams { analytic_residual, ..data.params(sampler, WIDTH, HEIGHT, sample_index) };
+        let (expected, report) = cpu.shade(&params, &data, &rays, &hits).expect("cpu shade");
+        assert_eq!(report.sanitized, 0, "cpu, {case}");
+        let lit = expected.analytic.iter().filter(|u| u.truncate().max_element() > 0.0).count();
+        assert!(lit * 3 > expected.len(), "{case}: only {lit} pixels lit on the CPU");
+        for device in devices.iter_mut() {
+            let (shades, report) = device.shade(&params, &data, &rays, &hits).expect("device shade");
+            let who = format!("{}, {case}", device.name());
+            assert_eq!((report.stage, report.sanitized), ("shade", 0), "{who}");
+            assert_matches_cpu(&who, &expected, &shades, &rays, &hits);
+        }
+    }
+    devices.into_iter().for_each(vulkan::assert_clean);
+}
+
 /// The Cornell box with its lamp wound the other way, so the camera sees the lamp's back: black
 /// where the lamp is one-sided (it glowed, though it lit nothing on that side), glowing where it
 /// is double-sided, alike on the CPU and every device. And unlit by the lamp: its hit points lie

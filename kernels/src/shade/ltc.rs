@@ -6,7 +6,9 @@
 //! clamped-cosine form factor of the light (the diffuse lobe), and `U_S`, the integral of the
 //! specular LTC lobe over the light. Each is a form factor of the light's corners after a linear
 //! map (identity, or the table's `M⁻¹`), so both come from one form factor
-//! ([`super::polygon::Polygon::form_factor`]), and [`lobe_form_factors`] gives the pair.
+//! ([`super::polygon::Polygon::form_factor`]), and [`lobe_form_factors`] gives the pair; the
+//! stage calls [`parallelogram_form_factors`], which integrates thin lights from their centre
+//! lines instead ([`super::thin_strip`]).
 //! The table's lobe is a mixture of two LTCs (one clamped cosine has lighter tails than GGX), so
 //! `U_S` is the weighted sum of two such form factors.
 //! With the directional albedos `E_D`, `E_S` the unshadowed radiance is
@@ -15,6 +17,7 @@
 use super::ggx::GgxLobe;
 use super::polygon::Polygon;
 use super::slope_quadrature::ggx_integral;
+use super::thin_strip::thin_parallelogram_form_factor;
 use crate::sampling::warp;
 use glam::{Mat3, Vec2, Vec3, Vec4};
 use raywave_shared::ltc_table::LTC_SIZE;
@@ -289,6 +292,53 @@ pub fn lobe_form_factors(lobe: &LtcLobe, ggx: Option<GgxLobe>, quad: [Vec3; 4]) 
     (above.form_factor_above_horizon(), specular)
 }
 
+/// `(U_D, U_S)` as [`lobe_form_factors`] gives them, of the parallelogram light
+/// `corner + s·edge_u + t·edge_v` (`s`, `t` in `[0, 1]`; world space) seen from `p` in `frame`.
+/// Where the light is a thin strip in a lobe's space ([`super::thin_strip::THIN`]), that lobe's form
+/// factor comes from the strip's centre lines ([`thin_parallelogram_form_factor`]),
+/// which take the width as a vector: the corners' edge sum loses about `ε·d/w` of itself to the
+/// corners' rounding (`tests::thin_lights_keep_their_precision`). Other lights take the corners'
+/// path, bit for bit as [`lobe_form_factors`] of [`local_quad`]. With `ggx` (the quadrature
+/// residual) `U_S` always takes the corners.
+pub fn parallelogram_form_factors(
+    lobe: &LtcLobe,
+    ggx: Option<GgxLobe>,
+    frame: &ShadingFrame,
+    p: Vec3,
+    corner: Vec3,
+    edge_u: Vec3,
+    edge_v: Vec3,
+) -> (f32, f32) {
+    let (o, u, v) = (frame.to_local(corner - p), frame.to_local(edge_u), frame.to_local(edge_v));
+    let thin = |map: Mat3| thin_parallelogram_form_factor(map, o, u, v);
+    let diffuse = thin(Mat3::IDENTITY);
+    let (first, second) = if ggx.is_none() { (thin(lobe.inv_m), thin(lobe.inv_m_2)) } else { (None, None) };
+    if let (Some(diffuse), Some(first), Some(second)) = (diffuse, first, second) {
+        return (diffuse, mixed(lobe, first, second));
+    }
+    let above = Polygon::quad(local_quad(frame, p, corner, edge_u, edge_v)).clip_to_horizon();
+    let diffuse = match diffuse {
+        Some(thin) => thin,
+        None => above.form_factor_above_horizon(),
+    };
+    let specular = match ggx {
+        Some(ggx) => corrected_form_factor(lobe, &ggx, &above),
+        None => {
+            let (inv_m, inv_m_2) = (lobe.inv_m, lobe.inv_m_2);
+            let first = match first {
+                Some(thin) => thin,
+                None => above.map(|q| inv_m * q).form_factor(),
+            };
+            let second = match second {
+                Some(thin) => thin,
+                None => above.map(|q| inv_m_2 * q).form_factor(),
+            };
+            mixed(lobe, first, second)
+        }
+    };
+    (diffuse, specular)
+}
+
 /// The GGX lobe's `U_S` (see [`lobe_form_factors`]) over `clipped` (local corners, already clipped to the
 /// horizon).
 fn corrected_form_factor(lobe: &LtcLobe, ggx: &GgxLobe, clipped: &Polygon) -> f32 {
@@ -303,6 +353,12 @@ fn mixture_form_factor(lobe: &LtcLobe, clipped: &Polygon) -> f32 {
     let (inv_m, inv_m_2) = (lobe.inv_m, lobe.inv_m_2);
     let first = clipped.map(|q| inv_m * q).form_factor();
     let second = clipped.map(|q| inv_m_2 * q).form_factor();
+    mixed(lobe, first, second)
+}
+
+/// The mixture's `U_S` from its two LTCs' form factors.
+#[inline]
+fn mixed(lobe: &LtcLobe, first: f32, second: f32) -> f32 {
     lobe.weight * first + (1.0 - lobe.weight) * second
 }
 

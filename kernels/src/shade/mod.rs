@@ -9,3 +9,4 @@ pub mod ltc;
 pub mod polygon;
 pub mod slope_quadrature;
 pub mod stage;
+pub mod thin_strip;
