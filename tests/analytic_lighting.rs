@@ -14,7 +14,7 @@
 //! Issue 5's targets: diffuse relative error ≤ 0.5 % (asserted); specular median ≤ 1 % and max
 //! ≤ 5 % at roughness ≥ 0.1, relative to the reference. Two specular variants are measured:
 //!
-//! - **The LTC alone** (`lobe_form_factors` without a GGX lobe, the default). The median is met with the two-lobe
+//! - **The LTC alone** (`parallelogram_form_factors` without a GGX lobe, the default). The median is met with the two-lobe
 //!   table (FIT_VERSION 4: 0.68 %, 0.67 % before the lookup aligned the cells' lobes; with the smaller reference 0.43 %, FIT_VERSION 3 0.68 %, one
 //!   lobe, FIT_VERSION 2, 4.2 %) and asserted; the max is not: lights that catch only a lobe's far
 //!   tail (a light low on the view's side, or overhead at grazing views; reference `U_S` below
@@ -28,7 +28,7 @@
 //!   percentile: FIT_VERSION 3 0.00 %, 0.87 %, 3.5 %; one lobe 0.14 %, 1.6 %, 9.0 %; ltc_code's
 //!   fixed frame 0.17 %, 4.5 %, 13 %), so a regression of the fit or of the polygon integration
 //!   fails.
-//! - **With the residual towards GGX** (`lobe_form_factors` with the GGX lobe: its own
+//! - **With the residual towards GGX** (`parallelogram_form_factors` with the GGX lobe: its own
 //!   integral by `raywave::kernels::shade::slope_quadrature`; `raywave render --analytic-residual`):
 //!   median 0.00 %, max 1.07 % over every view up to 89.9° (issue 5's ≤ 5 %, met and asserted at
 //!   ≤ 2 %); at roughness 0.05, below the issue's range, all 20 cases within the reference's 3σ
@@ -48,7 +48,7 @@ use glam::{DVec3, Vec3, Vec4};
 use rayon::prelude::*;
 use raywave::kernels::hash::{pcg3d, unit_float};
 use raywave::kernels::shade::ggx::GgxLobe;
-use raywave::kernels::shade::ltc::{lobe_form_factors, local_quad, lookup, ShadingFrame};
+use raywave::kernels::shade::ltc::{lookup, parallelogram_form_factors, ShadingFrame};
 use raywave::ltc_fit::Ggx;
 use raywave::shared::ltc_table::packed_entries;
 
@@ -137,7 +137,8 @@ struct Case {
     light: &'static str,
     diffuse: (f64, f64, f64),
     specular: (f64, f64, f64),
-    /// The specular lobe with the quadrature residual (`lobe_form_factors` with the GGX lobe).
+    /// The specular lobe with the quadrature residual (`parallelogram_form_factors` with the GGX
+    /// lobe).
     corrected: (f64, f64, f64),
     magnitude: f64,
 }
@@ -189,10 +190,11 @@ fn analytic_u_matches_the_f64_reference() {
                 };
                 let diffuse_ref = reference(&quad, cosine, cosine_sample, salt + 1000);
                 let frame = ShadingFrame::new(Vec3::Z, view.as_vec3());
-                let corners = local_quad(&frame, Vec3::ZERO, quad.corner.as_vec3(), quad.u.as_vec3(), quad.v.as_vec3());
+                let (corner, u, v) = (quad.corner.as_vec3(), quad.u.as_vec3(), quad.v.as_vec3());
                 let lobe = lookup(table, roughness, view.z as f32);
-                let (diffuse, specular) = lobe_form_factors(&lobe, None, corners);
-                let corrected = lobe_form_factors(&lobe, Some(GgxLobe::new(roughness, view.z as f32)), corners).1;
+                let ggx = GgxLobe::new(roughness, view.z as f32);
+                let (diffuse, specular) = parallelogram_form_factors(&lobe, None, &frame, Vec3::ZERO, corner, u, v);
+                let corrected = parallelogram_form_factors(&lobe, Some(ggx), &frame, Vec3::ZERO, corner, u, v).1;
                 let magnitude = f64::from(lobe.magnitude);
                 let (diffuse, specular, corrected) =
                     (f64::from(diffuse), magnitude * f64::from(specular), magnitude * f64::from(corrected));
@@ -407,12 +409,14 @@ fn the_residual_helps_on_random_lights() {
                 return None;
             }
             let frame = ShadingFrame::new(Vec3::Z, view.as_vec3());
-            let corners = local_quad(&frame, Vec3::ZERO, quad.corner.as_vec3(), quad.u.as_vec3(), quad.v.as_vec3());
+            let (corner, u, v) = (quad.corner.as_vec3(), quad.u.as_vec3(), quad.v.as_vec3());
             let lobe = lookup(&table, roughness, cos_v as f32);
             let magnitude = f64::from(lobe.magnitude);
-            let ltc = magnitude * f64::from(lobe_form_factors(&lobe, None, corners).1);
+            let ltc =
+                magnitude * f64::from(parallelogram_form_factors(&lobe, None, &frame, Vec3::ZERO, corner, u, v).1);
             let ggx = GgxLobe::new(roughness, cos_v as f32);
-            let corrected = magnitude * f64::from(lobe_form_factors(&lobe, Some(ggx), corners).1);
+            let corrected =
+                magnitude * f64::from(parallelogram_form_factors(&lobe, Some(ggx), &frame, Vec3::ZERO, corner, u, v).1);
             let (ltc, corrected) = ((ltc, reference, rel_sigma), (corrected, reference, rel_sigma));
             Some(RandomLightErrors {
                 relative: [relative_excess(ltc), relative_excess(corrected)],

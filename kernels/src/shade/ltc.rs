@@ -17,7 +17,7 @@
 use super::ggx::GgxLobe;
 use super::polygon::Polygon;
 use super::slope_quadrature::ggx_integral;
-use super::thin_strip::thin_parallelogram_form_factor;
+use super::thin_strip::{thin_parallelogram_form_factor, thin_parallelogram_ggx_integral};
 use crate::sampling::warp;
 use glam::{Mat3, Vec2, Vec3, Vec4};
 use raywave_shared::ltc_table::LTC_SIZE;
@@ -284,22 +284,17 @@ pub fn local_quad(frame: &ShadingFrame, p: Vec3, corner: Vec3, edge_u: Vec3, edg
 ///   Accurate also where the LTC is not — lights that catch only the lobe's far tail, grazing
 ///   views — at the cost of 30–200 radial integrals per light.
 pub fn lobe_form_factors(lobe: &LtcLobe, ggx: Option<GgxLobe>, quad: [Vec3; 4]) -> (f32, f32) {
-    let above = Polygon::quad(quad).clip_to_horizon();
-    let specular = match ggx {
-        Some(ggx) => corrected_form_factor(lobe, &ggx, &above),
-        None => mixture_form_factor(lobe, &above),
-    };
-    (above.form_factor_above_horizon(), specular)
+    corners_form_factors(lobe, ggx, &Polygon::quad(quad).clip_to_horizon(), ThinLobes::NONE)
 }
 
 /// `(U_D, U_S)` as [`lobe_form_factors`] gives them, of the parallelogram light
 /// `corner + s·edge_u + t·edge_v` (`s`, `t` in `[0, 1]`; world space) seen from `p` in `frame`.
-/// Where the light is a thin strip in a lobe's space ([`super::thin_strip::THIN`]), that lobe's form
-/// factor comes from the strip's centre lines ([`thin_parallelogram_form_factor`]),
-/// which take the width as a vector: the corners' edge sum loses about `ε·d/w` of itself to the
-/// corners' rounding (`tests::thin_lights_keep_their_precision`). Other lights take the corners'
-/// path, bit for bit as [`lobe_form_factors`] of [`local_quad`]. With `ggx` (the quadrature
-/// residual) `U_S` always takes the corners.
+/// Where the light is a thin strip in a lobe's space ([`super::thin_strip::THIN`]), that lobe's
+/// integral comes from lines across the strip's width ([`thin_parallelogram_form_factor`]; with
+/// `ggx`, [`thin_parallelogram_ggx_integral`]), which take the width as a vector: the corners'
+/// edge sum and quadrature lose about `ε·d/w` of themselves to the corners' rounding
+/// (`thin_strip::tests`). Other lobes take the corners' path, bit for bit as
+/// [`lobe_form_factors`] of [`local_quad`].
 pub fn parallelogram_form_factors(
     lobe: &LtcLobe,
     ggx: Option<GgxLobe>,
@@ -311,25 +306,79 @@ pub fn parallelogram_form_factors(
 ) -> (f32, f32) {
     let (o, u, v) = (frame.to_local(corner - p), frame.to_local(edge_u), frame.to_local(edge_v));
     let thin = |map: Mat3| thin_parallelogram_form_factor(map, o, u, v);
-    let diffuse = thin(Mat3::IDENTITY);
-    let (first, second) = if ggx.is_none() { (thin(lobe.inv_m), thin(lobe.inv_m_2)) } else { (None, None) };
-    if let (Some(diffuse), Some(first), Some(second)) = (diffuse, first, second) {
-        return (diffuse, mixed(lobe, first, second));
+    let lobes = match ggx {
+        Some(ggx) => ThinLobes {
+            diffuse: thin(Mat3::IDENTITY),
+            residual: thin_parallelogram_ggx_integral(&ggx, lobe.inv_m, o, u, v),
+            ..ThinLobes::NONE
+        },
+        None => ThinLobes {
+            diffuse: thin(Mat3::IDENTITY),
+            first: thin(lobe.inv_m),
+            second: thin(lobe.inv_m_2),
+            residual: None,
+        },
+    };
+    if let Some(both) = lobes.all(lobe, ggx.is_some()) {
+        return both;
     }
     let above = Polygon::quad(local_quad(frame, p, corner, edge_u, edge_v)).clip_to_horizon();
-    let diffuse = match diffuse {
+    corners_form_factors(lobe, ggx, &above, lobes)
+}
+
+/// The lobes' integrals that the thin-strip path gave ([`parallelogram_form_factors`]); `None`
+/// where the corners integrate a lobe.
+#[derive(Copy, Clone)]
+struct ThinLobes {
+    /// The clamped cosine's form factor.
+    diffuse: Option<f32>,
+    /// The first and second LTC's form factors.
+    first: Option<f32>,
+    second: Option<f32>,
+    /// The GGX lobe's `∫ G dω` (with the residual).
+    residual: Option<f32>,
+}
+
+impl ThinLobes {
+    /// Nothing from the thin-strip path.
+    const NONE: Self = Self { diffuse: None, first: None, second: None, residual: None };
+
+    /// `(U_D, U_S)` where the thin-strip path gave every lobe they need.
+    fn all(&self, lobe: &LtcLobe, with_residual: bool) -> Option<(f32, f32)> {
+        let specular = if with_residual {
+            by_magnitude(lobe, self.residual?)
+        } else {
+            match (self.first, self.second) {
+                (Some(first), Some(second)) => mixed(lobe, first, second),
+                _ => return None,
+            }
+        };
+        self.diffuse.map(|diffuse| (diffuse, specular))
+    }
+}
+
+/// `(U_D, U_S)` over `above` (local corners, already clipped to the horizon) for the lobes that
+/// `thin` does not give.
+fn corners_form_factors(lobe: &LtcLobe, ggx: Option<GgxLobe>, above: &Polygon, thin: ThinLobes) -> (f32, f32) {
+    let diffuse = match thin.diffuse {
         Some(thin) => thin,
         None => above.form_factor_above_horizon(),
     };
     let specular = match ggx {
-        Some(ggx) => corrected_form_factor(lobe, &ggx, &above),
+        Some(ggx) => by_magnitude(
+            lobe,
+            match thin.residual {
+                Some(thin) => thin,
+                None => ggx_integral(above, &ggx),
+            },
+        ),
         None => {
             let (inv_m, inv_m_2) = (lobe.inv_m, lobe.inv_m_2);
-            let first = match first {
+            let first = match thin.first {
                 Some(thin) => thin,
                 None => above.map(|q| inv_m * q).form_factor(),
             };
-            let second = match second {
+            let second = match thin.second {
                 Some(thin) => thin,
                 None => above.map(|q| inv_m_2 * q).form_factor(),
             };
@@ -339,21 +388,13 @@ pub fn parallelogram_form_factors(
     (diffuse, specular)
 }
 
-/// The GGX lobe's `U_S` (see [`lobe_form_factors`]) over `clipped` (local corners, already clipped to the
-/// horizon).
-fn corrected_form_factor(lobe: &LtcLobe, ggx: &GgxLobe, clipped: &Polygon) -> f32 {
+/// The GGX lobe's `∫ G dω` over a light as a `U_S`: over the table's magnitude (so that it takes
+/// the same albedo terms), in `[0, 1]`; 0 where the magnitude is not positive.
+fn by_magnitude(lobe: &LtcLobe, integral: f32) -> f32 {
     if lobe.magnitude.is_nan() || lobe.magnitude <= 0.0 {
         return 0.0;
     }
-    (ggx_integral(clipped, ggx) / lobe.magnitude).clamp(0.0, 1.0)
-}
-
-/// The LTC mixture's integral over `clipped` (local corners, already clipped to the horizon).
-fn mixture_form_factor(lobe: &LtcLobe, clipped: &Polygon) -> f32 {
-    let (inv_m, inv_m_2) = (lobe.inv_m, lobe.inv_m_2);
-    let first = clipped.map(|q| inv_m * q).form_factor();
-    let second = clipped.map(|q| inv_m_2 * q).form_factor();
-    mixed(lobe, first, second)
+    (integral / lobe.magnitude).clamp(0.0, 1.0)
 }
 
 /// The mixture's `U_S` from its two LTCs' form factors.

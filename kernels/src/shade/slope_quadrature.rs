@@ -119,8 +119,7 @@ pub fn ggx_integral(clipped: &Polygon, ggx: &GgxLobe) -> f32 {
     }
     let mut breaks = [0.0f32; MAX_BREAKS];
     let count = edges.azimuth_breaks(ggx.view(), &mut breaks);
-    let total =
-        adaptive_azimuth_integral(&breaks, count, edges.through_centre, |phi| radial_integral(&edges, ggx, phi));
+    let total = adaptive_integral(&breaks, count, true, edges.through_centre, |phi| radial_integral(&edges, ggx, phi));
     let value = total / TAU;
     if value.is_finite() && value > 0.0 {
         value
@@ -354,12 +353,15 @@ fn radial_integral(edges: &Edges, ggx: &GgxLobe, phi: f32) -> f32 {
     total
 }
 
-/// `∫ f dφ` over the full circle, split at the sorted `breaks[..count]` (cyclically) and into
-/// pieces of at most [`MAX_PIECE`], by adaptive Simpson (module documentation). With
-/// `one_sided_ends`, `f` may jump at the breaks ([`CENTRE_ON_EDGE`]).
-fn adaptive_azimuth_integral(
-    breaks: &[f32; MAX_BREAKS],
+/// `∫ f dφ` split at the sorted `breaks[..count]` and into pieces of at most [`MAX_PIECE`], by
+/// adaptive Simpson (module documentation): over the full circle with `around` (the last gap
+/// wraps to the first break), else from the first break to the last. With `one_sided_ends`, `f`
+/// may jump at the breaks ([`CENTRE_ON_EDGE`]). Also the rule along a thin strip's line
+/// ([`super::thin_strip`]).
+pub(crate) fn adaptive_integral<const N: usize>(
+    breaks: &[f32; N],
     count: usize,
+    around: bool,
     one_sided_ends: bool,
     f: impl Fn(f32) -> f32,
 ) -> f32 {
@@ -369,8 +371,10 @@ fn adaptive_azimuth_integral(
     let mut pieces = 0usize;
     // The last piece's end and its value, shared with the next piece where they meet.
     let (mut shared_x, mut shared_y) = (f32::NAN, 0.0f32);
+    // (`saturating_sub` is not in rust-gpu.)
+    let gaps = if around || count == 0 { count } else { count - 1 };
     let mut i = 0usize;
-    while i < count {
+    while i < gaps {
         let lo = breaks[i];
         let hi = if i + 1 < count { breaks[i + 1] } else { breaks[0] + TAU };
         // Without a corner or tangency inside, a gap's rays all meet the light or none does: one
