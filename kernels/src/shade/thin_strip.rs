@@ -20,12 +20,13 @@
 //! end-on lines keep their precision. For the GGX lobe (the residual) the adaptive rule of
 //! [`super::slope_quadrature`] integrates `G·cos φ` over gaps graded away from the lobe's peak.
 //!
-//! **Across the width** two lines (two-point Gauss–Legendre) per piece: the width is cut where
-//! a horizon crosses the strip's ends, and each line is cut where it crosses the surface's
-//! horizon and then the lobe's own. For a lobe that does not vanish on the surface's horizon
-//! (an LTC, GGX) the width is also cut into even pieces where that horizon sweeps along the
-//! strip, so that the part above it grows smoothly within each; a strip needing more than
-//! `MAX_SWEEP_PIECES` is left to its corners. So are GGX lobes too narrow for `f32` directions.
+//! **Across the width** two lines (two-point Gauss–Legendre) per piece, each cut where it
+//! crosses the surface's horizon and then the lobe's own. Each horizon that cuts the strip (the
+//! lobe's own; the surface's too for a lobe that does not vanish on it, an LTC or GGX) splits
+//! the width where it enters and leaves the strip and into even pieces between, so that the
+//! part above it grows smoothly within each (`WidthPieces`); a cut needing more than
+//! `MAX_SWEEP_PIECES` leaves the strip to its corners. So do GGX lobes too narrow for `f32`
+//! directions.
 
 use super::ggx::GgxLobe;
 use super::slope_quadrature::adaptive_integral;
@@ -40,8 +41,8 @@ use spirv_std::num_traits::Float;
 /// power of that fraction, while the corners' sum errs by about `ε·d/w`. Chosen by
 /// `tests::thin_lights_keep_their_precision` (random strips from 10⁻¹ to 10⁻⁷ of their
 /// distance; the cosine and the LTCs of roughness 0.05, 0.1 and 0.3): at 3 % the worst error
-/// is 7.5·10⁻⁵ of a strip's head-on form factor; at 1 %, 8.6·10⁻⁴; at 10 %, also 7.5·10⁻⁵, but
-/// 3·10⁻⁵ at 3·10⁻² where 3 % gives 8·10⁻⁶.
+/// is 5.5·10⁻⁵ of a strip's head-on form factor; at 1 %, 8.6·10⁻⁴; at 10 %, 4.4·10⁻⁵, but
+/// 3·10⁻⁵ at 3·10⁻², where 3 % gives 8·10⁻⁶.
 pub const THIN: f32 = 3.0e-2;
 
 /// The parameter interval `[s₀, s₁]` ⊂ `[lo, hi]` of the line `m + s·e` where `z ≥ 0`, or `None`
@@ -263,8 +264,8 @@ const WIDTH_NODES: [f32; 2] = [0.211_324_87, 0.788_675_1];
 /// shading-frame coordinates, z the normal) cut to the surface's horizon `z ≥ 0`, after the
 /// linear map `map` (identity for the diffuse lobe, an LTC's `M⁻¹` for the specular one), where
 /// that parallelogram is thin in `map`'s space (see [`THIN`]); `None` where it is not, where the
-/// input is not finite, or where `map` is not the identity and the surface's horizon cuts the
-/// strip along its length or obliquely (module documentation), for the corners' edge sum to
+/// input is not finite, or where a horizon sweeps along it farther than `MAX_SWEEP_PIECES`
+/// pieces of the width can follow (module documentation), for the corners' edge sum to
 /// integrate. The narrower way round is the width; two lines across each of its pieces, each
 /// cut to the surface's horizon and then to `map`'s, are integrated in closed form.
 #[inline]
@@ -273,10 +274,17 @@ pub fn thin_parallelogram_form_factor(map: Mat3, o: Vec3, u: Vec3, v: Vec3) -> O
     let (mapped_line, mapped_width) = (map * strip.line, map * strip.width);
     let mapped_o = map * o;
     // The cosine vanishes on the surface's horizon, which is its own; an LTC does not.
-    let even = if map == Mat3::IDENTITY { 1 } else { strip.pieces_for_the_surface_horizon(o, map)? };
-    let mut pieces = WidthPieces::even(even);
-    pieces.split_where_horizon_cuts(o, strip.line, strip.width);
-    pieces.split_where_horizon_cuts(mapped_o, mapped_line, mapped_width);
+    // How many pieces a cut needs per unit of its reach along the lines: a quarter of the line's
+    // distance in the lobe's space each.
+    let ratio = width_over_distance(mapped_o + 0.5 * mapped_width, mapped_line, mapped_width);
+    let per_reach = mapped_line.length() * ratio / (SWEEP_PER_PIECE * mapped_width.length());
+    let mut pieces = WidthPieces::whole();
+    // The lobe's own horizon (for the cosine, the surface's too), then the surface's for an LTC.
+    if !pieces.cut(mapped_o, mapped_line, mapped_width, per_reach)
+        || (map != Mat3::IDENTITY && !pieces.cut(o, strip.line, strip.width, per_reach))
+    {
+        return None;
+    }
     let sum = pieces.integrate(|t| match above_horizon(o + t * strip.width, strip.line, 0.0, 1.0) {
         Some((s0, s1)) => {
             let mapped = mapped_o + t * mapped_width;
@@ -296,8 +304,8 @@ pub fn thin_parallelogram_form_factor(map: Mat3, o: Vec3, u: Vec3, v: Vec3) -> O
 /// `ltc_map`, the `M⁻¹` of an LTC standing for the lobe (thin there, it is thin against the
 /// lobe's width too: `G` varies little across it), narrower than the lobe's half-width
 /// `½α·cos θ_v` (a lower bound), with a lobe no narrower than `MIN_LOBE_HALF_WIDTH`, and where
-/// the surface's horizon cuts it cleanly (as for an LTC in [`thin_parallelogram_form_factor`]);
-/// else `None`. Two lines across each
+/// the surface's horizon sweeps along it no farther than `MAX_SWEEP_PIECES` pieces of the width
+/// follow at the narrower of those two scales; else `None`. Two lines across each
 /// piece of the width, each integrated by the quadrature's adaptive rule. This is the
 /// residual's `U_S` (before its normalization) for thin lights, whose corners the slope-space
 /// quadrature takes with their rounding.
@@ -316,8 +324,15 @@ pub fn thin_parallelogram_ggx_integral(ggx: &GgxLobe, ltc_map: Mat3, o: Vec3, u:
     if !(ratio < half_width && mapped_ratio < THIN) {
         return None;
     }
-    let mut pieces = WidthPieces::even(strip.pieces_for_the_surface_horizon(o, ltc_map)?);
-    pieces.split_where_horizon_cuts(o, strip.line, strip.width);
+    // Pieces for the surface's horizon by the narrower of the lobe's scales along the line: its
+    // LTC's distance, or its half-width (radians along the line per unit of reach: `|e|/h`).
+    let (mapped_line, mapped_width) = (ltc_map * strip.line, ltc_map * strip.width);
+    let ltc_per_reach = mapped_line.length() * mapped_ratio / (SWEEP_PER_PIECE * mapped_width.length());
+    let lobe_per_reach = strip.line.length() * ratio / (SWEEP_PER_PIECE * half_width * strip.width.length());
+    let mut pieces = WidthPieces::whole();
+    if !pieces.cut(o, strip.line, strip.width, ltc_per_reach.max(lobe_per_reach)) {
+        return None;
+    }
     let integral = pieces.integrate(|t| {
         let m = o + t * strip.width;
         match above_horizon(m, strip.line, 0.0, 1.0) {
@@ -355,91 +370,77 @@ impl ThinStrip {
     }
 }
 
-impl ThinStrip {
-    /// How many even pieces of the width the lines must take for a lobe that does not vanish on
-    /// the surface's horizon (an LTC, GGX), where that horizon cuts the strip
-    /// `o + s·line + t·width`: the cut meets the lines at `s` moving by `|width_z/line_z|` per
-    /// unit of `t`, and within a piece it may sweep along the line no more than
-    /// `SWEEP_PER_PIECE` of the line's distance in `map`'s space, where the integrand varies. 1 where the horizon leaves
-    /// the strip whole or runs along its lines; `None` where more than `MAX_SWEEP_PIECES` would
-    /// be needed (or the input is not finite), for the corners. Two lines over a whole width
-    /// that such a cut swept had been 0.94 % low on a strip just above the horizon, 2.2× too
-    /// high on one straddling it along its length, and 10× too low on one 10⁻⁴ wide (reviews).
-    #[inline]
-    fn pieces_for_the_surface_horizon(&self, o: Vec3, map: Mat3) -> Option<usize> {
-        let (start, end) = (o.z, o.z + self.line.z);
-        let (start_across, end_across) = (start + self.width.z, end + self.width.z);
-        let (low, high) =
-            (start.min(end).min(start_across.min(end_across)), start.max(end).max(start_across.max(end_across)));
-        if !(low < 0.0 && high > 0.0) || self.line.z == 0.0 {
-            return Some(1);
-        }
-        let sweep = (self.width.z / self.line.z).abs();
-        let (mapped_line, mapped_width) = (map * self.line, map * self.width);
-        let ratio = width_over_distance(map * (o + 0.5 * self.width), mapped_line, mapped_width);
-        // The sweep in units of SWEEP_PER_PIECE·h', with |w'|/h' = ratio.
-        let reach = sweep * mapped_line.length() * ratio / (SWEEP_PER_PIECE * mapped_width.length());
-        if reach <= 1.0 {
-            Some(1)
-        } else if reach <= MAX_SWEEP_PIECES as f32 {
-            Some(reach.ceil() as usize)
-        } else {
-            None
-        }
-    }
-}
-
-/// How far along a line, in units of its distance in the lobe's space, the surface's horizon
-/// may sweep within one piece of the width ([`ThinStrip::pieces_for_the_surface_horizon`]).
+/// How far along a line, in units of its distance in the lobe's space, a horizon may sweep
+/// within one piece of the width ([`WidthPieces::cut`]).
 const SWEEP_PER_PIECE: f32 = 0.25;
 
-/// Most even pieces of a strip's width for a sweeping horizon cut
-/// ([`ThinStrip::pieces_for_the_surface_horizon`]); past it the corners integrate the strip.
+/// Most even pieces one horizon's cut may take ([`WidthPieces::cut`]); past it the corners
+/// integrate the strip.
 const MAX_SWEEP_PIECES: usize = 16;
 
-/// The pieces of a strip's width `t ∈ [0, 1]` that the lines across it integrate one by one: a
-/// horizon that crosses an end of the strip (the edges at `s` = 0 and 1) cuts it along its
-/// length, so that the part above it grows with `t` not smoothly but with a kink at the
-/// crossing, which two lines over the whole width cannot follow (review: a strip straddling the
-/// surface's horizon came out 2.2× too high in an LTC's space, and 0 just beside). Split there,
-/// each piece's lines see a smooth integrand again.
+/// The pieces of a strip's width `t ∈ [0, 1]` that the lines across it integrate one by one.
+///
+/// A horizon `z = 0` cuts the lines `o + s·line + t·width` at `s*(t) = −(o_z + t·width_z)/line_z`.
+/// Where it crosses an end of the strip (`s*` = 0 or 1 inside the width) the part above it grows
+/// with `t` with a kink, and where `s*` moves far along the lines within a piece the part above
+/// grows in a way two lines do not follow (reviews: a strip straddling the surface's horizon
+/// 2.2× too high in an LTC's space; one swept along by it 10× too low; the LTC's own horizon
+/// sweeping far, 9·10⁻³ of the head-on form factor off). So each cut splits the width where it
+/// enters and leaves the strip, and the span between into even pieces within which it moves no
+/// more than [`SWEEP_PER_PIECE`] of the line's distance in the lobe's space.
 struct WidthPieces {
-    /// The ends of the pieces, ascending: 0, the crossings, 1.
+    /// The ends of the pieces, ascending: 0, the breaks, 1.
     ends: [f32; MAX_WIDTH_PIECES + 1],
     count: usize,
 }
 
-/// Most pieces of a strip's width: `MAX_SWEEP_PIECES` even ones, split again where each of two
-/// horizons crosses each of its two ends.
-const MAX_WIDTH_PIECES: usize = MAX_SWEEP_PIECES + 4;
+/// Most pieces of a strip's width: two cuts of [`MAX_SWEEP_PIECES`] each, and the pieces outside
+/// their spans.
+const MAX_WIDTH_PIECES: usize = 2 * MAX_SWEEP_PIECES + 3;
 
 impl WidthPieces {
-    /// The width in `count` (1..=`MAX_SWEEP_PIECES`) even pieces.
+    /// The whole width, one piece.
     #[inline]
-    fn even(count: usize) -> Self {
-        let count = count.clamp(1, MAX_SWEEP_PIECES);
+    fn whole() -> Self {
         let mut ends = [0.0; MAX_WIDTH_PIECES + 1];
-        let mut i = 1usize;
-        while i <= count {
-            ends[i] = i as f32 / count as f32;
-            i += 1;
-        }
-        Self { ends, count }
+        ends[1] = 1.0;
+        Self { ends, count: 1 }
     }
 
-    /// Splits the pieces where the horizon `z = 0` crosses the ends of the strip
-    /// `o + s·line + t·width` (`s` = 0 and 1) strictly inside.
+    /// Splits the width for the cut of the horizon `z = 0` through the strip
+    /// `o + s·line + t·width`: where it enters and leaves the strip, and between into even
+    /// pieces, `per_reach` of them per unit of `s` the cut moves along the lines. False where
+    /// that takes more than [`MAX_SWEEP_PIECES`], or `per_reach` is not finite.
     #[inline]
-    fn split_where_horizon_cuts(&mut self, o: Vec3, line: Vec3, width: Vec3) {
-        let mut end = 0u32;
-        while end < 2 {
-            let a = if end == 0 { o.z } else { o.z + line.z };
-            let b = a + width.z;
-            if (a < 0.0) != (b < 0.0) {
-                self.split(a / (a - b));
-            }
-            end += 1;
+    fn cut(&mut self, o: Vec3, line: Vec3, width: Vec3, per_reach: f32) -> bool {
+        // A cut across the lines (`width_z` = 0) stays put: the lines follow it. One along them
+        // (`line_z` = 0) leaves each whole above or below: split where it passes.
+        if width.z == 0.0 {
+            return true;
         }
+        if line.z == 0.0 {
+            self.split(-o.z / width.z);
+            return true;
+        }
+        // Where s*(t) = 0 and 1, and the span of t inside the width between them.
+        let (at_start, at_end) = (-o.z / width.z, -(o.z + line.z) / width.z);
+        let (lo, hi) = (at_start.min(at_end).max(0.0), at_start.max(at_end).min(1.0));
+        if lo.is_nan() || hi.is_nan() || lo >= hi {
+            return true;
+        }
+        // How far along the lines (in s) the cut moves over the span.
+        let reach = (hi - lo) * (width.z / line.z).abs();
+        let pieces = (reach * per_reach).ceil().max(1.0);
+        if pieces.is_nan() || pieces > MAX_SWEEP_PIECES as f32 {
+            return false;
+        }
+        let pieces = pieces as u32;
+        let mut k = 0u32;
+        while k <= pieces {
+            self.split(lo + (hi - lo) * (k as f32 / pieces as f32));
+            k += 1;
+        }
+        true
     }
 
     /// Adds the break `t` where it lies strictly inside a piece (keeping the ends sorted).
@@ -627,8 +628,8 @@ mod tests {
 
     /// Through the stage's entry (`parallelogram_form_factors`), lights keep `U_D` and `U_S`
     /// within 10⁻⁴ of their lobes' head-on form factors (the specular one mixed as the LTCs are)
-    /// for widths from 10⁻¹ down to 10⁻⁷ of their distance (measured: at most 7.5·10⁻⁵, at
-    /// 10⁻³), where the corners' edge sum alone (`lobe_form_factors`) erred by 5·10⁻⁴ at 10⁻³,
+    /// for widths from 10⁻¹ down to 10⁻⁷ of their distance (measured: at most 5.5·10⁻⁵, at
+    /// 3·10⁻⁴), where the corners' edge sum alone (`lobe_form_factors`) erred by 5·10⁻⁴ at 10⁻³,
     /// 7·10⁻³ at 10⁻⁴, 5·10⁻² at 10⁻⁵ and a factor 7 at 10⁻⁷. The midpoint of the width alone
     /// fails it; so does [`THIN`] at 1 % (8.6·10⁻⁴ at 10⁻⁴: strips thin in the frame but not in an
     /// LTC's space are left to the corners).
@@ -818,8 +819,8 @@ mod tests {
 
     /// Strips 10⁻⁵ to 5·10⁻⁴ of their distance wide whose line is tilted against the surface's
     /// horizon, so that the horizon sweeps along them (crossing their long edges 0.05 to 10
-    /// lengths apart) or crosses both their ends: wherever the lines take one for an LTC, within
-    /// 10⁻⁴ of its head-on form factor (measured: 2.7·10⁻⁵). Two lines over the whole width
+    /// lengths apart) or crosses both their ends: wherever the lines take one for an LTC (1863 of
+    /// 2592), within 10⁻⁴ of its head-on form factor (measured: 2.7·10⁻⁵). Two lines over the whole width
     /// had been 10× too low here (review).
     #[test]
     fn strips_the_surface_horizon_sweeps_along_are_cut_into_enough_pieces() {
@@ -868,6 +869,48 @@ mod tests {
         }
         std::println!("{taken} of {total} taken, worst error {worst:.1e}");
         assert!(taken * 2 > total, "{taken} of {total} taken");
+    }
+
+    /// The third review's cases, each once wrong: a strip straddling the surface's horizon
+    /// along a line tilted by 10⁻⁹ (left to the corners, 0.37 of the head-on form factor off at
+    /// 10⁻⁶ wide); the first LTC's own horizon sweeping along a strip at a grazing view (two
+    /// lines over the whole width, 9.1·10⁻³ off); the surface's horizon sweeping along a strip
+    /// under the GGX lobe at view cosine 0.02, farther than the lobe is wide (1.34 % low). The
+    /// first is now within 10⁻⁴ of the head-on form factor; the other two go to the corners.
+    #[test]
+    fn horizons_sweeping_along_a_strip_in_a_lobes_space_are_followed() {
+        let table: Vec<Vec4> = packed_entries().map(Vec4::from_array).collect();
+        // Straddling, its line tilted by 10⁻⁹: the lines take it.
+        let lobe = lookup(&table, 0.3, 0.6);
+        let (o, u, v) = (Vec3::new(1.0, -0.5, -0.5e-6), Vec3::new(0.0, 1.0, 1e-9), Vec3::new(0.0, 0.0, 1e-6));
+        for map in [lobe.inv_m, lobe.inv_m_2] {
+            let exact = reference(map, o, u, v);
+            let strip = thin_parallelogram_form_factor(map, o, u, v);
+            let case = format!("straddling: {strip:?} vs {exact}");
+            assert!(
+                strip.is_some_and(|strip| (strip as f64 - exact).abs() <= 1e-4 * scale(map, o, u, v, exact)),
+                "{case}"
+            );
+        }
+        // The LTC's own horizon sweeping along the strip.
+        let inv_m = lookup(&table, 0.1, 0.05).inv_m;
+        let (o, u, v) = (
+            Vec3::new(-0.999_048_2, 0.979_951, 0.002_483_232_2),
+            Vec3::new(0.000_123_685_46, -0.999_95, 0.009_998_736),
+            Vec3::new(-0.009_965_436_5, 1.45e-13, 0.000_830_699_63),
+        );
+        // Sweeping farther than 16 pieces can follow: the corners take it (8.4·10⁻⁴ off, review).
+        assert_eq!(thin_parallelogram_form_factor(inv_m, o, u, v), None, "own horizon");
+        // The surface's horizon sweeping along a strip under a grazing GGX lobe, farther than
+        // the lobe is wide: the corners' quadrature takes it (7.5·10⁻⁵ off, review).
+        let ggx = GgxLobe::new(0.6, 0.02);
+        let inv_m = lookup(&table, 0.6, 0.02).inv_m;
+        let (o, u, v) = (
+            Vec3::new(-0.999_999_94, 0.98, -9.900_001e-5),
+            Vec3::new(0.0, -1.0, 1.000_000_1e-4),
+            Vec3::new(0.0, 0.0, 1e-5),
+        );
+        assert_eq!(thin_parallelogram_ggx_integral(&ggx, inv_m, o, u, v), None, "GGX sweep");
     }
 
     /// A strip seen nearly end-on — its line at height `h` over the horizon, from 1 to 2 ahead —
