@@ -273,13 +273,13 @@ pub fn thin_parallelogram_form_factor(map: Mat3, o: Vec3, u: Vec3, v: Vec3) -> O
     let strip = ThinStrip::new(map, o, u, v)?;
     let (mapped_line, mapped_width) = (map * strip.line, map * strip.width);
     let mapped_o = map * o;
-    // The cosine vanishes on the surface's horizon, which is its own; an LTC does not.
     // How many pieces a cut needs per unit of its reach along the lines: a quarter of the line's
     // distance in the lobe's space each.
     let ratio = width_over_distance(mapped_o + 0.5 * mapped_width, mapped_line, mapped_width);
     let per_reach = mapped_line.length() * ratio / (SWEEP_PER_PIECE * mapped_width.length());
     let mut pieces = WidthPieces::whole();
-    // The lobe's own horizon (for the cosine, the surface's too), then the surface's for an LTC.
+    // The lobe's own horizon, then the surface's for an LTC, which does not vanish there (the
+    // cosine's own horizon is the surface's).
     if !pieces.cut(mapped_o, mapped_line, mapped_width, per_reach)
         || (map != Mat3::IDENTITY && !pieces.cut(o, strip.line, strip.width, per_reach))
     {
