@@ -275,8 +275,7 @@ pub fn thin_parallelogram_form_factor(map: Mat3, o: Vec3, u: Vec3, v: Vec3) -> O
     let mapped_o = map * o;
     // How many pieces a cut needs per unit of its reach along the lines: a quarter of the line's
     // distance in the lobe's space each.
-    let ratio = width_over_distance(mapped_o + 0.5 * mapped_width, mapped_line, mapped_width);
-    let per_reach = mapped_line.length() * ratio / (SWEEP_PER_PIECE * mapped_width.length());
+    let per_reach = mapped_line.length() * strip.ratio / (SWEEP_PER_PIECE * mapped_width.length());
     let mut pieces = WidthPieces::whole();
     // The lobe's own horizon, then the surface's for an LTC, which does not vanish there (the
     // cosine's own horizon is the surface's).
@@ -316,7 +315,7 @@ pub fn thin_parallelogram_ggx_integral(ggx: &GgxLobe, ltc_map: Mat3, o: Vec3, u:
         return None;
     }
     let strip = ThinStrip::new(Mat3::IDENTITY, o, u, v)?;
-    let ratio = width_over_distance(o + 0.5 * strip.width, strip.line, strip.width);
+    let ratio = strip.ratio;
     let mapped_ratio =
         width_over_distance(ltc_map * (o + 0.5 * strip.width), ltc_map * strip.line, ltc_map * strip.width);
     // Narrower than the lobe, directly and as its LTC sees it (which at roughness 0 and grazing
@@ -343,10 +342,13 @@ pub fn thin_parallelogram_ggx_integral(ggx: &GgxLobe, ltc_map: Mat3, o: Vec3, u:
     Some(if integral.is_finite() && integral > 0.0 { integral } else { 0.0 })
 }
 
-/// A parallelogram's two edges as a strip: the one it runs along and its width.
+/// A parallelogram's two edges as a strip: the one it runs along and its width, with the
+/// width over the distance of the line through the width's middle in the space it was found
+/// thin in ([`width_over_distance`], below [`THIN`]).
 struct ThinStrip {
     line: Vec3,
     width: Vec3,
+    ratio: f32,
 }
 
 impl ThinStrip {
@@ -357,12 +359,12 @@ impl ThinStrip {
         let (mapped_o, mapped_u, mapped_v) = (map * o, map * u, map * v);
         let along_u = width_over_distance(mapped_o + 0.5 * mapped_v, mapped_u, mapped_v);
         let along_v = width_over_distance(mapped_o + 0.5 * mapped_u, mapped_v, mapped_u);
-        let (strip, ratio) = if along_u <= along_v {
-            (Self { line: u, width: v }, along_u)
+        let strip = if along_u <= along_v {
+            Self { line: u, width: v, ratio: along_u }
         } else {
-            (Self { line: v, width: u }, along_v)
+            Self { line: v, width: u, ratio: along_v }
         };
-        if ratio.is_nan() || ratio >= THIN {
+        if strip.ratio.is_nan() || strip.ratio >= THIN {
             None
         } else {
             Some(strip)
