@@ -310,9 +310,10 @@ pub fn check_shade_inputs(
     check_shade_streams(params, data, rays, hits)
 }
 
-/// The checks of [`check_shade_inputs`] after the data's own: the streams, one hit per ray, dense
-/// rays, then [`check_shade_params`]. For callers that have checked `data` already (a lit frame
-/// checks the camera streams a backend returned before resolving its G-buffer).
+/// The checks of [`check_shade_inputs`] after the data's own: the streams, one hit per ray,
+/// [`check_shade_params`] (cheap, and the more basic fault), then dense rays. For callers that
+/// have checked `data` already (a lit frame checks the camera streams a backend returned before
+/// resolving its G-buffer).
 pub(crate) fn check_shade_streams(
     params: &ShadeParams,
     data: &ShadeData,
@@ -321,21 +322,23 @@ pub(crate) fn check_shade_streams(
 ) -> Result<()> {
     rays.check("shade")?;
     hits.check("shade")?;
-    let reason = if rays.len() != hits.len() {
-        Some(format!("{} rays but {} hits", rays.len(), hits.len()))
-    } else {
-        rays.pixel.par_iter().enumerate().position_first(|(i, &pixel)| pixel as usize != i).map(|i| {
-            format!(
-                "rays.pixel[{i}] = {}: the stage takes dense streams, ray i for pixel i as generate writes them \
-                 (a compacted stream would shade its samples for the wrong pixels)",
-                rays.pixel[i]
-            )
-        })
-    };
-    match reason {
-        Some(reason) => Err(crate::error::Error::InvalidParameter { name: "shade", reason }),
-        None => check_shade_params(params, data, hits.len()),
+    if rays.len() != hits.len() {
+        return Err(shade_stream_error(format!("{} rays but {} hits", rays.len(), hits.len())));
     }
+    check_shade_params(params, data, hits.len())?;
+    match rays.pixel.par_iter().enumerate().position_first(|(i, &pixel)| pixel as usize != i) {
+        Some(i) => Err(shade_stream_error(format!(
+            "rays.pixel[{i}] = {}: the stage takes dense streams, ray i for pixel i as generate writes them \
+             (a compacted stream would shade its samples for the wrong pixels)",
+            rays.pixel[i]
+        ))),
+        None => Ok(()),
+    }
+}
+
+/// The shade stage's error for streams it cannot take, for `reason`.
+fn shade_stream_error(reason: String) -> crate::error::Error {
+    crate::error::Error::InvalidParameter { name: "shade", reason }
 }
 
 /// The checks of [`check_shade_inputs`] that need no streams, for a dense pass of `count` camera

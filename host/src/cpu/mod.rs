@@ -553,7 +553,8 @@ mod tests {
 
     /// The shade stage shades ray `i` as pixel `i` and reads no `pixel` field: a compacted stream
     /// (rays dropped before shading) or a reordered one is refused naming the first ray out of
-    /// place. Both had been shaded with `Ok`, each sample drawn for the wrong pixel.
+    /// place. Both had been shaded with `Ok`, each sample drawn for the wrong pixel. A compacted
+    /// stream that also keeps the frame's `params.count` is refused for the count.
     #[test]
     fn a_compacted_or_reordered_ray_stream_is_refused_by_shade() {
         let (mut cpu, data, frame, shade_params) = shade_fixture();
@@ -583,5 +584,9 @@ mod tests {
         swapped.pixel.swap(3, 4);
         let reason = refused(&swapped, hits);
         assert!(reason.contains("rays.pixel[3] = 4"), "{reason}");
+        // With `params.count` still the full frame's, the count — the more basic fault, checked
+        // in constant time — is the one named.
+        let reason = shade_refusal(cpu.shade(&shade_params, &data, &compacted, &compacted_hits));
+        assert!(reason.contains(&format!("params.count = {} but {} rays", rays.len(), kept.len())), "{reason}");
     }
 }
