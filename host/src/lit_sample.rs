@@ -16,7 +16,7 @@ use glam::Vec4;
 use raywave_shared::{GenerateParams, ShadeParams};
 
 /// What one lit sample is asked for.
-#[derive(Clone, Copy)]
+#[derive(Clone, Copy, Debug)]
 pub struct LitSampleRequest<'a> {
     /// The camera rays: the generate stage's parameters (dense, one ray per pixel).
     pub generate: &'a GenerateParams,

@@ -60,6 +60,26 @@ pub struct ShadeData {
     scene: SceneIdentity,
 }
 
+/// The scene, the switch and each buffer's length — not the contents: the LTC table alone is
+/// 192 KiB and a large scene's triangles many MiB, which a log line or a failed assertion would
+/// otherwise print whole.
+impl std::fmt::Debug for ShadeData {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ShadeData")
+            .field("scene", &self.scene)
+            .field("serial", &self.serial)
+            .field("materials", &self.materials.len())
+            .field("lights", &self.lights.len())
+            .field("light_nodes", &self.light_nodes.len())
+            .field("light_trails", &self.light_trails.len())
+            .field("ltc_entries", &self.ltc.len())
+            .field("triangles", &(self.triangles.len() / 3))
+            .field("instances", &self.first_triangle.len())
+            .field("analytic_residual", &self.analytic_residual)
+            .finish()
+    }
+}
+
 /// What identifies the contents of a [`ShadeData`] for a backend's upload cache: a number unique
 /// to the value, and the address and length of each of its buffers.
 #[derive(Copy, Clone, Debug, PartialEq, Eq)]
@@ -583,6 +603,23 @@ mod tests {
         let before = b.identity();
         b.lights.clear();
         assert_ne!(before, b.identity(), "a buffer's length changed");
+    }
+
+    /// `ShadeData`'s `Debug` (and so a `LitSampleRequest`'s) gives the buffers' lengths on one
+    /// short line, not their contents.
+    #[test]
+    fn shade_data_debugs_as_its_buffer_lengths() {
+        let scene = Scene::load("builtin:cornell-light-grid").unwrap();
+        let data = ShadeData::new(&scene).unwrap();
+        let text = format!("{data:?}");
+        let lengths = format!(
+            "lights: {}, light_nodes: {}, light_trails: {}, ltc_entries: {LTC_TABLE_LEN}, triangles: {}",
+            data.lights.len(),
+            data.light_nodes.len(),
+            data.light_trails.len(),
+            scene.triangle_count()
+        );
+        assert!(text.contains(&lengths) && text.len() < 1024, "{text}");
     }
 
     #[test]
