@@ -305,18 +305,24 @@ pub fn parallelogram_form_factors(
     edge_v: Vec3,
 ) -> (f32, f32) {
     let (o, u, v) = (frame.to_local(corner - p), frame.to_local(edge_u), frame.to_local(edge_v));
-    let thin = |map: Mat3| thin_parallelogram_form_factor(map, o, u, v);
-    let lobes = match ggx {
-        Some(ggx) => ThinLobes {
-            diffuse: thin(Mat3::IDENTITY),
-            residual: thin_parallelogram_ggx_integral(&ggx, lobe.inv_m, o, u, v),
-            ..ThinLobes::NONE
-        },
-        None => ThinLobes {
-            diffuse: thin(Mat3::IDENTITY),
-            first: thin(lobe.inv_m),
-            second: thin(lobe.inv_m_2),
-            residual: None,
+    // The cosine's map, then the two LTCs' where no GGX lobe stands in for them. One call in a
+    // loop rather than one per lobe: the thin path is then in the kernel once, not three times
+    // (SPIR-V inlines every call, and lavapipe's compile time grows with the copies).
+    let maps = [Mat3::IDENTITY, lobe.inv_m, lobe.inv_m_2];
+    let map_count = if ggx.is_some() { 1 } else { maps.len() };
+    let mut thin = [None; 3];
+    let mut i = 0;
+    while i < map_count {
+        thin[i] = thin_parallelogram_form_factor(maps[i], o, u, v);
+        i += 1;
+    }
+    let lobes = ThinLobes {
+        diffuse: thin[0],
+        first: thin[1],
+        second: thin[2],
+        residual: match ggx {
+            Some(ggx) => thin_parallelogram_ggx_integral(&ggx, lobe.inv_m, o, u, v),
+            None => None,
         },
     };
     if let Some(both) = lobes.all(lobe, ggx.is_some()) {
@@ -373,16 +379,19 @@ fn corners_form_factors(lobe: &LtcLobe, ggx: Option<GgxLobe>, above: &Polygon, t
             },
         ),
         None => {
-            let (inv_m, inv_m_2) = (lobe.inv_m, lobe.inv_m_2);
-            let first = match thin.first {
-                Some(thin) => thin,
-                None => above.map(|q| inv_m * q).form_factor(),
-            };
-            let second = match thin.second {
-                Some(thin) => thin,
-                None => above.map(|q| inv_m_2 * q).form_factor(),
-            };
-            mixed(lobe, first, second)
+            // Both LTCs by one call in a loop, as in `parallelogram_form_factors`.
+            let (maps, thin) = ([lobe.inv_m, lobe.inv_m_2], [thin.first, thin.second]);
+            let mut form_factors = [0.0; 2];
+            let mut i = 0;
+            while i < maps.len() {
+                let map = maps[i];
+                form_factors[i] = match thin[i] {
+                    Some(thin) => thin,
+                    None => above.map(|q| map * q).form_factor(),
+                };
+                i += 1;
+            }
+            mixed(lobe, form_factors[0], form_factors[1])
         }
     };
     (diffuse, specular)
