@@ -292,6 +292,8 @@ pub fn occlusion_miss(#[spirv(incoming_ray_payload)] payload: &mut u32) {
 /// Entry point of the shade stage: resolves each camera ray's hit into a surface and shades one
 /// sample of it (see `crate::shade::stage`). Bindings: the ray directions, the hit stream, the
 /// scene's triangles and materials, the lights and their BVH, the LTC table, then the outputs.
+/// Specialization constant 0 ([`raywave_shared::bindings::shade::RESIDUAL_CODE_SPEC_ID`]): 0
+/// builds the stage without the residual towards GGX.
 #[spirv(compute(threads(64)))]
 #[allow(clippy::too_many_arguments)]
 pub fn shade(
@@ -315,9 +317,14 @@ pub fn shade(
     #[spirv(storage_buffer, descriptor_set = 0, binding = 15)] shadow_origin: &mut [Vec4],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 16)] shadow_direction: &mut [Vec4],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 17)] replaced: &mut [u32],
+    #[spirv(spec_constant(id = 0, default = 1))] residual_code: u32,
 ) {
     let i = stream_index(global_id);
     if i < params.count {
+        // Specialized to 0 (`RESIDUAL_CODE_SPEC_ID`), the residual's flag is a constant 0 and the
+        // driver drops its code.
+        let residual = if residual_code != 0 { params.analytic_residual } else { 0 };
+        let params = &raywave_shared::ShadeParams { analytic_residual: residual, ..*params };
         let k = i as usize;
         let direction = glam::Vec4Swizzles::xyz(ray_direction[k]);
         let surface = crate::shade::stage::resolve_surface(

@@ -121,6 +121,13 @@ pub mod shade {
     /// Output: the count of samples in which the stage replaced a non-finite value (one `u32`, as
     /// [`super::trace::REPLACED`]).
     pub const REPLACED: u32 = 17;
+    /// Specialization constant (`u32`, default 1): 0 compiles the stage without the residual
+    /// towards GGX (`ShadeParams::analytic_residual` then reads as 0), 1 with it. The residual's
+    /// slope-space quadrature and thin-strip lines are half the kernel's code; a pipeline
+    /// specialized to 0 leaves them to the driver's dead-code elimination, so passes without the
+    /// residual neither compile them (lavapipe: 28 s → 16 s at the first dispatch) nor allocate registers
+    /// for them.
+    pub const RESIDUAL_CODE_SPEC_ID: u32 = 0;
 }
 
 /// The most storage buffers one pass binds — the shade stage's, [`shade::REPLACED`] + 1 — which a

@@ -27,15 +27,37 @@ impl ComputeKernel {
         push_constant_bytes: u32,
         workgroup_size: u32,
     ) -> Result<Self> {
+        Self::specialized(core, entry, bindings, push_constant_bytes, workgroup_size, &[])
+    }
+
+    /// [`Self::new`] with the `u32` specialization constants `constants` (id, value) set.
+    pub fn specialized(
+        core: &Arc<Core>,
+        entry: &'static str,
+        bindings: &[(u32, vk::DescriptorType)],
+        push_constant_bytes: u32,
+        workgroup_size: u32,
+        constants: &[(u32, u32)],
+    ) -> Result<Self> {
         // Before anything is created, so that this error leaks nothing.
         let name = std::ffi::CString::new(entry).map_err(|_| Error::InvalidParameter {
             name: "entry",
             reason: format!("entry point name {entry:?} holds a NUL byte"),
         })?;
+        let entries: Vec<vk::SpecializationMapEntry> = (0u32..)
+            .zip(constants)
+            .map(|(k, &(id, _))| vk::SpecializationMapEntry::default().constant_id(id).offset(4 * k).size(4))
+            .collect();
+        let values: Vec<u32> = constants.iter().map(|&(_, value)| value).collect();
+        let specialization =
+            vk::SpecializationInfo::default().map_entries(&entries).data(bytemuck::cast_slice(&values));
         let stages = vk::ShaderStageFlags::COMPUTE;
         let mut pass = Pass::new(core, entry, vk::PipelineBindPoint::COMPUTE, stages, bindings, push_constant_bytes)?;
         let module = pass.shader_module(entry, Some(workgroup_size))?;
-        let stage = vk::PipelineShaderStageCreateInfo::default().stage(stages).module(module).name(&name);
+        let mut stage = vk::PipelineShaderStageCreateInfo::default().stage(stages).module(module).name(&name);
+        if !constants.is_empty() {
+            stage = stage.specialization_info(&specialization);
+        }
         // SAFETY: the create info borrows live locals; the module is destroyed after creation.
         let created = unsafe {
             let created = core.device.create_compute_pipelines(

@@ -104,6 +104,30 @@ mod tests {
         assert_eq!(with_local_size_x_from(&patched, entry, 256, WORKGROUP_SIZE), compiled);
     }
 
+    /// The shade module declares the switch [`super::super::backend`] builds its pipelines with:
+    /// a `u32` specialization constant of id `RESIDUAL_CODE_SPEC_ID` and default 1 (the residual
+    /// kept, as `ShadeParams::analytic_residual` asks). Vulkan sets only the constants a module
+    /// declares, so an id out of step would go unnoticed, and every pass would compile the
+    /// residual's code.
+    #[test]
+    fn the_shade_module_declares_its_residual_switch() {
+        use raywave_shared::bindings::shade::RESIDUAL_CODE_SPEC_ID;
+        let module = rspirv::dr::load_words(words("entry::shade", None).expect("embedded")).expect("parses");
+        let spec_ids: Vec<(Operand, Operand)> = module
+            .annotations
+            .iter()
+            .filter(|i| i.class.opcode == Op::Decorate && i.operands[1] == Operand::Decoration(Decoration::SpecId))
+            .map(|i| (i.operands[0].clone(), i.operands[2].clone()))
+            .collect();
+        let [(Operand::IdRef(constant), id)] = spec_ids.as_slice() else { panic!("one SpecId: {spec_ids:?}") };
+        assert_eq!(*id, Operand::LiteralBit32(RESIDUAL_CODE_SPEC_ID));
+        let declared = module.types_global_values.iter().find(|i| i.result_id == Some(*constant)).expect("declared");
+        assert_eq!(
+            (declared.class.opcode, declared.operands.as_slice()),
+            (Op::SpecConstant, &[Operand::LiteralBit32(1)][..])
+        );
+    }
+
     #[test]
     fn a_module_without_the_compiled_local_size_is_refused() {
         // A ray-generation shader has no LocalSize.
