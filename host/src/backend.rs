@@ -291,13 +291,14 @@ pub fn copy_probe_len(params: &DenoiseParams, image: &[Vec4]) -> Result<u32> {
 /// Checks the inputs of the shade stage every backend shares, for an engine's own [`Backend`]
 /// too: `data` built from `loaded`, the scene the backend has loaded, if any
 /// ([`ShadeData::check_scene`]), the data itself ([`ShadeData::check`]), streams whose fields
-/// agree in length, one hit per ray, dense rays (`rays.pixel[i] = i`: the stage shades
-/// invocation `i` as pixel `(i mod width, i div width)` and ignores the field), then
-/// [`check_shade_params`]: `params.count` rays, a width ≥ 1, light and node counts within the
-/// data's buffers (a count past its buffer was clamped to it by the kernels — on the CPU to the
-/// slice, on Vulkan to the buffer, which holds one zeroed element where the slice is empty — so
-/// the backends would have shaded different light sets), and a sampler of a known kind that gives the sample its own point in every pixel
-/// ([`SamplerParams::indexes`]). Errors name the stage (`shade`) and the field at fault.
+/// agree in length, one hit per ray, [`check_shade_params`] — `params.count` rays, a width ≥ 1,
+/// light and node counts within the data's buffers (a count past its buffer was clamped to it by
+/// the kernels — on the CPU to the slice, on Vulkan to the buffer, which holds one zeroed element
+/// where the slice is empty — so the backends would have shaded different light sets), and a
+/// sampler of a known kind that gives the sample its own point in every pixel
+/// ([`SamplerParams::indexes`]) —, then dense rays (`rays.pixel[i] = i`: the stage shades
+/// invocation `i` as pixel `(i mod width, i div width)` and ignores the field). Errors name the
+/// stage (`shade`) and the field at fault.
 pub fn check_shade_inputs(
     params: &ShadeParams,
     data: &ShadeData,

@@ -60,7 +60,7 @@ pub struct ShadeData {
     scene: SceneIdentity,
 }
 
-/// The scene, the switch and each buffer's length — not the contents: the LTC table alone is
+/// The scene, the switch and each buffer's length (in elements) — not the contents: the LTC table alone is
 /// 192 KiB and a large scene's triangles many MiB, which a log line or a failed assertion would
 /// otherwise print whole.
 impl std::fmt::Debug for ShadeData {
@@ -73,8 +73,8 @@ impl std::fmt::Debug for ShadeData {
             .field("light_nodes", &self.light_nodes.len())
             .field("light_trails", &self.light_trails.len())
             .field("ltc_entries", &self.ltc.len())
-            .field("triangles", &(self.triangles.len() / 3))
-            .field("instances", &self.first_triangle.len())
+            .field("triangle_vertices", &self.triangles.len())
+            .field("first_triangle", &self.first_triangle.len())
             .field("analytic_residual", &self.analytic_residual)
             .finish()
     }
@@ -613,11 +613,13 @@ mod tests {
         let data = ShadeData::new(&scene).unwrap();
         let text = format!("{data:?}");
         let lengths = format!(
-            "lights: {}, light_nodes: {}, light_trails: {}, ltc_entries: {LTC_TABLE_LEN}, triangles: {}",
+            "lights: {}, light_nodes: {}, light_trails: {}, ltc_entries: {LTC_TABLE_LEN}, triangle_vertices: {}, \
+             first_triangle: {}",
             data.lights.len(),
             data.light_nodes.len(),
             data.light_trails.len(),
-            scene.triangle_count()
+            3 * scene.triangle_count(),
+            scene.meshes().len()
         );
         assert!(text.contains(&lengths) && text.len() < 1024, "{text}");
     }

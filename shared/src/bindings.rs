@@ -125,8 +125,9 @@ pub mod shade {
     /// towards GGX (`ShadeParams::analytic_residual` then reads as 0), 1 with it. The residual's
     /// slope-space quadrature and thin-strip lines are half the kernel's code; a pipeline
     /// specialized to 0 leaves them to the driver's dead-code elimination, so passes without the
-    /// residual neither compile them (lavapipe: 28 s → 16 s at the first dispatch) nor allocate registers
-    /// for them.
+    /// residual do not compile them (the README's Shading section measures lavapipe's compile
+    /// time) and may need fewer registers. A pipeline built with 0 ignores the flag: an engine
+    /// that sets it for some passes needs a pipeline of each.
     pub const RESIDUAL_CODE_SPEC_ID: u32 = 0;
 }
 

@@ -294,8 +294,8 @@ const SHADE_BINDINGS: [u32; 18] = [
 /// The shade stage's pipelines, both of `entry::shade`: without the residual towards GGX (its
 /// specialization constant [`bindings::shade::RESIDUAL_CODE_SPEC_ID`] 0), which passes without
 /// `ShadeParams::analytic_residual` run, and with it, built at the first pass that asks for it.
-/// The residual is half the kernel's code: specialized away, the driver neither compiles it
-/// (lavapipe: 16 s instead of 28 s at the first dispatch) nor allocates registers for it.
+/// The residual is half the kernel's code: specialized away, the driver does not compile it
+/// (README, Shading: lavapipe's compile time) and may need fewer registers.
 struct ShadeKernels {
     without_residual: ComputeKernel,
     with_residual: Option<ComputeKernel>,
@@ -333,9 +333,11 @@ impl ShadeKernels {
 }
 
 impl VulkanBackend {
-    /// Opens Vulkan device `index` and builds its pipelines. `trace` picks the trace method;
-    /// `None` takes ray query where the device has it, else the ray-tracing pipeline, else
-    /// software traversal. A method the device lacks is [`Error::MissingFeatures`].
+    /// Opens Vulkan device `index` and builds its pipelines (but the shade stage's with the
+    /// residual towards GGX, built at the first pass that asks for it: `ShadeKernels`). `trace`
+    /// picks the trace method; `None` takes ray query where the device has it, else the
+    /// ray-tracing pipeline, else software traversal. A method the device lacks is
+    /// [`Error::MissingFeatures`].
     pub fn open(index: usize, options: &ContextOptions, trace: Option<TraceMethod>) -> Result<Self> {
         let core = open(index, options)?;
         // Declared after `core`, so released before a failed open drops it.
@@ -707,6 +709,9 @@ impl Backend for VulkanBackend {
         request.data.check_scene(Some(identity))?;
         request.data.check()?;
         check_shade_params(request.shade, request.data, request.generate.ray_count() as usize)?;
+        // The shade pipeline the pass needs, built (the residual's, at its first pass) before
+        // any work, so that a failure to build it leaves none done.
+        self.shade_kernels.for_params(&self.core, request.shade)?;
         let (rays, generate_time) = self.generate_on_device(request.generate)?;
         let (hits, trace_time) = self.trace_on_device(scene, &rays.paths)?;
         let data = load_shade_data(&self.core, &mut self.shade_data, request.data)?;

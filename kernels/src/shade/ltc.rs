@@ -380,13 +380,13 @@ fn corners_form_factors(lobe: &LtcLobe, ggx: Option<GgxLobe>, above: &Polygon, t
         ),
         None => {
             // Both LTCs by one call in a loop, as in `parallelogram_form_factors`.
-            let (maps, thin) = ([lobe.inv_m, lobe.inv_m_2], [thin.first, thin.second]);
+            let (maps, thin_ltcs) = ([lobe.inv_m, lobe.inv_m_2], [thin.first, thin.second]);
             let mut form_factors = [0.0; 2];
             let mut i = 0;
             while i < maps.len() {
                 let map = maps[i];
-                form_factors[i] = match thin[i] {
-                    Some(thin) => thin,
+                form_factors[i] = match thin_ltcs[i] {
+                    Some(form_factor) => form_factor,
                     None => above.map(|q| map * q).form_factor(),
                 };
                 i += 1;
