@@ -48,7 +48,7 @@ use crate::offset::{offset_ray_origin, ray_stop_before, triangle_extent};
 use crate::sampling::light_select::{luminance, quad_faces, LightSet};
 use crate::sampling::{dims, sampler, warp};
 use crate::sanitized::Sanitized;
-use glam::{UVec2, Vec3, Vec4, Vec4Swizzles};
+use glam::{UVec2, Vec2, Vec3, Vec4, Vec4Swizzles};
 use raywave_shared::stream::NO_HIT;
 use raywave_shared::{Light, MaterialParams, ShadeParams};
 
@@ -280,9 +280,15 @@ pub fn shade_sample(
     let emitted = if emits { material.emission_metallic.xyz().extend(0.0) } else { Vec4::ZERO };
 
     // One light for the stochastic sample of U_N and S_N.
-    let strategy = sampler::sample_2d(&params.sampler, pixel, params.sample_index, dims::SHADE_STRATEGY);
-    let u_select = sampler::sample_1d(&params.sampler, pixel, params.sample_index, dims::SHADE_LIGHT_SELECT);
-    let u = sampler::sample_2d(&params.sampler, pixel, params.sample_index, dims::SHADE_DIRECTION);
+    // The three slots by one call in a loop, so that the kernel holds the sampler's code once.
+    let slots = [dims::SHADE_STRATEGY, dims::SHADE_LIGHT_SELECT, dims::SHADE_DIRECTION];
+    let mut drawn = [Vec2::ZERO; 3];
+    let mut slot = 0;
+    while slot < slots.len() {
+        drawn[slot] = sampler::sample_2d(&params.sampler, pixel, params.sample_index, slots[slot]);
+        slot += 1;
+    }
+    let (strategy, u_select, u) = (drawn[0], drawn[1].x, drawn[2]);
     let choice = scene.lights.select(p, n, u_select);
 
     // U: every light, analytically, keeping the chosen light's hit probabilities for the MIS.
