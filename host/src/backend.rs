@@ -324,11 +324,11 @@ pub(crate) fn check_shade_streams(
     rays.check("shade")?;
     hits.check("shade")?;
     if rays.len() != hits.len() {
-        return Err(shade_stream_error(format!("{} rays but {} hits", rays.len(), hits.len())));
+        return Err(shade_error(format!("{} rays but {} hits", rays.len(), hits.len())));
     }
     check_shade_params(params, data, hits.len())?;
     match rays.pixel.par_iter().enumerate().position_first(|(i, &pixel)| pixel as usize != i) {
-        Some(i) => Err(shade_stream_error(format!(
+        Some(i) => Err(shade_error(format!(
             "rays.pixel[{i}] = {}: the stage takes dense streams, ray i for pixel i as generate writes them \
              (a compacted stream would shade its samples for the wrong pixels)",
             rays.pixel[i]
@@ -337,8 +337,8 @@ pub(crate) fn check_shade_streams(
     }
 }
 
-/// The shade stage's error for streams it cannot take, for `reason`.
-fn shade_stream_error(reason: String) -> crate::error::Error {
+/// The shade stage's refusal of its inputs, for `reason`.
+fn shade_error(reason: String) -> crate::error::Error {
     crate::error::Error::InvalidParameter { name: "shade", reason }
 }
 
@@ -366,7 +366,7 @@ pub fn check_shade_params(params: &ShadeParams, data: &ShadeData, count: usize) 
         None
     };
     match reason {
-        Some(reason) => Err(crate::error::Error::InvalidParameter { name: "shade", reason }),
+        Some(reason) => Err(shade_error(reason)),
         // Invocation i shades pixel (i mod width, i div width).
         None => {
             let height = params.count.div_ceil(params.width);
