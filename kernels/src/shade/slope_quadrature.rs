@@ -358,6 +358,10 @@ fn radial_integral(edges: &Edges, ggx: &GgxLobe, phi: f32) -> f32 {
 /// wraps to the first break), else from the first break to the last. With `one_sided_ends`, `f`
 /// may jump at the breaks ([`CENTRE_ON_EDGE`]). Also the rule along a thin strip's line
 /// ([`super::thin_strip`]).
+///
+/// `f` is called from two places, the gaps' middles and the pieces' pending abscissae: rust-gpu
+/// inlines a closure at each of its call sites, and with one call per abscissa the shade module
+/// held eight copies of the radial integral and eight of a strip line's integrand.
 pub(crate) fn adaptive_integral<const N: usize>(
     breaks: &[f32; N],
     count: usize,
@@ -365,23 +369,32 @@ pub(crate) fn adaptive_integral<const N: usize>(
     one_sided_ends: bool,
     f: impl Fn(f32) -> f32,
 ) -> f32 {
-    // Each piece keeps its 5 equally spaced azimuths and their values.
-    let mut xs = [[0.0f32; 5]; MAX_PIECES];
-    let mut ys = [[0.0f32; 5]; MAX_PIECES];
-    let mut pieces = 0usize;
-    // The last piece's end and its value, shared with the next piece where they meet.
-    let (mut shared_x, mut shared_y) = (f32::NAN, 0.0f32);
     // (`saturating_sub` is not in rust-gpu.)
     let gaps = if around || count == 0 { count } else { count - 1 };
+    // Without a corner or tangency inside, a gap's rays all meet the light or none does: one
+    // ray at its middle tells, and empty gaps (most of the circle for a light off the lobe's
+    // centre) cost nothing more.
+    let mut middles = [0.0f32; N];
     let mut i = 0usize;
     while i < gaps {
-        let lo = breaks[i];
-        let hi = if i + 1 < count { breaks[i + 1] } else { breaks[0] + TAU };
-        // Without a corner or tangency inside, a gap's rays all meet the light or none does: one
-        // ray at its middle tells, and empty gaps (most of the circle for a light off the
-        // lobe's centre) cost nothing more.
-        let middle = if hi > lo { f(0.5 * (lo + hi)) } else { 0.0 };
-        if middle > 0.0 {
+        let (lo, hi) = gap(breaks, count, i);
+        middles[i] = if hi > lo { f(0.5 * (lo + hi)) } else { 0.0 };
+        i += 1;
+    }
+    // Each piece keeps its 5 equally spaced azimuths and their values. A slot whose bit is set in
+    // the piece's `pending` mask holds the abscissa `f` is still to be evaluated at (a gap's end
+    // nudged inside it with one-sided ends), and [`SHARES_START`] marks a piece whose first value
+    // is the previous piece's last.
+    let mut xs = [[0.0f32; 5]; MAX_PIECES];
+    let mut ys = [[0.0f32; 5]; MAX_PIECES];
+    let mut pending = [0u32; MAX_PIECES];
+    let mut pieces = 0usize;
+    // The last piece's end, shared with the next piece where they meet.
+    let mut shared_x = f32::NAN;
+    let mut i = 0usize;
+    while i < gaps {
+        let (lo, hi) = gap(breaks, count, i);
+        if middles[i] > 0.0 {
             let parts = ((hi - lo) / MAX_PIECE).ceil().max(1.0) as u32;
             let width = (hi - lo) / parts as f32;
             // Where the integral may jump at the breaks, each gap's ends take its limits from
@@ -391,14 +404,16 @@ pub(crate) fn adaptive_integral<const N: usize>(
             while p < parts && pieces < MAX_PIECES {
                 let start = lo + width * p as f32;
                 let x = [start, start + 0.25 * width, start + 0.5 * width, start + 0.75 * width, start + width];
-                let last = p + 1 == parts;
-                let y0 = if x[0] == shared_x { shared_y } else { f(if p == 0 { lo + nudge } else { x[0] }) };
-                let y2 = if parts == 1 { middle } else { f(x[2]) };
-                let y4 = f(if last && one_sided_ends { hi - nudge } else { x[4] });
+                let nudged_end = p + 1 == parts && one_sided_ends;
+                let first = if p == 0 { lo + nudge } else { x[0] };
+                let last = if nudged_end { hi - nudge } else { x[4] };
+                // Slots 1, 3 and 4 are new; 0 unless shared, 2 unless it is the gap's middle.
+                let start_bit = if x[0] == shared_x { SHARES_START } else { 1 };
+                let (middle, middle_bit) = if parts == 1 { (middles[i], 0) } else { (x[2], 1 << 2) };
                 xs[pieces] = x;
-                ys[pieces] = [y0, f(x[1]), y2, f(x[3]), y4];
-                shared_x = if last && one_sided_ends { f32::NAN } else { x[4] };
-                shared_y = y4;
+                ys[pieces] = [first, x[1], middle, x[3], last];
+                pending[pieces] = start_bit | 1 << 1 | middle_bit | 1 << 3 | 1 << 4;
+                shared_x = if nudged_end { f32::NAN } else { x[4] };
                 pieces += 1;
                 p += 1;
             }
@@ -407,12 +422,27 @@ pub(crate) fn adaptive_integral<const N: usize>(
     }
     // Each piece's Simpson value and error estimate, updated only where a piece changes.
     let mut estimates = [(0.0f32, 0.0f32); MAX_PIECES];
-    let mut i = 0usize;
-    while i < pieces {
-        estimates[i] = simpson(&xs[i], &ys[i]);
-        i += 1;
-    }
     loop {
+        // The pending values, in piece order so that a shared start finds its predecessor's end.
+        let mut i = 0usize;
+        while i < pieces {
+            let mask = pending[i];
+            if mask != 0 {
+                let mut k = 0usize;
+                while k < 5 {
+                    if mask & (1 << k) != 0 {
+                        ys[i][k] = f(ys[i][k]);
+                    }
+                    k += 1;
+                }
+                if mask & SHARES_START != 0 {
+                    ys[i][0] = ys[i - 1][4];
+                }
+                estimates[i] = simpson(&xs[i], &ys[i]);
+                pending[i] = 0;
+            }
+            i += 1;
+        }
         let (mut total, mut error, mut worst, mut worst_error) = (0.0f32, 0.0f32, 0usize, -1.0f32);
         let mut i = 0usize;
         while i < pieces {
@@ -438,12 +468,23 @@ pub(crate) fn adaptive_integral<const N: usize>(
             let ([a, m, b], [fa, fm, fb]) = (halves[h], values[h]);
             let (q1, q3) = (0.5 * (a + m), 0.5 * (m + b));
             xs[slots[h]] = [a, q1, m, q3, b];
-            ys[slots[h]] = [fa, f(q1), fm, f(q3), fb];
-            estimates[slots[h]] = simpson(&xs[slots[h]], &ys[slots[h]]);
+            ys[slots[h]] = [fa, q1, fm, q3, fb];
+            pending[slots[h]] = 1 << 1 | 1 << 3;
             h += 1;
         }
         pieces += 1;
     }
+}
+
+/// A piece of [`adaptive_integral`] whose first value is the previous piece's last (bits 0–4 of
+/// its pending mask are its slots).
+const SHARES_START: u32 = 1 << 5;
+
+/// Gap `i` of [`adaptive_integral`]'s sorted `breaks[..count]`: from break `i` to the next, the
+/// last one wrapping a turn on to the first.
+fn gap<const N: usize>(breaks: &[f32; N], count: usize, i: usize) -> (f32, f32) {
+    let hi = if i + 1 < count { breaks[i + 1] } else { breaks[0] + TAU };
+    (breaks[i], hi)
 }
 
 /// A piece's composite Simpson value on its 5 azimuths and the difference from the 3-point
