@@ -123,7 +123,7 @@ pub mod shade {
     pub const REPLACED: u32 = 17;
     /// Specialization constant (`u32`, default 1): 0 compiles the stage without the residual
     /// towards GGX (`ShadeParams::analytic_residual` then reads as 0), 1 with it. The residual's
-    /// slope-space quadrature and thin-strip lines are a third of the kernel's code; a pipeline
+    /// slope-space quadrature and thin-strip lines are two fifths of the kernel's code; a pipeline
     /// specialized to 0 leaves them to the driver's dead-code elimination, so passes without the
     /// residual do not compile them (the README's Shading section measures lavapipe's compile
     /// time) and may need fewer registers. A pipeline built with 0 ignores the flag: an engine

@@ -338,15 +338,10 @@ pub fn quad_lights_nothing(light: &Light, p: Vec3, n: Vec3) -> bool {
 /// [`light_bounds`], and 0 where the shade stage's `U` is 0 for a quad ([`quad_lights_nothing`]).
 /// What the linear scan weighs each light by, and the BVH each leaf.
 pub fn light_importance(light: &Light, p: Vec3, n: Vec3) -> f32 {
-    light_importance_in(light, &light_bounds(light), p, n)
-}
-
-/// [`light_importance`] with the light's bounds at hand (a BVH leaf's).
-fn light_importance_in(light: &Light, bounds: &LightBounds, p: Vec3, n: Vec3) -> f32 {
     if quad_lights_nothing(light, p, n) {
         0.0
     } else {
-        importance(bounds, p, n)
+        importance(&light_bounds(light), p, n)
     }
 }
 
@@ -365,17 +360,18 @@ fn light_importance_in(light: &Light, bounds: &LightBounds, p: Vec3, n: Vec3) ->
 /// [`importance`] of its bounds.
 fn node_importance(set: &LightSet, node: &LightBvhNode, p: Vec3, n: Vec3) -> f32 {
     let bounds = &node.bounds;
-    if node.is_leaf != 0 {
-        if node.child_or_light < set.light_count() {
-            return light_importance_in(&set.lights[node.child_or_light as usize], bounds, p, n);
-        }
+    let lights_nothing = if node.is_leaf != 0 {
+        node.child_or_light < set.light_count() && quad_lights_nothing(&set.lights[node.child_or_light as usize], p, n)
     } else {
         let centre = (bounds.min.truncate() + bounds.max.truncate()) * 0.5;
-        if (p - centre).length_squared() <= bounds.max.w * bounds.max.w && out_of_reach(bounds, p, n) {
-            return 0.0;
-        }
+        (p - centre).length_squared() <= bounds.max.w * bounds.max.w && out_of_reach(bounds, p, n)
+    };
+    // One call of `importance` for every kind of node: rust-gpu inlines each call site.
+    if lights_nothing {
+        0.0
+    } else {
+        importance(bounds, p, n)
     }
-    importance(bounds, p, n)
 }
 
 /// Whether no light inside the box of `bounds` can light `p` (surface normal `n`, need not be
@@ -455,24 +451,34 @@ fn scan_select(lights: &[Light], count: u32, p: Vec3, n: Vec3, u: f32) -> LightC
         // or the uniform fallback's 1 when `I` = 0 — without evaluating `I` twice per sample.
         return LightChoice { index: 0, pmf: 1.0 };
     }
-    let total = total_importance(lights, count, p, n);
-    if total.is_nan() || total <= 0.0 {
-        return select_uniform(count, u);
-    }
-    let target = clamp_sample_1d(u) * total;
-    let mut running = 0.0;
+    // Two passes over the lights — the total (as [`total_importance`] sums it), then the inverse
+    // CDF at `u` — with one call of `light_importance` between them: rust-gpu inlines each call
+    // site, and the shade kernel held the light's bounds and importance twice.
+    let (mut total, mut target, mut running) = (0.0, 0.0, 0.0);
     let mut last = LightChoice::NONE;
-    let mut i = 0;
-    while i < count {
-        let weight = light_importance(&lights[i as usize], p, n);
-        if weight > 0.0 {
-            last = LightChoice { index: i, pmf: weight / total };
-            running += weight;
-            if target < running {
-                return last;
+    let mut pass = 0;
+    while pass < 2 {
+        let mut i = 0;
+        while i < count {
+            let weight = light_importance(&lights[i as usize], p, n);
+            if pass == 0 {
+                total += weight;
+            } else if weight > 0.0 {
+                last = LightChoice { index: i, pmf: weight / total };
+                running += weight;
+                if target < running {
+                    return last;
+                }
             }
+            i += 1;
         }
-        i += 1;
+        if pass == 0 {
+            if total.is_nan() || total <= 0.0 {
+                return select_uniform(count, u);
+            }
+            target = clamp_sample_1d(u) * total;
+        }
+        pass += 1;
     }
     // `u·total` rounded up to `total`: the last light with non-zero importance.
     last
@@ -513,8 +519,14 @@ pub fn importance_pmf(lights: &[Light], p: Vec3, n: Vec3, index: u32) -> f32 {
 /// given every light under a dim second child pmf 0, though it was the first child's positive
 /// share when the children were the other way round.
 fn child_probabilities(set: &LightSet, first: u32, second: u32, p: Vec3, n: Vec3) -> (f32, f32) {
-    let i0 = node_importance(set, &set.nodes[first as usize], p, n);
-    let i1 = node_importance(set, &set.nodes[second as usize], p, n);
+    // Both children by one call in a loop, so that the kernel holds `node_importance` once.
+    let (children, mut weights) = ([first, second], [0.0f32; 2]);
+    let mut c = 0;
+    while c < 2 {
+        weights[c] = node_importance(set, &set.nodes[children[c] as usize], p, n);
+        c += 1;
+    }
+    let [i0, i1] = weights;
     let sum = i0 + i1;
     if sum > 0.0 {
         (i0 / sum, i1 / sum)
