@@ -336,7 +336,8 @@ pub fn quad_lights_nothing(light: &Light, p: Vec3, n: Vec3) -> bool {
 
 /// One light's importance at `p` (surface normal `n`): [`importance`] of its
 /// [`light_bounds`], and 0 where the shade stage's `U` is 0 for a quad ([`quad_lights_nothing`]).
-/// What the linear scan weighs each light by, and the BVH each leaf.
+/// What the linear scan weighs each light by; a BVH leaf weighs its light the same way, from the
+/// leaf's bounds (the light's, as raywave's builder stores them).
 pub fn light_importance(light: &Light, p: Vec3, n: Vec3) -> f32 {
     if quad_lights_nothing(light, p, n) {
         0.0
@@ -354,10 +355,11 @@ pub fn light_importance(light: &Light, p: Vec3, n: Vec3) -> f32 {
 /// as if they all lit it: ceiling points amid an array of 5 mm LEDs, in their plane or just below
 /// it, which none of them lights, gave the lamp that alone lit them a pmf down to 6·10⁻⁸ —
 /// 10⁷ times the variance, and below 2⁻²⁴ never drawn, a black `U_N` where `U` is not (now 1:
-/// `raywave_host::lights`' tests). A leaf weighs its light by [`light_importance`] (its own
-/// bounds, and 0 where the shade stage's `U` is 0), so that a box, which turns with the scene,
-/// never decides for one light; a leaf whose light index is beyond `set`'s lights keeps
-/// [`importance`] of its bounds.
+/// `raywave_host::lights`' tests). A leaf weighs its light as [`light_importance`] does — by
+/// [`importance`] of the leaf's bounds (the light's own, as raywave's builder stores them), and
+/// 0 where [`quad_lights_nothing`], the shade stage's `U` is 0 — so that a box, which turns with
+/// the scene, never decides for one light; a leaf whose light index is beyond `set`'s lights
+/// keeps [`importance`] of its bounds.
 fn node_importance(set: &LightSet, node: &LightBvhNode, p: Vec3, n: Vec3) -> f32 {
     let bounds = &node.bounds;
     let lights_nothing = if node.is_leaf != 0 {
@@ -430,15 +432,44 @@ pub fn uniform_pmf(count: u32, index: u32) -> f32 {
     }
 }
 
-/// Σ importance of the first `count` lights, in index order (the order [`scan_select`] repeats).
-fn total_importance(lights: &[Light], count: u32, p: Vec3, n: Vec3) -> f32 {
-    let mut total = 0.0;
-    let mut i = 0;
-    while i < count {
-        total += light_importance(&lights[i as usize], p, n);
-        i += 1;
+/// The linear scan behind [`scan_select`] and [`scan_pmf`], over the first `count` lights: pass 0
+/// sums their [`light_importance`]s in index order; pass 1 walks them again to light `index` if
+/// `index < count`, else to the first light of positive importance whose running sum passes
+/// `u`·total (the last such light where rounding leaves the sum short of it), and returns that
+/// light with its importance over the total as its pmf. `None` where the total is 0 or NaN (the
+/// callers' uniform fallback). One call of `light_importance` serves both passes and both
+/// callers, so that select and pmf agree bit for bit and the shade kernel holds the light's
+/// bounds and importance once (rust-gpu inlines each call site).
+fn scan(lights: &[Light], count: u32, p: Vec3, n: Vec3, u: f32, index: u32) -> Option<LightChoice> {
+    let (mut total, mut target, mut running) = (0.0, 0.0, 0.0);
+    let mut last = LightChoice::NONE;
+    let mut pass = 0;
+    while pass < 2 {
+        let mut i = 0;
+        while i < count {
+            let weight = light_importance(&lights[i as usize], p, n);
+            if pass == 0 {
+                total += weight;
+            } else if i == index {
+                return Some(LightChoice { index: i, pmf: weight / total });
+            } else if index >= count && weight > 0.0 {
+                last = LightChoice { index: i, pmf: weight / total };
+                running += weight;
+                if target < running {
+                    return Some(last);
+                }
+            }
+            i += 1;
+        }
+        if pass == 0 {
+            if total.is_nan() || total <= 0.0 {
+                return None;
+            }
+            target = clamp_sample_1d(u) * total;
+        }
+        pass += 1;
     }
-    total
+    Some(last)
 }
 
 /// [`select_importance`] over the first `count` lights (`count ≤ lights.len()`).
@@ -451,37 +482,10 @@ fn scan_select(lights: &[Light], count: u32, p: Vec3, n: Vec3, u: f32) -> LightC
         // or the uniform fallback's 1 when `I` = 0 — without evaluating `I` twice per sample.
         return LightChoice { index: 0, pmf: 1.0 };
     }
-    // Two passes over the lights — the total (as [`total_importance`] sums it), then the inverse
-    // CDF at `u` — with one call of `light_importance` between them: rust-gpu inlines each call
-    // site, and the shade kernel held the light's bounds and importance twice.
-    let (mut total, mut target, mut running) = (0.0, 0.0, 0.0);
-    let mut last = LightChoice::NONE;
-    let mut pass = 0;
-    while pass < 2 {
-        let mut i = 0;
-        while i < count {
-            let weight = light_importance(&lights[i as usize], p, n);
-            if pass == 0 {
-                total += weight;
-            } else if weight > 0.0 {
-                last = LightChoice { index: i, pmf: weight / total };
-                running += weight;
-                if target < running {
-                    return last;
-                }
-            }
-            i += 1;
-        }
-        if pass == 0 {
-            if total.is_nan() || total <= 0.0 {
-                return select_uniform(count, u);
-            }
-            target = clamp_sample_1d(u) * total;
-        }
-        pass += 1;
+    match scan(lights, count, p, n, u, count) {
+        Some(choice) => choice,
+        None => select_uniform(count, u),
     }
-    // `u·total` rounded up to `total`: the last light with non-zero importance.
-    last
 }
 
 /// [`importance_pmf`] over the first `count` lights (`count ≤ lights.len()`).
@@ -493,11 +497,10 @@ fn scan_pmf(lights: &[Light], count: u32, p: Vec3, n: Vec3, index: u32) -> f32 {
         // As in `scan_select`: `I / I` = 1 or the uniform fallback's 1.
         return 1.0;
     }
-    let total = total_importance(lights, count, p, n);
-    if total.is_nan() || total <= 0.0 {
-        return uniform_pmf(count, index);
+    match scan(lights, count, p, n, 0.0, index) {
+        Some(choice) => choice.pmf,
+        None => uniform_pmf(count, index),
     }
-    light_importance(&lights[index as usize], p, n) / total
 }
 
 /// Chooses a light with probability proportional to its [`light_importance`] at `p` (normal `n`, or 0)

@@ -320,9 +320,9 @@ pub fn shade_sample(
     let p_diff = if e_d + e_s > 0.0 { e_d / (e_d + e_s) } else { 1.0 };
     let p_brdf = lerp(u_s, u_d, p_diff);
 
-    // The light's solid angle serves its sample and its pdf: computed once for either strategy
-    // (a BRDF direction that misses the light does not need it), so that the kernel holds it once
-    // and a GPU's lanes run it together.
+    // The light's solid angle serves its sample and its pdf: computed once for either strategy,
+    // even for a BRDF direction that misses the light and does not need it, so that the kernel
+    // holds it once and a GPU's lanes run it together.
     let light_sampled = !(strategy.x < p_brdf);
     let solid_angle = warp::quad_solid_angle(p, corner, eu, ev);
     let direction = if light_sampled {
