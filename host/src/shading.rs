@@ -60,9 +60,9 @@ pub struct ShadeData {
     scene: SceneIdentity,
 }
 
-/// The scene, the switch and each buffer's length (in elements) — not the contents: the LTC table alone is
-/// 192 KiB and a large scene's triangles many MiB, which a log line or a failed assertion would
-/// otherwise print whole.
+/// The scene, the switch and each buffer's length (in elements) — not the contents: the LTC
+/// table alone is 192 KiB and a large scene's triangles many MiB, which a log line or a failed
+/// assertion would otherwise print whole.
 impl std::fmt::Debug for ShadeData {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("ShadeData")

@@ -294,8 +294,8 @@ const SHADE_BINDINGS: [u32; 18] = [
 /// The shade stage's pipelines, both of `entry::shade`: without the residual towards GGX (its
 /// specialization constant [`bindings::shade::RESIDUAL_CODE_SPEC_ID`] 0), which passes without
 /// `ShadeParams::analytic_residual` run, and with it, built at the first pass that asks for it.
-/// The residual is two fifths of the kernel's code: specialized away, the driver does not compile it
-/// (README, Shading: lavapipe's compile time) and may need fewer registers.
+/// The residual is two fifths of the kernel's code: specialized away, the driver does not
+/// compile it (README, Shading: lavapipe's compile time) and may need fewer registers.
 struct ShadeKernels {
     without_residual: ComputeKernel,
     with_residual: Option<ComputeKernel>,

@@ -441,6 +441,8 @@ pub fn uniform_pmf(count: u32, index: u32) -> f32 {
 /// callers, so that select and pmf agree bit for bit and the shade kernel holds the light's
 /// bounds and importance once (rust-gpu inlines each call site).
 fn scan(lights: &[Light], count: u32, p: Vec3, n: Vec3, u: f32, index: u32) -> Option<LightChoice> {
+    // Without an index in range, pass 1 draws a light by `u`.
+    let drawing = index >= count;
     let (mut total, mut target, mut running) = (0.0, 0.0, 0.0);
     let mut last = LightChoice::NONE;
     let mut pass = 0;
@@ -452,7 +454,7 @@ fn scan(lights: &[Light], count: u32, p: Vec3, n: Vec3, u: f32, index: u32) -> O
                 total += weight;
             } else if i == index {
                 return Some(LightChoice { index: i, pmf: weight / total });
-            } else if index >= count && weight > 0.0 {
+            } else if drawing && weight > 0.0 {
                 last = LightChoice { index: i, pmf: weight / total };
                 running += weight;
                 if target < running {
