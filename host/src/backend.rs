@@ -19,11 +19,12 @@ use std::sync::{Arc, Mutex};
 pub struct StageReport {
     /// Stage name (`generate`, `trace`, …).
     pub stage: &'static str,
-    /// Seconds per dispatch: on Vulkan the timed submission's time over `dispatches`, from GPU
-    /// timestamps where the device writes them (`DeviceInfo::timestamps`), else from the host
-    /// clock around the submission; the wall clock of the parallel loop on the CPU.
+    /// Seconds per dispatch: on Vulkan the stage's run's time over `dispatches`, from the GPU
+    /// timestamps around it where the device writes them (`DeviceInfo::timestamps`), else from
+    /// the host clock around its submission, which then holds that run alone; the wall clock of
+    /// the parallel loop on the CPU.
     pub seconds: f64,
-    /// How many times the stage's kernel ran back to back in its timed submission: 1, except on
+    /// How many times the stage's kernel ran back to back in its run: 1, except on
     /// a Vulkan backend opened for benchmarking (`ContextOptions::sustain_seconds`), where the
     /// repetitions keep the GPU busy enough to hold its clocks; always 1 on the CPU.
     pub dispatches: u32,

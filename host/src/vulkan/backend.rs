@@ -2,6 +2,7 @@
 //! device-resident SoA streams.
 
 use super::accel::{build_scene, check_limits, SceneAccel};
+use super::batch::{Batch, Done, ReadId, RunId};
 use super::buffer::{check_storage_range, GpuBuffer};
 use super::context::{open, ContextOptions, Core, DeviceInfo};
 use super::denoise::DenoiseKernels;
@@ -84,9 +85,32 @@ impl DeviceRays {
         Ok(Self { paths, pixel: GpuBuffer::storage::<u32>(core, len, "ray pixel")? })
     }
 
-    fn read(&self) -> Result<RayStream> {
+    /// Adds the reads of the whole stream to `batch`.
+    fn read_in<'a>(&'a self, batch: &mut Batch<'a>) -> Result<RayReads> {
         let (paths, n) = (&self.paths, self.paths.len as usize);
-        Ok(RayStream { origin: paths.origin.read(n)?, direction: paths.direction.read(n)?, pixel: self.pixel.read(n)? })
+        Ok(RayReads {
+            origin: batch.read(&paths.origin, n)?,
+            direction: batch.read(&paths.direction, n)?,
+            pixel: batch.read(&self.pixel, n)?,
+        })
+    }
+}
+
+/// A ray stream's reads in a batch ([`DeviceRays::read_in`]).
+struct RayReads {
+    origin: ReadId<Vec4>,
+    direction: ReadId<Vec4>,
+    pixel: ReadId<u32>,
+}
+
+impl RayReads {
+    /// The stream, once the batch has completed.
+    fn stream(&self, done: &Done) -> Result<RayStream> {
+        Ok(RayStream {
+            origin: done.read(&self.origin)?,
+            direction: done.read(&self.direction)?,
+            pixel: done.read(&self.pixel)?,
+        })
     }
 }
 
@@ -112,13 +136,39 @@ impl DeviceHits {
         })
     }
 
-    fn read(&self) -> Result<HitStream> {
+    /// The closest-hit trace's outputs, in the order of [`HIT_OUTPUTS`].
+    fn outputs(&self) -> [&GpuBuffer; 4] {
+        [&self.t, &self.primitive, &self.instance, &self.barycentrics]
+    }
+
+    /// Adds the reads of the whole stream to `batch`.
+    fn read_in<'a>(&'a self, batch: &mut Batch<'a>) -> Result<HitReads> {
         let n = self.len as usize;
+        Ok(HitReads {
+            t: batch.read(&self.t, n)?,
+            primitive: batch.read(&self.primitive, n)?,
+            instance: batch.read(&self.instance, n)?,
+            barycentrics: batch.read(&self.barycentrics, n)?,
+        })
+    }
+}
+
+/// A hit stream's reads in a batch ([`DeviceHits::read_in`]).
+struct HitReads {
+    t: ReadId<f32>,
+    primitive: ReadId<u32>,
+    instance: ReadId<u32>,
+    barycentrics: ReadId<Vec2>,
+}
+
+impl HitReads {
+    /// The stream, once the batch has completed.
+    fn stream(&self, done: &Done) -> Result<HitStream> {
         Ok(HitStream {
-            t: self.t.read(n)?,
-            primitive: self.primitive.read(n)?,
-            instance: self.instance.read(n)?,
-            barycentrics: self.barycentrics.read(n)?,
+            t: done.read(&self.t)?,
+            primitive: done.read(&self.primitive)?,
+            instance: done.read(&self.instance)?,
+            barycentrics: done.read(&self.barycentrics)?,
         })
     }
 }
@@ -146,14 +196,37 @@ impl DeviceShades {
         })
     }
 
-    fn read(&self) -> Result<ShadeStream> {
+    /// Adds the reads of the whole stream to `batch`.
+    fn read_in<'a>(&'a self, batch: &mut Batch<'a>) -> Result<ShadeReads> {
         let n = self.shadow.len as usize;
+        Ok(ShadeReads {
+            analytic: batch.read(&self.analytic, n)?,
+            unshadowed: batch.read(&self.unshadowed, n)?,
+            emitted: batch.read(&self.emitted, n)?,
+            shadow_origin: batch.read(&self.shadow.origin, n)?,
+            shadow_direction: batch.read(&self.shadow.direction, n)?,
+        })
+    }
+}
+
+/// A shade stream's reads in a batch ([`DeviceShades::read_in`]).
+struct ShadeReads {
+    analytic: ReadId<Vec4>,
+    unshadowed: ReadId<Vec4>,
+    emitted: ReadId<Vec4>,
+    shadow_origin: ReadId<Vec4>,
+    shadow_direction: ReadId<Vec4>,
+}
+
+impl ShadeReads {
+    /// The stream, once the batch has completed.
+    fn stream(&self, done: &Done) -> Result<ShadeStream> {
         Ok(ShadeStream {
-            analytic: self.analytic.read(n)?,
-            unshadowed: self.unshadowed.read(n)?,
-            emitted: self.emitted.read(n)?,
-            shadow_origin: self.shadow.origin.read(n)?,
-            shadow_direction: self.shadow.direction.read(n)?,
+            analytic: done.read(&self.analytic)?,
+            unshadowed: done.read(&self.unshadowed)?,
+            emitted: done.read(&self.emitted)?,
+            shadow_origin: done.read(&self.shadow_origin)?,
+            shadow_direction: done.read(&self.shadow_direction)?,
         })
     }
 }
@@ -238,8 +311,7 @@ pub struct VulkanBackend {
 
 /// Descriptor layout of a trace kernel for `method` writing `outputs` (binding numbers from
 /// `raywave_shared`): the scene at binding 0, the rays, the outputs, for software traversal the
-/// triangle buffers, and the sanitized counter. [`VulkanBackend::run_trace_kernel`] binds
-/// resources in this order.
+/// triangle buffers, and the sanitized counter. [`add_trace`] binds resources in this order.
 fn trace_bindings(method: TraceMethod, outputs: &[u32]) -> Vec<(u32, vk::DescriptorType)> {
     let storage = vk::DescriptorType::STORAGE_BUFFER;
     let scene = match method {
@@ -269,7 +341,7 @@ const HIT_OUTPUTS: [u32; 4] = [
 /// Output binding of the occlusion trace.
 const OCCLUSION_OUTPUTS: [u32; 1] = [bindings::occlusion::OCCLUDED];
 
-/// Bindings of the shade stage, in the order [`VulkanBackend::shade`] binds its resources.
+/// Bindings of the shade stage, in the order [`add_shade`] binds its resources.
 const SHADE_BINDINGS: [u32; 18] = [
     bindings::shade::RAY_DIRECTION,
     bindings::shade::HIT_T,
@@ -456,58 +528,9 @@ impl VulkanBackend {
         check_generate_params(params)
     }
 
-    /// The generate stage over `params`, which the caller has checked ([`Self::check_generate`]).
-    fn generate_on_device(&self, params: &GenerateParams) -> Result<(DeviceRays, StageReport)> {
-        let rays = DeviceRays::new(&self.core, params.ray_count())?;
-        let timing = self.generate.dispatch(
-            &[
-                Resource::Buffer(&rays.paths.origin),
-                Resource::Buffer(&rays.paths.direction),
-                Resource::Buffer(&rays.pixel),
-            ],
-            bytemuck::bytes_of(params),
-            rays.paths.len,
-        )?;
-        Ok((rays, timing.report("generate", 0)))
-    }
-
     /// The scene the trace kernels read, if one is loaded.
     fn loaded_scene(&self) -> Result<&DeviceScene> {
         loaded(&self.scene).map(|(scene, _)| scene)
-    }
-
-    /// Runs `kernel` over `rays` (checked against the device, [`Self::check_stream`]) in `scene`
-    /// with `outputs` bound after the rays (layout of [`trace_bindings`]); returns its report as
-    /// `stage`.
-    fn run_trace_kernel(
-        &self,
-        stage: &'static str,
-        kernel: &TraceKernel,
-        scene: &DeviceScene,
-        rays: &DevicePaths,
-        outputs: &[&GpuBuffer],
-    ) -> Result<StageReport> {
-        let (scene_resource, triangles) = match scene {
-            DeviceScene::Accelerated(accel) => (Resource::AccelerationStructure(accel.tlas.handle), vec![]),
-            DeviceScene::Software { nodes, vertices, ids } => {
-                (Resource::Buffer(nodes), vec![Resource::Buffer(vertices), Resource::Buffer(ids)])
-            }
-        };
-        let counter = GpuBuffer::counter(&self.core, stage)?;
-        let resources: Vec<Resource> =
-            [scene_resource, Resource::Buffer(&rays.origin), Resource::Buffer(&rays.direction)]
-                .into_iter()
-                .chain(outputs.iter().map(|b| Resource::Buffer(b)))
-                .chain(triangles)
-                .chain([Resource::Buffer(&counter)])
-                .collect();
-        let params = TraceParams { ray_count: rays.len, padding: [0; 3] };
-        let push = bytemuck::bytes_of(&params);
-        let timing = match kernel {
-            TraceKernel::Compute(kernel) => kernel.dispatch(&resources, push, rays.len),
-            TraceKernel::RtPipeline(kernel) => kernel.trace(&resources, push, rays.len),
-        }?;
-        Ok(timing.report(stage, counter.read_count()?))
     }
 
     /// The length of a stream of `len` elements of input `name` (rays, hits, an image's pixels)
@@ -522,13 +545,6 @@ impl VulkanBackend {
             name,
             reason: format!("{len} elements exceed the device's {} per stream", self.max_rays()),
         })
-    }
-
-    fn trace_on_device(&self, scene: &DeviceScene, rays: &DevicePaths) -> Result<(DeviceHits, StageReport)> {
-        let hits = DeviceHits::new(&self.core, rays.len)?;
-        let outputs = [&hits.t, &hits.primitive, &hits.instance, &hits.barycentrics];
-        let report = self.run_trace_kernel("trace", &self.trace, scene, rays, &outputs)?;
-        Ok((hits, report))
     }
 }
 
@@ -560,19 +576,84 @@ fn load_shade_data<'a>(
     Ok(loaded.insert(current))
 }
 
-/// Runs the shade stage `kernel` over `hits.len` camera rays whose directions `direction` holds,
-/// against the shade data `scene` on the device; the shade stream stays there. A function of the
-/// backend's fields, not a method, so that `scene` may borrow the backend's shade data.
-fn shade_on_device(
-    core: &Arc<Core>,
-    kernel: &ComputeKernel,
-    scene: &DeviceShadeData,
+/// A stage's run in a batch, and the read of its sanitized counter where it has one.
+struct StageRun {
+    stage: &'static str,
+    run: RunId,
+    sanitized: Option<ReadId<u32>>,
+}
+
+impl StageRun {
+    /// The stage's report, once its batch has completed.
+    fn report(&self, done: &Done) -> Result<StageReport> {
+        let sanitized = match &self.sanitized {
+            Some(read) => done.count(read)?,
+            None => 0,
+        };
+        Ok(done.timing(self.run).report(self.stage, sanitized))
+    }
+}
+
+/// Adds the generate stage over `params` (checked by the caller, [`VulkanBackend::check_generate`])
+/// to `batch`, writing `rays`.
+fn add_generate<'a>(
+    batch: &mut Batch<'a>,
+    kernel: &'a ComputeKernel,
+    params: &GenerateParams,
+    rays: &'a DeviceRays,
+) -> Result<StageRun> {
+    let resources = [&rays.paths.origin, &rays.paths.direction, &rays.pixel].map(Resource::Buffer);
+    let run = kernel.add_to(batch, &resources, bytemuck::bytes_of(params), rays.paths.len)?;
+    Ok(StageRun { stage: "generate", run, sanitized: None })
+}
+
+/// Adds trace `kernel` over `rays` (checked against the device, [`VulkanBackend::check_stream`])
+/// in `scene` to `batch`, with `outputs` bound after the rays (layout of [`trace_bindings`]) and
+/// its sanitized count in `counter`; it reports as `stage`.
+fn add_trace<'a>(
+    batch: &mut Batch<'a>,
+    stage: &'static str,
+    kernel: &'a TraceKernel,
+    scene: &'a DeviceScene,
+    rays: &'a DevicePaths,
+    outputs: &[&'a GpuBuffer],
+    counter: &'a GpuBuffer,
+) -> Result<StageRun> {
+    let (scene_resource, triangles) = match scene {
+        DeviceScene::Accelerated(accel) => (Resource::AccelerationStructure(accel.tlas.handle), vec![]),
+        DeviceScene::Software { nodes, vertices, ids } => {
+            (Resource::Buffer(nodes), vec![Resource::Buffer(vertices), Resource::Buffer(ids)])
+        }
+    };
+    let resources: Vec<Resource> = [scene_resource, Resource::Buffer(&rays.origin), Resource::Buffer(&rays.direction)]
+        .into_iter()
+        .chain(outputs.iter().map(|b| Resource::Buffer(b)))
+        .chain(triangles)
+        .chain([Resource::Buffer(counter)])
+        .collect();
+    let params = TraceParams { ray_count: rays.len, padding: [0; 3] };
+    let push = bytemuck::bytes_of(&params);
+    let run = match kernel {
+        TraceKernel::Compute(kernel) => kernel.add_to(batch, &resources, push, rays.len),
+        TraceKernel::RtPipeline(kernel) => kernel.add_to(batch, &resources, push, rays.len),
+    }?;
+    Ok(StageRun { stage, run, sanitized: Some(batch.read(counter, 1)?) })
+}
+
+/// Adds the shade stage `kernel` over `hits.len` camera rays whose directions `direction` holds,
+/// against the shade data `scene` on the device, to `batch`: it writes `out`, and its sanitized
+/// count to `counter`.
+#[allow(clippy::too_many_arguments)]
+fn add_shade<'a>(
+    batch: &mut Batch<'a>,
+    kernel: &'a ComputeKernel,
+    scene: &'a DeviceShadeData,
     params: &ShadeParams,
-    direction: &GpuBuffer,
-    hits: &DeviceHits,
-) -> Result<(DeviceShades, StageReport)> {
-    let out = DeviceShades::new(core, hits.len)?;
-    let counter = GpuBuffer::counter(core, "shade")?;
+    direction: &'a GpuBuffer,
+    hits: &'a DeviceHits,
+    out: &'a DeviceShades,
+    counter: &'a GpuBuffer,
+) -> Result<StageRun> {
     let resources = [
         direction,
         &hits.t,
@@ -591,12 +672,32 @@ fn shade_on_device(
         &out.emitted,
         &out.shadow.origin,
         &out.shadow.direction,
-        &counter,
+        counter,
     ]
     .map(Resource::Buffer);
-    let timing = kernel.dispatch(&resources, bytemuck::bytes_of(params), hits.len)?;
-    let report = timing.report("shade", counter.read_count()?);
-    Ok((out, report))
+    let run = kernel.add_to(batch, &resources, bytemuck::bytes_of(params), hits.len)?;
+    Ok(StageRun { stage: "shade", run, sanitized: Some(batch.read(counter, 1)?) })
+}
+
+/// The shade stage `kernel` over the camera rays' directions `direction` and their `hits`, on
+/// the device, against the shade data `scene`, in one submission with the read of its stream.
+/// A function of the backend's fields, not a method, so that `scene` may borrow the backend's
+/// shade data.
+fn shade_on_device(
+    core: &Arc<Core>,
+    kernel: &ComputeKernel,
+    scene: &DeviceShadeData,
+    params: &ShadeParams,
+    direction: &GpuBuffer,
+    hits: &DeviceHits,
+) -> Result<(ShadeStream, StageReport)> {
+    let out = DeviceShades::new(core, hits.len)?;
+    let counter = GpuBuffer::counter(core, "shade")?;
+    let mut batch = Batch::new(core);
+    let shade = add_shade(&mut batch, kernel, scene, params, direction, hits, &out, &counter)?;
+    let reads = out.read_in(&mut batch)?;
+    let done = batch.submit()?;
+    Ok((reads.stream(&done)?, shade.report(&done)?))
 }
 
 impl Backend for VulkanBackend {
@@ -652,8 +753,12 @@ impl Backend for VulkanBackend {
     fn generate(&mut self, params: &GenerateParams) -> Result<(RayStream, StageReport)> {
         let _driver = driver_lock::device_use();
         self.check_generate(params)?;
-        let (rays, timing) = self.generate_on_device(params)?;
-        Ok((rays.read()?, timing))
+        let rays = DeviceRays::new(&self.core, params.ray_count())?;
+        let mut batch = Batch::new(&self.core);
+        let generate = add_generate(&mut batch, &self.generate, params, &rays)?;
+        let reads = rays.read_in(&mut batch)?;
+        let done = batch.submit()?;
+        Ok((reads.stream(&done)?, generate.report(&done)?))
     }
 
     fn trace(&mut self, rays: &RayStream) -> Result<(HitStream, StageReport)> {
@@ -661,8 +766,13 @@ impl Backend for VulkanBackend {
         rays.check("trace")?;
         let scene = self.loaded_scene()?;
         let paths = DevicePaths::upload(&self.core, rays, self.check_stream(rays.len(), "rays")?)?;
-        let (hits, timing) = self.trace_on_device(scene, &paths)?;
-        Ok((hits.read()?, timing))
+        let hits = DeviceHits::new(&self.core, paths.len)?;
+        let counter = GpuBuffer::counter(&self.core, "trace")?;
+        let mut batch = Batch::new(&self.core);
+        let trace = add_trace(&mut batch, "trace", &self.trace, scene, &paths, &hits.outputs(), &counter)?;
+        let reads = hits.read_in(&mut batch)?;
+        let done = batch.submit()?;
+        Ok((reads.stream(&done)?, trace.report(&done)?))
     }
 
     fn trace_occlusion(&mut self, rays: &RayStream) -> Result<(Vec<u32>, StageReport)> {
@@ -671,8 +781,12 @@ impl Backend for VulkanBackend {
         let scene = self.loaded_scene()?;
         let paths = DevicePaths::upload(&self.core, rays, self.check_stream(rays.len(), "rays")?)?;
         let occluded = GpuBuffer::storage::<u32>(&self.core, paths.len, "occluded")?;
-        let report = self.run_trace_kernel("occlusion", &self.occlusion, scene, &paths, &[&occluded])?;
-        Ok((occluded.read(rays.len())?, report))
+        let counter = GpuBuffer::counter(&self.core, "occlusion")?;
+        let mut batch = Batch::new(&self.core);
+        let occlusion = add_trace(&mut batch, "occlusion", &self.occlusion, scene, &paths, &[&occluded], &counter)?;
+        let read = batch.read(&occluded, rays.len())?;
+        let done = batch.submit()?;
+        Ok((done.read(&read)?, occlusion.report(&done)?))
     }
 
     fn shade(
@@ -691,16 +805,16 @@ impl Backend for VulkanBackend {
         let scene = load_shade_data(core, &mut self.shade_data, data)?;
         let direction = GpuBuffer::storage_with(core, &rays.direction, "ray direction")?;
         let hits = DeviceHits::upload(core, hits, len)?;
-        let (out, report) = shade_on_device(core, kernel, scene, params, &direction, &hits)?;
-        Ok((out.read()?, report))
+        shade_on_device(core, kernel, scene, params, &direction, &hits)
     }
 
     /// The lit sample with every stream on the device, from the camera rays to the occlusion
-    /// results: what comes back is the three accumulated shade fields, the occlusion results and
-    /// the hits' primitives (to count the hits), 56 bytes a pixel, and the camera streams when
-    /// asked (the composed stages move 208). The checks of the composed stages, in their order
-    /// and before any work: the request, the scene loaded, the camera, the shade data and
-    /// parameters for the dense stream generate writes.
+    /// results, in one submission where the device writes timestamps (`vulkan/batch.rs`): what
+    /// comes back is the three accumulated shade fields, the occlusion results and the hits'
+    /// primitives (to count the hits), 56 bytes a pixel, and the camera streams when asked (the
+    /// composed stages move 208). The checks of the composed stages, in their order and before
+    /// any work: the request, the scene loaded, the camera, the shade data and parameters for
+    /// the dense stream generate writes.
     fn lit_sample(&mut self, request: &LitSampleRequest<'_>) -> Result<LitSample> {
         let _driver = driver_lock::device_use();
         request.check()?;
@@ -711,32 +825,53 @@ impl Backend for VulkanBackend {
         check_shade_params(request.shade, request.data, request.generate.ray_count() as usize)?;
         // The shade pipeline the pass needs, built (the residual's, at its first pass) before
         // any work, so that a failure to build it leaves none done.
-        self.shade_kernels.for_params(&self.core, request.shade)?;
-        let (rays, generate_time) = self.generate_on_device(request.generate)?;
-        let (hits, trace_time) = self.trace_on_device(scene, &rays.paths)?;
-        let data = load_shade_data(&self.core, &mut self.shade_data, request.data)?;
-        let kernel = self.shade_kernels.for_params(&self.core, request.shade)?;
-        let (shades, shade_time) =
-            shade_on_device(&self.core, kernel, data, request.shade, &rays.paths.direction, &hits)?;
-        let occluded = GpuBuffer::storage::<u32>(&self.core, hits.len, "occluded")?;
-        let occlusion_time =
-            self.run_trace_kernel("occlusion", &self.occlusion, scene, &shades.shadow, &[&occluded])?;
-        let n = hits.len as usize;
-        let camera = if request.keep_camera_streams { Some((rays.read()?, hits.read()?)) } else { None };
-        let hit_count = match &camera {
-            Some((_, hits)) => hits.hit_count(),
-            None => count_hits(&hits.primitive.read::<u32>(n)?),
+        let core = &self.core;
+        let kernel = self.shade_kernels.for_params(core, request.shade)?;
+        let data = load_shade_data(core, &mut self.shade_data, request.data)?;
+        let len = request.generate.ray_count();
+        let rays = DeviceRays::new(core, len)?;
+        let hits = DeviceHits::new(core, len)?;
+        let shades = DeviceShades::new(core, len)?;
+        let occluded = GpuBuffer::storage::<u32>(core, len, "occluded")?;
+        let counters = [
+            GpuBuffer::counter(core, "trace")?,
+            GpuBuffer::counter(core, "shade")?,
+            GpuBuffer::counter(core, "occlusion")?,
+        ];
+        let mut batch = Batch::new(core);
+        let generate = add_generate(&mut batch, &self.generate, request.generate, &rays)?;
+        // check_generate checked the image against max_rays: the stream fits every pass.
+        let trace = add_trace(&mut batch, "trace", &self.trace, scene, &rays.paths, &hits.outputs(), &counters[0])?;
+        let direction = &rays.paths.direction;
+        let shade = add_shade(&mut batch, kernel, data, request.shade, direction, &hits, &shades, &counters[1])?;
+        let occlusion =
+            add_trace(&mut batch, "occlusion", &self.occlusion, scene, &shades.shadow, &[&occluded], &counters[2])?;
+        let n = len as usize;
+        let analytic = batch.read(&shades.analytic, n)?;
+        let unshadowed = batch.read(&shades.unshadowed, n)?;
+        let emitted = batch.read(&shades.emitted, n)?;
+        let occlusion_read = batch.read(&occluded, n)?;
+        // The hits' primitives, to count the hits (read twice where the camera streams are).
+        let primitive = batch.read::<u32>(&hits.primitive, n)?;
+        let camera_reads = match request.keep_camera_streams {
+            true => Some((rays.read_in(&mut batch)?, hits.read_in(&mut batch)?)),
+            false => None,
         };
-        let pixels = u64::from(hits.len);
+        let done = batch.submit()?;
+        let camera = match &camera_reads {
+            Some((rays, hits)) => Some((rays.stream(&done)?, hits.stream(&done)?)),
+            None => None,
+        };
+        let pixels = u64::from(len);
         Ok(LitSample {
-            analytic: shades.analytic.read(n)?,
-            unshadowed: shades.unshadowed.read(n)?,
-            emitted: shades.emitted.read(n)?,
-            occluded: occluded.read(n)?,
-            hits: hit_count,
+            analytic: done.read(&analytic)?,
+            unshadowed: done.read(&unshadowed)?,
+            emitted: done.read(&emitted)?,
+            occluded: done.read(&occlusion_read)?,
+            hits: count_hits(&done.read(&primitive)?),
             camera,
-            camera_timings: vec![generate_time, trace_time],
-            pass_timings: [shade_time, occlusion_time],
+            camera_timings: vec![generate.report(&done)?, trace.report(&done)?],
+            pass_timings: [shade.report(&done)?, occlusion.report(&done)?],
             // Camera rays, hits, the shade stream (with the shadow rays) and occlusion results.
             stream_bytes: pixels
                 * u64::from(
@@ -749,10 +884,21 @@ impl Backend for VulkanBackend {
         let _driver = driver_lock::device_use();
         let scene = self.loaded_scene()?;
         self.check_generate(params)?;
-        let (rays, generate_time) = self.generate_on_device(params)?;
+        let len = params.ray_count();
+        let rays = DeviceRays::new(&self.core, len)?;
+        let hits = DeviceHits::new(&self.core, len)?;
+        let counter = GpuBuffer::counter(&self.core, "trace")?;
+        let mut batch = Batch::new(&self.core);
+        let generate = add_generate(&mut batch, &self.generate, params, &rays)?;
         // check_generate checked the image against max_rays: the stream fits every pass.
-        let (hits, trace_time) = self.trace_on_device(scene, &rays.paths)?;
-        Ok(FrameOutput { rays: rays.read()?, hits: hits.read()?, timings: vec![generate_time, trace_time] })
+        let trace = add_trace(&mut batch, "trace", &self.trace, scene, &rays.paths, &hits.outputs(), &counter)?;
+        let (ray_reads, hit_reads) = (rays.read_in(&mut batch)?, hits.read_in(&mut batch)?);
+        let done = batch.submit()?;
+        Ok(FrameOutput {
+            rays: ray_reads.stream(&done)?,
+            hits: hit_reads.stream(&done)?,
+            timings: vec![generate.report(&done)?, trace.report(&done)?],
+        })
     }
 
     fn denoise(
@@ -835,7 +981,6 @@ mod tests {
             let hits = DeviceHits::upload(core, &frame.hits, frame.hits.len() as u32).unwrap();
             let kernel = &backend.shade_kernels.without_residual;
             let (forced, _) = shade_on_device(core, kernel, on_device, &with, &direction, &hits).unwrap();
-            let forced = forced.read().unwrap();
             assert!(forced.analytic == plain.analytic && forced.unshadowed == plain.unshadowed, "{}", device.name);
             assert!(residual.analytic != plain.analytic, "{}: the residual changes U", device.name);
             let messages = backend.validation_messages();
@@ -868,6 +1013,106 @@ mod tests {
             let expected = nodes_of(quality);
             let uploaded: Vec<raywave_shared::bvh::CwBvhNode> = nodes.read(expected.len()).unwrap();
             assert!(uploaded == expected, "{quality:?}: the uploaded nodes are not the preset's tree");
+        }
+    }
+
+    /// A lit sample is one submission where the device writes timestamps — the four passes,
+    /// their counters and the readbacks in one command buffer — and one per pass plus one for
+    /// the copies where it does not ([`Batch::submit`]); it had been fifteen. Counted on the
+    /// second sample, after the first has uploaded the shade data. Every Vulkan device; without
+    /// one it fails under CI and is skipped loudly elsewhere.
+    #[test]
+    fn a_lit_sample_is_one_submission_where_the_device_writes_timestamps() {
+        let devices = super::super::enumerate_devices().unwrap_or_default();
+        if devices.is_empty() {
+            assert!(!crate::in_ci(), "CI=true requires a Vulkan device");
+            eprintln!("\n*** SKIP lit sample submissions: no Vulkan device ***\n");
+            return;
+        }
+        let scene = Scene::load("builtin:cornell").unwrap();
+        let data = ShadeData::new(&scene).unwrap();
+        for device in &devices {
+            let options = ContextOptions { validation: true, ..Default::default() };
+            let mut backend = VulkanBackend::open(device.index, &options, None).unwrap();
+            backend.load_scene(&scene).unwrap();
+            let mut submissions = Vec::new();
+            for (seed, keep_camera_streams) in [(0, true), (1, false)] {
+                let generate = crate::frame::generate_params(&scene, 24, 16, seed);
+                let shade = data.params(generate.sampler, 24, 16, generate.sample_index);
+                let request = LitSampleRequest { generate: &generate, shade: &shade, data: &data, keep_camera_streams };
+                let before = backend.core.submissions.load(std::sync::atomic::Ordering::Relaxed);
+                let sample = backend.lit_sample(&request).unwrap();
+                submissions.push(backend.core.submissions.load(std::sync::atomic::Ordering::Relaxed) - before);
+                assert_eq!(sample.camera.is_some(), keep_camera_streams, "{}", device.name);
+                assert!(sample.hits > 0 && sample.occluded.len() == 24 * 16, "{}", device.name);
+            }
+            let expected = if backend.core.info.timestamps { 1 } else { 5 };
+            assert_eq!(submissions[1], expected, "{}: submissions of each sample {submissions:?}", device.name);
+            let messages = backend.validation_messages();
+            assert!(messages.is_empty(), "{}: {messages:?}", device.name);
+        }
+    }
+
+    /// A batch submitted as one submission per run and one for the copies (the path of a device
+    /// without timestamps, which CI's lavapipe is not) reads back what one submission does, bit
+    /// for bit, with the same reports; a pass added twice and a read past a buffer's end are
+    /// refused. Every Vulkan device; without one it fails under CI and is skipped loudly elsewhere.
+    #[test]
+    fn a_batch_split_into_a_submission_per_run_reads_what_one_submission_reads() {
+        let devices = super::super::enumerate_devices().unwrap_or_default();
+        if devices.is_empty() {
+            assert!(!crate::in_ci(), "CI=true requires a Vulkan device");
+            eprintln!("\n*** SKIP batch submissions: no Vulkan device ***\n");
+            return;
+        }
+        let scene = Scene::load("builtin:cornell").unwrap();
+        let params = crate::frame::generate_params(&scene, 24, 16, 3);
+        for device in &devices {
+            let options = ContextOptions { validation: true, ..Default::default() };
+            let mut backend = VulkanBackend::open(device.index, &options, None).unwrap();
+            backend.load_scene(&scene).unwrap();
+            let (core, scene_on_device) = (&backend.core, backend.loaded_scene().unwrap());
+            let frame = |together: bool| {
+                let rays = DeviceRays::new(core, params.ray_count()).unwrap();
+                let hits = DeviceHits::new(core, params.ray_count()).unwrap();
+                let counter = GpuBuffer::counter(core, "trace").unwrap();
+                let mut batch = Batch::new(core);
+                let generate = add_generate(&mut batch, &backend.generate, &params, &rays).unwrap();
+                let trace = add_trace(
+                    &mut batch,
+                    "trace",
+                    &backend.trace,
+                    scene_on_device,
+                    &rays.paths,
+                    &hits.outputs(),
+                    &counter,
+                )
+                .unwrap();
+                let again = add_generate(&mut batch, &backend.generate, &params, &rays);
+                assert!(matches!(again, Err(Error::InvalidParameter { name: "batch", .. })), "{:?}", again.err());
+                let past_the_end = batch.read::<u32>(&counter, 2);
+                assert!(matches!(past_the_end, Err(Error::InvalidParameter { name: "count", .. })));
+                let (ray_reads, hit_reads) = (rays.read_in(&mut batch).unwrap(), hits.read_in(&mut batch).unwrap());
+                let before = core.submissions.load(std::sync::atomic::Ordering::Relaxed);
+                let done = batch.submit_in(together).unwrap();
+                let submissions = core.submissions.load(std::sync::atomic::Ordering::Relaxed) - before;
+                let reports = [generate.report(&done).unwrap(), trace.report(&done).unwrap()];
+                (ray_reads.stream(&done).unwrap(), hit_reads.stream(&done).unwrap(), reports, submissions)
+            };
+            let (rays, hits, reports, submissions) = frame(true);
+            let (split_rays, split_hits, split_reports, split_submissions) = frame(false);
+            assert_eq!((submissions, split_submissions), (1, 3), "{}", device.name);
+            assert!(rays == split_rays && hits == split_hits, "{}: the split batch read other streams", device.name);
+            assert!(hits.hit_count() > 0, "{}: the camera sees the box", device.name);
+            for (one, split) in reports.iter().zip(&split_reports) {
+                assert_eq!(
+                    (one.stage, one.dispatches, one.sanitized),
+                    (split.stage, split.dispatches, split.sanitized)
+                );
+                assert!(one.seconds > 0.0 && split.seconds > 0.0, "{}: {one:?} {split:?}", device.name);
+            }
+            let messages = backend.validation_messages();
+            assert!(messages.is_empty(), "{}: {messages:?}", device.name);
         }
     }
 }

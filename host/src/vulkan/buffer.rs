@@ -1,5 +1,6 @@
 //! Buffers and one-shot command submission.
 
+use super::batch::Batch;
 use super::context::{vk_error, Core};
 use super::driver_lock;
 use crate::error::{Error, Result};
@@ -21,8 +22,8 @@ pub(crate) struct GpuBuffer {
     pub device_local: bool,
     /// Size in bytes.
     pub size: u64,
-    /// Whether this is a stage's sanitized counter ([`Self::counter`]), which a submission that
-    /// repeats its dispatch zeroes before the last repetition.
+    /// Whether this is a stage's sanitized counter ([`Self::counter`]), which every run that
+    /// binds it zeroes before its last repetition.
     pub is_counter: bool,
 }
 
@@ -148,18 +149,21 @@ impl GpuBuffer {
         copy_buffer(&self.core, &staging, self, size)
     }
 
-    /// A stage's sanitized counter: one zeroed `u32` that its entry points increment atomically
-    /// (the `REPLACED` bindings of `raywave_shared::bindings`); [`Self::read_count`] reads it
-    /// once the dispatch has completed.
+    /// A stage's sanitized counter: one `u32` that its entry points increment atomically (the
+    /// `REPLACED` bindings of `raywave_shared::bindings`), zeroed on the device by every run
+    /// that binds it before its last repetition ([`super::pass::Pass::record`]); a batch reads
+    /// it once the run has completed ([`Batch::read`], [`super::batch::Done::count`]).
     pub fn counter(core: &Arc<Core>, name: &str) -> Result<Self> {
-        let mut counter = Self::storage_with(core, &[0u32], name)?;
+        let mut counter = Self::storage::<u32>(core, 1, name)?;
         counter.is_counter = true;
         Ok(counter)
     }
 
-    /// The value of a [`Self::counter`].
+    /// The value of a [`Self::counter`], read in a submission of its own.
     pub fn read_count(&self) -> Result<u64> {
-        Ok(self.read::<u32>(1)?.first().copied().map(u64::from).unwrap_or(0))
+        let mut batch = Batch::new(&self.core);
+        let read = batch.read(self, 1)?;
+        batch.submit()?.count(&read)
     }
 
     /// The mapping of a host-visible (staging) buffer. A device-local buffer is refused even where
@@ -173,40 +177,31 @@ impl GpuBuffer {
     }
 
     /// Copies the first `count` elements out of this device-local buffer through a host-visible
-    /// staging buffer.
+    /// staging buffer, in a submission of its own ([`Batch::read`] reads in a batch's).
     pub fn read<T: Pod>(&self, count: usize) -> Result<Vec<T>> {
-        let len = count * std::mem::size_of::<T>();
-        if len == 0 {
-            return Ok(Vec::new());
-        }
-        let staging = Self::new(
-            &self.core,
-            len as u64,
-            vk::BufferUsageFlags::TRANSFER_DST,
-            MemoryLocation::GpuToCpu,
-            "readback staging",
-        )?;
-        copy_buffer(&self.core, self, &staging, len as u64)?;
-        staging.read_mapped(len)
+        let mut batch = Batch::new(&self.core);
+        let read = batch.read(self, count)?;
+        batch.submit()?.read(&read)
     }
 
-    /// The first `len` bytes of a host-visible (staging) buffer's mapping, as elements of `T`;
-    /// refused for a device-local buffer, as [`Self::mapped_mut`].
-    fn read_mapped<T: Pod>(&self, len: usize) -> Result<Vec<T>> {
+    /// `len` bytes from `offset` of a host-visible (staging) buffer's mapping, as elements of
+    /// `T`; refused for a device-local buffer, as [`Self::mapped_mut`].
+    pub(crate) fn read_mapped<T: Pod>(&self, offset: u64, len: usize) -> Result<Vec<T>> {
         if self.device_local {
             return Err(not_host_visible());
         }
         let bytes = self.allocation.as_ref().and_then(|a| a.mapped_slice()).ok_or_else(not_host_visible)?;
-        let bytes = bytes.get(..len).ok_or_else(|| Error::InvalidParameter {
+        let range = usize::try_from(offset).ok().and_then(|start| bytes.get(start..start.checked_add(len)?));
+        let bytes = range.ok_or_else(|| Error::InvalidParameter {
             name: "count",
-            reason: format!("read of {len} bytes past {}", bytes.len()),
+            reason: format!("read of {len} bytes at {offset} past {}", bytes.len()),
         })?;
         Ok(bytemuck::pod_collect_to_vec(bytes))
     }
 }
 
 /// Checks that `what`, a storage buffer of `bytes` bytes, fits the device's
-/// `maxStorageBufferRange`: every kernel binds its buffers whole ([`super::pass::Pass::run`]),
+/// `maxStorageBufferRange`: every kernel binds its buffers whole ([`super::pass::Pass::prepare`]),
 /// and a binding past that range is invalid — the kernel would not see all of the buffer. A
 /// buffer over it is [`Error::InvalidParameter`] naming `parameter`, `what` and both sizes.
 pub(crate) fn check_storage_range(
@@ -289,6 +284,7 @@ pub(crate) fn submit_and_wait(core: &Core, record: impl FnOnce(vk::CommandBuffer
             let waited = match device.queue_submit(core.queue, &submit, fence) {
                 Err(e) => Err(vk_error("vkQueueSubmit")(e)),
                 Ok(()) => {
+                    core.submissions.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
                     let waited = device.wait_for_fences(&[fence], true, u64::MAX).map_err(vk_error("vkWaitForFences"));
                     if waited.is_err() {
                         // A failed wait (a lost device, out of memory) may leave the submission

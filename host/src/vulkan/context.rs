@@ -243,6 +243,9 @@ pub(crate) struct Core {
     /// Invocations per workgroup of the 1-D stream stages ([`ContextOptions::workgroup_sizes`]
     /// or the preferred ones, checked against the device).
     pub workgroup_sizes: WorkgroupSizes,
+    /// Command buffers submitted to the queue so far ([`super::buffer::submit_and_wait`]): what
+    /// the tests count to check that a batch is one submission.
+    pub submissions: AtomicU64,
 }
 
 impl Drop for Core {
@@ -567,6 +570,7 @@ pub(crate) fn open(index: usize, options: &ContextOptions) -> Result<Arc<Core>> 
                 accel_limits,
                 sustain_seconds: AtomicU64::new(options.sustain_seconds.to_bits()),
                 workgroup_sizes,
+                submissions: AtomicU64::new(0),
             }))
         }
         Err(e) => {

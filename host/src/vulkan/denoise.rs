@@ -53,7 +53,7 @@ impl DenoiseKernels {
     }
 
     /// Runs the copy probe on `source` (already checked against `params`) and reads the copy
-    /// back; the time is the dispatch's ([`super::pass::Pass::run`]: GPU timestamps where the
+    /// back; the time is the dispatch's ([`super::pass::Pass::timing`]: GPU timestamps where the
     /// device has them).
     pub fn copy_probe(
         &self,
@@ -75,7 +75,7 @@ impl DenoiseKernels {
     /// Runs `method` on `input` (already checked against `params`): uploads the inputs its passes
     /// read, allocates the working buffers they write ([`WorkingBuffers`]), runs every pass on the
     /// device and reads the colour back. Timings are the passes'
-    /// ([`super::pass::Pass::run`]: GPU timestamps where the device has them).
+    /// ([`super::pass::Pass::timing`]: GPU timestamps where the device has them).
     pub fn run(
         &self,
         core: &Arc<Core>,

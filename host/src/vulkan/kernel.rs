@@ -1,6 +1,7 @@
 //! Compute pipelines built from the embedded SPIR-V: one per entry point, dispatched as a 2-D grid
 //! of 1-D workgroups of the size the pipeline was built with.
 
+use super::batch::{run_alone, Batch, RunId};
 use super::context::{vk_error, Core};
 use super::pass::{Pass, Resource, Timing};
 use crate::error::{Error, Result};
@@ -72,10 +73,16 @@ impl ComputeKernel {
         Ok(Self { pass, workgroup_size })
     }
 
-    /// Binds `resources` (one per binding, in creation order), pushes `push`, runs `invocations`
-    /// invocations and waits ([`Pass::run`]: repeated in benchmark mode); returns the time per
-    /// dispatch.
-    pub fn dispatch(&self, resources: &[Resource<'_>], push: &[u8], invocations: u32) -> Result<Timing> {
+    /// Adds to `batch` a run over `resources` (one per binding, in creation order) with push
+    /// constants `push` and `invocations` invocations ([`Batch::add`]: repeated in benchmark
+    /// mode).
+    pub fn add_to<'a>(
+        &'a self,
+        batch: &mut Batch<'a>,
+        resources: &[Resource<'a>],
+        push: &[u8],
+        invocations: u32,
+    ) -> Result<RunId> {
         let (groups_x, groups_y) =
             dispatch_grid(&self.pass.core.limits, invocations, self.workgroup_size).ok_or_else(|| {
                 Error::InvalidParameter {
@@ -84,12 +91,17 @@ impl ComputeKernel {
                 }
             })?;
         let device = &self.pass.core.device;
-        self.pass.run(resources, push, invocations, |cmd| {
+        batch.add(&self.pass, resources, push, invocations, move |cmd| {
             if groups_x > 0 {
                 // SAFETY: `cmd` is recording with this pass's pipeline and set bound.
                 unsafe { device.cmd_dispatch(cmd, groups_x, groups_y, 1) };
             }
         })
+    }
+
+    /// [`Self::add_to`] a batch of its own, submitted and waited for: the time per dispatch.
+    pub fn dispatch(&self, resources: &[Resource<'_>], push: &[u8], invocations: u32) -> Result<Timing> {
+        run_alone(&self.pass.core, |batch| self.add_to(batch, resources, push, invocations))
     }
 }
 

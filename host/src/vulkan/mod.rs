@@ -4,6 +4,7 @@
 
 mod accel;
 mod backend;
+mod batch;
 mod buffer;
 mod context;
 mod denoise;

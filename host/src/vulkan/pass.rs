@@ -1,8 +1,9 @@
 //! What every raywave pipeline shares, compute or ray tracing: descriptor set 0 laid out from the
-//! shared binding numbers, a push-constant range, and a timestamped one-shot submission that
-//! repeats its work in benchmark mode ([`super::ContextOptions::sustain_seconds`]).
+//! shared binding numbers, a push-constant range, and a timestamped run that repeats its work in
+//! benchmark mode ([`super::ContextOptions::sustain_seconds`]), recorded into a submission that
+//! [`super::batch::Batch`] makes.
 
-use super::buffer::{global_barrier, submit_and_wait, GpuBuffer};
+use super::buffer::{global_barrier, GpuBuffer};
 use super::context::{vk_error, Core, MAX_SUSTAINED_DISPATCHES};
 use super::driver_lock;
 use crate::backend::StageReport;
@@ -10,14 +11,13 @@ use crate::error::{Error, Result};
 use ash::vk;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
-use std::time::Instant;
 
-/// What one timed submission of a pass measured.
+/// What one run of a pass measured ([`Pass::timing`]).
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Timing {
-    /// Seconds per dispatch: the submission's time over `dispatches`.
+    /// Seconds per dispatch: the run's time over `dispatches`.
     pub seconds: f64,
-    /// How many times the work ran back to back in the submission.
+    /// How many times the work ran back to back in the run.
     pub dispatches: u32,
 }
 
@@ -51,11 +51,25 @@ fn elapsed_ticks(start: u64, end: u64, valid_bits: u32) -> u64 {
 }
 
 /// A resource bound to one binding of a pass's descriptor set.
+#[derive(Clone, Copy)]
 pub(crate) enum Resource<'a> {
     /// A storage buffer.
     Buffer(&'a GpuBuffer),
     /// A top-level acceleration structure.
     AccelerationStructure(vk::AccelerationStructureKHR),
+}
+
+/// A run of a pass, prepared ([`Pass::prepare`]) and not yet recorded: its descriptor set is
+/// written.
+pub(crate) struct PreparedRun {
+    /// How many times the work repeats back to back (benchmark mode), at least 1.
+    dispatches: u32,
+    /// Invocations of one repetition (at least 1), for the time per invocation.
+    size: f64,
+    /// The sanitized counters among the resources, zeroed before the last repetition.
+    counters: Vec<vk::Buffer>,
+    /// The push constants.
+    push: Vec<u8>,
 }
 
 /// A pipeline with its layout, descriptor set and timestamp queries; destroyed on drop.
@@ -191,21 +205,14 @@ impl Pass {
             .map_err(vk_error("vkCreateShaderModule"))
     }
 
-    /// Binds `resources` (one per binding, in creation order; every buffer device-local, so no
-    /// kernel reads or writes host memory across the bus), pushes `push`, records `work` (of
-    /// `invocations` invocations) — between two timestamps where the device writes them
-    /// ([`super::DeviceInfo::timestamps`]) — once, or in benchmark mode as many
-    /// times as the last submission's time per invocation says keep the device busy for
-    /// [`Core::sustain_seconds`], separated by barriers, with every counter among `resources`
-    /// zeroed before the last — submits and waits. Returns the time per dispatch, from GPU
-    /// timestamps where the device has them, else from the host clock around the submission.
-    pub fn run(
-        &self,
-        resources: &[Resource<'_>],
-        push: &[u8],
-        invocations: u32,
-        work: impl Fn(vk::CommandBuffer),
-    ) -> Result<Timing> {
+    /// Prepares a run of this pass over `resources` (one per binding, in creation order; every
+    /// buffer device-local, so no kernel reads or writes host memory across the bus) with push
+    /// constants `push` and `invocations` invocations: checks the resources, writes them to the
+    /// descriptor set, and chooses how many times the work repeats — once, or in benchmark mode
+    /// as many times as the last run's time per invocation says keep the device busy for
+    /// [`Core::sustain_seconds`]. The set is the pass's only one: a submission holds at most one
+    /// run of each pass ([`super::batch::Batch`]).
+    pub fn prepare(&self, resources: &[Resource<'_>], push: &[u8], invocations: u32) -> Result<PreparedRun> {
         if resources.len() != self.bindings.len() {
             return Err(Error::InvalidParameter {
                 name: "resources",
@@ -252,8 +259,9 @@ impl Pass {
                 }
             })
             .collect();
-        // SAFETY: the set is not in use (every run waits for completion) and the writes reference
-        // live resources.
+        // SAFETY: the set is not in use (every submission is waited for, and one holds at most
+        // one run of this pass, recorded after this write) and the writes reference live
+        // resources.
         unsafe { d.update_descriptor_sets(&writes, &[]) };
         let size = f64::from(invocations.max(1));
         let sustain_seconds = self.core.sustain_seconds();
@@ -263,52 +271,62 @@ impl Pass {
         } else {
             1
         };
-        let counters: Vec<&GpuBuffer> = resources
+        let counters = resources
             .iter()
             .filter_map(|r| match r {
-                Resource::Buffer(b) if b.is_counter => Some(*b),
+                Resource::Buffer(b) if b.is_counter => Some(b.buffer),
                 _ => None,
             })
             .collect();
+        Ok(PreparedRun { dispatches, size, counters, push: push.to_vec() })
+    }
+
+    /// Records `run` into `cmd`: binds the pipeline and set, pushes the constants and records
+    /// `work` (the run's dispatch) `run.dispatches` times, separated by barriers, with every
+    /// counter among the resources zeroed before the last — between two timestamps where the
+    /// device writes them ([`super::DeviceInfo::timestamps`]).
+    pub fn record(&self, cmd: vk::CommandBuffer, run: &PreparedRun, work: &dyn Fn(vk::CommandBuffer)) {
+        let d = &self.core.device;
         let all = vk::PipelineStageFlags::ALL_COMMANDS;
-        let timed = self.core.info.timestamps;
-        let start = Instant::now();
-        submit_and_wait(&self.core, |cmd| {
-            // SAFETY: `cmd` is recording; pipeline, layout, set and query pool are live; the
-            // queue family has timestamp valid bits wherever `timed`.
-            unsafe {
-                if timed {
-                    d.cmd_reset_query_pool(cmd, self.query_pool, 0, 2);
-                    d.cmd_write_timestamp(cmd, vk::PipelineStageFlags::TOP_OF_PIPE, self.query_pool, 0);
-                }
-                d.cmd_bind_pipeline(cmd, self.bind_point, self.pipeline);
-                d.cmd_bind_descriptor_sets(cmd, self.bind_point, self.pipeline_layout, 0, &[self.descriptor_set], &[]);
-                d.cmd_push_constants(cmd, self.pipeline_layout, self.stages, 0, push);
+        // SAFETY: `cmd` is recording; pipeline, layout, set and query pool are live; the queue
+        // family has timestamp valid bits wherever `timestamps`.
+        unsafe {
+            if self.core.info.timestamps {
+                d.cmd_reset_query_pool(cmd, self.query_pool, 0, 2);
+                d.cmd_write_timestamp(cmd, vk::PipelineStageFlags::TOP_OF_PIPE, self.query_pool, 0);
             }
-            for repetition in 0..dispatches {
-                if repetition > 0 {
-                    // Each repetition writes what the last wrote: in order, as a frame's passes.
-                    global_barrier(&self.core, cmd, all, all);
-                }
-                if repetition > 0 && repetition + 1 == dispatches {
-                    // The counters count the last repetition alone, exactly one run's count.
-                    for counter in &counters {
-                        // SAFETY: a live device-local counter (TRANSFER_DST usage) of 4 bytes.
-                        unsafe { d.cmd_fill_buffer(cmd, counter.buffer, 0, vk::WHOLE_SIZE, 0) };
-                    }
-                    global_barrier(&self.core, cmd, all, all);
-                }
-                work(cmd);
+            d.cmd_bind_pipeline(cmd, self.bind_point, self.pipeline);
+            d.cmd_bind_descriptor_sets(cmd, self.bind_point, self.pipeline_layout, 0, &[self.descriptor_set], &[]);
+            d.cmd_push_constants(cmd, self.pipeline_layout, self.stages, 0, &run.push);
+        }
+        for repetition in 0..run.dispatches {
+            if repetition > 0 {
+                // Each repetition writes what the last wrote: in order, as a frame's passes.
+                global_barrier(&self.core, cmd, all, all);
             }
-            if timed {
-                // SAFETY: as above.
-                unsafe { d.cmd_write_timestamp(cmd, vk::PipelineStageFlags::BOTTOM_OF_PIPE, self.query_pool, 1) };
+            if repetition + 1 == run.dispatches && !run.counters.is_empty() {
+                // The counters count the last repetition alone, exactly one run's count.
+                for &counter in &run.counters {
+                    // SAFETY: a live device-local counter (TRANSFER_DST usage) of 4 bytes.
+                    unsafe { d.cmd_fill_buffer(cmd, counter, 0, vk::WHOLE_SIZE, 0) };
+                }
+                global_barrier(&self.core, cmd, all, all);
             }
-        })?;
-        let host_seconds = start.elapsed().as_secs_f64();
-        let seconds = if timed { self.gpu_seconds()? } else { host_seconds };
-        let timing = Timing { seconds: seconds / f64::from(dispatches), dispatches };
-        self.seconds_per_invocation.store((timing.seconds / size).to_bits(), Ordering::Relaxed);
+            work(cmd);
+        }
+        if self.core.info.timestamps {
+            // SAFETY: as above.
+            unsafe { d.cmd_write_timestamp(cmd, vk::PipelineStageFlags::BOTTOM_OF_PIPE, self.query_pool, 1) };
+        }
+    }
+
+    /// The time per dispatch of `run`, once its submission has completed: from the GPU
+    /// timestamps where the device has them, else `host_seconds`, the host clock around a
+    /// submission that held this run alone. Benchmark mode sizes the next run from it.
+    pub fn timing(&self, run: &PreparedRun, host_seconds: f64) -> Result<Timing> {
+        let seconds = if self.core.info.timestamps { self.gpu_seconds()? } else { host_seconds };
+        let timing = Timing { seconds: seconds / f64::from(run.dispatches), dispatches: run.dispatches };
+        self.seconds_per_invocation.store((timing.seconds / run.size).to_bits(), Ordering::Relaxed);
         Ok(timing)
     }
 

@@ -3,9 +3,10 @@
 //! stream, one miss and one triangle hit group fill the payload, the shader binding table holds
 //! the three group handles.
 
+use super::batch::{Batch, RunId};
 use super::buffer::GpuBuffer;
 use super::context::{vk_error, Core};
-use super::pass::{Pass, Resource, Timing};
+use super::pass::{Pass, Resource};
 use crate::error::{Error, Result};
 use ash::vk;
 use std::sync::Arc;
@@ -150,9 +151,15 @@ impl RtPipelineKernel {
         Ok(Self { loader: loader.clone(), raygen, miss, hit, _sbt: sbt, pass })
     }
 
-    /// Traces `rays` rays (raygen launch `min(rays, LAUNCH_WIDTH)` wide) and waits ([`Pass::run`]:
-    /// repeated in benchmark mode); returns the time per trace.
-    pub fn trace(&self, resources: &[Resource<'_>], push: &[u8], rays: u32) -> Result<Timing> {
+    /// Adds to `batch` a trace of `rays` rays (raygen launch `min(rays, LAUNCH_WIDTH)` wide) over
+    /// `resources` with push constants `push` ([`Batch::add`]: repeated in benchmark mode).
+    pub fn add_to<'a>(
+        &'a self,
+        batch: &mut Batch<'a>,
+        resources: &[Resource<'a>],
+        push: &[u8],
+        rays: u32,
+    ) -> Result<RunId> {
         let core = &self.pass.core;
         // The launch is a whole number of LAUNCH_WIDTH-wide rows: its invocations, not the rays,
         // must fit the limit (VUID-vkCmdTraceRaysKHR-width-03641).
@@ -169,7 +176,7 @@ impl RtPipelineKernel {
             });
         }
         let (loader, callable) = (&self.loader, vk::StridedDeviceAddressRegionKHR::default());
-        self.pass.run(resources, push, rays, |cmd| {
+        batch.add(&self.pass, resources, push, rays, move |cmd| {
             if rays > 0 {
                 // SAFETY: `cmd` is recording with this pass's pipeline and set bound; the SBT
                 // regions point into the live table buffer.
