@@ -177,8 +177,9 @@ pub(crate) struct RtPipelineProperties {
 /// How to open a Vulkan device.
 #[derive(Clone, Debug, Default)]
 pub struct ContextOptions {
-    /// Enable `VK_LAYER_KHRONOS_validation` and capture its warnings and errors. Fails with
-    /// [`Error::VulkanUnavailable`] if the layer is not installed.
+    /// Enable `VK_LAYER_KHRONOS_validation`, with its synchronization validation, and capture its
+    /// warnings and errors. Fails with [`Error::VulkanUnavailable`] if the layer is not
+    /// installed.
     pub validation: bool,
     /// Benchmark mode, in seconds (finite, `0..=1`; 0, the default, is off): after a kernel's
     /// first run, each of its timed submissions repeats the dispatch back to back — up to
@@ -245,6 +246,7 @@ pub(crate) struct Core {
     pub workgroup_sizes: WorkgroupSizes,
     /// Command buffers submitted to the queue so far ([`super::buffer::submit_and_wait`]): what
     /// the tests count to check that a batch is one submission.
+    #[cfg(test)]
     pub submissions: AtomicU64,
 }
 
@@ -337,13 +339,24 @@ fn create_instance(
         .engine_name(c"raywave")
         .api_version(vk::API_VERSION_1_2);
     let layers = if validation { vec![VALIDATION_LAYER.as_ptr()] } else { vec![] };
-    let extensions = if validation { vec![ash::ext::debug_utils::NAME.as_ptr()] } else { vec![] };
+    let extensions = if validation {
+        vec![ash::ext::debug_utils::NAME.as_ptr(), ash::ext::validation_features::NAME.as_ptr()]
+    } else {
+        vec![]
+    };
+    // With validation, synchronization validation too: a missing barrier between passes that a
+    // serial device such as lavapipe forgives is an error the tests see.
+    let enabled = [vk::ValidationFeatureEnableEXT::SYNCHRONIZATION_VALIDATION];
+    let mut features = vk::ValidationFeaturesEXT::default().enabled_validation_features(&enabled);
     let mut info = vk::InstanceCreateInfo::default()
         .application_info(&app)
         .enabled_layer_names(&layers)
         .enabled_extension_names(&extensions);
     if let Some(m) = messenger_info {
         info = info.push_next(m);
+    }
+    if validation {
+        info = info.push_next(&mut features);
     }
     // SAFETY: all pointers in `info` borrow locals that outlive the call.
     unsafe { entry.create_instance(&info, None) }.map_err(|e| match e {
@@ -570,6 +583,7 @@ pub(crate) fn open(index: usize, options: &ContextOptions) -> Result<Arc<Core>> 
                 accel_limits,
                 sustain_seconds: AtomicU64::new(options.sustain_seconds.to_bits()),
                 workgroup_sizes,
+                #[cfg(test)]
                 submissions: AtomicU64::new(0),
             }))
         }

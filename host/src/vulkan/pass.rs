@@ -9,7 +9,7 @@ use super::driver_lock;
 use crate::backend::StageReport;
 use crate::error::{Error, Result};
 use ash::vk;
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Arc;
 
 /// What one run of a pass measured ([`Pass::timing`]).
@@ -87,10 +87,12 @@ pub(crate) struct Pass {
     descriptor_set: vk::DescriptorSet,
     query_pool: vk::QueryPool,
     bindings: Vec<(u32, vk::DescriptorType)>,
-    /// Benchmark mode: the last submission's seconds per dispatch per invocation (`f64` bits;
-    /// NaN before the first), from which the next submission, whatever its size, takes how many
-    /// dispatches it repeats — so that a large call after a small one does not run for minutes.
+    /// Benchmark mode: the last run's seconds per dispatch per invocation (`f64` bits; NaN
+    /// before the first), from which the next run, whatever its size, takes how many dispatches
+    /// it repeats — so that a large call after a small one does not run for minutes.
     seconds_per_invocation: AtomicU64,
+    /// Whether a live [`super::batch::Batch`] holds a run of this pass ([`Self::claim`]).
+    claimed: AtomicBool,
 }
 
 impl Drop for Pass {
@@ -135,6 +137,7 @@ impl Pass {
             query_pool: vk::QueryPool::null(),
             bindings: bindings.to_vec(),
             seconds_per_invocation: AtomicU64::new(f64::NAN.to_bits()),
+            claimed: AtomicBool::new(false),
         };
         let layout_bindings: Vec<_> = bindings
             .iter()
@@ -205,13 +208,27 @@ impl Pass {
             .map_err(vk_error("vkCreateShaderModule"))
     }
 
+    /// Claims the pass for one batch's run, which [`Self::prepare`] writes the descriptor set
+    /// for; refused while another run holds it — in the same batch or another live one — as
+    /// that run's set would be overwritten before it ran.
+    pub fn claim(&self) -> Result<()> {
+        self.claimed.compare_exchange(false, true, Ordering::AcqRel, Ordering::Acquire).map(|_| ()).map_err(|_| {
+            Error::InvalidParameter { name: "batch", reason: format!("{} already runs in a batch", self.name) }
+        })
+    }
+
+    /// Releases a [`Self::claim`] once the run it was for is done with or dropped.
+    pub fn release(&self) {
+        self.claimed.store(false, Ordering::Release);
+    }
+
     /// Prepares a run of this pass over `resources` (one per binding, in creation order; every
     /// buffer device-local, so no kernel reads or writes host memory across the bus) with push
     /// constants `push` and `invocations` invocations: checks the resources, writes them to the
     /// descriptor set, and chooses how many times the work repeats — once, or in benchmark mode
     /// as many times as the last run's time per invocation says keep the device busy for
-    /// [`Core::sustain_seconds`]. The set is the pass's only one: a submission holds at most one
-    /// run of each pass ([`super::batch::Batch`]).
+    /// [`Core::sustain_seconds`]. The set is the pass's only one: the caller has claimed the
+    /// pass ([`Self::claim`]).
     pub fn prepare(&self, resources: &[Resource<'_>], push: &[u8], invocations: u32) -> Result<PreparedRun> {
         if resources.len() != self.bindings.len() {
             return Err(Error::InvalidParameter {
@@ -259,9 +276,9 @@ impl Pass {
                 }
             })
             .collect();
-        // SAFETY: the set is not in use (every submission is waited for, and one holds at most
-        // one run of this pass, recorded after this write) and the writes reference live
-        // resources.
+        // SAFETY: the set is not in use (every submission is waited for, and the pass is claimed
+        // by one batch, whose one run of it is recorded after this write) and the writes
+        // reference live resources.
         unsafe { d.update_descriptor_sets(&writes, &[]) };
         let size = f64::from(invocations.max(1));
         let sustain_seconds = self.core.sustain_seconds();
@@ -284,10 +301,23 @@ impl Pass {
     /// Records `run` into `cmd`: binds the pipeline and set, pushes the constants and records
     /// `work` (the run's dispatch) `run.dispatches` times, separated by barriers, with every
     /// counter among the resources zeroed before the last — between two timestamps where the
-    /// device writes them ([`super::DeviceInfo::timestamps`]).
+    /// device writes them ([`super::DeviceInfo::timestamps`]), which take in the zeroing only
+    /// where it falls between repetitions (benchmark mode), as before batches.
     pub fn record(&self, cmd: vk::CommandBuffer, run: &PreparedRun, work: &dyn Fn(vk::CommandBuffer)) {
         let d = &self.core.device;
         let all = vk::PipelineStageFlags::ALL_COMMANDS;
+        let zero_counters = || {
+            for &counter in &run.counters {
+                // SAFETY: `cmd` is recording; a live device-local counter (TRANSFER_DST usage) of
+                // 4 bytes.
+                unsafe { d.cmd_fill_buffer(cmd, counter, 0, vk::WHOLE_SIZE, 0) };
+            }
+            global_barrier(&self.core, cmd, all, all);
+        };
+        if run.dispatches == 1 && !run.counters.is_empty() {
+            // Outside the timestamps: the time is the dispatch's alone.
+            zero_counters();
+        }
         // SAFETY: `cmd` is recording; pipeline, layout, set and query pool are live; the queue
         // family has timestamp valid bits wherever `timestamps`.
         unsafe {
@@ -304,13 +334,9 @@ impl Pass {
                 // Each repetition writes what the last wrote: in order, as a frame's passes.
                 global_barrier(&self.core, cmd, all, all);
             }
-            if repetition + 1 == run.dispatches && !run.counters.is_empty() {
+            if repetition > 0 && repetition + 1 == run.dispatches && !run.counters.is_empty() {
                 // The counters count the last repetition alone, exactly one run's count.
-                for &counter in &run.counters {
-                    // SAFETY: a live device-local counter (TRANSFER_DST usage) of 4 bytes.
-                    unsafe { d.cmd_fill_buffer(cmd, counter, 0, vk::WHOLE_SIZE, 0) };
-                }
-                global_barrier(&self.core, cmd, all, all);
+                zero_counters();
             }
             work(cmd);
         }
