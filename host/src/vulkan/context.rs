@@ -177,9 +177,9 @@ pub(crate) struct RtPipelineProperties {
 /// How to open a Vulkan device.
 #[derive(Clone, Debug, Default)]
 pub struct ContextOptions {
-    /// Enable `VK_LAYER_KHRONOS_validation`, with its synchronization validation, and capture its
-    /// warnings and errors. Fails with [`Error::VulkanUnavailable`] if the layer is not
-    /// installed.
+    /// Enable `VK_LAYER_KHRONOS_validation`, with its synchronization validation where the layer
+    /// offers it (`VK_EXT_validation_features`), and capture its warnings and errors. Fails with
+    /// [`Error::VulkanUnavailable`] if the layer is not installed.
     pub validation: bool,
     /// Benchmark mode, in seconds (finite, `0..=1`; 0, the default, is off): after a kernel's
     /// first run, each of its timed submissions repeats the dispatch back to back — up to
@@ -324,14 +324,18 @@ fn keep_drivers_loaded(entry: &ash::Entry) {
     static KEPT: AtomicBool = AtomicBool::new(false);
     if !KEPT.load(Ordering::Acquire) {
         // `ash::Instance` has no destructor: dropping the handle leaves the instance alive.
-        let kept = create_instance(entry, false, None).is_ok();
+        let kept = create_instance(entry, false, false, None).is_ok();
         KEPT.store(kept, Ordering::Release);
     }
 }
 
+/// Creates the instance; with `validation` the validation layer, with its synchronization
+/// validation where `sync_validation` says the layer offers it (`VK_EXT_validation_features`),
+/// and the debug-utils messenger of `messenger_info`.
 fn create_instance(
     entry: &ash::Entry,
     validation: bool,
+    sync_validation: bool,
     messenger_info: Option<&mut vk::DebugUtilsMessengerCreateInfoEXT>,
 ) -> Result<ash::Instance> {
     let app = vk::ApplicationInfo::default()
@@ -339,11 +343,10 @@ fn create_instance(
         .engine_name(c"raywave")
         .api_version(vk::API_VERSION_1_2);
     let layers = if validation { vec![VALIDATION_LAYER.as_ptr()] } else { vec![] };
-    let extensions = if validation {
-        vec![ash::ext::debug_utils::NAME.as_ptr(), ash::ext::validation_features::NAME.as_ptr()]
-    } else {
-        vec![]
-    };
+    let mut extensions = if validation { vec![ash::ext::debug_utils::NAME.as_ptr()] } else { vec![] };
+    if sync_validation {
+        extensions.push(ash::ext::validation_features::NAME.as_ptr());
+    }
     // With validation, synchronization validation too: a missing barrier between passes that a
     // serial device such as lavapipe forgives is an error the tests see.
     let enabled = [vk::ValidationFeatureEnableEXT::SYNCHRONIZATION_VALIDATION];
@@ -355,7 +358,7 @@ fn create_instance(
     if let Some(m) = messenger_info {
         info = info.push_next(m);
     }
-    if validation {
+    if sync_validation {
         info = info.push_next(&mut features);
     }
     // SAFETY: all pointers in `info` borrow locals that outlive the call.
@@ -454,7 +457,7 @@ fn compute_queue_family(
 pub fn enumerate_devices() -> Result<Vec<DeviceInfo>> {
     let _lifetime = driver_lock::device_lifetime();
     let entry = load_entry()?;
-    let instance = create_instance(&entry, false, None)?;
+    let instance = create_instance(&entry, false, false, None)?;
     let result = physical_devices(&instance)
         .and_then(|devices| devices.iter().enumerate().map(|(i, &pd)| describe(&instance, pd, i)).collect());
     // SAFETY: nothing was created from this instance.
@@ -477,6 +480,16 @@ pub(crate) fn open(index: usize, options: &ContextOptions) -> Result<Arc<Core>> 
             });
         }
     }
+    // Synchronization validation where the layer offers it: an older layer without
+    // `VK_EXT_validation_features` still validates the rest, as before raywave asked for it (not
+    // a failed `vkCreateInstance`); CI's layer has it, which
+    // `buffer::tests::validation_reports_a_missing_barrier` checks.
+    let sync_validation = options.validation && {
+        // SAFETY: plain query on a loaded entry for an installed layer.
+        let extensions = unsafe { entry.enumerate_instance_extension_properties(Some(VALIDATION_LAYER)) }
+            .map_err(vk_error("vkEnumerateInstanceExtensionProperties"))?;
+        has_extension(&extensions, ash::ext::validation_features::NAME)
+    };
     let messages = ValidationLog::default();
     let mut messenger_info = vk::DebugUtilsMessengerCreateInfoEXT::default()
         .message_severity(vk::DebugUtilsMessageSeverityFlagsEXT::WARNING | vk::DebugUtilsMessageSeverityFlagsEXT::ERROR)
@@ -487,7 +500,12 @@ pub(crate) fn open(index: usize, options: &ContextOptions) -> Result<Arc<Core>> 
         )
         .pfn_user_callback(Some(debug_callback))
         .user_data(Arc::as_ptr(&messages.0) as *mut c_void);
-    let instance = create_instance(&entry, options.validation, options.validation.then_some(&mut messenger_info))?;
+    let instance = create_instance(
+        &entry,
+        options.validation,
+        sync_validation,
+        options.validation.then_some(&mut messenger_info),
+    )?;
     // From here on, every failure path destroys what was created before it.
     let debug = if options.validation {
         let utils = ash::ext::debug_utils::Instance::new(&entry, &instance);
