@@ -953,12 +953,7 @@ mod tests {
     /// loudly elsewhere.
     #[test]
     fn the_shade_pipeline_specialized_without_the_residual_ignores_its_flag() {
-        let devices = super::super::enumerate_devices().unwrap_or_default();
-        if devices.is_empty() {
-            assert!(!crate::in_ci(), "CI=true requires a Vulkan device");
-            eprintln!("\n*** SKIP shade specialization: no Vulkan device ***\n");
-            return;
-        }
+        let devices = super::super::devices_for_test("shade specialization");
         let scene = Scene::load("builtin:cornell").unwrap();
         let mut data = ShadeData::new(&scene).unwrap();
         for material in &mut data.materials {
@@ -1023,12 +1018,7 @@ mod tests {
     /// one it fails under CI and is skipped loudly elsewhere.
     #[test]
     fn a_lit_sample_is_one_submission_where_the_device_writes_timestamps() {
-        let devices = super::super::enumerate_devices().unwrap_or_default();
-        if devices.is_empty() {
-            assert!(!crate::in_ci(), "CI=true requires a Vulkan device");
-            eprintln!("\n*** SKIP lit sample submissions: no Vulkan device ***\n");
-            return;
-        }
+        let devices = super::super::devices_for_test("lit sample submissions");
         let scene = Scene::load("builtin:cornell").unwrap();
         let data = ShadeData::new(&scene).unwrap();
         for device in &devices {
@@ -1062,12 +1052,7 @@ mod tests {
     /// loudly elsewhere.
     #[test]
     fn a_batch_split_into_a_submission_per_run_reads_what_one_submission_reads() {
-        let devices = super::super::enumerate_devices().unwrap_or_default();
-        if devices.is_empty() {
-            assert!(!crate::in_ci(), "CI=true requires a Vulkan device");
-            eprintln!("\n*** SKIP batch submissions: no Vulkan device ***\n");
-            return;
-        }
+        let devices = super::super::devices_for_test("batch submissions");
         let scene = Scene::load("builtin:cornell").unwrap();
         let params = crate::frame::generate_params(&scene, 24, 16, 3);
         for device in &devices {

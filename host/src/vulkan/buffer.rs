@@ -328,12 +328,7 @@ mod tests {
     /// Every Vulkan device; without one it fails under CI and is skipped loudly elsewhere.
     #[test]
     fn validation_reports_a_missing_barrier() {
-        let devices = super::super::enumerate_devices().unwrap_or_default();
-        if devices.is_empty() {
-            assert!(!crate::in_ci(), "CI=true requires a Vulkan device");
-            eprintln!("\n*** SKIP synchronization validation: no Vulkan device ***\n");
-            return;
-        }
+        let devices = super::super::devices_for_test("synchronization validation");
         for device in &devices {
             let options = super::super::ContextOptions { validation: true, ..Default::default() };
             let core = super::super::context::open(device.index, &options).unwrap();

@@ -17,3 +17,15 @@ pub mod spirv;
 pub use crate::backend::ValidationLog;
 pub use backend::VulkanBackend;
 pub use context::{enumerate_devices, ContextOptions, DeviceInfo, MAX_SUSTAINED_DISPATCHES};
+
+/// The Vulkan devices a test runs on: every one there is. With none, under CI (`CI=true` or `1`)
+/// the test fails; elsewhere it is told to skip (an empty list) with a loud line naming `what`.
+#[cfg(test)]
+pub(crate) fn devices_for_test(what: &str) -> Vec<DeviceInfo> {
+    let devices = enumerate_devices().unwrap_or_default();
+    if devices.is_empty() {
+        assert!(!crate::in_ci(), "CI=true requires a Vulkan device");
+        eprintln!("\n*** SKIP {what}: no Vulkan device ***\n");
+    }
+    devices
+}
