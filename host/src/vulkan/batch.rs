@@ -1,8 +1,9 @@
-//! One submission of several passes and of the copies that read their results back. A lit
-//! sample's generate, trace, shade and occlusion passes, their sanitized counters and its
-//! readbacks make one command buffer and one wait: each of them had been its own submission,
-//! fifteen a sample (21 with the camera streams), every one a round trip to the device and the
-//! driver's threads.
+//! One submission of several passes, of the copies that upload their inputs and of the copies
+//! that read their results back. A lit sample's generate, trace, shade and occlusion passes,
+//! their sanitized counters and its readbacks make one command buffer and one wait: each of them
+//! had been its own submission, fifteen a sample (21 with the camera streams), every one a round
+//! trip to the device and the driver's threads. A frame's denoise is one too, where it had been
+//! one per pass and per input (fourteen for TV).
 
 use super::buffer::{global_barrier, submit_and_wait, GpuBuffer};
 use super::context::Core;
@@ -15,16 +16,27 @@ use std::marker::PhantomData;
 use std::sync::Arc;
 use std::time::Instant;
 
-/// Work gathered for one submission: runs of passes, in order, each after a barrier that makes
-/// the last one's writes visible, then copies of device buffers into host-visible staging
-/// buffers, one per read (no larger than the buffer read, as before batches). The buffers its
-/// runs bind and its reads copy are borrowed for `'a`, past [`Self::submit`]'s wait; an
-/// acceleration structure is bound by handle, which the caller keeps alive (`add_trace` borrows
-/// its scene). Each pass it runs is claimed until the batch is dropped ([`Pass::claim`]).
+/// Work gathered for one submission: copies of host data into device buffers, through
+/// host-visible staging buffers written when they are added; runs of passes, in order; then
+/// copies of device buffers into host-visible staging buffers, one per read (no larger than the
+/// buffer read, as before batches). Each step comes after a barrier that makes the last one's
+/// writes visible. The buffers it uploads to, its runs bind and its reads copy are borrowed for
+/// `'a`, past [`Self::submit`]'s wait; an acceleration structure is bound by handle, which the
+/// caller keeps alive (`add_trace` borrows its scene). Each run holds a slot of its pass
+/// (descriptor set, timestamps) until the batch is dropped ([`Pass::prepare`]), so a pass may
+/// run several times in one batch.
 pub(crate) struct Batch<'a> {
     core: Arc<Core>,
+    uploads: Vec<Upload<'a>>,
     runs: Vec<Run<'a>>,
     reads: Vec<Read<'a>>,
+}
+
+/// A copy of the first `bytes` of `staging`, written by the host, into the start of `buffer`.
+struct Upload<'a> {
+    buffer: &'a GpuBuffer,
+    staging: GpuBuffer,
+    bytes: u64,
 }
 
 /// A pass's prepared run and the commands of its work.
@@ -39,6 +51,13 @@ struct Read<'a> {
     buffer: &'a GpuBuffer,
     staging: GpuBuffer,
     bytes: u64,
+}
+
+/// One step of a submission, after a barrier where it is not the first.
+enum Step<'r, 'a> {
+    Uploads,
+    Run(&'r Run<'a>),
+    Reads,
 }
 
 /// A run in a [`Batch`], to find its timing in [`Done`].
@@ -62,13 +81,30 @@ pub(crate) struct Done {
 impl<'a> Batch<'a> {
     /// An empty batch for `core`'s device.
     pub fn new(core: &Arc<Core>) -> Self {
-        Self { core: core.clone(), runs: Vec::new(), reads: Vec::new() }
+        Self { core: core.clone(), uploads: Vec::new(), runs: Vec::new(), reads: Vec::new() }
+    }
+
+    /// Adds a copy of `data` into the start of device buffer `buffer`, made before every run:
+    /// `data` is written now into a host-visible staging buffer of its size. An upload past the
+    /// buffer's end is refused; an empty one adds nothing (Vulkan refuses empty copy regions).
+    pub fn upload<T: Pod>(&mut self, buffer: &'a GpuBuffer, data: &[T]) -> Result<()> {
+        let bytes: &[u8] = bytemuck::cast_slice(data);
+        if bytes.len() as u64 > buffer.size {
+            return Err(Error::InvalidParameter {
+                name: "data",
+                reason: format!("upload of {} bytes past the end of a buffer of {} bytes", bytes.len(), buffer.size),
+            });
+        }
+        if !bytes.is_empty() {
+            let staging = GpuBuffer::staging_with(&self.core, bytes)?;
+            self.uploads.push(Upload { buffer, staging, bytes: bytes.len() as u64 });
+        }
+        Ok(())
     }
 
     /// Adds a run of `pass` over `resources` with push constants `push` and `invocations`
-    /// invocations, whose commands `work` records ([`Pass::prepare`], [`Pass::record`]); refused
-    /// for a pass that this or another live batch already runs, whose one descriptor set the
-    /// second run would overwrite before the first ran.
+    /// invocations, whose commands `work` records ([`Pass::prepare`], [`Pass::record`]), in a
+    /// slot of the pass that the batch holds until it is dropped.
     pub fn add(
         &mut self,
         pass: &'a Pass,
@@ -77,14 +113,7 @@ impl<'a> Batch<'a> {
         invocations: u32,
         work: impl Fn(vk::CommandBuffer) + 'a,
     ) -> Result<RunId> {
-        pass.claim()?;
-        let prepared = match pass.prepare(resources, push, invocations) {
-            Ok(prepared) => prepared,
-            Err(error) => {
-                pass.release();
-                return Err(error);
-            }
-        };
+        let prepared = pass.prepare(resources, push, invocations)?;
         self.runs.push(Run { pass, prepared, work: Box::new(work) });
         Ok(RunId(self.runs.len() - 1))
     }
@@ -114,61 +143,69 @@ impl<'a> Batch<'a> {
         Ok(ReadId { staging: Some(self.reads.len() - 1), bytes, _element: PhantomData })
     }
 
-    /// Records the reads' copies.
-    fn record_reads(&self, cmd: vk::CommandBuffer) {
-        for read in &self.reads {
-            let region = [vk::BufferCopy::default().size(read.bytes)];
-            // SAFETY: `cmd` is recording; the source holds `bytes` (checked in `read`), the
-            // staging buffer was made of that size; both have transfer usage.
-            unsafe { self.core.device.cmd_copy_buffer(cmd, read.buffer.buffer, read.staging.buffer, &region) };
+    /// Records `steps` into `cmd`, a barrier between each step and the next.
+    fn record(&self, cmd: vk::CommandBuffer, steps: &[Step<'_, 'a>]) {
+        let all = vk::PipelineStageFlags::ALL_COMMANDS;
+        let copy = |source: &GpuBuffer, destination: &GpuBuffer, bytes| {
+            let region = [vk::BufferCopy::default().size(bytes)];
+            // SAFETY: `cmd` is recording; both buffers hold `bytes` (checked in `upload` and
+            // `read`, which made the staging buffers of that size) and have transfer usage.
+            unsafe { self.core.device.cmd_copy_buffer(cmd, source.buffer, destination.buffer, &region) };
+        };
+        for (k, step) in steps.iter().enumerate() {
+            if k > 0 {
+                // Each step reads what the ones before it wrote.
+                global_barrier(&self.core, cmd, all, all);
+            }
+            match step {
+                Step::Uploads => self.uploads.iter().for_each(|up| copy(&up.staging, up.buffer, up.bytes)),
+                Step::Run(run) => run.pass.record(cmd, &run.prepared, &*run.work),
+                Step::Reads => self.reads.iter().for_each(|read| copy(read.buffer, &read.staging, read.bytes)),
+            }
         }
     }
 
-    /// Submits the batch and waits. Where the device writes timestamps the runs and the copies
-    /// make one submission, and each run's time comes from its own pair of timestamps. Where it
-    /// does not, and in benchmark mode ([`Core::sustain_seconds`]: a run then keeps the device
-    /// busy on its own, and four in one command buffer could outlast a driver's watchdog), each
-    /// run is its own submission — timed by the host clock around it where there are no
-    /// timestamps — and the copies one more, as every pass was before batches.
+    /// Records `steps` into a submission of their own and waits, unless there are none: the
+    /// host clock's seconds around it.
+    fn submit_steps(&self, steps: &[Step<'_, 'a>]) -> Result<f64> {
+        if steps.is_empty() {
+            return Ok(0.0);
+        }
+        let start = Instant::now();
+        submit_and_wait(&self.core, |cmd| self.record(cmd, steps))?;
+        Ok(start.elapsed().as_secs_f64())
+    }
+
+    /// Submits the batch and waits. Where the device writes timestamps the uploads, the runs and
+    /// the reads make one submission, and each run's time comes from its own pair of timestamps.
+    /// Where it does not, and in benchmark mode ([`Core::sustain_seconds`]: a run then keeps the
+    /// device busy on its own, and four in one command buffer could outlast a driver's watchdog),
+    /// the uploads are one submission, each run is its own — timed by the host clock around it
+    /// where there are no timestamps — and the reads one more, as every pass was before batches.
     pub fn submit(self) -> Result<Done> {
         self.submit_in(true)
     }
 
-    /// [`Self::submit`], split into one submission per run and one for the copies also where one
-    /// submission could hold them all, unless `together`.
+    /// [`Self::submit`], split into one submission for the uploads, one per run and one for the
+    /// reads also where one submission could hold them all, unless `together`.
     pub(super) fn submit_in(mut self, together: bool) -> Result<Done> {
         let together = together && self.core.info.timestamps && self.core.sustain_seconds() == 0.0;
-        let all = vk::PipelineStageFlags::ALL_COMMANDS;
-        let groups: Vec<&[Run]> = if together { vec![&self.runs[..]] } else { self.runs.chunks(1).collect() };
+        let uploads = (!self.uploads.is_empty()).then_some(Step::Uploads);
+        let reads = (!self.reads.is_empty()).then_some(Step::Reads);
         let mut timings = Vec::with_capacity(self.runs.len());
-        for group in groups {
-            let copies = together && !self.reads.is_empty();
-            if group.is_empty() && !copies {
-                continue;
-            }
-            let start = Instant::now();
-            submit_and_wait(&self.core, |cmd| {
-                for (k, run) in group.iter().enumerate() {
-                    if k > 0 {
-                        // Each run reads what the ones before it wrote.
-                        global_barrier(&self.core, cmd, all, all);
-                    }
-                    run.pass.record(cmd, &run.prepared, &*run.work);
-                }
-                if copies {
-                    if !group.is_empty() {
-                        global_barrier(&self.core, cmd, all, all);
-                    }
-                    self.record_reads(cmd);
-                }
-            })?;
-            let host_seconds = start.elapsed().as_secs_f64();
-            for run in group {
+        if together {
+            let steps: Vec<Step> = uploads.into_iter().chain(self.runs.iter().map(Step::Run)).chain(reads).collect();
+            let host_seconds = self.submit_steps(&steps)?;
+            for run in &self.runs {
                 timings.push(run.pass.timing(&run.prepared, host_seconds)?);
             }
-        }
-        if !together && !self.reads.is_empty() {
-            submit_and_wait(&self.core, |cmd| self.record_reads(cmd))?;
+        } else {
+            self.submit_steps(&Vec::from_iter(uploads))?;
+            for run in &self.runs {
+                let host_seconds = self.submit_steps(&[Step::Run(run)])?;
+                timings.push(run.pass.timing(&run.prepared, host_seconds)?);
+            }
+            self.submit_steps(&Vec::from_iter(reads))?;
         }
         let staging = std::mem::take(&mut self.reads).into_iter().map(|read| read.staging).collect();
         Ok(Done { timings, staging })
@@ -176,19 +213,12 @@ impl<'a> Batch<'a> {
 }
 
 impl Drop for Batch<'_> {
-    /// Releases the passes the batch claimed, submitted or not.
+    /// Releases the slots of the batch's runs, submitted or not.
     fn drop(&mut self) {
         for run in &self.runs {
-            run.pass.release();
+            run.pass.release(&run.prepared);
         }
     }
-}
-
-/// Submits a batch of the one run `add` puts in it and waits: that run's timing.
-pub(crate) fn run_alone<'a>(core: &Arc<Core>, add: impl FnOnce(&mut Batch<'a>) -> Result<RunId>) -> Result<Timing> {
-    let mut batch = Batch::new(core);
-    let run = add(&mut batch)?;
-    Ok(batch.submit()?.timing(run))
 }
 
 impl Done {

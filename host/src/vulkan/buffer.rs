@@ -131,22 +131,24 @@ impl GpuBuffer {
     }
 
     /// Copies `data` to the start of this device-local buffer through a host-visible staging
-    /// buffer, and waits.
+    /// buffer, in a submission of its own ([`Batch::upload`]), and waits.
     pub fn upload<T: Pod>(&self, data: &[T]) -> Result<()> {
-        let bytes: &[u8] = bytemuck::cast_slice(data);
-        if bytes.is_empty() {
-            return Ok(());
-        }
-        let size = bytes.len() as u64;
+        let mut batch = Batch::new(&self.core);
+        batch.upload(self, data)?;
+        batch.submit().map(drop)
+    }
+
+    /// A host-visible staging buffer holding `bytes` (at least one), which a copy uploads.
+    pub(crate) fn staging_with(core: &Arc<Core>, bytes: &[u8]) -> Result<Self> {
         let mut staging = Self::new(
-            &self.core,
-            size,
+            core,
+            bytes.len() as u64,
             vk::BufferUsageFlags::TRANSFER_SRC,
             MemoryLocation::CpuToGpu,
             "upload staging",
         )?;
         staging.mapped_mut()?[..bytes.len()].copy_from_slice(bytes);
-        copy_buffer(&self.core, &staging, self, size)
+        Ok(staging)
     }
 
     /// A stage's sanitized counter: one `u32` that its entry points increment atomically (the
@@ -157,13 +159,6 @@ impl GpuBuffer {
         let mut counter = Self::storage::<u32>(core, 1, name)?;
         counter.is_counter = true;
         Ok(counter)
-    }
-
-    /// The value of a [`Self::counter`], read in a submission of its own.
-    pub fn read_count(&self) -> Result<u64> {
-        let mut batch = Batch::new(&self.core);
-        let read = batch.read(self, 1)?;
-        batch.submit()?.count(&read)
     }
 
     /// The mapping of a host-visible (staging) buffer. A device-local buffer is refused even where
@@ -177,7 +172,8 @@ impl GpuBuffer {
     }
 
     /// Copies the first `count` elements out of this device-local buffer through a host-visible
-    /// staging buffer, in a submission of its own ([`Batch::read`] reads in a batch's).
+    /// staging buffer, in a submission of its own, for tests ([`Batch::read`] reads in a batch).
+    #[cfg(test)]
     pub fn read<T: Pod>(&self, count: usize) -> Result<Vec<T>> {
         let mut batch = Batch::new(&self.core);
         let read = batch.read(self, count)?;
@@ -222,23 +218,6 @@ pub(crate) fn check_storage_range(
 /// The error of mapping a buffer the host may not reach directly.
 fn not_host_visible() -> Error {
     Error::Vulkan { call: "vkMapMemory", result: "buffer memory is not host-visible".into() }
-}
-
-/// Copies the first `size` bytes of `source` to `destination` on the device and waits; a copy
-/// past the end of either is a typed error.
-fn copy_buffer(core: &Core, source: &GpuBuffer, destination: &GpuBuffer, size: u64) -> Result<()> {
-    if size > source.size.min(destination.size) {
-        return Err(Error::InvalidParameter {
-            name: "size",
-            reason: format!("copy of {size} bytes between buffers of {} and {}", source.size, destination.size),
-        });
-    }
-    submit_and_wait(core, |cmd| {
-        let region = [vk::BufferCopy::default().size(size)];
-        // SAFETY: `cmd` is recording; both buffers are live, hold at least `size` bytes and were
-        // created with TRANSFER_SRC / TRANSFER_DST usage.
-        unsafe { core.device.cmd_copy_buffer(cmd, source.buffer, destination.buffer, &region) };
-    })
 }
 
 /// Records commands with `record`, submits them and waits for completion.

@@ -1,6 +1,7 @@
 //! The denoise passes on a Vulkan device: one compute pipeline per pass entry point, the
 //! intermediate images kept on the device between passes.
 
+use super::batch::Batch;
 use super::buffer::GpuBuffer;
 use super::context::Core;
 use super::kernel::ComputeKernel;
@@ -53,8 +54,8 @@ impl DenoiseKernels {
     }
 
     /// Runs the copy probe on `source` (already checked against `params`) and reads the copy
-    /// back; the time is the dispatch's ([`super::pass::Pass::timing`]: GPU timestamps where the
-    /// device has them).
+    /// back, the upload, the dispatch and the read in one batch; the time is the dispatch's
+    /// ([`super::pass::Pass::timing`]: GPU timestamps where the device has them).
     pub fn copy_probe(
         &self,
         core: &Arc<Core>,
@@ -62,20 +63,27 @@ impl DenoiseKernels {
         source: &[Vec4],
     ) -> Result<(Vec<Vec4>, StageReport)> {
         let pixels = params.pixels();
-        let source = GpuBuffer::storage_with(core, source, "copy probe source")?;
+        let on_device = GpuBuffer::storage::<Vec4>(core, pixels, "copy probe source")?;
         let copy = GpuBuffer::storage::<Vec4>(core, pixels, "copy probe copy")?;
-        let timing = self.copy_probe.dispatch(
-            &[Resource::Buffer(&source), Resource::Buffer(&copy)],
+        let mut batch = Batch::new(core);
+        batch.upload(&on_device, source)?;
+        let run = self.copy_probe.add_to(
+            &mut batch,
+            &[Resource::Buffer(&on_device), Resource::Buffer(&copy)],
             bytemuck::bytes_of(params),
             pixels,
         )?;
-        Ok((copy.read(pixels as usize)?, timing.report("copy probe", 0)))
+        let read = batch.read(&copy, pixels as usize)?;
+        let done = batch.submit()?;
+        Ok((done.read(&read)?, done.timing(run).report("copy probe", 0)))
     }
 
-    /// Runs `method` on `input` (already checked against `params`): uploads the inputs its passes
-    /// read, allocates the working buffers they write ([`WorkingBuffers`]), runs every pass on the
-    /// device and reads the colour back. Timings are the passes'
-    /// ([`super::pass::Pass::timing`]: GPU timestamps where the device has them).
+    /// Runs `method` on `input` (already checked against `params`) in one batch
+    /// ([`Batch::submit`]: one submission where the device writes timestamps): uploads the
+    /// inputs its passes read into buffers it allocates with the working buffers they write
+    /// ([`WorkingBuffers`]), runs every pass, and reads back the colour and the composite's
+    /// sanitized count. Timings are the passes' ([`super::pass::Pass::timing`]: GPU timestamps
+    /// where the device has them).
     pub fn run(
         &self,
         core: &Arc<Core>,
@@ -89,107 +97,225 @@ impl DenoiseKernels {
         // empty one (`GpuBuffer::new`'s least size, 4 bytes) that no pass binds.
         let needs = WorkingBuffers::for_passes(&passes);
         let sized = |needed: bool| if needed { pixels } else { 0 };
-        let guide = |data: &[Vec4], name| {
-            if needs.guides_read() {
-                GpuBuffer::storage_with(core, data, name)
-            } else {
-                GpuBuffer::storage::<Vec4>(core, 0, name)
-            }
-        };
-        let position = guide(&input.position, "denoise position")?;
-        let normal = guide(&input.normal, "denoise normal")?;
-        let analytic = GpuBuffer::storage_with(core, &input.analytic, "denoise analytic")?;
-        let emitted = GpuBuffer::storage_with(core, &input.emitted, "denoise emitted")?;
-        // Ping-pong pairs: [0] holds the current S_N / U_N / ratio, [1] receives the next.
-        let mut shadowed = [
-            GpuBuffer::storage_with(core, &input.shadowed, "S_N")?,
-            GpuBuffer::storage::<Vec4>(core, sized(needs.filtered), "S_N filtered")?,
-        ];
-        let mut unshadowed = [
-            GpuBuffer::storage_with(core, &input.unshadowed, "U_N")?,
-            GpuBuffer::storage::<Vec4>(core, sized(needs.filtered), "U_N filtered")?,
-        ];
-        let mut ratio = [
-            GpuBuffer::storage::<Vec4>(core, sized(needs.ratio), "ratio")?,
-            GpuBuffer::storage::<Vec4>(core, sized(needs.filtered_ratio), "ratio filtered")?,
-        ];
+        let image = |len, name| GpuBuffer::storage::<Vec4>(core, len, name);
+        let position = image(sized(needs.guides_read()), "denoise position")?;
+        let normal = image(sized(needs.guides_read()), "denoise normal")?;
+        let analytic = image(pixels, "denoise analytic")?;
+        let emitted = image(pixels, "denoise emitted")?;
+        // Ping-pong pairs: [current] holds the S_N / U_N / ratio so far, the other receives the
+        // next.
+        let shadowed = [image(pixels, "S_N")?, image(sized(needs.filtered), "S_N filtered")?];
+        let unshadowed = [image(pixels, "U_N")?, image(sized(needs.filtered), "U_N filtered")?];
+        let ratio = [image(sized(needs.ratio), "ratio")?, image(sized(needs.filtered_ratio), "ratio filtered")?];
+        let (mut filtered, mut ratio_current) = (0, 0);
         let noise_raw = GpuBuffer::storage::<f32>(core, sized(needs.noise), "noise raw")?;
         let noise = GpuBuffer::storage::<f32>(core, sized(needs.noise), "noise")?;
-        let color = GpuBuffer::storage::<Vec4>(core, pixels, "denoised colour")?;
+        let color = image(pixels, "denoised colour")?;
         // Only the composites, the denoiser's boundary, count (their last binding).
         let counter = GpuBuffer::counter(core, "denoise")?;
-        let mut timings = Vec::new();
-        for pass in passes {
+        let mut batch = Batch::new(core);
+        if needs.guides_read() {
+            batch.upload(&position, &input.position)?;
+            batch.upload(&normal, &input.normal)?;
+        }
+        batch.upload(&analytic, &input.analytic)?;
+        batch.upload(&emitted, &input.emitted)?;
+        batch.upload(&shadowed[0], &input.shadowed)?;
+        batch.upload(&unshadowed[0], &input.unshadowed)?;
+        let mut runs = Vec::with_capacity(passes.len());
+        for &pass in &passes {
             let b = Resource::Buffer;
-            let timing = match pass {
-                DenoisePass::Ratio => self.ratio.dispatch(
+            let run = match pass {
+                DenoisePass::Ratio => self.ratio.add_to(
+                    &mut batch,
                     &[b(&shadowed[0]), b(&unshadowed[0]), b(&ratio[0])],
                     bytemuck::bytes_of(params),
                     pixels,
                 )?,
                 DenoisePass::Noise => {
-                    self.noise.dispatch(&[b(&ratio[0]), b(&noise_raw)], bytemuck::bytes_of(params), pixels)?
+                    self.noise.add_to(&mut batch, &[b(&ratio[0]), b(&noise_raw)], bytemuck::bytes_of(params), pixels)?
                 }
-                DenoisePass::NoiseBlur => {
-                    self.noise_blur.dispatch(&[b(&noise_raw), b(&noise)], bytemuck::bytes_of(params), pixels)?
-                }
+                DenoisePass::NoiseBlur => self.noise_blur.add_to(
+                    &mut batch,
+                    &[b(&noise_raw), b(&noise)],
+                    bytemuck::bytes_of(params),
+                    pixels,
+                )?,
                 DenoisePass::BilateralX | DenoisePass::BilateralY => {
                     let along = if pass == DenoisePass::BilateralX { axis::X } else { axis::Y };
                     let params = DenoiseParams { axis: along, ..*params };
                     // Already checked by `DenoiseInput::check`: a count past 32 bits would wrap.
                     let invocations = bilateral_invocations(&params)
                         .map_err(|reason| Error::InvalidParameter { name: "denoise", reason })?;
-                    let timing = self.bilateral.dispatch(
+                    let (from, to) = (filtered, 1 - filtered);
+                    filtered = to;
+                    self.bilateral.add_to(
+                        &mut batch,
                         &[
                             b(&position),
                             b(&normal),
                             b(&noise),
-                            b(&shadowed[0]),
-                            b(&unshadowed[0]),
-                            b(&shadowed[1]),
-                            b(&unshadowed[1]),
+                            b(&shadowed[from]),
+                            b(&unshadowed[from]),
+                            b(&shadowed[to]),
+                            b(&unshadowed[to]),
                         ],
                         bytemuck::bytes_of(&params),
                         invocations,
-                    )?;
-                    shadowed.swap(0, 1);
-                    unshadowed.swap(0, 1);
-                    timing
+                    )?
                 }
-                DenoisePass::Composite => self.composite.dispatch(
-                    &[b(&analytic), b(&emitted), b(&shadowed[0]), b(&unshadowed[0]), b(&color), b(&counter)],
+                DenoisePass::Composite => self.composite.add_to(
+                    &mut batch,
+                    &[
+                        b(&analytic),
+                        b(&emitted),
+                        b(&shadowed[filtered]),
+                        b(&unshadowed[filtered]),
+                        b(&color),
+                        b(&counter),
+                    ],
                     bytemuck::bytes_of(params),
                     pixels,
                 )?,
-                DenoisePass::SvgfVariance => {
-                    let timing = self.svgf_variance.dispatch(
-                        &[b(&ratio[0]), b(&position), b(&normal), b(&ratio[1])],
-                        bytemuck::bytes_of(params),
-                        pixels,
-                    )?;
-                    ratio.swap(0, 1);
-                    timing
-                }
-                DenoisePass::SvgfAtrous { step } => {
-                    let params = DenoiseParams { step, ..*params };
-                    let timing = self.svgf_atrous.dispatch(
-                        &[b(&ratio[0]), b(&position), b(&normal), b(&ratio[1])],
+                DenoisePass::SvgfVariance | DenoisePass::SvgfAtrous { .. } => {
+                    let (kernel, params) = match pass {
+                        DenoisePass::SvgfAtrous { step } => (&self.svgf_atrous, DenoiseParams { step, ..*params }),
+                        _ => (&self.svgf_variance, *params),
+                    };
+                    let (from, to) = (ratio_current, 1 - ratio_current);
+                    ratio_current = to;
+                    kernel.add_to(
+                        &mut batch,
+                        &[b(&ratio[from]), b(&position), b(&normal), b(&ratio[to])],
                         bytemuck::bytes_of(&params),
                         pixels,
-                    )?;
-                    ratio.swap(0, 1);
-                    timing
+                    )?
                 }
-                DenoisePass::SvgfComposite => self.svgf_composite.dispatch(
-                    &[b(&analytic), b(&emitted), b(&ratio[0]), b(&color), b(&counter)],
+                DenoisePass::SvgfComposite => self.svgf_composite.add_to(
+                    &mut batch,
+                    &[b(&analytic), b(&emitted), b(&ratio[ratio_current]), b(&color), b(&counter)],
                     bytemuck::bytes_of(params),
                     pixels,
                 )?,
             };
-            // Each method has one composite, its last pass: the counter is that pass's count.
-            let sanitized = if pass.is_composite() { counter.read_count()? } else { 0 };
-            timings.push(timing.report(pass.name(), sanitized));
+            runs.push((pass, run));
         }
-        Ok((color.read(pixels as usize)?, timings))
+        let count = batch.read::<u32>(&counter, 1)?;
+        let colour = batch.read::<Vec4>(&color, pixels as usize)?;
+        let done = batch.submit()?;
+        // Each method has one composite, its last pass: the counter is that pass's count.
+        let sanitized = done.count(&count)?;
+        let timings = runs
+            .into_iter()
+            .map(|(pass, run)| done.timing(run).report(pass.name(), if pass.is_composite() { sanitized } else { 0 }))
+            .collect();
+        Ok((done.read(&colour)?, timings))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::denoise::TV_PASSES;
+    use crate::vulkan::context::open;
+    use crate::vulkan::ContextOptions;
+
+    /// An image of `pixels` colours that differ from pixel to pixel and from image `k` to image.
+    fn image(k: u32, pixels: u32) -> Vec<Vec4> {
+        (0..pixels).map(|i| Vec4::new(k as f32, i as f32, 0.5 + (i % 7) as f32, 1.0)).collect()
+    }
+
+    /// Runs of one pass wait side by side — two in one batch, a third in another live batch —
+    /// each on a descriptor set and timestamps of its own (the pass's slots,
+    /// [`super::super::pass::Pass::prepare`]): each copy probe copies its own image, though the
+    /// second batch is submitted first, and each is timed. The slots are reused once the batches
+    /// are gone. Every Vulkan device; without one it fails under CI and is skipped loudly
+    /// elsewhere.
+    #[test]
+    fn runs_of_one_pass_side_by_side_bind_their_own_buffers() {
+        let devices = super::super::devices_for_test("pass slots");
+        let params = DenoiseParams::new(16, 8);
+        let pixels = params.pixels();
+        for device in &devices {
+            let core = open(device.index, &ContextOptions { validation: true, ..Default::default() }).unwrap();
+            let kernels = DenoiseKernels::new(&core).unwrap();
+            let buffers = |name| -> Vec<GpuBuffer> {
+                (0..3).map(|_| GpuBuffer::storage::<Vec4>(&core, pixels, name).unwrap()).collect()
+            };
+            let (sources, copies) = (buffers("source"), buffers("copy"));
+            let (mut first, mut second) = (Batch::new(&core), Batch::new(&core));
+            let mut added = Vec::new();
+            for k in 0..3 {
+                let batch = if k < 2 { &mut first } else { &mut second };
+                batch.upload(&sources[k], &image(k as u32, pixels)).unwrap();
+                let resources = [Resource::Buffer(&sources[k]), Resource::Buffer(&copies[k])];
+                let run = kernels.copy_probe.add_to(batch, &resources, bytemuck::bytes_of(&params), pixels).unwrap();
+                added.push((run, batch.read::<Vec4>(&copies[k], pixels as usize).unwrap()));
+            }
+            assert_eq!(kernels.copy_probe.slot_count(), 3, "{}", device.name);
+            let second = second.submit().unwrap();
+            let first = first.submit().unwrap();
+            for (k, (run, read)) in added.iter().enumerate() {
+                let done = if k < 2 { &first } else { &second };
+                assert!(done.read(read).unwrap() == image(k as u32, pixels), "{}: copy {k}", device.name);
+                assert!(done.timing(*run).seconds > 0.0, "{}: run {k}", device.name);
+            }
+            drop((first, second));
+            let (_, report) = kernels.copy_probe(&core, &params, &image(7, pixels)).unwrap();
+            assert_eq!((report.stage, kernels.copy_probe.slot_count()), ("copy probe", 3), "{}", device.name);
+            let messages = core.validation_log().messages();
+            assert!(messages.is_empty(), "{}: {messages:?}", device.name);
+        }
+    }
+
+    /// A denoise is one submission where the device writes timestamps — its uploads, every pass
+    /// and its reads — and one for the uploads, one per pass and one for the reads where it does
+    /// not; it had been a submission per input, per pass and per read (fourteen for TV). The
+    /// kernels that run more than once a frame (TV's bilateral, SVGF's à-trous) hold a slot per
+    /// run, made by the first frame and reused by the next. Every Vulkan device; without one it
+    /// fails under CI and is skipped loudly elsewhere.
+    #[test]
+    fn a_denoise_is_one_submission_where_the_device_writes_timestamps() {
+        let devices = super::super::devices_for_test("denoise submissions");
+        let params = DenoiseParams::new(24, 16);
+        let pixels = params.pixels();
+        let input = DenoiseInput {
+            position: (0..pixels).map(|i| Vec4::new(i as f32, 0.0, 1.0, 1.0 + (i % 3) as f32)).collect(),
+            normal: vec![Vec4::new(0.0, 0.0, 1.0, 0.5); pixels as usize],
+            analytic: image(1, pixels),
+            emitted: vec![Vec4::ZERO; pixels as usize],
+            shadowed: image(2, pixels).iter().map(|c| *c * 0.25).collect(),
+            unshadowed: image(2, pixels),
+        };
+        input.check(&params).unwrap();
+        for device in &devices {
+            let core = open(device.index, &ContextOptions { validation: true, ..Default::default() }).unwrap();
+            let kernels = DenoiseKernels::new(&core).unwrap();
+            for method in [DenoiseMethod::Tv, DenoiseMethod::Svgf] {
+                let passes = method.passes(&params);
+                let mut submissions = Vec::new();
+                for _frame in 0..2 {
+                    let before = core.submissions.load(std::sync::atomic::Ordering::Relaxed);
+                    let (color, reports) = kernels.run(&core, method, &params, &input).unwrap();
+                    submissions.push(core.submissions.load(std::sync::atomic::Ordering::Relaxed) - before);
+                    assert!(color.len() == pixels as usize && color.iter().all(|c| c.is_finite()));
+                    let names: Vec<_> = reports.iter().map(|r| r.stage).collect();
+                    assert_eq!(names, passes.iter().map(|p| p.name()).collect::<Vec<_>>(), "{}", device.name);
+                }
+                let expected = if core.info.timestamps { 1 } else { passes.len() as u64 + 2 };
+                assert_eq!(submissions, [expected; 2], "{} {method:?}", device.name);
+            }
+            let bilateral = TV_PASSES.iter().filter(|p| matches!(p, DenoisePass::BilateralX | DenoisePass::BilateralY));
+            let svgf = DenoiseMethod::Svgf.passes(&params);
+            let atrous = svgf.iter().filter(|p| matches!(p, DenoisePass::SvgfAtrous { .. }));
+            assert_eq!(
+                (kernels.bilateral.slot_count(), kernels.svgf_atrous.slot_count(), kernels.composite.slot_count()),
+                (bilateral.count(), atrous.count(), 1),
+                "{}: a slot per run in a frame, reused by the next",
+                device.name
+            );
+            let messages = core.validation_log().messages();
+            assert!(messages.is_empty(), "{}: {messages:?}", device.name);
+        }
     }
 }

@@ -1,9 +1,9 @@
 //! Compute pipelines built from the embedded SPIR-V: one per entry point, dispatched as a 2-D grid
 //! of 1-D workgroups of the size the pipeline was built with.
 
-use super::batch::{run_alone, Batch, RunId};
+use super::batch::{Batch, RunId};
 use super::context::{vk_error, Core};
-use super::pass::{Pass, Resource, Timing};
+use super::pass::{Pass, Resource};
 use crate::error::{Error, Result};
 use ash::vk;
 use raywave_shared::bindings::STREAM_ROW;
@@ -99,9 +99,10 @@ impl ComputeKernel {
         })
     }
 
-    /// [`Self::add_to`] a batch of its own, submitted and waited for: the time per dispatch.
-    pub fn dispatch(&self, resources: &[Resource<'_>], push: &[u8], invocations: u32) -> Result<Timing> {
-        run_alone(&self.pass.core, |batch| self.add_to(batch, resources, push, invocations))
+    /// How many runs of the kernel live batches have held at once, at most ([`Pass::prepare`]).
+    #[cfg(test)]
+    pub fn slot_count(&self) -> usize {
+        self.pass.slot_count()
     }
 }
 

@@ -9,8 +9,8 @@ use super::driver_lock;
 use crate::backend::StageReport;
 use crate::error::{Error, Result};
 use ash::vk;
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
-use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex, PoisonError};
 
 /// What one run of a pass measured ([`Pass::timing`]).
 #[derive(Clone, Copy, Debug)]
@@ -59,9 +59,13 @@ pub(crate) enum Resource<'a> {
     AccelerationStructure(vk::AccelerationStructureKHR),
 }
 
-/// A run of a pass, prepared ([`Pass::prepare`]) and not yet recorded: its descriptor set is
-/// written.
+/// A run of a pass, prepared ([`Pass::prepare`]) and not yet recorded: it holds one of the pass's
+/// slots, whose descriptor set is written, until [`Pass::release`].
 pub(crate) struct PreparedRun {
+    /// The slot's index in the pass, its descriptor set and its two timestamp queries.
+    slot: usize,
+    descriptor_set: vk::DescriptorSet,
+    query_pool: vk::QueryPool,
     /// How many times the work repeats back to back (benchmark mode), at least 1.
     dispatches: u32,
     /// Invocations of one repetition (at least 1), for the time per invocation.
@@ -72,7 +76,28 @@ pub(crate) struct PreparedRun {
     push: Vec<u8>,
 }
 
-/// A pipeline with its layout, descriptor set and timestamp queries; destroyed on drop.
+/// What one run of a pass needs of its own while it waits in a batch: a descriptor set (a second
+/// run of the pass binds other buffers) and a pair of timestamp queries (it is timed on its own).
+struct Slot {
+    descriptor_pool: vk::DescriptorPool,
+    descriptor_set: vk::DescriptorSet,
+    query_pool: vk::QueryPool,
+    /// Whether a prepared run holds the slot ([`Pass::prepare`], [`Pass::release`]).
+    claimed: bool,
+}
+
+/// Destroys the objects of `slot` (null handles are ignored); its set goes with its pool.
+fn destroy_slot(core: &Core, slot: &Slot) {
+    // SAFETY: the device is idle after every submission and no run holds a destroyed slot: it is
+    // destroyed with its pass, or unclaimed as it was being made.
+    unsafe {
+        core.device.destroy_query_pool(slot.query_pool, None);
+        core.device.destroy_descriptor_pool(slot.descriptor_pool, None);
+    }
+}
+
+/// A pipeline with its layout and its slots (descriptor sets and timestamp queries, one per run
+/// that a live batch holds); destroyed on drop.
 pub(crate) struct Pass {
     pub core: Arc<Core>,
     /// Entry point(s), for error messages.
@@ -83,16 +108,16 @@ pub(crate) struct Pass {
     pub pipeline_layout: vk::PipelineLayout,
     /// Set by the pipeline kind after creation; null until then.
     pub pipeline: vk::Pipeline,
-    descriptor_pool: vk::DescriptorPool,
-    descriptor_set: vk::DescriptorSet,
-    query_pool: vk::QueryPool,
+    /// The descriptors of one set, to size each slot's pool.
+    pool_sizes: Vec<vk::DescriptorPoolSize>,
+    /// One per run that live batches held at once, at most: made when every slot is claimed,
+    /// reused once released.
+    slots: Mutex<Vec<Slot>>,
     bindings: Vec<(u32, vk::DescriptorType)>,
     /// Benchmark mode: the last run's seconds per dispatch per invocation (`f64` bits; NaN
     /// before the first), from which the next run, whatever its size, takes how many dispatches
     /// it repeats — so that a large call after a small one does not run for minutes.
     seconds_per_invocation: AtomicU64,
-    /// Whether a live [`super::batch::Batch`] holds a run of this pass ([`Self::claim`]).
-    claimed: AtomicBool,
 }
 
 impl Drop for Pass {
@@ -102,8 +127,10 @@ impl Drop for Pass {
         // (null handles are ignored by the destroy calls).
         unsafe {
             let d = &self.core.device;
-            d.destroy_query_pool(self.query_pool, None);
-            d.destroy_descriptor_pool(self.descriptor_pool, None);
+            let slots = self.slots.get_mut().unwrap_or_else(PoisonError::into_inner);
+            for slot in slots.drain(..) {
+                destroy_slot(&self.core, &slot);
+            }
             d.destroy_pipeline(self.pipeline, None);
             d.destroy_pipeline_layout(self.pipeline_layout, None);
             d.destroy_descriptor_set_layout(self.set_layout, None);
@@ -123,6 +150,13 @@ impl Pass {
         push_constant_bytes: u32,
     ) -> Result<Self> {
         let d = &core.device;
+        let mut pool_sizes: Vec<vk::DescriptorPoolSize> = Vec::new();
+        for &(_, ty) in bindings {
+            match pool_sizes.iter_mut().find(|s| s.ty == ty) {
+                Some(s) => s.descriptor_count += 1,
+                None => pool_sizes.push(vk::DescriptorPoolSize { ty, descriptor_count: 1 }),
+            }
+        }
         // Every object is stored in `pass` as soon as it exists, so Drop cleans up on error.
         let mut pass = Self {
             core: core.clone(),
@@ -132,12 +166,10 @@ impl Pass {
             set_layout: vk::DescriptorSetLayout::null(),
             pipeline_layout: vk::PipelineLayout::null(),
             pipeline: vk::Pipeline::null(),
-            descriptor_pool: vk::DescriptorPool::null(),
-            descriptor_set: vk::DescriptorSet::null(),
-            query_pool: vk::QueryPool::null(),
+            pool_sizes,
+            slots: Mutex::new(Vec::new()),
             bindings: bindings.to_vec(),
             seconds_per_invocation: AtomicU64::new(f64::NAN.to_bits()),
-            claimed: AtomicBool::new(false),
         };
         let layout_bindings: Vec<_> = bindings
             .iter()
@@ -149,13 +181,6 @@ impl Pass {
                     .stage_flags(stages)
             })
             .collect();
-        let mut pool_sizes: Vec<vk::DescriptorPoolSize> = Vec::new();
-        for &(_, ty) in bindings {
-            match pool_sizes.iter_mut().find(|s| s.ty == ty) {
-                Some(s) => s.descriptor_count += 1,
-                None => pool_sizes.push(vk::DescriptorPoolSize { ty, descriptor_count: 1 }),
-            }
-        }
         // SAFETY: all create infos borrow locals that outlive the calls; created objects are
         // recorded in `pass` and destroyed by its Drop.
         unsafe {
@@ -175,27 +200,77 @@ impl Pass {
                     None,
                 )
                 .map_err(vk_error("vkCreatePipelineLayout"))?;
-            pass.descriptor_pool = d
-                .create_descriptor_pool(
-                    &vk::DescriptorPoolCreateInfo::default().max_sets(1).pool_sizes(&pool_sizes),
-                    None,
-                )
-                .map_err(vk_error("vkCreateDescriptorPool"))?;
-            pass.descriptor_set = d
-                .allocate_descriptor_sets(
-                    &vk::DescriptorSetAllocateInfo::default()
-                        .descriptor_pool(pass.descriptor_pool)
-                        .set_layouts(&set_layouts),
-                )
-                .map_err(vk_error("vkAllocateDescriptorSets"))?[0];
-            pass.query_pool = d
-                .create_query_pool(
-                    &vk::QueryPoolCreateInfo::default().query_type(vk::QueryType::TIMESTAMP).query_count(2),
-                    None,
-                )
-                .map_err(vk_error("vkCreateQueryPool"))?;
         }
         Ok(pass)
+    }
+
+    /// A new slot, claimed: a pool of one descriptor set laid out as the pass's set 0, the set,
+    /// and a pool of two timestamp queries. On an error what was made is destroyed.
+    fn new_slot(&self) -> Result<Slot> {
+        let d = &self.core.device;
+        let mut slot = Slot {
+            descriptor_pool: vk::DescriptorPool::null(),
+            descriptor_set: vk::DescriptorSet::null(),
+            query_pool: vk::QueryPool::null(),
+            claimed: true,
+        };
+        let set_layouts = [self.set_layout];
+        // SAFETY: the create infos borrow locals that outlive the calls; what is created is
+        // recorded in `slot`, destroyed here on an error and by the pass's Drop otherwise.
+        let made = unsafe {
+            (|| -> Result<()> {
+                slot.descriptor_pool = d
+                    .create_descriptor_pool(
+                        &vk::DescriptorPoolCreateInfo::default().max_sets(1).pool_sizes(&self.pool_sizes),
+                        None,
+                    )
+                    .map_err(vk_error("vkCreateDescriptorPool"))?;
+                slot.descriptor_set = d
+                    .allocate_descriptor_sets(
+                        &vk::DescriptorSetAllocateInfo::default()
+                            .descriptor_pool(slot.descriptor_pool)
+                            .set_layouts(&set_layouts),
+                    )
+                    .map_err(vk_error("vkAllocateDescriptorSets"))?[0];
+                slot.query_pool = d
+                    .create_query_pool(
+                        &vk::QueryPoolCreateInfo::default().query_type(vk::QueryType::TIMESTAMP).query_count(2),
+                        None,
+                    )
+                    .map_err(vk_error("vkCreateQueryPool"))?;
+                Ok(())
+            })()
+        };
+        match made {
+            Ok(()) => Ok(slot),
+            Err(error) => {
+                destroy_slot(&self.core, &slot);
+                Err(error)
+            }
+        }
+    }
+
+    /// Claims a free slot for a run, making one where every slot is claimed: its index.
+    fn claim(&self) -> Result<usize> {
+        let mut slots = self.slots.lock().unwrap_or_else(PoisonError::into_inner);
+        if let Some(index) = slots.iter().position(|slot| !slot.claimed) {
+            slots[index].claimed = true;
+            return Ok(index);
+        }
+        slots.push(self.new_slot()?);
+        Ok(slots.len() - 1)
+    }
+
+    /// Releases the slot of `run` once its batch is done with it or dropped.
+    pub fn release(&self, run: &PreparedRun) {
+        let mut slots = self.slots.lock().unwrap_or_else(PoisonError::into_inner);
+        slots[run.slot].claimed = false;
+    }
+
+    /// How many slots the pass has made: the most runs of it that live batches held at once.
+    #[cfg(test)]
+    pub fn slot_count(&self) -> usize {
+        self.slots.lock().unwrap_or_else(PoisonError::into_inner).len()
     }
 
     /// A shader module from the embedded SPIR-V of `entry`, for a compute entry point with
@@ -208,27 +283,14 @@ impl Pass {
             .map_err(vk_error("vkCreateShaderModule"))
     }
 
-    /// Claims the pass for one batch's run, which [`Self::prepare`] writes the descriptor set
-    /// for; refused while another run holds it — in the same batch or another live one — as
-    /// that run's set would be overwritten before it ran.
-    pub fn claim(&self) -> Result<()> {
-        self.claimed.compare_exchange(false, true, Ordering::AcqRel, Ordering::Acquire).map(|_| ()).map_err(|_| {
-            Error::InvalidParameter { name: "batch", reason: format!("{} already runs in a batch", self.name) }
-        })
-    }
-
-    /// Releases a [`Self::claim`] once the run it was for is done with or dropped.
-    pub fn release(&self) {
-        self.claimed.store(false, Ordering::Release);
-    }
-
     /// Prepares a run of this pass over `resources` (one per binding, in creation order; every
     /// buffer device-local, so no kernel reads or writes host memory across the bus) with push
     /// constants `push` and `invocations` invocations: checks the resources, writes them to the
     /// descriptor set, and chooses how many times the work repeats — once, or in benchmark mode
     /// as many times as the last run's time per invocation says keep the device busy for
-    /// [`Core::sustain_seconds`]. The set is the pass's only one: the caller has claimed the
-    /// pass ([`Self::claim`]).
+    /// [`Core::sustain_seconds`]. The run holds a slot of its own (descriptor set, timestamps)
+    /// until the caller releases it ([`Self::release`]), so that runs of one pass can wait in
+    /// one batch or several side by side.
     pub fn prepare(&self, resources: &[Resource<'_>], push: &[u8], invocations: u32) -> Result<PreparedRun> {
         if resources.len() != self.bindings.len() {
             return Err(Error::InvalidParameter {
@@ -243,6 +305,12 @@ impl Pass {
             });
         }
         let d = &self.core.device;
+        // Nothing after the claim fails, so no error leaves a slot claimed.
+        let slot = self.claim()?;
+        let (descriptor_set, query_pool) = {
+            let slots = self.slots.lock().unwrap_or_else(PoisonError::into_inner);
+            (slots[slot].descriptor_set, slots[slot].query_pool)
+        };
         let buffer_infos: Vec<[vk::DescriptorBufferInfo; 1]> = resources
             .iter()
             .map(|r| match r {
@@ -266,19 +334,16 @@ impl Pass {
             .zip(&self.bindings)
             .zip(buffer_infos.iter().zip(accel_writes.iter_mut()))
             .map(|((resource, &(binding, ty)), (buffer_info, accel_write))| {
-                let write = vk::WriteDescriptorSet::default()
-                    .dst_set(self.descriptor_set)
-                    .dst_binding(binding)
-                    .descriptor_type(ty);
+                let write =
+                    vk::WriteDescriptorSet::default().dst_set(descriptor_set).dst_binding(binding).descriptor_type(ty);
                 match resource {
                     Resource::Buffer(_) => write.buffer_info(buffer_info),
                     Resource::AccelerationStructure(_) => write.descriptor_count(1).push_next(accel_write),
                 }
             })
             .collect();
-        // SAFETY: the set is not in use (every submission is waited for, and the pass is claimed
-        // by one batch, whose one run of it is recorded after this write) and the writes
-        // reference live resources.
+        // SAFETY: the set is not in use (every submission is waited for, and the slot is this
+        // run's alone, recorded after this write) and the writes reference live resources.
         unsafe { d.update_descriptor_sets(&writes, &[]) };
         let size = f64::from(invocations.max(1));
         let sustain_seconds = self.core.sustain_seconds();
@@ -295,7 +360,7 @@ impl Pass {
                 _ => None,
             })
             .collect();
-        Ok(PreparedRun { dispatches, size, counters, push: push.to_vec() })
+        Ok(PreparedRun { slot, descriptor_set, query_pool, dispatches, size, counters, push: push.to_vec() })
     }
 
     /// Records `run` into `cmd`: binds the pipeline and set, pushes the constants and records
@@ -322,11 +387,11 @@ impl Pass {
         // family has timestamp valid bits wherever `timestamps`.
         unsafe {
             if self.core.info.timestamps {
-                d.cmd_reset_query_pool(cmd, self.query_pool, 0, 2);
-                d.cmd_write_timestamp(cmd, vk::PipelineStageFlags::TOP_OF_PIPE, self.query_pool, 0);
+                d.cmd_reset_query_pool(cmd, run.query_pool, 0, 2);
+                d.cmd_write_timestamp(cmd, vk::PipelineStageFlags::TOP_OF_PIPE, run.query_pool, 0);
             }
             d.cmd_bind_pipeline(cmd, self.bind_point, self.pipeline);
-            d.cmd_bind_descriptor_sets(cmd, self.bind_point, self.pipeline_layout, 0, &[self.descriptor_set], &[]);
+            d.cmd_bind_descriptor_sets(cmd, self.bind_point, self.pipeline_layout, 0, &[run.descriptor_set], &[]);
             d.cmd_push_constants(cmd, self.pipeline_layout, self.stages, 0, &run.push);
         }
         for repetition in 0..run.dispatches {
@@ -342,7 +407,7 @@ impl Pass {
         }
         if self.core.info.timestamps {
             // SAFETY: as above.
-            unsafe { d.cmd_write_timestamp(cmd, vk::PipelineStageFlags::BOTTOM_OF_PIPE, self.query_pool, 1) };
+            unsafe { d.cmd_write_timestamp(cmd, vk::PipelineStageFlags::BOTTOM_OF_PIPE, run.query_pool, 1) };
         }
     }
 
@@ -350,21 +415,21 @@ impl Pass {
     /// timestamps where the device has them, else `host_seconds`, the host clock around a
     /// submission that held this run alone. Benchmark mode sizes the next run from it.
     pub fn timing(&self, run: &PreparedRun, host_seconds: f64) -> Result<Timing> {
-        let seconds = if self.core.info.timestamps { self.gpu_seconds()? } else { host_seconds };
+        let seconds = if self.core.info.timestamps { self.gpu_seconds(run.query_pool)? } else { host_seconds };
         let timing = Timing { seconds: seconds / f64::from(run.dispatches), dispatches: run.dispatches };
         self.seconds_per_invocation.store((timing.seconds / run.size).to_bits(), Ordering::Relaxed);
         Ok(timing)
     }
 
-    /// The time between the two timestamps of the completed submission, in seconds (only where
-    /// the device writes them, [`super::DeviceInfo::timestamps`]).
-    fn gpu_seconds(&self) -> Result<f64> {
+    /// The time between the two timestamps in `query_pool` of the completed submission, in
+    /// seconds (only where the device writes them, [`super::DeviceInfo::timestamps`]).
+    fn gpu_seconds(&self, query_pool: vk::QueryPool) -> Result<f64> {
         let d = &self.core.device;
         let mut stamps = [0u64; 2];
         // SAFETY: both queries were written by the completed submission.
         unsafe {
             d.get_query_pool_results(
-                self.query_pool,
+                query_pool,
                 0,
                 &mut stamps,
                 vk::QueryResultFlags::TYPE_64 | vk::QueryResultFlags::WAIT,
