@@ -88,7 +88,8 @@ impl DevicePaths {
         })
     }
 
-    /// Adds to `batch` the uploads of the origins and directions of `rays`, `len` of them.
+    /// Adds to `batch` the uploads of the origins and directions of `rays`, the stream of `len`
+    /// rays these buffers were made for.
     fn upload_in<'a>(&'a self, batch: &mut Batch<'a>, rays: &RayStream) -> Result<()> {
         batch.upload(&self.origin, &rays.origin)?;
         batch.upload(&self.direction, &rays.direction)
@@ -140,7 +141,8 @@ impl DeviceHits {
         })
     }
 
-    /// Adds to `batch` the uploads of `hits`, `len` of them.
+    /// Adds to `batch` the uploads of `hits`, the stream of `len` hits these buffers were made
+    /// for.
     fn upload_in<'a>(&'a self, batch: &mut Batch<'a>, hits: &HitStream) -> Result<()> {
         batch.upload(&self.t, &hits.t)?;
         batch.upload(&self.primitive, &hits.primitive)?;
@@ -1061,7 +1063,8 @@ mod tests {
     /// path of a device without timestamps and of benchmark mode, which CI's lavapipe does not
     /// take by itself) reads back what one submission does, bit for bit, with the same reports —
     /// the sanitized counts 0 though the batch uploaded `u32::MAX` to the counter before the
-    /// trace zeroed it; an upload or a read past a buffer's end is refused. Every Vulkan device;
+    /// trace zeroed it; an upload or a read past a buffer's end is refused, and a second upload
+    /// to one buffer (the uploads run without barriers between them). Every Vulkan device;
     /// without one it fails under CI and is skipped loudly elsewhere.
     #[test]
     fn a_batch_split_into_a_submission_per_run_reads_what_one_submission_reads() {
@@ -1078,9 +1081,15 @@ mod tests {
                 let hits = DeviceHits::new(core, params.ray_count()).unwrap();
                 let counter = GpuBuffer::counter(core, "trace").unwrap();
                 let mut batch = Batch::new(core);
-                batch.upload(&counter, &[u32::MAX]).unwrap();
                 let past_the_end = batch.upload(&counter, &[0u32; 2]);
-                assert!(matches!(past_the_end, Err(Error::InvalidParameter { name: "data", .. })));
+                assert!(
+                    matches!(past_the_end, Err(Error::InvalidParameter { name: "data", reason }) if reason.contains("past the end"))
+                );
+                batch.upload(&counter, &[u32::MAX]).unwrap();
+                let again = batch.upload(&counter, &[0u32]);
+                assert!(
+                    matches!(again, Err(Error::InvalidParameter { name: "data", reason }) if reason.contains("second upload"))
+                );
                 let generate = add_generate(&mut batch, &backend.generate, &params, &rays).unwrap();
                 let outputs = hits.outputs();
                 let trace =

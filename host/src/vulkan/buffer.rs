@@ -131,7 +131,7 @@ impl GpuBuffer {
     }
 
     /// Copies `data` to the start of this device-local buffer through a host-visible staging
-    /// buffer, in a submission of its own ([`Batch::upload`]), and waits.
+    /// buffer, in a submission of its own ([`Batch::upload`]; none for empty `data`), and waits.
     pub fn upload<T: Pod>(&self, data: &[T]) -> Result<()> {
         let mut batch = Batch::new(&self.core);
         batch.upload(self, data)?;

@@ -228,40 +228,52 @@ mod tests {
     /// Runs of one pass wait side by side — two in one batch, a third in another live batch —
     /// each on a descriptor set and timestamps of its own (the pass's slots,
     /// [`super::super::pass::Pass::prepare`]): each copy probe copies its own image, though the
-    /// second batch is submitted first, and each is timed. The slots are reused once the batches
-    /// are gone. Every Vulkan device; without one it fails under CI and is skipped loudly
-    /// elsewhere.
+    /// second batch is submitted first and split into a submission per step (the path of a device
+    /// without timestamps), and the large copy takes longer than the small one beside it, which
+    /// shared timestamps would have given one time. The slots are reused once the batches are
+    /// gone, and neither a batch dropped unsubmitted nor a refused run keeps one. Every Vulkan
+    /// device; without one it fails under CI and is skipped loudly elsewhere.
     #[test]
     fn runs_of_one_pass_side_by_side_bind_their_own_buffers() {
         let devices = super::super::devices_for_test("pass slots");
-        let params = DenoiseParams::new(16, 8);
-        let pixels = params.pixels();
+        // Run 1 copies 8192 times as many pixels as runs 0 and 2.
+        let sizes = [DenoiseParams::new(16, 8), DenoiseParams::new(1024, 1024), DenoiseParams::new(16, 8)];
         for device in &devices {
             let core = open(device.index, &ContextOptions { validation: true, ..Default::default() }).unwrap();
             let kernels = DenoiseKernels::new(&core).unwrap();
             let buffers = |name| -> Vec<GpuBuffer> {
-                (0..3).map(|_| GpuBuffer::storage::<Vec4>(&core, pixels, name).unwrap()).collect()
+                sizes.iter().map(|p| GpuBuffer::storage::<Vec4>(&core, p.pixels(), name).unwrap()).collect()
             };
             let (sources, copies) = (buffers("source"), buffers("copy"));
             let (mut first, mut second) = (Batch::new(&core), Batch::new(&core));
             let mut added = Vec::new();
-            for k in 0..3 {
+            for (k, params) in sizes.iter().enumerate() {
                 let batch = if k < 2 { &mut first } else { &mut second };
+                let pixels = params.pixels();
                 batch.upload(&sources[k], &image(k as u32, pixels)).unwrap();
                 let resources = [Resource::Buffer(&sources[k]), Resource::Buffer(&copies[k])];
-                let run = kernels.copy_probe.add_to(batch, &resources, bytemuck::bytes_of(&params), pixels).unwrap();
+                let run = kernels.copy_probe.add_to(batch, &resources, bytemuck::bytes_of(params), pixels).unwrap();
                 added.push((run, batch.read::<Vec4>(&copies[k], pixels as usize).unwrap()));
             }
             assert_eq!(kernels.copy_probe.slot_count(), 3, "{}", device.name);
-            let second = second.submit().unwrap();
+            let second = second.submit_in(false).unwrap();
             let first = first.submit().unwrap();
+            let mut seconds = Vec::new();
             for (k, (run, read)) in added.iter().enumerate() {
                 let done = if k < 2 { &first } else { &second };
-                assert!(done.read(read).unwrap() == image(k as u32, pixels), "{}: copy {k}", device.name);
-                assert!(done.timing(*run).seconds > 0.0, "{}: run {k}", device.name);
+                assert!(done.read(read).unwrap() == image(k as u32, sizes[k].pixels()), "{}: copy {k}", device.name);
+                seconds.push(done.timing(*run).seconds);
             }
+            assert!(seconds[1] > seconds[0] && seconds[2] > 0.0, "{}: {seconds:?}", device.name);
             drop((first, second));
-            let (_, report) = kernels.copy_probe(&core, &params, &image(7, pixels)).unwrap();
+            let params = sizes[0];
+            let mut unsubmitted = Batch::new(&core);
+            let resources = [Resource::Buffer(&sources[0]), Resource::Buffer(&copies[0])];
+            kernels.copy_probe.add_to(&mut unsubmitted, &resources, bytemuck::bytes_of(&params), 1).unwrap();
+            drop(unsubmitted);
+            let refused = kernels.copy_probe.add_to(&mut Batch::new(&core), &resources[..1], &[], 1);
+            assert!(matches!(refused, Err(Error::InvalidParameter { name: "resources", .. })));
+            let (_, report) = kernels.copy_probe(&core, &params, &image(7, params.pixels())).unwrap();
             assert_eq!((report.stage, kernels.copy_probe.slot_count()), ("copy probe", 3), "{}", device.name);
             let messages = core.validation_log().messages();
             assert!(messages.is_empty(), "{}: {messages:?}", device.name);

@@ -89,7 +89,7 @@ struct Slot {
 /// Destroys the objects of `slot` (null handles are ignored); its set goes with its pool.
 fn destroy_slot(core: &Core, slot: &Slot) {
     // SAFETY: the device is idle after every submission and no run holds a destroyed slot: it is
-    // destroyed with its pass, or unclaimed as it was being made.
+    // destroyed with its pass, or by `Pass::new_slot` on an error, before it was ever published.
     unsafe {
         core.device.destroy_query_pool(slot.query_pool, None);
         core.device.destroy_descriptor_pool(slot.descriptor_pool, None);
@@ -250,19 +250,25 @@ impl Pass {
         }
     }
 
-    /// Claims a free slot for a run, making one where every slot is claimed: its index.
-    fn claim(&self) -> Result<usize> {
+    /// Claims a free slot for a run, making one where every slot is claimed: its index, its
+    /// descriptor set and its query pool.
+    fn claim(&self) -> Result<(usize, vk::DescriptorSet, vk::QueryPool)> {
         let mut slots = self.slots.lock().unwrap_or_else(PoisonError::into_inner);
-        if let Some(index) = slots.iter().position(|slot| !slot.claimed) {
-            slots[index].claimed = true;
-            return Ok(index);
-        }
-        slots.push(self.new_slot()?);
-        Ok(slots.len() - 1)
+        let index = match slots.iter().position(|slot| !slot.claimed) {
+            Some(index) => index,
+            None => {
+                slots.push(self.new_slot()?);
+                slots.len() - 1
+            }
+        };
+        let slot = &mut slots[index];
+        slot.claimed = true;
+        Ok((index, slot.descriptor_set, slot.query_pool))
     }
 
-    /// Releases the slot of `run` once its batch is done with it or dropped.
-    pub fn release(&self, run: &PreparedRun) {
+    /// Releases the slot of `run`, a run of this pass, once its batch is done with it or
+    /// dropped; taken by value, so that no run is released twice.
+    pub fn release(&self, run: PreparedRun) {
         let mut slots = self.slots.lock().unwrap_or_else(PoisonError::into_inner);
         slots[run.slot].claimed = false;
     }
@@ -290,7 +296,10 @@ impl Pass {
     /// as many times as the last run's time per invocation says keep the device busy for
     /// [`Core::sustain_seconds`]. The run holds a slot of its own (descriptor set, timestamps)
     /// until the caller releases it ([`Self::release`]), so that runs of one pass can wait in
-    /// one batch or several side by side.
+    /// one batch or several side by side. In benchmark mode a batch prepares all its runs before
+    /// any is timed, so each takes its count from the pass's last timed run — a frame's earlier
+    /// run of the same pass (TV's bilateral x before y) no longer informs a later one, and the
+    /// first frame runs each once (a benchmark's warm-up frames set the counts).
     pub fn prepare(&self, resources: &[Resource<'_>], push: &[u8], invocations: u32) -> Result<PreparedRun> {
         if resources.len() != self.bindings.len() {
             return Err(Error::InvalidParameter {
@@ -306,11 +315,7 @@ impl Pass {
         }
         let d = &self.core.device;
         // Nothing after the claim fails, so no error leaves a slot claimed.
-        let slot = self.claim()?;
-        let (descriptor_set, query_pool) = {
-            let slots = self.slots.lock().unwrap_or_else(PoisonError::into_inner);
-            (slots[slot].descriptor_set, slots[slot].query_pool)
-        };
+        let (slot, descriptor_set, query_pool) = self.claim()?;
         let buffer_infos: Vec<[vk::DescriptorBufferInfo; 1]> = resources
             .iter()
             .map(|r| match r {
