@@ -27,13 +27,16 @@ use std::time::Instant;
 /// run several times in one batch.
 pub(crate) struct Batch<'a> {
     core: Arc<Core>,
-    uploads: Vec<Upload<'a>>,
+    /// Copies from their staging buffers, written by the host, into their device buffers.
+    uploads: Vec<Staged<'a>>,
     runs: Vec<Run<'a>>,
-    reads: Vec<Read<'a>>,
+    /// Copies from their device buffers into their staging buffers, which the host reads.
+    reads: Vec<Staged<'a>>,
 }
 
-/// A copy of the first `bytes` of `staging`, written by the host, into the start of `buffer`.
-struct Upload<'a> {
+/// A device buffer's first `bytes` and the host-visible staging buffer of that size that they
+/// are copied from (an upload) or into (a read).
+struct Staged<'a> {
     buffer: &'a GpuBuffer,
     staging: GpuBuffer,
     bytes: u64,
@@ -44,13 +47,6 @@ struct Run<'a> {
     pass: &'a Pass,
     prepared: PreparedRun,
     work: Box<dyn Fn(vk::CommandBuffer) + 'a>,
-}
-
-/// A copy of the first `bytes` of `buffer` into `staging`.
-struct Read<'a> {
-    buffer: &'a GpuBuffer,
-    staging: GpuBuffer,
-    bytes: u64,
 }
 
 /// One step of a submission, after a barrier where it is not the first.
@@ -106,7 +102,7 @@ impl<'a> Batch<'a> {
         }
         if !bytes.is_empty() {
             let staging = GpuBuffer::staging_with(&self.core, bytes)?;
-            self.uploads.push(Upload { buffer, staging, bytes: bytes.len() as u64 });
+            self.uploads.push(Staged { buffer, staging, bytes: bytes.len() as u64 });
         }
         Ok(())
     }
@@ -148,7 +144,7 @@ impl<'a> Batch<'a> {
             MemoryLocation::GpuToCpu,
             "readback staging",
         )?;
-        self.reads.push(Read { buffer, staging, bytes: bytes as u64 });
+        self.reads.push(Staged { buffer, staging, bytes: bytes as u64 });
         Ok(ReadId { staging: Some(self.reads.len() - 1), bytes, _element: PhantomData })
     }
 
