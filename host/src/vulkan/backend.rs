@@ -287,10 +287,18 @@ fn input_buffer<T: Pod>(core: &Arc<Core>, data: &[T], name: &str) -> Result<GpuB
 
 /// The scene as the chosen trace method reads it on the device.
 enum DeviceScene {
-    /// CWBVH nodes and triangles for the software traversal kernel.
-    Software { nodes: GpuBuffer, vertices: GpuBuffer, ids: GpuBuffer },
+    /// CWBVH nodes and triangles for the software traversal kernel (boxed: three buffers
+    /// outweigh the other variant).
+    Software(Box<SoftwareScene>),
     /// BLAS/TLAS for ray query and the ray-tracing pipeline.
     Accelerated(SceneAccel),
+}
+
+/// The buffers the software traversal kernel reads: CWBVH nodes, triangle vertices and ids.
+struct SoftwareScene {
+    nodes: GpuBuffer,
+    vertices: GpuBuffer,
+    ids: GpuBuffer,
 }
 
 /// The trace stage's pipeline: a compute kernel (software traversal, ray query) or a
@@ -635,9 +643,10 @@ fn add_trace<'a>(
 ) -> Result<StageRun> {
     let (scene_resource, triangles) = match scene {
         DeviceScene::Accelerated(accel) => (Resource::AccelerationStructure(accel.tlas.handle), vec![]),
-        DeviceScene::Software { nodes, vertices, ids } => {
-            (Resource::Buffer(nodes), vec![Resource::Buffer(vertices), Resource::Buffer(ids)])
-        }
+        DeviceScene::Software(software) => (
+            Resource::Buffer(&software.nodes),
+            vec![Resource::Buffer(&software.vertices), Resource::Buffer(&software.ids)],
+        ),
     };
     let resources: Vec<Resource> = [scene_resource, Resource::Buffer(&rays.origin), Resource::Buffer(&rays.direction)]
         .into_iter()
@@ -759,11 +768,11 @@ impl Backend for VulkanBackend {
         self.scene = None;
         let device_scene = match software {
             None => DeviceScene::Accelerated(build_scene(&self.core, scene)?),
-            Some(cpu) => DeviceScene::Software {
+            Some(cpu) => DeviceScene::Software(Box::new(SoftwareScene {
                 nodes: input_buffer(&self.core, cpu.nodes(), "cwbvh nodes")?,
                 vertices: input_buffer(&self.core, cpu.vertices(), "cwbvh vertices")?,
                 ids: input_buffer(&self.core, cpu.ids(), "cwbvh triangle ids")?,
-            },
+            })),
         };
         self.scene = Some((device_scene, scene.identity().clone()));
         Ok(())
@@ -1020,7 +1029,8 @@ mod tests {
             let mut backend = VulkanBackend::open(device.index, &options, Some(TraceMethod::Software)).unwrap();
             assert_eq!(backend.software_bvh(), quality);
             backend.load_scene(&scene).unwrap();
-            let Some((DeviceScene::Software { nodes, .. }, _)) = &backend.scene else { panic!("a software scene") };
+            let Some((DeviceScene::Software(software), _)) = &backend.scene else { panic!("a software scene") };
+            let nodes = &software.nodes;
             let expected = nodes_of(quality);
             let uploaded: Vec<raywave_shared::bvh::CwBvhNode> = nodes.read(expected.len()).unwrap();
             assert!(uploaded == expected, "{quality:?}: the uploaded nodes are not the preset's tree");
@@ -1054,6 +1064,64 @@ mod tests {
             }
             let expected = if backend.core.info.timestamps { 1 } else { 5 };
             assert_eq!(submissions[1], expected, "{}: submissions of each sample {submissions:?}", device.name);
+            let messages = backend.validation_messages();
+            assert!(messages.is_empty(), "{}: {messages:?}", device.name);
+        }
+    }
+
+    /// Transient buffers are kept and reused ([`super::super::recycle::Recycler`]): after a lit
+    /// sample, one of the same size creates no buffer — it takes every one the sample before it
+    /// left — and it reads back, bit for bit, what the same sample reads on a backend that had
+    /// run nothing, camera streams included: no stale contents reach a result. Every Vulkan
+    /// device; without one it fails under CI and is skipped loudly elsewhere.
+    #[test]
+    fn a_lit_sample_reuses_the_buffers_of_the_one_before_and_reads_none_of_their_contents() {
+        let devices = super::super::devices_for_test("lit sample buffer reuse");
+        let scene = Scene::load("builtin:cornell").unwrap();
+        let data = ShadeData::new(&scene).unwrap();
+        let (width, height) = (24, 16);
+        let sample = |backend: &mut VulkanBackend, seed| {
+            let generate = crate::frame::generate_params(&scene, width, height, seed);
+            let shade = data.params(generate.sampler, width, height, generate.sample_index);
+            let request =
+                LitSampleRequest { generate: &generate, shade: &shade, data: &data, keep_camera_streams: true };
+            let sample = backend.lit_sample(&request).unwrap();
+            let (rays, hits) = sample.camera.unwrap();
+            // Compared as bits, so that any NaN compares too.
+            fn bits<T: Pod>(values: &[T]) -> Vec<u8> {
+                bytemuck::cast_slice(values).to_vec()
+            }
+            vec![
+                bits(&sample.analytic),
+                bits(&sample.unshadowed),
+                bits(&sample.emitted),
+                bits(&sample.occluded),
+                bits(&rays.origin),
+                bits(&rays.direction),
+                bits(&rays.pixel),
+                bits(&hits.t),
+                bits(&hits.primitive),
+                bits(&hits.instance),
+                bits(&hits.barycentrics),
+            ]
+        };
+        for device in &devices {
+            let options = ContextOptions { validation: true, ..Default::default() };
+            let open = || {
+                let mut backend = VulkanBackend::open(device.index, &options, None).unwrap();
+                backend.load_scene(&scene).unwrap();
+                backend
+            };
+            let mut backend = open();
+            sample(&mut backend, 0);
+            let (created, reused, kept) = backend.core.recycler.counts();
+            assert!(created > 0 && kept > 0, "{}: ({created}, {reused}, {kept})", device.name);
+            let second = sample(&mut backend, 1);
+            let after = backend.core.recycler.counts();
+            assert_eq!(after.0, created, "{}: the second sample created buffers", device.name);
+            assert!(after.1 > reused, "{}: {after:?} after ({created}, {reused}, {kept})", device.name);
+            let fresh = sample(&mut open(), 1);
+            assert!(second == fresh, "{}: a reused buffer's contents reached the second sample", device.name);
             let messages = backend.validation_messages();
             assert!(messages.is_empty(), "{}: {messages:?}", device.name);
         }

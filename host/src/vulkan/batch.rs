@@ -137,7 +137,7 @@ impl<'a> Batch<'a> {
             // Vulkan refuses empty copy regions.
             return Ok(ReadId { staging: None, bytes, _element: PhantomData });
         }
-        let staging = GpuBuffer::new(
+        let staging = GpuBuffer::transient(
             &self.core,
             bytes as u64,
             vk::BufferUsageFlags::TRANSFER_DST,

@@ -3,6 +3,7 @@
 
 use super::driver_lock;
 use super::kernel::stream_rows_fit;
+use super::recycle::Recycler;
 use crate::backend::{check_sustain_seconds, ValidationLog};
 use crate::device::TraceMethod;
 use crate::error::{Error, Result};
@@ -244,10 +245,12 @@ pub(crate) struct Core {
     /// Invocations per workgroup of the 1-D stream stages ([`ContextOptions::workgroup_sizes`]
     /// or the preferred ones, checked against the device).
     pub workgroup_sizes: WorkgroupSizes,
-    /// Command buffers submitted to the queue so far ([`super::buffer::submit_and_wait`]): what
-    /// the tests count to check that a batch is one submission.
-    #[cfg(test)]
+    /// Command buffers submitted to the queue so far ([`super::buffer::submit_and_wait`]): the
+    /// clock that ages kept transient buffers out ([`Recycler`]), and what the tests count to
+    /// check that a batch is one submission.
     pub submissions: AtomicU64,
+    /// Transient buffers kept for the next call that needs one of their kind.
+    pub recycler: Recycler,
 }
 
 impl Drop for Core {
@@ -256,6 +259,9 @@ impl Drop for Core {
         // SAFETY: every object created from this device holds an `Arc<Core>`, so none is alive now.
         unsafe {
             let _ = self.device.device_wait_idle();
+            for parked in self.recycler.drain() {
+                super::buffer::free_parked(self, parked);
+            }
             ManuallyDrop::drop(&mut self.allocator);
             self.device.destroy_device(None);
             if let Some((utils, messenger)) = self.debug.take() {
@@ -601,8 +607,8 @@ pub(crate) fn open(index: usize, options: &ContextOptions) -> Result<Arc<Core>> 
                 accel_limits,
                 sustain_seconds: AtomicU64::new(options.sustain_seconds.to_bits()),
                 workgroup_sizes,
-                #[cfg(test)]
                 submissions: AtomicU64::new(0),
+                recycler: Recycler::default(),
             }))
         }
         Err(e) => {

@@ -225,6 +225,53 @@ mod tests {
         (0..pixels).map(|i| Vec4::new(k as f32, i as f32, 0.5 + (i % 7) as f32, 1.0)).collect()
     }
 
+    /// A frame's denoise input for `params`, with a shadowed quarter of image `k`'s unshadowed
+    /// light, and guides and emission that differ with `k` too.
+    fn frame(k: u32, params: &DenoiseParams) -> DenoiseInput {
+        let pixels = params.pixels();
+        let input = DenoiseInput {
+            position: (0..pixels).map(|i| Vec4::new(i as f32, k as f32, 1.0, 1.0 + ((i + k) % 3) as f32)).collect(),
+            normal: vec![Vec4::new(0.0, 0.0, 1.0, 0.5); pixels as usize],
+            analytic: image(k + 7, pixels),
+            emitted: image(k, pixels).iter().map(|c| *c * 0.01).collect(),
+            shadowed: image(k, pixels).iter().map(|c| *c * 0.25).collect(),
+            unshadowed: image(k, pixels),
+        };
+        input.check(params).unwrap();
+        input
+    }
+
+    /// A denoise takes the buffers the frame before it left ([`super::super::recycle::Recycler`]):
+    /// the second frame of a size creates none, and its colour is, bit for bit, what a device
+    /// that had denoised nothing makes of the same input — every pass of TV and SVGF writes what
+    /// the next reads, so no stale contents reach the image. Every Vulkan device; without one it
+    /// fails under CI and is skipped loudly elsewhere.
+    #[test]
+    fn a_second_frame_reuses_the_first_ones_buffers_and_reads_none_of_their_contents() {
+        let devices = super::super::devices_for_test("denoise buffer reuse");
+        let params = DenoiseParams::new(24, 16);
+        let options = ContextOptions { validation: true, ..Default::default() };
+        for device in &devices {
+            for method in [DenoiseMethod::Tv, DenoiseMethod::Svgf] {
+                let denoise = |core: &Arc<Core>, k| {
+                    let kernels = DenoiseKernels::new(core).unwrap();
+                    let (colour, _) = kernels.run(core, method, &params, &frame(k, &params)).unwrap();
+                    bytemuck::cast_slice::<Vec4, u32>(&colour).to_vec()
+                };
+                let core = open(device.index, &options).unwrap();
+                denoise(&core, 1);
+                let (created, reused, _) = core.recycler.counts();
+                let second = denoise(&core, 2);
+                let after = core.recycler.counts();
+                assert!(after.0 == created && after.1 > reused, "{} {method:?}: {after:?}", device.name);
+                let fresh = denoise(&open(device.index, &options).unwrap(), 2);
+                assert!(second == fresh, "{} {method:?}: a reused buffer's contents reached the image", device.name);
+                let messages = core.validation_log().messages();
+                assert!(messages.is_empty(), "{}: {messages:?}", device.name);
+            }
+        }
+    }
+
     /// Runs of one pass wait side by side — two in one batch, a third in another live batch —
     /// each on a descriptor set and timestamps of its own (the pass's slots,
     /// [`super::super::pass::Pass::prepare`]): each copy probe copies its own image, though the
@@ -291,15 +338,7 @@ mod tests {
         let devices = super::super::devices_for_test("denoise submissions");
         let params = DenoiseParams::new(24, 16);
         let pixels = params.pixels();
-        let input = DenoiseInput {
-            position: (0..pixels).map(|i| Vec4::new(i as f32, 0.0, 1.0, 1.0 + (i % 3) as f32)).collect(),
-            normal: vec![Vec4::new(0.0, 0.0, 1.0, 0.5); pixels as usize],
-            analytic: image(1, pixels),
-            emitted: vec![Vec4::ZERO; pixels as usize],
-            shadowed: image(2, pixels).iter().map(|c| *c * 0.25).collect(),
-            unshadowed: image(2, pixels),
-        };
-        input.check(&params).unwrap();
+        let input = frame(2, &params);
         for device in &devices {
             let core = open(device.index, &ContextOptions { validation: true, ..Default::default() }).unwrap();
             let kernels = DenoiseKernels::new(&core).unwrap();

@@ -11,6 +11,7 @@ mod denoise;
 mod driver_lock;
 mod kernel;
 mod pass;
+mod recycle;
 mod rt_pipeline;
 pub mod spirv;
 

@@ -1,0 +1,230 @@
+//! Transient buffers kept for reuse: the streams, images, counters and staging buffers that a
+//! lit sample, a denoise or a single stage allocates for one call and drops at its end.
+//!
+//! Why: a 1080p lit sample on Vulkan holds sixteen device buffers and eight staging buffers, a
+//! denoise up to fourteen and eight, and every call had created and freed them all. gpu-allocator
+//! suballocates 256 MB device blocks (64 MB host blocks) and frees a block as soon as it is empty
+//! unless it is the memory type's last, so at 1080p (33 MB a `Vec4` image) each call allocated
+//! and freed whole blocks through `vkAllocateMemory`; on lavapipe that memory is fresh pages the
+//! kernel faults in and zeroes every call. Kept buffers are taken again by the next call that
+//! asks for exactly the same size, usage and memory location ([`BufferKind`]) — the next sample,
+//! the next frame, and a denoise's images that a lit sample's streams of the same size left.
+//!
+//! What it holds: buffers released within the last [`KEPT_FOR_SUBMISSIONS`] submissions, at most
+//! as many bytes as the transient buffers alive at once have ever reached (so never more than a
+//! call already needed, while calls of varying lengths — a compacted stream's — cannot pile up),
+//! the oldest given up first. When an allocation fails, every kept buffer is freed and the
+//! allocation tried once more ([`super::buffer::GpuBuffer::new`]). The last call's buffers stay
+//! until a later release ages them out or the backend closes, as an engine's render targets stay
+//! between frames. A reused buffer holds what its last user left: every stage writes the
+//! elements it reads back, and the sanitized counters are zeroed on the device by each run.
+
+use ash::vk;
+use gpu_allocator::vulkan::Allocation;
+use gpu_allocator::MemoryLocation;
+use std::sync::{Mutex, MutexGuard, PoisonError};
+
+/// How many submissions a released buffer is kept for without being taken again. A lit sample
+/// and a denoise are one submission each where the device writes timestamps, and split
+/// (benchmark mode, or no timestamps: uploads, each pass, reads) five and up to nine (SVGF with
+/// four à-trous steps), so a frame's buffers outlive the next frame's calls; buffers of a size
+/// no longer asked for (a resized viewport, a bench's previous size) go at the first release
+/// this many submissions later.
+pub(crate) const KEPT_FOR_SUBMISSIONS: u64 = 16;
+
+/// What a kept buffer may be reused for: a buffer of exactly this size (bytes), usage and memory
+/// location. Exact, because a kernel binds its buffers whole and may read their length.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub(crate) struct BufferKind {
+    pub size: u64,
+    pub usage: vk::BufferUsageFlags,
+    pub location: MemoryLocation,
+}
+
+/// A buffer and its bound memory that no command and no [`super::buffer::GpuBuffer`] uses.
+pub(crate) struct Parked {
+    pub buffer: vk::Buffer,
+    pub allocation: Allocation,
+}
+
+/// A parked buffer with its kind and the submission count when it was released.
+struct Kept {
+    kind: BufferKind,
+    parked: Parked,
+    released_at: u64,
+}
+
+/// The kept buffers of one device ([`super::context::Core`]) and the accounting that bounds them.
+#[derive(Default)]
+pub(crate) struct Recycler {
+    state: Mutex<State>,
+}
+
+#[derive(Default)]
+struct State {
+    /// Oldest release first.
+    kept: Vec<Kept>,
+    kept_bytes: u64,
+    /// Bytes of the transient buffers in use now, and the most there have been at once.
+    live_bytes: u64,
+    peak_live_bytes: u64,
+    /// Transient buffers created, and taken from the kept ones, since the device opened.
+    #[cfg(test)]
+    created: u64,
+    #[cfg(test)]
+    reused: u64,
+}
+
+impl State {
+    fn count_live(&mut self, kind: BufferKind) {
+        self.live_bytes += kind.size;
+        self.peak_live_bytes = self.peak_live_bytes.max(self.live_bytes);
+    }
+
+    /// Removes and returns the oldest kept buffer.
+    fn give_up_oldest(&mut self) -> Option<Parked> {
+        if self.kept.is_empty() {
+            return None;
+        }
+        let oldest = self.kept.remove(0);
+        self.kept_bytes -= oldest.kind.size;
+        Some(oldest.parked)
+    }
+}
+
+impl Recycler {
+    fn state(&self) -> MutexGuard<'_, State> {
+        // Every update leaves the state consistent before anything that could panic.
+        self.state.lock().unwrap_or_else(PoisonError::into_inner)
+    }
+
+    /// A kept buffer of `kind` to use again (the most recently released), counted in use; none
+    /// when no kept buffer is of that kind.
+    pub fn take(&self, kind: BufferKind) -> Option<Parked> {
+        let mut state = self.state();
+        let index = state.kept.iter().rposition(|kept| kept.kind == kind)?;
+        let kept = state.kept.remove(index);
+        state.kept_bytes -= kind.size;
+        state.count_live(kind);
+        #[cfg(test)]
+        {
+            state.reused += 1;
+        }
+        Some(kept.parked)
+    }
+
+    /// Counts a transient buffer of `kind` just created in use.
+    pub fn created(&self, kind: BufferKind) {
+        let mut state = self.state();
+        state.count_live(kind);
+        #[cfg(test)]
+        {
+            state.created += 1;
+        }
+    }
+
+    /// Takes back a transient buffer of `kind` that is no longer used, released when `submitted`
+    /// submissions had been made; returns the buffers the caller must free: those kept since
+    /// more than [`KEPT_FOR_SUBMISSIONS`] submissions before, and the oldest ones the byte bound
+    /// pushes out (`parked` itself always fits: it was counted in use, so in the peak).
+    pub fn keep(&self, kind: BufferKind, parked: Parked, submitted: u64) -> Vec<Parked> {
+        let mut state = self.state();
+        state.live_bytes -= kind.size;
+        let mut freed = Vec::new();
+        while state.kept.first().is_some_and(|kept| kept.released_at + KEPT_FOR_SUBMISSIONS < submitted) {
+            freed.extend(state.give_up_oldest());
+        }
+        while state.kept_bytes + kind.size > state.peak_live_bytes {
+            freed.extend(state.give_up_oldest());
+        }
+        state.kept_bytes += kind.size;
+        state.kept.push(Kept { kind, parked, released_at: submitted });
+        freed
+    }
+
+    /// Every kept buffer, for the caller to free: when an allocation failed, and at teardown.
+    pub fn drain(&self) -> Vec<Parked> {
+        let mut state = self.state();
+        state.kept_bytes = 0;
+        state.kept.drain(..).map(|kept| kept.parked).collect()
+    }
+
+    /// (Transient buffers created, taken again, kept now) since the device opened.
+    #[cfg(test)]
+    pub fn counts(&self) -> (u64, u64, usize) {
+        let state = self.state();
+        (state.created, state.reused, state.kept.len())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn kind(size: u64) -> BufferKind {
+        BufferKind { size, usage: vk::BufferUsageFlags::STORAGE_BUFFER, location: MemoryLocation::GpuOnly }
+    }
+
+    /// A parked buffer told apart by its handle (no device: the recycler never calls one).
+    fn parked(handle: u64) -> Parked {
+        use ash::vk::Handle;
+        Parked { buffer: vk::Buffer::from_raw(handle), allocation: Allocation::default() }
+    }
+
+    fn handles(freed: &[Parked]) -> Vec<u64> {
+        use ash::vk::Handle;
+        freed.iter().map(|p| p.buffer.as_raw()).collect()
+    }
+
+    #[test]
+    fn a_buffer_is_taken_again_only_for_its_exact_kind() {
+        let recycler = Recycler::default();
+        recycler.created(kind(64));
+        assert!(handles(&recycler.keep(kind(64), parked(1), 0)).is_empty());
+        assert!(recycler.take(kind(60)).is_none(), "another size");
+        let staging = BufferKind { location: MemoryLocation::CpuToGpu, ..kind(64) };
+        assert!(recycler.take(staging).is_none(), "another location");
+        let upload = BufferKind { usage: vk::BufferUsageFlags::TRANSFER_SRC, ..kind(64) };
+        assert!(recycler.take(upload).is_none(), "another usage");
+        assert_eq!(handles(&recycler.take(kind(64)).into_iter().collect::<Vec<_>>()), [1]);
+        assert!(recycler.take(kind(64)).is_none(), "taken once");
+        assert_eq!(recycler.counts(), (1, 1, 0));
+    }
+
+    #[test]
+    fn kept_buffers_age_out_after_the_kept_submissions() {
+        let recycler = Recycler::default();
+        for size in [64, 128] {
+            recycler.created(kind(size));
+        }
+        recycler.keep(kind(64), parked(1), 10);
+        // Released at 10, still kept by a release at 10 + KEPT_FOR_SUBMISSIONS …
+        assert!(recycler.keep(kind(128), parked(2), 10 + KEPT_FOR_SUBMISSIONS).is_empty());
+        // … and given up by the first release after that.
+        let taken = recycler.take(kind(128)).unwrap();
+        let freed = recycler.keep(kind(128), taken, 11 + KEPT_FOR_SUBMISSIONS);
+        assert_eq!(handles(&freed), [1]);
+        assert_eq!(recycler.counts().2, 1);
+        assert_eq!(handles(&recycler.drain()), [2]);
+        assert_eq!(recycler.counts().2, 0);
+    }
+
+    #[test]
+    fn kept_bytes_stay_within_the_most_ever_in_use_at_once() {
+        let recycler = Recycler::default();
+        // At most 300 bytes in use at once: 100 + 200.
+        recycler.created(kind(100));
+        recycler.created(kind(200));
+        recycler.keep(kind(100), parked(1), 0);
+        recycler.keep(kind(200), parked(2), 0);
+        // Calls of other lengths, one buffer at a time: each release pushes out the oldest
+        // until the kept bytes fit 300.
+        recycler.created(kind(150));
+        assert_eq!(handles(&recycler.keep(kind(150), parked(3), 1)), [1, 2]);
+        recycler.created(kind(120));
+        assert!(recycler.keep(kind(120), parked(4), 2).is_empty(), "150 + 120 fit 300");
+        recycler.created(kind(90));
+        assert_eq!(handles(&recycler.keep(kind(90), parked(5), 3)), [3]);
+        assert_eq!(handles(&recycler.drain()), [4, 5]);
+    }
+}
