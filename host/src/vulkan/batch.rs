@@ -101,7 +101,7 @@ impl<'a> Batch<'a> {
             return refused("a second upload to one buffer in a batch".to_owned());
         }
         if !bytes.is_empty() {
-            let staging = GpuBuffer::staging_with(&self.core, bytes)?;
+            let staging = buffer.staging_for(bytes)?;
             self.uploads.push(Staged { buffer, staging, bytes: bytes.len() as u64 });
         }
         Ok(())

@@ -1,36 +1,47 @@
 //! Transient buffers kept for reuse: the streams, images, counters and staging buffers that a
 //! lit sample, a denoise or a single stage allocates for one call and drops at its end.
 //!
-//! Why: a 1080p lit sample on Vulkan holds sixteen device buffers and eight staging buffers, a
-//! denoise up to fourteen and eight, and every call had created and freed them all. gpu-allocator
-//! suballocates 256 MB device blocks (64 MB host blocks) and frees a block as soon as it is empty
-//! unless it is the memory type's last, so at 1080p (33 MB a `Vec4` image) each call allocated
-//! and freed whole blocks through `vkAllocateMemory`; on lavapipe that memory is fresh pages the
-//! kernel faults in and zeroes every call. Kept buffers are taken again by the next call that
-//! asks for exactly the same size, usage and memory location ([`BufferKind`]) — the next sample,
-//! the next frame, and a denoise's images that a lit sample's streams of the same size left.
+//! Why: a 1080p lit sample on Vulkan holds sixteen device buffers and eight staging buffers
+//! (thirty-one with the camera streams of a frame's first sample), a denoise up to fourteen and
+//! eight, and every call had created and freed them all. gpu-allocator suballocates 256 MB device
+//! blocks (64 MB host blocks) and frees a block as soon as it is empty unless it is the memory
+//! type's last, so at 1080p (33 MB a `Vec4` image) each call allocated and freed whole blocks
+//! through `vkAllocateMemory`; on lavapipe that memory is fresh pages the kernel faults in and
+//! zeroes every call. Kept buffers are taken again by the next call that asks for exactly the
+//! same size, usage and memory location ([`BufferKind`]) — the next sample, the next frame, and
+//! a denoise's images that a lit sample's streams of the same size left.
 //!
-//! What it holds: buffers released within the last [`KEPT_FOR_SUBMISSIONS`] submissions, at most
-//! as many bytes as the transient buffers alive at once have ever reached (so never more than a
-//! call already needed, while calls of varying lengths — a compacted stream's — cannot pile up),
-//! the oldest given up first. When an allocation fails, every kept buffer is freed and the
-//! allocation tried once more ([`super::buffer::GpuBuffer::new`]). The last call's buffers stay
-//! until a later release ages them out or the backend closes, as an engine's render targets stay
-//! between frames. A reused buffer holds what its last user left: every stage writes the
-//! elements it reads back, and the sanitized counters are zeroed on the device by each run.
+//! What it holds: each released buffer until the first release more than
+//! [`KEPT_FOR_SUBMISSIONS`] submissions later, and at most [`KEPT_PEAKS`] times the bytes the
+//! transient buffers alive at once have ever reached, the oldest given up first — room for the
+//! distinct buffers of two kinds of call that alternate, while calls of ever other lengths (an
+//! engine's single-stage calls on streams it compacts) cannot pile up. Where a buffer cannot be
+//! made for want of memory, every kept buffer of its device is freed and it is tried once more
+//! ([`super::buffer::GpuBuffer::new`]; each device keeps its own, so a second backend on the same
+//! GPU frees only its own). The last call's buffers stay until a later release ages them out or
+//! the backend closes, as an engine's render targets stay between frames. A reused buffer holds
+//! what its last user left: every stage writes the elements it reads back, and the sanitized
+//! counters are zeroed on the device by each run (tests fill kept buffers with ones before the
+//! calls that take them to check it).
 
 use ash::vk;
 use gpu_allocator::vulkan::Allocation;
 use gpu_allocator::MemoryLocation;
 use std::sync::{Mutex, MutexGuard, PoisonError};
 
-/// How many submissions a released buffer is kept for without being taken again. A lit sample
+/// How many submissions a released buffer is kept for without being taken again (it goes at the
+/// first release after them). A lit sample
 /// and a denoise are one submission each where the device writes timestamps, and split
 /// (benchmark mode, or no timestamps: uploads, each pass, reads) five and up to nine (SVGF with
 /// four à-trous steps), so a frame's buffers outlive the next frame's calls; buffers of a size
-/// no longer asked for (a resized viewport, a bench's previous size) go at the first release
-/// this many submissions later.
+/// no longer asked for (a resized viewport, a bench's previous size) go.
 pub(crate) const KEPT_FOR_SUBMISSIONS: u64 = 16;
+
+/// The kept bytes' bound, in multiples of the most bytes of transient buffers ever in use at
+/// once. Two: a realtime loop alternates a lit sample and a denoise, whose distinct buffers at
+/// 1080p come to about 340 bytes a pixel against a peak of about 280 (the sample with its camera
+/// streams); with one, the oldest 60 bytes a pixel would be freed and made again every frame.
+pub(crate) const KEPT_PEAKS: u64 = 2;
 
 /// What a kept buffer may be reused for: a buffer of exactly this size (bytes), usage and memory
 /// location. Exact, because a kernel binds its buffers whole and may read their length.
@@ -60,10 +71,12 @@ pub(crate) struct Recycler {
     state: Mutex<State>,
 }
 
+/// What a [`Recycler`] guards.
 #[derive(Default)]
 struct State {
-    /// Oldest release first.
+    /// The kept buffers, oldest release first.
     kept: Vec<Kept>,
+    /// Their bytes.
     kept_bytes: u64,
     /// Bytes of the transient buffers in use now, and the most there have been at once.
     live_bytes: u64,
@@ -76,6 +89,7 @@ struct State {
 }
 
 impl State {
+    /// Counts a buffer of `kind` in use.
     fn count_live(&mut self, kind: BufferKind) {
         self.live_bytes += kind.size;
         self.peak_live_bytes = self.peak_live_bytes.max(self.live_bytes);
@@ -90,6 +104,21 @@ impl State {
         self.kept_bytes -= oldest.kind.size;
         Some(oldest.parked)
     }
+}
+
+/// What a [`Recycler`] holds and has done, for tests.
+#[cfg(test)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) struct RecyclerCounts {
+    /// Transient buffers created and taken again since the device opened.
+    pub created: u64,
+    pub reused: u64,
+    /// Buffers kept now, and their bytes.
+    pub kept: usize,
+    pub kept_bytes: u64,
+    /// Bytes of transient buffers in use now, and the most at once.
+    pub live_bytes: u64,
+    pub peak_live_bytes: u64,
 }
 
 impl Recycler {
@@ -124,18 +153,24 @@ impl Recycler {
     }
 
     /// Takes back a transient buffer of `kind` that is no longer used, released when `submitted`
-    /// submissions had been made; returns the buffers the caller must free: those kept since
-    /// more than [`KEPT_FOR_SUBMISSIONS`] submissions before, and the oldest ones the byte bound
-    /// pushes out (`parked` itself always fits: it was counted in use, so in the peak).
+    /// submissions had been made; returns the buffers the caller must free: those released more
+    /// than [`KEPT_FOR_SUBMISSIONS`] submissions before, and the oldest ones the byte bound
+    /// ([`KEPT_PEAKS`]) pushes out (`parked` itself always fits: it was counted in use, so in the
+    /// peak).
     pub fn keep(&self, kind: BufferKind, parked: Parked, submitted: u64) -> Vec<Parked> {
         let mut state = self.state();
-        state.live_bytes -= kind.size;
+        debug_assert!(state.live_bytes >= kind.size, "a transient buffer released but never counted in use");
+        state.live_bytes = state.live_bytes.saturating_sub(kind.size);
         let mut freed = Vec::new();
         while state.kept.first().is_some_and(|kept| kept.released_at + KEPT_FOR_SUBMISSIONS < submitted) {
             freed.extend(state.give_up_oldest());
         }
-        while state.kept_bytes + kind.size > state.peak_live_bytes {
-            freed.extend(state.give_up_oldest());
+        let bound = KEPT_PEAKS * state.peak_live_bytes;
+        while state.kept_bytes + kind.size > bound {
+            match state.give_up_oldest() {
+                Some(oldest) => freed.push(oldest),
+                None => break,
+            }
         }
         state.kept_bytes += kind.size;
         state.kept.push(Kept { kind, parked, released_at: submitted });
@@ -149,11 +184,27 @@ impl Recycler {
         state.kept.drain(..).map(|kept| kept.parked).collect()
     }
 
-    /// (Transient buffers created, taken again, kept now) since the device opened.
+    /// What it holds and has done.
     #[cfg(test)]
-    pub fn counts(&self) -> (u64, u64, usize) {
+    pub fn counts(&self) -> RecyclerCounts {
         let state = self.state();
-        (state.created, state.reused, state.kept.len())
+        RecyclerCounts {
+            created: state.created,
+            reused: state.reused,
+            kept: state.kept.len(),
+            kept_bytes: state.kept_bytes,
+            live_bytes: state.live_bytes,
+            peak_live_bytes: state.peak_live_bytes,
+        }
+    }
+
+    /// Calls `visit` on every kept buffer with its kind (tests fill them with ones).
+    #[cfg(test)]
+    pub fn for_each_kept(&self, mut visit: impl FnMut(BufferKind, &mut Parked)) {
+        let mut state = self.state();
+        for kept in &mut state.kept {
+            visit(kept.kind, &mut kept.parked);
+        }
     }
 }
 
@@ -188,7 +239,8 @@ mod tests {
         assert!(recycler.take(upload).is_none(), "another usage");
         assert_eq!(handles(&recycler.take(kind(64)).into_iter().collect::<Vec<_>>()), [1]);
         assert!(recycler.take(kind(64)).is_none(), "taken once");
-        assert_eq!(recycler.counts(), (1, 1, 0));
+        let counts = recycler.counts();
+        assert_eq!((counts.created, counts.reused, counts.kept, counts.live_bytes), (1, 1, 0, 64));
     }
 
     #[test]
@@ -204,27 +256,31 @@ mod tests {
         let taken = recycler.take(kind(128)).unwrap();
         let freed = recycler.keep(kind(128), taken, 11 + KEPT_FOR_SUBMISSIONS);
         assert_eq!(handles(&freed), [1]);
-        assert_eq!(recycler.counts().2, 1);
+        assert_eq!((recycler.counts().kept, recycler.counts().kept_bytes), (1, 128));
         assert_eq!(handles(&recycler.drain()), [2]);
-        assert_eq!(recycler.counts().2, 0);
+        assert_eq!((recycler.counts().kept, recycler.counts().kept_bytes), (0, 0));
     }
 
     #[test]
-    fn kept_bytes_stay_within_the_most_ever_in_use_at_once() {
+    fn kept_bytes_stay_within_twice_the_most_ever_in_use_at_once() {
         let recycler = Recycler::default();
-        // At most 300 bytes in use at once: 100 + 200.
+        // At most 300 bytes in use at once (100 + 200): 600 may be kept.
         recycler.created(kind(100));
         recycler.created(kind(200));
         recycler.keep(kind(100), parked(1), 0);
         recycler.keep(kind(200), parked(2), 0);
         // Calls of other lengths, one buffer at a time: each release pushes out the oldest
-        // until the kept bytes fit 300.
-        recycler.created(kind(150));
-        assert_eq!(handles(&recycler.keep(kind(150), parked(3), 1)), [1, 2]);
-        recycler.created(kind(120));
-        assert!(recycler.keep(kind(120), parked(4), 2).is_empty(), "150 + 120 fit 300");
-        recycler.created(kind(90));
-        assert_eq!(handles(&recycler.keep(kind(90), parked(5), 3)), [3]);
-        assert_eq!(handles(&recycler.drain()), [4, 5]);
+        // until the kept bytes fit 600.
+        let release = |size, handle| {
+            recycler.created(kind(size));
+            handles(&recycler.keep(kind(size), parked(handle), handle))
+        };
+        assert!(release(150, 3).is_empty(), "450 kept");
+        assert!(release(120, 4).is_empty(), "570 kept");
+        assert_eq!(release(90, 5), [1], "660 less the oldest 100");
+        assert_eq!(release(250, 6), [2, 3], "810 less 200 and 150");
+        let counts = recycler.counts();
+        assert_eq!((counts.kept_bytes, counts.live_bytes, counts.peak_live_bytes), (460, 0, 300));
+        assert_eq!(handles(&recycler.drain()), [4, 5, 6]);
     }
 }
