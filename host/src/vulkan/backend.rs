@@ -1135,6 +1135,34 @@ mod tests {
         }
     }
 
+    /// A realtime loop — frames of a lit sample with camera streams, one without and a denoise,
+    /// TV or SVGF — creates buffers in its first frame only: every later frame takes all it
+    /// needs from those kept ([`super::super::recycle::KEPT_PEAKS`] leaves room for the sample's
+    /// and the denoise's distinct buffers), with no buffer in use between frames. Every Vulkan
+    /// device; without one it fails under CI and is skipped loudly elsewhere.
+    #[test]
+    fn a_frame_loop_creates_buffers_in_its_first_frame_only() {
+        use crate::lit_frame::{render_lit, LitFrameSettings};
+        let devices = super::super::devices_for_test("frame loop buffer reuse");
+        let scene = Scene::load("builtin:cornell").unwrap();
+        let data = ShadeData::new(&scene).unwrap();
+        for device in &devices {
+            for denoise in [crate::denoise::DenoiseMethod::Tv, crate::denoise::DenoiseMethod::Svgf] {
+                let mut backend = VulkanBackend::open(device.index, &ContextOptions::default(), None).unwrap();
+                backend.load_scene(&scene).unwrap();
+                let mut created = Vec::new();
+                for seed in 0..4 {
+                    let settings = LitFrameSettings { seed, denoise, ..LitFrameSettings::new(40, 24, 2) };
+                    render_lit(&mut backend, &scene, &data, &settings).unwrap();
+                    let counts = backend.core.recycler.counts();
+                    assert_eq!(counts.live_bytes, 0, "{} {denoise:?}: {counts:?}", device.name);
+                    created.push(counts.created);
+                }
+                assert!(created.iter().all(|&c| c == created[0]), "{} {denoise:?}: {created:?}", device.name);
+            }
+        }
+    }
+
     /// A batch submitted as one submission for the uploads, one per run and one for the reads (the
     /// path of a device without timestamps and of benchmark mode, which CI's lavapipe does not
     /// take by itself) reads back what one submission does, bit for bit, with the same reports —

@@ -38,9 +38,10 @@ use std::sync::{Mutex, MutexGuard, PoisonError};
 pub(crate) const KEPT_FOR_SUBMISSIONS: u64 = 16;
 
 /// The kept bytes' bound, in multiples of the most bytes of transient buffers ever in use at
-/// once. Two: a realtime loop alternates a lit sample and a denoise, whose distinct buffers at
-/// 1080p come to about 340 bytes a pixel against a peak of about 280 (the sample with its camera
-/// streams); with one, the oldest 60 bytes a pixel would be freed and made again every frame.
+/// once. Two: a realtime loop alternates lit samples and a denoise, whose distinct buffers come
+/// to 1.4–1.5 times that peak (`a_frame_loop_creates_buffers_in_its_first_frame_only`, 40×24
+/// pixels, 2 spp: 396 bytes a pixel kept against a peak of 280 with TV, 380 against 256 with
+/// SVGF); with one, 26 of a TV frame's 40 buffers were freed and made again every frame.
 pub(crate) const KEPT_PEAKS: u64 = 2;
 
 /// What a kept buffer may be reused for: a buffer of exactly this size (bytes), usage and memory
