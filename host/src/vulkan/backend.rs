@@ -1148,7 +1148,8 @@ mod tests {
         let data = ShadeData::new(&scene).unwrap();
         for device in &devices {
             for denoise in [crate::denoise::DenoiseMethod::Tv, crate::denoise::DenoiseMethod::Svgf] {
-                let mut backend = VulkanBackend::open(device.index, &ContextOptions::default(), None).unwrap();
+                let options = ContextOptions { validation: true, ..Default::default() };
+                let mut backend = VulkanBackend::open(device.index, &options, None).unwrap();
                 backend.load_scene(&scene).unwrap();
                 let mut created = Vec::new();
                 for seed in 0..4 {
@@ -1159,6 +1160,8 @@ mod tests {
                     created.push(counts.created);
                 }
                 assert!(created.iter().all(|&c| c == created[0]), "{} {denoise:?}: {created:?}", device.name);
+                let messages = backend.validation_messages();
+                assert!(messages.is_empty(), "{}: {messages:?}", device.name);
             }
         }
     }

@@ -14,7 +14,7 @@
 //! What it holds: each released buffer until the first release more than
 //! [`KEPT_FOR_SUBMISSIONS`] submissions later, and at most [`KEPT_PEAKS`] times the bytes the
 //! transient buffers alive at once have ever reached, the oldest given up first — room for the
-//! distinct buffers of two kinds of call that alternate, while calls of ever other lengths (an
+//! distinct buffers of two kinds of call that alternate, while calls of ever-changing lengths (an
 //! engine's single-stage calls on streams it compacts) cannot pile up. Where a buffer cannot be
 //! made for want of memory, every kept buffer of its device is freed and it is tried once more
 //! ([`super::buffer::GpuBuffer::new`]; each device keeps its own, so a second backend on the same
@@ -30,11 +30,11 @@ use gpu_allocator::MemoryLocation;
 use std::sync::{Mutex, MutexGuard, PoisonError};
 
 /// How many submissions a released buffer is kept for without being taken again (it goes at the
-/// first release after them). A lit sample
-/// and a denoise are one submission each where the device writes timestamps, and split
-/// (benchmark mode, or no timestamps: uploads, each pass, reads) five and up to nine (SVGF with
-/// four à-trous steps), so a frame's buffers outlive the next frame's calls; buffers of a size
-/// no longer asked for (a resized viewport, a bench's previous size) go.
+/// first release after them). A lit sample and a denoise are one submission each where the
+/// device writes timestamps, and split (benchmark mode, or no timestamps: uploads, each pass,
+/// reads) five and up to nine (SVGF with four à-trous steps), so a frame's buffers outlive the
+/// next frame's calls; buffers of a size no longer asked for (a resized viewport, a bench's
+/// previous size) go.
 pub(crate) const KEPT_FOR_SUBMISSIONS: u64 = 16;
 
 /// The kept bytes' bound, in multiples of the most bytes of transient buffers ever in use at
