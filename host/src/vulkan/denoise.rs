@@ -241,6 +241,21 @@ mod tests {
         input
     }
 
+    /// `input` denoised by `method` on `core` with kernels of their own: the colour as bits (so
+    /// that any NaN compares too), the passes' reports and the submissions it made.
+    fn denoised(
+        core: &Arc<Core>,
+        method: DenoiseMethod,
+        params: &DenoiseParams,
+        input: &DenoiseInput,
+    ) -> (Vec<u32>, Vec<StageReport>, u64) {
+        let kernels = DenoiseKernels::new(core).unwrap();
+        let before = core.submissions.load(std::sync::atomic::Ordering::Relaxed);
+        let (colour, reports) = kernels.run(core, method, params, input).unwrap();
+        let submissions = core.submissions.load(std::sync::atomic::Ordering::Relaxed) - before;
+        (bytemuck::cast_slice::<Vec4, u32>(&colour).to_vec(), reports, submissions)
+    }
+
     /// A denoise takes the buffers the frame before it left ([`super::super::recycle::Recycler`]):
     /// the second frame of a size creates none, and, with every kept buffer filled with ones
     /// first, its colour is, bit for bit, what a device that had denoised nothing makes of the
@@ -254,11 +269,7 @@ mod tests {
         let options = ContextOptions { validation: true, ..Default::default() };
         for device in &devices {
             for method in [DenoiseMethod::Tv, DenoiseMethod::Svgf] {
-                let denoise = |core: &Arc<Core>, k| {
-                    let kernels = DenoiseKernels::new(core).unwrap();
-                    let (colour, _) = kernels.run(core, method, &params, &frame(k, &params)).unwrap();
-                    bytemuck::cast_slice::<Vec4, u32>(&colour).to_vec()
-                };
+                let denoise = |core: &Arc<Core>, k| denoised(core, method, &params, &frame(k, &params)).0;
                 let core = open(device.index, &options).unwrap();
                 denoise(&core, 1);
                 let first = core.recycler.counts();
@@ -292,13 +303,7 @@ mod tests {
             let mut untimed = open(device.index, &options).unwrap();
             Arc::get_mut(&mut untimed).expect("nothing shares a device just opened").info.timestamps = false;
             for method in [DenoiseMethod::Tv, DenoiseMethod::Svgf] {
-                let denoise = |core: &Arc<Core>| {
-                    let kernels = DenoiseKernels::new(core).unwrap();
-                    let before = core.submissions.load(std::sync::atomic::Ordering::Relaxed);
-                    let (colour, reports) = kernels.run(core, method, &params, &input).unwrap();
-                    let submissions = core.submissions.load(std::sync::atomic::Ordering::Relaxed) - before;
-                    (bytemuck::cast_slice::<Vec4, u32>(&colour).to_vec(), reports, submissions)
-                };
+                let denoise = |core: &Arc<Core>| denoised(core, method, &params, &input);
                 let (colour, _, _) = denoise(&timed);
                 let (untimed_colour, reports, submissions) = denoise(&untimed);
                 assert!(untimed_colour == colour, "{} {method:?}: the split frame's colour", device.name);
