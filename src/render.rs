@@ -7,7 +7,7 @@ use crate::{close_backend, open_backend, Backend, BackendOptions, DeviceChoice, 
 use glam::Vec3;
 use image::{ImageFormat, RgbImage};
 use raywave_host::denoise::DenoiseMethod;
-use raywave_host::lit_frame::{render_lit, LitFrameSettings};
+use raywave_host::lit_frame::{denoise_samples, shade_samples, LitFrameSettings};
 use raywave_host::scene::Unrendered;
 use raywave_host::shading::{ShadeAccumulator, ShadeData};
 use raywave_host::visualize::{normal_depth_image, output_destination, persist_all, srgb_image, PendingOutput};
@@ -221,7 +221,7 @@ pub fn render(options: &RenderOptions) -> Result<RenderReport> {
     let settings = options.frame_settings();
     settings.check_on(backend.as_ref())?;
     backend.load_scene(&scene)?;
-    let frame = Frame { scene: &scene, settings: &settings, data: data.as_ref() };
+    let frame = Frame { scene: &scene, settings: &settings, data: data.as_ref(), one_off: settle_seconds.is_none() };
     let (rendered, warm_up_seconds) = match settle_seconds {
         None => (frame.render(backend.as_mut())?, None),
         Some(settle) => {
@@ -267,6 +267,10 @@ struct Frame<'a> {
     settings: &'a LitFrameSettings,
     /// The shading inputs of the lit view (`None`: the normals view).
     data: Option<&'a ShadeData>,
+    /// Whether this is the only frame (no [`RenderOptions::settle_seconds`]): its samples' kept
+    /// buffers are freed before the denoiser allocates its own, for a lower peak (a 1080p render
+    /// on lavapipe: README, Architecture), where settling frames keep them as a frame loop does.
+    one_off: bool,
 }
 
 /// What one frame produced.
@@ -296,8 +300,9 @@ enum FrameImage {
 }
 
 impl Frame<'_> {
-    /// Renders the frame on `backend`: the lit view through [`render_lit`] (per sample generate →
-    /// trace → shade → occlusion, then the denoiser), the normals view from one sample's hits.
+    /// Renders the frame on `backend`: the lit view as `render_lit` does it ([`shade_samples`]:
+    /// per sample generate → trace → shade → occlusion; then [`denoise_samples`]), the normals
+    /// view from one sample's hits.
     fn render(&self, backend: &mut dyn Backend) -> Result<RenderedFrame> {
         let (width, height) = (self.settings.width, self.settings.height);
         let Some(data) = self.data else {
@@ -307,7 +312,11 @@ impl Frame<'_> {
             let stream_bytes = frame.rays.bytes() + frame.hits.bytes();
             return Ok(RenderedFrame { timings: frame.timings, hits, stream_bytes, image: FrameImage::Normals(image) });
         };
-        let lit = render_lit(backend, self.scene, data, self.settings)?;
+        let samples = shade_samples(backend, self.scene, data, self.settings)?;
+        if self.one_off {
+            backend.release_kept_memory();
+        }
+        let lit = denoise_samples(backend, self.settings, samples)?;
         let samples = lit.samples;
         Ok(RenderedFrame {
             timings: samples.timings,

@@ -194,6 +194,17 @@ pub trait Backend: Send {
     /// Runs the warp probe: `params.count` warped directions (xyz) with their pdfs (w).
     fn warp_probe(&mut self, params: &WarpParams) -> Result<Vec<Vec4>>;
 
+    /// Frees the working memory this backend keeps between calls for the next one to take again,
+    /// and returns its bytes. On Vulkan that is the streams, images, counters and staging buffers
+    /// of the calls before (README, Architecture: kept within twice the most in use at once, and
+    /// until later calls age them out), device memory that an engine's frame loop reuses every
+    /// frame but a one-off frame no longer needs once its samples are in, or that an engine
+    /// pausing its ray tracing wants back without closing the backend and its loaded scene. The
+    /// next call makes what it needs afresh. The CPU backend keeps nothing: 0.
+    fn release_kept_memory(&mut self) -> u64 {
+        0
+    }
+
     /// The log of this backend's validation-layer messages, which outlives it
     /// ([`crate::device::close_backend`] reads it after the drop). `None` for a backend without
     /// validation layers (the CPU); a Vulkan backend's log stays empty unless it was opened with

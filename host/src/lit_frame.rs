@@ -304,7 +304,19 @@ pub fn render_lit(
     data: &ShadeData,
     settings: &LitFrameSettings,
 ) -> Result<LitFrame> {
-    let mut samples = shade_samples(backend, scene, data, settings)?;
+    let samples = shade_samples(backend, scene, data, settings)?;
+    denoise_samples(backend, settings, samples)
+}
+
+/// The second half of [`render_lit`]: `settings.denoise` and the composite of `samples` (what
+/// [`shade_samples`] returned for the same `settings`) on `backend`, the denoiser's pass times
+/// appended to theirs. Apart, so that a one-off frame can free what its samples kept
+/// ([`Backend::release_kept_memory`]) before the denoiser allocates its own.
+pub fn denoise_samples(
+    backend: &mut dyn Backend,
+    settings: &LitFrameSettings,
+    mut samples: LitSamples,
+) -> Result<LitFrame> {
     let params = settings.denoise_params(samples.accumulator.samples());
     let (color, reports) = backend.denoise(settings.denoise, &params, &samples.denoise_input())?;
     samples.timings.extend(reports);

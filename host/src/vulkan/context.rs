@@ -259,7 +259,7 @@ impl Drop for Core {
         // SAFETY: every object created from this device holds an `Arc<Core>`, so none is alive now.
         unsafe {
             let _ = self.device.device_wait_idle();
-            for parked in self.recycler.drain() {
+            for parked in self.recycler.drain().0 {
                 super::buffer::free_parked(self, parked);
             }
             ManuallyDrop::drop(&mut self.allocator);
@@ -276,6 +276,15 @@ impl Core {
     /// The validation log ([`ValidationLog`]), shared.
     pub fn validation_log(&self) -> ValidationLog {
         self.messages.clone()
+    }
+
+    /// Frees every transient buffer kept for reuse ([`Recycler`]) and returns their bytes. No
+    /// command uses a kept buffer, so this may run between any two calls.
+    pub fn free_kept_buffers(&self) -> u64 {
+        let (kept, bytes) = self.recycler.drain();
+        let _driver = driver_lock::device_use();
+        kept.into_iter().for_each(|parked| super::buffer::free_parked(self, parked));
+        bytes
     }
 }
 

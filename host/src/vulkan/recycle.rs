@@ -178,11 +178,12 @@ impl Recycler {
         freed
     }
 
-    /// Every kept buffer, for the caller to free: when an allocation failed, and at teardown.
-    pub fn drain(&self) -> Vec<Parked> {
+    /// Every kept buffer, for the caller to free, and their bytes: when an allocation failed,
+    /// when the engine releases them ([`crate::Backend::release_kept_memory`]), and at teardown.
+    pub fn drain(&self) -> (Vec<Parked>, u64) {
         let mut state = self.state();
-        state.kept_bytes = 0;
-        state.kept.drain(..).map(|kept| kept.parked).collect()
+        let bytes = std::mem::take(&mut state.kept_bytes);
+        (state.kept.drain(..).map(|kept| kept.parked).collect(), bytes)
     }
 
     /// What it holds and has done.
@@ -258,7 +259,8 @@ mod tests {
         let freed = recycler.keep(kind(128), taken, 11 + KEPT_FOR_SUBMISSIONS);
         assert_eq!(handles(&freed), [1]);
         assert_eq!((recycler.counts().kept, recycler.counts().kept_bytes), (1, 128));
-        assert_eq!(handles(&recycler.drain()), [2]);
+        let (drained, bytes) = recycler.drain();
+        assert_eq!((handles(&drained), bytes), (vec![2], 128));
         assert_eq!((recycler.counts().kept, recycler.counts().kept_bytes), (0, 0));
     }
 
@@ -282,6 +284,7 @@ mod tests {
         assert_eq!(release(250, 6), [2, 3], "810 less 200 and 150");
         let counts = recycler.counts();
         assert_eq!((counts.kept_bytes, counts.live_bytes, counts.peak_live_bytes), (460, 0, 300));
-        assert_eq!(handles(&recycler.drain()), [4, 5, 6]);
+        let (drained, bytes) = recycler.drain();
+        assert_eq!((handles(&drained), bytes), (vec![4, 5, 6], 460));
     }
 }
