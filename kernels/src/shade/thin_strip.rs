@@ -194,7 +194,7 @@ fn strip_ggx_integral(ggx: &GgxLobe, m: Vec3, e: Vec3, w: Vec3, s0: f32, s1: f32
     let (at_peak, past_peak) = (start * cos_peak + onward * sin_peak, onward * cos_peak - start * sin_peak);
     let mut breaks = [0.0f32; MAX_LINE_BREAKS];
     let count = graded_breaks(-peak, line.angle - peak, lobe_half_width(ggx), &mut breaks);
-    let integral = adaptive_integral(&breaks, count, false, false, |u| {
+    let integral = adaptive_integral(&breaks, count, false, 1.0, |u| {
         let (sin_u, cos_u) = crate::trig::sin_cos(u);
         let direction = at_peak * cos_u + past_peak * sin_u;
         ggx.eval(direction) * direction.dot(line.foot)
