@@ -99,7 +99,7 @@ const BASE4_PERMUTATIONS: [u32; 6] = [0x78d8_b4e4, 0xb1e1_6c9c, 0x2d8d_39c9, 0x3
 /// permutation from a hash's top byte — as one byte whose bits `2d..2d+2` hold entry `d`. On the
 /// CPU one load from [`DIGIT_PERMUTATION_BY_BYTE`]: `zsobol_index` calls this once per base-4
 /// digit, and the table spares it the `mod 24` and the word and byte selection; SPIR-V selects the
-/// word by comparisons instead ([`base4_permutation_word_by_selects`]).
+/// word by comparisons instead (`base4_permutation_word_by_selects`, built for SPIR-V and tests).
 #[cfg(not(target_arch = "spirv"))]
 fn digit_permutation(b: u32) -> u32 {
     DIGIT_PERMUTATION_BY_BYTE[(b & 0xff) as usize] as u32
