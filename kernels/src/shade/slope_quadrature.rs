@@ -112,7 +112,10 @@ const CENTRE_ON_EDGE: f32 = 1.0e-4;
 /// is no bound: 31 of 2000 random lights exceed the tolerance too, worst 2.05 %.
 const NEAR_CENTRE: f32 = 0.01;
 
-/// Azimuth breakpoints: one per corner and up to two tangencies per edge.
+/// Azimuth breakpoints: one per corner and up to two tangencies per edge. The two azimuths
+/// where an edge through the bump's centre leaves it ([`CENTRE_ON_EDGE`]) come on top, and
+/// breaks past this capacity are dropped, which costs accuracy only (a quad clipped to the
+/// horizon has at most 5 corners, so 3 of the 18 slots are spare for them).
 const MAX_BREAKS: usize = 3 * MAX_CORNERS;
 
 /// `∫ G dω` over `clipped` — a convex light polygon already clipped to the horizon, corners in
@@ -185,7 +188,8 @@ impl Edges {
     }
 
     /// Writes the azimuths (in `[0, 2π)`, sorted) where the radial integral is not smooth —
-    /// the corners' and the edges' tangent rays — and returns how many.
+    /// the corners' and the edges' tangent rays, and where an edge through the bump's centre
+    /// leaves it — and returns how many.
     fn azimuth_breaks(&self, v: Vec3, breaks: &mut [f32; MAX_BREAKS]) -> usize {
         let mut count = 0usize;
         let mut i = 0usize;
