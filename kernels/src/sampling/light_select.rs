@@ -8,7 +8,10 @@
 //! can emit towards the point, or where the whole light lies below the surface (within rounding:
 //! see [`quad_lights_nothing`] and `out_of_reach`), so a light that contributes is never given
 //! probability 0. For one quad light — each light of the scan, each BVH leaf — the zero set is
-//! the shade stage's own where its `U` is 0 ([`light_importance`]).
+//! the shade stage's own where its `U` is 0, and the two cosine factors are bounded further by
+//! the quad's own plane and corners ([`quad_cosine_bounds`], [`light_importance`]): the sphere
+//! alone bounds nothing inside it, so a large lamp seen edge-on had starved the lamp that lit a
+//! point.
 //!
 //! Three ways to choose, each a pure function with a matching pmf function:
 //!
@@ -175,10 +178,18 @@ pub fn light_bounds(light: &Light) -> LightBounds {
             i += 1;
         }
         let centre = (lo + hi) * 0.5;
+        // The corners relative to the centre from the edges, not from the rounded absolute
+        // corners: far from the origin a light smaller than its coordinates' spacing rounds to a
+        // box of a point or two (a 5 mm lamp 10⁶ out: radius 0, and a centre up to 3 cm off), and
+        // a sphere about it missed the light the shade stage sees from `corner − p`, so its
+        // importance was 0 where its `U` was half the point's. `centre − origin` is exact there
+        // (both lie in one binade).
+        let offset = centre - origin;
+        let relative = [Vec3::ZERO, eu, ev, eu + ev];
         let mut radius = 0.0f32;
         i = 0;
         while i < 4 {
-            radius = radius.max((corners[i] - centre).length());
+            radius = radius.max((relative[i] - offset).length());
             i += 1;
         }
         bounds.min = lo.extend(0.0);
@@ -220,6 +231,13 @@ pub fn light_bounds(light: &Light) -> LightBounds {
 /// zero power. A NaN normal counts as no surface (`n = 0`): the light keeps its importance, which
 /// cannot make a lit point dark.
 pub fn importance(bounds: &LightBounds, p: Vec3, n: Vec3) -> f32 {
+    bounded_importance(bounds, p, n, Vec2::ONE)
+}
+
+/// [`importance`] with its emitter factor `cos θ'` and its surface factor bounded further by
+/// `cosines` (x and y, in `[0, 1]`; 0 gives 0): a single quad's [`quad_cosine_bounds`], which know
+/// the quad's plane and corners.
+fn bounded_importance(bounds: &LightBounds, p: Vec3, n: Vec3, cosines: Vec2) -> f32 {
     let phi = bounds.phi;
     if phi.is_nan() || phi <= 0.0 {
         return 0.0;
@@ -267,7 +285,7 @@ pub fn importance(bounds: &LightBounds, p: Vec3, n: Vec3) -> f32 {
             cos_theta_pi = cos_sub_clamped(sin_i, cos_i, sin_b, cos_b);
         }
     }
-    let value = phi * cos_theta_p * cos_theta_pi / d2;
+    let value = phi * cos_theta_p.min(cosines.x) * cos_theta_pi.min(cosines.y) / d2;
     if value > 0.0 {
         value.min(MAX_IMPORTANCE)
     } else {
@@ -310,40 +328,92 @@ pub fn quad_faces(light: &Light, p: Vec3) -> bool {
 /// against the box centre's plane, had culled points a few µm in front of a lamp whose `U` was
 /// 1 (its band scaled with the centre's coordinates, not the stage's), and lost a normal's tilt
 /// of up to 3.5·10⁻⁴ rad to cancellation.
-#[allow(clippy::neg_cmp_op_on_partial_ord)] // `!(h <= 0)`: a NaN height counts as above
 pub fn quad_lights_nothing(light: &Light, p: Vec3, n: Vec3) -> bool {
     if light.kind != light_kind::QUAD {
         return false;
     }
-    if !quad_faces(light, p) {
-        return true;
-    }
-    if !(n.length_squared() > 0.0) {
-        return false;
-    }
     let to_corner = light.position.truncate() - p;
-    let (eu, ev) = (light.edge_u.truncate(), light.edge_v.truncate());
-    let corners = [to_corner, to_corner + eu, to_corner + ev, to_corner + eu + ev];
-    let mut i = 0;
-    while i < 4 {
-        if !(n.dot(corners[i]) <= 0.0) {
-            return false;
-        }
-        i += 1;
-    }
-    true
+    !quad_faces(light, p) || highest_corner(light, to_corner, n).is_none()
 }
 
-/// One light's importance at `p` (surface normal `n`): [`importance`] of its
-/// [`light_bounds`], and 0 where the shade stage's `U` is 0 for a quad ([`quad_lights_nothing`]).
-/// What the linear scan weighs each light by; a BVH leaf weighs its light the same way, from the
-/// leaf's bounds (the light's, as raywave's builder stores them).
-pub fn light_importance(light: &Light, p: Vec3, n: Vec3) -> f32 {
-    if quad_lights_nothing(light, p, n) {
-        0.0
-    } else {
-        importance(&light_bounds(light), p, n)
+/// The largest height `n·(c − p)` of quad `light`'s corners `c` over `p`'s tangent plane
+/// (`to_corner` = the light's corner − `p`; NaN heights skipped), or `None` where every corner is
+/// on or below it and `n` is a surface's normal (positive length) — the horizon's half of
+/// [`quad_lights_nothing`]'s zero set, shared with [`quad_cosine_bounds`].
+#[allow(clippy::neg_cmp_op_on_partial_ord)] // `!(h <= 0)`: a NaN height counts as above
+fn highest_corner(light: &Light, to_corner: Vec3, n: Vec3) -> Option<f32> {
+    let (eu, ev) = (light.edge_u.truncate(), light.edge_v.truncate());
+    let corners = [to_corner, to_corner + eu, to_corner + ev, to_corner + eu + ev];
+    let (mut highest, mut above) = (f32::NEG_INFINITY, !(n.length_squared() > 0.0));
+    let mut i = 0;
+    while i < 4 {
+        let height = n.dot(corners[i]);
+        highest = highest.max(height);
+        above = above || !(height <= 0.0);
+        i += 1;
     }
+    if above {
+        Some(highest)
+    } else {
+        None
+    }
+}
+
+/// One light's importance at `p` (surface normal `n`): [`importance`] of its [`light_bounds`],
+/// its two cosine factors no larger than a quad's own [`quad_cosine_bounds`] — which are 0 where
+/// the shade stage's `U` is 0 for a quad ([`quad_lights_nothing`]). What the linear scan weighs
+/// each light by; a BVH leaf weighs its light the same way, from the leaf's bounds (the light's,
+/// as raywave's builder stores them).
+pub fn light_importance(light: &Light, p: Vec3, n: Vec3) -> f32 {
+    bounded_importance(&light_bounds(light), p, n, quad_cosine_bounds(light, p, n))
+}
+
+/// For quad light `light` and a point `p` (surface normal `n`, need not be normalised; 0 or NaN:
+/// no surface), upper bounds of the two cosines of any direction between the light and `p`: at
+/// the light (x), `h / D`, and at the surface (y), `max_c n̂·(c − p) / D` over the corners `c` (a
+/// linear function's largest value on the parallelogram), with `h` the height of `p` over the
+/// light's plane, `D = √(h² + d²)` and `d` a lower bound of the distance in that plane from `p`'s
+/// foot to the parallelogram (the largest distance outside one of its four edge lines), so that
+/// `D` is at most the distance from `p` to any point of the light; each clamped to 1 (and 1
+/// where not finite). Both 0 where the light lights nothing at `p` ([`quad_lights_nothing`],
+/// whose tests this shares); 1 for a sphere light.
+///
+/// [`importance`]'s cone and surface factors know only the light's bounding sphere, which bounds
+/// nothing inside it and little near it (`sin θb`): a large lamp seen nearly edge-on from just in
+/// front of its plane beside it, or whose sliver above the horizon was all `p` saw of it, weighed
+/// as if it faced `p` while its `U` was ~0 — the lamp (`U` 0) took a pmf of 0.99999997 and the
+/// lamp that alone lit the point got 3·10⁻⁸, below 2⁻²⁴, never drawn (`U_N` 0 where `U` was not;
+/// a helper's study). Both bounds are positive wherever the shade stage's `U` is: `h` is above
+/// [`quad_faces`]' tolerance, a corner above the horizon by the same products as
+/// [`quad_lights_nothing`]'s, and `D` is formed without squaring the larger of `h` and `d`.
+pub fn quad_cosine_bounds(light: &Light, p: Vec3, n: Vec3) -> Vec2 {
+    if light.kind != light_kind::QUAD {
+        return Vec2::ONE;
+    }
+    let to_corner = light.position.truncate() - p;
+    let highest = highest_corner(light, to_corner, n);
+    if !quad_faces(light, p) || highest.is_none() {
+        return Vec2::ZERO;
+    }
+    let (eu, ev) = (light.edge_u.truncate(), light.edge_v.truncate());
+    let normal = eu.cross(ev);
+    let (area, len_u, len_v) = (normal.length(), eu.length(), ev.length());
+    let unit = normal / area;
+    let to_p = -to_corner;
+    let h = unit.dot(to_p).abs();
+    // In-plane unit normals of the edge lines through the corner (along `ev`, along `eu`),
+    // pointing into the parallelogram, whose widths across them are `m_v·eu` and `m_u·ev`; no
+    // `area²`, which a device flushes to 0 for lights 10⁻¹⁰ across.
+    let m_v = ev.cross(unit) / len_v;
+    let m_u = unit.cross(eu) / len_u;
+    let (a, b) = (m_v.dot(to_p), m_u.dot(to_p));
+    let d = (-a).max(a - m_v.dot(eu)).max(-b).max(b - m_u.dot(ev)).max(0.0);
+    // √(h² + d²) without overflow or underflow: the larger times √(1 + (smaller/larger)²).
+    let (large, small) = (h.max(d), h.min(d));
+    let distance = large * Float::sqrt(1.0 + (small / large) * (small / large));
+    let (emission, horizon) = (h / distance, highest.unwrap_or(1.0) / (n.length() * distance));
+    // NaN (no surface, a degenerate light) or a rounding above 1: no bound.
+    Vec2::new(if emission < 1.0 { emission } else { 1.0 }, if horizon < 1.0 { horizon.max(0.0) } else { 1.0 })
 }
 
 /// A light-BVH node's importance for `p` (surface normal `n`): [`importance`] of its bounds, and 0
@@ -359,21 +429,23 @@ pub fn light_importance(light: &Light, p: Vec3, n: Vec3) -> f32 {
 /// [`importance`] of the leaf's bounds (the light's own, as raywave's builder stores them), and
 /// 0 where [`quad_lights_nothing`], the shade stage's `U` is 0 — so that a box, which turns with
 /// the scene, never decides for one light; a leaf whose light index is beyond `set`'s lights
-/// keeps [`importance`] of its bounds.
+/// keeps [`importance`] of its bounds. A leaf's cosine factors are bounded by its quad's
+/// [`quad_cosine_bounds`] as well, as in [`light_importance`].
 fn node_importance(set: &LightSet, node: &LightBvhNode, p: Vec3, n: Vec3) -> f32 {
     let bounds = &node.bounds;
-    let lights_nothing = if node.is_leaf != 0 {
-        node.child_or_light < set.light_count() && quad_lights_nothing(&set.lights[node.child_or_light as usize], p, n)
+    let mut cosines = Vec2::ONE;
+    if node.is_leaf != 0 {
+        if node.child_or_light < set.light_count() {
+            cosines = quad_cosine_bounds(&set.lights[node.child_or_light as usize], p, n);
+        }
     } else {
         let centre = (bounds.min.truncate() + bounds.max.truncate()) * 0.5;
-        (p - centre).length_squared() <= bounds.max.w * bounds.max.w && out_of_reach(bounds, p, n)
-    };
-    // One call of `importance` for every kind of node: rust-gpu inlines each call site.
-    if lights_nothing {
-        0.0
-    } else {
-        importance(bounds, p, n)
+        if (p - centre).length_squared() <= bounds.max.w * bounds.max.w && out_of_reach(bounds, p, n) {
+            cosines = Vec2::ZERO;
+        }
     }
+    // One call of `importance` for every kind of node: rust-gpu inlines each call site.
+    bounded_importance(bounds, p, n, cosines)
 }
 
 /// Whether no light inside the box of `bounds` can light `p` (surface normal `n`, need not be
@@ -920,6 +992,142 @@ mod tests {
         assert!(quad_faces(&ceiling_lamp, p));
         let pmf = importance_pmf(&[ceiling_lamp, other], p, n, 0);
         assert!(pmf > 0.9, "the ceiling lamp's pmf {pmf}");
+    }
+
+    /// A 1 cm lamp 10⁶ out, smaller than the spacing of its coordinates (0.0625): its corners
+    /// rounded to one point, so its bounding sphere had radius 0 about a centre 1 cm off, which
+    /// the point's horizon cut, and its importance was 0 where the shade stage lit the point with
+    /// it (`U` 5.2·10⁻⁷, 45 % of the point's; a helper's study). Its sphere now holds its corners
+    /// as the stage forms them from `corner − p`, and its pmf is 0.988 (the other lamp's `U` is
+    /// 55 %, its pmf 0.012).
+    #[test]
+    fn a_lamp_smaller_than_the_spacing_of_its_coordinates_keeps_its_pmf() {
+        let small = Light::quad(
+            Vec3::new(999999.4, 1000002.6, 1000002.2),
+            Vec3::new(0.0, 0.0, 0.010630406),
+            Vec3::new(-0.010630406, 0.0, 0.0),
+            Vec3::splat(15768.981),
+            false,
+        );
+        let other = Light::quad(
+            Vec3::new(1000002.94, 999999.25, 999997.4),
+            Vec3::new(-0.05061938, 0.09522605, 0.12708),
+            Vec3::new(-0.029864777, 0.011556857, -0.020555953),
+            Vec3::splat(0.072254606),
+            false,
+        );
+        let (p, n) = (Vec3::new(999999.4, 1000000.7, 1000002.2), Vec3::new(0.9929158, -0.00020129842, 0.11882049));
+        assert!(!quad_lights_nothing(&small, p, n), "the stage lights p with the small lamp");
+        let pmf = importance_pmf(&[small, other], p, n, 0);
+        assert!(pmf > 0.5, "the small lamp's pmf {pmf}");
+        // Its sphere holds its corners relative to its own corner (f64).
+        let b = light_bounds(&small);
+        let centre = (b.min.truncate() + b.max.truncate()).as_dvec3() * 0.5;
+        let (corner, eu, ev) = (small.position.truncate().as_dvec3(), small.edge_u.truncate(), small.edge_v.truncate());
+        for rel in [Vec3::ZERO, eu, ev, eu + ev] {
+            let distance = (corner + rel.as_dvec3() - centre).length();
+            assert!(distance <= f64::from(b.max.w) * (1.0 + 1e-6), "{distance} beyond {}", b.max.w);
+        }
+    }
+
+    /// An 8 m lamp seen nearly edge-on, from a point 19 µm in front of its plane and 4 m beside
+    /// it — outside its bounding sphere, where `sin θb` = 0.65 of its cone bound let it weigh as
+    /// if it faced the point (its `U` is 0 there): the lamp that alone lights the point got pmf
+    /// 3.0·10⁻⁸, below 2⁻²⁴, never drawn (`U_N` 0 where `U` is not; a helper's study), in the
+    /// scan and in a BVH leaf alike. The quad's own cosine bound, `h / D`, gives it 0.998.
+    #[test]
+    fn a_lamp_seen_edge_on_does_not_starve_the_lamp_that_lights_the_point() {
+        let edge_on = Light::quad(
+            Vec3::new(4.0800004, 1.8405485, -0.010178082),
+            Vec3::new(-0.019834992, -7.8155446, 2.1256008),
+            Vec3::new(-8.098079, -0.019834993, -0.1484976),
+            Vec3::splat(751.2568),
+            false,
+        );
+        let lit = Light::quad(
+            Vec3::new(2.0071056, -2.9293492, 2.2894611),
+            Vec3::new(-0.0030784165, 0.041051235, 0.015199469),
+            Vec3::new(-0.039869785, 0.0030278135, -0.016252626),
+            Vec3::splat(4.6057),
+            false,
+        );
+        let (p, n) = (Vec3::new(-2.4352605, -10.192575, 3.139228), Vec3::new(-0.018334247, 0.26243722, 0.9647749));
+        let lights = [edge_on, lit];
+        assert!(quad_faces(&edge_on, p), "the edge-on lamp keeps a positive pmf: p is in front of it");
+        let scanned = importance_pmf(&lights, p, n, 1);
+        assert!(scanned > 0.5, "scan: the lit lamp's pmf {scanned}");
+        assert!(importance_pmf(&lights, p, n, 0) > 0.0);
+        let (a, b) = (leaf_node(&lights, 0).bounds, leaf_node(&lights, 1).bounds);
+        let root = union_bounds(&a, &b, Vec3::Z, -1.0);
+        let nodes = [
+            LightBvhNode { bounds: root, child_or_light: 2, is_leaf: 0, padding: [0; 2] },
+            leaf_node(&lights, 0),
+            leaf_node(&lights, 1),
+        ];
+        let walked = bvh_pmf(&lights, &nodes, &[0b0, 0b1], p, n, 1);
+        assert!(walked > 0.5, "BVH: the lit lamp's pmf {walked}");
+    }
+
+    /// A 20 m ceiling lamp of which the point's horizon leaves a 0.4 m strip 10 m away, and a
+    /// 10 cm lamp facing the point 1.4 m off, which gives 97 % of its `U` (the shade stage's form
+    /// factors): the small lamp's pmf was 2.4·10⁻³ (the big lamp's sphere bounds no horizon),
+    /// and is 0.057 with the quad's own bound `max_c n̂·(c − p) / D`.
+    #[test]
+    fn a_lamp_mostly_below_the_horizon_weighs_by_what_is_above_it() {
+        let lamp = Light::quad(
+            Vec3::new(-10.0, 4.0, -10.0),
+            Vec3::new(20.0, 0.0, 0.0),
+            Vec3::new(0.0, 0.0, 20.0),
+            Vec3::ONE,
+            false,
+        );
+        let (eu, ev) = (Vec3::new(0.0, 0.0, 0.1), Vec3::new(0.0707, 0.0707, 0.0));
+        let small = Light::quad(Vec3::new(1.0, -1.0, 0.0) - 0.5 * (eu + ev), eu, ev, Vec3::ONE, false);
+        let n = Vec3::new(1.0, -2.4, 0.0).normalize();
+        let pmf = importance_pmf(&[lamp, small], Vec3::ZERO, n, 1);
+        assert!(pmf > 0.02, "the small lamp's pmf {pmf}");
+    }
+
+    /// [`quad_cosine_bounds`] bounds the cosines at the light and at the surface of every sampled
+    /// direction between a random quad and a random point (1 + 10⁻⁴ for rounding), both are
+    /// positive wherever a sampled direction clearly lights the point, and both are 0 where
+    /// [`quad_lights_nothing`]; each case is counted.
+    #[test]
+    fn quad_cosine_bounds_bound_every_cosine() {
+        let mut rng = CounterRng::new(93);
+        let (mut tight, mut lit, mut nothing) = (0, 0, 0);
+        for case in 0..5_000 {
+            let mut light = random_light(&mut rng);
+            if light.kind != light_kind::QUAD {
+                light =
+                    Light::quad(rng.vec3(-2.0, 2.0), rng.unit_vec3(), rng.unit_vec3() * 0.3, Vec3::ONE, case % 2 == 0);
+            }
+            let p = rng.vec3(-4.0, 4.0);
+            let n = if case % 5 == 0 { Vec3::ZERO } else { rng.unit_vec3() * rng.range(0.5, 2.0) };
+            let bound = quad_cosine_bounds(&light, p, n);
+            if quad_lights_nothing(&light, p, n) {
+                assert_eq!(bound, Vec2::ZERO, "case {case}: a light that lights nothing");
+                nothing += 1;
+                continue;
+            }
+            assert!(bound.x > 0.0 && bound.x <= 1.0 && (0.0..=1.0).contains(&bound.y), "{bound}");
+            tight += usize::from(bound.x < 0.5 || bound.y < 0.5);
+            let points = light_points(&light, &mut rng, 48);
+            for &(x, nx) in &points {
+                let w = (p - x).normalize();
+                let emit = nx.dot(w).abs();
+                assert!(emit <= bound.x * (1.0 + 1e-4) + 1e-6, "case {case}: emission {emit} > {}", bound.x);
+                if n != Vec3::ZERO {
+                    let receive = n.normalize().dot(-w);
+                    assert!(receive <= bound.y * (1.0 + 1e-4) + 1e-6, "case {case}: horizon {receive} > {}", bound.y);
+                }
+            }
+            if contributes(&light, &points, p, n, 1e-4) {
+                lit += 1;
+                assert!(bound.x > 0.0 && bound.y > 0.0, "case {case}: {bound}");
+            }
+        }
+        assert!(tight > 1_000 && lit > 1_000 && nothing > 500, "tight {tight}, lit {lit}, nothing {nothing}");
     }
 
     /// A dim light beside a bright one keeps its positive pmf in the BVH whichever child it is, as
