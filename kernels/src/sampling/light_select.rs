@@ -639,10 +639,10 @@ fn bvh_light_pmf(set: &LightSet, p: Vec3, n: Vec3, light: u32) -> f32 {
 
 /// The descent of `set`'s BVH from the root to a leaf: at each interior node the first child with
 /// probability `I₀/(I₀ + I₁)` — taken by the sample `u`, rescaled to `[0, 1)` for the next level,
-/// or, with `follow_trail`, by `trail`'s bit for the level — the pmf the product of the
-/// probabilities of the branches taken. One loop for both, so that a kernel choosing either way holds it once.
-/// [`LightChoice::NONE`] for an empty or malformed tree (deeper than [`MAX_BVH_DEPTH`] or a child
-/// index out of range).
+/// or, with `follow_trail`, by `trail`'s bit for the level (`u` then unused) — the pmf the
+/// product of the probabilities of the branches taken. One loop for both, so that a kernel
+/// choosing either way holds it once. [`LightChoice::NONE`] for an empty or malformed tree
+/// (deeper than [`MAX_BVH_DEPTH`] or a child index out of range).
 fn bvh_descend(set: &LightSet, p: Vec3, n: Vec3, u: f32, follow_trail: bool, trail: u32) -> LightChoice {
     let (nodes, count) = (set.nodes, set.node_count());
     if count == 0 {
