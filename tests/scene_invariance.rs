@@ -43,6 +43,11 @@
 //! 10⁻⁶, 10⁻³, 10³ and 10⁸ 6.5·10⁻¹³ (1.7·10⁻⁷); rotated 4.6·10⁻¹³ (1.7·10⁻⁷); winding flipped
 //! and subdivided 5.5·10⁻¹³ (2.7·10⁻⁸); emission ×10⁻⁶ and ×10⁶ 2.6·10⁻¹⁵ (7.8·10⁻⁹). The two
 //! coloured lights moved most in relMSE, the light grid's 20 lights (the most edges) in the mean.
+//! Since the light BVH's choice draws 1/32 of its lights uniformly (2026-11-30), more shadow rays
+//! go to lights seen at grazing angles, which the origin offset moves most: the light grid's
+//! means moved 2.6·10⁻⁴ at 100 m and 1.2·10⁻³ at 1 km (every method alike, brighter: less
+//! shadow), and with an offset of 8 ulps instead of 64 they move 8.4·10⁻⁶ and 1.7·10⁻⁴ — the
+//! offset's, as `host/tests/shadowed_estimate.rs` measures it in penumbrae.
 //! The moved variants' bounds below sit 2–6× above those; the others are held to 10⁻⁸ in relMSE
 //! and 10⁻⁶ in the mean (10⁻⁵ subdivided) — far above their rounding-level errors, to leave room
 //! for a device's own ray–triangle test deciding rays along shared edges otherwise (subdivided:
@@ -102,7 +107,7 @@ fn variants() -> Vec<Variant> {
     let rotation = Quat::from_axis_angle(Vec3::new(0.3, 1.0, -0.6).normalize(), 0.77);
     vec![
         moved(10.0, 2e-5, 1e-4),
-        moved(100.0, 2e-4, 2e-4),
+        moved(100.0, 2e-4, 6e-4),
         moved(1000.0, 1e-3, 3e-3),
         scaled(1e-6, 1e-8, 1e-6),
         scaled(1e-3, 1e-8, 1e-6),
