@@ -310,12 +310,26 @@ pub const IN_LIGHT_PLANE_TOLERANCE: f32 = 8.0 * f32::EPSILON;
 /// side, between `U` = 0 and a light that fills the hemisphere (the back of a one-sided lamp
 /// speckled with full `U`, differently on each backend).
 pub fn quad_faces(light: &Light, p: Vec3) -> bool {
+    facing_height(light, p) != 0.0
+}
+
+/// [`quad_faces`]' test, keeping its measure for [`quad_cosine_bounds`]: `p`'s height over
+/// `light`'s plane along `e_u × e_v` (`(e_u × e_v)·(p − corner)`, scene units times the
+/// parallelogram's area; negative on a two-sided light's back) where `p` is on its emitting side,
+/// and 0 behind a one-sided light or in its plane.
+fn facing_height(light: &Light, p: Vec3) -> f32 {
     let corner = light.position.truncate();
     let normal = light.edge_u.truncate().cross(light.edge_v.truncate());
     let side = normal.dot(p - corner);
     let emitting_side = side > 0.0 || (light.two_sided != 0 && side < 0.0);
     // The tolerance (a square root) only for the lights that pass the sign test.
-    emitting_side && side.abs() > IN_LIGHT_PLANE_TOLERANCE * p.abs().max(corner.abs()).max_element() * normal.length()
+    if emitting_side
+        && side.abs() > IN_LIGHT_PLANE_TOLERANCE * p.abs().max(corner.abs()).max_element() * normal.length()
+    {
+        side
+    } else {
+        0.0
+    }
 }
 
 /// Whether quad light `light` lights nothing at `p` (surface normal `n`, need not be normalised;
@@ -394,16 +408,19 @@ pub fn quad_cosine_bounds(light: &Light, p: Vec3, n: Vec3) -> Vec2 {
         return Vec2::ONE;
     }
     let to_corner = light.position.truncate() - p;
-    let highest = highest_corner(light, to_corner, n);
-    if !quad_faces(light, p) || highest.is_none() {
+    let side = facing_height(light, p);
+    if side == 0.0 {
         return Vec2::ZERO;
     }
+    let Some(highest) = highest_corner(light, to_corner, n) else {
+        return Vec2::ZERO;
+    };
     let (eu, ev) = (light.edge_u.truncate(), light.edge_v.truncate());
     let normal = eu.cross(ev);
     let (area, len_u, len_v) = (normal.length(), eu.length(), ev.length());
     let unit = normal / area;
     let to_p = -to_corner;
-    let h = unit.dot(to_p).abs();
+    let h = side.abs() / area;
     // In-plane unit normals of the edge lines through the corner (along `ev`, along `eu`),
     // pointing into the parallelogram, whose widths across them are `m_v·eu` and `m_u·ev`; no
     // `area²`, which a device flushes to 0 for lights 10⁻¹⁰ across.
@@ -414,7 +431,7 @@ pub fn quad_cosine_bounds(light: &Light, p: Vec3, n: Vec3) -> Vec2 {
     // √(h² + d²) without overflow or underflow: the larger times √(1 + (smaller/larger)²).
     let (large, small) = (h.max(d), h.min(d));
     let distance = large * Float::sqrt(1.0 + (small / large) * (small / large));
-    let (emission, horizon) = (h / distance, highest.unwrap_or(1.0) / (n.length() * distance));
+    let (emission, horizon) = (h / distance, highest / (n.length() * distance));
     // NaN (no surface, a degenerate light) or a rounding above 1: no bound.
     Vec2::new(if emission < 1.0 { emission } else { 1.0 }, if horizon < 1.0 { horizon.max(0.0) } else { 1.0 })
 }
@@ -584,9 +601,9 @@ fn scan_pmf(lights: &[Light], count: u32, p: Vec3, n: Vec3, index: u32) -> f32 {
     }
 }
 
-/// Chooses a light with probability proportional to its [`light_importance`] at `p` (normal `n`, or 0)
-/// by a linear scan: the total, then the inverse CDF at `u`. Falls back to [`select_uniform`] when
-/// every importance is 0. [`LightChoice::NONE`] for an empty list.
+/// Chooses a light with probability proportional to its [`light_importance`] at `p` (normal `n`,
+/// or 0) by a linear scan: the total, then the inverse CDF at `u`. Falls back to
+/// [`select_uniform`] when every importance is 0. [`LightChoice::NONE`] for an empty list.
 pub fn select_importance(lights: &[Light], p: Vec3, n: Vec3, u: f32) -> LightChoice {
     scan_select(lights, lights.len() as u32, p, n, u)
 }
