@@ -677,6 +677,49 @@ mod tests {
         }
     }
 
+    /// Two lights whose horizon crossings lie beside a far corner (`Polygon::clip_to_horizon`
+    /// steps a crossing from the edge's end nearer the plane): `U_S` within 10⁻⁵ of the `f64`
+    /// integral of the same looked-up lobe (clip, `M⁻¹`, clip, edge sum), where stepped from the
+    /// edge's first end it came out 0.666 for 0.98860 (a shading point 3.5·10⁻⁶ of the light's
+    /// size above its plane, beside its edge, roughness 10⁻³) and 0.803 for 0.98761 (a light
+    /// 5·10⁵ times its distance, roughness 10⁻⁴): cases of a random sweep against that reference.
+    #[test]
+    fn horizon_crossings_beside_a_far_corner_keep_u_s() {
+        let table = table();
+        let cases = [
+            (
+                [
+                    Vec3::new(0.019_226_85, 0.001_361_456_4, 0.020_053_694),
+                    Vec3::new(-0.382_011_56, 0.778_104_8, -0.498_618_22),
+                    Vec3::new(-0.474_302_38, -0.625_791_4, -0.619_211_26),
+                    Vec3::new(0.005_245_579, 0.002_684_161_3, 0.021_096_053),
+                    Vec3::new(0.022_944_279, -0.002_170_547_6, -0.001_710_505_5),
+                    Vec3::new(0.0, -0.001_167_298_3, 0.001_481_244_3),
+                ],
+                1.054e-3,
+                0.988_600_72,
+            ),
+            (
+                [
+                    Vec3::new(19.985_205, -76.195_145, -27.207_315),
+                    Vec3::new(-0.771_254_6, -0.408_798_2, -0.487_904_04),
+                    Vec3::new(-0.400_356_95, 0.907_180_25, -0.129_376_65),
+                    Vec3::new(-8_577_047.0, -14_290_952.0, -12_695_864.0),
+                    Vec3::new(18_572_232.0, 30_985_718.0, 27_585_210.0),
+                    Vec3::new(28_129.791, 13_689.166, -34_315.55),
+                ],
+                1.168e-4,
+                0.987_605_3,
+            ),
+        ];
+        for ([p, n, v, corner, edge_u, edge_v], roughness, exact) in cases {
+            let frame = ShadingFrame::new(n, v);
+            let lobe = lookup(&table, roughness, n.dot(v));
+            let (_, u_s) = parallelogram_form_factors(&lobe, None, &frame, p, corner, edge_u, edge_v);
+            assert!((u_s - exact).abs() < 1e-5, "roughness {roughness}: {u_s} vs {exact}");
+        }
+    }
+
     /// Views within 10⁻⁶…10⁻³ rad of random normals: the frame stays orthonormal to 10⁻⁶ (a
     /// tangent normalised once leant up to 0.26 towards the normal at 1.2·10⁻⁶ rad).
     #[test]
