@@ -22,7 +22,10 @@
 //! shortest triangle edge, so that no corner is within it of two others. The checks run in `f64`.
 //! Far from the origin the rounding slack dominates, and small lamps pass bent: at 10⁵ it is 0.19
 //! (24 `f32` ulps there), so a 1 × 1 lamp with a corner 0.15 out of plane is a light, following
-//! its first triangle. 16 ε is what a node transform's rounding, over four corners, may reach.
+//! its first triangle. 16 ε is what a node transform's rounding, over four corners, may reach —
+//! of the world coordinates, as the glTF loader transforms in `f64` and rounds once (in `f32` the
+//! rounding of a transform's terms, which may be far larger than its result, had bent lamps
+//! modelled 10³ from their node's origin past the tolerance).
 //!
 //! **Orientation.** The light's corner is the first triangle's corner off the diagonal, `p`; its
 //! edges run from `p` to the triangle's next and previous corners in the triangle's own order.

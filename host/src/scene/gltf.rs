@@ -645,8 +645,12 @@ fn place(
     field: &str,
     (node, world): (usize, Mat4),
 ) -> std::result::Result<(), String> {
+    // In `f64`, rounded once: in `f32` each world coordinate carried the rounding of the
+    // transform's terms, which may be far larger than the result (a lamp modelled 10³ from its
+    // node's origin and moved back near the world's was bent past the quad-light tolerance).
+    let world_f64 = world.as_dmat4();
     for (position, element) in positions.iter_mut().zip(elements) {
-        let p = world.transform_point3(*position);
+        let p = world_f64.transform_point3(position.as_dvec3()).as_vec3();
         if !in_range(p) {
             return Err(format!(
                 "{field}.attributes.POSITION element {element} is at {p} in world space under nodes[{node}]'s \
@@ -1231,6 +1235,30 @@ mod tests {
             let light = quad_light_from(6, &quad_buffer_with(scale, [0, 1, 2, 0, 2, 3]), triangles, node).unwrap();
             assert!(facing(&light).abs_diff_eq(Vec3::Z, 1e-6), "{node}: faces {}", facing(&light));
         }
+    }
+
+    /// A 1 × 1 lamp modelled 1.5·10³ from its node's origin, which the node's scale, rotation
+    /// and translation bring back near the world's (as a model recentred by its root node is):
+    /// placed in `f32`, each corner carried the rounding of the 10³-sized terms, which bent the
+    /// lamp past its tolerance (10⁻⁴ of its size plus 16 ε of its world coordinates), and it
+    /// stayed an unsupported emitter. Placed in `f64` and rounded once, it is a quad light. (A
+    /// helper's sweep of such lamps, offsets 10³..10⁵ and scales 0.1..10: 8300 of 20 000 refused,
+    /// every one a light when rounded once.)
+    #[test]
+    fn a_lamp_far_out_in_its_node_space_is_placed_as_a_parallelogram() {
+        let offset = Vec3::new(339.28693, -413.79184, -1463.6217);
+        let local = [Vec3::ZERO, Vec3::X, Vec3::new(1.0, 1.0, 0.0), Vec3::Y].map(|p| p + offset);
+        let rotation = glam::Quat::from_axis_angle(Vec3::new(-0.77815384, -0.574024, 0.2548981), 0.57355255);
+        let scale = 0.4223223;
+        let translation = Vec3::new(0.5, 1.0, 2.0) - rotation * offset * scale;
+        let world = Mat4::from_scale_rotation_translation(Vec3::splat(scale), rotation, translation);
+        let (mut positions, mut triangles) = (local.to_vec(), vec![[0, 1, 2], [0, 2, 3]]);
+        place(&mut positions, &mut triangles, &[0, 1, 2, 3], "meshes[0].primitives[0]", (0, world)).unwrap();
+        let c = positions.iter().map(|p| p.as_dvec3()).collect::<Vec<_>>();
+        let bend = (c[0] + c[2] - c[1] - c[3]).length();
+        let material = Material { emission: Vec3::ONE, ..Material::diffuse(Vec3::ONE) };
+        let lamp = Mesh { name: "lamp".into(), positions, triangles, material };
+        assert!(super::super::emitters::parallelogram(&lamp).is_some(), "bent {bend:e} out of a parallelogram");
     }
 
     /// [`quad_gltf`] with its buffer at `uri` instead of in a data URI.
