@@ -324,7 +324,7 @@ struct RenderArgs {
     /// Give each light's analytic specular term the integral of the GGX lobe the LTC table stands
     /// for (the LTC's plus its residual towards GGX): accurate far-tail and grazing-view
     /// highlights (within 1.1 % of a converged reference; the LTC alone is up to 174 % off for
-    /// lights that catch only a lobe's tail), for 5–6× the shade stage's time.
+    /// lights that catch only a lobe's tail), for 5–7× the shade stage's time.
     #[arg(long)]
     analytic_residual: bool,
     /// Seed of the sampler.

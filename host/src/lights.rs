@@ -23,7 +23,8 @@
 //! contain its children's and its importance is positive wherever a light below it contributes.
 //!
 //! **Left out.** Lights of zero power (zero radiance) are left out of the tree: they can never
-//! contribute, and the kernels give them pmf 0 (their trail, 0, leads to another light's leaf). A
+//! contribute. The walk gives them pmf 0 (their trail, 0, leads to another light's leaf);
+//! `LightSet`'s uniform share still draws them, with pmf `1/(32 N)`, where they add 0. A
 //! scene whose lights all have zero power gets an empty BVH; then `LightSet` falls back to the
 //! linear scan, which chooses uniformly among them.
 //!

@@ -43,8 +43,8 @@
 //! each radial integral solves a quadratic per edge and evaluates `G₂` at 3 nodes per piece of an
 //! interval, and a light takes about 14 of them on the Cornell box's surfaces (the gaps between
 //! breakpoints that the light does not reach cost one each), 100–200 as a thin grazing strip —
-//! the shade stage takes 5–6× its time on the CPU with this on (`shade/cpu-residual` bench,
-//! 512²).
+//! the shade stage takes 5–7× its time on the CPU with this on (5.2–6.6× measured on the Cornell
+//! box at 256² and 512², `shade/cpu-residual` bench and renders; README).
 
 // `!(x > 0.0)` sends NaN down the "nothing here" branches on purpose.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
@@ -689,10 +689,12 @@ mod tests {
         // A 3 cm light with an edge in the plane of incidence (y = 0) and the mirror direction on
         // that edge's great circle, on the edge or beyond its ends as the view tilts: every ray
         // from the bump's centre starts on the light's boundary, and the ray along the edge falls
-        // either way. Without the one-sided ends ([`CENTRE_ON_EDGE`]) three of these came out
+        // either way. With neither breaks nor one-sided ends there, three of these came out
         // 0.86–0.88 % low at roughness 0.1 and two 1.11–1.13 % low at 0.5 (each at a single view
-        // of the 21: the wrong end value must cancel in the error estimate); with them the worst
-        // is 0.023 % (0.1 % allowed).
+        // of the 21: the wrong end value must cancel in the error estimate). One-sided ends took
+        // the worst to 0.023 %; since the corners' azimuths and those of [`CENTRE_ON_EDGE`] are
+        // breaks instead (35d8b79) it is 0.096 %, at roughness 0.1 and tan θv 0.283 — within the
+        // quadrature's [`TOLERANCE`], which is what this test allows.
         let mut worst = (0.0f64, 0.0f32, 0.0f32);
         for roughness in [0.1f32, 0.2, 0.5] {
             for step in 0..=20 {
