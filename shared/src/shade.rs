@@ -43,8 +43,7 @@ pub struct ShadeParams {
     /// 1: each light's specular hit probability `U_S` takes the residual towards GGX — it becomes
     /// the GGX lobe's own integral over the light (`raywave_kernels::shade::slope_quadrature`:
     /// accurate far-tail and grazing `U`, 5–7× the stage's time on the CPU, 5.2–6.6× measured on
-    /// the Cornell box, README); 0: the LTC form
-    /// factors alone.
+    /// the Cornell box, README); 0: the LTC form factors alone.
     pub analytic_residual: u32,
     /// Explicit padding; always 0.
     pub padding: [u32; 2],

@@ -445,12 +445,13 @@ pub fn quad_cosine_bounds(light: &Light, p: Vec3, n: Vec3) -> Vec2 {
 /// as if they all lit it: ceiling points amid an array of 5 mm LEDs, in their plane or just below
 /// it, which none of them lights, gave the lamp that alone lit them a pmf down to 6·10⁻⁸ —
 /// 10⁷ times the variance, and below 2⁻²⁴ never drawn, a black `U_N` where `U` is not (now 1 by
-/// the walk, about 0.97 in [`LightSet`] with its uniform share: `raywave_host::lights`' tests). A leaf weighs its light as [`light_importance`] does — by
-/// [`importance`] of the leaf's bounds (the light's own, as raywave's builder stores them), and
-/// 0 where [`quad_lights_nothing`], the shade stage's `U` is 0 — so that a box, which turns with
-/// the scene, never decides for one light; a leaf whose light index is beyond `set`'s lights
-/// keeps [`importance`] of its bounds. A leaf's cosine factors are bounded by its quad's
-/// [`quad_cosine_bounds`] as well, as in [`light_importance`].
+/// the walk, about 0.97 in [`LightSet`] with its uniform share: `raywave_host::lights`' tests).
+/// A leaf weighs its light as [`light_importance`] does — by [`importance`] of the leaf's bounds
+/// (the light's own, as raywave's builder stores them), and 0 where [`quad_lights_nothing`], the
+/// shade stage's `U` is 0 — so that a box, which turns with the scene, never decides for one
+/// light; a leaf whose light index is beyond `set`'s lights keeps [`importance`] of its bounds. A
+/// leaf's cosine factors are bounded by its quad's [`quad_cosine_bounds`] as well, as in
+/// [`light_importance`].
 fn node_importance(set: &LightSet, node: &LightBvhNode, p: Vec3, n: Vec3) -> f32 {
     let bounds = &node.bounds;
     let mut cosines = Vec2::ONE;

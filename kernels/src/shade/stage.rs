@@ -702,8 +702,8 @@ mod tests {
     /// own samples met the plane past the edge slack (which scales with the hit's distance) and
     /// were dropped: `U_N` was 1.7 % below `U` here (10 standard errors over these 2^18 samples;
     /// 1.6 %, 27 standard errors, over 2^21 fresh ones in the helper's sweep of random
-    /// configurations that found it). Mean of 2^18 samples within `Z`
-    /// standard errors (plus 10⁻⁴ relative) of `U`, channel by channel.
+    /// configurations that found it). Mean of 2^18 samples within `Z` standard errors (plus 10⁻⁴
+    /// relative) of `U`, channel by channel.
     #[test]
     fn unshadowed_estimate_keeps_light_samples_of_a_light_seen_edge_on_from_beside_it() {
         let light = Light::quad(
