@@ -527,6 +527,24 @@ mod tests {
         estimates.iter().zip(reference).all(|(e, r)| (e.mean - r).abs() <= Z * e.error + 1e-4 * r)
     }
 
+    /// Adds `y`'s channels and their squares to `sums` (per channel: the sum, the sum of squares).
+    fn accumulate(sums: &mut [[f64; 2]; 3], y: glam::DVec3) {
+        for (sum, y) in sums.iter_mut().zip(y.to_array()) {
+            sum[0] += y;
+            sum[1] += y * y;
+        }
+    }
+
+    /// Per channel, the mean of `n` samples whose sums [`accumulate`] gathered, and its standard
+    /// error.
+    fn mean_and_error(sums: [[f64; 2]; 3], n: u32) -> [MeanAndError; 3] {
+        sums.map(|[sum, sum2]| {
+            let mean = sum / f64::from(n);
+            let variance = (sum2 / f64::from(n) - mean * mean).max(0.0);
+            MeanAndError { mean, error: (variance / f64::from(n)).sqrt() }
+        })
+    }
+
     /// `n` samples at the origin (normal +z, viewed from `view`) under `lights`, with
     /// `ShadeParams::analytic_residual` = `analytic_residual`; a sample's `S_N` is its `U_N` if
     /// `visible(shadow_origin, shadow_direction)` (direction's w = tmax).
@@ -551,25 +569,14 @@ mod tests {
             let has_ray = s.shadow_direction.w > 0.0;
             let visible = has_ray && visible(s.shadow_origin, s.shadow_direction);
             let shadowed = if visible { unshadowed } else { glam::DVec3::ZERO };
-            for (sums, y) in sums.iter_mut().zip([unshadowed, shadowed]) {
-                for (sum, y) in sums.iter_mut().zip(y.to_array()) {
-                    sum[0] += y;
-                    sum[1] += y * y;
-                }
-            }
+            accumulate(&mut sums[0], unshadowed);
+            accumulate(&mut sums[1], shadowed);
             analytic = s.analytic.xyz().as_dvec3().to_array();
             assert!(s.unshadowed.is_finite() && s.shadow_direction.is_finite() && s.shadow_origin.is_finite());
             // A shadow ray leaves the lit side, offset along the normal (+z), towards the light.
             assert!(!has_ray || (s.shadow_origin.z > 0.0 && s.shadow_direction.z > 0.0), "sample {i}: {s:?}");
         }
-        let mean_and_error = |sums: [[f64; 2]; 3]| {
-            sums.map(|[sum, sum2]| {
-                let mean = sum / f64::from(n);
-                let variance = (sum2 / f64::from(n) - mean * mean).max(0.0);
-                MeanAndError { mean, error: (variance / f64::from(n)).sqrt() }
-            })
-        };
-        Estimate { unshadowed: mean_and_error(sums[0]), shadowed: mean_and_error(sums[1]), analytic }
+        Estimate { unshadowed: mean_and_error(sums[0], n), shadowed: mean_and_error(sums[1], n), analytic }
     }
 
     /// Every shadow ray reaches its light: no occluder.
@@ -724,17 +731,10 @@ mod tests {
         let (mut sums, mut analytic) = ([[0.0f64; 2]; 3], [0.0f64; 3]);
         for i in 0..n_samples {
             let s = shade_sample(&params(sampler_kind::INDEPENDENT, 1, i), UVec2::ZERO, -view, &surface, &scene).value;
-            for (sum, y) in sums.iter_mut().zip(s.unshadowed.xyz().as_dvec3().to_array()) {
-                sum[0] += y;
-                sum[1] += y * y;
-            }
+            accumulate(&mut sums, s.unshadowed.xyz().as_dvec3());
             analytic = s.analytic.xyz().as_dvec3().to_array();
         }
-        let estimates = sums.map(|[sum, sum2]| {
-            let mean = sum / f64::from(n_samples);
-            let variance = (sum2 / f64::from(n_samples) - mean * mean).max(0.0);
-            MeanAndError { mean, error: (variance / f64::from(n_samples)).sqrt() }
-        });
+        let estimates = mean_and_error(sums, n_samples);
         assert!(analytic.iter().all(|&u| u > 0.0), "U = {analytic:?}");
         assert!(agrees(estimates, analytic), "U_N {estimates:?} vs U {analytic:?}");
     }
