@@ -24,21 +24,22 @@
 //! (`R/√N` at most) is down to ½ pixel, it must be the raw ratio exactly. At 1 spp it must also
 //! have the lowest mean FLIP (`raywave::report::flip`, the LDR display image) of every method.
 //!
-//! Measured (CPU, 128², seeds 1–4, reference 4096 spp), relMSE:
+//! Measured (CPU, 128², seeds 1–4, reference 4096 spp; the two-light rows again 2026-11-30, after
+//! the light choice took the quads' own cosine bounds and a uniform share in the scan), relMSE:
 //!
 //! | scene | spp | stochastic | stochastic+tv | ratio | ratio+tv | ratio+svgf |
 //! |---|---|---|---|---|---|---|
-//! | cornell-two-lights | 1 | 0.02827 | 0.00118 | 0.00821 | 0.00050 | 0.00166 |
-//! | cornell-two-lights | 4 | 0.00245 | 0.00048 | 0.00110 | 0.00023 | 0.00039 |
-//! | cornell-two-lights | 8 | 0.00088 | 0.00042 | 0.00041 | 0.00023 | 0.00035 |
-//! | cornell-two-lights | 16 | 0.00032 | 0.00032 | 0.00017 | 0.00017 | 0.00035 |
+//! | cornell-two-lights | 1 | 0.02765 | 0.00114 | 0.00826 | 0.00049 | 0.00165 |
+//! | cornell-two-lights | 4 | 0.00233 | 0.00046 | 0.00105 | 0.00022 | 0.00039 |
+//! | cornell-two-lights | 8 | 0.00086 | 0.00041 | 0.00040 | 0.00022 | 0.00035 |
+//! | cornell-two-lights | 16 | 0.00031 | 0.00031 | 0.00016 | 0.00016 | 0.00035 |
 //! | cornell | 1 | 0.00464 | 0.00028 | 0.00180 | 0.00017 | 0.00030 |
 //! | cornell | 4 | 0.00039 | 0.00012 | 0.00018 | 0.00007 | 0.00027 |
 //! | cornell | 8 | 0.00015 | 0.00009 | 0.00006 | 0.00005 | 0.00027 |
 //! | cornell | 16 | 0.000055 | 0.000055 | 0.000020 | 0.000020 | 0.00027 |
 //!
-//! Mean FLIP at 1 spp (stochastic, stochastic+tv, ratio, ratio+tv, ratio+svgf): two lights 0.044,
-//! 0.039, 0.026, **0.013**, 0.024; Cornell 0.029, 0.027, 0.0092, **0.0082**, 0.013 — ratio+tv at
+//! Mean FLIP at 1 spp (stochastic, stochastic+tv, ratio, ratio+tv, ratio+svgf): two lights 0.045,
+//! 0.039, 0.027, **0.013**, 0.025; Cornell 0.029, 0.027, 0.0092, **0.0082**, 0.013 — ratio+tv at
 //! 0.33× and 0.31× of stochastic+tv. Re-measured 2026-11-27 after the SVGF baseline's fix
 //! (pixels that drew no light sample skipped as taps and filled, not averaged in as visibility
 //! 1): its 1-spp column read 0.00167 / 0.00031 in the measurement before (f7ac952), which also
@@ -58,7 +59,7 @@
 //! (4·10⁻⁵ each): there both filter one binary visibility sample per pixel, and ~60 % of that
 //! error is the blur's bias at the shadows' edges. The split is `MethodError::relmse_shadow` /
 //! `relmse_lit`; the test prints it and asserts ratio+tv's lit part below a tenth of
-//! stochastic+tv's. With a lit part of 0, ratio+tv would still be 0.60× (Cornell) and 0.43× (two
+//! stochastic+tv's. With a lit part of 0, ratio+tv would still be 0.60× (Cornell) and 0.42× (two
 //! lights) of stochastic+tv. No footprint gets there (`--denoise-radius` 1 … 6 at 128², 3 and 4
 //! at 256²: 0.43–0.78× on the Cornell box, 0.32–0.53× with two lights), nor one picked per 8×8
 //! tile by an oracle that knows the reference (`examples/footprint_oracle.rs`: 0.51× and 0.30×

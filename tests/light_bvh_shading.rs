@@ -1,7 +1,7 @@
 //! The shade stage through the light BVH (more than 8 lights) keeps `U_N` an unbiased estimate of
 //! the analytic `U`: `builtin:cornell-light-grid`, the Cornell box with its light cut into a 4 × 5
 //! grid of coloured lights of different brightness, where every sample's light is chosen by
-//! `LightSet` — the BVH walk mixed with a uniform choice (`BVH_UNIFORM_SHARE` = 1/32) — and
+//! `LightSet` — the BVH walk mixed with a uniform choice (`UNIFORM_SHARE` = 1/32) — and
 //! weighted by that mixture's pmf. A walk whose branch probabilities do not sum to 1, or that
 //! cannot reach a light, biases `U_N`. (The shade stage never evaluates a pmf from a light's trail; that
 //! the trails give the walk's pmf bit for bit is `raywave-host`'s `lights` unit tests' job.) The

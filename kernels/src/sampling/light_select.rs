@@ -29,10 +29,11 @@
 //!   branch probabilities multiply into the pmf. Cost: 2 importance evaluations per level.
 //!
 //! [`LightSet`] picks between the scan and the BVH for a scene (the host decides whether a scene
-//! gets a BVH). With a BVH it mixes in a uniform choice, [`BVH_UNIFORM_SHARE`] = 1/32 of the
-//! choices, so that every light keeps a pmf of at least `1/(32 N)`: a node's bounds cannot see
-//! that all of its lights light nothing at a point, and the light that did had been left a pmf
-//! below 2⁻²⁴, never drawn.
+//! gets a BVH) and mixes in a uniform choice, [`UNIFORM_SHARE`] = 1/32 of the choices (with the
+//! scan, among the lights of positive importance), so that every light that can light a point
+//! keeps a pmf of at least `1/(32 N)`: importance is a bound — a node's cannot see that all of
+//! its lights light nothing at a point, a lamp's own is loose within about 1 cm of its plane —
+//! and the light that did light the point had been left a pmf below 2⁻²⁴, never drawn.
 //!
 //! **BVH layout** ([`LightBvhNode`], 80 bytes): depth-first in one array, node 0 the root. An
 //! interior node's first child is the next node, its second child is `child_or_light`; a leaf holds
@@ -56,7 +57,8 @@
 //! The linear scan has the same limit: its target `u·Σ I` moves in steps of 2⁻²⁴ of the total,
 //! so a light whose importance is below that step may fall between two steps and never be
 //! chosen, though [`importance_pmf`] gives it its share; the light missed is at most ≈ 2⁻²⁴ of
-//! the total importance.
+//! the total importance. [`LightSet`]'s uniform share keeps every light of positive importance
+//! above that step.
 //!
 //! All functions are `no_std`, loop-bounded, allocation- and panic-free, and return finite values:
 //! importances are clamped to `[0,` [`MAX_IMPORTANCE`]`]` so that sums over up to 2³² lights stay
@@ -529,26 +531,34 @@ pub fn uniform_pmf(count: u32, index: u32) -> f32 {
     }
 }
 
-/// The linear scan behind [`scan_select`] and [`scan_pmf`], over the first `count` lights: pass 0
-/// sums their [`light_importance`]s in index order; pass 1 walks them again to light `index` if
-/// `index < count`, else to the first light of positive importance whose running sum passes
+/// The linear scan behind [`scan_choice`], over the first `count` lights: pass 0 sums their
+/// [`light_importance`]s `I` in index order and counts the positive ones, `M`; pass 1 gives each
+/// light the weight `(1 − share)·I + share·ΣI/M` if `I > 0`, else 0 — its importance mixed with a
+/// uniform choice among the `M` lights, summing to `ΣI` — and walks them again to light `index`
+/// if `index < count`, else to the first light of positive weight whose running sum passes
 /// `u`·total (the last such light where rounding leaves the sum short of it), and returns that
-/// light with its importance over the total as its pmf. `None` where the total is 0 or NaN (the
-/// callers' uniform fallback). One call of `light_importance` serves both passes and both
-/// callers, so that select and pmf agree bit for bit and the shade kernel holds the light's
-/// bounds and importance once (rust-gpu inlines each call site).
-fn scan(lights: &[Light], count: u32, p: Vec3, n: Vec3, u: f32, index: u32) -> Option<LightChoice> {
+/// light with its weight over the total as its pmf. With `share` 0 the weight is `I` exactly.
+/// `None` where the total is 0 or NaN (the callers' uniform fallback). One call of
+/// `light_importance` serves both passes and both callers, so that select and pmf agree bit for
+/// bit and the shade kernel holds the light's bounds and importance once (rust-gpu inlines each
+/// call site).
+fn scan(lights: &[Light], count: u32, p: Vec3, n: Vec3, u: f32, index: u32, share: f32) -> Option<LightChoice> {
     // Without an index in range, pass 1 draws a light by `u`.
     let drawing = index >= count;
-    let (mut total, mut target, mut running) = (0.0, 0.0, 0.0);
+    let (mut total, mut target, mut running, mut spread) = (0.0, 0.0, 0.0, 0.0);
+    let mut positive = 0u32;
     let mut last = LightChoice::NONE;
     let mut pass = 0;
     while pass < 2 {
         let mut i = 0;
         while i < count {
-            let weight = light_importance(&lights[i as usize], p, n);
+            let importance = light_importance(&lights[i as usize], p, n);
+            let weight = if importance > 0.0 { (1.0 - share) * importance + spread } else { 0.0 };
             if pass == 0 {
-                total += weight;
+                total += importance;
+                if importance > 0.0 {
+                    positive += 1;
+                }
             } else if i == index {
                 return Some(LightChoice { index: i, pmf: weight / total });
             } else if drawing && weight > 0.0 {
@@ -565,40 +575,27 @@ fn scan(lights: &[Light], count: u32, p: Vec3, n: Vec3, u: f32, index: u32) -> O
                 return None;
             }
             target = clamp_sample_1d(u) * total;
+            spread = share * total / positive as f32;
         }
         pass += 1;
     }
     Some(last)
 }
 
-/// [`select_importance`] over the first `count` lights (`count ≤ lights.len()`).
-fn scan_select(lights: &[Light], count: u32, p: Vec3, n: Vec3, u: f32) -> LightChoice {
-    if count == 0 {
-        return LightChoice::NONE;
-    }
+/// The scan's choice over the first `count` lights (`count ≤ lights.len()`), with `share` of it
+/// uniform among the lights of positive importance (see [`scan`]): light `index` with its pmf
+/// when `index < count`, else the light drawn with `u`. With `share` 0 these are
+/// [`importance_pmf`] and [`select_importance`].
+fn scan_choice(lights: &[Light], count: u32, p: Vec3, n: Vec3, u: f32, index: u32, share: f32) -> LightChoice {
     if count == 1 {
         // What the scan returns for one light — `I / I` = 1 exactly ([`importance`] is finite),
         // or the uniform fallback's 1 when `I` = 0 — without evaluating `I` twice per sample.
         return LightChoice { index: 0, pmf: 1.0 };
     }
-    match scan(lights, count, p, n, u, count) {
+    match scan(lights, count, p, n, u, index, share) {
         Some(choice) => choice,
+        None if index < count => LightChoice { index, pmf: uniform_pmf(count, index) },
         None => select_uniform(count, u),
-    }
-}
-
-/// [`importance_pmf`] over the first `count` lights (`count ≤ lights.len()`).
-fn scan_pmf(lights: &[Light], count: u32, p: Vec3, n: Vec3, index: u32) -> f32 {
-    if index >= count {
-        return 0.0;
-    }
-    if count == 1 {
-        // As in `scan_select`: `I / I` = 1 or the uniform fallback's 1.
-        return 1.0;
-    }
-    match scan(lights, count, p, n, 0.0, index) {
-        Some(choice) => choice.pmf,
-        None => uniform_pmf(count, index),
     }
 }
 
@@ -606,13 +603,19 @@ fn scan_pmf(lights: &[Light], count: u32, p: Vec3, n: Vec3, index: u32) -> f32 {
 /// or 0) by a linear scan: the total, then the inverse CDF at `u`. Falls back to
 /// [`select_uniform`] when every importance is 0. [`LightChoice::NONE`] for an empty list.
 pub fn select_importance(lights: &[Light], p: Vec3, n: Vec3, u: f32) -> LightChoice {
-    scan_select(lights, lights.len() as u32, p, n, u)
+    let count = lights.len() as u32;
+    scan_choice(lights, count, p, n, u, count, 0.0)
 }
 
 /// Probability that [`select_importance`] chooses light `index` at `p`, `n`: `I_index / Σ I`, or
 /// `1/N` in the all-zero fallback; 0 for an index out of range.
 pub fn importance_pmf(lights: &[Light], p: Vec3, n: Vec3, index: u32) -> f32 {
-    scan_pmf(lights, lights.len() as u32, p, n, index)
+    let count = lights.len() as u32;
+    if index < count {
+        scan_choice(lights, count, p, n, 0.0, index, 0.0).pmf
+    } else {
+        0.0
+    }
 }
 
 /// Probabilities of taking the first and the second child of an interior node (children `first`,
@@ -714,21 +717,34 @@ pub fn bvh_pmf(lights: &[Light], nodes: &[LightBvhNode], trails: &[u32], p: Vec3
     bvh_light_pmf(&LightSet::new(lights, nodes, trails), p, n, light)
 }
 
-/// Share of [`LightSet::select`]'s choices that a set with a BVH makes uniformly among all its
-/// lights rather than by the walk: `pmf = α/N + (1 − α)·bvh_pmf`. The walk's branch probabilities
-/// come from cluster bounds, which cannot see that every light under a node lights nothing at `p`
-/// (behind one-sided lamps, below the horizon), so such a node kept its share and the light that
-/// did light `p` got a pmf far below its share of `U` — 3.5·10⁻⁹ for the only lit light of 4,
-/// below 2⁻²⁴, never drawn (a helper's study: in adversarial sets of more than 8 lights, 4–15 %
-/// of lit points had a light's pmf below 10⁻³ of its share). With the mixture every light has
-/// pmf ≥ α/N (≥ 2⁻²⁴ for N ≤ α·2²⁴ ≈ 5·10⁵); the selection's second moment `Σ s²/pmf` on
-/// `builtin:cornell-light-grid` went 1.078 → 1.083 in that study. A power of two, so that
-/// rescaling the sample is exact.
-pub const BVH_UNIFORM_SHARE: f32 = 1.0 / 32.0;
+/// Share of [`LightSet::select`]'s choices made uniformly rather than by importance: with a BVH
+/// among all `N` lights, `pmf = α/N + (1 − α)·bvh_pmf`; in the linear scan among the `M` lights
+/// of positive importance, `pmf = α/M + (1 − α)·importance_pmf` for those and 0 for the rest,
+/// which light nothing there (the scan sees every importance; the walk would have to visit every
+/// leaf to count them). Importance is a bound, and a loose one can starve the light that lights
+/// `p`:
+/// - the walk's branch probabilities come from cluster bounds, which cannot see that every light
+///   under a node lights nothing at `p` (behind one-sided lamps, below the horizon), so such a
+///   node kept its share and the light that did light `p` got a pmf far below its share of `U` —
+///   3.5·10⁻⁹ for the only lit light of 4, below 2⁻²⁴, never drawn (a helper's study: in
+///   adversarial sets of more than 8 lights, 4–15 % of lit points had a light's pmf below 10⁻³
+///   of its share);
+/// - in the scan, at a point within about 1 cm of a lamp's plane whose foot lies on the lamp,
+///   that lamp's cosine bounds are 1 and its distance is clamped at its radius, though only a
+///   sliver of it may be above the point's horizon: a neighbour holding 0.26 % of `U` got pmf
+///   2.5·10⁻⁹, never drawn (`U_N` 0.5 % low; in one row of 30 m lamps three lamps with 58 % of
+///   the stage's `U` were, where that `U` is itself at its `f32` floor; a second helper's
+///   study, 2026-11-30).
+///
+/// With the mixture every light that can light `p` has pmf ≥ α/N (≥ 2⁻²⁴ for
+/// N ≤ α·2²⁴ ≈ 5·10⁵); the selection's second moment `Σ s²/pmf` on
+/// `builtin:cornell-light-grid` went 1.078 → 1.083 in the first study. A single light keeps
+/// pmf 1. A power of two, so that rescaling the walk's sample is exact.
+pub const UNIFORM_SHARE: f32 = 1.0 / 32.0;
 
-/// [`BVH_UNIFORM_SHARE`]'s mixture of the uniform pmf over `count` lights and the walk's `pmf`.
+/// [`UNIFORM_SHARE`]'s mixture of the uniform pmf over `count` lights and the walk's `pmf`.
 fn mixed_pmf(count: u32, pmf: f32) -> f32 {
-    BVH_UNIFORM_SHARE / count as f32 + (1.0 - BVH_UNIFORM_SHARE) * pmf
+    UNIFORM_SHARE / count as f32 + (1.0 - UNIFORM_SHARE) * pmf
 }
 
 /// A scene's lights as light selection reads them: the light list and, for scenes with many
@@ -772,9 +788,10 @@ impl<'a> LightSet<'a> {
         self.node_count.min(self.nodes.len() as u32)
     }
 
-    /// Chooses a light for `p`, `n` with sample `u`: by the BVH when there is one — mixed with a
-    /// uniform choice among all the lights ([`BVH_UNIFORM_SHARE`]) — else by the linear importance
-    /// scan. [`LightChoice::NONE`] when there is no light to choose.
+    /// Chooses a light for `p`, `n` with sample `u`, by importance mixed with a uniform choice
+    /// ([`UNIFORM_SHARE`]): by the BVH when there is one — uniform among all the lights — else by
+    /// the linear scan — uniform among the lights of positive importance.
+    /// [`LightChoice::NONE`] when there is no light to choose.
     pub fn select(&self, p: Vec3, n: Vec3, u: f32) -> LightChoice {
         let lights = self.light_count();
         if lights == 0 {
@@ -785,10 +802,10 @@ impl<'a> LightSet<'a> {
             // light's trail gives its walk pmf — and the rest by the walk, with the sample
             // rescaled (exactly, for the power-of-two share) to [0, 1).
             let u = clamp_sample_1d(u);
-            let uniform = u < BVH_UNIFORM_SHARE;
-            let picked = select_uniform(lights, u * (1.0 / BVH_UNIFORM_SHARE)).index;
+            let uniform = u < UNIFORM_SHARE;
+            let picked = select_uniform(lights, u * (1.0 / UNIFORM_SHARE)).index;
             let trail = if uniform && (picked as usize) < self.trails.len() { self.trails[picked as usize] } else { 0 };
-            let rescaled = ((u - BVH_UNIFORM_SHARE) / (1.0 - BVH_UNIFORM_SHARE)).min(ONE_MINUS_EPSILON);
+            let rescaled = ((u - UNIFORM_SHARE) / (1.0 - UNIFORM_SHARE)).min(ONE_MINUS_EPSILON);
             let reached = bvh_descend(self, p, n, rescaled, uniform, trail);
             let index = if uniform { picked } else { reached.index };
             // A light left out of the tree (zero power) is reached by no walk.
@@ -799,7 +816,7 @@ impl<'a> LightSet<'a> {
                 LightChoice::NONE
             }
         } else {
-            scan_select(self.lights, lights, p, n, u)
+            scan_choice(self.lights, lights, p, n, u, lights, UNIFORM_SHARE)
         }
     }
 
@@ -812,7 +829,7 @@ impl<'a> LightSet<'a> {
         if self.node_count() > 0 {
             mixed_pmf(lights, bvh_light_pmf(self, p, n, index))
         } else {
-            scan_pmf(self.lights, lights, p, n, index)
+            scan_choice(self.lights, lights, p, n, 0.0, index, UNIFORM_SHARE).pmf
         }
     }
 }
@@ -1494,15 +1511,20 @@ mod tests {
         let (p, n) = (Vec3::new(1.0, 0.0, 0.5), Vec3::Y);
         let linear = LightSet::new(&lights, &[], &[]);
         let tree = LightSet::new(&lights, &nodes, &trails);
+        // The scan mixes its uniform share over the lights of positive importance (all three
+        // here), the tree over all the lights.
+        assert!((0..3).all(|k| light_importance(&lights[k], p, n) > 0.0));
         for k in 0..3 {
-            assert_eq!(linear.pmf(p, n, k), importance_pmf(&lights, p, n, k));
+            let mixed = UNIFORM_SHARE / 3.0 + (1.0 - UNIFORM_SHARE) * importance_pmf(&lights, p, n, k);
+            assert!((linear.pmf(p, n, k) / mixed - 1.0).abs() < 1e-6, "{} vs {mixed}", linear.pmf(p, n, k));
             assert_eq!(tree.pmf(p, n, k), mixed_pmf(3, bvh_pmf(&lights, &nodes, &trails, p, n, k)));
         }
-        assert_eq!(linear.select(p, n, 0.4), select_importance(&lights, p, n, 0.4));
+        let scanned = linear.select(p, n, 0.4);
+        assert_eq!(scanned.pmf, linear.pmf(p, n, scanned.index));
         // Past the uniform share the walk draws with the rescaled sample; within it, uniformly.
-        let walked = select_bvh(&lights, &nodes, p, n, (0.4 - BVH_UNIFORM_SHARE) / (1.0 - BVH_UNIFORM_SHARE));
+        let walked = select_bvh(&lights, &nodes, p, n, (0.4 - UNIFORM_SHARE) / (1.0 - UNIFORM_SHARE));
         assert_eq!(tree.select(p, n, 0.4), LightChoice { index: walked.index, pmf: mixed_pmf(3, walked.pmf) });
-        let uniform = tree.select(p, n, 0.5 * BVH_UNIFORM_SHARE);
+        let uniform = tree.select(p, n, 0.5 * UNIFORM_SHARE);
         assert_eq!(uniform, LightChoice { index: 1, pmf: tree.pmf(p, n, 1) });
         // Dummy one-element buffers with zero counts: no light, and the scan, respectively.
         let none = LightSet { light_count: 0, ..tree };
@@ -1534,19 +1556,88 @@ mod tests {
         let walked = bvh_pmf(&lights, &nodes, &trails, p, n, 0);
         assert!(walked > 0.0 && walked < 1.0 / 16_777_216.0, "the walk alone: {walked}");
         let set = LightSet::new(&lights, &nodes, &trails);
-        let pmf = set.pmf(p, n, 0);
-        assert!(pmf >= BVH_UNIFORM_SHARE / 3.0, "{pmf}");
-        let total: f32 = (0..3).map(|k| set.pmf(p, n, k)).sum();
+        assert!(set.pmf(p, n, 0) >= UNIFORM_SHARE / 3.0, "{}", set.pmf(p, n, 0));
+        assert_draws_follow_the_pmf(&set, p, n);
+    }
+
+    /// Draws `set`'s choice at `p`, `n` with 2¹⁶ stratified samples: each choice carries the pmf
+    /// [`LightSet::pmf`] gives, the pmfs sum to 1, and each light is drawn as often as its pmf
+    /// says (within 10⁻⁴, a few steps of the stratification).
+    fn assert_draws_follow_the_pmf(set: &LightSet, p: Vec3, n: Vec3) {
+        let pmfs: Vec<f32> = (0..set.len()).map(|k| set.pmf(p, n, k)).collect();
+        let total: f32 = pmfs.iter().sum();
         assert!((total - 1.0).abs() < 1e-6, "{total}");
         let draws = 1u32 << 16;
-        let mut far_drawn = 0u32;
+        let mut drawn = vec![0u32; pmfs.len()];
         for i in 0..draws {
             let choice = set.select(p, n, (i as f32 + 0.5) / draws as f32);
-            assert_eq!(choice.pmf, set.pmf(p, n, choice.index), "sample {i}");
-            far_drawn += u32::from(choice.index == 0);
+            assert_eq!(choice.pmf, pmfs[choice.index as usize], "sample {i}");
+            drawn[choice.index as usize] += 1;
         }
-        let frequency = far_drawn as f32 / draws as f32;
-        assert!((frequency - pmf).abs() < 1e-4, "drawn {frequency}, pmf {pmf}");
+        for (light, (&count, &pmf)) in drawn.iter().zip(&pmfs).enumerate() {
+            let frequency = count as f32 / draws as f32;
+            assert!((frequency - pmf).abs() < 1e-4, "light {light} drawn {frequency}, pmf {pmf}");
+        }
+    }
+
+    /// A row of seven 5.3 cm one-sided lamps in one plane and a point 13.4 µm over the first, its
+    /// normal tilted 1.27·10⁻³ along the row (a helper's study found the case): only a strip of
+    /// the lamp under the point lies above its horizon, but the point's foot is on that lamp, so
+    /// its cosine bounds are 1 and its distance is clamped at its radius, and the scan gives
+    /// every other lamp a pmf below 10⁻⁶ — lamps 2–6 below 2⁻²⁴, never drawn, though an `f64`
+    /// integral of the form factors gives them 6 % of the point's `U` (lamp 1: 32 %, pmf
+    /// 4.5·10⁻⁷). The set's uniform share keeps each of them at `α/M` at least, `M` the lamps of
+    /// positive importance, and its draws follow its pmf. An eighth lamp, facing away, lights
+    /// nothing there: it keeps pmf 0 and is never drawn.
+    #[test]
+    fn a_lamp_the_point_stands_over_does_not_starve_its_lit_neighbours_in_the_scan() {
+        let size = 0.053;
+        let lamp = |k: u32| {
+            let corner = Vec3::new(-0.5 * size, -0.5 * size - 0.06 * k as f32, 1.0);
+            let (edge_u, edge_v) = if k < 7 { (Vec3::X, Vec3::Y) } else { (Vec3::Y, Vec3::X) };
+            Light::quad(corner, edge_u * size, edge_v * size, Vec3::ONE, false)
+        };
+        let lights: Vec<Light> = (0..8).map(lamp).collect();
+        let (p, n) = (Vec3::new(0.0, 0.0, 1.0 + 13.4e-6), Vec3::new(0.0, -1.27e-3, 1.0).normalize());
+        let shares = form_factor_shares(&lights, p, n);
+        let starved: f64 = (0..8u32)
+            .filter(|&k| importance_pmf(&lights, p, n, k) < 1.0 / 16_777_216.0)
+            .map(|k| shares[k as usize])
+            .sum();
+        assert!(starved > 0.05, "the scan alone starves lamps with {starved} of the form factor");
+        assert!(quad_lights_nothing(&lights[7], p, n) && shares[7] == 0.0);
+        let set = LightSet::new(&lights, &[], &[]);
+        for k in 0..7 {
+            assert!(set.pmf(p, n, k) >= UNIFORM_SHARE / 7.0, "lamp {k}: {}", set.pmf(p, n, k));
+        }
+        assert_eq!(set.pmf(p, n, 7), 0.0);
+        assert_draws_follow_the_pmf(&set, p, n);
+    }
+
+    /// Each quad light's share of the diffuse form factor at `p` (normal `n`): a 400² midpoint
+    /// rule in `f64` of `cos θ_p cos θ_l / r²` over the light's front side.
+    fn form_factor_shares(lights: &[Light], p: Vec3, n: Vec3) -> Vec<f64> {
+        let (p, n) = (p.as_dvec3(), n.as_dvec3());
+        let steps = 400;
+        let factors: Vec<f64> = lights
+            .iter()
+            .map(|light| {
+                let corner = light.position.truncate().as_dvec3();
+                let (eu, ev) = (light.edge_u.truncate().as_dvec3(), light.edge_v.truncate().as_dvec3());
+                let front = eu.cross(ev).normalize();
+                let mut sum = 0.0;
+                for i in 0..steps {
+                    for j in 0..steps {
+                        let (a, b) = ((i as f64 + 0.5) / steps as f64, (j as f64 + 0.5) / steps as f64);
+                        let d = corner + eu * a + ev * b - p;
+                        sum += n.dot(d).max(0.0) * (-front.dot(d)).max(0.0) / d.length_squared().powi(2);
+                    }
+                }
+                sum * eu.cross(ev).length() / (steps * steps) as f64
+            })
+            .collect();
+        let total: f64 = factors.iter().sum();
+        factors.iter().map(|f| f / total).collect()
     }
 
     /// Inside a light's bounding sphere the importance stops growing: the distance term is

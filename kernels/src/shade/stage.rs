@@ -25,7 +25,8 @@
 //! `P_BRDF` sample the BRDF (its diffuse lobe with probability `P_Diff`, else the LTC lobe), else
 //! the light (spherical rectangle). One-sample MIS pdf
 //! `lerp(pdf_light, lerp(pdf_spec, pdf_diff, P_Diff), P_BRDF)`. The light itself is chosen by
-//! [`crate::sampling::light_select::LightSet`] (importance, or a light BVH for many lights).
+//! [`crate::sampling::light_select::LightSet`] (importance, or a light BVH for many lights,
+//! mixed with a uniform choice).
 //! A BRDF sample that misses the light contributes 0 to both estimates (at 1 spp the ratio then
 //! falls back to `U`). Measured and not adopted: redrawing such a sample up to 8 times — `P_BRDF`
 //! is exactly its hit probability, so the retried density stays analytic — lowered the Cornell
