@@ -39,7 +39,7 @@
 //! | cornell | 16 | 0.000055 | 0.000055 | 0.000020 | 0.000020 | 0.00027 |
 //!
 //! Mean FLIP at 1 spp (stochastic, stochastic+tv, ratio, ratio+tv, ratio+svgf): two lights 0.045,
-//! 0.039, 0.027, **0.013**, 0.025; Cornell 0.029, 0.027, 0.0092, **0.0082**, 0.013 — ratio+tv at
+//! 0.039, 0.026, **0.013**, 0.025; Cornell 0.029, 0.027, 0.0092, **0.0082**, 0.013 — ratio+tv at
 //! 0.33× and 0.31× of stochastic+tv. Re-measured 2026-11-27 after the SVGF baseline's fix
 //! (pixels that drew no light sample skipped as taps and filled, not averaged in as visibility
 //! 1): its 1-spp column read 0.00167 / 0.00031 in the measurement before (f7ac952), which also

@@ -24,9 +24,10 @@
 //!
 //! **Left out.** Lights of zero power (zero radiance) are left out of the tree: they can never
 //! contribute. The walk gives them pmf 0 (their trail, 0, leads to another light's leaf);
-//! `LightSet`'s uniform share still draws them, with pmf `1/(32 N)`, where they add 0. A
-//! scene whose lights all have zero power gets an empty BVH; then `LightSet` falls back to the
-//! linear scan, which chooses uniformly among them.
+//! `LightSet`'s uniform share still draws them, with pmf `1/(32 N)`, where they add 0 (the
+//! scan's share, for scenes without a BVH, leaves them out). A scene whose lights all have zero
+//! power gets an empty BVH; then `LightSet` falls back to the linear scan, which chooses
+//! uniformly among them.
 //!
 //! **When.** [`wants_bvh`]: more than [`LINEAR_SCAN_MAX_LIGHTS`] = 8 lights. The scan evaluates
 //! about 1.5·N importances per choice and gives every light its exact importance; the BVH

@@ -32,8 +32,8 @@
 //! gets a BVH) and mixes in a uniform choice, [`UNIFORM_SHARE`] = 1/32 of the choices (with the
 //! scan, among the lights of positive importance), so that every light that can light a point
 //! keeps a pmf of at least `1/(32 N)`: importance is a bound — a node's cannot see that all of
-//! its lights light nothing at a point, a lamp's own is loose within about 1 cm of its plane —
-//! and the light that did light the point had been left a pmf below 2⁻²⁴, never drawn.
+//! its lights light nothing at a point, a lamp's own is loose close to its plane — and the light
+//! that did light the point had been left a pmf below 2⁻²⁴, never drawn.
 //!
 //! **BVH layout** ([`LightBvhNode`], 80 bytes): depth-first in one array, node 0 the root. An
 //! interior node's first child is the next node, its second child is `child_or_light`; a leaf holds
@@ -58,7 +58,7 @@
 //! so a light whose importance is below that step may fall between two steps and never be
 //! chosen, though [`importance_pmf`] gives it its share; the light missed is at most ≈ 2⁻²⁴ of
 //! the total importance. [`LightSet`]'s uniform share keeps every light of positive importance
-//! above that step.
+//! above that step (for up to [`UNIFORM_SHARE`]·2²⁴ = 2¹⁹ such lights).
 //!
 //! All functions are `no_std`, loop-bounded, allocation- and panic-free, and return finite values:
 //! importances are clamped to `[0,` [`MAX_IMPORTANCE`]`]` so that sums over up to 2³² lights stay
@@ -588,8 +588,9 @@ fn scan(lights: &[Light], count: u32, p: Vec3, n: Vec3, u: f32, index: u32, shar
 /// [`importance_pmf`] and [`select_importance`].
 fn scan_choice(lights: &[Light], count: u32, p: Vec3, n: Vec3, u: f32, index: u32, share: f32) -> LightChoice {
     if count == 1 {
-        // What the scan returns for one light — `I / I` = 1 exactly ([`importance`] is finite),
-        // or the uniform fallback's 1 when `I` = 0 — without evaluating `I` twice per sample.
+        // What the scan returns for one light — with `share` 0 `I / I` = 1 exactly
+        // ([`importance`] is finite), with a share 1 within rounding, or the uniform fallback's 1
+        // when `I` = 0 — without evaluating `I` twice per sample.
         return LightChoice { index: 0, pmf: 1.0 };
     }
     match scan(lights, count, p, n, u, index, share) {
@@ -720,21 +721,22 @@ pub fn bvh_pmf(lights: &[Light], nodes: &[LightBvhNode], trails: &[u32], p: Vec3
 /// Share of [`LightSet::select`]'s choices made uniformly rather than by importance: with a BVH
 /// among all `N` lights, `pmf = α/N + (1 − α)·bvh_pmf`; in the linear scan among the `M` lights
 /// of positive importance, `pmf = α/M + (1 − α)·importance_pmf` for those and 0 for the rest,
-/// which light nothing there (the scan sees every importance; the walk would have to visit every
-/// leaf to count them). Importance is a bound, and a loose one can starve the light that lights
-/// `p`:
+/// which light nothing there (with `M` = 0, the uniform fallback's `1/N` each). The scan sees
+/// every importance; the walk would have to visit every leaf to count them. Importance is a
+/// bound, and a loose one can starve the light that lights `p`:
 /// - the walk's branch probabilities come from cluster bounds, which cannot see that every light
 ///   under a node lights nothing at `p` (behind one-sided lamps, below the horizon), so such a
 ///   node kept its share and the light that did light `p` got a pmf far below its share of `U` —
 ///   3.5·10⁻⁹ for the only lit light of 4, below 2⁻²⁴, never drawn (a helper's study: in
 ///   adversarial sets of more than 8 lights, 4–15 % of lit points had a light's pmf below 10⁻³
 ///   of its share);
-/// - in the scan, at a point within about 1 cm of a lamp's plane whose foot lies on the lamp,
-///   that lamp's cosine bounds are 1 and its distance is clamped at its radius, though only a
-///   sliver of it may be above the point's horizon: a neighbour holding 0.26 % of `U` got pmf
-///   2.5·10⁻⁹, never drawn (`U_N` 0.5 % low; in one row of 30 m lamps three lamps with 58 % of
-///   the stage's `U` were, where that `U` is itself at its `f32` floor; a second helper's
-///   study, 2026-11-30).
+/// - in the scan, at a point close to a lamp's plane (within about 1 cm for 5 cm lamps) whose
+///   foot lies on the lamp, that lamp's cosine bounds are 1 and its distance is clamped at its
+///   radius, though only a sliver of it may be above the point's horizon: a neighbour holding
+///   0.26 % of `U` got pmf 2.5·10⁻⁹, never drawn (with a second neighbour drawn less often than
+///   its pmf said, the choice left `U_N` 0.5 % low; in one row of 30 m lamps three lamps with
+///   58 % of the stage's `U` were never drawn either, where that `U` is itself at its `f32`
+///   floor; a second helper's study, 2026-11-30).
 ///
 /// With the mixture every light that can light `p` has pmf ≥ α/N (≥ 2⁻²⁴ for
 /// N ≤ α·2²⁴ ≈ 5·10⁵); the selection's second moment `Σ s²/pmf` on
