@@ -133,13 +133,15 @@ mod tests {
     /// first Vulkan render waits for it (README, Shading: at 634 KB the compile took 38.5 s on this
     /// project's 2-vCPU VM; at 350 KB 6–8 s, 10–15 s with the residual; at 361.6 KB, with the
     /// light choice's quad bounds and uniform share, the first render's shade stage took
-    /// 7.6–10.4 s against 8.0–10.3 s at 352.0 KB, six alternating runs each). rust-gpu inlines
-    /// every call, so a second call site of a large function grows the module, and the mesa shader
-    /// cache hides the cost from every later run. Raise the budget only with the compile measured
+    /// 7.6–10.4 s against 8.0–10.3 s at 352.0 KB, six alternating runs each; at 365.0 KB, with
+    /// near-rectangles sampled exactly, 6.7–8.1 s against 7.3–9.8 s at 363.0 KB, four and three
+    /// alternating runs). rust-gpu inlines every call, so a second call site of a large function
+    /// grows the module, and the mesa shader cache hides the cost from every later run. Raise the
+    /// budget only with the compile measured
     /// (`MESA_SHADER_CACHE_DISABLE=true raywave render --device vulkan`).
     #[test]
     fn the_shade_module_stays_within_its_size_budget() {
-        const BUDGET_BYTES: usize = 364_000;
+        const BUDGET_BYTES: usize = 366_000;
         let bytes = module("entry::shade").expect("embedded").len();
         assert!(bytes <= BUDGET_BYTES, "the shade module is {bytes} bytes, over its budget of {BUDGET_BYTES}");
     }

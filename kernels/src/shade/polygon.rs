@@ -332,9 +332,10 @@ pub(crate) mod tests {
         assert!(irregular > 0, "some quads' edge angles leave a rounding residue");
     }
 
-    /// The form factor of the polygon `q` (f32 corners, taken exactly) by the same edge formula
-    /// in f64, whose rounding (`10⁻¹⁶·(d/s)²` relative) is far below the f32 tolerances here.
-    fn form_factor_f64(q: [Vec3; 4]) -> f64 {
+    /// The form factor (normal +z) of the quad `q` wholly above the horizon (f32 corners relative
+    /// to the shading point, taken exactly) by the same edge formula in f64, whose rounding
+    /// (`10⁻¹⁶·(d/s)²` relative) is far below the f32 tolerances of the tests using it.
+    pub(crate) fn form_factor_f64(q: [Vec3; 4]) -> f64 {
         let q = q.map(|c| c.as_dvec3());
         let sum: f64 = (0..4)
             .map(|i| {

@@ -328,13 +328,14 @@ pub fn shade_sample(
     let p_diff = if e_d + e_s > 0.0 { e_d / (e_d + e_s) } else { 1.0 };
     let p_brdf = lerp(u_s, u_d, p_diff);
 
-    // The light's solid angle serves its sample and its pdf: computed once for either strategy,
-    // even for a BRDF direction that misses the light and does not need it, so that the kernel
-    // holds it once and a GPU's lanes run it together.
+    // The light as its sampler sees it (its solid angle, `warp::SphericalQuad`) serves its sample
+    // and its pdf: computed once for either strategy, even for a BRDF direction that misses the
+    // light and does not need it, so that the kernel holds it once and a GPU's lanes run it
+    // together.
     let light_sampled = !(strategy.x < p_brdf);
-    let solid_angle = warp::quad_solid_angle(p, corner, eu, ev);
+    let quad = warp::spherical_quad(p, corner, eu, ev);
     let (direction, sampled_distance) = if light_sampled {
-        let sample = warp::sample_quad_spherical_with_solid_angle(p, corner, eu, ev, solid_angle, u);
+        let sample = warp::sample_quad_spherical_with(p, corner, eu, ev, &quad, u);
         // pdf 0 is "no sample": its direction (+z) is a placeholder, not a direction to the light.
         if !(sample.pdf > 0.0) {
             return result;
@@ -358,7 +359,7 @@ pub fn shade_sample(
         return result;
     }
     let pdf_brdf = lerp(pdf_specular, pdf_diffuse, p_diff);
-    let pdf_light = warp::quad_spherical_pdf_at_hit(eu, ev, solid_angle, direction, distance);
+    let pdf_light = warp::quad_spherical_pdf_at_hit(p, corner, eu, ev, &quad, direction, distance);
     let pdf = lerp(pdf_light, pdf_brdf, p_brdf) * choice.pmf;
     if !(pdf > 0.0) {
         return result;
