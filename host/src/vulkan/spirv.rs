@@ -136,9 +136,9 @@ mod tests {
     /// 7.6–10.4 s against 8.0–10.3 s at 352.0 KB, six alternating runs each; at 365.0 KB, with
     /// near-rectangles sampled exactly, 6.7–8.1 s against 7.3–9.8 s at 363.0 KB, four and three
     /// alternating runs). rust-gpu inlines every call, so a second call site of a large function
-    /// grows the module, and the mesa shader cache hides the cost from every later run. Raise the
-    /// budget only with the compile measured
-    /// (`MESA_SHADER_CACHE_DISABLE=true raywave render --device vulkan`).
+    /// grows the module, and the mesa shader cache hides the cost from every later run. Raise
+    /// the budget only with the compile measured (`MESA_SHADER_CACHE_DISABLE=true raywave render
+    /// --device vulkan`).
     #[test]
     fn the_shade_module_stays_within_its_size_budget() {
         const BUDGET_BYTES: usize = 366_000;

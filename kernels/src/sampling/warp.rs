@@ -102,17 +102,20 @@ fn is_rectangle(eu: Vec3, ev: Vec3) -> bool {
 /// (`dω = cos θl·dA/d²`, `cos θl = h/d` at the height `h` of the point above the plane).
 #[derive(Copy, Clone, Debug)]
 pub struct SphericalQuad {
-    /// Solid angle (sr) of the rectangle sampled ([`quad_solid_angle`]; the quad's own for a
-    /// rectangle, and for a parallelogram too when it is sampled by area).
-    pub solid_angle: f32,
+    /// Solid angle (sr) of the rectangle the method samples ([`quad_solid_angle`]): the quad's
+    /// own for a rectangle and for a parallelogram beyond [`QUAD_RECTANGLE_MAX_COS`], else the
+    /// rectangle's it is sheared from. Below [`QUAD_MIN_SPHERICAL_SOLID_ANGLE`] the quad is
+    /// sampled by area.
+    solid_angle: f32,
     /// The rectangle's second edge `ev⊥`: `ev` less its part along `eu` (`ev` itself, but for
-    /// the sign of a zero coordinate, where `eu·ev` = 0 and for a parallelogram sampled by area).
+    /// the sign of a zero coordinate, where `eu·ev` = 0 and for a parallelogram beyond
+    /// [`QUAD_RECTANGLE_MAX_COS`]).
     edge_v: Vec3,
     /// `c`, `ev`'s part along `eu` in units of `eu`: 0 for a rectangle.
     shear: f32,
-    /// Sampled by the spherical method: a rectangle within [`QUAD_RECTANGLE_MAX_COS`] of
-    /// `Ω` ≥ [`QUAD_MIN_SPHERICAL_SOLID_ANGLE`]; else by area ([`sample_quad_area`]), or not at
-    /// all where `Ω` = 0.
+    /// Sampled by the spherical method: a quad within [`QUAD_RECTANGLE_MAX_COS`] of a rectangle
+    /// whose rectangle subtends at least [`QUAD_MIN_SPHERICAL_SOLID_ANGLE`]; else by area
+    /// ([`sample_quad_area`]), or not at all where the solid angle is 0.
     spherical: bool,
 }
 
@@ -687,8 +690,9 @@ fn area_pdf_at_hit(n: Vec3, dir: Vec3, distance: f32) -> f32 {
     }
 }
 
-/// Samples the quad light `o + s·eu + t·ev` (edges `eu ⟂ ev`) uniformly in the solid angle it
-/// subtends at `p`: C. Ureña, M. Fajardo and A. King, "An Area-Preserving Parametrization for
+/// Samples the quad light `o + s·eu + t·ev` (edges `eu ⟂ ev`, or within
+/// [`QUAD_RECTANGLE_MAX_COS`] of it: see below) uniformly in the solid angle it subtends at `p`:
+/// C. Ureña, M. Fajardo and A. King, "An Area-Preserving Parametrization for
 /// Spherical Rectangles", EGSR 2013, following pbrt-v4 `SampleSphericalRectangle`
 /// (sampling.cpp) including its clamps: `cu` clamped to `±(1 − 2⁻²⁴)`, `xu` clamped to
 /// `[x₀, x₁]` and `yv` to `[y₀, y₁]`. Four changes for `f32`: the solid angle
@@ -711,7 +715,8 @@ fn area_pdf_at_hit(n: Vec3, dir: Vec3, distance: f32) -> f32 {
 /// ([`SphericalQuad`]). Special cases, mirrored by [`quad_spherical_pdf`]:
 /// - `p` in the quad's plane or a degenerate quad (Ω = 0): the bilinear point `o + u₀eu + u₁ev`
 ///   with pdf 0 (as pbrt-v4).
-/// - Ω < [`QUAD_MIN_SPHERICAL_SOLID_ANGLE`]: uniform area sampling ([`sample_quad_area`]) with
+/// - Ω < [`QUAD_MIN_SPHERICAL_SOLID_ANGLE`] (the rectangle's Ω for a sheared one): uniform area
+///   sampling ([`sample_quad_area`]) with
 ///   *its* pdf. (pbrt-v4 also returns the bilinear point there but keeps pdf 1/Ω, which is
 ///   inconsistent for small quads seen at grazing angles; the area pdf keeps sample and pdf in
 ///   agreement.)
@@ -1926,8 +1931,8 @@ mod tests {
 
     /// A parallelogram within [`QUAD_RECTANGLE_MAX_COS`] of a rectangle is sampled as the
     /// rectangle it is sheared from, its samples sheared onto it and their density with them: seen
-    /// from points 4·10⁻⁵ of the light's size above its plane and 1.2·10⁻³ of it beside its
-    /// corners and edges, the form factor estimated from 2¹⁸ stratified samples matches the `f64`
+    /// from points 4·10⁻⁵ of the light's size above and below its plane and 1.2·10⁻³ of it beside
+    /// its corners and edges, the form factor estimated from 2¹⁸ stratified samples matches the `f64`
     /// edge sum within 3·10⁻⁴ (measured ≤ 2.8·10⁻⁵, and 1.5·10⁻⁴ beside the far `eu` edge, as for
     /// the rectangle itself: the spherical method's `f32` rounding there), and every sample's pdf
     /// is what `quad_spherical_pdf` gives its direction. The rectangle's own samples taken as the
@@ -1935,21 +1940,20 @@ mod tests {
     /// (0.58 % at 7·10⁻⁶), with samples off the light.
     #[test]
     fn a_near_rectangle_is_sampled_exactly_beside_its_edges() {
-        let (o, eu, n) = (Vec3::ZERO, Vec3::X, Vec3::NEG_Z);
-        let (near, height) = (-1.2e-3, 4.0e-5);
-        let points = [
-            Vec3::new(near, near, height),
-            Vec3::new(near, 0.3, height),
-            Vec3::new(0.5, near, height),
-            Vec3::new(1.0 - near, 1.0 - near, height),
-            Vec3::new(near, 1.0 - near, height),
-            Vec3::new(1.0 - near, 0.7, height),
-        ];
+        let (o, eu) = (Vec3::ZERO, Vec3::X);
+        let near = -1.2e-3;
+        let beside =
+            [(near, near), (near, 0.3), (0.5, near), (1.0 - near, 1.0 - near), (near, 1.0 - near), (1.0 - near, 0.7)];
         let side = 512;
-        for shear in [0.0, 7.0e-6, -7.0e-5, 9.9e-5] {
+        // Shears in steps of 2⁻²³, so that the oracle's corner 1 + c is exact in f32 too.
+        for shear in [0.0, 2.0f32.powi(-17), -(2.0f32.powi(-14)), 13.0 * 2.0f32.powi(-17)] {
             let ev = Vec3::new(shear, 1.0, 0.0);
             assert!(is_rectangle(eu, ev), "within the threshold: {shear}");
-            for p in points {
+            // Above the light's plane and below it, the normal facing the plane.
+            for (p, n) in beside
+                .into_iter()
+                .flat_map(|(x, y)| [(Vec3::new(x, y, 4.0e-5), Vec3::NEG_Z), (Vec3::new(x, y, -4.0e-5), Vec3::Z)])
+            {
                 assert!(spherical_quad(p, o, eu, ev).spherical);
                 let mut sum = 0.0f64;
                 for i in 0..side * side {
@@ -1962,8 +1966,8 @@ mod tests {
                     sum += f64::from(n.dot(s.direction).max(0.0) / s.pdf);
                 }
                 let estimate = sum / f64::from(side * side) / core::f64::consts::PI;
-                // Mirrored in z (exactly), the normal −z becomes the oracle's +z.
-                let corner = |c: Vec3| (c - p) * Vec3::new(1.0, 1.0, -1.0);
+                // Mirrored in z where the normal is −z (exactly), it becomes the oracle's +z.
+                let corner = |c: Vec3| (c - p) * Vec3::new(1.0, 1.0, n.z);
                 let exact = form_factor_f64([o, o + eu, o + eu + ev, o + ev].map(corner));
                 assert!((estimate / exact - 1.0).abs() < 3.0e-4, "{p} {shear}: {estimate} vs {exact}");
             }
