@@ -662,17 +662,17 @@ fn place(
     // A mirroring transform makes the clockwise face the front one (glTF 2.0, 3.7.4): reversing
     // each triangle keeps the counter-clockwise front face every mesh has here, which decides the
     // side a quad light emits from.
-    if mirrors(world) {
+    if mirrors(DMat3::from_mat4(world_f64)) {
         triangles.iter_mut().for_each(|triangle| triangle.swap(1, 2));
     }
     Ok(())
 }
 
-/// Whether the world transform `world` mirrors (its linear part's determinant is negative). The
-/// sign is taken in `f64`: in `f32` a tiny scale's determinant underflows to −0 (10⁻⁴⁸ for a scale
-/// of 10⁻¹⁶), and a huge one may be ∞ − ∞.
-fn mirrors(world: Mat4) -> bool {
-    DMat3::from_mat4(world.as_dmat4()).determinant() < 0.0
+/// Whether a world transform whose linear part is `linear` mirrors (its determinant is negative).
+/// The sign is taken in `f64`: in `f32` a tiny scale's determinant underflows to −0 (10⁻⁴⁸ for a
+/// scale of 10⁻¹⁶), and a huge one may be ∞ − ∞.
+fn mirrors(linear: DMat3) -> bool {
+    linear.determinant() < 0.0
 }
 
 /// How many triangles a primitive of `mode` with `corners` vertices (or indices) draws: the
@@ -1060,7 +1060,7 @@ impl PlacedCamera {
                  (a zero scale?)"
             ));
         }
-        Ok(Self { node, camera, position, forward, up: up.as_vec3(), vertical_fov_degrees, mirrored: mirrors(world) })
+        Ok(Self { node, camera, position, forward, up: up.as_vec3(), vertical_fov_degrees, mirrored: mirrors(linear) })
     }
 
     /// The camera looking at the point along its view at the depth of the bounds' centre of
