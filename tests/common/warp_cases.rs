@@ -160,9 +160,9 @@ pub fn warp_cases() -> Vec<(String, WarpParams)> {
             ("edge-on beyond its ev edge", Vec3::new(-0.5, 0.5, 1.0e-3), Vec3::X, Vec3::Y),
             // Not a rectangle: the spherical-rectangle method's frame needs perpendicular edges.
             ("a 60° rhombus", Vec3::new(-0.75, -0.5, 0.6), Vec3::X, Vec3::new(0.5, 0.866_025_4, 0.0)),
-            // Within `QUAD_RECTANGLE_MAX_COS` of a rectangle: sampled as the rectangle it is
-            // sheared from, its samples and their density sheared onto it. p 4·10⁻³ beyond the eu
-            // edge, half way along it, where the shear moves the light's points by 4.5·10⁻⁵.
+            // Within `QUAD_RECTANGLE_MAX_COS` of a rectangle: sampled as a rectangle, its samples
+            // and their density sheared onto it about p's foot. p 4·10⁻³ beyond the eu edge, half
+            // way along it: the shear moves the light's ends by 4.5·10⁻⁵.
             ("sheared 9e-5, beyond its eu edge", Vec3::new(0.004, -0.5, -0.002), Vec3::X, Vec3::new(9.0e-5, 1.0, 0.0)),
         ] {
             cases.push((format!("quad {strategy}, {what}"), quad_light(kind, o, eu, ev)));

@@ -359,7 +359,7 @@ pub fn shade_sample(
         return result;
     }
     let pdf_brdf = lerp(pdf_specular, pdf_diffuse, p_diff);
-    let pdf_light = warp::quad_spherical_pdf_at_hit(p, corner, eu, ev, &quad, direction, distance);
+    let pdf_light = warp::quad_spherical_pdf_at_hit(eu, ev, &quad, direction, distance);
     let pdf = lerp(pdf_light, pdf_brdf, p_brdf) * choice.pmf;
     if !(pdf > 0.0) {
         return result;
