@@ -1973,8 +1973,8 @@ mod tests {
     /// beside its corners and edges, and 10⁻⁶ above and 10⁻⁷ beside it — closer than the shear
     /// moves its points — the form factor estimated from 2¹⁸ stratified samples matches the `f64`
     /// edge sum within 5·10⁻⁴ (measured ≤ 2.9·10⁻⁵ but for the rectangle itself: up to 1.4·10⁻⁴
-    /// beside the far `eu` edge, the spherical method's `f32` rounding there, and 4.2·10⁻⁴
-    /// 10⁻⁶ above its centre, where the grid meets a peaked integrand), and every sample's pdf is
+    /// beside the far `eu` edge, not told apart from the grid's own error, and 4.2·10⁻⁴ 10⁻⁶
+    /// above its centre, where the grid meets a peaked integrand), and every sample's pdf is
     /// what `quad_spherical_pdf` gives its direction. The rectangle's own samples
     /// taken as the parallelogram's, as before, were up to 5.9 % high beside an edge at
     /// `cos ψ` = 7·10⁻⁵ (0.58 % at 7·10⁻⁶), with samples off the light; the shear pivoting on the
@@ -1984,7 +1984,7 @@ mod tests {
         let (o, eu) = (Vec3::ZERO, Vec3::X);
         let near = -1.2e-3;
         // (x, y, height): beside the light's corners and edges, then above it and beside its
-        // sheared edge, closer to its plane than the shear moves the light's points.
+        // sheared edge, closer to its plane than a shear about the edge t = 0 moves its points.
         let points = [
             (near, near, 4.0e-5),
             (near, 0.3, 4.0e-5),
