@@ -1967,6 +1967,28 @@ mod tests {
         assert_eq!(clamp_sample(Vec2::new(1.0, f32::NAN)), Vec2::new(ONE_MINUS_EPSILON, 0.0));
     }
 
+    /// The form factor `∫ max(0, n·ω)/π dω` of the quad light `o + s·eu + t·ev` at `p` estimated
+    /// from `side²` stratified samples of [`sample_quad_spherical`] (the grid's midpoints), each
+    /// handed to `check` first.
+    fn sampled_form_factor(
+        p: Vec3,
+        o: Vec3,
+        eu: Vec3,
+        ev: Vec3,
+        n: Vec3,
+        side: u32,
+        check: impl Fn(&LightSample),
+    ) -> f64 {
+        let mut sum = 0.0f64;
+        for i in 0..side * side {
+            let cell = Vec2::new((i % side) as f32, (i / side) as f32);
+            let s = sample_quad_spherical(p, o, eu, ev, (cell + 0.5) / side as f32);
+            check(&s);
+            sum += f64::from(n.dot(s.direction).max(0.0) / s.pdf);
+        }
+        sum / f64::from(side * side) / core::f64::consts::PI
+    }
+
     /// A parallelogram within [`QUAD_RECTANGLE_MAX_COS`] of a rectangle is sampled as a
     /// rectangle, its samples sheared onto it and their density with them ([`SphericalQuad`]):
     /// seen from points 4·10⁻⁵ of the light's size above and below its plane and 1.2·10⁻³ of it
@@ -1996,7 +2018,6 @@ mod tests {
             (0.5, 0.9, 1.0e-6),
             (1.0e-5, 0.5, 1.0e-7),
         ];
-        let side = 512;
         // Shears in steps of 2⁻²³, so that the oracle's corner 1 + c is exact in f32 too.
         for shear in [0.0, 2.0f32.powi(-17), -(2.0f32.powi(-14)), 13.0 * 2.0f32.powi(-17)] {
             let ev = Vec3::new(shear, 1.0, 0.0);
@@ -2007,17 +2028,12 @@ mod tests {
                 .flat_map(|(x, y, h)| [(Vec3::new(x, y, h), Vec3::NEG_Z), (Vec3::new(x, y, -h), Vec3::Z)])
             {
                 assert!(spherical_quad(p, o, eu, ev).spherical);
-                let mut sum = 0.0f64;
-                for i in 0..side * side {
-                    let cell = Vec2::new((i % side) as f32, (i / side) as f32);
-                    let s = sample_quad_spherical(p, o, eu, ev, (cell + 0.5) / side as f32);
+                let estimate = sampled_form_factor(p, o, eu, ev, n, 512, |s| {
                     let pdf = quad_spherical_pdf(p, o, eu, ev, s.direction);
                     assert!(s.pdf > 0.0 && (pdf / s.pdf - 1.0).abs() < 1.0e-5, "{p} {shear}: {pdf} vs {}", s.pdf);
                     let off_ray = (s.point - p - s.distance * s.direction).length();
                     assert!(off_ray < 1.0e-6, "{p} {shear}: {off_ray} off the ray");
-                    sum += f64::from(n.dot(s.direction).max(0.0) / s.pdf);
-                }
-                let estimate = sum / f64::from(side * side) / core::f64::consts::PI;
+                });
                 // Mirrored in z where the normal is −z (exactly), it becomes the oracle's +z.
                 let corner = |c: Vec3| (c - p) * Vec3::new(1.0, 1.0, n.z);
                 let exact = form_factor_f64([o, o + eu, o + eu + ev, o + ev].map(corner));
@@ -2047,14 +2063,7 @@ mod tests {
             let exact = triangle_f64(po, po + eud, po + eud + evd) + triangle_f64(po, po + eud + evd, po + evd);
             let omega = quad_solid_angle(p, o, eu, ev);
             assert!((f64::from(omega) / exact - 1.0).abs() < 1.0e-4, "{beside} {height}: {omega} vs {exact}");
-            let side = 256;
-            let mut sum = 0.0f64;
-            for i in 0..side * side {
-                let cell = Vec2::new((i % side) as f32, (i / side) as f32);
-                let s = sample_quad_spherical(p, o, eu, ev, (cell + 0.5) / side as f32);
-                sum += f64::from(Vec3::NEG_Y.dot(s.direction).max(0.0) / s.pdf);
-            }
-            let estimate = sum / f64::from(side * side) / core::f64::consts::PI;
+            let estimate = sampled_form_factor(p, o, eu, ev, Vec3::NEG_Y, 256, |_| {});
             let flip = |c: Vec3| {
                 let d = c - p;
                 Vec3::new(d.x, d.z, -d.y)
