@@ -40,6 +40,11 @@
 //! pass the coordinate limit (`crate::lights::reach_within_limit`), though every vertex is within
 //! it, is no light — light validation would refuse it and fail the whole scene.
 //!
+//! **Snapped.** A mesh that becomes a light is moved onto it: each vertex to the light's corner
+//! it matched, as rebuilt in `f32`, by at most the tolerance. Its triangles then lie in the
+//! light's plane to rounding, where the shade stage's shadow rays, which stop short of that plane
+//! by the ray-origin offset, cannot meet them (bent by the tolerance, they had blocked the light).
+//!
 //! Everything else that emits (more or fewer triangles, non-planar or non-parallelogram shapes,
 //! inconsistent winding, a rebuilt corner out of range) is counted as an unsupported emitter and
 //! stays plain geometry.
@@ -70,17 +75,19 @@ pub(super) struct DerivedLights {
     pub unsupported: usize,
 }
 
-/// Derives a quad light from every emissive parallelogram mesh (see the module documentation).
-/// Mesh and light counts must fit in `u32` (the scene checks the mesh count before this).
-pub(super) fn derive(meshes: &[Mesh]) -> DerivedLights {
+/// Derives a quad light from every emissive parallelogram mesh (see the module documentation)
+/// and snaps that mesh onto its light ([`snap_onto`]). Mesh and light counts must fit in `u32`
+/// (the scene checks the mesh count before this).
+pub(super) fn derive(meshes: &mut [Mesh]) -> DerivedLights {
     let mut derived = DerivedLights { mesh_lights: vec![None; meshes.len()], ..Default::default() };
-    for (index, mesh) in meshes.iter().enumerate() {
+    for (index, mesh) in meshes.iter_mut().enumerate() {
         let emission = mesh.material.emission;
         if emission == Vec3::ZERO {
             continue;
         }
         match parallelogram(mesh) {
             Some(quad) => {
+                snap_onto(mesh, &quad);
                 derived.mesh_lights[index] = Some(derived.lights.len() as u32);
                 let two_sided = mesh.material.double_sided;
                 let light = Light::quad(quad.corner, quad.edge_u, quad.edge_v, emission, two_sided);
@@ -90,6 +97,28 @@ pub(super) fn derive(meshes: &[Mesh]) -> DerivedLights {
         }
     }
     derived
+}
+
+/// Moves each vertex of a parallelogram mesh's triangles to the nearest corner of its light, as
+/// the kernels rebuild the corners in `f32` (`corner + edge_u + edge_v` for the fourth), so that
+/// the lamp's own triangles lie in the light's plane to rounding. The shade stage's shadow rays
+/// stop short of that plane by the ray-origin offset (64 `f32` steps of the larger coordinate,
+/// `raywave_kernels::offset::ray_stop_before`) so that the lamp cannot block them; a mesh the fit
+/// accepted bent by up to its tolerance (10⁻⁴ of the lamp's size) reaches past that margin
+/// wherever the lamp is more than ~6 % of its coordinates across: the Cornell box's lamp with a
+/// corner lowered by 0.9·10⁻⁴ of its diagonal had blocked the shadow rays to about a quarter of
+/// itself, `S_N` 5–91 % low (12–24 % of `U`) at the hard points of `shadowed_estimate.rs` (test). Each vertex moves by at most the tolerance, which
+/// is under a quarter of the shortest edge, so its nearest corner is the one it was matched to.
+fn snap_onto(mesh: &mut Mesh, quad: &Parallelogram) {
+    let corners =
+        [quad.corner, quad.corner + quad.edge_u, quad.corner + quad.edge_v, quad.corner + quad.edge_u + quad.edge_v];
+    for &index in mesh.triangles.iter().flatten() {
+        let vertex = &mut mesh.positions[index as usize];
+        let nearest = corners.iter().min_by(|a, b| a.distance_squared(*vertex).total_cmp(&b.distance_squared(*vertex)));
+        if let Some(&nearest) = nearest {
+            *vertex = nearest;
+        }
+    }
 }
 
 /// A parallelogram `corner + s·edge_u + t·edge_v`, `s, t ∈ [0, 1]`, facing `edge_u × edge_v`.
@@ -402,7 +431,7 @@ mod tests {
         let lit = emissive(square.clone(), vec![[0, 1, 2], [0, 2, 3]]);
         let dark = Mesh { material: Material::diffuse(Vec3::ONE), ..lit.clone() };
         let bent = emissive(vec![Vec3::ZERO, Vec3::X, Vec3::new(1.0, 1.0, 0.5), Vec3::Y], vec![[0, 1, 2], [0, 2, 3]]);
-        let derived = derive(&[dark, lit.clone(), bent, lit]);
+        let derived = derive(&mut [dark, lit.clone(), bent, lit]);
         assert_eq!(derived.lights.len(), 2);
         assert_eq!(derived.lights.iter().map(|l| l.mesh).collect::<Vec<_>>(), vec![1, 3]);
         assert_eq!(derived.mesh_lights, vec![None, Some(0), None, Some(1)]);

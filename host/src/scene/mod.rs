@@ -219,7 +219,10 @@ impl Scene {
     ///
     /// Every remaining mesh whose material emits (non-zero emission) and whose triangles form one
     /// planar parallelogram becomes one quad light ([`Scene::lights`]); other emissive meshes are
-    /// counted ([`Scene::unsupported_emitters`]). Emissive meshes stay in the scene either way.
+    /// counted ([`Scene::unsupported_emitters`]). Emissive meshes stay in the scene either way, a
+    /// light's mesh moved onto the light (each vertex to the corner it matched, by at most the
+    /// tolerance [`Scene::lights`] gives), so that its triangles cannot block the light's shadow
+    /// rays.
     pub fn new(name: &str, mut meshes: Vec<Mesh>, camera: Camera) -> Result<Scene> {
         check_indices_and_vertices(name, &meshes)?;
         // Every mesh's material, before meshes of only zero-area triangles are removed: an
@@ -232,7 +235,8 @@ impl Scene {
         }
         meshes.retain(|m| !m.triangles.is_empty());
         let dropped_degenerate = before - meshes.iter().map(|m| m.triangles.len()).sum::<usize>();
-        let lights = if u32::try_from(meshes.len()).is_ok() { emitters::derive(&meshes) } else { Default::default() };
+        let lights =
+            if u32::try_from(meshes.len()).is_ok() { emitters::derive(&mut meshes) } else { Default::default() };
         let scene = Scene {
             identity: SceneIdentity::new(name),
             name: name.to_owned(),
@@ -257,8 +261,9 @@ impl Scene {
     /// from both where its material is [`Material::double_sided`]:
     /// the light's corner is the first triangle's corner off the diagonal and its edges run to
     /// that triangle's next and previous corners, so `edge_u × edge_v` is the triangle's
-    /// counter-clockwise normal. The meshes stay in [`Scene::meshes`], so rays still hit them;
-    /// each light is [`Light::made_of`] its mesh, which it does not light.
+    /// counter-clockwise normal. The meshes stay in [`Scene::meshes`], so rays still hit them,
+    /// each moved onto its light's corners ([`Scene::new`]); each light is [`Light::made_of`] its
+    /// mesh, which it does not light.
     pub fn lights(&self) -> &[Light] {
         &self.lights.lights
     }
