@@ -72,6 +72,9 @@ mod spirv {
             // A warning in the kernels fails the build, as `clippy -D warnings` does for the host.
             builder.deny_warnings = true;
             builder.spirv_metadata = SpirvMetadata::NameVariables;
+            // Every entry point declares the `SignedZeroInfNanPreserve` execution mode (IEEE Inf
+            // and NaN kept: `raywave-kernels`' entry module).
+            builder.capabilities.push(Capability::SignedZeroInfNanPreserve);
             builder.capabilities.extend_from_slice(variant.capabilities);
             builder.extensions.extend(variant.extensions.iter().map(|e| e.to_string()));
             builder.shader_crate_features.features = variant.features.iter().map(|f| f.to_string()).collect();

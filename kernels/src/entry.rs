@@ -3,6 +3,13 @@
 //! stream index, call the stage function and store its result. Binding numbers repeat
 //! [`raywave_shared::bindings`] (attributes need literals); `threads(64)` is
 //! [`raywave_shared::bindings::WORKGROUP_SIZE`].
+//!
+//! Every entry point declares `SignedZeroInfNanPreserve` for 32-bit floats: without it Vulkan lets
+//! a driver assume that no float operand or result is NaN or ±Inf (Vulkan specification,
+//! "Precision and Operation of SPIR-V Instructions") and so fold the kernels' `is_finite` and
+//! `!(x > 0.0)` guards, and with them DESIGN rule 5 — no NaN or Inf leaves a stage, and what was
+//! replaced is counted — which the CPU's IEEE arithmetic keeps. It needs the device property
+//! `shaderSignedZeroInfNanPreserveFloat32`, which raywave's Vulkan backend requires.
 
 use glam::{UVec3, Vec4};
 use raywave_shared::bindings::{stream_index, WORKGROUP_SIZE};
@@ -45,7 +52,7 @@ fn store_hit(
 }
 
 /// Entry point of the generate stage.
-#[spirv(compute(threads(64)))]
+#[spirv(compute(threads(64), signed_zero_inf_nan_preserve = 32))]
 pub fn generate(
     #[spirv(global_invocation_id)] global_id: UVec3,
     #[spirv(push_constant)] params: &GenerateParams,
@@ -63,7 +70,7 @@ pub fn generate(
 }
 
 /// Entry point of the sampler probe: raw sampler bits, compared bit-exact with the CPU.
-#[spirv(compute(threads(64)))]
+#[spirv(compute(threads(64), signed_zero_inf_nan_preserve = 32))]
 pub fn sampler_probe(
     #[spirv(global_invocation_id)] global_id: UVec3,
     #[spirv(push_constant)] params: &raywave_shared::SamplerProbeParams,
@@ -76,7 +83,7 @@ pub fn sampler_probe(
 }
 
 /// Entry point of the warp probe: warped directions and their pdfs.
-#[spirv(compute(threads(64)))]
+#[spirv(compute(threads(64), signed_zero_inf_nan_preserve = 32))]
 pub fn warp_probe(
     #[spirv(global_invocation_id)] global_id: UVec3,
     #[spirv(push_constant)] params: &raywave_shared::WarpParams,
@@ -89,7 +96,7 @@ pub fn warp_probe(
 }
 
 /// Entry point of the trace stage with software CWBVH traversal: needs no ray-tracing extension.
-#[spirv(compute(threads(64)))]
+#[spirv(compute(threads(64), signed_zero_inf_nan_preserve = 32))]
 #[allow(clippy::too_many_arguments)]
 pub fn trace_cwbvh(
     #[spirv(global_invocation_id)] global_id: UVec3,
@@ -116,7 +123,7 @@ pub fn trace_cwbvh(
 /// Entry point of the trace stage with `VK_KHR_ray_query`; only in the SPIR-V build with the
 /// `ray-query` feature (and the `RayQueryKHR` capability), so other modules never declare it.
 #[cfg(all(target_arch = "spirv", feature = "ray-query"))]
-#[spirv(compute(threads(64)))]
+#[spirv(compute(threads(64), signed_zero_inf_nan_preserve = 32))]
 #[allow(clippy::too_many_arguments)]
 pub fn trace_ray_query(
     #[spirv(global_invocation_id)] global_id: UVec3,
@@ -142,7 +149,7 @@ pub fn trace_ray_query(
 /// query): one launch per ray over a 2-D launch grid, the same stream bindings as
 /// `trace_ray_query`, the closest hit found by the fixed-function traversal.
 #[cfg(all(target_arch = "spirv", feature = "ray-tracing"))]
-#[spirv(ray_generation)]
+#[spirv(ray_generation(signed_zero_inf_nan_preserve = 32))]
 #[allow(clippy::too_many_arguments)]
 pub fn trace_raygen(
     #[spirv(launch_id)] launch_id: UVec3,
@@ -188,14 +195,14 @@ pub fn trace_raygen(
 
 /// Miss shader of the ray-tracing-pipeline trace: the ray hit nothing.
 #[cfg(all(target_arch = "spirv", feature = "ray-tracing"))]
-#[spirv(miss)]
+#[spirv(miss(signed_zero_inf_nan_preserve = 32))]
 pub fn trace_miss(#[spirv(incoming_ray_payload)] payload: &mut crate::trace::Hit) {
     *payload = crate::trace::Hit::MISS;
 }
 
 /// Closest-hit shader of the ray-tracing-pipeline trace: records t, ids and barycentrics.
 #[cfg(all(target_arch = "spirv", feature = "ray-tracing"))]
-#[spirv(closest_hit)]
+#[spirv(closest_hit(signed_zero_inf_nan_preserve = 32))]
 pub fn trace_closest_hit(
     #[spirv(incoming_ray_payload)] payload: &mut crate::trace::Hit,
     #[spirv(hit_attribute)] barycentrics: &mut glam::Vec2,
@@ -207,7 +214,7 @@ pub fn trace_closest_hit(
 }
 
 /// Entry point of the occlusion (any-hit) trace with software CWBVH traversal: 1 per blocked ray.
-#[spirv(compute(threads(64)))]
+#[spirv(compute(threads(64), signed_zero_inf_nan_preserve = 32))]
 #[allow(clippy::too_many_arguments)]
 pub fn occlusion_cwbvh(
     #[spirv(global_invocation_id)] global_id: UVec3,
@@ -230,7 +237,7 @@ pub fn occlusion_cwbvh(
 
 /// Entry point of the occlusion (any-hit) trace with `VK_KHR_ray_query`.
 #[cfg(all(target_arch = "spirv", feature = "ray-query"))]
-#[spirv(compute(threads(64)))]
+#[spirv(compute(threads(64), signed_zero_inf_nan_preserve = 32))]
 pub fn occlusion_ray_query(
     #[spirv(global_invocation_id)] global_id: UVec3,
     #[spirv(push_constant)] params: &raywave_shared::TraceParams,
@@ -252,7 +259,7 @@ pub fn occlusion_ray_query(
 /// starts at 1 (blocked), the traversal stops at the first hit without a closest-hit shader, and
 /// [`occlusion_miss`] clears it.
 #[cfg(all(target_arch = "spirv", feature = "ray-tracing"))]
-#[spirv(ray_generation)]
+#[spirv(ray_generation(signed_zero_inf_nan_preserve = 32))]
 #[allow(clippy::too_many_arguments)]
 pub fn occlusion_raygen(
     #[spirv(launch_id)] launch_id: UVec3,
@@ -284,7 +291,7 @@ pub fn occlusion_raygen(
 
 /// Miss shader of the occlusion trace: the ray reached its end unblocked.
 #[cfg(all(target_arch = "spirv", feature = "ray-tracing"))]
-#[spirv(miss)]
+#[spirv(miss(signed_zero_inf_nan_preserve = 32))]
 pub fn occlusion_miss(#[spirv(incoming_ray_payload)] payload: &mut u32) {
     *payload = 0;
 }
@@ -294,7 +301,7 @@ pub fn occlusion_miss(#[spirv(incoming_ray_payload)] payload: &mut u32) {
 /// scene's triangles and materials, the lights and their BVH, the LTC table, then the outputs.
 /// Specialization constant 0 ([`raywave_shared::bindings::shade::RESIDUAL_CODE_SPEC_ID`]): 0
 /// builds the stage without the residual towards GGX.
-#[spirv(compute(threads(64)))]
+#[spirv(compute(threads(64), signed_zero_inf_nan_preserve = 32))]
 #[allow(clippy::too_many_arguments)]
 pub fn shade(
     #[spirv(global_invocation_id)] global_id: UVec3,
@@ -361,7 +368,7 @@ pub fn shade(
 /// Entry point of the copy probe (one invocation per pixel): pixel `i`'s `Vec4` copied to
 /// another buffer, nothing else — the least a per-pixel pass over `Vec4` images can move, and so
 /// the memory roof `raywave bench denoise` measures the passes' bandwidth against.
-#[spirv(compute(threads(64)))]
+#[spirv(compute(threads(64), signed_zero_inf_nan_preserve = 32))]
 pub fn copy_probe(
     #[spirv(global_invocation_id)] global_id: UVec3,
     #[spirv(push_constant)] params: &raywave_shared::DenoiseParams,
@@ -375,7 +382,7 @@ pub fn copy_probe(
 }
 
 /// Entry point of the denoisers' ratio pass: `S_N/U_N` per pixel (one invocation per pixel).
-#[spirv(compute(threads(64)))]
+#[spirv(compute(threads(64), signed_zero_inf_nan_preserve = 32))]
 pub fn denoise_ratio(
     #[spirv(global_invocation_id)] global_id: UVec3,
     #[spirv(push_constant)] params: &raywave_shared::DenoiseParams,
@@ -391,7 +398,7 @@ pub fn denoise_ratio(
 }
 
 /// Entry point of the denoiser's raw noise estimate (one invocation per pixel).
-#[spirv(compute(threads(64)))]
+#[spirv(compute(threads(64), signed_zero_inf_nan_preserve = 32))]
 pub fn denoise_noise(
     #[spirv(global_invocation_id)] global_id: UVec3,
     #[spirv(push_constant)] params: &raywave_shared::DenoiseParams,
@@ -405,7 +412,7 @@ pub fn denoise_noise(
 }
 
 /// Entry point of the noise estimate's 3×3 blur (one invocation per pixel).
-#[spirv(compute(threads(64)))]
+#[spirv(compute(threads(64), signed_zero_inf_nan_preserve = 32))]
 pub fn denoise_noise_blur(
     #[spirv(global_invocation_id)] global_id: UVec3,
     #[spirv(push_constant)] params: &raywave_shared::DenoiseParams,
@@ -447,7 +454,7 @@ impl crate::denoise::bilateral::FilterLine for TileLine<'_> {
 /// [`raywave_shared::DenoiseParams::bilateral_invocations`]): it first loads the segment and
 /// `MAX_RADIUS` pixels on each side into workgroup memory, one global read per pixel, then every
 /// invocation filters its pixel from the tile with the CPU's `bilateral_pass`.
-#[spirv(compute(threads(64)))]
+#[spirv(compute(threads(64), signed_zero_inf_nan_preserve = 32))]
 #[allow(clippy::too_many_arguments)]
 pub fn denoise_bilateral(
     #[spirv(workgroup_id)] group: UVec3,
@@ -514,7 +521,7 @@ pub fn denoise_bilateral(
 
 /// Entry point of the denoiser's composite `emitted + U · den(S_N)/den(U_N)` (one invocation per
 /// pixel).
-#[spirv(compute(threads(64)))]
+#[spirv(compute(threads(64), signed_zero_inf_nan_preserve = 32))]
 #[allow(clippy::too_many_arguments)]
 pub fn denoise_composite(
     #[spirv(global_invocation_id)] global_id: UVec3,
@@ -537,7 +544,7 @@ pub fn denoise_composite(
 }
 
 /// Entry point of the SVGF baseline's spatial variance of the ratio (one invocation per pixel).
-#[spirv(compute(threads(64)))]
+#[spirv(compute(threads(64), signed_zero_inf_nan_preserve = 32))]
 pub fn svgf_variance(
     #[spirv(global_invocation_id)] global_id: UVec3,
     #[spirv(push_constant)] params: &raywave_shared::DenoiseParams,
@@ -554,7 +561,7 @@ pub fn svgf_variance(
 
 /// Entry point of one SVGF à-trous iteration with spacing `params.step` (one invocation per
 /// pixel).
-#[spirv(compute(threads(64)))]
+#[spirv(compute(threads(64), signed_zero_inf_nan_preserve = 32))]
 pub fn svgf_atrous(
     #[spirv(global_invocation_id)] global_id: UVec3,
     #[spirv(push_constant)] params: &raywave_shared::DenoiseParams,
@@ -571,7 +578,7 @@ pub fn svgf_atrous(
 
 /// Entry point of the SVGF baseline's composite `emitted + U · den(ratio)` (one invocation per
 /// pixel).
-#[spirv(compute(threads(64)))]
+#[spirv(compute(threads(64), signed_zero_inf_nan_preserve = 32))]
 #[allow(clippy::too_many_arguments)]
 pub fn svgf_composite(
     #[spirv(global_invocation_id)] global_id: UVec3,

@@ -48,6 +48,11 @@ pub struct DeviceInfo {
     /// The Vulkan 1.2 `vulkanMemoryModel` feature: every rust-gpu module uses the Vulkan memory
     /// model, so no kernel runs without it.
     pub vulkan_memory_model: bool,
+    /// The Vulkan 1.2 property `shaderSignedZeroInfNanPreserveFloat32`: every raywave kernel
+    /// declares the `SignedZeroInfNanPreserve` execution mode for 32-bit floats, without which a
+    /// driver may assume that no value is NaN or ±Inf and drop the kernels' checks for them
+    /// (`raywave_kernels::entry`), so no kernel runs without it.
+    pub signed_zero_inf_nan_preserve: bool,
     /// Whether raywave's compute queue writes GPU timestamps: `timestampComputeAndGraphics` and a
     /// `timestampValidBits` above 0. Without them every pass is timed by the host clock, since
     /// writing a timestamp on a queue without valid bits is invalid usage.
@@ -103,12 +108,16 @@ impl DeviceInfo {
     }
 
     /// What every kernel needs and this device lacks (empty when raywave runs on it): Vulkan 1.2
-    /// with `vulkanMemoryModel` (every rust-gpu module uses it) and room for
-    /// [`MOST_STORAGE_BUFFERS`] storage buffers in one pass.
+    /// with `vulkanMemoryModel` (every rust-gpu module uses it) and
+    /// `shaderSignedZeroInfNanPreserveFloat32` (every kernel keeps IEEE Inf and NaN), and room
+    /// for [`MOST_STORAGE_BUFFERS`] storage buffers in one pass.
     pub fn missing_for_kernels(&self) -> Vec<String> {
         let mut missing = Vec::new();
         if !self.vulkan_memory_model {
             missing.push("Vulkan 1.2 with vulkanMemoryModel".to_owned());
+        }
+        if !self.signed_zero_inf_nan_preserve {
+            missing.push("shaderSignedZeroInfNanPreserveFloat32 (IEEE Inf and NaN in 32-bit float shaders)".to_owned());
         }
         if self.storage_buffers_per_pass < MOST_STORAGE_BUFFERS {
             missing.push(format!(
@@ -425,6 +434,11 @@ fn describe(instance: &ash::Instance, physical: vk::PhysicalDevice, index: usize
             features = features.push_next(&mut rtp_features);
         }
         instance.get_physical_device_features2(physical, &mut features);
+        let mut v12_properties = vk::PhysicalDeviceVulkan12Properties::default();
+        if api_1_2 {
+            let mut properties = vk::PhysicalDeviceProperties2::default().push_next(&mut v12_properties);
+            instance.get_physical_device_properties2(physical, &mut properties);
+        }
         let timestamp_valid_bits = compute_queue_family(instance, physical).map_or(0, |(_, f)| f.timestamp_valid_bits);
         let v = props.api_version;
         Ok(DeviceInfo {
@@ -442,6 +456,8 @@ fn describe(instance: &ash::Instance, physical: vk::PhysicalDevice, index: usize
             ray_tracing_pipeline: has_rtp && rtp_features.ray_tracing_pipeline == vk::TRUE,
             buffer_device_address: api_1_2 && v12.buffer_device_address == vk::TRUE,
             vulkan_memory_model: api_1_2 && v12.vulkan_memory_model == vk::TRUE,
+            signed_zero_inf_nan_preserve: api_1_2
+                && v12_properties.shader_signed_zero_inf_nan_preserve_float32 == vk::TRUE,
             timestamps: props.limits.timestamp_compute_and_graphics == vk::TRUE && timestamp_valid_bits > 0,
             timestamp_valid_bits,
             storage_buffers_per_pass: props
@@ -772,6 +788,7 @@ mod tests {
             ray_tracing_pipeline: true,
             buffer_device_address: true,
             vulkan_memory_model: true,
+            signed_zero_inf_nan_preserve: true,
             timestamps: true,
             timestamp_valid_bits: 64,
             storage_buffers_per_pass: 1 << 20,
@@ -796,7 +813,7 @@ mod tests {
     }
 
     #[test]
-    fn a_device_needs_the_memory_model_and_room_for_the_shade_passes_buffers() {
+    fn a_device_needs_the_memory_model_ieee_floats_and_room_for_the_shade_passes_buffers() {
         let base = DeviceInfo {
             name: "a GPU".into(),
             device_type: "DISCRETE_GPU".into(),
@@ -810,6 +827,10 @@ mod tests {
         assert!(missing.len() == 1 && missing[0].contains("18 storage buffers a pass") && missing[0].contains(": 4)"));
         let old = DeviceInfo { vulkan_memory_model: false, ..small };
         assert_eq!(old.missing_for_kernels().len(), 2);
+        // A driver that may assume no float is NaN or Inf.
+        let lax = DeviceInfo { signed_zero_inf_nan_preserve: false, ..base.clone() };
+        assert_eq!(lax.missing_for_kernels().len(), 1);
+        assert!(lax.missing_for_kernels()[0].contains("shaderSignedZeroInfNanPreserveFloat32"));
         // `auto` passes over such devices.
         let devices = [DeviceInfo { index: 0, ..old }, DeviceInfo { index: 1, device_type: "CPU".into(), ..base }];
         assert_eq!(crate::device::best_vulkan_device(&devices).unwrap(), 1);
