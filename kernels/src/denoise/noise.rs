@@ -2,7 +2,8 @@
 //! `estimateNoise` as quoted by its public ports [H-PF, H-EST, H-CPU], see
 //! `../shared/reference/ddgi-ratio-ltc.md` §2.1): the total variation — summed second-difference
 //! magnitudes — of the shadow ratio `S_N/U_N` along randomly rotated lines through the pixel,
-//! the maximum over the lines, normalized; then a 3×3 box blur.
+//! the maximum over the lines, normalized; then a 3×3 box blur. (The talk says the lines'
+//! results are averaged; the reference code as its ports quote it takes the maximum, as here.)
 
 use crate::hash::{pcg3d, unit_float};
 use crate::shade::stage::{shadow_ratio, SMALLEST_RADIANCE};
@@ -119,7 +120,7 @@ pub fn noise_estimate(params: &DenoiseParams, pixel: IVec2, ratio: &[Vec4]) -> f
         r += 1;
     }
     // A ratio that is not finite (only a caller's own ratio image holds one: `ratio_pixel`'s
-    // are in [0, 1]) counts as the loudest noise, decided before the clamp, whose `max` and
+    // are in [0, 10⁴]) counts as the loudest noise, decided before the clamp, whose `max` and
     // `min` pass NaN on in some lanes and drop it in others, by platform.
     if !variation.element_sum().is_finite() {
         return 1.0;
@@ -246,8 +247,13 @@ mod tests {
         let params = DenoiseParams { radius: MAX_RADIUS, ..DenoiseParams::new(16, 16) };
         let zero: Vec<Vec4> = (0..256).map(|_| ratio_pixel(Vec4::ZERO, Vec4::ZERO)).collect();
         assert_eq!(noise_estimate(&params, IVec2::new(8, 8), &zero), 0.0);
-        let nan: Vec<Vec4> = (0..256).map(|_| ratio_pixel(Vec4::splat(f32::NAN), Vec4::splat(f32::NAN))).collect();
-        assert!(nan.iter().all(|r| r.is_finite()), "an undefined ratio is 1");
+        for (shadowed, unshadowed) in [(f32::NAN, f32::NAN), (f32::NAN, 1.0), (1.0, f32::NAN)] {
+            let r = ratio_pixel(Vec4::splat(shadowed), Vec4::splat(unshadowed));
+            assert_eq!(r.truncate(), Vec3::ONE, "an undefined ratio is 1: {shadowed} / {unshadowed}");
+        }
+        // A subnormal S_N beside a normal U_N is 0, as on a device that flushes it.
+        let flushed = ratio_pixel(Vec4::splat(0.9 * SMALLEST_RADIANCE), Vec4::splat(SMALLEST_RADIANCE));
+        assert_eq!(flushed, Vec4::new(0.0, 0.0, 0.0, 1.0));
         for bad in [f32::NAN, f32::INFINITY] {
             assert_eq!(noise_estimate(&params, IVec2::new(0, 0), &vec![Vec4::splat(bad); 256]), 1.0, "{bad}: loudest");
         }

@@ -397,13 +397,17 @@ pub const SMALLEST_RADIANCE: f32 = f32::MIN_POSITIVE;
 /// (below [`SMALLEST_RADIANCE`]), i.e. no sample reached the light and the ratio is undefined, so
 /// the composite falls back to `U` [H-DX, H-CPU]. Clamped to `[0, 10⁴]` for other inputs: the
 /// stochastic+tv baseline divides `S_N` by one constant per channel (its mean over the image,
-/// `raywave::denoise::DenoiseInput::stochastic`), where a bright pixel's ratio exceeds 1.
+/// `raywave::denoise::DenoiseInput::stochastic`), where a bright pixel's ratio exceeds 1. A NaN
+/// `S_N` (which raywave's own inputs never hold) is undefined too: 1; an `S_N` below
+/// [`SMALLEST_RADIANCE`] counts as 0, as `U_N` does, since a device may flush it to 0.
 pub fn shadow_ratio(shadowed: Vec3, unshadowed: Vec3) -> Vec3 {
     // `s == u_n` (no occluder: the same sample in both) is 1 exactly, not `s / u_n`: Vulkan bounds
     // `OpFDiv` only to 2.5 ulp, so a device may round `x / x` off 1 and `U · S_N / U_N` off `U`.
     let ratio = |s: f32, u_n: f32| {
-        if s == u_n || !(u_n >= SMALLEST_RADIANCE) {
+        if s == u_n || !(u_n >= SMALLEST_RADIANCE) || s.is_nan() {
             1.0
+        } else if s < SMALLEST_RADIANCE {
+            0.0
         } else {
             (s / u_n).clamp(0.0, 1.0e4)
         }
