@@ -7,6 +7,7 @@
 #![cfg(feature = "vulkan")]
 
 use cargo_gpu_install::install::Install;
+use cargo_gpu_install::spirv_builder::Capability;
 use std::path::{Path, PathBuf};
 
 /// The fixture's entry points, built with `features` (of the fixture crate) on.
@@ -16,6 +17,9 @@ fn entry_points(features: &[&str]) -> Vec<String> {
     let mut builder = backend.to_spirv_builder(&fixture, "spirv-unknown-vulkan1.2");
     builder.release = true;
     builder.shader_crate_features.features = features.iter().map(|f| f.to_string()).collect();
+    // raywave's entry points declare `SignedZeroInfNanPreserve` (README, Linking the kernels into
+    // your engine), which a build that emits them must enable.
+    builder.capabilities.push(Capability::SignedZeroInfNanPreserve);
     // Inside the target dir, so repeated runs (and CI's cached target dir) build incrementally.
     builder.target_dir_path = Some(PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("engine-shader"));
     let mut entries = builder.build().expect("the fixture builds to SPIR-V").entry_points;
