@@ -82,7 +82,8 @@ fn ratio_estimator_is_exact_where_lit_at_the_visibility_floor_in_shadow_and_beat
             assert!(lit_ratio < 0.1 * lit_stochastic, "{scene} {spp} spp lit: {lit_ratio} vs {lit_stochastic}");
         }
     }
-    // One light of one colour, where the floor is exact for unbiased estimates: the 1-spp ratio
+    // One light of one colour, where the floor holds for unbiased estimates (but for the
+    // lobes' colours: README, Shading): the 1-spp ratio
     // estimate is `U` times its one shadow ray's visibility, so in shadowed pixels its error is
     // the floor's, off only by the ratio's bias and the repetitions' noise.
     let cornell = "builtin:cornell";

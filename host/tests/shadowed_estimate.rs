@@ -47,8 +47,8 @@ use raywave_host::Scene;
 const SAMPLES: u32 = 1 << 16;
 
 /// Standard errors a mean may stray from its reference: 4, a chance of 6.3·10⁻⁵ per comparison
-/// for independent samples, about 2·10⁻³ over this file's comparisons (Šidák); the seeds are
-/// fixed, so the test is deterministic.
+/// for independent samples, about 10⁻³ over this file's 16 such comparisons (Šidák); the seeds
+/// are fixed, so the test is deterministic.
 const Z: f64 = 4.0;
 
 /// The brute-force reference's own error, relative to the point's `U`: the 256² midpoint grid is
