@@ -312,9 +312,9 @@ fn a_shadow_origin_lifted_two_millimetres_is_seen() {
 
 /// A lamp mesh bent within the emitter fit's tolerance does not shadow its own light: with the
 /// Cornell lamp's fourth corner (its second triangle's own) lowered by 0.9·10⁻⁴ of the lamp's
-/// diagonal — about 3.5 times the shadow rays' stop before the light's plane — the light is the flat
-/// lamp's and `S_N` at every point of [`cases`] is the flat lamp's, from the same samples, within
-/// 10⁻⁶ of `U`. Before the loader moved a light's mesh onto it, the shadow rays towards that
+/// diagonal — about 3.5 times the shadow rays' stop before the light's plane — the light is the
+/// flat lamp's and `S_N` at every point of [`cases`] is the flat lamp's, from the same samples,
+/// within 10⁻⁶ of `U`. Before the loader moved a light's mesh onto it, the shadow rays towards that
 /// corner met the bent triangle: `S_N` 5–91 % low at these points (12–24 % of `U`).
 #[test]
 fn a_lamp_bent_within_the_emitter_fit_does_not_shadow_its_own_light() {

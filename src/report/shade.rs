@@ -168,8 +168,8 @@ fn mse(image: &[Vec3], reference: &[Vec3], pixels: &[usize]) -> f64 {
 /// visibility is stochastic"). The bound is exact where every channel sees the same visible
 /// fraction (one light, lobes of one colour); under lights of different colours, or where a
 /// coloured diffuse lobe and a white specular one weigh a partly hidden light differently, `v`
-/// differs between channels and one scalar sample cannot have every channel's mean. Stratified samples (ZSobol) beat `floor/√N` at `N` > 1, so only the 1-spp
-/// floor is reported.
+/// differs between channels and one scalar sample cannot have every channel's mean. Stratified
+/// samples (ZSobol) beat `floor/√N` at `N` > 1, so only the 1-spp floor is reported.
 pub fn visibility_floor(analytic: &[Vec3], reference: &[Vec3], emitted: &[Vec3], pixels: &[usize]) -> f64 {
     let sum = sum_from_zero(pixels.iter().map(|&i| {
         let u = analytic[i].as_dvec3();

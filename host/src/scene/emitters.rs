@@ -107,8 +107,9 @@ pub(super) fn derive(meshes: &mut [Mesh]) -> DerivedLights {
 /// accepted bent by up to its tolerance (10⁻⁴ of the lamp's size) reaches past that margin
 /// wherever the lamp is more than ~6 % of its coordinates across: the Cornell box's lamp with a
 /// corner lowered by 0.9·10⁻⁴ of its diagonal had blocked the shadow rays to about a quarter of
-/// itself, `S_N` 5–91 % low (12–24 % of `U`) at the hard points of `shadowed_estimate.rs` (test). Each vertex moves by at most the tolerance, which
-/// is under a quarter of the shortest edge, so its nearest corner is the one it was matched to.
+/// itself, `S_N` 5–91 % low (12–24 % of `U`) at the hard points of `shadowed_estimate.rs`
+/// (test). Each vertex moves by at most the tolerance, which is under a quarter of the shortest
+/// edge, so its nearest corner is the one it was matched to.
 fn snap_onto(mesh: &mut Mesh, quad: &Parallelogram) {
     let corners =
         [quad.corner, quad.corner + quad.edge_u, quad.corner + quad.edge_v, quad.corner + quad.edge_u + quad.edge_v];

@@ -161,10 +161,10 @@ mod tests {
     /// near-rectangles sampled exactly, 6.7–8.1 s against 7.3–9.8 s at 363.0 KB, four and three
     /// alternating runs; at 372.3 KB, with the `SignedZeroInfNanPreserve` capability — which
     /// stops spirv-opt's float folds that assume no NaN or Inf — 7.5–10.2 s against 8.0–8.9 s at
-    /// 365.4 KB, four and three runs). rust-gpu inlines every call, so a second call site of a large function
-    /// grows the module, and the mesa shader cache hides the cost from every later run. Raise
-    /// the budget only with the compile measured (`MESA_SHADER_CACHE_DISABLE=true raywave render
-    /// --device vulkan`).
+    /// 365.4 KB, four and three runs). rust-gpu inlines every call, so a second call site of a
+    /// large function grows the module, and the mesa shader cache hides the cost from every later
+    /// run. Raise the budget only with the compile measured (`MESA_SHADER_CACHE_DISABLE=true
+    /// raywave render --device vulkan`).
     #[test]
     fn the_shade_module_stays_within_its_size_budget() {
         const BUDGET_BYTES: usize = 373_000;
