@@ -426,6 +426,44 @@ mod tests {
         }
     }
 
+    /// A lamp bent within the tolerance — its second triangle's own corner off the first
+    /// triangle's plane — is moved onto its light: indexed or not (six vertices, the shared
+    /// corners written twice), split along either diagonal, every vertex becomes one of the
+    /// light's corners as the kernels rebuild them, all four used, so both triangles lie in the
+    /// light's plane; vertices not in a triangle stay where they were.
+    #[test]
+    fn a_bent_lamp_is_moved_onto_its_light() {
+        let origin = Vec3::new(10.0, -3.0, 4.5);
+        let (u, v) = (Vec3::new(2.0, 0.5, 0.0), Vec3::new(0.75, 0.25, 1.5));
+        let normal = u.cross(v).normalize();
+        let unused = Vec3::new(-7.0, 8.0, 9.0);
+        for (triangles, bent) in [([[0, 1, 2], [0, 2, 3]], 3), ([[0, 1, 3], [1, 2, 3]], 2)] {
+            let mut c = vec![origin, origin + u, origin + u + v, origin + v, unused];
+            // 0.8·10⁻⁴ of the diagonal, within the fit's 10⁻⁴.
+            c[bent] += 0.8e-4 * (u + v).length() * normal;
+            let flat = triangles.iter().flatten().map(|&i| c[i as usize]).collect();
+            for mesh in [emissive(c.clone(), triangles.to_vec()), emissive(flat, vec![[0, 1, 2], [3, 4, 5]])] {
+                let mut meshes = [mesh];
+                let light = derive(&mut meshes).lights[0];
+                let (corner, eu, ev) = (light.position.truncate(), light.edge_u.truncate(), light.edge_v.truncate());
+                let corners = [corner, corner + eu, corner + ev, corner + eu + ev];
+                let snapped = &meshes[0];
+                let used: Vec<Vec3> =
+                    snapped.triangles.iter().flatten().map(|&i| snapped.positions[i as usize]).collect();
+                assert!(used.iter().all(|p| corners.contains(p)), "{triangles:?}: {used:?} vs {corners:?}");
+                assert!(corners.iter().all(|c| used.contains(c)), "{triangles:?}: a corner unused");
+                let off_plane =
+                    used.iter().map(|p| (*p - corner).dot(eu.cross(ev).normalize()).abs()).fold(0.0, f32::max);
+                // A few f32 steps of the coordinates (the bend was 2.6·10⁻⁴).
+                let steps = 8.0 * f32::EPSILON * (origin + u + v).abs().max_element();
+                assert!(off_plane < steps, "{triangles:?}: {off_plane} off the plane");
+                if snapped.positions.len() == 5 {
+                    assert_eq!(snapped.positions[4], unused);
+                }
+            }
+        }
+    }
+
     #[test]
     fn derive_maps_lights_and_meshes_both_ways() {
         let square = vec![Vec3::ZERO, Vec3::X, Vec3::new(1.0, 1.0, 0.0), Vec3::Y];
