@@ -100,7 +100,7 @@ pub(super) fn derive(meshes: &mut [Mesh]) -> DerivedLights {
 }
 
 /// Moves each vertex of a parallelogram mesh's triangles to the nearest corner of its light, as
-/// the kernels rebuild the corners in `f32` (`corner + edge_u + edge_v` for the fourth), so that
+/// the kernels rebuild the corners in `f32` ([`Parallelogram::corners`]), so that
 /// the lamp's own triangles lie in the light's plane to rounding. The shade stage's shadow rays
 /// stop short of that plane by the ray-origin offset (64 `f32` steps of the larger coordinate,
 /// `raywave_kernels::offset::ray_stop_before`) so that the lamp cannot block them; a mesh the fit
@@ -111,8 +111,7 @@ pub(super) fn derive(meshes: &mut [Mesh]) -> DerivedLights {
 /// (test). Each vertex moves by at most the tolerance, which is under a quarter of the shortest
 /// edge, so its nearest corner is the one it was matched to.
 fn snap_onto(mesh: &mut Mesh, quad: &Parallelogram) {
-    let corners =
-        [quad.corner, quad.corner + quad.edge_u, quad.corner + quad.edge_v, quad.corner + quad.edge_u + quad.edge_v];
+    let corners = quad.corners();
     for &index in mesh.triangles.iter().flatten() {
         let vertex = &mut mesh.positions[index as usize];
         let nearest = corners.iter().min_by(|a, b| a.distance_squared(*vertex).total_cmp(&b.distance_squared(*vertex)));
@@ -128,6 +127,15 @@ pub(super) struct Parallelogram {
     pub corner: Vec3,
     pub edge_u: Vec3,
     pub edge_v: Vec3,
+}
+
+impl Parallelogram {
+    /// The four corners in cyclic order from `corner`, rebuilt in `f32` as the kernels rebuild a
+    /// quad light's (`corner + edge_u + edge_v` for the third).
+    pub fn corners(&self) -> [Vec3; 4] {
+        let (c, u, v) = (self.corner, self.edge_u, self.edge_v);
+        [c, c + u, c + u + v, c + v]
+    }
 }
 
 /// The mesh as one front-facing parallelogram, if it is one (see the module documentation).
@@ -209,11 +217,6 @@ mod tests {
         }
     }
 
-    /// The four corners a parallelogram spans, in cyclic order from its corner.
-    fn quad_corners(q: &Parallelogram) -> [Vec3; 4] {
-        [q.corner, q.corner + q.edge_u, q.corner + q.edge_u + q.edge_v, q.corner + q.edge_v]
-    }
-
     /// Whether every corner of `got` is near one of `want` and vice versa.
     fn same_corner_set(got: [Vec3; 4], want: [Vec3; 4], tolerance: f32) -> bool {
         let covers = |a: &[Vec3; 4], b: &[Vec3; 4]| a.iter().all(|p| b.iter().any(|q| p.distance(*q) <= tolerance));
@@ -243,7 +246,7 @@ mod tests {
             let unindexed = emissive(flat, vec![[0, 1, 2], [3, 4, 5]]);
             for mesh in [indexed, unindexed] {
                 let q = parallelogram(&mesh).unwrap_or_else(|| panic!("{triangles:?} not detected"));
-                assert!(same_corner_set(quad_corners(&q), c, 1e-5), "{triangles:?}: {q:?}");
+                assert!(same_corner_set(q.corners(), c, 1e-5), "{triangles:?}: {q:?}");
                 let n = q.edge_u.cross(q.edge_v);
                 assert!((n.length() - u.cross(v).length()).abs() < 1e-4, "{triangles:?}: area {}", n.length());
                 assert!((n.normalize().dot(front) - facing).abs() < 1e-5, "{triangles:?}: facing {n}");
@@ -263,7 +266,7 @@ mod tests {
         for corners in [far, strip] {
             let mesh = emissive(corners.to_vec(), vec![[0, 1, 2], [0, 2, 3]]);
             let q = parallelogram(&mesh).unwrap_or_else(|| panic!("{corners:?} not detected"));
-            assert!(same_corner_set(quad_corners(&q), corners, 1e-2), "{q:?}");
+            assert!(same_corner_set(q.corners(), corners, 1e-2), "{q:?}");
         }
     }
 
@@ -285,7 +288,7 @@ mod tests {
         assert!(bend > 10.0 * shape, "the rounding bends it {bend}, within the shape tolerance {shape}");
         let mesh = emissive(corners.to_vec(), vec![[0, 1, 2], [0, 2, 3]]);
         let q = parallelogram(&mesh).expect("a quad light despite the rounding");
-        assert!(same_corner_set(quad_corners(&q), corners, 0.01), "{q:?}");
+        assert!(same_corner_set(q.corners(), corners, 0.01), "{q:?}");
         let scene = crate::scene::Scene::new("far lamp", vec![mesh], crate::scene::cornell::camera()).unwrap();
         assert_eq!((scene.lights().len(), scene.unsupported_emitters()), (1, 0));
     }
@@ -446,7 +449,7 @@ mod tests {
                 let mut meshes = [mesh];
                 let light = derive(&mut meshes).lights[0];
                 let (corner, eu, ev) = (light.position.truncate(), light.edge_u.truncate(), light.edge_v.truncate());
-                let corners = [corner, corner + eu, corner + ev, corner + eu + ev];
+                let corners = Parallelogram { corner, edge_u: eu, edge_v: ev }.corners();
                 let snapped = &meshes[0];
                 let used: Vec<Vec3> =
                     snapped.triangles.iter().flatten().map(|&i| snapped.positions[i as usize]).collect();
