@@ -482,7 +482,7 @@ mod tests {
 
     fn params(kind: u32, seed: u32, sample_index: u32) -> ShadeParams {
         ShadeParams {
-            sampler: SamplerParams { kind, seed, spp_log2: SEEDS.trailing_zeros(), resolution_log2: 0 },
+            sampler: SamplerParams { kind, seed, spp_log2: (SEEDS / REPLICATES).trailing_zeros(), resolution_log2: 0 },
             width: 1,
             count: 1,
             sample_index,
@@ -495,6 +495,11 @@ mod tests {
 
     /// Samples per statistical test: at least the 10⁵ seeds issue 5 asks for.
     const SEEDS: u32 = 1 << 17;
+
+    /// Independent runs a statistical test's samples are split into, each of `SEEDS / REPLICATES`
+    /// samples with its own seed (for the Sobol' sampler its own scramble), so that the scatter of
+    /// their means gives the standard error whatever the sampler.
+    const REPLICATES: u32 = 64;
 
     /// Each statistical test runs with both samplers, each with `U_S` from the LTC alone and with
     /// the residual towards GGX (`ShadeParams::analytic_residual`).
@@ -513,12 +518,12 @@ mod tests {
         analytic: [f64; 3],
     }
 
-    /// A sample mean and its standard error as for independent samples. For the Sobol' sampler
-    /// that is not a bound: each slot's samples form an Owen-scrambled (0, m, 2)-net, whose
-    /// variance may reach twice that of independent samples (A. B. Owen, "Monte Carlo Variance
-    /// of Scrambled Net Quadrature", SIAM J. Numer. Anal. 34(5), 1997), so a Sobol' comparison
-    /// within [`Z`] of these errors may be as tight as about 2.8 of its own: stricter than
-    /// stated, never looser.
+    /// The mean of [`REPLICATES`] replicate means and its standard error, estimated from their
+    /// scatter. The error of one sample's scatter would not do for the Sobol' sampler: a
+    /// replicate's samples form an Owen-scrambled (0, m, 2)-net, whose mean's variance may be far
+    /// below that of independent samples for a smooth integrand or up to twice it (A. B. Owen,
+    /// "Monte Carlo Variance of Scrambled Net Quadrature", SIAM J. Numer. Anal. 34(5), 1997),
+    /// while the replicates, scrambled apart, are independent whatever the sampler.
     #[derive(Copy, Clone, Debug)]
     struct MeanAndError {
         mean: f64,
@@ -526,13 +531,16 @@ mod tests {
     }
 
     /// Standard errors a mean may stray from what it estimates in the statistical tests below:
-    /// 4, a chance of 6.3·10⁻⁵ each for independent samples, so that this module's 62
-    /// comparisons of three channels (186) raise a false alarm with a chance near 1.2 % (Šidák:
-    /// 1 − (1 − 6.3·10⁻⁵)¹⁸⁶), and a bias of 1.5 % of a mean 0.3 % uncertain still fails.
-    const Z: f64 = 4.0;
+    /// 4.3, Student's t with the replicates' 63 degrees of freedom beyond which lies a chance of
+    /// 6.0·10⁻⁵ (two-sided), so that this module's 68 comparisons of three channels (204) raise a
+    /// false alarm with a chance near 1.2 % (Šidák: 1 − (1 − 6.0·10⁻⁵)²⁰⁴), and a bias of 1.5 %
+    /// of a mean 0.3 % uncertain still fails.
+    const Z: f64 = 4.3;
 
-    /// Whether every channel of `estimates` is within [`Z`] standard errors (plus 10⁻⁴ relative:
-    /// the `f32` accumulation) of `reference`.
+    /// Whether every channel of `estimates` is within [`Z`] standard errors of `reference`, plus
+    /// 10⁻⁴ relative for the `f32` arithmetic of `U` and of each sample: with the Sobol' sampler
+    /// a smooth integrand's mean is known to a few 10⁻⁶ (a thin strip's `U_N` with the residual
+    /// lies 2.3·10⁻⁵ below its `U`, nine such errors).
     fn agrees(estimates: [MeanAndError; 3], reference: [f64; 3]) -> bool {
         estimates.iter().zip(reference).all(|(e, r)| (e.mean - r).abs() <= Z * e.error + 1e-4 * r)
     }
@@ -545,48 +553,86 @@ mod tests {
         }
     }
 
-    /// Per channel, the mean of `n` samples whose sums [`accumulate`] gathered, and its standard
-    /// error.
-    fn mean_and_error(sums: [[f64; 2]; 3], n: u32) -> [MeanAndError; 3] {
+    /// Per channel, the mean of the [`REPLICATES`] replicate means whose sums [`accumulate`]
+    /// gathered, and its standard error (from their sample variance, `n − 1` in the divisor).
+    fn mean_and_error(sums: [[f64; 2]; 3]) -> [MeanAndError; 3] {
+        let n = f64::from(REPLICATES);
         sums.map(|[sum, sum2]| {
-            let mean = sum / f64::from(n);
-            let variance = (sum2 / f64::from(n) - mean * mean).max(0.0);
-            MeanAndError { mean, error: (variance / f64::from(n)).sqrt() }
+            let mean = sum / n;
+            let variance = ((sum2 - n * mean * mean) / (n - 1.0)).max(0.0);
+            MeanAndError { mean, error: (variance / n).sqrt() }
         })
     }
 
-    /// `n` samples at the origin (normal +z, viewed from `view`) under `lights`, with
-    /// `ShadeParams::analytic_residual` = `analytic_residual`; a sample's `S_N` is its `U_N` if
-    /// `visible(shadow_origin, shadow_direction)` (direction's w = tmax).
+    /// Per channel, the means of `sample(seed, index)`'s `N` estimates over `samples` split into
+    /// [`REPLICATES`] replicates seeded `seed`, `seed + 1`, …, with their standard errors from
+    /// the replicates' scatter.
+    fn replicated<const N: usize>(
+        samples: u32,
+        seed: u32,
+        mut sample: impl FnMut(u32, u32) -> [glam::DVec3; N],
+    ) -> [[MeanAndError; 3]; N] {
+        let per_replicate = samples / REPLICATES;
+        assert!(
+            per_replicate > 0 && samples.is_multiple_of(REPLICATES),
+            "{samples} samples in {REPLICATES} replicates"
+        );
+        // Per estimate and channel: the sum and the sum of squares of the replicate means.
+        let mut sums = [[[0.0f64; 2]; 3]; N];
+        for replicate in 0..REPLICATES {
+            let mut totals = [glam::DVec3::ZERO; N];
+            for i in 0..per_replicate {
+                for (total, y) in totals.iter_mut().zip(sample(seed + replicate, i)) {
+                    *total += y;
+                }
+            }
+            for (sums, total) in sums.iter_mut().zip(totals) {
+                accumulate(sums, total / f64::from(per_replicate));
+            }
+        }
+        sums.map(mean_and_error)
+    }
+
+    /// The analytic `U` at the origin (normal +z, viewed from `view`) under `lights`, with
+    /// `ShadeParams::analytic_residual` = `analytic_residual`.
+    fn analytic_u(lights: &[Light], material: MaterialParams, view: Vec3, analytic_residual: u32) -> [f64; 3] {
+        let table = table();
+        let materials = [material];
+        let scene = ShadeScene { materials: &materials, lights: LightSet::new(lights, &[], &[]), ltc: &table };
+        let p = ShadeParams { analytic_residual, ..params(sampler_kind::SOBOL, 5, 0) };
+        let s = shade_sample(&p, UVec2::ZERO, -view, &surface_at_origin(), &scene).value;
+        s.analytic.xyz().as_dvec3().to_array()
+    }
+
+    /// [`SEEDS`] samples in [`REPLICATES`] replicates at the origin (normal +z, viewed from
+    /// `view`) under `lights`, with `ShadeParams::analytic_residual` = `analytic_residual`; a
+    /// sample's `S_N` is its `U_N` if `visible(shadow_origin, shadow_direction)` (direction's
+    /// w = tmax).
     fn estimate(
         lights: &[Light],
         material: MaterialParams,
         view: Vec3,
         kind: u32,
         analytic_residual: u32,
-        n: u32,
         visible: impl Fn(Vec4, Vec4) -> bool,
     ) -> Estimate {
         let table = table();
         let materials = [material];
         let scene = ShadeScene { materials: &materials, lights: LightSet::new(lights, &[], &[]), ltc: &table };
-        // Per estimate (U_N, S_N) and channel: the sum and the sum of squares.
-        let (mut sums, mut analytic) = ([[[0.0f64; 2]; 3]; 2], [0.0f64; 3]);
-        for i in 0..n {
-            let p = ShadeParams { analytic_residual, ..params(kind, 5, i) };
+        let mut analytic = [0.0f64; 3];
+        let [unshadowed, shadowed] = replicated(SEEDS, 5, |seed, i| {
+            let p = ShadeParams { analytic_residual, ..params(kind, seed, i) };
             let s = shade_sample(&p, UVec2::ZERO, -view, &surface_at_origin(), &scene).value;
             let unshadowed = s.unshadowed.xyz().as_dvec3();
             let has_ray = s.shadow_direction.w > 0.0;
             let visible = has_ray && visible(s.shadow_origin, s.shadow_direction);
-            let shadowed = if visible { unshadowed } else { glam::DVec3::ZERO };
-            accumulate(&mut sums[0], unshadowed);
-            accumulate(&mut sums[1], shadowed);
             analytic = s.analytic.xyz().as_dvec3().to_array();
             assert!(s.unshadowed.is_finite() && s.shadow_direction.is_finite() && s.shadow_origin.is_finite());
             // A shadow ray leaves the lit side, offset along the normal (+z), towards the light.
             assert!(!has_ray || (s.shadow_origin.z > 0.0 && s.shadow_direction.z > 0.0), "sample {i}: {s:?}");
-        }
-        Estimate { unshadowed: mean_and_error(sums[0], n), shadowed: mean_and_error(sums[1], n), analytic }
+            [unshadowed, if visible { unshadowed } else { glam::DVec3::ZERO }]
+        });
+        Estimate { unshadowed, shadowed, analytic }
     }
 
     /// Every shadow ray reaches its light: no occluder.
@@ -596,8 +642,8 @@ mod tests {
 
     #[test]
     fn unshadowed_estimate_is_unbiased_for_u() {
-        // Mean of 2^17 samples within `Z` standard errors (plus 1e-4 relative for the f32
-        // accumulation) of the analytic U, channel by channel (a `U_N` of the right luminance in
+        // Mean of 2^17 samples (64 replicates) within `Z` standard errors (plus 1e-4 relative: f32
+        // arithmetic) of the analytic U, channel by channel (a `U_N` of the right luminance in
         // the wrong colour fails): glossy and diffuse materials, one and two lights, a light
         // crossing the horizon, a grazing view, a rhombus, near-mirror surfaces (roughness 0,
         // 0.02, 0.05) under a light about the mirror direction of a view 84° from the normal;
@@ -737,14 +783,13 @@ mod tests {
         let table = table();
         let materials = [material(Vec3::new(0.9460666, 0.62173045, 0.6543907), 0.0, 0.0)];
         let scene = ShadeScene { materials: &materials, lights: LightSet::new(&lights, &[], &[]), ltc: &table };
-        let n_samples = 1u32 << 18;
-        let (mut sums, mut analytic) = ([[0.0f64; 2]; 3], [0.0f64; 3]);
-        for i in 0..n_samples {
-            let s = shade_sample(&params(sampler_kind::INDEPENDENT, 1, i), UVec2::ZERO, -view, &surface, &scene).value;
-            accumulate(&mut sums, s.unshadowed.xyz().as_dvec3());
+        let mut analytic = [0.0f64; 3];
+        let [estimates] = replicated(1 << 18, 1, |seed, i| {
+            let s =
+                shade_sample(&params(sampler_kind::INDEPENDENT, seed, i), UVec2::ZERO, -view, &surface, &scene).value;
             analytic = s.analytic.xyz().as_dvec3().to_array();
-        }
-        let estimates = mean_and_error(sums, n_samples);
+            [s.unshadowed.xyz().as_dvec3()]
+        });
         assert!(analytic.iter().all(|&u| u > 0.0), "U = {analytic:?}");
         assert!(agrees(estimates, analytic), "U_N {estimates:?} vs U {analytic:?}");
     }
@@ -754,7 +799,7 @@ mod tests {
     fn assert_unshadowed_estimate_is_unbiased(cases: &[(&[Light], MaterialParams, Vec3)], kinds: &[(u32, u32)]) {
         for (k, &(lights, material, view)) in cases.iter().enumerate() {
             for &(kind, residual) in kinds {
-                let e = estimate(lights, material, view, kind, residual, SEEDS, unoccluded);
+                let e = estimate(lights, material, view, kind, residual, unoccluded);
                 assert!(e.analytic.iter().all(|&u| u > 0.0), "case {k}: U = {:?}", e.analytic);
                 assert!(
                     agrees(e.unshadowed, e.analytic),
@@ -773,9 +818,9 @@ mod tests {
         // `S_N` samples the whole light and counts only unoccluded rays, so its mean is the
         // integral of the lobes it evaluates over the visible part — exactly the analytic `U` of
         // the sub-quad x ∈ [−0.1, 0.2]. Mean of 2^17 samples within `Z` standard errors (plus
-        // 1e-4 relative: f32 accumulation, and the shadow ray's origin offset, which moves the
-        // shadow's edge on the light by ~1e-5) of that `U`, channel by channel; diffuse, glossy and metallic
-        // materials, a grazing view, a second light below the occluder's plane (never occluded),
+        // 1e-4 relative: f32 arithmetic, and the shadow ray's origin offset, which moves the
+        // shadow's edge on the light by ~1e-5) of that `U`, channel by channel; diffuse, glossy
+        // and metallic materials, a grazing view, a second light below the occluder's plane (never occluded),
         // both samplers, with and without the residual towards GGX.
         let occluder_visible = |origin: Vec4, direction: Vec4| {
             let (o, d, t_max) = (origin.xyz(), direction.xyz(), direction.w);
@@ -805,8 +850,8 @@ mod tests {
         for (k, (count, material, view)) in cases.into_iter().enumerate() {
             let (lights, visible_lights) = (&all_lights[..count], &all_visible[..count]);
             for (kind, residual) in KINDS_AND_RESIDUAL {
-                let reference = estimate(visible_lights, material, view, kind, residual, 1, unoccluded).analytic;
-                let e = estimate(lights, material, view, kind, residual, SEEDS, occluder_visible);
+                let reference = analytic_u(visible_lights, material, view, residual);
+                let e = estimate(lights, material, view, kind, residual, occluder_visible);
                 let hides_part = reference.iter().zip(e.analytic).all(|(&r, u)| r > 0.0 && r < 0.95 * u);
                 assert!(hides_part, "case {k}: the occluder hides part of U");
                 assert!(
@@ -839,7 +884,7 @@ mod tests {
             let diffuse = base * (1.0 - metallic);
             let expected = radiance * (diffuse + f0 * magnitude + (Vec3::ONE - f0) * fresnel);
             let material = material(base, roughness, metallic);
-            let u = estimate(&lights, material, Vec3::Z, sampler_kind::SOBOL, 0, 1, unoccluded).analytic;
+            let u = analytic_u(&lights, material, Vec3::Z, 0);
             for (channel, (u, expected)) in u.into_iter().zip(expected.to_array()).enumerate() {
                 let expected = f64::from(expected);
                 assert!(
@@ -1080,8 +1125,8 @@ mod tests {
         let lights = [ceiling_light(Vec3::new(0.5, 0.0, 1.0), 0.3, Vec3::splat(4.0))];
         let view = Vec3::new(0.966, 0.0, 0.259);
         // A grey light on a grey metal: the channels agree, so the first stands for all.
-        let ltc_u = estimate(&lights, material, view, sampler_kind::SOBOL, 0, 1, unoccluded).analytic;
-        let e = estimate(&lights, material, view, sampler_kind::SOBOL, 1, SEEDS, unoccluded);
+        let ltc_u = analytic_u(&lights, material, view, 0);
+        let e = estimate(&lights, material, view, sampler_kind::SOBOL, 1, unoccluded);
         let (MeanAndError { mean, error }, corrected_u, ltc_u) = (e.unshadowed[0], e.analytic[0], ltc_u[0]);
         assert!((corrected_u - ltc_u).abs() > 0.05 * ltc_u, "U {corrected_u} vs the LTC's {ltc_u}");
         assert!(agrees(e.unshadowed, e.analytic), "U_N {:?} vs U {:?}", e.unshadowed, e.analytic);
