@@ -339,6 +339,8 @@ pub(crate) fn check_shade_streams(
         return Err(shade_error(format!("{} rays but {} hits", rays.len(), hits.len())));
     }
     check_shade_params(params, data, hits.len())?;
+    #[cfg(feature = "vulkan")]
+    crate::vulkan::driver_lock::debug_assert_unheld("the shade stage's dense-stream check (rayon)");
     match rays.pixel.par_iter().enumerate().position_first(|(i, &pixel)| pixel as usize != i) {
         Some(i) => Err(shade_error(format!(
             "rays.pixel[{i}] = {}: the stage takes dense streams, ray i for pixel i as generate writes them \

@@ -290,6 +290,8 @@ impl DenoiseInput {
     /// Cost: one read of the six buffers, about 20 ms for a 1920 × 1080 frame on the 2-vCPU test
     /// machine (≈ 10 GB/s, memory-bound; the upload to a Vulkan device reads them once more).
     pub fn check(&self, params: &DenoiseParams) -> Result<()> {
+        #[cfg(feature = "vulkan")]
+        crate::vulkan::driver_lock::debug_assert_unheld("the denoise inputs' scan");
         let pixels = u64::from(params.width) * u64::from(params.height);
         let lengths = self.buffers().map(|(_, buffer, _)| buffer.len());
         let reason = if pixels == 0 {

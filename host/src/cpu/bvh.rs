@@ -125,6 +125,8 @@ impl CpuScene {
     /// Builds the CWBVH with obvhs preset `quality`. Spatial splits (the slow preset) may reference
     /// a triangle from several leaves; it is then stored once per reference.
     pub fn build_with(scene: &Scene, quality: BvhQuality) -> Result<Self> {
+        #[cfg(feature = "vulkan")]
+        crate::vulkan::driver_lock::debug_assert_unheld("a BVH build");
         let start = Instant::now();
         let mut flat = Vec::with_capacity(scene.triangle_count());
         let mut ids = Vec::with_capacity(scene.triangle_count());

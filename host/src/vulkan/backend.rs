@@ -742,11 +742,11 @@ impl Backend for VulkanBackend {
     }
 
     fn load_scene(&mut self, scene: &Scene) -> Result<()> {
-        let _driver = driver_lock::device_use();
         // Everything that can refuse the scene on the host runs first, so that a refused scene
-        // leaves the loaded one in place (as on the CPU backend). Then the old scene's device
-        // memory is freed before the new one's is allocated: a failure from here on (device
-        // memory) leaves no scene loaded.
+        // leaves the loaded one in place (as on the CPU backend), and outside the driver lock
+        // (`driver_lock::debug_assert_unheld`: the software BVH's build may take seconds). Then
+        // the old scene's device memory is freed before the new one's is allocated: a failure
+        // from here on (device memory) leaves no scene loaded.
         let software = match self.trace_method {
             TraceMethod::RayQuery | TraceMethod::RtPipeline => {
                 check_limits(scene, &self.core.accel_limits, &self.core.info.name)?;
@@ -765,6 +765,7 @@ impl Backend for VulkanBackend {
                 Some(cpu)
             }
         };
+        let _driver = driver_lock::device_use();
         self.scene = None;
         let device_scene = match software {
             None => DeviceScene::Accelerated(build_scene(&self.core, scene)?),
@@ -826,10 +827,12 @@ impl Backend for VulkanBackend {
         rays: &RayStream,
         hits: &HitStream,
     ) -> Result<(ShadeStream, StageReport)> {
-        let _driver = driver_lock::device_use();
+        // The checks before the driver lock: the dense-stream check is a rayon scan
+        // (`driver_lock::debug_assert_unheld`).
         let loaded = self.scene.as_ref().map(|(_, identity)| identity);
         check_shade_inputs(params, data, loaded, rays, hits)?;
         let len = self.check_stream(hits.len(), "hits")?;
+        let _driver = driver_lock::device_use();
         let core = &self.core;
         let kernel = self.shade_kernels.for_params(core, params)?;
         let scene = load_shade_data(core, &mut self.shade_data, data)?;
@@ -935,9 +938,10 @@ impl Backend for VulkanBackend {
         params: &DenoiseParams,
         input: &DenoiseInput,
     ) -> Result<(Vec<Vec4>, Vec<StageReport>)> {
-        let _driver = driver_lock::device_use();
+        // The inputs' scan before the driver lock (`driver_lock::debug_assert_unheld`).
         input.check(params)?;
         self.check_stream(input.len(), "denoise")?;
+        let _driver = driver_lock::device_use();
         self.denoise_kernels.run(&self.core, method, params, input)
     }
 

@@ -43,6 +43,16 @@ pub(crate) fn device_use() -> DeviceUse {
     DeviceUse { _read: outermost.then(|| DRIVER.read().unwrap_or_else(PoisonError::into_inner)) }
 }
 
+/// Asserts, in debug builds, that this thread is inside no backend call holding the lock, before
+/// host work that takes long or enters rayon (`work` names it). Such work belongs before a
+/// backend method takes [`device_use`]: a rayon worker waiting for its parallel section's jobs
+/// runs other jobs meanwhile, and one of them that opens or drops a backend would wait for this
+/// thread's own lock, forever; and a thread that waits to open or drop a backend makes every
+/// other thread's backend calls queue behind the whole of that work.
+pub(crate) fn debug_assert_unheld(work: &str) {
+    debug_assert_eq!(USES.with(Cell::get), 0, "{work} runs inside a device call, holding the driver lock");
+}
+
 /// See [`device_use`].
 pub(crate) struct DeviceUse {
     _read: Option<RwLockReadGuard<'static, ()>>,
@@ -67,6 +77,20 @@ mod tests {
         }
         assert_eq!(USES.with(Cell::get), 0);
         drop(device_lifetime());
+    }
+
+    #[test]
+    #[cfg(debug_assertions)]
+    fn host_work_inside_a_device_call_is_caught() {
+        debug_assert_unheld("outside");
+        let inside = std::panic::catch_unwind(|| {
+            let _using = device_use();
+            debug_assert_unheld("a scan");
+        });
+        let message = inside.expect_err("host work while the lock is held");
+        let message = message.downcast_ref::<String>().expect("a formatted message");
+        assert!(message.contains("a scan runs inside a device call"), "{message}");
+        assert_eq!(USES.with(Cell::get), 0, "the unwinding released the use");
     }
 
     #[test]

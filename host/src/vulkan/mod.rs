@@ -8,7 +8,7 @@ mod batch;
 mod buffer;
 mod context;
 mod denoise;
-mod driver_lock;
+pub(crate) mod driver_lock;
 mod kernel;
 mod pass;
 mod recycle;
