@@ -114,6 +114,8 @@ pub(crate) struct Pass {
     /// reused once released.
     slots: Mutex<Vec<Slot>>,
     bindings: Vec<(u32, vk::DescriptorType)>,
+    /// Bytes of push constants the layout declares, which every run must push.
+    push_constant_bytes: u32,
     /// Benchmark mode: the last run's seconds per dispatch per invocation (`f64` bits; NaN
     /// before the first), from which the next run, whatever its size, takes how many dispatches
     /// it repeats — so that a large call after a small one does not run for minutes.
@@ -169,6 +171,7 @@ impl Pass {
             pool_sizes,
             slots: Mutex::new(Vec::new()),
             bindings: bindings.to_vec(),
+            push_constant_bytes,
             seconds_per_invocation: AtomicU64::new(f64::NAN.to_bits()),
         };
         let layout_bindings: Vec<_> = bindings
@@ -305,6 +308,29 @@ impl Pass {
             return Err(Error::InvalidParameter {
                 name: "resources",
                 reason: format!("{} takes {} bindings", self.name, self.bindings.len()),
+            });
+        }
+        // A resource of another kind than its binding's would write a descriptor without its
+        // data, and pushed constants of another size leave the kernel reading undefined ones.
+        let kind = |resource: &Resource<'_>| match resource {
+            Resource::Buffer(_) => vk::DescriptorType::STORAGE_BUFFER,
+            Resource::AccelerationStructure(_) => vk::DescriptorType::ACCELERATION_STRUCTURE_KHR,
+        };
+        if let Some((_, &(binding, ty))) = resources.iter().zip(&self.bindings).find(|(r, &(_, ty))| kind(r) != ty) {
+            return Err(Error::InvalidParameter {
+                name: "resources",
+                reason: format!("{}: binding {binding} takes a {ty:?}, not the resource given", self.name),
+            });
+        }
+        if push.len() != self.push_constant_bytes as usize {
+            return Err(Error::InvalidParameter {
+                name: "push",
+                reason: format!(
+                    "{}: {} bytes of push constants for a layout of {}",
+                    self.name,
+                    push.len(),
+                    self.push_constant_bytes
+                ),
             });
         }
         if let Some(k) = resources.iter().position(|r| matches!(r, Resource::Buffer(b) if !b.device_local)) {
@@ -458,6 +484,41 @@ mod tests {
         assert_eq!(sustained_dispatches(0.01, 1e-9), MAX_SUSTAINED_DISPATCHES);
         assert_eq!(sustained_dispatches(0.01, 0.0), 1);
         assert_eq!(sustained_dispatches(0.01, f64::NAN), 1);
+    }
+
+    /// A run is refused, by a typed error naming what is wrong, for a resource of another kind
+    /// than its binding's or push constants of another size than the layout's, and prepared
+    /// when both match. Every Vulkan device; without one it fails under CI and is skipped loudly
+    /// elsewhere.
+    #[test]
+    fn a_run_of_mismatched_resources_or_push_constants_is_refused() {
+        for device in &super::super::devices_for_test("pass preparation") {
+            let core = super::super::context::open(device.index, &Default::default()).unwrap();
+            let storage = vk::DescriptorType::STORAGE_BUFFER;
+            let stages = vk::ShaderStageFlags::COMPUTE;
+            let pass =
+                Pass::new(&core, "test", vk::PipelineBindPoint::COMPUTE, stages, &[(0, storage), (1, storage)], 16)
+                    .unwrap();
+            let buffer = GpuBuffer::storage::<u32>(&core, 4, "test").unwrap();
+            let buffers = [Resource::Buffer(&buffer), Resource::Buffer(&buffer)];
+            let refusal = |resources: &[Resource<'_>], push: &[u8]| match pass.prepare(resources, push, 1) {
+                Err(Error::InvalidParameter { name, reason }) => format!("{name}: {reason}"),
+                Err(other) => panic!("{}: {other}", device.name),
+                Ok(run) => {
+                    pass.release(run);
+                    String::new()
+                }
+            };
+            let accel = Resource::AccelerationStructure(vk::AccelerationStructureKHR::null());
+            let mixed = refusal(&[buffers[0], accel], &[0; 16]);
+            assert!(mixed.contains("resources: test: binding 1 takes a STORAGE_BUFFER"), "{}: {mixed}", device.name);
+            for push in [&[0u8; 0][..], &[0; 8], &[0; 20]] {
+                let message = refusal(&buffers, push);
+                let expected = format!("push: test: {} bytes of push constants for a layout of 16", push.len());
+                assert_eq!(message, expected, "{}", device.name);
+            }
+            assert_eq!(refusal(&buffers, &[0; 16]), "", "{}: matching resources and constants", device.name);
+        }
     }
 
     #[test]
