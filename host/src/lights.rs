@@ -788,7 +788,7 @@ mod tests {
             // Through LightSet, an empty BVH means the linear scan: uniform among dark lights.
             let set = LightSet::new(&lights, bvh.nodes(), bvh.trails());
             let expected = if lights.is_empty() { LightChoice::NONE } else { LightChoice { index: 1, pmf: 1.0 / 3.0 } };
-            assert_eq!(set.select(Vec3::ONE, Vec3::ZERO, 0.5), expected);
+            assert_eq!(set.select(Vec3::ONE, Vec3::ZERO, glam::Vec2::splat(0.5)), expected);
         }
     }
 

@@ -12,7 +12,8 @@ pub const LENS: u32 = 1;
 /// Shade: x chooses BRDF versus light sampling (the seed's P_BRDF), y chooses the BRDF lobe
 /// (P_Diff).
 pub const SHADE_STRATEGY: u32 = 2;
-/// Shade: x selects the light (uniformly or by importance).
+/// Shade: the light's selection (x: by importance or uniformly, and the importance walk; y: the
+/// uniformly chosen light, `LightSet::select`).
 pub const SHADE_LIGHT_SELECT: u32 = 3;
 /// Shade: the 2-D point warped to a light sample or a BRDF/ambient-occlusion direction.
 pub const SHADE_DIRECTION: u32 = 4;

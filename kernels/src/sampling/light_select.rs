@@ -58,7 +58,9 @@
 //! so a light whose importance is below that step may fall between two steps and never be
 //! chosen, though [`importance_pmf`] gives it its share; the light missed is at most ≈ 2⁻²⁴ of
 //! the total importance. [`LightSet`]'s uniform share keeps every light of positive importance
-//! above that step (for up to [`UNIFORM_SHARE`]·2²⁴ = 2¹⁹ such lights).
+//! above that step (for up to [`UNIFORM_SHARE`]·2²⁴ = 2¹⁹ such lights). With the BVH its uniform
+//! light is picked by a number of its own, so each of `N` lights is drawn by the share within
+//! `N/2²⁴` of its `α/N` (drawn at all for `N` up to 2²⁴).
 //!
 //! All functions are `no_std`, loop-bounded, allocation- and panic-free, and return finite values:
 //! importances are clamped to `[0,` [`MAX_IMPORTANCE`]`]` so that sums over up to 2³² lights stay
@@ -790,11 +792,15 @@ impl<'a> LightSet<'a> {
         self.node_count.min(self.nodes.len() as u32)
     }
 
-    /// Chooses a light for `p`, `n` with sample `u`, by importance mixed with a uniform choice
-    /// ([`UNIFORM_SHARE`]): by the BVH when there is one — uniform among all the lights — else by
-    /// the linear scan — uniform among the lights of positive importance.
-    /// [`LightChoice::NONE`] when there is no light to choose.
-    pub fn select(&self, p: Vec3, n: Vec3, u: f32) -> LightChoice {
+    /// Chooses a light for `p`, `n` with the 2-D sample `u`, by importance mixed with a uniform
+    /// choice ([`UNIFORM_SHARE`]): by the BVH when there is one — uniform among all the lights —
+    /// else by the linear scan — uniform among the lights of positive importance.
+    /// [`LightChoice::NONE`] when there is no light to choose. `u.x` chooses between the share
+    /// and the walk, and walks; `u.y` picks the BVH's uniform light, with all its 24 bits: `u.x`
+    /// rescaled from below the share would hold only 2¹⁹ values, so that each of `N` lights
+    /// would be drawn a whole number of them, up to `N/2¹⁹` off its pmf (+14 % at 10⁵ lights).
+    /// Now the drawn frequency is within `N/2²⁴` of it.
+    pub fn select(&self, p: Vec3, n: Vec3, u: Vec2) -> LightChoice {
         let lights = self.light_count();
         if lights == 0 {
             return LightChoice::NONE;
@@ -803,9 +809,9 @@ impl<'a> LightSet<'a> {
             // A share of the choices uniform among all the lights — one descent along the chosen
             // light's trail gives its walk pmf — and the rest by the walk, with the sample
             // rescaled (exactly, for the power-of-two share) to [0, 1).
-            let u = clamp_sample_1d(u);
+            let (u, u_pick) = (clamp_sample_1d(u.x), u.y);
             let uniform = u < UNIFORM_SHARE;
-            let picked = select_uniform(lights, u * (1.0 / UNIFORM_SHARE)).index;
+            let picked = select_uniform(lights, u_pick).index;
             let trail = if uniform && (picked as usize) < self.trails.len() { self.trails[picked as usize] } else { 0 };
             let rescaled = ((u - UNIFORM_SHARE) / (1.0 - UNIFORM_SHARE)).min(ONE_MINUS_EPSILON);
             let reached = bvh_descend(self, p, n, rescaled, uniform, trail);
@@ -818,7 +824,7 @@ impl<'a> LightSet<'a> {
                 LightChoice::NONE
             }
         } else {
-            scan_choice(self.lights, lights, p, n, u, lights, UNIFORM_SHARE)
+            scan_choice(self.lights, lights, p, n, u.x, lights, UNIFORM_SHARE)
         }
     }
 
@@ -1521,19 +1527,26 @@ mod tests {
             assert!((linear.pmf(p, n, k) / mixed - 1.0).abs() < 1e-6, "{} vs {mixed}", linear.pmf(p, n, k));
             assert_eq!(tree.pmf(p, n, k), mixed_pmf(3, bvh_pmf(&lights, &nodes, &trails, p, n, k)));
         }
-        let scanned = linear.select(p, n, 0.4);
+        let u = Vec2::new(0.4, 0.9);
+        let scanned = linear.select(p, n, u);
         assert_eq!(scanned.pmf, linear.pmf(p, n, scanned.index));
-        // Past the uniform share the walk draws with the rescaled sample; within it, uniformly.
+        // Past the uniform share the walk draws with the rescaled sample's x (y does not count);
+        // within it, y picks uniformly.
         let walked = select_bvh(&lights, &nodes, p, n, (0.4 - UNIFORM_SHARE) / (1.0 - UNIFORM_SHARE));
-        assert_eq!(tree.select(p, n, 0.4), LightChoice { index: walked.index, pmf: mixed_pmf(3, walked.pmf) });
-        let uniform = tree.select(p, n, 0.5 * UNIFORM_SHARE);
-        assert_eq!(uniform, LightChoice { index: 1, pmf: tree.pmf(p, n, 1) });
+        for y in [0.0, 0.5, 0.9] {
+            let expected = LightChoice { index: walked.index, pmf: mixed_pmf(3, walked.pmf) };
+            assert_eq!(tree.select(p, n, Vec2::new(0.4, y)), expected);
+        }
+        for (y, index) in [(0.0, 0), (0.5, 1), (0.9, 2)] {
+            let uniform = tree.select(p, n, Vec2::new(0.5 * UNIFORM_SHARE, y));
+            assert_eq!(uniform, LightChoice { index, pmf: tree.pmf(p, n, index) });
+        }
         // Dummy one-element buffers with zero counts: no light, and the scan, respectively.
         let none = LightSet { light_count: 0, ..tree };
-        assert_eq!(none.select(p, n, 0.4), LightChoice::NONE);
+        assert_eq!(none.select(p, n, u), LightChoice::NONE);
         assert_eq!(none.pmf(p, n, 0), 0.0);
         let no_tree = LightSet { node_count: 0, ..tree };
-        assert_eq!(no_tree.select(p, n, 0.4), linear.select(p, n, 0.4));
+        assert_eq!(no_tree.select(p, n, u), linear.select(p, n, u));
         let two = LightSet { light_count: 2, node_count: 0, ..tree };
         assert!(((0..3).map(|k| two.pmf(p, n, k)).sum::<f32>() - 1.0).abs() < 1e-6);
         assert_eq!(two.pmf(p, n, 2), 0.0);
@@ -1562,8 +1575,37 @@ mod tests {
         assert_draws_follow_the_pmf(&set, p, n);
     }
 
-    /// Draws `set`'s choice at `p`, `n` with 2¹⁶ stratified samples: each choice carries the pmf
-    /// [`LightSet::pmf`] gives, the pmfs sum to 1, and each light is drawn as often as its pmf
+    /// The uniform share's pick among 10⁵ lights, over every one of the 2²⁴ values of `u.y`
+    /// below the share: each light is drawn ⌊2²⁴/N⌋ or ⌈2²⁴/N⌉ times (167 or 168 of 167.8, within
+    /// 0.5 % of its share `α/N`), and carries its pmf. From `u.x` below the share, as before, it
+    /// had only 2¹⁹ values, 5 or 6 a light for 5.24 (+14 %). One leaf, light 0's: the walk
+    /// reaches no other light, so each of them is drawn by the share alone, with pmf `α/N`.
+    #[test]
+    fn the_uniform_share_draws_each_of_many_lights_as_often_as_its_pmf_says() {
+        const N: u32 = 100_000;
+        let lights: Vec<Light> = (0..N)
+            .map(|k| Light::quad(Vec3::new(k as f32, 2.0, 0.0), Vec3::X * 0.5, Vec3::Z * 0.5, Vec3::ONE, false))
+            .collect();
+        let nodes = [leaf_node(&lights, 0)];
+        let trails = vec![0u32; N as usize];
+        let set = LightSet::new(&lights, &nodes, &trails);
+        let (p, n) = (Vec3::new(0.25, 0.0, 0.25), Vec3::Y);
+        let mut drawn = vec![0u32; N as usize];
+        let steps = 1u32 << 24;
+        // Light 0's pmf holds the walk's share too.
+        let pmf = |k: u32| if k == 0 { set.pmf(p, n, 0) } else { UNIFORM_SHARE / N as f32 };
+        for j in 0..steps {
+            let choice = set.select(p, n, Vec2::new(0.5 * UNIFORM_SHARE, j as f32 / steps as f32));
+            assert_eq!(choice.pmf, pmf(choice.index), "value {j}: {choice:?}");
+            drawn[choice.index as usize] += 1;
+        }
+        let (fewest, most) = (drawn.iter().min().unwrap(), drawn.iter().max().unwrap());
+        assert!(*fewest >= steps / N && *most <= steps.div_ceil(N), "{fewest}..={most} draws a light");
+    }
+
+    /// Draws `set`'s choice at `p`, `n` with 2¹⁶ stratified samples (x stratified over them all,
+    /// y over each run of 2¹¹, the draws of the uniform share among them): each choice carries the
+    /// pmf [`LightSet::pmf`] gives, the pmfs sum to 1, and each light is drawn as often as its pmf
     /// says (within 10⁻⁴, a few steps of the stratification).
     fn assert_draws_follow_the_pmf(set: &LightSet, p: Vec3, n: Vec3) {
         let pmfs: Vec<f32> = (0..set.len()).map(|k| set.pmf(p, n, k)).collect();
@@ -1572,7 +1614,9 @@ mod tests {
         let draws = 1u32 << 16;
         let mut drawn = vec![0u32; pmfs.len()];
         for i in 0..draws {
-            let choice = set.select(p, n, (i as f32 + 0.5) / draws as f32);
+            let run = draws as f32 * UNIFORM_SHARE;
+            let u = Vec2::new((i as f32 + 0.5) / draws as f32, ((i as f32 % run) + 0.5) / run);
+            let choice = set.select(p, n, u);
             assert_eq!(choice.pmf, pmfs[choice.index as usize], "sample {i}");
             drawn[choice.index as usize] += 1;
         }

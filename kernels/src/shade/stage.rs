@@ -296,7 +296,7 @@ pub fn shade_sample(
         drawn[slot] = sampler::sample_2d(&params.sampler, pixel, params.sample_index, slots[slot]);
         slot += 1;
     }
-    let (strategy, u_select, u) = (drawn[0], drawn[1].x, drawn[2]);
+    let (strategy, u_select, u) = (drawn[0], drawn[1], drawn[2]);
     let choice = scene.lights.select(p, n, u_select);
 
     // U: every light, analytically, keeping the chosen light's hit probabilities for the MIS.
