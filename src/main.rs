@@ -7,6 +7,7 @@ use raywave::render::{render, RenderOptions, RenderView};
 use raywave::{BackendOptions, DeviceChoice, TraceMethod};
 use std::path::PathBuf;
 use std::process::ExitCode;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 /// Wavefront ray-tracing kernels on the CPU and on Vulkan.
 #[derive(Parser)]
@@ -379,7 +380,13 @@ fn main() -> ExitCode {
             warn(&format!("error: {}", named_by_flag(e)));
             ExitCode::FAILURE
         }
-        Err(payload) if payload.is::<StdoutClosed>() => ExitCode::SUCCESS,
+        Err(payload) if payload.is::<StdoutClosed>() => match FILE_PENDING.load(Ordering::Relaxed) {
+            true => {
+                warn("error: standard output closed before the output file was written; none was");
+                ExitCode::FAILURE
+            }
+            false => ExitCode::SUCCESS,
+        },
         Err(payload) => match payload.downcast::<StdoutFailed>() {
             Ok(failed) => {
                 warn(&format!("error: cannot write standard output: {}", failed.0));
@@ -446,6 +453,11 @@ fn named_by_flag(error: raywave::Error) -> raywave::Error {
 /// What [`print_line`] unwinds with when stdout has closed, for `main` to catch.
 struct StdoutClosed;
 
+/// Whether the command has an output file still to write (`report error-vs-time --plot`): a
+/// closed stdout then ends it with a failure, not quietly, since part of what it was asked for
+/// is abandoned (the pending file deletes its temporary file as the stack unwinds).
+static FILE_PENDING: AtomicBool = AtomicBool::new(false);
+
 /// What [`print_line`] unwinds with when stdout failed otherwise (a full disk, an I/O error): the
 /// lines are the product of a bench or a report, so `main` reports the error and fails.
 struct StdoutFailed(std::io::Error);
@@ -469,7 +481,8 @@ fn keep_freed_stream_memory() -> bool {
 }
 
 /// Prints one measurement line as soon as it exists; a closed stdout (a broken pipe, e.g. piped
-/// into `head`) ends the program quietly, with success, instead of panicking, and any other
+/// into `head`) ends the program quietly, with success — unless an output file is pending
+/// ([`FILE_PENDING`]) — instead of panicking, and any other
 /// write error (a full disk under `--json > file`) ends it with the error and a failure — it had
 /// counted as a closed stdout, so a lost bench result exited 0. It unwinds to `main` rather
 /// than exiting on the spot, so that what is on the stack is dropped on the way — a pending
@@ -559,6 +572,7 @@ fn report_error_vs_time_command(args: ErrorVsTimeArgs) -> raywave::Result<()> {
         .as_deref()
         .map(|path| raywave::visualize::PendingOutput::create(path, image::ImageFormat::Png))
         .transpose()?;
+    FILE_PENDING.store(pending.is_some(), Ordering::Relaxed);
     let json = args.common.json;
     let (denoise_radius, settle_seconds) = (args.radius.denoise_radius, args.settle_seconds);
     let with = |report| ErrorVsTimeOptions { report, denoise_radius, settle_seconds };

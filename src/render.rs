@@ -140,7 +140,8 @@ impl RenderOptions {
 }
 
 /// Checks the options that need neither the scene nor the backend: the samples per pixel in
-/// range, the frame's settings, the image size and the samples for it as far as no backend is
+/// range, the backend options the device choice allows ([`BackendOptions::check_for`]: no
+/// validation or hardware trace on the CPU), the frame's settings, the image size and the samples for it as far as no backend is
 /// needed ([`LitFrameSettings::check_size`]: lens values and filter radius in range too), outputs
 /// that the view writes, no option that another makes the render ignore (but `--spp`, which has a
 /// default: the normals view traces one sample, as README says), and no file named twice.
@@ -148,6 +149,7 @@ fn check_options(options: &RenderOptions) -> Result<()> {
     let invalid = |name, reason: String| Err(crate::Error::InvalidParameter { name, reason });
     let settings = options.frame_settings();
     crate::frame::check_sample_count("spp", options.spp)?;
+    options.backend.check_for(options.device)?;
     // Before the scene loads and the backend opens (its own pixel limit is checked once it is
     // open).
     settings.check_size()?;

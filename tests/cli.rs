@@ -213,6 +213,13 @@ fn bad_input_is_a_typed_error_without_output() {
     assert_rejected(&["--device", "cpu", "--spp", "70000"], "spp: 70000 is outside 1..=65536");
     // Before the scene loads (this one would fail to) and the device opens (nor would it).
     assert_rejected(&["--device", "vulkan:99", "--scene", "/no/such/scene.obj", "--spp", "0"], "spp: 0 is outside");
+    // So are the options an explicit CPU choice cannot run, which need no backend.
+    let on_cpu_nowhere = ["--device", "cpu", "--scene", "/no/such/scene.obj"];
+    assert_rejected(&[&on_cpu_nowhere[..], &["--validate"]].concat(), "validate: the CPU backend has no validation");
+    assert_rejected(
+        &[&on_cpu_nowhere[..], &["--trace", "rtpipe"]].concat(),
+        "trace: the CPU backend traces in software",
+    );
     // So are the image size and the samples for it, which need no backend.
     let nowhere = ["--device", "vulkan:99", "--scene", "/no/such/scene.obj"];
     assert_rejected(&[&nowhere[..], &["--width", "0"]].concat(), "at least 1");
@@ -341,7 +348,7 @@ fn vulkan_only_options_do_not_fall_back_to_the_cpu() {
 fn closed_stdout_is_not_a_panic() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("piped.png");
-    run_with_closed_stdout(&[
+    let out = run_with_closed_stdout(&[
         "render",
         "--device",
         "cpu",
@@ -352,19 +359,25 @@ fn closed_stdout_is_not_a_panic() {
         "--out",
         path.to_str().unwrap(),
     ]);
+    assert!(out.status.success(), "{:?}: {}", out.status, stderr(&out));
     assert!(path.exists(), "the image is written before anything is printed");
 }
 
 /// A report whose reader goes away (`raywave report error-vs-time --plot p.png | head -2`) ends
-/// quietly and takes its plot's temporary file with it: the pending output was left behind when
-/// a closed stdout exited on the spot.
+/// with a failure, since its plot is not written, and takes the plot's temporary file with it:
+/// the pending output was left behind when a closed stdout exited on the spot, and the report
+/// had exited 0 without its plot.
 #[test]
 fn closed_stdout_leaves_no_temporary_file() {
     let dir = tempfile::tempdir().unwrap();
     let plot = dir.path().join("plot.png");
     let args = ["report", "error-vs-time", "--scenes", "builtin:cornell", "--resolution", "16", "--reference-spp", "4"];
     let more = ["--max-spp", "1", "--reps", "1", "--device", "cpu", "--plot", plot.to_str().unwrap()];
-    run_with_closed_stdout(&[&args[..], &more[..]].concat());
+    let out = run_with_closed_stdout(&[&args[..], &more[..]].concat());
+    // The plot was asked for and not written: a failure, said on stderr (without a plot the
+    // closed stdout would end the report quietly, as the test above checks).
+    assert!(!out.status.success(), "{:?}", out.status);
+    assert!(stderr(&out).contains("standard output closed before the output file was written"), "{}", stderr(&out));
     let left: Vec<_> = std::fs::read_dir(dir.path()).unwrap().map(|e| e.unwrap().file_name()).collect();
     assert!(left.is_empty(), "left behind: {left:?}");
 }
@@ -473,7 +486,7 @@ fn full_standard_streams() {
 
 /// Runs raywave with `args`, its standard output closed before it prints anything, and checks
 /// that it ends with success and without a panic.
-fn run_with_closed_stdout(args: &[&str]) {
+fn run_with_closed_stdout(args: &[&str]) -> std::process::Output {
     let mut child = Command::new(env!("CARGO_BIN_EXE_raywave"))
         .args(args)
         .stdout(std::process::Stdio::piped())
@@ -482,7 +495,8 @@ fn run_with_closed_stdout(args: &[&str]) {
         .unwrap();
     drop(child.stdout.take());
     let out = child.wait_with_output().unwrap();
-    assert!(out.status.success() && !stderr(&out).contains("panicked"), "{:?}: {}", out.status, stderr(&out));
+    assert!(!stderr(&out).contains("panicked"), "{:?}: {}", out.status, stderr(&out));
+    out
 }
 
 /// A scene without quad lights renders (emitters glow, nothing is lit) with a warning; the

@@ -96,6 +96,32 @@ pub struct BackendOptions {
     pub workgroup_sizes: Option<crate::WorkgroupSizes>,
 }
 
+impl BackendOptions {
+    /// Checks what needs no device, as [`open_backend`] does first: `sustain_seconds` within
+    /// 0..=1, and with an explicit CPU choice no validation and no trace method but software
+    /// traversal (it has neither). A job may call it before any other work, so that a scene is
+    /// neither loaded nor its error reported before options that could never run.
+    pub fn check_for(&self, choice: DeviceChoice) -> Result<()> {
+        crate::backend::check_sustain_seconds(self.sustain_seconds)?;
+        if choice != DeviceChoice::Cpu {
+            return Ok(());
+        }
+        if self.validation {
+            return Err(Error::InvalidParameter {
+                name: "validation",
+                reason: "the CPU backend has no validation layers (they check Vulkan calls)".to_owned(),
+            });
+        }
+        match self.trace {
+            None | Some(TraceMethod::Software) => Ok(()),
+            Some(other) => Err(Error::InvalidParameter {
+                name: "trace",
+                reason: format!("the CPU backend traces in software only, not with {}", other.name()),
+            }),
+        }
+    }
+}
+
 /// Opens the backend `choice` names. `Auto` opens the best Vulkan device that has the trace
 /// method asked for
 #[cfg_attr(feature = "vulkan", doc = "([`best_vulkan_device_tracing`]),")]
@@ -107,21 +133,9 @@ pub struct BackendOptions {
 /// lacks is an error, and so are validation with an explicit CPU choice and a `sustain_seconds`
 /// outside 0..=1 with any.
 pub fn open_backend(choice: DeviceChoice, options: &BackendOptions) -> Result<Box<dyn Backend>> {
-    crate::backend::check_sustain_seconds(options.sustain_seconds)?;
-    let cpu = || -> Result<Box<dyn Backend>> {
-        match options.trace {
-            None | Some(TraceMethod::Software) => Ok(Box::new(CpuBackend::new())),
-            Some(other) => Err(Error::InvalidParameter {
-                name: "trace",
-                reason: format!("the CPU backend traces in software only, not with {}", other.name()),
-            }),
-        }
-    };
+    options.check_for(choice)?;
+    let cpu = || -> Result<Box<dyn Backend>> { Ok(Box::new(CpuBackend::new())) };
     match choice {
-        DeviceChoice::Cpu if options.validation => Err(Error::InvalidParameter {
-            name: "validation",
-            reason: "the CPU backend has no validation layers (they check Vulkan calls)".to_owned(),
-        }),
         DeviceChoice::Cpu => cpu(),
         DeviceChoice::Auto => open_vulkan(None, options).or_else(|vulkan_error| {
             let hardware_trace = options.trace.is_some_and(|method| method != TraceMethod::Software);
