@@ -631,8 +631,8 @@ fn render_command(args: RenderArgs) -> raywave::Result<()> {
     }
     if report.unrendered.textured_meshes > 0 {
         warn(&format!(
-            "warning: {} mesh(es) of {} have textures, which raywave does not sample: their materials' factors alone \
-             apply (an emissive texture's mesh emits its factor everywhere)",
+            "warning: {} mesh(es) of {} have textures or vertex colours, which raywave does not sample: their \
+             materials' factors alone apply (an emissive texture's mesh emits its factor everywhere)",
             report.unrendered.textured_meshes, options.scene
         ));
     }

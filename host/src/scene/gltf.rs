@@ -108,7 +108,8 @@ pub fn load(path: &Path) -> Result<Scene> {
                 }
                 .map_err(in_primitive)?;
                 let material = material(&primitive.material()).map_err(load_error)?;
-                unrendered.textured_meshes += usize::from(has_textures(&primitive.material()));
+                let coloured = has_textures(&primitive.material()) || has_vertex_colours(&primitive);
+                unrendered.textured_meshes += usize::from(coloured);
                 unrendered.see_through_meshes += usize::from(is_see_through(&primitive.material()));
                 unrendered.deformed_meshes += usize::from(is_deformed(node, &mesh, &primitive));
                 meshes.push(Mesh { name, positions, triangles, material });
@@ -128,6 +129,13 @@ pub fn load(path: &Path) -> Result<Scene> {
 fn has_textures(m: &gltf::Material) -> bool {
     let pbr = m.pbr_metallic_roughness();
     pbr.base_color_texture().is_some() || pbr.metallic_roughness_texture().is_some() || m.emissive_texture().is_some()
+}
+
+/// Whether `primitive` has vertex colours, `COLOR_0`, which glTF 2.0 (§ 3.9.2) multiplies into
+/// the base colour and raywave does not read ([`Unrendered::textured_meshes`]): a
+/// vertex-coloured file, often with a white base colour, would render in one colour unsaid.
+fn has_vertex_colours(primitive: &gltf::Primitive) -> bool {
+    primitive.get(&gltf::Semantic::Colors(0)).is_some()
 }
 
 /// Whether material `m` lets light through somewhere, which raywave does not render
@@ -1943,6 +1951,16 @@ mod tests {
             let scene = load(file(&text).path()).unwrap_or_else(|e| panic!("{texture}: {e}"));
             assert_eq!(scene.unrendered().textured_meshes, 1, "{texture}");
         }
+        // Vertex colours (here the positions' numbers: black to white), which glTF multiplies
+        // into the base colour: a viewer shades the quad from black to its colour, and raywave
+        // counts it.
+        let coloured = quad_gltf(6).replacen(r#""POSITION":0"#, r#""POSITION":0,"COLOR_0":2"#, 1).replacen(
+            r#""type":"SCALAR"}"#,
+            r#""type":"SCALAR"},{"bufferView":0,"componentType":5126,"count":4,"type":"VEC3"}"#,
+            1,
+        );
+        let scene = load(file(&coloured).path()).unwrap();
+        assert_eq!(scene.unrendered().textured_meshes, 1, "{coloured}");
     }
 
     #[test]

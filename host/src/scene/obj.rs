@@ -572,8 +572,11 @@ fn check_material_names(
 /// the perceptual roughness and metalness, each one number (a trailing `#` comment is no part of
 /// it, as for the keys tobj reads). Without `Pr` the roughness follows the Phong exponent
 /// `Ns` by Walter et al. 2007's correspondence `α = √(2/(Ns + 2))` (§5.2; roughness = √α), and
-/// is 1 without either; without `Pm` the surface is a dielectric. A `Pr` or `Pm` that is not a
-/// number, or a value out of range ([`Material::check`]), is an error naming the MTL keyword;
+/// is 1 without either — and where the entry says it has no specular lobe, whose exponent `Ns`
+/// is (`Ks 0 0 0`, or `illum` 0 or 1: a colour, or a colour with ambient and Lambertian terms
+/// only); exporters write an `Ns` for every material, which had made such diffuse walls glossy
+/// (`Ns 1000`: roughness 0.21). Without `Pm` the surface is a dielectric. A `Pr` or `Pm` that is
+/// not a number, or a value out of range ([`Material::check`]), is an error naming the MTL keyword;
 /// `Ns` is finite and ≥ 0 ([`read_material_library`] refused other lines).
 fn mtl_material(m: &tobj::Material) -> std::result::Result<Material, String> {
     let pbr = |key: &str| {
@@ -586,7 +589,9 @@ fn mtl_material(m: &tobj::Material) -> std::result::Result<Material, String> {
             .transpose()
     };
     let from_exponent = |ns: f32| (2.0 / (ns + 2.0)).sqrt().sqrt();
-    let roughness = pbr("Pr")?.or_else(|| m.shininess.map(from_exponent));
+    let no_specular = m.specular.is_some_and(|ks| ks == [0.0; 3]) || matches!(m.illumination_model, Some(0 | 1));
+    let exponent = m.shininess.filter(|_| !no_specular);
+    let roughness = pbr("Pr")?.or_else(|| exponent.map(from_exponent));
     let material = Material {
         base_color: m.diffuse.map_or(DEFAULT_ALBEDO, Vec3::from_array),
         roughness: roughness.unwrap_or(1.0),
@@ -806,6 +811,21 @@ mod tests {
         let (floor, metal) = (material("floor (floor)"), material("chip (metal)"));
         assert_eq!((floor.roughness, floor.base_color), (1.0, Vec3::new(0.25, 0.5, 1.0)));
         assert_eq!((metal.roughness, metal.metallic), (0.25, 1.0));
+        // `Ns` is the exponent of the specular lobe: where `Ks 0 0 0` or `illum` 0 or 1 says
+        // there is none, it leaves the roughness at 1 (it had made such walls glossy); with a
+        // lobe (`Ks` given or not, `illum` 2) it sets it; `Pr` overrides either way.
+        for (entry, roughness) in [
+            ("Ks 0 0 0\nNs 1000", 1.0),
+            ("Ks 0.5 0.5 0.5\nNs 1000\nillum 1", 1.0),
+            ("Ns 1000\nillum 0", 1.0),
+            ("Ks 0 0 0\nNs 1000\nPr 0.4", 0.4),
+            ("Ks 0.5 0.5 0.5\nNs 198\nillum 2", 0.1f32.sqrt()),
+            ("Ns 198", 0.1f32.sqrt()),
+        ] {
+            std::fs::write(&library, format!("newmtl floor\n{entry}\nnewmtl lamp\nnewmtl metal\n")).unwrap();
+            let floor = load(&path).unwrap().meshes().iter().find(|m| m.name == "floor (floor)").unwrap().material;
+            assert!((floor.roughness - roughness).abs() < 1e-6, "{entry:?}: roughness {}", floor.roughness);
+        }
         for (not_a_file, expected) in [("/dev/zero", "/dev/zero: not a regular file"), (".", "/.: not a regular file")]
         {
             let scene = dir.path().join("device.obj");

@@ -6,9 +6,10 @@
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Unrendered {
     /// Meshes whose materials have textures (glTF base colour, metallic-roughness or emissive
-    /// textures; an MTL `map_Kd`, `map_Ke`, `map_Pr` or `map_Pm`). raywave samples no texture:
-    /// their materials' factors alone apply, so such a mesh is one colour — and an emissive
-    /// texture's mesh emits its factor (Blender writes 1) over its whole surface.
+    /// textures; an MTL `map_Kd`, `map_Ke`, `map_Pr` or `map_Pm`), or that have glTF vertex
+    /// colours (`COLOR_0`, a multiplier of the base colour). raywave samples no texture and reads
+    /// no vertex colour: their materials' factors alone apply, so such a mesh is one colour — and
+    /// an emissive texture's mesh emits its factor (Blender writes 1) over its whole surface.
     pub textured_meshes: usize,
     /// Meshes whose materials are see-through: glTF `alphaMode` `BLEND` with a base-colour alpha
     /// below 1 or a base-colour texture (whose alpha may be below 1), or `MASK` with an alpha
