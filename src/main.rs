@@ -380,13 +380,11 @@ fn main() -> ExitCode {
             warn(&format!("error: {}", named_by_flag(e)));
             ExitCode::FAILURE
         }
-        Err(payload) if payload.is::<StdoutClosed>() => match FILE_PENDING.load(Ordering::Relaxed) {
-            true => {
-                warn("error: standard output closed before the output file was written; none was");
-                ExitCode::FAILURE
-            }
-            false => ExitCode::SUCCESS,
-        },
+        Err(payload) if payload.is::<StdoutClosed>() && FILE_PENDING.load(Ordering::Relaxed) => {
+            warn("error: standard output closed before the output file was written; none was");
+            ExitCode::FAILURE
+        }
+        Err(payload) if payload.is::<StdoutClosed>() => ExitCode::SUCCESS,
         Err(payload) => match payload.downcast::<StdoutFailed>() {
             Ok(failed) => {
                 warn(&format!("error: cannot write standard output: {}", failed.0));
@@ -482,12 +480,12 @@ fn keep_freed_stream_memory() -> bool {
 
 /// Prints one measurement line as soon as it exists; a closed stdout (a broken pipe, e.g. piped
 /// into `head`) ends the program quietly, with success — unless an output file is pending
-/// ([`FILE_PENDING`]) — instead of panicking, and any other
-/// write error (a full disk under `--json > file`) ends it with the error and a failure — it had
-/// counted as a closed stdout, so a lost bench result exited 0. It unwinds to `main` rather
-/// than exiting on the spot, so that what is on the stack is dropped on the way — a pending
-/// output file (`report error-vs-time --plot`) deletes its temporary file, a Vulkan backend
-/// releases its device; `resume_unwind` prints no panic message.
+/// ([`FILE_PENDING`]) — instead of panicking, and any other write error (a full disk under
+/// `--json > file`) ends it with the error and a failure — it had counted as a closed stdout, so
+/// a lost bench result exited 0. It unwinds to `main` rather than exiting on the spot, so that
+/// what is on the stack is dropped on the way — a pending output file (`report error-vs-time
+/// --plot`) deletes its temporary file, a Vulkan backend releases its device; `resume_unwind`
+/// prints no panic message.
 fn print_line(line: String) {
     use std::io::Write;
     if let Err(e) = writeln!(std::io::stdout().lock(), "{line}") {

@@ -141,10 +141,11 @@ impl RenderOptions {
 
 /// Checks the options that need neither the scene nor the backend: the samples per pixel in
 /// range, the backend options the device choice allows ([`BackendOptions::check_for`]: no
-/// validation or hardware trace on the CPU), the frame's settings, the image size and the samples for it as far as no backend is
-/// needed ([`LitFrameSettings::check_size`]: lens values and filter radius in range too), outputs
-/// that the view writes, no option that another makes the render ignore (but `--spp`, which has a
-/// default: the normals view traces one sample, as README says), and no file named twice.
+/// validation or hardware trace on the CPU), the frame's settings, the image size and the
+/// samples for it as far as no backend is needed ([`LitFrameSettings::check_size`]: lens values
+/// and filter radius in range too), outputs that the view writes, no option that another makes
+/// the render ignore (but `--spp`, which has a default: the normals view traces one sample, as
+/// README says), and no file named twice.
 fn check_options(options: &RenderOptions) -> Result<()> {
     let invalid = |name, reason: String| Err(crate::Error::InvalidParameter { name, reason });
     let settings = options.frame_settings();

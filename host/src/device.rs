@@ -131,7 +131,7 @@ impl BackendOptions {
 /// them as invalid: then, as for an explicit Vulkan choice that cannot be honoured, the error says
 /// why Vulkan failed (a CPU run would silently drop what was asked). A trace method the backend
 /// lacks is an error, and so are validation with an explicit CPU choice and a `sustain_seconds`
-/// outside 0..=1 with any.
+/// outside 0..=1 with any ([`BackendOptions::check_for`], first).
 pub fn open_backend(choice: DeviceChoice, options: &BackendOptions) -> Result<Box<dyn Backend>> {
     options.check_for(choice)?;
     let cpu = || -> Result<Box<dyn Backend>> { Ok(Box::new(CpuBackend::new())) };

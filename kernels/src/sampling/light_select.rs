@@ -796,10 +796,10 @@ impl<'a> LightSet<'a> {
     /// choice ([`UNIFORM_SHARE`]): by the BVH when there is one — uniform among all the lights —
     /// else by the linear scan — uniform among the lights of positive importance.
     /// [`LightChoice::NONE`] when there is no light to choose. `u.x` chooses between the share
-    /// and the walk, and walks; `u.y` picks the BVH's uniform light, with all its 24 bits: `u.x`
-    /// rescaled from below the share would hold only 2¹⁹ values, so that each of `N` lights
-    /// would be drawn a whole number of them, up to `N/2¹⁹` off its pmf (+14 % at 10⁵ lights).
-    /// Now the drawn frequency is within `N/2²⁴` of it.
+    /// and the walk, and walks; `u.y` picks the BVH's uniform light with all its 24 bits, so that
+    /// each of `N` lights is drawn by the share within `N/2²⁴` of its `α/N` (`u.x` rescaled from
+    /// below the share holds only 2¹⁹ values: each light drawn a whole number of them, up to
+    /// `N/2¹⁹` off, +14 % at 10⁵ lights).
     pub fn select(&self, p: Vec3, n: Vec3, u: Vec2) -> LightChoice {
         let lights = self.light_count();
         if lights == 0 {
