@@ -83,9 +83,9 @@ fn ratio_estimator_is_exact_where_lit_at_the_visibility_floor_in_shadow_and_beat
         }
     }
     // One light of one colour, where the floor holds for unbiased estimates (but for the
-    // lobes' colours: README, Shading): the 1-spp ratio
-    // estimate is `U` times its one shadow ray's visibility, so in shadowed pixels its error is
-    // the floor's, off only by the ratio's bias and the repetitions' noise.
+    // lobes' colours: README, Shading): the 1-spp ratio estimate is `U` times its one shadow
+    // ray's visibility, so in shadowed pixels its error is the floor's, off only by the ratio's
+    // bias and the repetitions' noise.
     let cornell = "builtin:cornell";
     // Its 95 % interval lies within 0.9–1.2 × the floor.
     let (floor, ratio) = (rmse(cornell, 1, "visibility-floor", "shadow"), line(cornell, 1, "ratio", "shadow"));

@@ -134,7 +134,7 @@ impl BackendOptions {
 /// outside 0..=1 with any ([`BackendOptions::check_for`], first).
 pub fn open_backend(choice: DeviceChoice, options: &BackendOptions) -> Result<Box<dyn Backend>> {
     options.check_for(choice)?;
-    let cpu = || -> Result<Box<dyn Backend>> { Ok(Box::new(CpuBackend::new())) };
+    let cpu = || Ok(Box::new(CpuBackend::new()) as Box<dyn Backend>);
     match choice {
         DeviceChoice::Cpu => cpu(),
         DeviceChoice::Auto => open_vulkan(None, options).or_else(|vulkan_error| {

@@ -593,15 +593,21 @@ mod tests {
         sums.map(mean_and_error)
     }
 
+    /// `f` of the scene of `lights` over a surface of `material`, with the committed LTC table.
+    fn with_scene<R>(lights: &[Light], material: MaterialParams, f: impl FnOnce(&ShadeScene<'_>) -> R) -> R {
+        let table = table();
+        let materials = [material];
+        f(&ShadeScene { materials: &materials, lights: LightSet::new(lights, &[], &[]), ltc: &table })
+    }
+
     /// The analytic `U` at the origin (normal +z, viewed from `view`) under `lights`, with
     /// `ShadeParams::analytic_residual` = `analytic_residual`.
     fn analytic_u(lights: &[Light], material: MaterialParams, view: Vec3, analytic_residual: u32) -> [f64; 3] {
-        let table = table();
-        let materials = [material];
-        let scene = ShadeScene { materials: &materials, lights: LightSet::new(lights, &[], &[]), ltc: &table };
-        let p = ShadeParams { analytic_residual, ..params(sampler_kind::SOBOL, 5, 0) };
-        let s = shade_sample(&p, UVec2::ZERO, -view, &surface_at_origin(), &scene).value;
-        s.analytic.xyz().as_dvec3().to_array()
+        with_scene(lights, material, |scene| {
+            let p = ShadeParams { analytic_residual, ..params(sampler_kind::SOBOL, 5, 0) };
+            let s = shade_sample(&p, UVec2::ZERO, -view, &surface_at_origin(), scene).value;
+            s.analytic.xyz().as_dvec3().to_array()
+        })
     }
 
     /// [`SEEDS`] samples in [`REPLICATES`] replicates at the origin (normal +z, viewed from
@@ -616,23 +622,20 @@ mod tests {
         analytic_residual: u32,
         visible: impl Fn(Vec4, Vec4) -> bool,
     ) -> Estimate {
-        let table = table();
-        let materials = [material];
-        let scene = ShadeScene { materials: &materials, lights: LightSet::new(lights, &[], &[]), ltc: &table };
-        let mut analytic = [0.0f64; 3];
-        let [unshadowed, shadowed] = replicated(SEEDS, 5, |seed, i| {
-            let p = ShadeParams { analytic_residual, ..params(kind, seed, i) };
-            let s = shade_sample(&p, UVec2::ZERO, -view, &surface_at_origin(), &scene).value;
-            let unshadowed = s.unshadowed.xyz().as_dvec3();
-            let has_ray = s.shadow_direction.w > 0.0;
-            let visible = has_ray && visible(s.shadow_origin, s.shadow_direction);
-            analytic = s.analytic.xyz().as_dvec3().to_array();
-            assert!(s.unshadowed.is_finite() && s.shadow_direction.is_finite() && s.shadow_origin.is_finite());
-            // A shadow ray leaves the lit side, offset along the normal (+z), towards the light.
-            assert!(!has_ray || (s.shadow_origin.z > 0.0 && s.shadow_direction.z > 0.0), "sample {i}: {s:?}");
-            [unshadowed, if visible { unshadowed } else { glam::DVec3::ZERO }]
+        let [unshadowed, shadowed] = with_scene(lights, material, |scene| {
+            replicated(SEEDS, 5, |seed, i| {
+                let p = ShadeParams { analytic_residual, ..params(kind, seed, i) };
+                let s = shade_sample(&p, UVec2::ZERO, -view, &surface_at_origin(), scene).value;
+                let unshadowed = s.unshadowed.xyz().as_dvec3();
+                let has_ray = s.shadow_direction.w > 0.0;
+                let visible = has_ray && visible(s.shadow_origin, s.shadow_direction);
+                assert!(s.unshadowed.is_finite() && s.shadow_direction.is_finite() && s.shadow_origin.is_finite());
+                // A shadow ray leaves the lit side, offset along the normal (+z), towards the light.
+                assert!(!has_ray || (s.shadow_origin.z > 0.0 && s.shadow_direction.z > 0.0), "sample {i}: {s:?}");
+                [unshadowed, if visible { unshadowed } else { glam::DVec3::ZERO }]
+            })
         });
-        Estimate { unshadowed, shadowed, analytic }
+        Estimate { unshadowed, shadowed, analytic: analytic_u(lights, material, view, analytic_residual) }
     }
 
     /// Every shadow ray reaches its light: no occluder.
