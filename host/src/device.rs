@@ -123,9 +123,9 @@ impl BackendOptions {
 }
 
 /// Opens the backend `choice` names. `Auto` opens the best Vulkan device that has the trace
-/// method asked for
-#[cfg_attr(feature = "vulkan", doc = "([`best_vulkan_device_tracing`]),")]
-#[cfg_attr(not(feature = "vulkan"), doc = "(`best_vulkan_device_tracing`, with the `vulkan` feature),")]
+/// method and workgroup sizes asked for
+#[cfg_attr(feature = "vulkan", doc = "([`best_vulkan_device_for`]),")]
+#[cfg_attr(not(feature = "vulkan"), doc = "(`best_vulkan_device_for`, with the `vulkan` feature),")]
 /// and falls back to the CPU when no Vulkan device can be opened, unless `options` ask for what
 /// only Vulkan has (validation, a hardware trace method, workgroup sizes) or Vulkan refused one of
 /// them as invalid: then, as for an explicit Vulkan choice that cannot be honoured, the error says
@@ -167,7 +167,7 @@ fn open_vulkan(index: Option<usize>, options: &BackendOptions) -> Result<Box<dyn
     use crate::vulkan::{enumerate_devices, ContextOptions, VulkanBackend};
     let index = match index {
         Some(i) => i,
-        None => best_vulkan_device_tracing(&enumerate_devices()?, options.trace)?,
+        None => best_vulkan_device_for(&enumerate_devices()?, options)?,
     };
     let context = ContextOptions {
         validation: options.validation,
@@ -193,18 +193,21 @@ pub fn best_vulkan_device(devices: &[crate::vulkan::DeviceInfo]) -> Result<usize
     best_of(devices).map(|device| device.index)
 }
 
-/// [`best_vulkan_device`] among the devices that have `trace` (`None`: any), or among all where
-/// none has it (the backend then refuses the method, saying what the device lacks): `--device
-/// auto --trace rayquery` on a machine with an NVIDIA H100 (no ray query) and lavapipe opens
-/// lavapipe, where it had opened the H100 and failed.
+/// [`best_vulkan_device`] among the devices that have what `options` ask for: their trace method
+/// (`None`: any) and workgroup sizes (each a size the device runs, `DeviceInfo::workgroup_sizes`);
+/// or among all where none has it (the backend then refuses, saying what the device lacks):
+/// `--device auto --trace rayquery` on a machine with an NVIDIA H100 (no ray query) and lavapipe
+/// opens lavapipe, where it had opened the H100 and failed, as `--workgroup-sizes` of 1024 opens
+/// lavapipe beside a GPU that runs up to 512.
 #[cfg(feature = "vulkan")]
-pub fn best_vulkan_device_tracing(devices: &[crate::vulkan::DeviceInfo], trace: Option<TraceMethod>) -> Result<usize> {
+pub fn best_vulkan_device_for(devices: &[crate::vulkan::DeviceInfo], options: &BackendOptions) -> Result<usize> {
     // Among the devices that run the kernels too: else one that has the method but cannot run
     // the kernels hides another that can (and would say what it lacks for the method).
     let able: Vec<_> = devices
         .iter()
         .filter(|d| d.missing_for_kernels().is_empty())
-        .filter(|d| trace.is_none_or(|method| d.missing_for(method).is_empty()))
+        .filter(|d| options.trace.is_none_or(|method| d.missing_for(method).is_empty()))
+        .filter(|d| options.workgroup_sizes.is_none_or(|sizes| sizes.check(&d.workgroup_sizes).is_ok()))
         .cloned()
         .collect();
     best_vulkan_device(if able.is_empty() { devices } else { &able })

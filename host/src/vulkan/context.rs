@@ -836,12 +836,14 @@ mod tests {
         assert_eq!(crate::device::best_vulkan_device(&devices).unwrap(), 1);
     }
 
-    /// With a trace method asked for, `auto` takes the best device that has it: lavapipe beside
-    /// an H100, which has no ray query, for `rayquery`; the GPU otherwise, and where no device
-    /// has the method (the backend then says what it lacks).
+    /// With a trace method or workgroup sizes asked for, `auto` takes the best device that has
+    /// them: lavapipe beside an H100, which has no ray query, for `rayquery`; lavapipe beside a
+    /// GPU that runs workgroups up to 512 for 1024; the GPU otherwise, and where no device has
+    /// what is asked (the backend then says what it lacks).
     #[test]
-    fn a_trace_method_picks_the_best_device_that_has_it() {
-        use crate::device::best_vulkan_device_tracing as best;
+    fn a_trace_method_or_workgroup_sizes_pick_the_best_device_that_has_them() {
+        use crate::device::{best_vulkan_device_for as best_for, BackendOptions};
+        let best = |devices: &[DeviceInfo], trace| best_for(devices, &BackendOptions { trace, ..Default::default() });
         let gpu = DeviceInfo { index: 0, device_type: "DISCRETE_GPU".into(), ray_query: false, ..lavapipe() };
         let devices = [gpu.clone(), DeviceInfo { index: 1, ..lavapipe() }];
         assert_eq!(best(&devices, Some(TraceMethod::RayQuery)).unwrap(), 1);
@@ -851,7 +853,15 @@ mod tests {
         // A device with ray query that cannot run the kernels does not hide one that can: that
         // one opens (and its backend then says it lacks ray query).
         let unable = DeviceInfo { index: 1, storage_buffers_per_pass: 4, ..lavapipe() };
-        assert_eq!(best(&[gpu, unable], Some(TraceMethod::RayQuery)).unwrap(), 0);
+        assert_eq!(best(&[gpu.clone(), unable], Some(TraceMethod::RayQuery)).unwrap(), 0);
+        // Workgroup sizes: lavapipe runs 1024, this GPU up to 512; 512 both.
+        let narrow = DeviceInfo { workgroup_sizes: vec![32, 64, 128, 256, 512], ..gpu.clone() };
+        assert!(devices[1].workgroup_sizes.contains(&1024), "{:?}", devices[1].workgroup_sizes);
+        let devices = [narrow.clone(), devices[1].clone()];
+        let sized = |size| BackendOptions { workgroup_sizes: Some(WorkgroupSizes::all(size)), ..Default::default() };
+        assert_eq!(best_for(&devices, &sized(1024)).unwrap(), 1);
+        assert_eq!(best_for(&devices, &sized(512)).unwrap(), 0);
+        assert_eq!(best_for(std::slice::from_ref(&narrow), &sized(1024)).unwrap(), 0);
     }
 
     /// A stream is bounded by one storage buffer of `Vec4`s and by one dispatch grid, and an image
