@@ -636,9 +636,15 @@ fn render_command(args: RenderArgs) -> raywave::Result<()> {
     }
     if report.unrendered.see_through_meshes > 0 {
         warn(&format!(
-            "warning: {} mesh(es) of {} have see-through materials (alpha blended or masked, MTL dissolve), which \
-             raywave renders opaque",
+            "warning: {} mesh(es) of {} have see-through materials (alpha blended or masked, glTF transmission, MTL \
+             dissolve), which raywave renders opaque",
             report.unrendered.see_through_meshes, options.scene
+        ));
+    }
+    if report.unrendered.unlit_meshes > 0 {
+        warn(&format!(
+            "warning: {} mesh(es) of {} have unlit materials (KHR_materials_unlit), which raywave shades as lit",
+            report.unrendered.unlit_meshes, options.scene
         ));
     }
     if report.unrendered.deformed_meshes > 0 {
@@ -660,6 +666,13 @@ fn render_command(args: RenderArgs) -> raywave::Result<()> {
             "warning: {} punctual light(s) (KHR_lights_punctual point, spot or directional) of {} light nothing: \
              raywave renders area lights only (emissive parallelograms)",
             report.unrendered.punctual_lights, options.scene
+        ));
+    }
+    if report.unrendered.gpu_instanced_nodes > 0 {
+        warn(&format!(
+            "warning: {} node(s) of {} place their mesh many times (EXT_mesh_gpu_instancing), which raywave does not \
+             read: each renders one copy, at the node",
+            report.unrendered.gpu_instanced_nodes, options.scene
         ));
     }
     if report.lights == 0 && options.view == RenderView::Lit {

@@ -71,6 +71,7 @@ pub fn load(path: &Path) -> Result<Scene> {
     let (mut placed_camera, mut orthographic) = (None, false);
     for (node, world) in &nodes {
         unrendered.punctual_lights += usize::from(node.light().is_some());
+        unrendered.gpu_instanced_nodes += usize::from(is_gpu_instanced(node));
         if let (None, Some(node_camera)) = (&placed_camera, node.camera()) {
             match node_camera.projection() {
                 gltf::camera::Projection::Perspective(p) => {
@@ -111,6 +112,7 @@ pub fn load(path: &Path) -> Result<Scene> {
                 let coloured = has_textures(&primitive.material()) || has_vertex_colours(&primitive);
                 unrendered.textured_meshes += usize::from(coloured);
                 unrendered.see_through_meshes += usize::from(is_see_through(&primitive.material()));
+                unrendered.unlit_meshes += usize::from(primitive.material().extension_value(UNLIT).is_some());
                 unrendered.deformed_meshes += usize::from(is_deformed(node, &mesh, &primitive));
                 meshes.push(Mesh { name, positions, triangles, material });
             }
@@ -138,19 +140,34 @@ fn has_vertex_colours(primitive: &gltf::Primitive) -> bool {
     primitive.get(&gltf::Semantic::Colors(0)).is_some()
 }
 
+/// The extension that makes a glTF material unlit ([`Unrendered::unlit_meshes`]).
+const UNLIT: &str = "KHR_materials_unlit";
+
 /// Whether material `m` lets light through somewhere, which raywave does not render
 /// ([`Unrendered::see_through_meshes`]): its alpha (factor, or a base-colour texture's, unknown
 /// as images are not read) is blended, or masked below the cutoff (glTF 2.0 § 3.9.4: `OPAQUE`
-/// ignores alpha; the cutoff defaults to 0.5).
+/// ignores alpha; the cutoff defaults to 0.5), or it transmits light (`KHR_materials_transmission`:
+/// a factor above 0, its default, or a texture, whose values are not read).
 fn is_see_through(m: &gltf::Material) -> bool {
     let pbr = m.pbr_metallic_roughness();
     let [.., alpha] = pbr.base_color_factor();
     let textured = pbr.base_color_texture().is_some();
-    match m.alpha_mode() {
-        gltf::material::AlphaMode::Opaque => false,
-        gltf::material::AlphaMode::Blend => textured || alpha < 1.0,
-        gltf::material::AlphaMode::Mask => textured || alpha < m.alpha_cutoff().unwrap_or(0.5),
-    }
+    let transmits = m.extension_value("KHR_materials_transmission").is_some_and(|transmission| {
+        transmission.get("transmissionTexture").is_some()
+            || transmission.get("transmissionFactor").and_then(gltf::json::Value::as_f64).is_some_and(|f| f > 0.0)
+    });
+    transmits
+        || match m.alpha_mode() {
+            gltf::material::AlphaMode::Opaque => false,
+            gltf::material::AlphaMode::Blend => textured || alpha < 1.0,
+            gltf::material::AlphaMode::Mask => textured || alpha < m.alpha_cutoff().unwrap_or(0.5),
+        }
+}
+
+/// Whether `node` places its mesh many times by `EXT_mesh_gpu_instancing`, which raywave does not
+/// read ([`Unrendered::gpu_instanced_nodes`]): it renders the one copy at the node.
+fn is_gpu_instanced(node: &gltf::Node) -> bool {
+    node.mesh().is_some() && node.extension_value("EXT_mesh_gpu_instancing").is_some()
 }
 
 /// Whether node `node` would deform `primitive` of its mesh `mesh` in a way raywave does not
@@ -1776,6 +1793,39 @@ mod tests {
         assert_eq!(load(file(&quad_gltf(6)).path()).unwrap().unrendered().punctual_lights, 0);
     }
 
+    /// Unlit materials (`KHR_materials_unlit`) and meshes placed many times
+    /// (`EXT_mesh_gpu_instancing`), extensions a file may use without requiring them, are counted
+    /// (they had been rendered lit, and once, without a word); required, the instancing is refused.
+    #[test]
+    fn unlit_materials_and_gpu_instanced_nodes_are_counted() {
+        let material = r#""emissiveFactor":[1,0.5,0]}"#;
+        let unlit = quad_gltf(6).replacen(
+            material,
+            r#""emissiveFactor":[1,0.5,0],"extensions":{"KHR_materials_unlit":{}}}"#,
+            1,
+        );
+        assert_ne!(unlit, quad_gltf(6));
+        let scene = load(file(&unlit).path()).unwrap();
+        assert_eq!((scene.unrendered().unlit_meshes, scene.unrendered().gpu_instanced_nodes), (1, 0));
+        // The instancing's accessors are not read: any index will do for the count.
+        let node = r#"{"mesh":0,"translation":[0,0,-2]}"#;
+        let instanced = r#"{"mesh":0,"translation":[0,0,-2],"extensions":{"EXT_mesh_gpu_instancing":{"attributes":{"TRANSLATION":0}}}}"#;
+        let used = quad_gltf(6).replacen(node, instanced, 1).replacen(
+            r#""scene":0,"#,
+            r#""scene":0,"extensionsUsed":["EXT_mesh_gpu_instancing"],"#,
+            1,
+        );
+        assert!(used.contains(instanced));
+        let scene = load(file(&used).path()).unwrap();
+        assert_eq!((scene.unrendered().unlit_meshes, scene.unrendered().gpu_instanced_nodes), (0, 1));
+        assert_eq!(scene.meshes().len(), 1, "one copy, at the node");
+        let required =
+            used.replacen(r#""scene":0,"#, r#""scene":0,"extensionsRequired":["EXT_mesh_gpu_instancing"],"#, 1);
+        let err = load(file(&required).path()).unwrap_err().to_string();
+        assert!(err.contains("extensionsRequired") && err.contains("EXT_mesh_gpu_instancing"), "{err}");
+        assert_eq!(load(file(&quad_gltf(6)).path()).unwrap().unrendered(), Unrendered::default());
+    }
+
     /// raywave renders no orthographic projection: a file whose cameras are all orthographic is
     /// framed as one without a camera, which the scene notes (it was silent); beside a
     /// perspective camera, an orthographic one changes nothing.
@@ -1968,6 +2018,16 @@ mod tests {
         // The quad's material with (its base colour, its alpha mode and cutoff), and whether it
         // is see-through: OPAQUE ignores alpha; MASK cuts below alphaCutoff (0.5 unless given).
         let material = r#"{"pbrMetallicRoughness":{"baseColorFactor":[0.5,0.25,1,1],"metallicFactor":0.5,"roughnessFactor":0.3},"emissiveFactor":[1,0.5,0]}"#;
+        // Transmission (Blender's glass), in an extension the file uses without requiring it:
+        // its factor defaults to 0; a texture's values are not read.
+        let transmission = |extension: &str| format!(r#","extensions":{{"KHR_materials_transmission":{extension}}}"#);
+        let [transmits, opaque, by_default, textured] = [
+            r#"{"transmissionFactor":1}"#,
+            r#"{"transmissionFactor":0}"#,
+            "{}",
+            r#"{"transmissionTexture":{"index":0}}"#,
+        ]
+        .map(transmission);
         for (colour, mode, see_through) in [
             (r#""baseColorFactor":[1,1,1,0.2]"#, "", false),
             (r#""baseColorFactor":[1,1,1,0.9]"#, r#","alphaMode":"BLEND""#, true),
@@ -1977,6 +2037,10 @@ mod tests {
             (r#""baseColorFactor":[1,1,1,0.4]"#, r#","alphaMode":"MASK""#, true),
             (r#""baseColorFactor":[1,1,1,0.6]"#, r#","alphaMode":"MASK""#, false),
             (r#""baseColorFactor":[1,1,1,0.6]"#, r#","alphaMode":"MASK","alphaCutoff":0.7"#, true),
+            (r#""baseColorFactor":[1,1,1,1]"#, transmits.as_str(), true),
+            (r#""baseColorFactor":[1,1,1,1]"#, opaque.as_str(), false),
+            (r#""baseColorFactor":[1,1,1,1]"#, by_default.as_str(), false),
+            (r#""baseColorFactor":[1,1,1,1]"#, textured.as_str(), true),
         ] {
             let edited = format!(r#"{{"pbrMetallicRoughness":{{{colour}}}{mode}}}"#);
             let text = quad_gltf(6).replacen(material, &edited, 1).replacen(

@@ -575,9 +575,12 @@ fn check_material_names(
 /// is 1 without either — and where the entry says it has no specular lobe, whose exponent `Ns`
 /// is (`Ks 0 0 0`, or `illum` 0 or 1: a colour, or a colour with ambient and Lambertian terms
 /// only); exporters write an `Ns` for every material, which had made such diffuse walls glossy
-/// (`Ns 1000`: roughness 0.21). Without `Pm` the surface is a dielectric. A `Pr` or `Pm` that is
-/// not a number, or a value out of range ([`Material::check`]), is an error naming the MTL keyword;
-/// `Ns` is finite and ≥ 0 ([`read_material_library`] refused other lines).
+/// (`Ns 1000`: roughness 0.21). Without `Pm` the surface is a dielectric — but for an entry whose
+/// only reflection is specular (`Kd 0 0 0` and a `Ks` other than black, where `illum` allows it, as
+/// exporters write a mirror: `Ks 0.95 0.95 0.95`, `illum 3`), a metal of base colour `Ks`, the
+/// colour of that reflection (a black dielectric reflects 4 % at normal incidence). A `Pr` or `Pm`
+/// that is not a number, or a value out of range ([`Material::check`]), is an error naming the MTL
+/// keyword; `Ns` is finite and ≥ 0 ([`read_material_library`] refused other lines).
 fn mtl_material(m: &tobj::Material) -> std::result::Result<Material, String> {
     let pbr = |key: &str| {
         m.unknown_param
@@ -592,15 +595,18 @@ fn mtl_material(m: &tobj::Material) -> std::result::Result<Material, String> {
     let no_specular = m.specular.is_some_and(|ks| ks == [0.0; 3]) || matches!(m.illumination_model, Some(0 | 1));
     let exponent = m.shininess.filter(|_| !no_specular);
     let roughness = pbr("Pr")?.or_else(|| exponent.map(from_exponent));
+    let metallic = pbr("Pm")?;
+    let specular_only = m.specular.filter(|_| !no_specular && metallic.is_none() && m.diffuse == Some([0.0; 3]));
     let material = Material {
-        base_color: m.diffuse.map_or(DEFAULT_ALBEDO, Vec3::from_array),
+        base_color: specular_only.or(m.diffuse).map_or(DEFAULT_ALBEDO, Vec3::from_array),
         roughness: roughness.unwrap_or(1.0),
-        metallic: pbr("Pm")?.unwrap_or(0.0),
+        metallic: metallic.unwrap_or(if specular_only.is_some() { 1.0 } else { 0.0 }),
         emission: m.emissive.map_or(Vec3::ZERO, Vec3::from_array),
         double_sided: false,
     };
     material.check().map_err(|(field, reason)| {
         let keyword = match field {
+            "material.base_color" if specular_only.is_some() => "Ks",
             "material.base_color" => "Kd",
             "material.emission" => "Ke",
             "material.roughness" => "Pr",
@@ -826,6 +832,25 @@ mod tests {
             let floor = load(&path).unwrap().meshes().iter().find(|m| m.name == "floor (floor)").unwrap().material;
             assert!((floor.roughness - roughness).abs() < 1e-6, "{entry:?}: roughness {}", floor.roughness);
         }
+        // An entry whose only reflection is specular (`Kd 0 0 0`, `Ks` not black, a lobe `illum`
+        // allows) is a metal of base colour `Ks`: a mirror (it had loaded as a black dielectric);
+        // with a diffuse colour, no lobe, or its own `Pm`, it stays as it says.
+        let mirror = "Kd 0 0 0\nKs 0.95 0.9 0.85\nNs 1000";
+        for (entry, base_color, metallic) in [
+            (format!("{mirror}\nillum 3"), Vec3::new(0.95, 0.9, 0.85), 1.0),
+            (mirror.to_owned(), Vec3::new(0.95, 0.9, 0.85), 1.0),
+            (format!("{mirror}\nillum 1"), Vec3::ZERO, 0.0),
+            (format!("{mirror}\nPm 0"), Vec3::ZERO, 0.0),
+            ("Kd 0.1 0 0\nKs 0.95 0.9 0.85\nillum 3".to_owned(), Vec3::new(0.1, 0.0, 0.0), 0.0),
+            ("Kd 0 0 0\nKs 0 0 0".to_owned(), Vec3::ZERO, 0.0),
+        ] {
+            std::fs::write(&library, format!("newmtl floor\n{entry}\nnewmtl lamp\nnewmtl metal\n")).unwrap();
+            let floor = load(&path).unwrap().meshes().iter().find(|m| m.name == "floor (floor)").unwrap().material;
+            assert_eq!((floor.base_color, floor.metallic), (base_color, metallic), "{entry:?}");
+        }
+        std::fs::write(&library, "newmtl floor\nKd 0 0 0\nKs 1.5 1 1\nnewmtl lamp\nnewmtl metal\n").unwrap();
+        let err = load(&path).unwrap_err().to_string();
+        assert!(err.contains("material `floor`: Ks:"), "the base colour's keyword: {err}");
         for (not_a_file, expected) in [("/dev/zero", "/dev/zero: not a regular file"), (".", "/.: not a regular file")]
         {
             let scene = dir.path().join("device.obj");

@@ -13,10 +13,16 @@ pub struct Unrendered {
     pub textured_meshes: usize,
     /// Meshes whose materials are see-through: glTF `alphaMode` `BLEND` with a base-colour alpha
     /// below 1 or a base-colour texture (whose alpha may be below 1), or `MASK` with an alpha
-    /// below `alphaCutoff` or a base-colour texture; an MTL `d` below 1 or a `map_d`. raywave
-    /// renders every surface opaque (a `MASK`ed-out mesh, invisible in a glTF viewer, is seen and
-    /// casts shadows). MTL's `Tr` is not counted: exporters disagree on which way it runs.
+    /// below `alphaCutoff` or a base-colour texture, or `KHR_materials_transmission` with a
+    /// `transmissionFactor` above 0 or a `transmissionTexture` (Blender's glass, an extension
+    /// files use without requiring it); an MTL `d` below 1 or a `map_d`. raywave renders every
+    /// surface opaque (a `MASK`ed-out mesh, invisible in a glTF viewer, is seen and casts shadows).
+    /// MTL's `Tr` is not counted: exporters disagree on which way it runs.
     pub see_through_meshes: usize,
+    /// Meshes whose glTF materials are unlit (`KHR_materials_unlit`: the base colour is the
+    /// colour seen, whatever the light), which raywave shades as lit metallic-roughness
+    /// materials, as the extension's fallback is.
+    pub unlit_meshes: usize,
     /// Meshes that a skin or morph targets would deform: glTF primitives of a node with a `skin`,
     /// or with morph `targets` and a non-zero weight (the node's `weights`, else the mesh's; glTF
     /// 2.0 § 3.7.2.2 defaults them to 0). raywave renders them in their rest pose: POSITION under
@@ -30,4 +36,8 @@ pub struct Unrendered {
     /// and directional lights, which Blender exports its lamps as). raywave renders area lights
     /// only (emissive parallelograms): these light nothing.
     pub punctual_lights: usize,
+    /// Nodes whose mesh `EXT_mesh_gpu_instancing` places many times (an extension files use
+    /// without requiring it, for foliage and crowds): raywave renders the mesh once, at the node,
+    /// as the extension's fallback is.
+    pub gpu_instanced_nodes: usize,
 }
