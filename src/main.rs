@@ -576,6 +576,10 @@ fn report_error_vs_time_command(args: ErrorVsTimeArgs) -> raywave::Result<()> {
     let with = |report| ErrorVsTimeOptions { report, denoise_radius, settle_seconds };
     let (report, mut backend) = args.common.open(args.resolution, |report| with(report.clone()).check())?;
     let options = with(report);
+    if !json {
+        // The JSON lines name it each (`backend`).
+        print_line(format!("backend  {}", backend.name()));
+    }
     let lines = report_error_vs_time(backend.as_mut(), &options, |line| print_line(line.text(json)))?;
     if !json {
         print_line(String::new());

@@ -145,7 +145,8 @@ impl RenderOptions {
 /// samples for it as far as no backend is needed ([`LitFrameSettings::check_size`]: lens values
 /// and filter radius in range too), outputs that the view writes, no option that another makes
 /// the render ignore (but `--spp`, which has a default: the normals view traces one sample, as
-/// README says), and no file named twice.
+/// README says; `--denoise-radius` where the TV filter is the identity at `--spp`,
+/// [`crate::shared::DenoiseParams::tv_filter_is_identity`], included), and no file named twice.
 fn check_options(options: &RenderOptions) -> Result<()> {
     let invalid = |name, reason: String| Err(crate::Error::InvalidParameter { name, reason });
     let settings = options.frame_settings();
@@ -177,6 +178,18 @@ fn check_options(options: &RenderOptions) -> Result<()> {
     }
     if options.denoise == DenoiseMethod::None && options.denoise_radius.is_some() {
         return invalid("denoise-radius", "--denoise none filters nothing; drop it or choose a filter".into());
+    }
+    let denoise = settings.denoise_params(settings.samples_per_pixel);
+    if options.denoise == DenoiseMethod::Tv && options.denoise_radius.is_some() && denoise.tv_filter_is_identity() {
+        let (spp, radius) = (settings.samples_per_pixel, denoise.radius);
+        return invalid(
+            "denoise-radius",
+            format!(
+                "the TV filter at --spp {spp} ≥ 4R² = {} leaves every pixel as it is (its widest Gaussian, R/√spp, \
+                 is at most ½ pixel); drop it, or give R > √spp / 2",
+                4 * radius * radius
+            ),
+        );
     }
     let named =
         [("out", Some(&options.out)), ("exr", options.exr.as_ref()), ("stochastic", options.stochastic.as_ref())];

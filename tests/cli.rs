@@ -275,6 +275,11 @@ fn bad_input_is_a_typed_error_without_output() {
         &["--device", "cpu", "--denoise", "none", "--denoise-radius", "3"],
         "denoise-radius: --denoise none",
     );
+    // The TV filter is the identity from spp = 4R² on (R = 2: 16); one below it filters.
+    assert_rejected(
+        &["--device", "cpu", "--spp", "16", "--denoise-radius", "2"],
+        "denoise-radius: the TV filter at --spp 16 ≥ 4R² = 16 leaves every pixel as it is",
+    );
 
     let out = raywave(&["render", "--device", "cpu", "--out", "/no/such/dir/out.png"]);
     assert!(!out.status.success());
@@ -802,6 +807,7 @@ fn error_vs_time_in_steady_state_measures_the_same_errors() {
         assert!(once.get("warm_up_seconds").is_none() && once.get("relmse_stderr").is_none(), "{once}");
         assert!(steady["warm_up_seconds"].as_f64().unwrap() >= 0.05, "{steady}");
         assert!(steady["ms"].as_f64().unwrap() > 0.0, "{steady}");
+        assert!(steady["backend"].as_str().unwrap().starts_with("vulkan:"), "{steady}");
     }
 }
 
@@ -834,6 +840,7 @@ fn error_vs_time_report_prints_every_method_and_draws_the_plot() {
         let line = lines.iter().find(|l| l["method"] == method && l["spp"] == 1).expect("method present");
         assert_eq!(line["scene"], "builtin:cornell");
         assert!(line["relmse"].as_f64().unwrap().is_finite() && line["ms"].as_f64().unwrap() > 0.0);
+        assert!(line["backend"].as_str().unwrap().starts_with("cpu ("), "the default device: {line}");
         let flip = line["flip"].as_f64().unwrap();
         assert!((0.0..=1.0).contains(&flip), "FLIP {flip}");
         let part = |key: &str| line[key].as_f64().unwrap_or_else(|| panic!("{key} missing"));
@@ -847,6 +854,7 @@ fn error_vs_time_report_prints_every_method_and_draws_the_plot() {
     let table = raywave(&args[..args.len() - 3]);
     assert!(table.status.success(), "{}", stderr(&table));
     let text = String::from_utf8_lossy(&table.stdout);
+    assert!(text.starts_with("backend  cpu ("), "the table names its backend first: {text}");
     assert!(text.lines().any(|l| l.contains("relMSE ≤") && l.contains("fastest")), "{text}");
     let image = image::open(&plot).expect("plot is a PNG").to_rgb8();
     assert_eq!(image.width(), 960);
@@ -1165,6 +1173,10 @@ fn render_denoises_by_default_and_takes_each_denoiser() {
     };
     assert_eq!(radius("2"), images[0], "R = 2 is this size's default");
     assert_ne!(radius("4"), images[0], "R = 4 filters wider");
+    // One sample below 4R² the TV filter still filters, so R is accepted (from 4R² on it is
+    // refused: `bad_input_is_a_typed_error_without_output`).
+    let (out, _) = render(dir.path(), "spp15.png", &["--device", "cpu", "--spp", "15", "--denoise-radius", "2"]);
+    assert!(out.status.success(), "{}", stderr(&out));
     assert_rejected(&["--denoise", "blur"], "denoise");
     assert_rejected(&["--device", "cpu", "--denoise-radius", "11"], "denoise-radius: radius 11 outside 1..=10");
 }

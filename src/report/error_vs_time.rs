@@ -101,6 +101,8 @@ pub struct ErrorVsTimeLine {
     pub flip: f64,
     /// Milliseconds of backend time for the frame, mean over the repetitions.
     pub ms: f64,
+    /// The backend that measured `ms` ([`Backend::name`]): under `--device auto`, the one chosen.
+    pub backend: String,
     /// Seconds of the scene's warm-up before steady-state measurements
     /// ([`ErrorVsTimeOptions::settle_seconds`]); absent where each stage ran once.
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -341,6 +343,7 @@ pub fn report_error_vs_time(
     options.check()?;
     let report = &options.report;
     let mut lines = Vec::new();
+    let backend_name = backend.name();
     for (name, scene) in report.scenes.iter().zip(report.load_scenes()?) {
         let mut prepared = PreparedScene {
             denoise_radius: options.radius(),
@@ -372,6 +375,7 @@ pub fn report_error_vs_time(
                     relmse_lit,
                     flip,
                     ms,
+                    backend: backend_name.clone(),
                     warm_up_seconds,
                 };
                 emit(&line);
@@ -586,6 +590,7 @@ mod tests {
             relmse_lit: 0.0,
             flip: 0.0,
             ms,
+            backend: "cpu".to_owned(),
             warm_up_seconds: None,
         }
     }
