@@ -695,6 +695,9 @@ fn render_command(args: RenderArgs) -> raywave::Result<()> {
         report.hits
     ));
     print_line(format!("streams  {} bytes/pixel", report.stream_bytes_per_pixel));
+    if let Some(peak) = report.peak_resident_bytes {
+        print_line(format!("memory   peak {} MB resident", peak.div_ceil(1_000_000)));
+    }
     print_line(match report.warm_up_seconds {
         None => "timing   one frame (a GPU may have run it at idle clocks: --settle-seconds S for steady state)".into(),
         Some(warm_up) => {

@@ -102,9 +102,9 @@ pub struct RenderReport {
     /// Emissive meshes that are not one planar parallelogram: they glow where seen but light
     /// nothing ([`Scene::unsupported_emitters`]).
     pub unsupported_emitters: usize,
-    /// What the scene's file asked for that raywave does not render: textures, see-through
-    /// materials, skins and morph targets, orthographic cameras, punctual lights
-    /// ([`Scene::unrendered`]).
+    /// What the scene's file asked for that raywave does not render: textures, see-through and
+    /// unlit materials, skins and morph targets, orthographic cameras, punctual lights, GPU
+    /// instancing ([`Scene::unrendered`]).
     pub unrendered: Unrendered,
     /// Samples per pixel traced: `spp` for the lit view, 1 for the normals view.
     pub samples_per_pixel: u32,
@@ -120,6 +120,10 @@ pub struct RenderReport {
     /// Seconds of untimed warm-up frames before the timed one ([`RenderOptions::settle_seconds`];
     /// `None`: the one frame was timed).
     pub warm_up_seconds: Option<f64>,
+    /// The most resident memory the process held, bytes, its files written
+    /// ([`raywave_host::memory::peak_resident_bytes`]; `None` where it cannot be read): what
+    /// [`LitFrameSettings::check_memory`] estimates, the process's own on top.
+    pub peak_resident_bytes: Option<u64>,
 }
 
 impl RenderOptions {
@@ -236,6 +240,9 @@ pub fn render(options: &RenderOptions) -> Result<RenderReport> {
     // whatever `--spp` says) for its sampler.
     let settings = options.frame_settings();
     settings.check_on(backend.as_ref())?;
+    if options.view == RenderView::Lit {
+        settings.check_memory(backend.as_ref())?;
+    }
     backend.load_scene(&scene)?;
     let frame = Frame { scene: &scene, settings: &settings, data: data.as_ref(), one_off: settle_seconds.is_none() };
     let (rendered, warm_up_seconds) = match settle_seconds {
@@ -259,6 +266,7 @@ pub fn render(options: &RenderOptions) -> Result<RenderReport> {
         stream_bytes_per_pixel: rendered.stream_bytes / (u64::from(options.width) * u64::from(options.height)),
         timings: rendered.timings,
         warm_up_seconds,
+        peak_resident_bytes: None,
     };
     let (width, height) = (options.width, options.height);
     match rendered.image {
@@ -274,7 +282,7 @@ pub fn render(options: &RenderOptions) -> Result<RenderReport> {
             persist_all(written)?;
         }
     }
-    Ok(report)
+    Ok(RenderReport { peak_resident_bytes: raywave_host::memory::peak_resident_bytes(), ..report })
 }
 
 /// One frame of a render: everything but the backend, which each run borrows.

@@ -170,6 +170,47 @@ fn renders_a_gltf_scene_and_reports_dropped_triangles() {
     assert!(image.pixels().any(|p| p.0 != [0, 0, 0]), "the tetrahedron is in view of the file's camera");
 }
 
+/// A render states its peak memory, and the lit frame's footprint per pixel that it is held to
+/// before it starts covers what one more pixel costs: between 1024² and 2048² (with every output;
+/// lavapipe's peak varies by ±10 MB from run to run) the peak grows by at most that, and by more
+/// than 80 % of it — on the CPU
+/// ([`raywave::cpu::LIT_FRAME_BYTES_PER_PIXEL`]) and on each Vulkan device in host memory
+/// (lavapipe, [`raywave::vulkan::SOFTWARE_DEVICE_LIT_FRAME_BYTES_PER_PIXEL`]), both measured on a
+/// release build.
+#[cfg(target_os = "linux")]
+#[test]
+fn a_render_states_its_peak_memory_and_its_footprint_covers_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let peak = |device: &str, side: u32| {
+        let side = side.to_string();
+        let exr = dir.path().join("m.exr");
+        let stochastic = dir.path().join("s.png");
+        let outputs = ["--exr", exr.to_str().unwrap(), "--stochastic", stochastic.to_str().unwrap()];
+        let size = ["--device", device, "--spp", "1", "--width", &side, "--height", &side];
+        let (out, _) = render(dir.path(), "m.png", &[&size[..], &outputs[..]].concat());
+        assert!(out.status.success(), "{}", stderr(&out));
+        let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
+        let line = stdout.lines().find_map(|l| l.strip_prefix("memory   peak ")).unwrap_or_else(|| panic!("{stdout}"));
+        line.strip_suffix(" MB resident").unwrap().parse::<f64>().unwrap() * 1e6
+    };
+    let mut footprints = vec![("cpu".to_owned(), raywave::cpu::LIT_FRAME_BYTES_PER_PIXEL)];
+    #[cfg(feature = "vulkan")]
+    if let Some(devices) = vulkan_devices("peak memory on a Vulkan device in host memory") {
+        let software = devices.iter().filter(|d| d.device_type == "CPU");
+        let footprint = raywave::vulkan::SOFTWARE_DEVICE_LIT_FRAME_BYTES_PER_PIXEL;
+        footprints.extend(software.map(|d| (format!("vulkan:{}", d.index), footprint)));
+        assert!(footprints.len() > 1 || std::env::var_os("CI").is_none(), "CI's Vulkan device is lavapipe");
+    }
+    for (device, footprint) in footprints {
+        let per_pixel = (peak(&device, 2048) - peak(&device, 1024)) / f64::from(2048 * 2048 - 1024 * 1024);
+        let footprint = footprint as f64;
+        assert!(
+            per_pixel <= footprint && per_pixel > 0.8 * footprint,
+            "{device}: {per_pixel:.1} bytes per pixel against {footprint}"
+        );
+    }
+}
+
 /// Runs a render expected to fail; checks the message mentions `needle` and no file appeared.
 fn assert_rejected(extra: &[&str], needle: &str) {
     let dir = tempfile::tempdir().unwrap();

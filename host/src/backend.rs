@@ -117,6 +117,13 @@ pub trait Backend: Send {
     /// Checks that a `width × height` image fits this backend's limits.
     fn check_image_size(&self, width: u32, height: u32) -> Result<()>;
 
+    /// Host memory, bytes per pixel, that a lit frame ([`crate::lit_frame`]: its sample passes
+    /// one at a time, their sums, the G-buffer, the denoiser and the images written) holds at its
+    /// peak on this backend, as measured; `None` where it was not (a Vulkan GPU, whose streams
+    /// live in device memory). [`crate::lit_frame::LitFrameSettings::check_memory`] holds an
+    /// image to it.
+    fn lit_frame_bytes_per_pixel(&self) -> Option<u64>;
+
     /// Benchmark mode from the next stage on, as `BackendOptions::sustain_seconds` sets it at
     /// open: each timed Vulkan submission repeats its dispatch to keep the GPU busy about
     /// `seconds` (0..=1; 0 runs every stage once), so that a measurement can be sustained while

@@ -13,6 +13,7 @@ pub mod lights;
 pub mod lit_frame;
 pub mod lit_sample;
 pub mod ltc_fit;
+pub mod memory;
 pub mod scene;
 pub mod shading;
 pub mod stats;

@@ -118,6 +118,17 @@ impl LitFrameSettings {
         check_samples_per_pixel("spp", self.sampler_kind, self.width, self.height, self.samples_per_pixel)
     }
 
+    /// Checks that a lit frame of this size fits the host's memory on `backend`: its
+    /// [`Backend::lit_frame_bytes_per_pixel`] times the pixels within
+    /// [`crate::memory::available_bytes`], else an [`Error::ImageSize`] giving both — a render
+    /// too large for the machine is refused before it starts, where the out-of-memory killer had
+    /// ended it midway. It passes where either is unknown; the scene's own memory (its BVH) is not
+    /// counted.
+    pub fn check_memory(&self, backend: &dyn Backend) -> Result<()> {
+        let (per_pixel, available) = (backend.lit_frame_bytes_per_pixel(), crate::memory::available_bytes());
+        check_memory_fits(self.width, self.height, per_pixel, available, &backend.name())
+    }
+
     /// The sampler of this frame's samples.
     pub fn sampler(&self) -> SamplerParams {
         sampler_params(self.sampler_kind, self.seed, self.width, self.height, self.samples_per_pixel)
@@ -144,6 +155,30 @@ impl LitFrameSettings {
             ..frame_params(self.width, self.height, self.denoise_radius)
         }
     }
+}
+
+/// [`LitFrameSettings::check_memory`]'s rule: a `width × height` lit frame at `per_pixel` bytes
+/// fits within `available` bytes (either `None`: unknown, so it passes).
+fn check_memory_fits(
+    width: u32,
+    height: u32,
+    per_pixel: Option<u64>,
+    available: Option<u64>,
+    backend: &str,
+) -> Result<()> {
+    let (Some(per_pixel), Some(available)) = (per_pixel, available) else { return Ok(()) };
+    let needed = u64::from(width) * u64::from(height) * per_pixel;
+    if needed <= available {
+        return Ok(());
+    }
+    let gb = |bytes: u64| bytes as f64 / 1e9;
+    let reason = format!(
+        "a lit frame needs about {:.1} GB of memory ({per_pixel} bytes per pixel), more than the {:.1} GB \
+         available",
+        gb(needed),
+        gb(available)
+    );
+    Err(Error::ImageSize { width, height, backend: backend.to_owned(), reason })
 }
 
 /// The shading samples of a frame, before any filter.
@@ -357,6 +392,28 @@ mod tests {
         }
     }
 
+    /// A lit frame is held to the host's memory: at the CPU's 2²⁶-pixel limit it needs 25.5 GB,
+    /// refused with both sizes said where less is available; where the footprint or the memory
+    /// is unknown, or the frame fits (to the byte), it passes. A frame of a few pixels fits this
+    /// machine.
+    #[test]
+    fn a_lit_frame_is_held_to_the_memory_available() {
+        let per_pixel = Some(crate::cpu::LIT_FRAME_BYTES_PER_PIXEL);
+        match check_memory_fits(8192, 8192, per_pixel, Some(16 << 30), "cpu (2 threads)") {
+            Err(Error::ImageSize { width: 8192, height: 8192, backend, reason }) => {
+                assert_eq!(backend, "cpu (2 threads)");
+                let expected = "a lit frame needs about 25.5 GB of memory (380 bytes per pixel), more than the 17.2 GB";
+                assert!(reason.contains(expected), "{reason}");
+            }
+            other => panic!("{other:?}"),
+        }
+        assert!(check_memory_fits(8192, 8192, None, Some(16 << 30), "gpu").is_ok());
+        assert!(check_memory_fits(8192, 8192, per_pixel, None, "cpu").is_ok());
+        assert!(check_memory_fits(100, 10, Some(380), Some(380_000), "cpu").is_ok());
+        assert!(check_memory_fits(100, 10, Some(380), Some(379_999), "cpu").is_err());
+        LitFrameSettings::new(64, 32, 4).check_memory(&CpuBackend::new()).unwrap();
+    }
+
     #[test]
     fn each_bad_setting_is_named() {
         let good = LitFrameSettings::new(64, 32, 4);
@@ -539,6 +596,9 @@ mod tests {
         }
         fn check_image_size(&self, width: u32, height: u32) -> Result<()> {
             self.0.check_image_size(width, height)
+        }
+        fn lit_frame_bytes_per_pixel(&self) -> Option<u64> {
+            self.0.lit_frame_bytes_per_pixel()
         }
         fn set_sustain_seconds(&mut self, seconds: f64) -> Result<()> {
             self.0.set_sustain_seconds(seconds)

@@ -16,7 +16,7 @@ mod rt_pipeline;
 pub mod spirv;
 
 pub use crate::backend::ValidationLog;
-pub use backend::VulkanBackend;
+pub use backend::{VulkanBackend, SOFTWARE_DEVICE_LIT_FRAME_BYTES_PER_PIXEL};
 pub use context::{enumerate_devices, ContextOptions, DeviceInfo, MAX_SUSTAINED_DISPATCHES};
 
 /// The Vulkan devices a test runs on: every one there is. With none, under CI (`CI=true` or `1`)
