@@ -168,9 +168,10 @@ fn surfaces_only(text: &[u8]) -> std::borrow::Cow<'_, [u8]> {
 /// The text of the material library at `path`, less a leading byte-order mark
 /// ([`without_byte_order_mark`]), or why it cannot be used: the OS's reason, not a regular file,
 /// or the line at fault — one that is not UTF-8 text, or a colour (`Ka`, `Kd`, `Ks`, `Ke`) with
-/// other than three words (before any trailing `#` comment), refused here before tobj parses the
-/// text: tobj 4.0.5 panics on fewer (found by fuzzing the loader) and ignores what follows the
-/// third. Also refused, because tobj
+/// other than one or three words (before any trailing `#` comment), refused here before tobj
+/// parses the text: tobj 4.0.5 panics on fewer than three (found by fuzzing the loader) and ignores
+/// what follows the third. One number is a grey, `Kd 0.5` as `Kd 0.5 0.5 0.5`, as the MTL
+/// format says (g and b default to r), written out so here for tobj. Also refused, because tobj
 /// would drop them without a word: a property before the first `newmtl` (it belongs to no
 /// material), and a material name defined twice (the later definition would hide the earlier);
 /// and an `Ns` that is not one finite number ≥ 0 (a Phong exponent, [`mtl_material`]), which tobj
@@ -183,13 +184,23 @@ fn read_material_library(path: &Path) -> std::result::Result<String, String> {
         format!("line {}: not UTF-8 text", 1 + valid.iter().filter(|&&b| b == b'\n').count())
     })?;
     let mut defined: std::collections::HashMap<&str, usize> = std::collections::HashMap::new();
+    let mut kept = String::with_capacity(text.len());
     for (index, line) in text.lines().enumerate() {
         let mut words = line.split_whitespace();
         let key = words.next();
         let arguments: Vec<&str> = before_comment(words).collect();
+        match (key, &arguments[..]) {
+            (Some(key @ ("Ka" | "Kd" | "Ks" | "Ke")), [grey]) => kept.push_str(&format!("{key} {grey} {grey} {grey}")),
+            _ => kept.push_str(line),
+        }
+        kept.push('\n');
         match key {
-            Some(key @ ("Ka" | "Kd" | "Ks" | "Ke")) if arguments.len() != 3 => {
-                return Err(format!("line {}: `{key}` needs three numbers, not {}", index + 1, arguments.len()));
+            Some(key @ ("Ka" | "Kd" | "Ks" | "Ke")) if ![1, 3].contains(&arguments.len()) => {
+                return Err(format!(
+                    "line {}: `{key}` needs three numbers (or one, a grey), not {}",
+                    index + 1,
+                    arguments.len()
+                ));
             }
             Some("Ns") if !is_exponent(&arguments) => {
                 return Err(format!(
@@ -213,7 +224,7 @@ fn read_material_library(path: &Path) -> std::result::Result<String, String> {
             _ => {}
         }
     }
-    Ok(text.to_owned())
+    Ok(kept)
 }
 
 /// The words of an MTL line before any trailing `#` comment (`Kd 1 1 1 # red`), which tobj reads
@@ -767,21 +778,34 @@ mod tests {
         let err = load(&path).unwrap_err().to_string();
         assert!(err.contains("(read as the name `usemtl lamp`: start the line with `usemtl`)"), "{err}");
         std::fs::write(&path, obj).unwrap();
-        // A colour with other than three numbers (tobj 4.0.5 panics on fewer and ignored a fourth),
+        // One number is a grey, as the MTL format says (it had been refused): on line 2 of a
+        // library whose line 4 is at fault, which the error still names.
+        std::fs::write(dir.path().join("scene.mtl"), "newmtl floor\nKd 0.5 # grey\nnewmtl lamp\nKe 1 x 1\n").unwrap();
+        let err = load(&path).unwrap_err().to_string();
+        assert!(err.contains("scene.mtl: line 4: material"), "{err}");
+        std::fs::write(dir.path().join("scene.mtl"), "newmtl floor\nKd 0.5 # grey\nnewmtl lamp\nnewmtl metal\n")
+            .unwrap();
+        let scene = load(&path).unwrap();
+        let floor = scene.meshes().iter().find(|m| m.name == "floor (floor)").unwrap().material;
+        assert_eq!(floor.base_color, Vec3::splat(0.5));
+        // A colour with other than one or three numbers (tobj 4.0.5 panics on fewer and ignored a fourth),
         // an `Ns` that is not one finite number ≥ 0 (a negative one was taken as 0, an infinite
         // one as a mirror) or a number that does not parse names the library and its line.
         let library = dir.path().join("scene.mtl");
         for (text, expected) in [
-            ("newmtl floor\nKd 0.5\nnewmtl lamp\nnewmtl metal\n", "scene.mtl: line 2: `Kd` needs three numbers, not 1"),
+            (
+                "newmtl floor\nKd 0.5 0.5\nnewmtl lamp\nnewmtl metal\n",
+                "scene.mtl: line 2: `Kd` needs three numbers (or one, a grey), not 2",
+            ),
             ("newmtl floor\nnewmtl lamp\n  Ke 1 1\nnewmtl metal\n", "scene.mtl: line 3: `Ke` needs three numbers"),
             ("newmtl floor\nKa\n", "scene.mtl: line 2: `Ka` needs three numbers"),
             (
                 "newmtl floor\nnewmtl lamp\nKe 1 1 1 1\nnewmtl metal\n",
-                "scene.mtl: line 3: `Ke` needs three numbers, not 4",
+                "scene.mtl: line 3: `Ke` needs three numbers (or one, a grey), not 4",
             ),
             (
                 "newmtl floor\nKd 0.5 0.5 0.5 0.5\nnewmtl lamp\nnewmtl metal\n",
-                "scene.mtl: line 2: `Kd` needs three numbers, not 4",
+                "scene.mtl: line 2: `Kd` needs three numbers (or one, a grey), not 4",
             ),
             ("newmtl floor\nKs 1 2 x\n", "scene.mtl: line 2: material"),
             ("newmtl floor\n\nNi many\n", "scene.mtl: line 3: material"),
