@@ -40,7 +40,8 @@ fn generate_matches_cpu_on_every_vulkan_device() {
 
 /// The hard cameras: a field of view of 0.01° and of 179° (image-plane axes 8.7·10⁻⁵ and 115 long),
 /// images 4096 × 2 and 2 × 4096 wide open, views exactly along an axis, a camera 10⁶ from the
-/// origin, and a thin lens at that distance. The rays must match as on the Cornell camera.
+/// origin, and a thin lens at that distance, along and across its view. The rays must match as
+/// on the Cornell camera.
 #[test]
 fn generate_matches_cpu_for_extreme_cameras_on_every_vulkan_device() {
     let scene = cornell();
@@ -63,6 +64,9 @@ fn generate_matches_cpu_for_extreme_cameras_on_every_vulkan_device() {
             0.0,
         ),
         (23, 19, Vec3::new(1e6, 0.0, 0.0), Vec3::NEG_X, Vec3::Z, Vec3::Y, 40.0, 0.25),
+        // The far coordinate across the view, where the lens and focal points had rounded to the
+        // camera's grid (a GPU fusing one multiply-add had then aimed a ray pixels off).
+        (23, 19, Vec3::new(1e5, 0.0, 0.0), Vec3::NEG_Z, Vec3::X, Vec3::Y, 40.0, 1e-3),
     ];
     for (width, height, origin, forward, right, up, fov, lens_radius) in cases {
         let sampler = sampler_params(sampler_kind::ZSOBOL, 9, width, height, 4);

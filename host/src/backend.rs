@@ -410,7 +410,9 @@ pub const MIN_IMAGE_PLANE_AXIS_SQUARED: f32 = f32::MIN_POSITIVE;
 /// Largest thin-lens aperture radius as a multiple of the focus distance. A ray from the lens's
 /// rim is aimed at its point on the focal plane along a direction rounded to `f32`, so it misses
 /// that point by about 1.2·10⁻⁷ of the focus distance per unit of this ratio (measured:
-/// `thin_lens_rays_meet_their_focal_point_up_to_the_aperture_limit`). Under the old limit alone
+/// `thin_lens_rays_meet_their_focal_point_up_to_the_aperture_limit`; the generate stage takes
+/// the lens and focal points relative to the camera, so far from the origin too, where only the
+/// ray's start rounds to the camera position's `f32` grid). Under the old limit alone
 /// (an aperture of 10⁸ scene units), `raywave render --aperture 1e6 … 1e8` on the Cornell box
 /// (focus 0.8) missed by scene-sized amounts: the share of camera rays that hit drifted from 73 %
 /// to 32 %, and the CPU and lavapipe's ray query disagreed on 13 % of the rays at 10⁷, nothing

@@ -46,16 +46,21 @@ pub fn generate_ray(ray_index: u32, params: &GenerateParams) -> CameraRay {
         let lens =
             warp::sample_concentric_disk(sampler::sample_2d(&params.sampler, pixel, params.sample_index, dims::LENS))
                 * params.lens_radius;
-        let focus = origin + pinhole * params.focus_distance;
-        origin += lens.x * params.right.xyz().normalize() + lens.y * params.up.xyz().normalize();
-        // Scaled before its length is taken: `|focus − origin|²` overflows f32 from about 10¹⁹
-        // (a far focus plane with a wide field of view), which left rays without a direction.
-        let to_focus = focus - origin;
+        let offset = lens.x * params.right.xyz().normalize() + lens.y * params.up.xyz().normalize();
+        // From the lens point to the focal point, both relative to the camera: in world
+        // coordinates each had rounded to the camera position's `f32` grid, and their difference
+        // with them — 10⁵ from the origin with a 1 m focus, directions snapped to 2.5-pixel
+        // steps, and a focus below half a grid step turned every ray sideways. Only the start
+        // point rounds there now, a shift as fine as the scene's own vertices.
+        let to_focus = pinhole * params.focus_distance - offset;
+        origin += offset;
+        // Scaled before its length is taken: `|to_focus|²` overflows f32 from about 10¹⁹ (a far
+        // focus plane with a wide field of view), which left rays without a direction.
         let scale = to_focus.abs().max_element();
-        // A focus point that rounds onto the lens point (a focus distance and aperture below the
-        // origin's rounding: 10⁻⁹ at 0.8) leaves no direction to it, and 0/0 had made the ray
-        // NaN: that ray keeps the pinhole's. `MIN_POSITIVE`, not 0, so that a GPU flushing a
-        // subnormal scale to 0 takes the same branch.
+        // Its component along the view is the focus distance (the offset lies in the lens
+        // plane): a subnormal one underflows, and 0/0 had made the ray NaN: that ray keeps the
+        // pinhole's. `MIN_POSITIVE`, not 0, so that a GPU flushing a subnormal scale to 0 takes
+        // the same branch.
         if scale >= f32::MIN_POSITIVE {
             direction = (to_focus / scale).normalize();
         }
@@ -189,16 +194,53 @@ mod tests {
         }
     }
 
-    /// A focus distance and aperture below the origin's rounding put the focus point on the lens
-    /// point: the ray keeps the pinhole's direction (it had been 0/0, NaN, for every pixel).
+    /// A subnormal focus distance (and an aperture within its limit) leaves no direction to the
+    /// focal point that `f32` can hold: the ray keeps the pinhole's (it had been 0/0, NaN, for
+    /// every pixel).
     #[test]
-    fn a_focus_point_on_the_lens_point_keeps_the_pinhole_direction() {
+    fn a_focus_below_the_normal_floats_keeps_the_pinhole_direction() {
         let pinhole = params(4, 4);
-        let p = GenerateParams { lens_radius: 1e-9, focus_distance: 1e-9, ..pinhole };
+        let p = GenerateParams { lens_radius: 1e-42, focus_distance: 1e-40, ..pinhole };
         for i in 0..p.ray_count() {
             let ray = generate_ray(i, &p);
             assert_eq!(ray.origin, pinhole.origin, "the lens offset rounds away");
             assert_eq!(ray.direction, generate_ray(i, &pinhole).direction);
+        }
+    }
+
+    /// A camera 512² wide, 40° high, looking along +z from `origin`, with a lens.
+    fn far_camera(origin: Vec3, lens_radius: f32, focus_distance: f32) -> GenerateParams {
+        let t = 20f32.to_radians().tan();
+        GenerateParams {
+            origin: origin.extend(0.0),
+            right: Vec4::new(t, 0.0, 0.0, 0.0),
+            up: Vec4::new(0.0, t, 0.0, 0.0),
+            sampler: SamplerParams { kind: sampler_kind::ZSOBOL, seed: 1, spp_log2: 0, resolution_log2: 9 },
+            lens_radius,
+            focus_distance,
+            ..params(512, 512)
+        }
+    }
+
+    /// Far from the origin a barely open lens aims as the pinhole does (its rays within the
+    /// lens's 10⁻⁶ rad of it), and a macro focus along the view still looks ahead: the focal and
+    /// lens points, built in world coordinates, had rounded to the camera position's grid — at
+    /// 10⁵ directions 3.6·10⁻³ rad (2.5 pixels) off, and with a 3 mm focus every ray sideways.
+    #[test]
+    fn thin_lens_directions_do_not_round_with_the_camera_position() {
+        for origin in [Vec3::new(1e5, 0.0, 0.0), Vec3::new(-3e6, 2e6, 0.0)] {
+            let lens = far_camera(origin, 1e-6, 1.0);
+            let pinhole = GenerateParams { lens_radius: 0.0, ..lens };
+            for i in (256 * 512..257 * 512).chain(0..512) {
+                let [a, b] = [&lens, &pinhole].map(|p| generate_ray(i, p).direction.truncate());
+                // The sine of their angle (`acos` of the dot product has no precision near 0).
+                assert!(a.cross(b).length() < 1e-5, "at {origin}, ray {i}: {a} against the pinhole's {b}");
+            }
+        }
+        let macro_lens = far_camera(Vec3::new(0.0, 0.0, 1e5), 1e-3, 0.003);
+        for i in 0..macro_lens.ray_count() {
+            let direction = generate_ray(i, &macro_lens).direction;
+            assert!(direction.z > 0.5, "ray {i}: {direction}");
         }
     }
 }
