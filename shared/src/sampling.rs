@@ -33,17 +33,21 @@ pub struct SamplerParams {
     /// so set it from the real count ([`Self::indexes`]; the host refuses such indices).
     pub spp_log2: u32,
     /// log₂ of the power-of-two square covering the image (`ZSOBOL` only):
-    /// `ceil(log2(max(width, height)))`. `2·resolution_log2 + spp_log2` must be ≤ 32.
+    /// `ceil(log2(max(width, height)))`. `2·resolution_log2 + spp_log2` must be ≤ 32
+    /// ([`Self::fits_index`]).
     pub resolution_log2: u32,
 }
 
 const _: () = assert!(core::mem::size_of::<SamplerParams>() == 16);
 
 impl SamplerParams {
-    /// Whether the Morton-ordered sample space of a `ZSOBOL` sampler fits its 32-bit index.
+    /// Whether the Morton-ordered sample space of a `ZSOBOL` sampler fits its 32-bit index:
+    /// `2·resolution_log2 + spp_log2 ≤ 32`, and `spp_log2 ≤ 31`, the most the kernels shift a
+    /// sample index by (a 1 × 1 frame of 2³² samples had passed, its samples from 2³¹ on
+    /// repeating earlier points).
     pub fn fits_index(&self) -> bool {
         // In u64: fields from outside may be anything, and u32 arithmetic could wrap.
-        2 * u64::from(self.resolution_log2) + u64::from(self.spp_log2) <= 32
+        2 * u64::from(self.resolution_log2) + u64::from(self.spp_log2) <= 32 && self.spp_log2 <= 31
     }
 
     /// Whether samples `0..sample_count` of every pixel of a `width × height` image each get their
@@ -139,5 +143,23 @@ impl SamplerProbeParams {
     /// Invocations (= samples) the probe writes: `width · height · 2^spp_log2`.
     pub fn sample_count(&self) -> u32 {
         (self.width * self.height) << self.sampler.spp_log2
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The index holds `2·resolution_log2 + spp_log2` bits, at most 32, and a sample index
+    /// shifted by at most 31.
+    #[test]
+    fn the_zsobol_index_fits_32_bits_and_31_sample_bits() {
+        let fits = |resolution_log2, spp_log2| {
+            SamplerParams { kind: sampler_kind::ZSOBOL, seed: 0, spp_log2, resolution_log2 }.fits_index()
+        };
+        assert!(fits(16, 0) && fits(8, 16) && fits(0, 31) && fits(1, 30));
+        assert!(!fits(16, 1) && !fits(0, 32) && !fits(u32::MAX, u32::MAX));
+        let one_pixel = SamplerParams { kind: sampler_kind::ZSOBOL, seed: 0, spp_log2: 32, resolution_log2: 0 };
+        assert!(!one_pixel.indexes(1, 1, u32::MAX));
     }
 }

@@ -743,7 +743,9 @@ pub fn bvh_pmf(lights: &[Light], nodes: &[LightBvhNode], trails: &[u32], p: Vec3
 /// With the mixture every light that can light `p` has pmf ≥ α/N (≥ 2⁻²⁴ for
 /// N ≤ α·2²⁴ ≈ 5·10⁵); the selection's second moment `Σ s²/pmf` on
 /// `builtin:cornell-light-grid` went 1.078 → 1.083 in the first study. A single light keeps
-/// pmf 1. A power of two, so that rescaling the walk's sample is exact.
+/// pmf 1. A power of two, so that the walk's sample loses no bits to the share: `u − 1/32` is
+/// exact, and the division by 31/32 that rescales it rounds but stays one to one (its steps,
+/// 1.03·2⁻²⁴, exceed the grid's).
 pub const UNIFORM_SHARE: f32 = 1.0 / 32.0;
 
 /// [`UNIFORM_SHARE`]'s mixture of the uniform pmf over `count` lights and the walk's `pmf`.
@@ -808,7 +810,7 @@ impl<'a> LightSet<'a> {
         if self.node_count() > 0 {
             // A share of the choices uniform among all the lights — one descent along the chosen
             // light's trail gives its walk pmf — and the rest by the walk, with the sample
-            // rescaled (exactly, for the power-of-two share) to [0, 1).
+            // rescaled to [0, 1) (one to one, [`UNIFORM_SHARE`]).
             let (u, u_pick) = (clamp_sample_1d(u.x), u.y);
             let uniform = u < UNIFORM_SHARE;
             let picked = select_uniform(lights, u_pick).index;

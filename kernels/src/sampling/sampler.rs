@@ -60,7 +60,10 @@ fn scrambled_sobol_2d(index: u32, seed: u32) -> UVec2 {
 
 /// Burley's shuffled, scrambled Sobol': independent per (pixel, dimension).
 fn shuffled_sobol_bits(seed: u32, pixel: UVec2, sample_index: u32, dimension: u32) -> UVec2 {
-    let pixel_seed = pcg3d(UVec3::new(pixel.x, pixel.y, seed)).x;
+    // One to one in the pixel (its Morton code, sides being at most 2¹⁶, then a bijection), and
+    // so is `hash_combine` in its first argument: a 32-bit hash of (x, y, seed) had given pixel
+    // pairs one seed, and so the same samples in every slot (11 pairs at 512², seed 0).
+    let pixel_seed = hash_combine(morton_encode(pixel), seed);
     let slot_seed = hash_combine(pixel_seed, dimension);
     let shuffled = nested_uniform_scramble(sample_index, hash_combine(slot_seed, 0));
     scrambled_sobol_2d(shuffled, slot_seed)
@@ -340,6 +343,22 @@ mod tests {
             // Uniform variance 1/12; σ of the mean product ≈ (1/12)/√n = 0.0013: 5σ.
             assert!((cross_slot / n as f64).abs() < 0.0065, "kind {kind}: slot correlation");
             assert!((cross_seed / n as f64).abs() < 0.0065, "kind {kind}: seed correlation");
+        }
+    }
+
+    /// No two pixels of a 512² image share their samples, with any sampler: the per-pixel Sobol'
+    /// sampler had seeded pixels by a 32-bit hash, and 11 pairs (seed 0; (75, 10) and (157, 34)
+    /// the first) drew the same samples in every slot.
+    #[test]
+    fn no_two_pixels_share_their_samples() {
+        for kind in 0..sampler_kind::COUNT {
+            let p = SamplerParams { kind, seed: 0, spp_log2: 2, resolution_log2: 9 };
+            let mut seen = std::collections::HashSet::new();
+            for (x, y) in (0..512).flat_map(|y| (0..512).map(move |x| (x, y))) {
+                let pixel = UVec2::new(x, y);
+                let samples: [UVec2; 4] = core::array::from_fn(|s| sample_bits(&p, pixel, s as u32, 0));
+                assert!(seen.insert(samples), "kind {kind}: ({x}, {y}) draws another pixel's samples");
+            }
         }
     }
 
