@@ -434,15 +434,17 @@ pub fn aperture_refusal(lens_radius: f32, focus_distance: f32) -> Option<String>
 }
 
 /// Relative tolerance of the camera basis' documented shape ([`GenerateParams`]): `|forward|`
-/// within this of 1, and `right`, `up` orthogonal to it within this fraction of their length —
-/// far above the rounding of a basis built from normalized cross products (~10⁻⁷).
+/// within this of 1, `right`, `up` orthogonal to it within this fraction of their length, and
+/// to each other within this cosine — far above the rounding of a basis built from normalized
+/// cross products (~10⁻⁷).
 const CAMERA_BASIS_TOLERANCE: f32 = 1e-3;
 
 /// Checks generate-stage parameters beyond the image size (which each backend checks against its
 /// own limit): a finite camera basis of the shape [`GenerateParams`]' fields document — a unit
-/// `forward`, `right` and `up` orthogonal to it, long enough to normalize (squared length a
-/// normal float, ~10⁻¹⁹), within [`MAX_IMAGE_PLANE_AXIS`] and spanning a non-zero image plane (a
-/// zeroed basis gave NaN ray directions, a 10⁻³⁰ one infinite ones, a 10¹⁹ one zero ones) —,
+/// `forward`, `right` and `up` orthogonal to it and to each other, long enough to normalize
+/// (squared length a normal float, ~10⁻¹⁹), within [`MAX_IMAGE_PLANE_AXIS`] (a zeroed basis gave
+/// NaN ray directions, a 10⁻³⁰ one infinite ones, a 10¹⁹ one zero ones, and a slanted image
+/// plane, `right` and `up` 1000 long at 0.06° from each other, a zero direction at its corner) —,
 /// `0 ≤ tmin < tmax` finite, a finite non-negative aperture with a positive finite focus distance
 /// when it is open, at most [`MAX_APERTURE_TO_FOCUS`] times it, and a thin lens within
 /// `f32::MAX / 4` of the origin, and a sampler of a known
@@ -468,10 +470,10 @@ pub fn check_generate_params(params: &GenerateParams) -> Result<()> {
         Some("the camera's origin, forward, right and up must be finite".to_owned())
     } else if (forward.length() - 1.0).abs() > CAMERA_BASIS_TOLERANCE {
         Some(format!("the camera's forward axis must be a unit vector (length {})", forward.length()))
-    } else if !(usable(right) && usable(up)) || right.cross(up) == glam::Vec3::ZERO {
+    } else if !(usable(right) && usable(up)) || right.normalize().dot(up.normalize()).abs() > CAMERA_BASIS_TOLERANCE {
         Some(format!(
-            "the camera's right and up axes must be orthogonal to forward, between 1e-19 and \
-             {MAX_IMAGE_PLANE_AXIS:e} long, and span a non-zero image plane (right {right}, up {up})"
+            "the camera's right and up axes must be orthogonal to forward and to each other, and between 1e-19 \
+             and {MAX_IMAGE_PLANE_AXIS:e} long (right {right}, up {up})"
         ))
     } else if !(params.tmin >= 0.0 && params.tmax > params.tmin && params.tmax.is_finite()) {
         Some(format!("needs 0 ≤ tmin < tmax, both finite (tmin {}, tmax {})", params.tmin, params.tmax))
@@ -710,6 +712,13 @@ mod tests {
         let slanted = GenerateParams { right: good.right + good.forward * 0.01 * good.right.length(), ..good };
         let wide = GenerateParams { right: good.right * 1e19, ..good };
         let flat = GenerateParams { up: good.right, ..good };
+        // Axes 1000 long, each orthogonal to `forward` within the tolerance, but not to each
+        // other: the image plane's corner ray had been zero, a NaN direction.
+        let sheared =
+            GenerateParams { forward: v(0.0, 0.0, 1.0), right: v(1000.0, 0.0, 0.0), up: v(1000.0, 0.0, 1.0), ..good };
+        // At right angles within the basis' rounding, as built, it passes.
+        let square = GenerateParams { up: good.up + good.right * 1e-6, ..good };
+        assert!(check_generate_params(&square).is_ok());
         // Too short to normalize, which the thin lens does: its origins became infinite.
         let lens = GenerateParams { lens_radius: 0.01, focus_distance: 1.0, ..good };
         let thin = GenerateParams {
@@ -726,6 +735,7 @@ mod tests {
             ("slanted", slanted),
             ("wide", wide),
             ("flat", flat),
+            ("sheared", sheared),
             ("thin", thin),
             ("far", far),
         ];
