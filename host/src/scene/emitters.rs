@@ -9,7 +9,9 @@
 //! - the four corners form a parallelogram (`p + q = s₀ + s₁` for the off-diagonal corners `p`,
 //!   `q` and the diagonal's ends `s₀`, `s₁`, i.e. opposite edges are equal), which also puts `q`
 //!   on the first triangle's plane;
-//! - both triangles wind the same way, so the mesh has one front face.
+//! - both triangles wind the same way, so the mesh has one front face — unless its material is
+//!   [`Material::double_sided`](super::Material::double_sided): it emits from both faces, and
+//!   its triangles may wind either way.
 //!
 //! Tolerance: `min(1e-4 · d, 0.05 · h) + 16 ε · m`, with `d` the longest distance between the six
 //! triangle corners, `h` the smaller of the two triangles' heights over their longest edge (a
@@ -180,7 +182,7 @@ pub(super) fn parallelogram(mesh: &Mesh) -> Option<Parallelogram> {
     let normal = (x - p).cross(y - p);
     let second_normal = (bd[1] - bd[0]).cross(bd[2] - bd[0]);
     let unit = normal.try_normalize()?;
-    let consistent = unit.dot(second_normal.try_normalize()?) > 0.0;
+    let consistent = unit.dot(second_normal.try_normalize()?) > 0.0 || mesh.material.double_sided;
     // Also puts `q` on the first triangle's plane: `q − p = (x − p) + (y − p) − (x + y − p − q)`,
     // whose first two terms lie in it.
     let parallelogram = (x + y - p - q).length() <= tolerance;
@@ -427,6 +429,17 @@ mod tests {
         for (what, positions, triangles) in cases {
             assert_eq!(parallelogram(&emissive(positions, triangles)), None, "{what}");
         }
+        // A two-sided lamp has no front face for its triangles to agree on: wound either way, it
+        // is a light (it had been refused), facing its first triangle's way; the same triangle
+        // twice is still none.
+        let two_sided = |triangles| {
+            let mut mesh = emissive(square.to_vec(), triangles);
+            mesh.material.double_sided = true;
+            parallelogram(&mesh)
+        };
+        let light = two_sided(vec![[0, 1, 2], [0, 3, 2]]).expect("a two-sided light");
+        assert!(light.edge_u.cross(light.edge_v).z > 0.0, "{light:?}");
+        assert_eq!(two_sided(vec![[0, 1, 2], [0, 2, 1]]), None);
     }
 
     /// A lamp bent within the tolerance — its second triangle's own corner off the first

@@ -134,7 +134,10 @@ fn without_byte_order_mark(bytes: &[u8]) -> &[u8] {
 ///   became a filled quad (under an emissive material, a quad light), and a polyline has no area
 ///   for a ray to hit;
 /// - vertex colours (`v x y z r g b`) cut off: raywave does not use them, and tobj refused a file
-///   that gives some vertices colours and others none ("face vertex color index out of bounds").
+///   that gives some vertices colours and others none ("face vertex color index out of bounds");
+/// - a vertex's weight (`v x y z w`) cut off: the OBJ format gives it only to rational curves and
+///   surfaces, meaningless for a polygon's vertex (tinyobjloader ignores it), and tobj divided
+///   the position by it — `v 1 1 1 2` was at (0.5, 0.5, 0.5), `w` = 0 infinitely far.
 fn surfaces_only(text: &[u8]) -> std::borrow::Cow<'_, [u8]> {
     let rewritten = |line: &[u8]| -> Option<Vec<u8>> {
         let text = String::from_utf8_lossy(line);
@@ -142,6 +145,9 @@ fn surfaces_only(text: &[u8]) -> std::borrow::Cow<'_, [u8]> {
         match words.as_slice() {
             ["l", ..] => Some(Vec::new()),
             ["v", x, y, z, r, g, b] if [x, y, z, r, g, b].iter().all(|w| w.parse::<f32>().is_ok()) => {
+                Some(format!("v {x} {y} {z}").into_bytes())
+            }
+            ["v", x, y, z, w] if [x, y, z, w].iter().all(|w| w.parse::<f32>().is_ok()) => {
                 Some(format!("v {x} {y} {z}").into_bytes())
             }
             _ => None,
@@ -958,6 +964,16 @@ mod tests {
         // Line numbers still name the line at fault.
         let err = load(obj_file("v 0 0 0 1 0 0\nv 1 0 0\nv 0 1 0\nf 1 2/x 3\n").path()).unwrap_err().to_string();
         assert!(err.contains("line 4: face parse error"), "{err}");
+    }
+
+    /// A vertex's weight (`v x y z w`, for rational curves and surfaces) is ignored: tobj had
+    /// divided the position by it, and a weight of 0 had put the vertex at infinity.
+    #[test]
+    fn vertex_weights_are_ignored() {
+        let scene = load(obj_file("v 0 0 0 2\nv 1 0 0 0\nv 0 1 0\nf 1 2 3\n").path()).unwrap();
+        assert_eq!(scene.meshes()[0].positions, [Vec3::ZERO, Vec3::X, Vec3::Y]);
+        let err = load(obj_file("v 0 0 0 2\nv 1 0 0\nv 0 1 0\nf 1 2/x 3\n").path()).unwrap_err().to_string();
+        assert!(err.contains("line 4: face parse error"), "line numbers kept: {err}");
     }
 
     #[test]
