@@ -46,13 +46,14 @@ impl Setup {
         let scene = Scene::load("builtin:cornell").expect("built-in scene");
         let mut cpu = cpu::CpuBackend::new();
         cpu.load_scene(&scene).expect("BVH builds");
-        let vulkan = match open_backend(DeviceChoice::Vulkan(None), &BackendOptions::default()) {
+        let options = BackendOptions { validation: validating(), ..Default::default() };
+        let vulkan = match open_backend(DeviceChoice::Vulkan(None), &options) {
             Ok(mut v) => {
                 v.load_scene(&scene).expect("acceleration structures build");
                 Some(v)
             }
             // `cargo test` runs the benches once; in CI (lavapipe) the Vulkan rows must run too.
-            Err(e) if cfg!(feature = "vulkan") && std::env::var("CI").is_ok_and(|v| v == "true" || v == "1") => {
+            Err(e) if cfg!(feature = "vulkan") && validating() => {
                 panic!("CI=true but no Vulkan device opens: {e}")
             }
             Err(e) => {
@@ -82,6 +83,23 @@ fn stages(c: &mut Criterion) {
     layout(c);
     #[cfg(feature = "vulkan")]
     workgroup_size::group(c, &setup);
+    if let Some(vulkan) = setup.vulkan.take() {
+        raywave::close_backend(vulkan).expect("the validation layers reported nothing");
+    }
+}
+
+/// Whether criterion measures (`cargo bench`) rather than runs every benchmark once to check
+/// it (`cargo test`, or `--test`), as criterion decides from the same arguments.
+fn benchmarking() -> bool {
+    let args: Vec<String> = std::env::args().collect();
+    args.iter().any(|a| a == "--bench") && !args.iter().any(|a| a == "--test")
+}
+
+/// Whether the Vulkan backends open with the validation layers, whose every warning or error
+/// fails the run as it closes them: where the benches run once as tests under CI (`CI=true` or
+/// `1`, where the layers are installed), not while they measure.
+fn validating() -> bool {
+    !benchmarking() && std::env::var("CI").is_ok_and(|v| v == "true" || v == "1")
 }
 
 /// The samplers alone: one 2-D slot of every sample of a 512² frame at 4 samples per pixel
@@ -151,7 +169,10 @@ fn trace_primary(c: &mut Criterion, setup: &mut Setup) {
 /// lists what it runs).
 #[cfg(feature = "vulkan")]
 mod workgroup_size {
-    use super::{black_box, cpu, generate_params, open_backend, BackendOptions, DeviceChoice, Setup, SIZES};
+    use super::{
+        benchmarking, black_box, cpu, generate_params, open_backend, validating, BackendOptions, DeviceChoice, Setup,
+        SIZES,
+    };
     use criterion::{BenchmarkId, Criterion, Throughput};
     use raywave::bench::{warm_up, GPU_SETTLE_SECONDS, SUSTAIN_SECONDS};
     use raywave::{Backend, StageReport, TraceMethod, WorkgroupSizes};
@@ -206,7 +227,7 @@ mod workgroup_size {
                     // Criterion's test mode runs each row once: no sustained submissions there.
                     sustain_seconds: if benchmarking { SUSTAIN_SECONDS } else { 0.0 },
                     workgroup_sizes: Some(WorkgroupSizes::all(size)),
-                    ..Default::default()
+                    validation: validating(),
                 };
                 let choice = DeviceChoice::Vulkan(Some(device.index));
                 let mut v = open_backend(choice, &options).expect("a size and trace method the device runs");
@@ -222,27 +243,21 @@ mod workgroup_size {
                         .expect("warm-up");
                     }
                 };
-                let v = v.as_mut();
+                let backend = v.as_mut();
                 group.bench_function(BenchmarkId::new(format!("vulkan-{}-trace", method.name()), size), |b| {
-                    warm(v);
-                    b.iter_custom(|iters| gpu_time(iters, || trace(v)))
+                    warm(backend);
+                    b.iter_custom(|iters| gpu_time(iters, || trace(backend)))
                 });
                 if shades {
                     group.bench_function(BenchmarkId::new("vulkan-shade", size), |b| {
-                        warm(v);
-                        b.iter_custom(|iters| gpu_time(iters, || shade(v)))
+                        warm(backend);
+                        b.iter_custom(|iters| gpu_time(iters, || shade(backend)))
                     });
                 }
+                raywave::close_backend(v).expect("the validation layers reported nothing");
             }
         }
         group.finish();
-    }
-
-    /// Whether criterion measures (`cargo bench`) rather than runs every benchmark once to check
-    /// it (`cargo test`, or `--test`), as criterion decides from the same arguments.
-    fn benchmarking() -> bool {
-        let args: Vec<String> = std::env::args().collect();
-        args.iter().any(|a| a == "--bench") && !args.iter().any(|a| a == "--test")
     }
 
     /// The summed GPU time of `iters` runs of a stage, as criterion's measured time.

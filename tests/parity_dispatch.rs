@@ -455,13 +455,16 @@ fn an_unusable_workgroup_size_is_refused_when_the_device_opens() {
         }
     }
     let mixed = WorkgroupSizes { generate: 32, trace: 128, shade: largest, denoise: 256.min(largest) };
-    let options = ContextOptions { workgroup_sizes: Some(mixed), ..Default::default() };
+    let validated = ContextOptions { validation: true, ..Default::default() };
+    let options = ContextOptions { workgroup_sizes: Some(mixed), ..validated.clone() };
     let opened = VulkanBackend::open(device.index, &options, None).expect("every size runs");
     assert_eq!(opened.workgroup_sizes(), mixed);
-    let preferred = VulkanBackend::open(device.index, &ContextOptions::default(), None).expect("opens");
+    let preferred = VulkanBackend::open(device.index, &validated, None).expect("opens");
     assert_eq!(preferred.workgroup_sizes(), WorkgroupSizes::preferred_on(&device.workgroup_sizes));
     if largest >= 256 {
         assert_eq!(preferred.workgroup_sizes(), WorkgroupSizes::PREFERRED);
         assert_eq!(preferred.workgroup_sizes().shade, 256);
     }
+    vulkan::assert_clean(opened);
+    vulkan::assert_clean(preferred);
 }

@@ -1046,7 +1046,7 @@ mod tests {
         let nodes_of = |quality| CpuScene::build_with(&scene, quality).unwrap().nodes().to_vec();
         assert_ne!(nodes_of(BvhQuality::Fast).len(), nodes_of(BvhQuality::Slow).len(), "the presets differ");
         for quality in [BvhQuality::Fast, BvhQuality::Slow] {
-            let options = ContextOptions { software_bvh: quality, ..Default::default() };
+            let options = ContextOptions { software_bvh: quality, validation: true, ..Default::default() };
             let mut backend = VulkanBackend::open(device.index, &options, Some(TraceMethod::Software)).unwrap();
             assert_eq!(backend.software_bvh(), quality);
             backend.load_scene(&scene).unwrap();
@@ -1055,6 +1055,8 @@ mod tests {
             let expected = nodes_of(quality);
             let uploaded: Vec<raywave_shared::bvh::CwBvhNode> = nodes.read(expected.len()).unwrap();
             assert!(uploaded == expected, "{quality:?}: the uploaded nodes are not the preset's tree");
+            let messages = backend.validation_messages();
+            assert!(messages.is_empty(), "{}: {messages:?}", device.name);
         }
     }
 

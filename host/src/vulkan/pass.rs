@@ -493,7 +493,8 @@ mod tests {
     #[test]
     fn a_run_of_mismatched_resources_or_push_constants_is_refused() {
         for device in &super::super::devices_for_test("pass preparation") {
-            let core = super::super::context::open(device.index, &Default::default()).unwrap();
+            let options = super::super::ContextOptions { validation: true, ..Default::default() };
+            let core = super::super::context::open(device.index, &options).unwrap();
             let storage = vk::DescriptorType::STORAGE_BUFFER;
             let stages = vk::ShaderStageFlags::COMPUTE;
             let pass =
@@ -518,6 +519,8 @@ mod tests {
                 assert_eq!(message, expected, "{}", device.name);
             }
             assert_eq!(refusal(&buffers, &[0; 16]), "", "{}: matching resources and constants", device.name);
+            let messages = core.validation_log().messages();
+            assert!(messages.is_empty(), "{}: {messages:?}", device.name);
         }
     }
 
