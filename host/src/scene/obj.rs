@@ -794,9 +794,9 @@ mod tests {
         let scene = load(&path).unwrap();
         let floor = scene.meshes().iter().find(|m| m.name == "floor (floor)").unwrap().material;
         assert_eq!(floor.base_color, Vec3::splat(0.5));
-        // A colour with other than one or three numbers (tobj 4.0.5 panics on fewer and ignored a fourth),
-        // an `Ns` that is not one finite number ≥ 0 (a negative one was taken as 0, an infinite
-        // one as a mirror) or a number that does not parse names the library and its line.
+        // A colour with other than one or three numbers (tobj 4.0.5 panics on fewer and ignored a
+        // fourth), an `Ns` that is not one finite number ≥ 0 (a negative one was taken as 0, an
+        // infinite one as a mirror) or a number that does not parse names the library and its line.
         let library = dir.path().join("scene.mtl");
         for (text, expected) in [
             (
