@@ -625,65 +625,63 @@ fn render_command(args: RenderArgs) -> raywave::Result<()> {
         "scene    {} ({} triangles, {} zero-area dropped, {} quad lights)",
         options.scene, report.triangles, report.dropped_degenerate, report.lights
     ));
-    if report.unsupported_emitters > 0 {
-        warn(&format!(
-            "warning: {} emissive mesh(es) of {} are not one planar parallelogram: they glow where seen (their front faces) but light nothing",
-            report.unsupported_emitters, options.scene
-        ));
-    }
-    if report.unrendered.textured_meshes > 0 {
-        warn(&format!(
-            "warning: {} mesh(es) of {} have textures or vertex colours, which raywave does not sample: their \
-             materials' factors alone apply (an emissive texture's mesh emits its factor everywhere)",
-            report.unrendered.textured_meshes, options.scene
-        ));
-    }
-    if report.unrendered.see_through_meshes > 0 {
-        warn(&format!(
-            "warning: {} mesh(es) of {} have see-through materials (alpha blended or masked, glTF transmission, MTL \
-             dissolve), which raywave renders opaque",
-            report.unrendered.see_through_meshes, options.scene
-        ));
-    }
-    if report.unrendered.unlit_meshes > 0 {
-        warn(&format!(
-            "warning: {} mesh(es) of {} have unlit materials (KHR_materials_unlit), which raywave shades as lit",
-            report.unrendered.unlit_meshes, options.scene
-        ));
-    }
-    if report.unrendered.deformed_meshes > 0 {
-        warn(&format!(
-            "warning: {} mesh(es) of {} have a skin or weighted morph targets, which raywave does not apply: they render \
-             in their rest pose",
-            report.unrendered.deformed_meshes, options.scene
-        ));
-    }
-    if report.unrendered.orthographic_camera {
-        warn(&format!(
-            "warning: the cameras of {} are orthographic, which raywave does not render: it frames the scene with a \
-             perspective camera instead",
-            options.scene
-        ));
-    }
-    if report.unrendered.punctual_lights > 0 {
-        warn(&format!(
-            "warning: {} punctual light(s) (KHR_lights_punctual point, spot or directional) of {} light nothing: \
-             raywave renders area lights only (emissive parallelograms)",
-            report.unrendered.punctual_lights, options.scene
-        ));
-    }
-    if report.unrendered.gpu_instanced_nodes > 0 {
-        warn(&format!(
-            "warning: {} node(s) of {} place their mesh many times (EXT_mesh_gpu_instancing), which raywave does not \
-             read: each renders one copy, at the node",
-            report.unrendered.gpu_instanced_nodes, options.scene
-        ));
-    }
-    if report.lights == 0 && options.view == RenderView::Lit {
-        warn(&format!(
-            "warning: {} has no quad light, so nothing is lit (emitters glow where their front faces are seen)",
-            options.scene
-        ));
+    // What the scene asked for that the render leaves out or renders otherwise, each a warning
+    // where it occurs: counts as "N what of SCENE rest".
+    let (scene, unrendered) = (&options.scene, &report.unrendered);
+    let counted = |count: usize, what: &str, rest: &str| {
+        (count > 0).then(|| format!("warning: {count} {what} of {scene} {rest}"))
+    };
+    let warnings = [
+        counted(
+            report.unsupported_emitters,
+            "emissive mesh(es)",
+            "are not one planar parallelogram: they glow where seen (their front faces) but light nothing",
+        ),
+        counted(
+            unrendered.textured_meshes,
+            "mesh(es)",
+            "have textures or vertex colours, which raywave does not sample: their materials' factors alone apply \
+             (an emissive texture's mesh emits its factor everywhere)",
+        ),
+        counted(
+            unrendered.see_through_meshes,
+            "mesh(es)",
+            "have see-through materials (alpha blended or masked, glTF transmission, MTL dissolve), which raywave \
+             renders opaque",
+        ),
+        counted(
+            unrendered.unlit_meshes,
+            "mesh(es)",
+            "have unlit materials (KHR_materials_unlit), which raywave shades as lit",
+        ),
+        counted(
+            unrendered.deformed_meshes,
+            "mesh(es)",
+            "have a skin or weighted morph targets, which raywave does not apply: they render in their rest pose",
+        ),
+        unrendered.orthographic_camera.then(|| {
+            format!(
+                "warning: the cameras of {scene} are orthographic, which raywave does not render: it frames the scene \
+                 with a perspective camera instead"
+            )
+        }),
+        counted(
+            unrendered.punctual_lights,
+            "punctual light(s) (KHR_lights_punctual point, spot or directional)",
+            "light nothing: raywave renders area lights only (emissive parallelograms)",
+        ),
+        counted(
+            unrendered.gpu_instanced_nodes,
+            "node(s)",
+            "place their mesh many times (EXT_mesh_gpu_instancing), which raywave does not read: each renders one \
+             copy, at the node",
+        ),
+        (report.lights == 0 && options.view == RenderView::Lit).then(|| {
+            format!("warning: {scene} has no quad light, so nothing is lit (emitters glow where their front faces are seen)")
+        }),
+    ];
+    for warning in warnings.into_iter().flatten() {
+        warn(&warning);
     }
     let spp = report.samples_per_pixel;
     let rays = u64::from(options.width) * u64::from(options.height) * u64::from(spp);
