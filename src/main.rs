@@ -670,12 +670,6 @@ fn render_command(args: RenderArgs) -> raywave::Result<()> {
             "punctual light(s) (KHR_lights_punctual point, spot or directional)",
             "light nothing: raywave renders area lights only (emissive parallelograms)",
         ),
-        counted(
-            unrendered.gpu_instanced_nodes,
-            "node(s)",
-            "place their mesh many times (EXT_mesh_gpu_instancing), which raywave does not read: each renders one \
-             copy, at the node",
-        ),
         (report.lights == 0 && options.view == RenderView::Lit).then(|| {
             format!("warning: {scene} has no quad light, so nothing is lit (emitters glow where their front faces are seen)")
         }),

@@ -1,5 +1,6 @@
 //! glTF 2.0 scenes (through the `gltf` crate): the default scene's node hierarchy with its
-//! transforms, every triangle primitive as a mesh, metallic-roughness materials with emission
+//! transforms (and `EXT_mesh_gpu_instancing`'s instances, [`instancing`]), every triangle
+//! primitive as a mesh, metallic-roughness materials with emission
 //! (and `KHR_materials_emissive_strength`; `doubleSided` makes an emissive rectangle a two-sided
 //! light), and the first perspective camera, if any — looking at the point along its view at the
 //! depth of the scene's centre, which sets the default focus ([`PlacedCamera::aimed`]). What raywave does not render — textures,
@@ -28,6 +29,8 @@ use gltf::{buffer, Document, Semantic};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
+mod instancing;
+
 /// Loads and validates a `.gltf` or `.glb` file.
 pub fn load(path: &Path) -> Result<Scene> {
     let load_error = |message: String| Error::SceneLoad { path: path.to_owned(), message };
@@ -38,23 +41,34 @@ pub fn load(path: &Path) -> Result<Scene> {
         .or_else(|| document.scenes().next())
         .ok_or_else(|| load_error("the file defines no scene".into()))?;
     let nodes = scene_nodes(&document, &scene).map_err(load_error)?;
-    // Counted before any is read: nodes may instance one large accessor many times over. Each
+    // Counted before any is read: nodes (and each node's `EXT_mesh_gpu_instancing` instances) may
+    // instance one large accessor many times over. Each
     // mesh's accessors are checked once, however many nodes instance it, and its instances
     // counted, so that the last one can take the geometry read for them all.
     let (mut vertices, mut triangle_count): (u64, u64) = (0, 0);
     let mut mesh_sizes: HashMap<usize, (u64, u64)> = HashMap::new();
     let mut checked_accessors = CheckedAccessors::new();
     let mut instances_left: HashMap<usize, usize> = HashMap::new();
-    for mesh in nodes.iter().filter_map(|(node, _)| node.mesh()) {
+    // Where each node places its mesh (none for a node without one).
+    let mut node_placements: Vec<Vec<Placement>> = Vec::with_capacity(nodes.len());
+    for (node, world) in &nodes {
+        let Some(mesh) = node.mesh() else {
+            node_placements.push(Vec::new());
+            continue;
+        };
+        let placements =
+            Placement::of_node(&document, node, *world, &buffers, &mut checked_accessors).map_err(load_error)?;
         let (mesh_vertices, mesh_triangles) = match mesh_sizes.get(&mesh.index()) {
             Some(&size) => size,
             None => *mesh_sizes
                 .entry(mesh.index())
                 .or_insert(mesh_size(&mesh, &buffers, &mut checked_accessors).map_err(load_error)?),
         };
-        vertices = vertices.saturating_add(mesh_vertices);
-        triangle_count = triangle_count.saturating_add(mesh_triangles);
-        *instances_left.entry(mesh.index()).or_default() += 1;
+        let copies = placements.len() as u64;
+        vertices = vertices.saturating_add(mesh_vertices.saturating_mul(copies));
+        triangle_count = triangle_count.saturating_add(mesh_triangles.saturating_mul(copies));
+        *instances_left.entry(mesh.index()).or_default() += placements.len();
+        node_placements.push(placements);
     }
     for (count, limit, what) in [(vertices, MAX_VERTICES, "vertices"), (triangle_count, MAX_TRIANGLES, "triangles")] {
         if count > limit as u64 {
@@ -69,9 +83,8 @@ pub fn load(path: &Path) -> Result<Scene> {
     let mut geometries: HashMap<(usize, usize), PrimitiveGeometry> = HashMap::new();
     let mut unrendered = Unrendered::default();
     let (mut placed_camera, mut orthographic) = (None, false);
-    for (node, world) in &nodes {
+    for ((node, world), placements) in nodes.iter().zip(node_placements) {
         unrendered.punctual_lights += usize::from(node.light().is_some());
-        unrendered.gpu_instanced_nodes += usize::from(is_gpu_instanced(node));
         if let (None, Some(node_camera)) = (&placed_camera, node.camera()) {
             match node_camera.projection() {
                 gltf::camera::Projection::Perspective(p) => {
@@ -80,7 +93,8 @@ pub fn load(path: &Path) -> Result<Scene> {
                 gltf::camera::Projection::Orthographic(_) => orthographic = true,
             }
         }
-        if let Some(mesh) = node.mesh() {
+        let Some(mesh) = node.mesh() else { continue };
+        for placement in &placements {
             let last_instance = instances_left.get_mut(&mesh.index()).is_some_and(|left| {
                 *left -= 1;
                 *left == 0
@@ -99,7 +113,6 @@ pub fn load(path: &Path) -> Result<Scene> {
                     Some(geometry) => geometry,
                     None => PrimitiveGeometry::read(&primitive, &buffers, &field).map_err(in_primitive)?,
                 };
-                let placement = (node.index(), *world);
                 let (positions, triangles) = if last_instance {
                     geometry.into_instance(&field, placement)
                 } else {
@@ -164,10 +177,45 @@ fn is_see_through(m: &gltf::Material) -> bool {
         }
 }
 
-/// Whether `node` places its mesh many times by `EXT_mesh_gpu_instancing`, which raywave does not
-/// read ([`Unrendered::gpu_instanced_nodes`]): it renders the one copy at the node.
-fn is_gpu_instanced(node: &gltf::Node) -> bool {
-    node.mesh().is_some() && node.extension_value("EXT_mesh_gpu_instancing").is_some()
+/// One place a node puts its mesh at: the node's world transform, or one of its instances under
+/// `EXT_mesh_gpu_instancing` ([`instancing`]).
+struct Placement {
+    /// From the mesh's space to world space.
+    world: Mat4,
+    /// The node's index, which errors name.
+    node: usize,
+    /// The instance's index, which errors name; `None` for the node's own transform.
+    instance: Option<usize>,
+}
+
+impl Placement {
+    /// Where `node`, of world transform `world`, puts its mesh: at each of its instances
+    /// ([`instancing::instance_transforms`], whose errors this returns), else at the node.
+    fn of_node(
+        document: &Document,
+        node: &gltf::Node,
+        world: Mat4,
+        buffers: &[buffer::Data],
+        checked: &mut CheckedAccessors,
+    ) -> std::result::Result<Vec<Self>, String> {
+        let node_index = node.index();
+        Ok(match instancing::instance_transforms(document, node, buffers, checked)? {
+            Some(instances) => instances
+                .into_iter()
+                .enumerate()
+                .map(|(k, instance)| Self { world: world * instance, node: node_index, instance: Some(k) })
+                .collect(),
+            None => vec![Self { world, node: node_index, instance: None }],
+        })
+    }
+
+    /// The transform's source, as errors name it.
+    fn source(&self) -> String {
+        match self.instance {
+            Some(k) => format!("nodes[{}]'s instance {k} ({})", self.node, instancing::EXTENSION),
+            None => format!("nodes[{}]", self.node),
+        }
+    }
 }
 
 /// Whether node `node` would deform `primitive` of its mesh `mesh` in a way raywave does not
@@ -258,7 +306,10 @@ fn parse(bytes: &[u8], base: Option<&Path>) -> std::result::Result<(Document, Ve
     check_glb_length(bytes)?;
     let gltf::Gltf { document, blob } = gltf::Gltf::from_slice_without_validation(bytes).map_err(|e| e.to_string())?;
     check_position_accessor_indices(document.as_json())?;
-    let document = Document::from_json(document.into_json()).map_err(|e| e.to_string())?;
+    let mut json = document.into_json();
+    // Read here, so a file may require it: the crate's validation refuses any it does not know.
+    json.extensions_required.retain(|required| required != instancing::EXTENSION);
+    let document = Document::from_json(json).map_err(|e| e.to_string())?;
     check_camera_projections(document.as_json())?;
     check_node_matrices_alone(document.as_json())?;
     check_meshes_have_primitives(document.as_json())?;
@@ -434,17 +485,32 @@ enum AccessorUse {
     /// Vertex indices: SCALAR unsigned integers, tightly packed — glTF 2.0 gives a `byteStride`
     /// to vertex attributes alone.
     Indices,
+    /// An `EXT_mesh_gpu_instancing` TRANSLATION: VEC3 of `f32`.
+    InstanceTranslation,
+    /// An `EXT_mesh_gpu_instancing` ROTATION: VEC4 of `f32`, normalized `i8` or normalized `i16`.
+    InstanceRotation,
+    /// An `EXT_mesh_gpu_instancing` SCALE: VEC3 of `f32`.
+    InstanceScale,
 }
 
 impl AccessorUse {
-    /// The element type glTF 2.0 requires: its dimensions and the component types it allows
-    /// (none normalized).
-    fn element(self) -> (Dimensions, &'static [DataType]) {
+    /// The element type glTF 2.0 (or the extension) requires: its dimensions and the component
+    /// types it allows, each with whether it is `normalized`.
+    fn element(self) -> (Dimensions, &'static [(DataType, bool)]) {
+        const F32: (DataType, bool) = (DataType::F32, false);
         match self {
-            Self::Position => (Dimensions::Vec3, &[DataType::F32]),
-            Self::Indices => (Dimensions::Scalar, &[DataType::U8, DataType::U16, DataType::U32]),
+            Self::Position | Self::InstanceTranslation | Self::InstanceScale => (Dimensions::Vec3, &[F32]),
+            Self::Indices => {
+                (Dimensions::Scalar, &[(DataType::U8, false), (DataType::U16, false), (DataType::U32, false)])
+            }
+            Self::InstanceRotation => (Dimensions::Vec4, &[F32, (DataType::I8, true), (DataType::I16, true)]),
         }
     }
+}
+
+/// A component type as an error names it: `F32`, `normalized I16`.
+fn component_name((data_type, normalized): (DataType, bool)) -> String {
+    format!("{}{data_type:?}", if normalized { "normalized " } else { "" })
 }
 
 /// Accessors already checked ([`check_accessor`]) for each use: each is checked once however
@@ -547,14 +613,10 @@ impl PrimitiveGeometry {
         Ok(Self { elements, positions, triangles })
     }
 
-    /// The positions (moved to world space by `world`, node `node`'s transform) and triangles
-    /// (counter-clockwise in world space seen from the front, reversed where `world` mirrors)
-    /// of this primitive (JSON path `field`) as that node instances it, in new vectors ([`place`]).
-    fn instance(
-        &self,
-        field: &str,
-        placement: (usize, Mat4),
-    ) -> std::result::Result<(Vec<Vec3>, Vec<[u32; 3]>), String> {
+    /// The positions (moved to world space by `placement`) and triangles (counter-clockwise in
+    /// world space seen from the front, reversed where the placement mirrors) of this primitive
+    /// (JSON path `field`) as placed there, in new vectors ([`place`]).
+    fn instance(&self, field: &str, placement: &Placement) -> std::result::Result<(Vec<Vec3>, Vec<[u32; 3]>), String> {
         let (mut positions, mut triangles) = (self.positions.clone(), self.triangles.clone());
         place(&mut positions, &mut triangles, &self.elements, field, placement)?;
         Ok((positions, triangles))
@@ -564,7 +626,7 @@ impl PrimitiveGeometry {
     fn into_instance(
         mut self,
         field: &str,
-        placement: (usize, Mat4),
+        placement: &Placement,
     ) -> std::result::Result<(Vec<Vec3>, Vec<[u32; 3]>), String> {
         place(&mut self.positions, &mut self.triangles, &self.elements, field, placement)?;
         Ok((self.positions, self.triangles))
@@ -661,25 +723,26 @@ impl<'a> PositionElements<'a> {
 const VEC3_F32_BYTES: usize = 12;
 
 /// Moves `positions` (each POSITION element `elements` names, of the primitive at JSON path
-/// `field`) to world space by `world`, node `node`'s transform, and reverses `triangles` where
-/// `world` mirrors; an error if a world position is not finite and within [`MAX_COORDINATE`].
+/// `field`) to world space by `placement`, and reverses `triangles` where it mirrors; an error if
+/// a world position is not finite and within [`MAX_COORDINATE`].
 fn place(
     positions: &mut [Vec3],
     triangles: &mut [[u32; 3]],
     elements: &[u32],
     field: &str,
-    (node, world): (usize, Mat4),
+    placement: &Placement,
 ) -> std::result::Result<(), String> {
     // In `f64`, rounded once: in `f32` each world coordinate carried the rounding of the
     // transform's terms, which may be far larger than the result (a lamp modelled 10³ from its
     // node's origin and moved back near the world's was bent past the quad-light tolerance).
-    let world_f64 = world.as_dmat4();
+    let world_f64 = placement.world.as_dmat4();
     for (position, element) in positions.iter_mut().zip(elements) {
         let p = world_f64.transform_point3(position.as_dvec3()).as_vec3();
         if !in_range(p) {
             return Err(format!(
-                "{field}.attributes.POSITION element {element} is at {p} in world space under nodes[{node}]'s \
-                 transform; each coordinate must be finite and within ±{MAX_COORDINATE:e}"
+                "{field}.attributes.POSITION element {element} is at {p} in world space under {}'s transform; each \
+                 coordinate must be finite and within ±{MAX_COORDINATE:e}",
+                placement.source()
             ));
         }
         *position = p;
@@ -734,8 +797,9 @@ fn fan_triangles(indices: &[u32]) -> Vec<[u32; 3]> {
 }
 
 /// Checks what the `gltf` crate's reader trusts of an accessor read at `field` as `use_`, and what
-/// glTF 2.0 forbids there that the crate takes: its element type (one glTF allows there, not
-/// `normalized` — which the reader ignored, and glTF forbids for float and 32-bit components), no
+/// glTF 2.0 forbids there that the crate takes: its element type (one glTF allows there, and
+/// `normalized` only where that allows it — the reader ignores the flag, and glTF forbids it for
+/// float and 32-bit components), no
 /// `byteStride` on an indices view, `count ≥ 1` (glTF's minimum) and at most one element per byte
 /// of the file's buffers and below 2³² (32-bit indices; a sparse accessor without a buffer view
 /// would otherwise allocate `count` zeros, however large), `1 ≤ sparse.count ≤ count`, and that
@@ -749,13 +813,15 @@ fn check_accessor(
 ) -> std::result::Result<(), String> {
     let error = |what: String| Err(format!("{field}: accessor {}: {what}", accessor.index()));
     let count = accessor.count();
-    let (dimensions, data_types) = use_.element();
-    if accessor.dimensions() != dimensions || !data_types.contains(&accessor.data_type()) || accessor.normalized() {
-        let (found, found_type) = (accessor.dimensions(), accessor.data_type());
-        let normalized = if accessor.normalized() { "normalized " } else { "" };
+    let (dimensions, components) = use_.element();
+    let found = (accessor.data_type(), accessor.normalized());
+    if accessor.dimensions() != dimensions || !components.contains(&found) {
+        let allowed: Vec<String> = components.iter().copied().map(component_name).collect();
         return error(format!(
-            "holds {found:?} of {normalized}{found_type:?}, glTF requires {dimensions:?} of {data_types:?} (not \
-             normalized)"
+            "holds {:?} of {}, glTF requires {dimensions:?} of {}",
+            accessor.dimensions(),
+            component_name(found),
+            allowed.join(" or ")
         ));
     }
     if let (AccessorUse::Indices, Some(view)) = (use_, accessor.view()) {
@@ -1278,7 +1344,8 @@ mod tests {
         let translation = Vec3::new(0.5, 1.0, 2.0) - rotation * offset * scale;
         let world = Mat4::from_scale_rotation_translation(Vec3::splat(scale), rotation, translation);
         let (mut positions, mut triangles) = (local.to_vec(), vec![[0, 1, 2], [0, 2, 3]]);
-        place(&mut positions, &mut triangles, &[0, 1, 2, 3], "meshes[0].primitives[0]", (0, world)).unwrap();
+        let placement = Placement { world, node: 0, instance: None };
+        place(&mut positions, &mut triangles, &[0, 1, 2, 3], "meshes[0].primitives[0]", &placement).unwrap();
         let c = positions.iter().map(|p| p.as_dvec3()).collect::<Vec<_>>();
         let bend = (c[0] + c[2] - c[1] - c[3]).length();
         let material = Material { emission: Vec3::ONE, ..Material::diffuse(Vec3::ONE) };
@@ -1793,11 +1860,10 @@ mod tests {
         assert_eq!(load(file(&quad_gltf(6)).path()).unwrap().unrendered().punctual_lights, 0);
     }
 
-    /// Unlit materials (`KHR_materials_unlit`) and meshes placed many times
-    /// (`EXT_mesh_gpu_instancing`), extensions a file may use without requiring them, are counted
-    /// (they had been rendered lit, and once, without a word); required, the instancing is refused.
+    /// Unlit materials (`KHR_materials_unlit`), an extension a file may use without requiring it,
+    /// are counted (they had been rendered lit without a word).
     #[test]
-    fn unlit_materials_and_gpu_instanced_nodes_are_counted() {
+    fn unlit_materials_are_counted() {
         let material = r#""emissiveFactor":[1,0.5,0]}"#;
         let unlit = quad_gltf(6).replacen(
             material,
@@ -1805,25 +1871,197 @@ mod tests {
             1,
         );
         assert_ne!(unlit, quad_gltf(6));
-        let scene = load(file(&unlit).path()).unwrap();
-        assert_eq!((scene.unrendered().unlit_meshes, scene.unrendered().gpu_instanced_nodes), (1, 0));
-        // The instancing's accessors are not read: any index will do for the count.
-        let node = r#"{"mesh":0,"translation":[0,0,-2]}"#;
-        let instanced = r#"{"mesh":0,"translation":[0,0,-2],"extensions":{"EXT_mesh_gpu_instancing":{"attributes":{"TRANSLATION":0}}}}"#;
-        let used = quad_gltf(6).replacen(node, instanced, 1).replacen(
-            r#""scene":0,"#,
-            r#""scene":0,"extensionsUsed":["EXT_mesh_gpu_instancing"],"#,
-            1,
-        );
-        assert!(used.contains(instanced));
-        let scene = load(file(&used).path()).unwrap();
-        assert_eq!((scene.unrendered().unlit_meshes, scene.unrendered().gpu_instanced_nodes), (0, 1));
-        assert_eq!(scene.meshes().len(), 1, "one copy, at the node");
-        let required =
-            used.replacen(r#""scene":0,"#, r#""scene":0,"extensionsRequired":["EXT_mesh_gpu_instancing"],"#, 1);
-        let err = load(file(&required).path()).unwrap_err().to_string();
-        assert!(err.contains("extensionsRequired") && err.contains("EXT_mesh_gpu_instancing"), "{err}");
+        assert_eq!(load(file(&unlit).path()).unwrap().unrendered().unlit_meshes, 1);
         assert_eq!(load(file(&quad_gltf(6)).path()).unwrap().unrendered(), Unrendered::default());
+    }
+
+    /// [`quad_gltf`] whose mesh node places the quad by `EXT_mesh_gpu_instancing` with
+    /// `attributes` (JSON), beside a second buffer holding `data`: `views` and `accessors` (JSON,
+    /// each starting with a comma) follow the file's own, so the first of each is index 2.
+    fn gpu_instanced_quad(attributes: &str, data: &[u8], views: &str, accessors: &str) -> String {
+        let quad_data = format!(r#"{}"}}],"#, base64_encode(&quad_buffer()));
+        let buffers = format!(
+            r#"{}"}},{{"byteLength":{},"uri":"data:application/octet-stream;base64,{}"}}],"#,
+            base64_encode(&quad_buffer()),
+            data.len(),
+            base64_encode(data)
+        );
+        let node = r#"{"mesh":0,"translation":[0,0,-2]}"#;
+        let instanced = format!(
+            r#"{{"mesh":0,"translation":[0,0,-2],"extensions":{{"EXT_mesh_gpu_instancing":{{"attributes":{attributes}}}}}}}"#
+        );
+        let last_view = r#"{"buffer":0,"byteOffset":48,"byteLength":12}"#;
+        let text = quad_gltf(6)
+            .replacen(node, &instanced, 1)
+            .replacen(r#""scene":0,"#, r#""scene":0,"extensionsUsed":["EXT_mesh_gpu_instancing"],"#, 1)
+            .replacen(&quad_data, &buffers, 1)
+            .replacen(last_view, &format!("{last_view}{views}"), 1)
+            .replacen(r#""type":"SCALAR"}]"#, &format!(r#""type":"SCALAR"}}{accessors}]"#), 1);
+        assert!(text.contains(&instanced) && text.contains(&buffers), "{text}");
+        text
+    }
+
+    /// Little-endian bytes of `values`, each `f32`.
+    fn f32_bytes(values: &[f32]) -> Vec<u8> {
+        values.iter().flat_map(|v| v.to_le_bytes()).collect()
+    }
+
+    /// Three instances' TRANSLATION, SCALE and ROTATION (as `f32`), for [`gpu_instanced_quad`]:
+    /// the quad as it is; turned 90° about z, doubled and moved 5 along x; turned 180° about y,
+    /// mirrored in x and moved to (0, 3, 1) — in the node's space, moved by its (0, 0, −2).
+    const INSTANCE_TRANSLATIONS: [f32; 9] = [0.0, 0.0, 0.0, 5.0, 0.0, 0.0, 0.0, 3.0, 1.0];
+    const INSTANCE_SCALES: [f32; 9] = [1.0, 1.0, 1.0, 2.0, 2.0, 2.0, -1.0, 1.0, 1.0];
+    const INSTANCE_ROTATIONS: [f32; 12] = [
+        0.0,
+        0.0,
+        0.0,
+        1.0,
+        0.0,
+        0.0,
+        std::f32::consts::FRAC_1_SQRT_2,
+        std::f32::consts::FRAC_1_SQRT_2,
+        0.0,
+        1.0,
+        0.0,
+        0.0,
+    ];
+
+    /// The views (from byte 0 of the second buffer) and accessors of the translations, scales and
+    /// rotations [`INSTANCE_TRANSLATIONS`]… hold, the rotations as `component_type` (5126 `f32`,
+    /// 5122 normalized `i16`, 5120 normalized `i8`), after the buffer that holds them.
+    fn instance_accessors(component_type: u32) -> (Vec<u8>, String, String) {
+        let mut data = f32_bytes(&INSTANCE_TRANSLATIONS);
+        data.extend(f32_bytes(&INSTANCE_SCALES));
+        let rotations: Vec<u8> = match component_type {
+            5126 => f32_bytes(&INSTANCE_ROTATIONS),
+            5122 => INSTANCE_ROTATIONS.iter().flat_map(|c| ((c * 32767.0).round() as i16).to_le_bytes()).collect(),
+            _ => INSTANCE_ROTATIONS.iter().map(|c| (c * 127.0).round() as i8 as u8).collect(),
+        };
+        let normalized = if component_type == 5126 { "" } else { r#","normalized":true"# };
+        let views = format!(
+            r#",{{"buffer":1,"byteLength":36}},{{"buffer":1,"byteOffset":36,"byteLength":36}},{{"buffer":1,"byteOffset":72,"byteLength":{}}}"#,
+            rotations.len()
+        );
+        let accessors = format!(
+            r#",{{"bufferView":2,"componentType":5126,"count":3,"type":"VEC3"}},{{"bufferView":3,"componentType":5126,"count":3,"type":"VEC3"}},{{"bufferView":4,"componentType":{component_type}{normalized},"count":3,"type":"VEC4"}}"#
+        );
+        data.extend(rotations);
+        (data, views, accessors)
+    }
+
+    /// A node with `EXT_mesh_gpu_instancing` places its mesh at each instance, `node · T · R · S`
+    /// (the extension's order), with rotations as `f32`, normalized `i16` and normalized `i8`
+    /// (the last rounded 0.4 % off unit length); a mirroring instance's lamp still emits from its
+    /// front face; the primitive is read once. It had been drawn once, at the node.
+    #[test]
+    fn gpu_instances_place_the_mesh_at_each_instance() {
+        let attributes = r#"{"TRANSLATION":2,"SCALE":3,"ROTATION":4}"#;
+        let corners = |points: &[Vec3]| {
+            let mut sorted: Vec<[i32; 3]> =
+                points.iter().map(|p| p.to_array().map(|c| (c * 1e4).round() as i32)).collect();
+            sorted.sort_unstable();
+            sorted
+        };
+        let expected = [
+            [[0.0, 0.0, -2.0], [1.0, 0.0, -2.0], [1.0, 1.0, -2.0], [0.0, 1.0, -2.0]],
+            [[5.0, 0.0, -2.0], [5.0, 2.0, -2.0], [3.0, 2.0, -2.0], [3.0, 0.0, -2.0]],
+            [[0.0, 3.0, -1.0], [1.0, 3.0, -1.0], [1.0, 4.0, -1.0], [0.0, 4.0, -1.0]],
+        ]
+        .map(|quad| corners(&quad.map(Vec3::from)));
+        for component_type in [5126, 5122, 5120] {
+            let (data, views, accessors) = instance_accessors(component_type);
+            PRIMITIVE_READS.with(|reads| reads.set(0));
+            let scene = load(file(&gpu_instanced_quad(attributes, &data, &views, &accessors)).path()).unwrap();
+            assert_eq!(PRIMITIVE_READS.with(std::cell::Cell::get), 1, "the primitive read once");
+            let placed: Vec<_> = scene.meshes().iter().map(|mesh| corners(&mesh.positions)).collect();
+            assert_eq!(placed, expected, "rotations of component type {component_type}");
+            let facings: Vec<Vec3> = scene.lights().iter().map(|light| facing(light).round()).collect();
+            assert_eq!(facings, [Vec3::Z, Vec3::Z, Vec3::NEG_Z], "rotations of component type {component_type}");
+        }
+    }
+
+    /// Instancing without a transform attribute: a custom `_ID` alone sets the count (each
+    /// instance at the node), an extension without `attributes` draws the mesh once; a file may
+    /// require the extension (the `gltf` crate refused it as unknown).
+    #[test]
+    fn gpu_instancing_counts_custom_attributes_and_may_be_required() {
+        let (data, views, accessors) = instance_accessors(5126);
+        let ids = gpu_instanced_quad(r#"{"_ID":2}"#, &data, &views, &accessors);
+        assert_eq!(load(file(&ids).path()).unwrap().meshes().len(), 3);
+        let unsaid = ids.replacen(r#"{"attributes":{"_ID":2}}"#, "{}", 1);
+        assert_ne!(unsaid, ids);
+        assert_eq!(load(file(&unsaid).path()).unwrap().meshes().len(), 1);
+        let required =
+            ids.replacen(r#""scene":0,"#, r#""scene":0,"extensionsRequired":["EXT_mesh_gpu_instancing"],"#, 1);
+        assert_ne!(required, ids);
+        assert_eq!(load(file(&required).path()).unwrap().meshes().len(), 3);
+    }
+
+    /// Bad instancing is refused naming the node's extension field (or the accessor's): each
+    /// case a substitution in the three-instance file of [`instance_accessors`].
+    #[test]
+    fn bad_gpu_instancing_names_the_field() {
+        let field = "nodes[0].extensions.EXT_mesh_gpu_instancing.attributes";
+        let attributes = r#"{"TRANSLATION":2,"SCALE":3,"ROTATION":4}"#;
+        let translation_accessor = r#"{"bufferView":2,"componentType":5126,"count":3,"type":"VEC3"}"#;
+        let rotation_accessor = r#"{"bufferView":4,"componentType":5126,"count":3,"type":"VEC4"}"#;
+        let huge = f32::to_le_bytes(1e9);
+        let nan = f32::to_le_bytes(f32::NAN);
+        let two = f32::to_le_bytes(2.0);
+        // (what is replaced, by what, bytes to overwrite in the data at an offset, the error)
+        let cases: [(&str, &str, Option<(usize, [u8; 4])>, String); 9] = [
+            (attributes, "{}", None, format!("{field}: empty; the extension requires at least one attribute")),
+            (attributes, "[2]", None, format!("{field}: not an object of accessor indices")),
+            (attributes, r#"{"TRANSLATION":9}"#, None, format!("{field}.TRANSLATION: 9 is not the index of an accessor")),
+            (attributes, r#"{"TRANSLATION":-1}"#, None, format!("{field}.TRANSLATION: -1 is not the index of an accessor")),
+            (
+                r#"{"bufferView":3,"componentType":5126,"count":3,"#,
+                r#"{"bufferView":3,"componentType":5126,"count":2,"#,
+                None,
+                format!("{field}.SCALE: accessor 3 has 2 elements, attributes.ROTATION 3; the extension requires one count"),
+            ),
+            (
+                translation_accessor,
+                r#"{"bufferView":2,"componentType":5126,"count":3,"type":"VEC4"}"#,
+                None,
+                format!("{field}.TRANSLATION: accessor 2: holds Vec4 of F32, glTF requires Vec3 of F32"),
+            ),
+            (
+                rotation_accessor,
+                r#"{"bufferView":4,"componentType":5122,"count":3,"type":"VEC4"}"#,
+                None,
+                format!(
+                    "{field}.ROTATION: accessor 4: holds Vec4 of I16, glTF requires Vec4 of F32 or normalized I8 or \
+                     normalized I16"
+                ),
+            ),
+            (
+                "",
+                "",
+                Some((72 + 12, two)),
+                format!("{field}.ROTATION: element 0 is [0.0, 0.0, 0.0, 2.0], 2 long; the extension requires a unit quaternion"),
+            ),
+            ("", "", Some((36 + 12, nan)), format!("{field}.SCALE: element 1 is [NaN, 2, 2]; each component must be finite")),
+        ];
+        for (from, to, bytes, expected) in cases.into_iter().chain([(
+            "",
+            "",
+            Some((0, huge)),
+            "element 0 is at [1000000000, 0, -2] in world space under nodes[0]'s instance 0 (EXT_mesh_gpu_instancing)'s \
+             transform"
+                .to_owned(),
+        )]) {
+            let (mut data, views, accessors) = instance_accessors(5126);
+            if let Some((at, value)) = bytes {
+                data[at..at + 4].copy_from_slice(&value);
+            }
+            let text = gpu_instanced_quad(attributes, &data, &views, &accessors);
+            assert!(text.contains(from), "{from}");
+            match load(file(&text.replacen(from, to, 1)).path()) {
+                Err(err @ Error::SceneLoad { .. }) => assert!(err.to_string().contains(&expected), "{to}: {err}"),
+                other => panic!("{to}: expected a SceneLoad error containing {expected:?}, got {other:?}"),
+            }
+        }
     }
 
     /// raywave renders no orthographic projection: a file whose cameras are all orthographic is
@@ -2142,7 +2380,7 @@ mod tests {
                 r#""componentType":5126,"count":4"#,
                 r#""componentType":5126,"normalized":true,"count":4"#,
                 "meshes[0].primitives[0].attributes.POSITION: accessor 0: holds Vec3 of normalized F32, glTF requires \
-                 Vec3 of [F32] (not normalized)",
+                 Vec3 of F32",
             ),
             (
                 r#""componentType":5123,"count":6"#,
@@ -2305,6 +2543,42 @@ mod tests {
             }
             other => panic!("expected SceneTooLarge, got {other:?}"),
         }
+    }
+
+    /// The vertex limit counts a node's `EXT_mesh_gpu_instancing` instances as copies: 2²⁰
+    /// vertices (a sparse POSITION accessor, drawn without indices) placed by 257 instances (a
+    /// TRANSLATION accessor of the zeros) pass 2²⁸, refused before any is read.
+    #[test]
+    fn gpu_instancing_beyond_the_vertex_limit_is_refused_before_reading() {
+        let per_instance = 1 << 20;
+        let instances = MAX_VERTICES / per_instance + 1;
+        let (_dir, path) = instanced_quad_gltf(1, per_instance, |text| {
+            let node = r#"{"mesh":0}"#;
+            let instanced = r#"{"mesh":0,"extensions":{"EXT_mesh_gpu_instancing":{"attributes":{"TRANSLATION":2}}}}"#;
+            let views = format!(r#""byteLength":12}},{{"buffer":0,"byteLength":{}}}]"#, 12 * instances);
+            let translations = format!(
+                r#""type":"SCALAR"}},{{"bufferView":2,"componentType":5126,"count":{instances},"type":"VEC3"}}]"#
+            );
+            text.replacen(
+                r#"{"bufferView":0,"componentType":5126,"count":4"#,
+                &format!(
+                    r#"{{"componentType":5126,"count":{per_instance},"sparse":{{"count":3,"indices":{{"bufferView":1,"componentType":5123}},"values":{{"bufferView":0}}}}"#
+                ),
+                1,
+            )
+            .replacen(r#""indices":1,"#, "", 1)
+            .replacen(node, instanced, 1)
+            .replacen(r#""byteLength":12}]"#, &views, 1)
+            .replacen(r#""type":"SCALAR"}]"#, &translations, 1)
+        });
+        PRIMITIVE_READS.with(|reads| reads.set(0));
+        match load(&path) {
+            Err(err @ Error::SceneTooLarge { .. }) => {
+                assert!(err.to_string().contains("instance 269484032 vertices, more than 268435456"), "{err}")
+            }
+            other => panic!("expected SceneTooLarge, got {other:?}"),
+        }
+        assert_eq!(PRIMITIVE_READS.with(std::cell::Cell::get), 0, "nothing read");
     }
 
     #[test]

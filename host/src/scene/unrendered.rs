@@ -36,8 +36,4 @@ pub struct Unrendered {
     /// and directional lights, which Blender exports its lamps as). raywave renders area lights
     /// only (emissive parallelograms): these light nothing.
     pub punctual_lights: usize,
-    /// Nodes whose mesh `EXT_mesh_gpu_instancing` places many times (an extension files use
-    /// without requiring it, for foliage and crowds): raywave renders the mesh once, at the node,
-    /// as the extension's fallback is.
-    pub gpu_instanced_nodes: usize,
 }
