@@ -2008,8 +2008,10 @@ mod tests {
         let huge = f32::to_le_bytes(1e9);
         let nan = f32::to_le_bytes(f32::NAN);
         let two = f32::to_le_bytes(2.0);
-        // (what is replaced, by what, bytes to overwrite in the data at an offset, the error)
-        let cases: [(&str, &str, Option<(usize, [u8; 4])>, String); 9] = [
+        // Bytes to overwrite in the file's data, at an offset.
+        type Overwrite = Option<(usize, [u8; 4])>;
+        // (what is replaced, by what, the bytes overwritten, the error)
+        let cases: [(&str, &str, Overwrite, String); 9] = [
             (attributes, "{}", None, format!("{field}: empty; the extension requires at least one attribute")),
             (attributes, "[2]", None, format!("{field}: not an object of accessor indices")),
             (attributes, r#"{"TRANSLATION":9}"#, None, format!("{field}.TRANSLATION: 9 is not the index of an accessor")),
