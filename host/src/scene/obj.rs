@@ -32,14 +32,13 @@ pub fn load(path: &Path) -> Result<Scene> {
     let mut reader = LineCounter::new(&surfaces[..]);
     let directory = path.parent().unwrap_or(Path::new(""));
     // tobj's material-library errors carry no text of their own: the first one's is kept here.
-    // And each library read with the number of materials it added, in order, which the
-    // materials' errors name.
+    // And the libraries each `mtllib` line read, each with the number of materials it added, in
+    // order, which the materials' errors name.
     let library_error = RefCell::new(None);
-    let libraries: RefCell<Vec<(PathBuf, usize)>> = RefCell::new(Vec::new());
+    let libraries: RefCell<Vec<Vec<(PathBuf, usize)>>> = RefCell::new(Vec::new());
     // The library that defines each material name (a library named twice may define it twice).
     let defined_in: RefCell<std::collections::HashMap<String, PathBuf>> = RefCell::default();
-    let (models, materials) = tobj::load_obj_buf(&mut reader, &options, |library| {
-        let library = directory.join(library);
+    let load_library = |library: PathBuf| {
         let fail = |message: String| {
             library_error.borrow_mut().get_or_insert_with(|| format!("{}: {message}", library.display()));
         };
@@ -66,8 +65,26 @@ pub fn load(path: &Path) -> Result<Scene> {
                 _ => defined_in.insert(m.name.clone(), library.clone()),
             };
         }
-        libraries.borrow_mut().push((library.clone(), loaded.0.len()));
-        Ok(loaded)
+        Ok((library, loaded))
+    };
+    let (models, materials) = tobj::load_obj_buf(&mut reader, &options, |named| {
+        // One line's libraries as one, each library's indices after those before it, as tobj
+        // merges the libraries of successive lines.
+        let (mut line, mut merged): (_, Option<(Vec<tobj::Material>, _)>) = (Vec::new(), None);
+        for library in library_paths(directory, named) {
+            let (library, (mut materials, names)) = load_library(library)?;
+            line.push((library, materials.len()));
+            match &mut merged {
+                None => merged = Some((materials, names)),
+                Some((all, all_names)) => {
+                    let offset = all.len();
+                    all.append(&mut materials);
+                    all_names.extend(names.into_iter().map(|(name, index)| (name, index + offset)));
+                }
+            }
+        }
+        libraries.borrow_mut().push(line);
+        Ok(merged.unwrap_or_default())
     })
     .map_err(|e| load_error(locate(e, reader.line())))?;
     // A library that cannot be read would leave every mesh grey and every light dark — also when
@@ -83,7 +100,7 @@ pub fn load(path: &Path) -> Result<Scene> {
     check_material_names(text, &libraries, &materials).map_err(load_error)?;
     // Each MTL entry as a material, checked once, naming its library (tobj appends each
     // library's materials in the order read).
-    let library_of = libraries.iter().flat_map(|(library, count)| std::iter::repeat_n(library, *count));
+    let library_of = libraries.iter().flatten().flat_map(|(library, count)| std::iter::repeat_n(library, *count));
     let mut converted = Vec::with_capacity(materials.len());
     for (m, library) in materials.iter().zip(library_of) {
         let material = mtl_material(m)
@@ -169,6 +186,19 @@ fn surfaces_only(text: &[u8]) -> std::borrow::Cow<'_, [u8]> {
         }
     }
     std::borrow::Cow::Owned(kept)
+}
+
+/// The material libraries an `mtllib` line names, `named` the rest of the line (as tobj 4.0.5
+/// reads it, so that a name may hold spaces), each under `directory`: that one file where it is
+/// one, else each of its words — the OBJ format's `mtllib filename1 filename2 ...`, which tobj
+/// had read as one name and refused.
+fn library_paths(directory: &Path, named: &Path) -> Vec<PathBuf> {
+    let whole = directory.join(named);
+    let words: Vec<&str> = named.to_str().map_or_else(Vec::new, |named| named.split_whitespace().collect());
+    if words.len() <= 1 || whole.is_file() {
+        return vec![whole];
+    }
+    words.into_iter().map(|word| directory.join(word)).collect()
 }
 
 /// The text of the material library at `path`, less a leading byte-order mark
@@ -531,14 +561,14 @@ fn each_vertex_and_index(
 }
 
 /// Checks that every `usemtl` line of the OBJ `text` names a material of the `libraries` read
-/// before it (each with the number of materials it added, in the order of the `mtllib` lines),
+/// before it (those of each `mtllib` line, each with the number of materials it added, in order),
 /// as tobj reads the name: tobj leaves a mesh whose material it does not find without one, so a
 /// typo (`usemtl lmap`), a `usemtl` before the `mtllib` line of its library or without any, or
 /// one indented (tobj then reads `usemtl lamp` as the name) made a grey mesh and no light. Errors
 /// name the line and the libraries.
 fn check_material_names(
     text: &[u8],
-    libraries: &[(PathBuf, usize)],
+    libraries: &[Vec<(PathBuf, usize)>],
     materials: &[tobj::Material],
 ) -> std::result::Result<(), String> {
     // The libraries read so far, and the materials they added (tobj appends in order).
@@ -552,7 +582,7 @@ fn check_material_names(
         let line = String::from_utf8_lossy(line);
         match line.split_whitespace().next() {
             Some("mtllib") if read < libraries.len() => {
-                known += libraries[read].1;
+                known += libraries[read].iter().map(|(_, count)| count).sum::<usize>();
                 read += 1;
             }
             Some("usemtl") => {
@@ -571,7 +601,7 @@ fn check_material_names(
                         String::new()
                     };
                     let names: Vec<String> =
-                        libraries[..read].iter().map(|(library, _)| library.display().to_string()).collect();
+                        libraries[..read].iter().flatten().map(|(library, _)| library.display().to_string()).collect();
                     return Err(format!(
                         "line {line_number}: `{written}` names no material of {}{read_as}",
                         names.join(", ")
@@ -930,6 +960,42 @@ mod tests {
         std::fs::write(&path, "mtllib a.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl blue\nf 1 2 3\nmtllib b.mtl\n").unwrap();
         let err = load(&path).unwrap_err().to_string();
         assert!(err.contains("line 5: `usemtl blue` names no material of") && !err.contains("b.mtl"), "{err}");
+    }
+
+    /// One `mtllib` line may name several libraries (the OBJ format's `mtllib filename1 filename2
+    /// ...`): tobj had read `a.mtl b.mtl` as one file name and refused the scene. A file whose
+    /// name holds a space is still one library.
+    #[test]
+    fn one_mtllib_line_may_name_several_libraries() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("scene.obj");
+        let obj = |mtllib: &str| {
+            format!("mtllib {mtllib}\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl red\nf 1 2 3\nusemtl lamp\nf 1 3 2\n")
+        };
+        std::fs::write(dir.path().join("a.mtl"), "newmtl red\nKd 1 0 0\n").unwrap();
+        std::fs::write(dir.path().join("b.mtl"), "newmtl green\nKd 0 1 0\nnewmtl lamp\nKe 5 5 5\n").unwrap();
+        std::fs::write(&path, obj("a.mtl  b.mtl")).unwrap();
+        let scene = load(&path).unwrap();
+        let materials: Vec<_> =
+            scene.meshes().iter().map(|mesh| (mesh.material.base_color, mesh.material.emission)).collect();
+        assert_eq!(materials, [(Vec3::X, Vec3::ZERO), (DEFAULT_ALBEDO, Vec3::splat(5.0))]);
+        // Each library still answers for its own materials, and a library that cannot be read
+        // is named, also when it is not the line's first.
+        std::fs::write(dir.path().join("b.mtl"), "newmtl lamp\nKe -5 5 5\n").unwrap();
+        let err = load(&path).unwrap_err().to_string();
+        assert!(err.contains("b.mtl: material `lamp`"), "{err}");
+        std::fs::remove_file(dir.path().join("b.mtl")).unwrap();
+        let err = load(&path).unwrap_err().to_string();
+        assert!(err.contains("material library") && err.contains("b.mtl:") && !err.contains("a.mtl "), "{err}");
+        // A name the line's libraries do not define lists them all.
+        std::fs::write(dir.path().join("b.mtl"), "newmtl green\nKd 0 1 0\n").unwrap();
+        let err = load(&path).unwrap_err().to_string();
+        assert!(err.contains("line 7: `usemtl lamp` names no material of") && err.contains("a.mtl, "), "{err}");
+        assert!(err.contains("b.mtl"), "{err}");
+        // A file named with a space is one library, as tobj reads the line.
+        std::fs::write(dir.path().join("a b.mtl"), "newmtl red\nKd 0 0 1\nnewmtl lamp\nKe 1 1 1\n").unwrap();
+        std::fs::write(&path, obj("a b.mtl")).unwrap();
+        assert_eq!(load(&path).unwrap().meshes()[0].material.base_color, Vec3::Z);
     }
 
     /// A name two libraries define: tobj gave it the later library's material without a word (an
