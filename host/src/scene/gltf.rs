@@ -1,6 +1,6 @@
 //! glTF 2.0 scenes (through the `gltf` crate): the default scene's node hierarchy with its
 //! transforms (and `EXT_mesh_gpu_instancing`'s instances, [`instancing`]), every triangle
-//! primitive as a mesh, metallic-roughness materials with emission
+//! primitive as a mesh (one without POSITION is skipped, as glTF 2.0 § 3.7.2.1 asks), metallic-roughness materials with emission
 //! (and `KHR_materials_emissive_strength`; `doubleSided` makes an emissive rectangle a two-sided
 //! light), and the first perspective camera, if any — looking at the point along its view at the
 //! depth of the scene's centre, which sets the default focus ([`PlacedCamera::aimed`]). What raywave does not render — textures,
@@ -100,7 +100,7 @@ pub fn load(path: &Path) -> Result<Scene> {
                 *left == 0
             });
             for (index, primitive) in mesh.primitives().enumerate() {
-                if !draws_surfaces(primitive.mode()) {
+                if !draws_surfaces(&primitive) {
                     continue;
                 }
                 // An unnamed mesh is named by its JSON path, so errors that name the mesh find it.
@@ -309,12 +309,41 @@ fn parse(bytes: &[u8], base: Option<&Path>) -> std::result::Result<(Document, Ve
     let mut json = document.into_json();
     // Read here, so a file may require it: the crate's validation refuses any it does not know.
     json.extensions_required.retain(|required| required != instancing::EXTENSION);
-    let document = Document::from_json(json).map_err(|e| e.to_string())?;
+    let document = Document::from_json_without_validation(json);
+    validate(&document)?;
     check_camera_projections(document.as_json())?;
     check_node_matrices_alone(document.as_json())?;
     check_meshes_have_primitives(document.as_json())?;
     let buffers = load_buffers(&document, base, blob)?;
     Ok((document, buffers))
+}
+
+/// Validates `document` as `gltf::Document::from_json` does (with the same message), less the
+/// one error that glTF 2.0 does not make: a primitive without POSITION, which gltf-json 1.4
+/// reports missing, where the specification allows it (§ 3.7.2.1: "When positions are not
+/// specified, client implementations SHOULD skip primitive's rendering", [`draws_surfaces`]).
+fn validate(document: &Document) -> std::result::Result<(), String> {
+    use gltf::json::validation::{Error as Invalid, Validate};
+    use gltf::json::Path as JsonPath;
+    let root = document.as_json();
+    let without_positions: Vec<JsonPath> = (root.meshes.iter().enumerate())
+        .flat_map(|(m, mesh)| mesh.primitives.iter().enumerate().map(move |(p, primitive)| (m, p, primitive)))
+        .filter(|(_, _, primitive)| !primitive.attributes.contains_key(&Checked::Valid(Semantic::Positions)))
+        .map(|(m, p, _)| JsonPath::new().field("meshes").index(m).field("primitives").index(p))
+        .map(|primitive| primitive.field("attributes").key("POSITION"))
+        .collect();
+    let mut errors = Vec::new();
+    root.validate(root, JsonPath::new, &mut |path, error| {
+        let path = path();
+        if !(matches!(error, Invalid::Missing) && without_positions.contains(&path)) {
+            errors.push((path, error));
+        }
+    });
+    if errors.is_empty() {
+        Ok(())
+    } else {
+        Err(gltf::Error::Validation(errors).to_string())
+    }
 }
 
 /// Checks that a GLB header's total length (bytes 8–11) is the file's size, as glTF 2.0
@@ -528,7 +557,7 @@ fn mesh_size(
 ) -> std::result::Result<(u64, u64), String> {
     let (mut vertices, mut triangles) = (0u64, 0u64);
     for (index, primitive) in mesh.primitives().enumerate() {
-        let Some(position) = primitive.get(&Semantic::Positions).filter(|_| draws_surfaces(primitive.mode())) else {
+        let Some(position) = primitive.get(&Semantic::Positions).filter(|_| draws_surfaces(&primitive)) else {
             continue;
         };
         let field = primitive_field(mesh, index);
@@ -775,9 +804,10 @@ fn surface_triangles(mode: Mode, corners: u64) -> u64 {
     }
 }
 
-/// Whether a primitive of `mode` draws triangles ([`surface_triangles`]' surface modes).
-fn draws_surfaces(mode: Mode) -> bool {
-    surface_triangles(mode, 3) > 0
+/// Whether `primitive` draws triangles: one of [`surface_triangles`]' surface modes, with
+/// positions (glTF 2.0 § 3.7.2.1 has a primitive without POSITION skipped).
+fn draws_surfaces(primitive: &gltf::Primitive) -> bool {
+    primitive.get(&Semantic::Positions).is_some() && surface_triangles(primitive.mode(), 3) > 0
 }
 
 /// The triangles of a strip (glTF 2.0, 3.7.2.1): triangle `i` is `(pᵢ, pᵢ₊₁₊ᵢ﹪₂, pᵢ₊₂₋ᵢ﹪₂)`, every
@@ -1351,6 +1381,30 @@ mod tests {
         let material = Material { emission: Vec3::ONE, ..Material::diffuse(Vec3::ONE) };
         let lamp = Mesh { name: "lamp".into(), positions, triangles, material };
         assert!(super::super::emitters::parallelogram(&lamp).is_some(), "bent {bend:e} out of a parallelogram");
+    }
+
+    /// A primitive without POSITION is skipped, as glTF 2.0 § 3.7.2.1 asks ("client
+    /// implementations SHOULD skip primitive's rendering"): gltf-json 1.4's validation had
+    /// refused the file. Its other errors stand — a POSITION accessor without `min` among them —,
+    /// and a file with nothing else renders nothing.
+    #[test]
+    fn a_primitive_without_positions_is_skipped() {
+        let quad = quad_gltf(6);
+        let primitive = r#"{"attributes":{"POSITION":0},"indices":1,"material":0}"#;
+        let unpositioned = r#"{"attributes":{},"mode":0}"#;
+        let with_normals_only = r#"{"attributes":{"NORMAL":0},"indices":1}"#;
+        let three = quad.replace(primitive, &format!("{unpositioned},{primitive},{with_normals_only}"));
+        assert_ne!(three, quad);
+        let scene = load(file(&three).path()).unwrap();
+        let names: Vec<&str> = scene.meshes().iter().map(|mesh| mesh.name.as_str()).collect();
+        assert_eq!(names, ["quad primitive 1"]);
+        let without_min = three.replace(r#""min":[0,0,0],"#, "");
+        assert_ne!(without_min, three);
+        let err = load(file(&without_min).path()).unwrap_err().to_string();
+        let expected = r#"invalid glTF: meshes[0].primitives[1].attributes["POSITION"].min: Missing data;"#;
+        assert!(err.contains(expected) && !err.contains("primitives[0]"), "{err}");
+        let err = load(file(&quad.replace(primitive, unpositioned)).path()).unwrap_err().to_string();
+        assert!(err.contains("contains no triangles"), "{err}");
     }
 
     /// [`quad_gltf`] with its buffer at `uri` instead of in a data URI.
