@@ -144,6 +144,26 @@ mod tests {
         assert!((w - (1.0 - 0.9 * 0.5)).abs() < 1e-6, "analytic stop {w}");
     }
 
+    /// The depth stop's value between its all-or-nothing ends: `1 − Wd·4·|Δz|/z_c`, relative to
+    /// the centre's depth, so the two sides of a pair differ (only the depth stop weighs here,
+    /// the other weights 0). The other depth tests pass for any scale from ~0.2 to 10⁶ and for
+    /// either pixel's depth as the divisor.
+    #[test]
+    fn the_depth_stop_is_four_relative_depth_differences_from_one() {
+        let near = guide(Vec3::ZERO, 10.0, Vec3::Y, 0.5);
+        let far = guide(Vec3::new(0.01, 0.0, 0.0), 10.1, Vec3::Y, 0.5);
+        for depth_weight in [1.0f32, 2.0] {
+            let depth_only = Vec4::new(depth_weight, 0.0, 0.0, 0.0);
+            for (center, tap, expected) in [
+                (&near, &far, 1.0 - depth_weight * 4.0 * 0.1 / 10.0),
+                (&far, &near, 1.0 - depth_weight * 4.0 * 0.1 / 10.1),
+            ] {
+                let w = edge_stop(center, tap, depth_only);
+                assert!((w - expected).abs() < 1e-6, "Wd {depth_weight}: {w} vs {expected}");
+            }
+        }
+    }
+
     /// Opposite normals weigh 0 (the two faces of a thin wall, or a normal flipped by the
     /// camera-facing rule across a silhouette), however close the points: the reference's
     /// `(n_c·n_t)⁴` alone weighs them as equal ones, which the clamp of the cosine to [0, 1]

@@ -182,6 +182,34 @@ mod tests {
         assert!(edge < noisy, "a clean shadow edge ({edge}) is less noisy than coin flips");
     }
 
+    /// The estimate's scale, pinned on a lone grey spike of height `h` in a ratio image of 0,
+    /// at least `R` pixels from the border: every tap of a line at `|r| ≥ 1` lies at least one
+    /// pixel out, so it rounds to another pixel whatever the line's angle, and each line sees
+    /// the spike only at `r = 0`. The three second differences over it sum to `(1 + 2 + 1)·h·√3`
+    /// (the RGB length of a grey step), so the estimate is `clamp(sqrt(4√3·h/R)/1.5, 0, 1)`
+    /// at any angle (seed); at `R` = 1 only the difference centred on the spike counts, `2√3·h`.
+    /// The other tests pass for any scale and divisor that keep a constant at 0 and coin flips
+    /// at 1.
+    #[test]
+    fn a_lone_spike_gives_the_estimate_of_its_second_differences() {
+        let (width, height) = (24, 24);
+        let center = IVec2::new(12, 12);
+        for height_of_spike in [0.02f32, 0.1, 0.5, 2.0] {
+            let r = image(width, height, |x, y| if (x, y) == (12, 12) { height_of_spike } else { 0.0 });
+            for (radius, sum) in [(1, 2.0), (2, 4.0), (5, 4.0), (MAX_RADIUS, 4.0)] {
+                let expected = ((sum * 3f32.sqrt() * height_of_spike / radius as f32).sqrt() / 1.5).min(1.0);
+                for seed in [0, 1, 7, 1234] {
+                    let params = DenoiseParams { radius, seed, ..DenoiseParams::new(width, height) };
+                    let estimate = noise_estimate(&params, center, &r);
+                    assert!(
+                        (estimate - expected).abs() < 1e-5,
+                        "h {height_of_spike}, R {radius}, seed {seed}: {estimate} vs {expected}"
+                    );
+                }
+            }
+        }
+    }
+
     /// The estimate one line at a time, in plain scalar code: what the four-lane version must
     /// reproduce bit for bit.
     fn noise_one_line_at_a_time(params: &DenoiseParams, pixel: IVec2, ratio: &[Vec4]) -> f32 {
