@@ -392,6 +392,96 @@ fn kernel_traversal_matches_brute_force_on_incoherent_rays() {
     assert!(agree as f64 >= 0.9999 * hit_count as f64, "{agree} of {hit_count} agree on the primitive");
 }
 
+/// Traversal finds what brute force over every triangle finds — the same closest `t`, and no hit
+/// where there is none — for every BVH preset (the slow one pre-splits large triangles, whose
+/// clipped reference boxes obvhs computes in `f32`), with the scene scaled from 10⁻⁶ to 10⁶ and
+/// moved 10⁴ and 10⁷ from the origin (the quantized child boxes are relative to their node's
+/// corner), for random and axis-aligned rays (±0 components) starting at `tmin` 0 or beyond. The
+/// test above covers one preset near the origin.
+#[test]
+fn kernel_traversal_matches_brute_force_for_every_preset_scale_and_offset() {
+    use raywave::cpu::BvhQuality;
+    let (mut meshes, _) = raywave::scene::procedural::hairball(6_000, 5).expect("a hairball");
+    // Large triangles across the hairball's box, which the slow preset splits.
+    let large: Vec<Vec3> = (0..3 * 40).map(|i| random3(i, 60) * 1.6 - 0.3).collect();
+    let triangles = (0..40).map(|k| [3 * k, 3 * k + 1, 3 * k + 2]).collect();
+    meshes.push(Mesh { name: "large".into(), positions: large, triangles, material: Material::diffuse(Vec3::ONE) });
+    let axis_aligned = [
+        Vec3::X,
+        Vec3::NEG_X,
+        Vec3::new(-0.0, 1.0, 0.0),
+        Vec3::new(0.0, -1.0, -0.0),
+        Vec3::new(-0.0, -0.0, 1.0),
+        Vec3::NEG_Z,
+    ];
+    let n = 1_200u32;
+    for (scale, offset) in [(1e-6f32, 0.0f32), (1.0, 0.0), (1e6, 0.0), (10.0, 1e4), (1e4, 1e7)] {
+        let moved = meshes
+            .iter()
+            .map(|mesh| Mesh {
+                positions: mesh.positions.iter().map(|&p| p * scale + Vec3::splat(offset)).collect(),
+                ..mesh.clone()
+            })
+            .collect();
+        let scene = scene_of(moved);
+        // Every fourth ray axis-aligned and exactly through a vertex (its other two coordinates
+        // the vertex's), so along the planes of the boxes that vertex bounds.
+        let vertices: Vec<Vec3> = scene.meshes().iter().flat_map(|mesh| mesh.positions.iter().copied()).collect();
+        let axis_aligned_ray = |i: u32| i.is_multiple_of(4);
+        let directions: Vec<Vec3> = (0..n)
+            .map(|i| {
+                if axis_aligned_ray(i) {
+                    axis_aligned[(i / 4) as usize % axis_aligned.len()]
+                } else {
+                    random_direction(i, 62)
+                }
+            })
+            .collect();
+        let origins: Vec<Vec3> = (0..n)
+            .map(|i| {
+                let random = (random3(i, 61) * 1.6 - 0.3) * scale + Vec3::splat(offset);
+                if !axis_aligned_ray(i) {
+                    return random;
+                }
+                let vertex = vertices[pcg3d(UVec3::new(i, 63, 0)).x as usize % vertices.len()];
+                let along = directions[i as usize].abs().cmpgt(Vec3::splat(0.5));
+                Vec3::select(along, random, vertex)
+            })
+            .collect();
+        let mut rays = rays_from(&origins, &directions, 3.0 * scale);
+        for (i, origin) in rays.origin.iter_mut().enumerate() {
+            origin.w = if i.is_multiple_of(3) { 0.2 * scale } else { 0.0 };
+        }
+        for quality in [BvhQuality::Fast, BvhQuality::Medium, BvhQuality::Slow] {
+            let case = format!("{} preset, scale {scale:e}, offset {offset:e}", quality.name());
+            let cpu_scene = CpuScene::build_with(&scene, quality).unwrap();
+            let hits = cpu::trace(&cpu_scene, &rays).expect("trace");
+            let (mut hit_count, mut agree) = (0, 0);
+            for i in 0..n as usize {
+                let (origin, direction) = (rays.origin[i], rays.direction[i]);
+                let ray = raywave::kernels::triangle::WatertightRay::new(origin.truncate(), direction.truncate());
+                let best = (scene.meshes().iter().enumerate())
+                    .flat_map(|(m, mesh)| mesh.triangles.iter().enumerate().map(move |(k, t)| (m, k, mesh, t)))
+                    .filter_map(|(m, k, mesh, t)| {
+                        let [a, b, c] = t.map(|v| mesh.positions[v as usize]);
+                        ray.intersect(a, b, c, origin.w, direction.w).map(|h| (h.t, m as u32, k as u32))
+                    })
+                    .min_by(|x, y| x.0.total_cmp(&y.0));
+                match best {
+                    None => assert_eq!(hits.primitive[i], NO_HIT, "{case}: ray {i} hits nothing"),
+                    Some((t, mesh, primitive)) => {
+                        assert_eq!(hits.t[i], t, "{case}: ray {i}: traversal and brute force disagree on t");
+                        hit_count += 1;
+                        agree += usize::from((hits.instance[i], hits.primitive[i]) == (mesh, primitive));
+                    }
+                }
+            }
+            assert!(hit_count > 300 && hit_count < n as usize - 100, "{case}: a mix of hits and misses ({hit_count})");
+            assert!(agree as f64 >= 0.999 * hit_count as f64, "{case}: {agree} of {hit_count} agree on the primitive");
+        }
+    }
+}
+
 #[test]
 fn occlusion_agrees_with_closest_hit_and_exits_early() {
     let (meshes, _) = raywave::scene::procedural::hairball(200_000, 3).expect("a hairball");

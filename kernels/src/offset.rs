@@ -34,7 +34,9 @@ const OFFSET_ULPS: f32 = 64.0;
 const MIN_EXTENT: f32 = 5.421_011e-20;
 
 /// The largest absolute coordinate of triangle `(a, b, c)`: the extent [`offset_ray_origin`]
-/// scales with. NaN coordinates are skipped.
+/// scales with. A NaN coordinate may make it NaN (glam's `max` keeps its right operand then);
+/// [`offset_ray_origin`] takes the larger of it and its least extent (2⁻⁶⁴) by `f32::max`, which
+/// drops NaN (and the loaders refuse NaN vertices).
 pub fn triangle_extent(a: Vec3, b: Vec3, c: Vec3) -> f32 {
     a.abs().max(b.abs()).max(c.abs()).max_element()
 }

@@ -642,7 +642,7 @@ mod tests {
             let (nodes, vertices, ids) = caterpillar(depth);
             let scene = CwBvhScene { nodes: &nodes, vertices: &vertices, ids: &ids };
             let hit = scene.closest_hit(&ray);
-            assert_eq!(scene.occluded(&ray), hit.t < ray.tmax, "depth {depth}");
+            assert_eq!(scene.occluded(&ray), hit.is_hit(), "depth {depth}");
             #[cfg(target_arch = "x86_64")]
             if std::is_x86_feature_detected!("avx2") {
                 // SAFETY: AVX2 (and the rest of x86-64-v3 with it on every such CPU) was detected.
