@@ -167,10 +167,11 @@ fn untraceable_rays_miss_on_every_backend() {
 /// Rays whose directions are as short as a traceable ray's may be ([`MIN_DIRECTION`]) hit what
 /// the same rays of direction `d / MIN_DIRECTION` hit, at `t / MIN_DIRECTION`, on every backend — an axis-aligned
 /// one too, whose zero components the box test floors far below it (a floor as large as the
-/// direction had traced `(0, 0, d)` as a diagonal and missed); shorter ones miss uncounted.
+/// direction had traced `(0, 0, d)` as a diagonal and missed); shorter ones miss uncounted. So do
+/// the longest ([`MAX_DIRECTION`]), and longer ones miss uncounted.
 #[test]
 fn the_shortest_traceable_directions_hit_what_unit_ones_hit_on_every_backend() {
-    use raywave::kernels::trace::MIN_DIRECTION;
+    use raywave::kernels::trace::{MAX_DIRECTION, MIN_DIRECTION};
     let scene = cornell();
     // Largest component 1: scaled by MIN_DIRECTION, exactly the shortest traceable.
     let units = [glam::Vec3::Z, glam::Vec3::NEG_Y, glam::Vec3::X, glam::Vec3::new(0.375, -0.625, 1.0)];
@@ -190,6 +191,17 @@ fn the_shortest_traceable_directions_hit_what_unit_ones_hit_on_every_backend() {
         let t = short.t[i] * MIN_DIRECTION;
         assert!((t - unit.t[i]).abs() <= T_REL_TOLERANCE * unit.t[i], "ray {i}: {t} vs {}", unit.t[i]);
     }
+    // The longest traceable, `MAX_DIRECTION`, the same; longer ones miss uncounted.
+    let long_rays = stream(MAX_DIRECTION, 10.0 / MAX_DIRECTION);
+    let long = cpu::trace(&cpu_scene, &long_rays).expect("trace");
+    for i in 0..units.len() {
+        assert_eq!((long.instance[i], long.primitive[i]), (unit.instance[i], unit.primitive[i]), "long ray {i}");
+        let t = long.t[i] * MAX_DIRECTION;
+        assert!((t - unit.t[i]).abs() <= T_REL_TOLERANCE * unit.t[i], "long ray {i}: {t} vs {}", unit.t[i]);
+    }
+    let longer_rays = stream(4.0 * MAX_DIRECTION, 1.0);
+    let (longer_misses, sanitized) = cpu::trace_counted(&cpu_scene, &longer_rays).expect("trace");
+    assert!(longer_misses.primitive.iter().all(|&p| p == NO_HIT) && sanitized == 0, "not traceable, not replaced");
     let shorter = stream(0.5 * MIN_DIRECTION, 20.0 / MIN_DIRECTION);
     let (misses, sanitized) = cpu::trace_counted(&cpu_scene, &shorter).expect("trace");
     assert!(misses.primitive.iter().all(|&p| p == NO_HIT) && sanitized == 0, "not traceable, not replaced");
@@ -200,6 +212,11 @@ fn the_shortest_traceable_directions_hit_what_unit_ones_hit_on_every_backend() {
         assert_eq!(report.sanitized, 0, "{}", device.name());
         let (occluded, report) = device.trace_occlusion(&short_rays).unwrap();
         assert_eq!((occluded, report.sanitized), (vec![1; units.len()], 0), "{}", device.name());
+        let (long_hits, report) = device.trace(&long_rays).unwrap();
+        assert_eq!(compare(&scene, &long_rays, &long, &long_hits), 1.0, "{}", device.name());
+        assert_eq!(report.sanitized, 0, "{}", device.name());
+        let (longer_hits, report) = device.trace(&longer_rays).unwrap();
+        assert_eq!((longer_hits, report.sanitized), (longer_misses.clone(), 0), "{}", device.name());
         let (shorter_hits, report) = device.trace(&shorter).unwrap();
         assert_eq!((shorter_hits, report.sanitized), (misses.clone(), 0), "{}", device.name());
         let (occluded, report) = device.trace_occlusion(&shorter).unwrap();

@@ -64,8 +64,8 @@ fn unit(axis: u32) -> Vec3A {
 
 impl WatertightRay {
     /// Prepares a ray. `direction` need not be unit length but must be finite, its largest
-    /// component at least `trace::MIN_DIRECTION` in magnitude (as a traceable ray's is), so
-    /// that `1/d` of that component is finite.
+    /// component within `trace::MIN_DIRECTION` … `trace::MAX_DIRECTION` in magnitude (as a
+    /// traceable ray's is), so that `1/d` of that component is finite and a normal float.
     pub fn new(origin: Vec3, direction: Vec3) -> Self {
         let abs = direction.abs();
         let kz = if abs.x > abs.y {

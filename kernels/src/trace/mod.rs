@@ -20,8 +20,9 @@ use raywave_shared::stream::NO_HIT;
 pub struct Ray {
     /// Origin in scene units.
     pub origin: Vec3,
-    /// Direction, of any length whose largest component is at least [`MIN_DIRECTION`] in
-    /// magnitude (a shorter one is not traceable, as a zero one is not).
+    /// Direction, of any length whose largest component is at least [`MIN_DIRECTION`] and at
+    /// most [`MAX_DIRECTION`] in magnitude (a shorter or longer one is not traceable, as a zero
+    /// one is not).
     pub direction: Vec3,
     /// Start of the valid interval (≥ 0).
     pub tmin: f32,
@@ -36,13 +37,15 @@ impl Ray {
     }
 
     /// Whether the ray can be traced: all components finite, a direction whose largest
-    /// component is at least [`MIN_DIRECTION`] in magnitude, and `0 ≤ tmin ≤ tmax`. Vulkan
-    /// leaves rays of a zero direction undefined, so the stage never passes them on; one of
-    /// subnormal components made the watertight test's `1/d` overflow into NaN.
+    /// component lies in [[`MIN_DIRECTION`], [`MAX_DIRECTION`]] in magnitude, and
+    /// `0 ≤ tmin ≤ tmax`. Vulkan leaves rays of a zero direction undefined, so the stage never
+    /// passes them on; one of subnormal components made the watertight test's `1/d` overflow
+    /// into NaN, and one beyond 2¹²⁶ makes it subnormal, which a GPU may flush to 0.
     pub fn is_traceable(&self) -> bool {
         self.origin.is_finite()
             && self.direction.is_finite()
             && self.direction.abs().max_element() >= MIN_DIRECTION
+            && self.direction.abs().max_element() <= MAX_DIRECTION
             && self.tmin.is_finite()
             && self.tmax.is_finite()
             && self.tmin >= 0.0
@@ -63,6 +66,15 @@ impl Ray {
 /// test scales every direction to a largest component in [1, 2) first, `cwbvh`; a floor of
 /// 10⁻³⁰ under unscaled components, as large as such a direction, had traced it as a diagonal.)
 pub const MIN_DIRECTION: f32 = 1e-12;
+
+/// Largest largest-component of a traceable ray's direction ([`Ray::is_traceable`]), 10²⁰: the
+/// watertight test's `1/d` of the dominant component is then at least 10⁻²⁰, a normal float, and
+/// so are the sheared depths `Δz/d` of vertices more than ~10⁻¹⁸ away along it. Beyond 2¹²⁶ `1/d`
+/// is subnormal, and a GPU that flushes it (Vulkan leaves denormals to the device; the kernels
+/// do not ask to keep them) made every sheared depth 0: a triangle behind the origin was hit at
+/// `t` = 0 (the trace review's case: direction (0, 0, −2·10³⁸)). Ten orders of magnitude above
+/// the longest coordinate difference of a scene within its 10⁸ limit.
+pub const MAX_DIRECTION: f32 = 1e20;
 
 /// The closest hit of one ray, as the trace stage writes it into the hit stream.
 #[derive(Copy, Clone, Debug, PartialEq)]
@@ -116,8 +128,8 @@ pub fn trace_occluded_with(origin: Vec4, direction: Vec4, occluded: impl FnOnce(
 }
 
 /// The trace stage for one invocation: reads the ray at its stream fields and returns its closest
-/// hit. Rays that are not traceable (NaN, Inf, a direction shorter than [`MIN_DIRECTION`], a bad
-/// interval) miss, and a hit whose
+/// hit. Rays that are not traceable (NaN, Inf, a direction shorter than [`MIN_DIRECTION`] or
+/// longer than [`MAX_DIRECTION`], a bad interval) miss, and a hit whose
 /// values are not finite is written as a miss, so no NaN or Inf leaves the stage; both are
 /// flagged as replaced (a non-finite ray, a non-finite hit).
 pub fn trace_closest<Q: ClosestHitQuery>(origin: Vec4, direction: Vec4, query: &Q) -> Sanitized<Hit> {
@@ -166,7 +178,8 @@ mod tests {
     #[test]
     fn traceable_rays_reach_the_query() {
         let o = Vec4::new(0.0, 0.0, 0.0, 0.0);
-        for d in [Vec4::new(0.0, 0.0, 1.0, 10.0), Vec4::new(0.0, -MIN_DIRECTION, 0.0, 10.0)] {
+        let longest = Vec4::new(MAX_DIRECTION, -1.0, 0.0, 10.0);
+        for d in [Vec4::new(0.0, 0.0, 1.0, 10.0), Vec4::new(0.0, -MIN_DIRECTION, 0.0, 10.0), longest] {
             assert_eq!(trace_closest(o, d, &Fixed(HIT)), Sanitized::clean(HIT), "{d}");
             assert_eq!(trace_occluded(o, d, &Fixed(HIT)), Sanitized::clean(true), "{d}");
         }
@@ -187,6 +200,9 @@ mod tests {
             // Below the floor: `1/d` overflows in the watertight test (it had traced a NaN hit).
             (ok_origin, Vec4::new(0.0, 0.0, 1e-40, 10.0), false),
             (ok_origin, Vec4::new(-0.9e-12, 0.9e-12, 0.0, 10.0), false),
+            // Beyond the ceiling: `1/d` is subnormal there, which a GPU may flush to 0.
+            (ok_origin, Vec4::new(0.0, 0.0, -2e38, 10.0), false),
+            (ok_origin, Vec4::new(0.0, 1.01e20, 1.0, 10.0), false),
             (Vec4::new(0.0, 0.0, 0.0, -1.0), ok_dir, false),
             (Vec4::new(0.0, 0.0, 0.0, 11.0), ok_dir, false),
         ];
