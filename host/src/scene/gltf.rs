@@ -1,11 +1,11 @@
 //! glTF 2.0 scenes (through the `gltf` crate): the default scene's node hierarchy with its
-//! transforms (and `EXT_mesh_gpu_instancing`'s instances, [`instancing`]), every triangle
-//! primitive as a mesh (one without POSITION is skipped, as glTF 2.0 § 3.7.2.1 asks), metallic-roughness materials with emission
-//! (and `KHR_materials_emissive_strength`; `doubleSided` makes an emissive rectangle a two-sided
-//! light), and the first perspective camera, if any — looking at the point along its view at the
-//! depth of the scene's centre, which sets the default focus ([`PlacedCamera::aimed`]). What raywave does not render — textures,
-//! see-through materials, skins and morph targets, orthographic cameras, punctual lights — is counted
-//! ([`Scene::unrendered`]).
+//! transforms (and `EXT_mesh_gpu_instancing`'s instances, [`instancing`]), every triangle primitive
+//! as a mesh (one without POSITION is skipped, as glTF 2.0 § 3.7.2.1 asks), metallic-roughness
+//! materials with emission (and `KHR_materials_emissive_strength`; `doubleSided` makes an emissive
+//! rectangle a two-sided light), and the first perspective camera, if any — looking at the point
+//! along its view at the depth of the scene's centre, which sets the default focus
+//! ([`PlacedCamera::aimed`]). What raywave does not render — textures, see-through materials, skins
+//! and morph targets, orthographic cameras, punctual lights — is counted ([`Scene::unrendered`]).
 //!
 //! Bad files give an [`Error::SceneLoad`] naming the file and the JSON field, never a panic or a
 //! hang: on top of the `gltf` crate's validation this checks what that crate trusts (POSITION
@@ -42,9 +42,9 @@ pub fn load(path: &Path) -> Result<Scene> {
         .ok_or_else(|| load_error("the file defines no scene".into()))?;
     let nodes = scene_nodes(&document, &scene).map_err(load_error)?;
     // Counted before any is read: nodes (and each node's `EXT_mesh_gpu_instancing` instances) may
-    // instance one large accessor many times over. Each
-    // mesh's accessors are checked once, however many nodes instance it, and its instances
-    // counted, so that the last one can take the geometry read for them all.
+    // instance one large accessor many times over. Each mesh's accessors are checked once,
+    // however many nodes instance it, and its instances counted, so that the last one can take
+    // the geometry read for them all.
     let (mut vertices, mut triangle_count): (u64, u64) = (0, 0);
     let mut mesh_sizes: HashMap<usize, (u64, u64)> = HashMap::new();
     let mut checked_accessors = CheckedAccessors::new();
@@ -829,12 +829,11 @@ fn fan_triangles(indices: &[u32]) -> Vec<[u32; 3]> {
 /// Checks what the `gltf` crate's reader trusts of an accessor read at `field` as `use_`, and what
 /// glTF 2.0 forbids there that the crate takes: its element type (one glTF allows there, and
 /// `normalized` only where that allows it — the reader ignores the flag, and glTF forbids it for
-/// float and 32-bit components), no
-/// `byteStride` on an indices view, `count ≥ 1` (glTF's minimum) and at most one element per byte
-/// of the file's buffers and below 2³² (32-bit indices; a sparse accessor without a buffer view
-/// would otherwise allocate `count` zeros, however large), `1 ≤ sparse.count ≤ count`, and that
-/// its elements, and its sparse indices and values, lie inside their buffer views and buffers
-/// ([`check_span`]).
+/// float and 32-bit components), no `byteStride` on an indices view, `count ≥ 1` (glTF's minimum)
+/// and at most one element per byte of the file's buffers and below 2³² (32-bit indices; a sparse
+/// accessor without a buffer view would otherwise allocate `count` zeros, however large), `1 ≤
+/// sparse.count ≤ count`, and that its elements, and its sparse indices and values, lie inside
+/// their buffer views and buffers ([`check_span`]).
 fn check_accessor(
     accessor: &gltf::Accessor,
     buffers: &[buffer::Data],
