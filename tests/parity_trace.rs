@@ -164,13 +164,13 @@ fn untraceable_rays_miss_on_every_backend() {
     }
 }
 
-/// Rays whose directions are as short as a traceable ray's may be ([`MIN_DIRECTION`]) hit what
-/// the same rays of direction `d / MIN_DIRECTION` hit, at `t / MIN_DIRECTION`, on every backend — an axis-aligned
-/// one too, whose zero components the box test floors far below it (a floor as large as the
-/// direction had traced `(0, 0, d)` as a diagonal and missed); shorter ones miss uncounted. So do
-/// the longest ([`MAX_DIRECTION`]), and longer ones miss uncounted.
+/// Rays whose directions are as short as a traceable ray's may be ([`MIN_DIRECTION`]), or as
+/// long ([`MAX_DIRECTION`]), hit what the same rays of direction `d / scale` hit, at `t / scale`,
+/// on every backend — an axis-aligned one too, whose zero components the box test floors far
+/// below it (a floor as large as the direction had traced `(0, 0, d)` as a diagonal and missed);
+/// shorter and longer ones miss uncounted.
 #[test]
-fn the_shortest_traceable_directions_hit_what_unit_ones_hit_on_every_backend() {
+fn the_shortest_and_longest_traceable_directions_hit_what_unit_ones_hit_on_every_backend() {
     use raywave::kernels::trace::{MAX_DIRECTION, MIN_DIRECTION};
     let scene = cornell();
     // Largest component 1: scaled by MIN_DIRECTION, exactly the shortest traceable.
@@ -183,43 +183,47 @@ fn the_shortest_traceable_directions_hit_what_unit_ones_hit_on_every_backend() {
     };
     let cpu_scene = CpuScene::build(&scene).unwrap();
     let unit = cpu::trace(&cpu_scene, &stream(1.0, 10.0)).expect("trace");
-    let short_rays = stream(MIN_DIRECTION, 10.0 / MIN_DIRECTION);
-    let short = cpu::trace(&cpu_scene, &short_rays).expect("trace");
-    for i in 0..units.len() {
-        assert_ne!(unit.primitive[i], NO_HIT, "ray {i} hits the box");
-        assert_eq!((short.instance[i], short.primitive[i]), (unit.instance[i], unit.primitive[i]), "ray {i}");
-        let t = short.t[i] * MIN_DIRECTION;
-        assert!((t - unit.t[i]).abs() <= T_REL_TOLERANCE * unit.t[i], "ray {i}: {t} vs {}", unit.t[i]);
-    }
-    // The longest traceable, `MAX_DIRECTION`, the same; longer ones miss uncounted.
-    let long_rays = stream(MAX_DIRECTION, 10.0 / MAX_DIRECTION);
-    let long = cpu::trace(&cpu_scene, &long_rays).expect("trace");
-    for i in 0..units.len() {
-        assert_eq!((long.instance[i], long.primitive[i]), (unit.instance[i], unit.primitive[i]), "long ray {i}");
-        let t = long.t[i] * MAX_DIRECTION;
-        assert!((t - unit.t[i]).abs() <= T_REL_TOLERANCE * unit.t[i], "long ray {i}: {t} vs {}", unit.t[i]);
-    }
-    let longer_rays = stream(4.0 * MAX_DIRECTION, 1.0);
-    let (longer_misses, sanitized) = cpu::trace_counted(&cpu_scene, &longer_rays).expect("trace");
-    assert!(longer_misses.primitive.iter().all(|&p| p == NO_HIT) && sanitized == 0, "not traceable, not replaced");
-    let shorter = stream(0.5 * MIN_DIRECTION, 20.0 / MIN_DIRECTION);
-    let (misses, sanitized) = cpu::trace_counted(&cpu_scene, &shorter).expect("trace");
-    assert!(misses.primitive.iter().all(|&p| p == NO_HIT) && sanitized == 0, "not traceable, not replaced");
-    for mut device in vulkan::every_device("shortest directions") {
+    assert!(unit.primitive.iter().all(|&p| p != NO_HIT), "every ray hits the box");
+    // (the rays, their hits on the CPU) at the shortest and the longest traceable directions.
+    let traceable: Vec<(RayStream, HitStream)> = [MIN_DIRECTION, MAX_DIRECTION]
+        .into_iter()
+        .map(|scale| {
+            let rays = stream(scale, 10.0 / scale);
+            let hits = cpu::trace(&cpu_scene, &rays).expect("trace");
+            for i in 0..units.len() {
+                let what = format!("ray {i}, direction × {scale:e}");
+                assert_eq!((hits.instance[i], hits.primitive[i]), (unit.instance[i], unit.primitive[i]), "{what}");
+                let t = hits.t[i] * scale;
+                assert!((t - unit.t[i]).abs() <= T_REL_TOLERANCE * unit.t[i], "{what}: {t} vs {}", unit.t[i]);
+            }
+            (rays, hits)
+        })
+        .collect();
+    // (the rays, their misses on the CPU) shorter and longer than traceable.
+    let untraceable: Vec<(RayStream, HitStream)> =
+        [stream(0.5 * MIN_DIRECTION, 20.0 / MIN_DIRECTION), stream(4.0 * MAX_DIRECTION, 1.0)]
+            .into_iter()
+            .map(|rays| {
+                let (misses, sanitized) = cpu::trace_counted(&cpu_scene, &rays).expect("trace");
+                assert!(misses.primitive.iter().all(|&p| p == NO_HIT) && sanitized == 0, "not traceable, not replaced");
+                (rays, misses)
+            })
+            .collect();
+    let (shortest, shorter) = (&traceable[0].0, &untraceable[0].0);
+    for mut device in vulkan::every_device("shortest and longest directions") {
         device.load_scene(&scene).unwrap();
-        let (hits, report) = device.trace(&short_rays).unwrap();
-        assert_eq!(compare(&scene, &short_rays, &short, &hits), 1.0, "{}", device.name());
-        assert_eq!(report.sanitized, 0, "{}", device.name());
-        let (occluded, report) = device.trace_occlusion(&short_rays).unwrap();
+        for (rays, expected) in &traceable {
+            let (hits, report) = device.trace(rays).unwrap();
+            assert_eq!(compare(&scene, rays, expected, &hits), 1.0, "{}", device.name());
+            assert_eq!(report.sanitized, 0, "{}", device.name());
+        }
+        for (rays, misses) in &untraceable {
+            let (hits, report) = device.trace(rays).unwrap();
+            assert_eq!((&hits, report.sanitized), (misses, 0), "{}", device.name());
+        }
+        let (occluded, report) = device.trace_occlusion(shortest).unwrap();
         assert_eq!((occluded, report.sanitized), (vec![1; units.len()], 0), "{}", device.name());
-        let (long_hits, report) = device.trace(&long_rays).unwrap();
-        assert_eq!(compare(&scene, &long_rays, &long, &long_hits), 1.0, "{}", device.name());
-        assert_eq!(report.sanitized, 0, "{}", device.name());
-        let (longer_hits, report) = device.trace(&longer_rays).unwrap();
-        assert_eq!((longer_hits, report.sanitized), (longer_misses.clone(), 0), "{}", device.name());
-        let (shorter_hits, report) = device.trace(&shorter).unwrap();
-        assert_eq!((shorter_hits, report.sanitized), (misses.clone(), 0), "{}", device.name());
-        let (occluded, report) = device.trace_occlusion(&shorter).unwrap();
+        let (occluded, report) = device.trace_occlusion(shorter).unwrap();
         assert_eq!((occluded, report.sanitized), (vec![0; units.len()], 0), "{}", device.name());
         vulkan::assert_clean(device);
     }

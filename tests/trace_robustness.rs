@@ -356,32 +356,35 @@ fn axis_aligned_grazing_tiny_and_huge_cases() {
     }
 }
 
+/// The closest hit of ray `i` of `rays` (within its `[tmin, tmax]`) among every triangle of
+/// `scene`, by the kernels' watertight triangle test alone, no BVH: `(t, mesh, triangle)`.
+fn brute_force_closest(scene: &Scene, rays: &RayStream, i: usize) -> Option<(f32, u32, u32)> {
+    let (origin, direction) = (rays.origin[i], rays.direction[i]);
+    let ray = raywave::kernels::triangle::WatertightRay::new(origin.truncate(), direction.truncate());
+    (scene.meshes().iter().enumerate())
+        .flat_map(|(m, mesh)| mesh.triangles.iter().enumerate().map(move |(k, t)| (m, k, mesh, t)))
+        .filter_map(|(m, k, mesh, t)| {
+            let [a, b, c] = t.map(|v| mesh.positions[v as usize]);
+            ray.intersect(a, b, c, origin.w, direction.w).map(|h| (h.t, m as u32, k as u32))
+        })
+        .min_by(|x, y| x.0.total_cmp(&y.0))
+}
+
 #[test]
 fn kernel_traversal_matches_brute_force_on_incoherent_rays() {
     let (meshes, _) = raywave::scene::procedural::hairball(60_000, 2).expect("a hairball");
     let scene = scene_of(meshes);
     let cpu_scene = CpuScene::build(&scene).unwrap();
-    let mesh = &scene.meshes()[0];
     let n = 5_000u32;
     let origins: Vec<Vec3> = (0..n).map(|i| random3(i, 40) * 1.6 - 0.3).collect();
     let directions: Vec<Vec3> = (0..n).map(|i| random_direction(i, 41)).collect();
     let rays = rays_from(&origins, &directions, 5.0);
     let hits = cpu::trace(&cpu_scene, &rays).expect("trace");
     let mut agree = 0;
-    for (i, origin) in origins.iter().enumerate() {
-        let ray = raywave::kernels::triangle::WatertightRay::new(*origin, rays.direction[i].truncate());
-        let best = mesh
-            .triangles
-            .iter()
-            .enumerate()
-            .filter_map(|(k, t)| {
-                let [a, b, c] = t.map(|v| mesh.positions[v as usize]);
-                ray.intersect(a, b, c, 0.0, 5.0).map(|h| (h.t, k as u32))
-            })
-            .min_by(|x, y| x.0.total_cmp(&y.0));
-        match best {
+    for i in 0..origins.len() {
+        match brute_force_closest(&scene, &rays, i) {
             None => assert_eq!(hits.primitive[i], NO_HIT, "ray {i}"),
-            Some((t, k)) => {
+            Some((t, _, k)) => {
                 assert_eq!(hits.t[i], t, "ray {i}: traversal and brute force disagree on the closest t");
                 agree += usize::from(hits.primitive[i] == k);
             }
@@ -458,16 +461,7 @@ fn kernel_traversal_matches_brute_force_for_every_preset_scale_and_offset() {
             let hits = cpu::trace(&cpu_scene, &rays).expect("trace");
             let (mut hit_count, mut agree) = (0, 0);
             for i in 0..n as usize {
-                let (origin, direction) = (rays.origin[i], rays.direction[i]);
-                let ray = raywave::kernels::triangle::WatertightRay::new(origin.truncate(), direction.truncate());
-                let best = (scene.meshes().iter().enumerate())
-                    .flat_map(|(m, mesh)| mesh.triangles.iter().enumerate().map(move |(k, t)| (m, k, mesh, t)))
-                    .filter_map(|(m, k, mesh, t)| {
-                        let [a, b, c] = t.map(|v| mesh.positions[v as usize]);
-                        ray.intersect(a, b, c, origin.w, direction.w).map(|h| (h.t, m as u32, k as u32))
-                    })
-                    .min_by(|x, y| x.0.total_cmp(&y.0));
-                match best {
+                match brute_force_closest(&scene, &rays, i) {
                     None => assert_eq!(hits.primitive[i], NO_HIT, "{case}: ray {i} hits nothing"),
                     Some((t, mesh, primitive)) => {
                         assert_eq!(hits.t[i], t, "{case}: ray {i}: traversal and brute force disagree on t");
