@@ -1,10 +1,11 @@
-//! Every SPIR-V module the build embeds passes `spirv-val --target-env vulkan1.2`, and declares
-//! ray-query capability only if it is the ray-query trace kernel.
+//! Every SPIR-V module the build embeds, as embedded and as the Vulkan backend loads it (every
+//! float operation decorated `NoContraction`), passes `spirv-val --target-env vulkan1.2`, and
+//! declares ray-query capability only if it is the ray-query trace kernel.
 #![cfg(feature = "vulkan")]
 
 mod common;
 
-use raywave::vulkan::spirv::MODULES;
+use raywave::vulkan::spirv::{words, MODULES};
 use std::process::Command;
 
 #[test]
@@ -16,10 +17,14 @@ fn every_module_passes_spirv_val() {
     }
     let dir = tempfile::tempdir().unwrap();
     for (entry, bytes) in MODULES {
-        let path = dir.path().join(format!("{}.spv", entry.replace("::", "-")));
-        std::fs::write(&path, bytes).unwrap();
-        let out = Command::new("spirv-val").args(["--target-env", "vulkan1.2"]).arg(&path).output().unwrap();
-        assert!(out.status.success(), "{entry} fails spirv-val:\n{}", String::from_utf8_lossy(&out.stderr));
+        let loaded: Vec<u8> = words(entry, None).unwrap().iter().flat_map(|w| w.to_le_bytes()).collect();
+        for (form, bytes) in [("embedded", *bytes), ("loaded", &loaded[..])] {
+            let path = dir.path().join(format!("{}-{form}.spv", entry.replace("::", "-")));
+            std::fs::write(&path, bytes).unwrap();
+            let out = Command::new("spirv-val").args(["--target-env", "vulkan1.2"]).arg(&path).output().unwrap();
+            let errors = String::from_utf8_lossy(&out.stderr);
+            assert!(out.status.success(), "{entry}, {form}, fails spirv-val:\n{errors}");
+        }
     }
 }
 

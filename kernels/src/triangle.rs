@@ -118,7 +118,8 @@ impl WatertightRay {
         // exactly antisymmetric and equals the canonical one up to the sign of a zero, which no
         // comparison here sees (tested); skipping the ordering there keeps the CPU traversal
         // 13–15 % faster (`raywave bench trace`, sphere field, one thread). A SPIR-V driver may
-        // fuse, so the kernels order the endpoints.
+        // fuse where the module does not forbid it ([`edge_function`]), so the kernels order the
+        // endpoints.
         if cfg!(target_arch = "spirv") {
             self.intersect_with(v0, v1, v2, tmin, tmax, |p, q| edge_function(p, q, &cross_2d))
         } else {
@@ -239,7 +240,11 @@ fn cross_2d(p: Vec3A, q: Vec3A) -> f32 {
 /// result is decorated `NoContraction` (rust-gpu 0.11 does not decorate), and a fused
 /// `fma(p.x, q.y, −p.y·q.x)` is not the negation of `fma(q.x, p.y, −q.y·p.x)`: on an NVIDIA H100
 /// (driver 580.159.04) 1 276 of 10⁶ rays aimed at the shared edges and vertices of a closed
-/// sphere went through it, all at edges (`trace_robustness`).
+/// sphere went through it, all at edges (`trace_robustness`). raywave's Vulkan backend now
+/// decorates every float operation of its kernels so (the host's
+/// `vulkan::spirv::without_contraction`), which also keeps the vertex transform that precedes
+/// this (`M·(v − o)`, inlined three times) rounded alike in every triangle; the canonical order
+/// stays for an engine that builds these kernels into shaders it does not pass through that.
 #[inline(always)]
 fn edge_function<F: Fn(Vec3A, Vec3A) -> f32>(p: Vec3A, q: Vec3A, cross: &F) -> f32 {
     let same_x = q.x == p.x;

@@ -1,5 +1,6 @@
 //! The SPIR-V modules of `raywave-kernels`, embedded at build time (one per entry point), and the
-//! one edit the host makes to them: another workgroup size for a 1-D compute stage.
+//! edits the host makes to them before a driver sees them: every float sum and product marked
+//! `NoContraction` ([`without_contraction`]), and another workgroup size for a 1-D compute stage.
 
 use crate::error::{Error, Result};
 use raywave_shared::bindings::WORKGROUP_SIZE;
@@ -18,25 +19,93 @@ pub fn module(entry: &str) -> Result<&'static [u8]> {
         .ok_or_else(|| embedded_error(entry, "no module for this entry point"))
 }
 
-/// The SPIR-V words of entry point `entry`; with `local_size_x`, a compute entry point's
-/// `LocalSize` execution mode set to `(local_size_x, 1, 1)` in place of the
-/// `(WORKGROUP_SIZE, 1, 1)` it was compiled with (`threads(64)`), so that the pipeline runs
-/// workgroups of that many invocations. Only stages whose code does not depend on the size may
-/// be given one (every 1-D stream stage: `raywave_shared::bindings::stream_index`); the kernel must not also carry
-/// a `WorkgroupSize` built-in, which would override the execution mode.
+/// The SPIR-V words of entry point `entry` as raywave's Vulkan backend hands them to the driver:
+/// [`without_contraction`]; with `local_size_x`, a compute entry point's `LocalSize` execution
+/// mode set to `(local_size_x, 1, 1)` in place of the `(WORKGROUP_SIZE, 1, 1)` it was compiled
+/// with (`threads(64)`), so that the pipeline runs workgroups of that many invocations. Only
+/// stages whose code does not depend on the size may be given one (every 1-D stream stage:
+/// `raywave_shared::bindings::stream_index`); the kernel must not also carry a `WorkgroupSize`
+/// built-in, which would override the execution mode.
 pub fn words(entry: &str, local_size_x: Option<u32>) -> Result<Vec<u32>> {
-    let code = ash::util::read_spv(&mut std::io::Cursor::new(module(entry)?))
-        .map_err(|e| embedded_error(entry, &e.to_string()))?;
+    let fail = |reason: &str| embedded_error(entry, reason);
+    let mut module = rspirv::dr::load_bytes(module(entry)?).map_err(|e| fail(&e.to_string()))?;
+    forbid_contraction(&mut module);
     match local_size_x {
-        None | Some(WORKGROUP_SIZE) => Ok(code),
-        Some(x) => with_local_size_x(&code, entry, x),
+        None | Some(WORKGROUP_SIZE) => {}
+        Some(x) => set_local_size_x(&mut module, entry, x)?,
     }
+    Ok(module.assemble())
 }
 
-/// `code` with entry point `entry`'s `LocalSize` x changed from `WORKGROUP_SIZE` to `x`.
-fn with_local_size_x(code: &[u32], entry: &str, x: u32) -> Result<Vec<u32>> {
+/// The float arithmetic a Vulkan driver may combine with other instructions unless the result
+/// is decorated `NoContraction` — a product and the sum it feeds into one fused multiply–add,
+/// most often (SPIR-V specification, "NoContraction"; NVIDIA's driver fused the triangle test's
+/// edge products on an H100, `raywave_kernels::triangle`).
+const CONTRACTIBLE: [Op; 9] = [
+    Op::FAdd,
+    Op::FSub,
+    Op::FMul,
+    Op::FDiv,
+    Op::VectorTimesScalar,
+    Op::MatrixTimesScalar,
+    Op::VectorTimesMatrix,
+    Op::MatrixTimesVector,
+    Op::Dot,
+];
+
+/// `code`, a SPIR-V module, with the result of every float sum, difference, product and quotient
+/// decorated `NoContraction`, so that a driver evaluates each as written, rounded on its own, as
+/// the CPU build of the same Rust does (Rust never fuses `a * b + c`). rust-gpu cannot emit the
+/// decoration, and without it a driver may fuse a product into the sum that uses it: the
+/// watertight triangle test's vertex transform (`raywave_kernels::triangle`) must round the same
+/// vertex alike in every triangle that shares it, and the denoiser's noise-line taps
+/// (`raywave_kernels::denoise::noise`) must land on the CPU's pixels. raywave's Vulkan backend
+/// loads every kernel so ([`words`]); an engine that builds the kernels into its own shaders
+/// passes its modules through this for the same arithmetic. A module that does not parse is
+/// [`Error::InvalidParameter`].
+pub fn without_contraction(code: &[u32]) -> Result<Vec<u32>> {
+    let mut module = rspirv::dr::load_words(code)
+        .map_err(|e| Error::InvalidParameter { name: "code", reason: format!("not a SPIR-V module: {e}") })?;
+    forbid_contraction(&mut module);
+    Ok(module.assemble())
+}
+
+/// Decorates every [`CONTRACTIBLE`] result in `module` `NoContraction`, once each.
+fn forbid_contraction(module: &mut rspirv::dr::Module) {
+    let decorated: std::collections::HashSet<u32> = no_contraction_targets(module).collect();
+    let undecorated: Vec<u32> = module
+        .functions
+        .iter()
+        .flat_map(|function| &function.blocks)
+        .flat_map(|block| &block.instructions)
+        .filter(|i| CONTRACTIBLE.contains(&i.class.opcode))
+        .filter_map(|i| i.result_id)
+        .filter(|id| !decorated.contains(id))
+        .collect();
+    let no_contraction = Operand::Decoration(Decoration::NoContraction);
+    module.annotations.extend(
+        undecorated
+            .into_iter()
+            .map(|id| Instruction::new(Op::Decorate, None, None, vec![Operand::IdRef(id), no_contraction.clone()])),
+    );
+}
+
+/// The ids `module` decorates `NoContraction`, in its order (with repeats, if it repeats one).
+fn no_contraction_targets(module: &rspirv::dr::Module) -> impl Iterator<Item = u32> + '_ {
+    let no_contraction = Operand::Decoration(Decoration::NoContraction);
+    module
+        .annotations
+        .iter()
+        .filter(move |i| i.class.opcode == Op::Decorate && i.operands.get(1) == Some(&no_contraction))
+        .filter_map(|i| match i.operands.first() {
+            Some(&Operand::IdRef(target)) => Some(target),
+            _ => None,
+        })
+}
+
+/// Sets entry point `entry`'s `LocalSize` x in `module` from `WORKGROUP_SIZE` to `x`.
+fn set_local_size_x(module: &mut rspirv::dr::Module, entry: &str, x: u32) -> Result<()> {
     let fail = |reason: &str| embedded_error(entry, reason);
-    let mut module = rspirv::dr::load_words(code).map_err(|e| fail(&e.to_string()))?;
     let is_entry = |i: &Instruction| matches!(i.operands.get(2), Some(Operand::LiteralString(name)) if name == entry);
     let function = match module.entry_points.iter().find(|i| is_entry(i)).map(|i| &i.operands[1]) {
         Some(&Operand::IdRef(id)) => id,
@@ -60,7 +129,7 @@ fn with_local_size_x(code: &[u32], entry: &str, x: u32) -> Result<Vec<u32>> {
         Some(mode) => return Err(fail(&format!("compiled with LocalSize {:?}, not (64, 1, 1)", &mode.operands[2..]))),
         None => return Err(fail("no LocalSize execution mode")),
     }
-    Ok(module.assemble())
+    Ok(())
 }
 
 fn embedded_error(entry: &str, reason: &str) -> Error {
@@ -172,14 +241,59 @@ mod tests {
         assert!(bytes <= BUDGET_BYTES, "the shade module is {bytes} bytes, over its budget of {BUDGET_BYTES}");
     }
 
+    /// Every module the backend loads has each float sum, difference, product and quotient
+    /// decorated `NoContraction` exactly once, and nothing else: the embedded module (rust-gpu
+    /// emits no such decoration) plus one `OpDecorate` per such result: over 4 000 in the shade
+    /// module, over 100 in the trace and noise ones. Decorating a decorated module changes nothing.
+    #[test]
+    fn every_float_sum_and_product_is_marked_no_contraction() {
+        for (entry, bytes) in MODULES {
+            let embedded = rspirv::dr::load_bytes(bytes).expect("parses");
+            assert_eq!(no_contraction_targets(&embedded).count(), 0, "{entry}: rust-gpu decorated");
+            let loaded_words = words(entry, None).expect("embedded");
+            let loaded = rspirv::dr::load_words(&loaded_words).expect("parses");
+            let mut arithmetic: Vec<u32> = loaded
+                .functions
+                .iter()
+                .flat_map(|function| &function.blocks)
+                .flat_map(|block| &block.instructions)
+                .filter(|i| CONTRACTIBLE.contains(&i.class.opcode))
+                .map(|i| i.result_id.expect("a result"))
+                .collect();
+            let mut decorated: Vec<u32> = no_contraction_targets(&loaded).collect();
+            arithmetic.sort_unstable();
+            decorated.sort_unstable();
+            assert_eq!(decorated, arithmetic, "{entry}");
+            let least = match *entry {
+                "entry::shade" => 4000,
+                "entry::trace_cwbvh" | "entry::denoise_noise" => 100,
+                _ => 0,
+            };
+            assert!(arithmetic.len() >= least, "{entry}: {} float operations", arithmetic.len());
+            let mut undecorated = loaded.clone();
+            undecorated.annotations.truncate(embedded.annotations.len());
+            assert_eq!(undecorated.assemble(), embedded.assemble(), "{entry}: more than decorations added");
+            assert_eq!(without_contraction(&loaded_words).expect("parses"), loaded_words, "{entry}: twice");
+        }
+    }
+
+    #[test]
+    fn without_contraction_refuses_what_is_not_spir_v() {
+        let refused = without_contraction(&[0x0723_0203, 1, 2]).expect_err("not a module");
+        assert!(matches!(refused, Error::InvalidParameter { name: "code", .. }), "{refused}");
+    }
+
     #[test]
     fn a_module_without_the_compiled_local_size_is_refused() {
         // A ray-generation shader has no LocalSize.
         assert!(matches!(words("entry::trace_raygen", Some(128)), Err(Error::Vulkan { .. })));
         let compiled = words("entry::generate", None).expect("embedded");
         let other = with_local_size_x_from(&compiled, "entry::generate", 64, 32);
-        let refused = with_local_size_x(&other, "entry::generate", 128).expect_err("compiled size differs");
+        let set = |code: &[u32], entry: &str| {
+            set_local_size_x(&mut rspirv::dr::load_words(code).expect("parses"), entry, 128)
+        };
+        let refused = set(&other, "entry::generate").expect_err("compiled size differs");
         assert!(refused.to_string().contains("not (64, 1, 1)"), "{refused}");
-        assert!(matches!(with_local_size_x(&compiled, "entry::nothing", 128), Err(Error::Vulkan { .. })));
+        assert!(matches!(set(&compiled, "entry::nothing"), Err(Error::Vulkan { .. })));
     }
 }
