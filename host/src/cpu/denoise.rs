@@ -235,4 +235,55 @@ mod tests {
         let (filtered, _) = run_passes(TV_PASSES.to_vec(), &params, &input);
         assert_ne!(filtered, skipped, "at N = 4R² − 1 the filter works");
     }
+
+    /// The bilateral passes take each pixel's width from the blurred noise estimate, not the raw
+    /// one (the denoise review's gap): over a plane facing the camera, lit everywhere but at
+    /// scattered shadowed pixels (one in 50), a pixel passes through both passes untouched exactly
+    /// where the *blurred* estimate makes its Gaussian ≤ ½ pixel, and among the pixels whose own
+    /// noise lines see no shadow (raw width ≤ ½) but whose neighbours' do, many are filtered.
+    /// Reading the raw estimate instead leaves all of those untouched and filters some of the
+    /// former, and fails both assertions.
+    #[test]
+    fn the_bilateral_passes_filter_with_the_blurred_noise_estimate() {
+        const WIDTH: u32 = 64;
+        const HEIGHT: u32 = 48;
+        let mut rng = CounterRng::new(5);
+        let mut input = DenoiseInput::default();
+        for i in 0..WIDTH * HEIGHT {
+            let point = glam::Vec3::new((i % WIDTH) as f32, (i / WIDTH) as f32, -50.0);
+            let lit = Vec4::new(0.5, 0.4, 0.3, 0.0);
+            input.position.push(point.extend(50.0));
+            input.normal.push(glam::Vec3::Z.extend(0.4));
+            input.analytic.push(lit);
+            input.unshadowed.push(lit);
+            input.shadowed.push(if rng.next_f32() < 0.02 { Vec4::ZERO } else { lit });
+            input.emitted.push(Vec4::ZERO);
+        }
+        let params = DenoiseParams { seed: 9, ..DenoiseParams::with_radius(WIDTH, HEIGHT, 4) };
+        input.check(&params).unwrap();
+        let (unfiltered, _) = denoise(DenoiseMethod::None, &params, &input);
+        let (filtered, _) = denoise(DenoiseMethod::Tv, &params, &input);
+
+        let ratio: Vec<Vec4> =
+            input.shadowed.iter().zip(&input.unshadowed).map(|(&s, &u)| noise::ratio_pixel(s, u)).collect();
+        let pixels: Vec<IVec2> = (0..params.pixels()).map(|i| params.pixel(i).unwrap()).collect();
+        let raw: Vec<f32> = pixels.iter().map(|&p| noise::noise_estimate(&params, p, &ratio)).collect();
+        let blurred: Vec<f32> = pixels.iter().map(|&p| noise::blurred_noise(&params, p, &raw)).collect();
+        let filters = |noise: f32| {
+            raywave_kernels::denoise::bilateral::gaussian_radius(noise, params.radius, params.samples_per_pixel) > 0.5
+        };
+        let (mut quiet, mut spread_to, mut spread_and_changed) = (0, 0, 0);
+        for i in 0..pixels.len() {
+            if !filters(blurred[i]) {
+                assert_eq!(filtered[i], unfiltered[i], "pixel {}: blurred noise {}", pixels[i], blurred[i]);
+                quiet += usize::from(filters(raw[i]));
+            } else if !filters(raw[i]) {
+                spread_to += 1;
+                spread_and_changed += usize::from(filtered[i] != unfiltered[i]);
+            }
+        }
+        assert!(quiet >= 10, "only {quiet} pixels with loud raw but quiet blurred noise");
+        assert!(spread_to >= 100, "only {spread_to} pixels with quiet raw but loud blurred noise");
+        assert!(spread_and_changed * 2 >= spread_to, "{spread_and_changed} of {spread_to} filtered");
+    }
 }
