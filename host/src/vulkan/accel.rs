@@ -21,6 +21,10 @@ pub(crate) struct AccelerationStructure {
 
 impl Drop for AccelerationStructure {
     fn drop(&mut self) {
+        if self.core.is_wedged() {
+            // Leaked: a submission may still use it (`Core::wedge`).
+            return;
+        }
         let _driver = driver_lock::device_use();
         if let Some(accel) = &self.core.acceleration_structure {
             // SAFETY: the device is idle after every submission, so no command uses it.

@@ -36,6 +36,10 @@ pub(crate) struct GpuBuffer {
 
 impl Drop for GpuBuffer {
     fn drop(&mut self) {
+        if self.core.is_wedged() {
+            // Leaked with its memory: a submission may still use it (`Core::wedge`).
+            return;
+        }
         let _driver = driver_lock::device_use();
         let Some(allocation) = self.allocation.take() else {
             // Its memory was never bound (creation failed): only the buffer is left.
@@ -362,11 +366,19 @@ fn not_host_visible() -> Error {
     Error::Vulkan { call: "vkMapMemory", result: "buffer memory is not host-visible".into() }
 }
 
-/// Records commands with `record`, submits them and waits for completion.
+/// Records commands with `record`, submits them and waits for completion. If the wait fails (a
+/// lost device, out of memory), the submission may still be pending: the device is idled, and if
+/// that fails too, other than by losing the device, it is wedged ([`Core::wedge`]) — the fence,
+/// the pool and every buffer the commands use are leaked rather than freed under the GPU — and
+/// this and every later call fail with the error [`wedged_error`].
 pub(crate) fn submit_and_wait(core: &Core, record: impl FnOnce(vk::CommandBuffer)) -> Result<()> {
+    if core.is_wedged() {
+        return Err(wedged_error());
+    }
     let device = &core.device;
     // SAFETY: the pool, command buffer and fence are created, used and destroyed within this call,
-    // and the wait guarantees the GPU is done with them before destruction.
+    // and the wait (or an idle device, or a wedged one's leak) guarantees the GPU is done with
+    // them before destruction.
     unsafe {
         let pool = device
             .create_command_pool(
@@ -406,21 +418,38 @@ pub(crate) fn submit_and_wait(core: &Core, record: impl FnOnce(vk::CommandBuffer
                 Ok(()) => {
                     core.submissions.fetch_add(1, Ordering::Relaxed);
                     let waited = device.wait_for_fences(&[fence], true, u64::MAX).map_err(vk_error("vkWaitForFences"));
-                    if waited.is_err() {
-                        // A failed wait (a lost device, out of memory) may leave the submission
-                        // pending: the fence, the pool and the buffers its commands use may go only
-                        // once the queue is idle — or the device lost, which counts every
-                        // submission complete. The wait's own error is the one reported.
-                        let _ = device.device_wait_idle();
+                    if waited.is_err() && !idled(device.device_wait_idle()) {
+                        core.wedge();
                     }
+                    // The wait's own error is the one reported.
                     waited
                 }
             };
-            device.destroy_fence(fence, None);
+            if !core.is_wedged() {
+                device.destroy_fence(fence, None);
+            }
             waited
         })();
-        device.destroy_command_pool(pool, None);
+        if !core.is_wedged() {
+            device.destroy_command_pool(pool, None);
+        }
         result
+    }
+}
+
+/// Whether `vkDeviceWaitIdle`'s `result` leaves no submission running: success, or a lost
+/// device, which counts every submission complete (Vulkan specification, "Lost Device").
+fn idled(result: ash::prelude::VkResult<()>) -> bool {
+    matches!(result, Ok(()) | Err(vk::Result::ERROR_DEVICE_LOST))
+}
+
+/// The error of a call on a wedged device ([`Core::wedge`]).
+pub(crate) fn wedged_error() -> Error {
+    Error::Vulkan {
+        call: "vkQueueSubmit",
+        result: "not submitted: an earlier submission could be neither waited for nor the device idled, so the \
+                 GPU may still be using this backend's objects (they are leaked, not freed); open a new backend"
+            .into(),
     }
 }
 
@@ -494,6 +523,40 @@ mod tests {
             let messages = fill_then_copy(false);
             assert!(messages.iter().any(|m| m.contains("SYNC-HAZARD")), "{}: {messages:?}", device.name);
             assert_eq!(destination.read::<u32>(64).unwrap(), [7; 64], "{}", device.name);
+        }
+    }
+
+    /// `vkDeviceWaitIdle` leaves nothing running when it succeeds or finds the device lost; any
+    /// other error (out of memory) may leave a submission pending, which wedges the device.
+    #[test]
+    fn only_success_or_a_lost_device_leaves_the_device_idle() {
+        assert!(idled(Ok(())));
+        assert!(idled(Err(vk::Result::ERROR_DEVICE_LOST)));
+        assert!(!idled(Err(vk::Result::ERROR_OUT_OF_HOST_MEMORY)));
+        assert!(!idled(Err(vk::Result::ERROR_OUT_OF_DEVICE_MEMORY)));
+    }
+
+    /// A wedged device (`Core::wedge`) submits nothing more — a call fails with the typed error
+    /// before recording — and dropping a buffer and the device after it, which leaks them, is
+    /// quiet under validation (that nothing is destroyed, no test here can see). Every Vulkan
+    /// device; without one it fails under CI and is skipped loudly elsewhere.
+    #[test]
+    fn a_wedged_device_submits_nothing_and_drops_quietly() {
+        let devices = super::super::devices_for_test("wedged device");
+        for device in &devices {
+            let options = super::super::ContextOptions { validation: true, ..Default::default() };
+            let core = super::super::context::open(device.index, &options).unwrap();
+            let buffer = GpuBuffer::storage::<u32>(&core, 64, "in use").unwrap();
+            submit_and_wait(&core, |_| {}).unwrap();
+            let submitted = core.submissions.load(Ordering::Relaxed);
+            core.wedge();
+            let refused = submit_and_wait(&core, |_| panic!("recorded on a wedged device")).expect_err("wedged");
+            assert_eq!(refused.to_string(), wedged_error().to_string(), "{}", device.name);
+            assert_eq!(core.submissions.load(Ordering::Relaxed), submitted, "{}", device.name);
+            let log = core.validation_log();
+            drop(buffer);
+            drop(core);
+            assert_eq!(log.messages(), Vec::<String>::new(), "{}", device.name);
         }
     }
 

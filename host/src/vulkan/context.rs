@@ -260,10 +260,22 @@ pub(crate) struct Core {
     pub submissions: AtomicU64,
     /// Transient buffers kept for the next call that needs one of their kind.
     pub recycler: Recycler,
+    /// Set when a wait for a submission failed and the device then could not be idled either (an
+    /// error other than a lost device, after which every submission counts as done): the GPU may
+    /// still be using any object of the device, so from then on none is destroyed — each is
+    /// leaked, the device with them — and nothing more is submitted
+    /// ([`super::buffer::submit_and_wait`]).
+    wedged: AtomicBool,
 }
 
 impl Drop for Core {
     fn drop(&mut self) {
+        if self.is_wedged() {
+            // Leaked: the GPU may still be using the device's objects (`wedged`). So is the
+            // debug messenger, whose callback writes into the log: it must outlive it.
+            std::mem::forget(self.messages.clone());
+            return;
+        }
         let _lifetime = driver_lock::device_lifetime();
         // SAFETY: every object created from this device holds an `Arc<Core>`, so none is alive now.
         unsafe {
@@ -282,6 +294,18 @@ impl Drop for Core {
 }
 
 impl Core {
+    /// Whether the device is wedged ([`Core::wedge`]): nothing of it may be destroyed any more.
+    pub fn is_wedged(&self) -> bool {
+        self.wedged.load(Ordering::Acquire)
+    }
+
+    /// Marks the device wedged: a submission may still be running that the driver could neither
+    /// wait for nor idle the device behind, so every object it might use — any of the device's —
+    /// is leaked from now on instead of destroyed, and no more work is submitted.
+    pub fn wedge(&self) {
+        self.wedged.store(true, Ordering::Release);
+    }
+
     /// The validation log ([`ValidationLog`]), shared.
     pub fn validation_log(&self) -> ValidationLog {
         self.messages.clone()
@@ -634,6 +658,7 @@ pub(crate) fn open(index: usize, options: &ContextOptions) -> Result<Arc<Core>> 
                 workgroup_sizes,
                 submissions: AtomicU64::new(0),
                 recycler: Recycler::default(),
+                wedged: AtomicBool::new(false),
             }))
         }
         Err(e) => {

@@ -124,6 +124,10 @@ pub(crate) struct Pass {
 
 impl Drop for Pass {
     fn drop(&mut self) {
+        if self.core.is_wedged() {
+            // Leaked: a submission may still use the pipeline and its slots (`Core::wedge`).
+            return;
+        }
         let _driver = driver_lock::device_use();
         // SAFETY: the device is idle after every submission; these objects are owned by `self`
         // (null handles are ignored by the destroy calls).
