@@ -241,8 +241,8 @@ mod tests {
     /// scattered shadowed pixels (one in 50), a pixel passes through both passes untouched exactly
     /// where the *blurred* estimate makes its Gaussian ≤ ½ pixel, and among the pixels whose own
     /// noise lines see no shadow (raw width ≤ ½) but whose neighbours' do, many are filtered.
-    /// Reading the raw estimate instead leaves all of those untouched and filters some of the
-    /// former, and fails both assertions.
+    /// Reading the raw estimate instead filters pixels of the first kind and leaves those of the
+    /// second untouched (it fails at a pixel of the first kind).
     #[test]
     fn the_bilateral_passes_filter_with_the_blurred_noise_estimate() {
         const WIDTH: u32 = 64;
