@@ -8,7 +8,12 @@
 //! can emit towards the point, or where the whole light lies below the surface (within rounding:
 //! see [`quad_lights_nothing`] and `out_of_reach`), so a light that contributes is never given
 //! probability 0. For one quad light — each light of the scan, each BVH leaf — the zero set is
-//! the shade stage's own where its `U` is 0, and the two cosine factors are bounded further by
+//! the shade stage's own where its `U` is 0, but for one rule the choice does not know: a light
+//! lights nothing of the mesh it is made of (`Light::mesh`). raywave's host moves such a mesh
+//! onto its light, so its points lie in the light's plane, where both are 0; a mesh an engine
+//! leaves bent in front of the plane (by up to the emitter fit's 10⁻⁴) gives that light a
+//! positive probability at its own points for a contribution of 0 — unbiased, a little variance
+//! where other lights compete (the MIS review's F3). The two cosine factors are bounded further by
 //! the quad's own plane and corners ([`quad_cosine_bounds`], [`light_importance`]): the sphere
 //! alone bounds nothing inside it, so a large lamp seen edge-on had starved the lamp that lit a
 //! point.
