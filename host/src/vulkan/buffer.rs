@@ -497,10 +497,7 @@ mod tests {
     /// Every Vulkan device; without one it fails under CI and is skipped loudly elsewhere.
     #[test]
     fn validation_reports_a_missing_barrier() {
-        let devices = super::super::devices_for_test("synchronization validation");
-        for device in &devices {
-            let options = super::super::ContextOptions { validation: true, ..Default::default() };
-            let core = super::super::context::open(device.index, &options).unwrap();
+        for (name, core) in super::super::validated_cores_for_test("synchronization validation") {
             let source = GpuBuffer::storage::<u32>(&core, 64, "source").unwrap();
             let destination = GpuBuffer::storage::<u32>(&core, 64, "destination").unwrap();
             let fill_then_copy = |barrier: bool| {
@@ -519,10 +516,10 @@ mod tests {
                 .unwrap();
                 core.validation_log().messages()
             };
-            assert!(fill_then_copy(true).is_empty(), "{}: with the barrier", device.name);
+            assert!(fill_then_copy(true).is_empty(), "{}: with the barrier", name);
             let messages = fill_then_copy(false);
-            assert!(messages.iter().any(|m| m.contains("SYNC-HAZARD")), "{}: {messages:?}", device.name);
-            assert_eq!(destination.read::<u32>(64).unwrap(), [7; 64], "{}", device.name);
+            assert!(messages.iter().any(|m| m.contains("SYNC-HAZARD")), "{}: {messages:?}", name);
+            assert_eq!(destination.read::<u32>(64).unwrap(), [7; 64], "{}", name);
         }
     }
 
@@ -542,21 +539,18 @@ mod tests {
     /// device; without one it fails under CI and is skipped loudly elsewhere.
     #[test]
     fn a_wedged_device_submits_nothing_and_drops_quietly() {
-        let devices = super::super::devices_for_test("wedged device");
-        for device in &devices {
-            let options = super::super::ContextOptions { validation: true, ..Default::default() };
-            let core = super::super::context::open(device.index, &options).unwrap();
+        for (name, core) in super::super::validated_cores_for_test("wedged device") {
             let buffer = GpuBuffer::storage::<u32>(&core, 64, "in use").unwrap();
             submit_and_wait(&core, |_| {}).unwrap();
             let submitted = core.submissions.load(Ordering::Relaxed);
             core.wedge();
             let refused = submit_and_wait(&core, |_| panic!("recorded on a wedged device")).expect_err("wedged");
-            assert_eq!(refused.to_string(), wedged_error().to_string(), "{}", device.name);
-            assert_eq!(core.submissions.load(Ordering::Relaxed), submitted, "{}", device.name);
+            assert_eq!(refused.to_string(), wedged_error().to_string(), "{}", name);
+            assert_eq!(core.submissions.load(Ordering::Relaxed), submitted, "{}", name);
             let log = core.validation_log();
             drop(buffer);
             drop(core);
-            assert_eq!(log.messages(), Vec::<String>::new(), "{}", device.name);
+            assert_eq!(log.messages(), Vec::<String>::new(), "{}", name);
         }
     }
 

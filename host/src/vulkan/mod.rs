@@ -30,3 +30,14 @@ pub(crate) fn devices_for_test(what: &str) -> Vec<DeviceInfo> {
     }
     devices
 }
+
+/// A context with validation on for each device of [`devices_for_test`] (named by `what`), with
+/// the device's name: what the crate's own low-level tests run on.
+#[cfg(test)]
+pub(crate) fn validated_cores_for_test(what: &str) -> Vec<(String, std::sync::Arc<context::Core>)> {
+    let options = ContextOptions { validation: true, ..Default::default() };
+    devices_for_test(what)
+        .into_iter()
+        .map(|device| (device.name, context::open(device.index, &options).expect("a Vulkan context")))
+        .collect()
+}

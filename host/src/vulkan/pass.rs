@@ -496,9 +496,7 @@ mod tests {
     /// elsewhere.
     #[test]
     fn a_run_of_mismatched_resources_or_push_constants_is_refused() {
-        for device in &super::super::devices_for_test("pass preparation") {
-            let options = super::super::ContextOptions { validation: true, ..Default::default() };
-            let core = super::super::context::open(device.index, &options).unwrap();
+        for (name, core) in super::super::validated_cores_for_test("pass preparation") {
             let storage = vk::DescriptorType::STORAGE_BUFFER;
             let stages = vk::ShaderStageFlags::COMPUTE;
             let pass =
@@ -508,7 +506,7 @@ mod tests {
             let buffers = [Resource::Buffer(&buffer), Resource::Buffer(&buffer)];
             let refusal = |resources: &[Resource<'_>], push: &[u8]| match pass.prepare(resources, push, 1) {
                 Err(Error::InvalidParameter { name, reason }) => format!("{name}: {reason}"),
-                Err(other) => panic!("{}: {other}", device.name),
+                Err(other) => panic!("{}: {other}", name),
                 Ok(run) => {
                     pass.release(run);
                     String::new()
@@ -516,15 +514,15 @@ mod tests {
             };
             let accel = Resource::AccelerationStructure(vk::AccelerationStructureKHR::null());
             let mixed = refusal(&[buffers[0], accel], &[0; 16]);
-            assert!(mixed.contains("resources: test: binding 1 takes a STORAGE_BUFFER"), "{}: {mixed}", device.name);
+            assert!(mixed.contains("resources: test: binding 1 takes a STORAGE_BUFFER"), "{}: {mixed}", name);
             for push in [&[0u8; 0][..], &[0; 8], &[0; 20]] {
                 let message = refusal(&buffers, push);
                 let expected = format!("push: test: {} bytes of push constants for a layout of 16", push.len());
-                assert_eq!(message, expected, "{}", device.name);
+                assert_eq!(message, expected, "{}", name);
             }
-            assert_eq!(refusal(&buffers, &[0; 16]), "", "{}: matching resources and constants", device.name);
+            assert_eq!(refusal(&buffers, &[0; 16]), "", "{}: matching resources and constants", name);
             let messages = core.validation_log().messages();
-            assert!(messages.is_empty(), "{}: {messages:?}", device.name);
+            assert!(messages.is_empty(), "{}: {messages:?}", name);
         }
     }
 
