@@ -15,7 +15,16 @@
 //! [`super::slope_quadrature`]; `U_S` is capped at 1, the whole lobe, so where that error would
 //! take it above — a light holding nearly all the lobe, within 0.05 % — `U` is that much below
 //! the mean of `U_N`), and the fully stochastic `S_N` converges to the GGX shading
-//! the ratio estimate converges to. Either way `S_N = U_N` sample
+//! the ratio estimate converges to. One exception: the LTC's support is a half-space of its own
+//! (the image of the cosine's hemisphere under its `M`), so a sliver of the GGX lobe by the
+//! horizon lies outside it — at most 0.25 % of the lobe over the table's cells and the midpoints
+//! between them (roughness 0.40–0.47, views 34–43°; a 300 × 600 grid of the hemisphere) — which
+//! only light samples reach. Where `P_BRDF` is exactly 1 (`U_S` capped at 1 under a light
+//! holding the whole lobe, on a metal, which has no diffuse lobe, or under a light filling the
+//! hemisphere) no light sample is drawn, and `U_N` and `S_N`
+//! both miss that sliver, up to 0.25 % low; the ratio, whose two estimates miss the same
+//! directions, only by the sliver's share of the shadow. Capping `P_BRDF` below 1 would reach it
+//! at a variance growing as `1/(1 − cap)`; not adopted. Either way `S_N = U_N` sample
 //! by sample without an occluder, so `U · S_N / U_N = U` exactly: the ratio adds no noise where
 //! nothing casts a shadow.
 //!
