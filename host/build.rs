@@ -22,6 +22,10 @@ mod spirv {
     /// SPIR-V target: Vulkan 1.2 gives SPIR-V 1.5, which `SPV_KHR_ray_query` needs (≥ 1.4).
     const TARGET: &str = "spirv-unknown-vulkan1.2";
 
+    /// Cargo's setting for what its resolver does with versions whose `rust-version` the
+    /// toolchain does not meet (`resolver.incompatible-rust-versions`, Cargo 1.84+).
+    const MSRV_RESOLVER: &str = "CARGO_RESOLVER_INCOMPATIBLE_RUST_VERSIONS";
+
     /// One SPIR-V build of the kernels: the capabilities it enables and its own target dir (so
     /// the variants do not invalidate each other's incremental state).
     struct Variant {
@@ -62,6 +66,16 @@ mod spirv {
         println!("cargo::rerun-if-changed=../kernels");
         println!("cargo::rerun-if-changed=../shared");
 
+        // The codegen backend is built from crates.io without a lock file: cargo-gpu-install 0.11
+        // deletes the one its metadata query wrote, then runs `cargo +<pinned nightly> build`,
+        // which passes this variable on. With it that cargo resolves each dependency to its
+        // newest version whose `rust-version` the pinned nightly meets (cargo's MSRV-aware
+        // resolver, falling back to `rustc -V` where no `rust-version` is set), so a release
+        // that needs a newer compiler cannot break a first build. Unset, it resolved the same
+        // 127 packages on 2026-12-02. A value the user set is kept.
+        if std::env::var_os(MSRV_RESOLVER).is_none() {
+            std::env::set_var(MSRV_RESOLVER, "fallback");
+        }
         let backend = Install::from_shader_crate(kernels.clone()).within_build_script().run()?;
         // Entry point name → module path, each from the first (leanest) variant that emits it.
         let mut modules = std::collections::BTreeMap::new();
