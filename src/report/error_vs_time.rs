@@ -18,7 +18,9 @@
 //! that of one trace made after the untimed frames.
 //!
 //! Every method is charged the same shade passes, which evaluate the analytic `U` for every
-//! light on every pass although the stochastic methods never read it: the time axis compares
+//! light on every pass although the stochastic methods read only the chosen light's form
+//! factors (its sampling probabilities) and, for `stochastic+tv`'s edge stops, `U`'s luminance;
+//! on a scene of one or two lights that is most of the work, on the 20-light grid it is not. The time axis compares
 //! the estimators at equal work, not what leaving `U` out would save a purely stochastic
 //! renderer. The stochastic methods go through the composite with `U = U_N` = the mean of `S_N`
 //! ([`DenoiseInput::stochastic`]), so a pixel above 10⁴ times that mean is clipped there, and

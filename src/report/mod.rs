@@ -38,8 +38,10 @@ pub const REFERENCE_SEED: u32 = 0xfeed;
 const _: () = assert!(REFERENCE_SEED >= MAX_REPS);
 
 /// How many times `max-spp` a scene report's reference must sample at least: its own noise then
-/// adds at most `√(1 + 1/4) − 1` ≈ 12 % to `report shade`'s ratio RMSE at `max-spp` (its variance a
-/// quarter of theirs, independent of them), less at fewer samples — but up to 25 % to a relMSE,
+/// adds at most `√(1 + 1/4) − 1` ≈ 12 % to `report shade`'s ratio RMSE at `max-spp` over all
+/// pixels and over shadowed ones (its variance a quarter of theirs, independent of them), less at
+/// fewer samples — not in unshadowed pixels, where the ratio's own error is all but 0 and what
+/// is measured is mostly the reference's rarely blocked samples —, but up to 25 % to a relMSE,
 /// an MSE, and more to the error of a denoised image, whose own variance is far below the raw
 /// estimate's at the same samples, so `report error-vs-time` wants a much larger factor (its
 /// default 4096 at 64 spp is 64 ×, as is `report shade`'s). A floor that catches a reference

@@ -162,10 +162,13 @@ fn mse(image: &[Vec3], reference: &[Vec3], pixels: &[usize]) -> f64 {
 /// `v = (reference − emitted) / U` per channel, a 0/1 sample of mean `v` has the variance
 /// `v(1 − v)`, so the pixel's squared error is `U² · v(1 − v)` — whatever the sampling that draws
 /// it. At 1 spp the ratio estimate is such a product (`S_N / U_N` is the one shadow ray's
-/// visibility, 0 or 1), with a mean that differs from `v` only by the ratio estimator's bias (it
-/// is consistent, not unbiased): so in penumbrae it cannot beat the fully stochastic estimate by
-/// more than that estimate's lighting noise, however the light is sampled (seed 000: "only the
-/// visibility is stochastic"). The bound is exact where every channel sees the same visible
+/// visibility, 0 or 1), but its mean `q`, the chance that the one sample is visible (and 1 where
+/// `U_N` = 0 falls back to `U`), is not `v`: the estimator is consistent, not unbiased. Its
+/// squared error is `U² · (q(1 − q) + (q − v)²) = U² · (v(1 − v) + (q − v)(1 − 2v))`, whose
+/// bias term may take either sign — negative where `q` errs towards the nearer of 0 and 1,
+/// positive in an umbra that the fallback lights — so the floor is what the ratio estimate would
+/// leave were it unbiased, not a bound on it; on the Cornell box at 32² it measured 1.07 × the
+/// floor (`tests/report_shade.rs` holds it within 0.9–1.2 ×). The bound is exact where every channel sees the same visible
 /// fraction (one light, lobes of one colour); under lights of different colours, or where a
 /// coloured diffuse lobe and a white specular one weigh a partly hidden light differently, `v`
 /// differs between channels and one scalar sample cannot have every channel's mean. Stratified
