@@ -346,7 +346,11 @@ pub fn render_lit(
 /// The second half of [`render_lit`]: `settings.denoise` and the composite of `samples` (what
 /// [`shade_samples`] returned for the same `settings`) on `backend`, the denoiser's pass times
 /// appended to theirs. Apart, so that a one-off frame can free what its samples kept
-/// ([`Backend::release_kept_memory`]) before the denoiser allocates its own.
+/// ([`Backend::release_kept_memory`]) before the denoiser allocates its own. It takes the samples,
+/// and an error (the device out of memory, a value the denoiser refuses) drops them: a caller
+/// that would rather try another backend or method than sample again calls
+/// [`Backend::denoise`] itself with [`LitFrameSettings::denoise_params`] and
+/// [`LitSamples::denoise_input`], which borrow them.
 pub fn denoise_samples(
     backend: &mut dyn Backend,
     settings: &LitFrameSettings,

@@ -1,9 +1,11 @@
 //! One lit sample of a frame as a backend runs it — generate → trace → shade → occlusion trace —
 //! with what comes back to the host cut to what the accumulator adds up ([`LitSample`]).
 //!
-//! Composed from a backend's stage calls ([`compose`]), every stream but the camera rays passes
-//! through the host between stages; on Vulkan that is 208 bytes a pixel per sample (140 read back,
-//! 68 uploaded again), each buffer a blocking copy of its own. [`crate::Backend::lit_sample`] lets a backend keep the streams
+//! Composed from a backend's stage calls ([`compose`]), the streams stay on the device only from
+//! generate to trace: the camera rays and their hits, the shade stream and the occlusion results
+//! pass through the host between the calls; on Vulkan that is 208 bytes a pixel per sample (140
+//! read back, 68 uploaded again), in one blocking submission per call (render, shade, occlusion
+//! trace). [`crate::Backend::lit_sample`] lets a backend keep the streams
 //! on its device from the camera rays to the occlusion results instead, as the Vulkan backend
 //! does; it must give the composed sample's values bit for bit (the same kernels on the same
 //! inputs), which `tests/parity_lit_sample.rs` checks.
