@@ -119,9 +119,10 @@ pub trait Backend: Send {
 
     /// Host memory, bytes per pixel, that a lit frame ([`crate::lit_frame`]: its sample passes
     /// one at a time, their sums, the G-buffer, the denoiser and the images written) holds at its
-    /// peak on this backend, as measured; `None` where it was not (a Vulkan GPU, whose streams
-    /// live in device memory). [`crate::lit_frame::LitFrameSettings::check_memory`] holds an
-    /// image to it.
+    /// peak on this backend, as measured — on a Vulkan GPU, whose streams live in device memory,
+    /// not measured: at least [`crate::lit_frame::HOST_LIT_FRAME_BYTES_PER_PIXEL`]; `None` where
+    /// not known at all. [`crate::lit_frame::LitFrameSettings::check_memory`] holds an image to
+    /// it.
     fn lit_frame_bytes_per_pixel(&self) -> Option<u64>;
 
     /// Benchmark mode from the next stage on, as `BackendOptions::sustain_seconds` sets it at

@@ -157,6 +157,18 @@ impl LitFrameSettings {
     }
 }
 
+/// Host memory, bytes per pixel, that a lit frame holds on every backend at its denoise step:
+/// the sums of its samples ([`ShadeAccumulator`]: four `f64` RGB sums), the G-buffer
+/// ([`Surface`]), the denoiser's inputs ([`DenoiseInput`]: six `Vec4` images) and the colour it
+/// returns (a `Vec4`) — 256 bytes. A lower bound, counted, not measured: staging copies, the
+/// images written and their encodings come on top (the CPU backend, which holds all of it and its
+/// streams, measured 360). What a Vulkan GPU's frame is held to
+/// ([`Backend::lit_frame_bytes_per_pixel`]).
+pub const HOST_LIT_FRAME_BYTES_PER_PIXEL: u64 = (4 * std::mem::size_of::<glam::DVec3>()
+    + std::mem::size_of::<Surface>()
+    + 7 * std::mem::size_of::<glam::Vec4>()) as u64;
+const _: () = assert!(HOST_LIT_FRAME_BYTES_PER_PIXEL == 256, "the figure its doc gives");
+
 /// [`LitFrameSettings::check_memory`]'s rule: a `width × height` lit frame at `per_pixel` bytes
 /// fits within `available` bytes (either `None`: unknown, so it passes).
 fn check_memory_fits(
@@ -412,6 +424,12 @@ mod tests {
             other => panic!("{other:?}"),
         }
         assert!(check_memory_fits(8192, 8192, None, Some(16 << 30), "gpu").is_ok());
+        // A GPU's frame is held to the host buffers it keeps, which the CPU's measured peak holds
+        // too: 16384² of them need 68.7 GB, more than a 32 GiB host has.
+        assert!(HOST_LIT_FRAME_BYTES_PER_PIXEL < crate::cpu::LIT_FRAME_BYTES_PER_PIXEL);
+        let gpu = Some(HOST_LIT_FRAME_BYTES_PER_PIXEL);
+        assert!(check_memory_fits(16384, 16384, gpu, Some(32 << 30), "vulkan:0 NVIDIA H200").is_err());
+        assert!(check_memory_fits(8192, 8192, gpu, Some(32 << 30), "vulkan:0 NVIDIA H200").is_ok());
         assert!(check_memory_fits(8192, 8192, per_pixel, None, "cpu").is_ok());
         assert!(check_memory_fits(100, 10, Some(380), Some(380_000), "cpu").is_ok());
         assert!(check_memory_fits(100, 10, Some(380), Some(379_999), "cpu").is_err());

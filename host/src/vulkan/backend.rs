@@ -359,6 +359,20 @@ fn trace_bindings(method: TraceMethod, outputs: &[u32]) -> Vec<(u32, vk::Descrip
 /// alike; the debug build's 582 from 512² to 1024²), rounded up by 5 %.
 pub const SOFTWARE_DEVICE_LIT_FRAME_BYTES_PER_PIXEL: u64 = 600;
 
+/// [`Backend::lit_frame_bytes_per_pixel`] for a device of `device_type` (`VkPhysicalDeviceType`
+/// without its prefix): on one in host memory (`CPU`, as lavapipe is), streams and device buffers
+/// included, [`SOFTWARE_DEVICE_LIT_FRAME_BYTES_PER_PIXEL`]; on a GPU, not measured, the host
+/// buffers every backend's lit frame holds at its denoise step
+/// ([`crate::lit_frame::HOST_LIT_FRAME_BYTES_PER_PIXEL`]), a lower bound — so that a frame
+/// that cannot fit the host is refused there too, where none had been.
+fn lit_frame_bytes_per_pixel_on(device_type: &str) -> u64 {
+    if device_type == "CPU" {
+        SOFTWARE_DEVICE_LIT_FRAME_BYTES_PER_PIXEL
+    } else {
+        crate::lit_frame::HOST_LIT_FRAME_BYTES_PER_PIXEL
+    }
+}
+
 /// Output bindings of the closest-hit trace.
 const HIT_OUTPUTS: [u32; 4] = [
     bindings::trace::HIT_T,
@@ -744,10 +758,10 @@ impl Backend for VulkanBackend {
         check_image_size_common(width, height, self.max_rays(), &self.name())
     }
 
-    /// On a device in host memory (`CPU`, as lavapipe is), streams and device buffers included:
-    /// [`SOFTWARE_DEVICE_LIT_FRAME_BYTES_PER_PIXEL`]. On a GPU, not measured.
+    /// Measured on a device in host memory, a lower bound on a GPU
+    /// ([`lit_frame_bytes_per_pixel_on`]).
     fn lit_frame_bytes_per_pixel(&self) -> Option<u64> {
-        (self.core.info.device_type == "CPU").then_some(SOFTWARE_DEVICE_LIT_FRAME_BYTES_PER_PIXEL)
+        Some(lit_frame_bytes_per_pixel_on(&self.core.info.device_type))
     }
 
     fn set_sustain_seconds(&mut self, seconds: f64) -> Result<()> {
@@ -991,6 +1005,16 @@ impl Backend for VulkanBackend {
 mod tests {
     use super::*;
     use crate::cpu::BvhQuality;
+
+    /// A device in host memory is held to its measured footprint, any other (a GPU, which CI has
+    /// not) to the host buffers every lit frame keeps; none passes unchecked.
+    #[test]
+    fn a_lit_frame_on_any_vulkan_device_is_held_to_host_memory() {
+        assert_eq!(lit_frame_bytes_per_pixel_on("CPU"), SOFTWARE_DEVICE_LIT_FRAME_BYTES_PER_PIXEL);
+        for gpu in ["DISCRETE_GPU", "INTEGRATED_GPU", "VIRTUAL_GPU", "OTHER"] {
+            assert_eq!(lit_frame_bytes_per_pixel_on(gpu), crate::lit_frame::HOST_LIT_FRAME_BYTES_PER_PIXEL, "{gpu}");
+        }
+    }
 
     /// Specialized without the residual ([`ShadeKernels`]), the shade pipeline reads
     /// `analytic_residual` as 0: asked for the residual, it shades as the pass without it, bit
