@@ -460,6 +460,7 @@ fn overflowing_colours_are_replaced_and_counted_alike_on_the_cpu_and_every_vulka
             }
             let counts: Vec<(&str, u64)> = timings.iter().map(|t| (t.stage, t.sanitized)).collect();
             let composite = if method == DenoiseMethod::Svgf { "svgf composite" } else { "denoise composite" };
+            assert!(counts.iter().any(|&(stage, _)| stage == composite), "{who}: no {composite} in {counts:?}");
             for (stage, sanitized) in counts {
                 let expected = if stage == composite { overflowing.len() as u64 } else { 0 };
                 assert_eq!(sanitized, expected, "{who}: {stage}");

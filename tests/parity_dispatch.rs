@@ -6,7 +6,9 @@
 //! - **Benchmark mode** (`ContextOptions::sustain_seconds`, what `raywave bench` opens its Vulkan
 //!   backend with): once a kernel has run, each of its timed submissions repeats the dispatch to
 //!   keep the GPU busy, so that the GPU holds its clocks; it reports how many dispatches it
-//!   timed: 1 without benchmark mode, more than 1 with it.
+//!   timed: 1 without benchmark mode, more than 1 with it. The sampler and warp probes return no
+//!   report, so for them only the result is compared: that they repeated is not checked here
+//!   (they run through the same `Pass` as the copy probe, whose count is).
 //! - **Workgroup sizes** (`ContextOptions::workgroup_sizes`, for occupancy tuning): the 1-D
 //!   stream stages run in workgroups of another power of two, including streams spread over
 //!   several rows of the dispatch grid.

@@ -222,6 +222,7 @@ fn assert_invariant(backend: &mut dyn Backend) {
             if let Change::ScaleEmission(k) = variant.change {
                 changed.iter_mut().flatten().for_each(|c| *c /= k);
             }
+            assert_eq!((changed.len(), as_built.len()), (METHODS.len(), METHODS.len()), "an image per method");
             for ((method, image), reference) in METHODS.iter().zip(&changed).zip(&as_built) {
                 let what = format!("{} {name} {}, {method}", backend.name(), variant.change);
                 assert!(image.iter().all(|c| c.is_finite()), "{what}: a pixel is not finite");

@@ -1315,7 +1315,10 @@ mod tests {
             );
             assert!(hits.hit_count() > 0, "{}: the camera sees the box", device.name);
             for (one, split) in reports.iter().zip(&split_reports) {
-                assert_eq!((one.stage, one.dispatches, one.sanitized), (split.stage, split.dispatches, 0));
+                assert_eq!(
+                    (one.stage, one.dispatches, one.sanitized, split.sanitized),
+                    (split.stage, split.dispatches, 0, 0)
+                );
                 assert!(one.seconds > 0.0 && split.seconds > 0.0, "{}: {one:?} {split:?}", device.name);
             }
             let messages = backend.validation_messages();
