@@ -63,11 +63,17 @@ fn cgroup_headroom(groups: &str, read: impl Fn(&str) -> Option<String>) -> Optio
         .min()
 }
 
-/// [`cgroup_headroom`] under cgroup v2 for the group at `path` (without its trailing `/`): the
-/// least over it and its ancestors that set `memory.max`.
+/// The group at `path` (without its trailing `/`) and each above it, up to the hierarchy's root
+/// (""): in a container that mounts its own group as the root without a cgroup namespace, the
+/// process's path does not exist there, and the root holds the container's limit.
+fn levels(path: &str) -> impl Iterator<Item = &str> {
+    std::iter::successors(Some(path), |level| level.rfind('/').map(|slash| &level[..slash]))
+}
+
+/// [`cgroup_headroom`] under cgroup v2 for the group at `path`: the least over it and the groups
+/// above it ([`levels`]) that set `memory.max`.
 fn v2_headroom(path: &str, read: &impl Fn(&str) -> Option<String>) -> Option<u64> {
-    let levels = std::iter::successors(Some(path), |level| level.rfind('/').map(|slash| &level[..slash]));
-    levels
+    levels(path)
         .filter_map(|level| {
             let dir = format!("/sys/fs/cgroup{level}");
             let limit = read(&format!("{dir}/memory.max"))?.trim().parse().ok()?;
@@ -78,10 +84,14 @@ fn v2_headroom(path: &str, read: &impl Fn(&str) -> Option<String>) -> Option<u64
         .min()
 }
 
-/// [`cgroup_headroom`] under cgroup v1 for the memory controller's group at `path`.
+/// [`cgroup_headroom`] under cgroup v1 for the memory controller's group at `path`: from the
+/// nearest of it and the groups above it ([`levels`]) that can be read, since its
+/// `hierarchical_memory_limit` already takes in those above.
 fn v1_headroom(path: &str, read: &impl Fn(&str) -> Option<String>) -> Option<u64> {
-    let dir = format!("/sys/fs/cgroup/memory{path}");
-    let stat = read(&format!("{dir}/memory.stat"))?;
+    let (dir, stat) = levels(path).find_map(|level| {
+        let dir = format!("/sys/fs/cgroup/memory{level}");
+        read(&format!("{dir}/memory.stat")).map(|stat| (dir, stat))
+    })?;
     let limit = stat_field(&stat, "hierarchical_memory_limit").filter(|&limit| limit < V1_UNLIMITED)?;
     let usage = read(&format!("{dir}/memory.usage_in_bytes")).and_then(|text| text.trim().parse().ok());
     Some(headroom(limit, usage, &stat, "total_active_file", "total_inactive_file"))
@@ -162,6 +172,12 @@ mod tests {
         for groups in ["4:memory:/x\n0::/\n", "3:cpu,memory:/x\n"] {
             assert_eq!(cgroup_headroom(groups, files(&limited)), Some(GIB + GIB / 4), "{groups}");
         }
+        // A container's own group mounted as the root, its path in the host's hierarchy absent.
+        let container = [
+            ("/sys/fs/cgroup/memory/memory.stat", stat),
+            ("/sys/fs/cgroup/memory/memory.usage_in_bytes", "1610612736\n"),
+        ];
+        assert_eq!(cgroup_headroom("4:memory:/docker/abc\n", files(&container)), Some(GIB + GIB / 4));
         let unlimited = [("/sys/fs/cgroup/memory/x/memory.stat", "hierarchical_memory_limit 9223372036854771712\n")];
         assert_eq!(cgroup_headroom("4:memory:/x\n", files(&unlimited)), None);
         assert_eq!(cgroup_headroom("4:cpu:/x\n", files(&limited)), None);
