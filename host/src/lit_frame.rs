@@ -168,6 +168,10 @@ pub const HOST_LIT_FRAME_BYTES_PER_PIXEL: u64 = (4 * std::mem::size_of::<glam::D
     + std::mem::size_of::<Surface>()
     + 7 * std::mem::size_of::<glam::Vec4>()) as u64;
 const _: () = assert!(HOST_LIT_FRAME_BYTES_PER_PIXEL == 256, "the figure its doc gives");
+const _: () = assert!(
+    HOST_LIT_FRAME_BYTES_PER_PIXEL < crate::cpu::LIT_FRAME_BYTES_PER_PIXEL,
+    "a lower bound of what the CPU backend's measured peak holds too"
+);
 
 /// [`LitFrameSettings::check_memory`]'s rule: a `width × height` lit frame at `per_pixel` bytes
 /// fits within `available` bytes (either `None`: unknown, so it passes).
@@ -424,9 +428,9 @@ mod tests {
             other => panic!("{other:?}"),
         }
         assert!(check_memory_fits(8192, 8192, None, Some(16 << 30), "gpu").is_ok());
-        // A GPU's frame is held to the host buffers it keeps, which the CPU's measured peak holds
-        // too: 16384² of them need 68.7 GB, more than a 32 GiB host has.
-        assert!(HOST_LIT_FRAME_BYTES_PER_PIXEL < crate::cpu::LIT_FRAME_BYTES_PER_PIXEL);
+        // A GPU's frame is held to the host buffers it keeps (below the CPU's measured peak,
+        // which holds them too: a constant assertion beside them): 16384² of them need 68.7 GB,
+        // more than a 32 GiB host has.
         let gpu = Some(HOST_LIT_FRAME_BYTES_PER_PIXEL);
         assert!(check_memory_fits(16384, 16384, gpu, Some(32 << 30), "vulkan:0 NVIDIA H200").is_err());
         assert!(check_memory_fits(8192, 8192, gpu, Some(32 << 30), "vulkan:0 NVIDIA H200").is_ok());

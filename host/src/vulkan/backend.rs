@@ -758,8 +758,9 @@ impl Backend for VulkanBackend {
         check_image_size_common(width, height, self.max_rays(), &self.name())
     }
 
-    /// Measured on a device in host memory, a lower bound on a GPU
-    /// ([`lit_frame_bytes_per_pixel_on`]).
+    /// Measured on a device in host memory (`CPU`, as lavapipe is), streams and device buffers
+    /// included: [`SOFTWARE_DEVICE_LIT_FRAME_BYTES_PER_PIXEL`]; on a GPU, not measured, a lower
+    /// bound: [`crate::lit_frame::HOST_LIT_FRAME_BYTES_PER_PIXEL`].
     fn lit_frame_bytes_per_pixel(&self) -> Option<u64> {
         Some(lit_frame_bytes_per_pixel_on(&self.core.info.device_type))
     }
