@@ -72,7 +72,12 @@ mod spirv {
         // newest version whose `rust-version` the pinned nightly meets (cargo's MSRV-aware
         // resolver, falling back to `rustc -V` where no `rust-version` is set), so a release
         // that needs a newer compiler cannot break a first build. Unset, it resolved the same
-        // 127 packages on 2026-12-02. A value the user set is kept.
+        // 127 packages on 2026-12-02. A value set in the environment is kept; set here, it
+        // overrides a user's `resolver.incompatible-rust-versions` in Cargo's config. It also
+        // reaches the metadata query that picks the codegen's version (on the stable toolchain)
+        // and spirv-builder's builds of the kernels (whose lock file is committed): were a
+        // `rustc_codegen_spirv` 0.11 release to need a newer compiler than this stable one, the
+        // query would keep an older 0.11 and the backend build could take the newer.
         if std::env::var_os(MSRV_RESOLVER).is_none() {
             std::env::set_var(MSRV_RESOLVER, "fallback");
         }
