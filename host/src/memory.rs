@@ -59,7 +59,8 @@ fn cgroup_headroom(groups: &str, mounts: &str, read: impl Fn(&str) -> Option<Str
             }
             let dirs = cgroup_mounts(mounts, v1_memory).filter_map(|mount| mount.group_dirs(path));
             if v1_memory {
-                dirs.filter_map(|dirs| v1_headroom(&dirs[0], &read)).min()
+                // `hierarchical_memory_limit` already takes in the groups above.
+                dirs.filter_map(|mut dirs| v1_headroom(&dirs.next()?, &read)).min()
             } else {
                 dirs.flatten().filter_map(|dir| v2_headroom(&dir, &read)).min()
             }
@@ -69,16 +70,20 @@ fn cgroup_headroom(groups: &str, mounts: &str, read: impl Fn(&str) -> Option<Str
 
 /// A mounted cgroup hierarchy: the group it shows at its mount point (not `/` in a container
 /// without a cgroup namespace, which sees its own group mounted there) and that mount point.
+#[derive(Copy, Clone)]
 struct CgroupMount<'a> {
     root: &'a str,
     point: &'a str,
 }
 
-impl CgroupMount<'_> {
+impl<'a> CgroupMount<'a> {
     /// The directories of the group at `path` (the hierarchy's own path, as `/proc/self/cgroup`
     /// gives it) and of each group above it up to the mount's root; `None` where the group is
     /// not under that root.
-    fn group_dirs(&self, path: &str) -> Option<Vec<String>> {
+    fn group_dirs<'p>(self, path: &'p str) -> Option<impl Iterator<Item = String> + 'p>
+    where
+        'a: 'p,
+    {
         let relative = if self.root == "/" { path } else { path.strip_prefix(self.root)? };
         if !(relative.is_empty() || relative.starts_with('/')) {
             return None;
@@ -87,7 +92,7 @@ impl CgroupMount<'_> {
         let levels = std::iter::successors(Some(relative.trim_end_matches('/')), |level| {
             level.rfind('/').map(|slash| &level[..slash])
         });
-        Some(levels.map(|level| format!("{point}{level}")).collect())
+        Some(levels.map(move |level| format!("{point}{level}")))
     }
 }
 
@@ -113,8 +118,8 @@ fn cgroup_mounts(mountinfo: &str, v1_memory: bool) -> impl Iterator<Item = Cgrou
 /// [`cgroup_headroom`] under cgroup v2 for the group in directory `dir`, `None` where it sets no
 /// `memory.max`.
 fn v2_headroom(dir: &str, read: &impl Fn(&str) -> Option<String>) -> Option<u64> {
-    let limit = read(&format!("{dir}/memory.max"))?.trim().parse().ok()?;
-    let usage = read(&format!("{dir}/memory.current")).and_then(|text| text.trim().parse().ok());
+    let limit = number(read, &format!("{dir}/memory.max"))?;
+    let usage = number(read, &format!("{dir}/memory.current"));
     let stat = read(&format!("{dir}/memory.stat")).unwrap_or_default();
     Some(headroom(limit, usage, &stat, ["active_file", "inactive_file", "file_dirty", "file_writeback"]))
 }
@@ -123,7 +128,7 @@ fn v2_headroom(dir: &str, read: &impl Fn(&str) -> Option<String>) -> Option<u64>
 fn v1_headroom(dir: &str, read: &impl Fn(&str) -> Option<String>) -> Option<u64> {
     let stat = read(&format!("{dir}/memory.stat"))?;
     let limit = stat_field(&stat, "hierarchical_memory_limit").filter(|&limit| limit < V1_UNLIMITED)?;
-    let usage = read(&format!("{dir}/memory.usage_in_bytes")).and_then(|text| text.trim().parse().ok());
+    let usage = number(read, &format!("{dir}/memory.usage_in_bytes"));
     let cache_fields = ["total_active_file", "total_inactive_file", "total_dirty", "total_writeback"];
     Some(headroom(limit, usage, &stat, cache_fields))
 }
@@ -135,6 +140,11 @@ fn headroom(limit: u64, usage: Option<u64>, stat: &str, [active, inactive, dirty
     let cache =
         field(active).saturating_add(field(inactive)).saturating_sub(field(dirty).saturating_add(field(writeback)));
     limit.saturating_sub(usage.unwrap_or(0).saturating_sub(cache))
+}
+
+/// The number a one-value control file at `path` holds (`None` for `max`, or where unread).
+fn number(read: &impl Fn(&str) -> Option<String>, path: &str) -> Option<u64> {
+    read(path)?.trim().parse().ok()
 }
 
 /// The value of a cgroup `memory.stat` line `key N` (bytes).
@@ -158,8 +168,9 @@ mod tests {
     }
 
     /// A fake file system of `(path, text)` files.
-    fn files(entries: &[(&str, &str)]) -> impl Fn(&str) -> Option<String> {
-        let entries: Vec<(String, String)> = entries.iter().map(|(p, t)| (p.to_string(), t.to_string())).collect();
+    fn files<P: AsRef<str>>(entries: &[(P, &str)]) -> impl Fn(&str) -> Option<String> {
+        let entries: Vec<(String, String)> =
+            entries.iter().map(|(p, t)| (p.as_ref().to_owned(), t.to_string())).collect();
         move |path| entries.iter().find(|(p, _)| p == path).map(|(_, text)| text.clone())
     }
 
@@ -211,10 +222,9 @@ mod tests {
         assert_eq!(cgroup_headroom("0::/docker/abc\n", own_group, files(&root)), Some(2 * GIB));
         // Where v2 is mounted beside v1 (the memory controller still v1's, or not).
         let unified = root.map(|(path, text)| (path.replacen("cgroup", "cgroup/unified", 1), text));
-        let unified: Vec<(&str, &str)> = unified.iter().map(|(p, t)| (p.as_str(), *t)).collect();
         assert_eq!(cgroup_headroom("0::/\n", HYBRID_MOUNTS, files(&unified)), Some(2 * GIB));
         assert_eq!(cgroup_headroom(groups, V2_MOUNT, files(&[("/sys/fs/cgroup/a/b/memory.max", "max\n")])), None);
-        assert_eq!(cgroup_headroom(groups, V2_MOUNT, files(&[])), None);
+        assert_eq!(cgroup_headroom(groups, V2_MOUNT, files::<&str>(&[])), None);
         assert_eq!(cgroup_headroom(groups, "", files(&parent_limit)), None, "no mount, nothing read");
     }
 
@@ -234,7 +244,6 @@ mod tests {
         // A container without a cgroup namespace sees its own group, /docker/abc, at the mount.
         let own_group = "35 31 0:32 /docker/abc /sys/fs/cgroup/memory ro - cgroup cgroup rw,memory\n";
         let container = limited.map(|(path, text)| (path.replace("/x/", "/"), text));
-        let container: Vec<(&str, &str)> = container.iter().map(|(p, t)| (p.as_str(), *t)).collect();
         assert_eq!(cgroup_headroom("4:memory:/docker/abc\n", own_group, files(&container)), Some(GIB + GIB / 4));
         // A group whose name only begins with the mount's root is not under it.
         assert_eq!(cgroup_headroom("4:memory:/docker/abcd\n", own_group, files(&container)), None);
