@@ -2,8 +2,9 @@
 //! rays, hits, the shade stream and the shadow rays never leave it) must be the sample composed
 //! from the backend's own stage calls (`lit_sample::compose`, every stream through the host) bit
 //! for bit: the same kernels on the same inputs. On every device and trace method, for the Cornell
-//! box with and without the quadrature residual and for the light grid (the light BVH), at two
-//! sample indices, with and without the camera streams; the same stage order, hit count and
+//! box with and without the quadrature residual and for the light grid (the light BVH), at three
+//! sample indices, with all the camera streams, none, and those of listed pixels that hit (the
+//! G-buffer's gaps, gathered out of the device's streams); the same stage order, hit count and
 //! sanitized counts (0 on these scenes); and the same refusals, before any work, for what the
 //! composed stages refuse.
 #![cfg(feature = "vulkan")]
@@ -12,10 +13,12 @@ mod common;
 
 use common::vulkan;
 use raywave::frame::{generate_params_with, sampler_params};
-use raywave::lit_sample::{compose, LitSample, LitSampleRequest};
+use raywave::lit_sample::{compose, CameraStreams, LitSample, LitSampleRequest};
 use raywave::shading::ShadeData;
 use raywave::shared::sampling::sampler_kind;
+use raywave::shared::stream::NO_HIT;
 use raywave::shared::{GenerateParams, ShadeParams};
+use raywave::stream::{HitStream, RayStream};
 use raywave::{Backend, Scene};
 
 const WIDTH: u32 = 40;
@@ -53,10 +56,13 @@ fn device_resident_lit_samples_are_the_composed_stages_bit_for_bit() {
             let mut data = ShadeData::new(&scene).expect("shade data");
             data.analytic_residual = analytic_residual;
             backend.load_scene(&scene).expect("scene loads");
-            for (sample_index, keep_camera_streams) in [(0, true), (1, false)] {
+            // Runs of consecutive pixels and single ones, gathered in one copy region each.
+            let listed: Vec<u32> = (0..WIDTH * HEIGHT).filter(|i| i % 7 < 3 || i % 50 == 11).collect();
+            let streams = [CameraStreams::All, CameraStreams::None, CameraStreams::HitsAmong(&listed)];
+            for (sample_index, camera) in (0..).zip(streams) {
                 let case = format!("{name}, {scene_name} residual {analytic_residual}, sample {sample_index}");
                 let (generate, shade) = params(&scene, &data, sample_index);
-                let request = LitSampleRequest { generate: &generate, shade: &shade, data: &data, keep_camera_streams };
+                let request = LitSampleRequest { generate: &generate, shade: &shade, data: &data, camera };
                 let resident = backend.lit_sample(&request).expect("device-resident lit sample");
                 let composed = compose(&mut backend, &request).expect("composed lit sample");
                 assert_same(&case, &resident, &composed);
@@ -65,7 +71,23 @@ fn device_resident_lit_samples_are_the_composed_stages_bit_for_bit() {
                 assert!(resident.hits > WIDTH as usize * HEIGHT as usize / 2, "{case}: {} hits", resident.hits);
                 assert!(lit > 0 && lit < resident.occluded.len(), "{case}: {lit} unblocked shadow rays");
                 assert!(resident.unshadowed.iter().any(|u| u.x > 0.0), "{case}: no U_N");
-                assert_eq!(resident.camera.is_some(), keep_camera_streams, "{case}");
+                // The records' pixels: every one, or the listed ones that the sample's camera
+                // rays, traced on their own, hit (some of them: the box's edges leave misses).
+                let pixels_of = |camera: &Option<(RayStream, HitStream)>| {
+                    camera.as_ref().map(|(rays, hits)| (rays.pixel.clone(), hits.len()))
+                };
+                let expected = match camera {
+                    CameraStreams::None => None,
+                    CameraStreams::All => Some(((0..WIDTH * HEIGHT).collect(), (WIDTH * HEIGHT) as usize)),
+                    CameraStreams::HitsAmong(pixels) => {
+                        let frame = backend.render(&generate).expect("camera rays traced");
+                        let hit: Vec<u32> =
+                            pixels.iter().copied().filter(|&i| frame.hits.primitive[i as usize] != NO_HIT).collect();
+                        assert!(!hit.is_empty() && hit.len() < pixels.len(), "{case}: {} listed hits", hit.len());
+                        Some((hit.clone(), hit.len()))
+                    }
+                };
+                assert_eq!(pixels_of(&resident.camera), expected, "{case}");
                 let pixels = u64::from(WIDTH * HEIGHT);
                 assert_eq!((resident.stream_bytes, composed.stream_bytes), (140 * pixels, 176 * pixels), "{case}");
             }
@@ -83,7 +105,7 @@ fn device_resident_lit_samples_refuse_what_the_composed_stages_refuse() {
     for mut backend in vulkan::each_device("device_resident_lit_sample_refusals") {
         let name = backend.name();
         let (generate, shade) = params(&scene, &data, 0);
-        let request = LitSampleRequest { generate: &generate, shade: &shade, data: &data, keep_camera_streams: false };
+        let request = LitSampleRequest { generate: &generate, shade: &shade, data: &data, camera: CameraStreams::None };
         let refusal = |backend: &mut raywave::vulkan::VulkanBackend, request: &LitSampleRequest<'_>| {
             let message = |result: raywave::Result<LitSample>, how: &str| match result {
                 Ok(_) => panic!("{how}: accepted"),
@@ -100,6 +122,7 @@ fn device_resident_lit_samples_refuse_what_the_composed_stages_refuse() {
         let other_sample = ShadeParams { sample_index: 1, ..shade };
         let (flat, flat_shade) = (GenerateParams { width: 0, ..generate }, ShadeParams { width: 0, ..shade });
         let wider = ShadeParams { width: WIDTH + 1, ..shade };
+        let gaps = |pixels: &'static [u32]| LitSampleRequest { camera: CameraStreams::HitsAmong(pixels), ..request };
         // Each refusal, and the words that say why: the two paths could agree on another reason.
         let cases = [
             ("another scene's data", LitSampleRequest { data: &other_data, ..request }, "ShadeData::new"),
@@ -108,6 +131,8 @@ fn device_resident_lit_samples_refuse_what_the_composed_stages_refuse() {
             ("another sample's shading", LitSampleRequest { shade: &other_sample, ..request }, "sample_index"),
             ("another image's shading", LitSampleRequest { shade: &wider, ..request }, "shade.width"),
             ("an image 0 wide", LitSampleRequest { generate: &flat, shade: &flat_shade, ..request }, "at least 1"),
+            ("a listed pixel past the image", gaps(&[5, WIDTH * HEIGHT]), "past the image's end"),
+            ("listed pixels out of order", gaps(&[5, 9, 9]), "strictly ascending"),
         ];
         for (what, case, why) in cases {
             let (resident, composed) = refusal(&mut backend, &case);

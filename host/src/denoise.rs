@@ -198,6 +198,12 @@ impl WorkingBuffers {
     }
 }
 
+/// Whether the denoiser's edge stops see `surface` (a finite point at a depth of at least
+/// 2⁻¹²⁶, [`is_surface_depth`]); where not, its pixel has no G-buffer surface.
+pub(crate) fn is_guide_surface(surface: &Surface) -> bool {
+    surface.position.is_finite() && is_surface_depth(surface.position.w)
+}
+
 /// Everything a denoiser reads, one entry per pixel of a `width × height` image (row-major).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct DenoiseInput {
@@ -217,15 +223,13 @@ pub struct DenoiseInput {
 
 impl DenoiseInput {
     /// The inputs of a frame: the accumulated estimates and the G-buffer of `surfaces` (the
-    /// surface each pixel's camera ray hit; the first sample's when the camera jitters). Both are
+    /// surface each pixel's camera ray hit; when the camera jitters, that of the first sample
+    /// whose ray hit one, [`crate::lit_frame::shade_samples`]). Both are
     /// one entry per pixel; a `surfaces` of another length than the accumulator's gives buffers
     /// of different lengths, which [`DenoiseInput::check`] (run by every denoiser) refuses.
     pub fn new(surfaces: &[Surface], accumulator: &ShadeAccumulator) -> Self {
         let analytic = accumulator.analytic();
-        let position = surfaces
-            .iter()
-            .map(|s| if s.position.is_finite() && is_surface_depth(s.position.w) { s.position } else { Vec4::ZERO })
-            .collect();
+        let position = surfaces.iter().map(|s| if is_guide_surface(s) { s.position } else { Vec4::ZERO }).collect();
         let normal = surfaces.iter().zip(&analytic).map(|(s, &u)| s.normal.truncate().extend(luminance(u))).collect();
         let four = |v: Vec<Vec3>| v.into_iter().map(|c| c.extend(0.0)).collect();
         Self {

@@ -4,12 +4,13 @@
 //! own [`Scene`] ([`Scene::new`]) calls [`render_lit`] and gets the image in memory.
 
 use crate::backend::{aperture_refusal, check_image_size_common, check_shade_streams, Backend, StageReport};
-use crate::denoise::{check_radius, frame_params, rgb, DenoiseInput, DenoiseMethod};
+use crate::denoise::{check_radius, frame_params, is_guide_surface, rgb, DenoiseInput, DenoiseMethod};
 use crate::error::{Error, Result};
 use crate::frame::{check_samples_per_pixel, generate_params_with, sampler_params};
-use crate::lit_sample::LitSampleRequest;
+use crate::lit_sample::{CameraStreams, LitSampleRequest};
 use crate::scene::{Scene, MAX_COORDINATE};
 use crate::shading::{resolve, ShadeAccumulator, ShadeData};
+use crate::stream::{HitStream, RayStream};
 use glam::Vec3;
 use raywave_kernels::shade::stage::Surface;
 use raywave_shared::sampling::sampler_kind;
@@ -202,7 +203,9 @@ fn check_memory_fits(
 pub struct LitSamples {
     /// Per-pixel sums of `U`, `U_N`, `S_N` and the emitted radiance over the samples.
     pub accumulator: ShadeAccumulator,
-    /// The denoiser's G-buffer: the surface each pixel's first camera ray hit.
+    /// The denoiser's G-buffer: per pixel, the surface hit by the first of its camera rays that
+    /// hit one the denoiser sees (so a silhouette pixel whose first jittered ray missed is
+    /// filtered as the later rays that hit it saw it); none where no ray did.
     pub surfaces: Vec<Surface>,
     /// Each stage's report, summed over the samples ([`StageReport::add_to`]) in execution order.
     pub timings: Vec<StageReport>,
@@ -236,6 +239,11 @@ fn check_aperture(lens_radius: f32, focus: f32, note: &str) -> Result<()> {
 /// image size, the lens on `scene`'s camera ([`LitFrameSettings::check_lens`]), `data`'s scene
 /// ([`ShadeData::check_scene`]) and `data` ([`ShadeData::check`]) are checked first, so a bad
 /// value is a typed error before any work.
+///
+/// The denoiser's G-buffer ([`LitSamples::surfaces`]) is resolved from the first sample's camera
+/// streams; its gaps, pixels whose first ray hit no surface, take the surface of the first later
+/// sample whose ray hit one there ([`CameraStreams::HitsAmong`]: only those records come back).
+/// Without that, a silhouette pixel whose first jittered ray missed was never filtered.
 pub fn shade_samples(
     backend: &mut dyn Backend,
     scene: &Scene,
@@ -254,23 +262,37 @@ pub fn shade_samples(
         hits: 0,
         stream_bytes: 0,
     };
+    // The G-buffer's gaps: pixels with no surface yet, ascending.
+    let mut gaps: Vec<u32> = Vec::new();
     for sample_index in 0..settings.samples_per_pixel {
         let generate = settings.generate_params(scene, sample_index);
         let shade = data.params(settings.sampler(), width, height, sample_index);
-        let request =
-            LitSampleRequest { generate: &generate, shade: &shade, data, keep_camera_streams: sample_index == 0 };
+        let camera = match sample_index {
+            0 => CameraStreams::All,
+            _ if gaps.is_empty() => CameraStreams::None,
+            _ => CameraStreams::HitsAmong(&gaps),
+        };
+        let request = LitSampleRequest { generate: &generate, shade: &shade, data, camera };
         let sample = backend.lit_sample(&request)?;
         samples.accumulator.add_sample(&sample)?;
-        if sample_index == 0 {
-            // The G-buffer is the first sample's. Its streams are checked again here (`data` was
-            // checked above): the resolve step would panic on fewer hits than rays, and a
-            // backend an engine wrote may return other streams than the ones it shaded.
+        if camera != CameraStreams::None {
+            // The streams are checked again here (`data` was checked above): the resolve step
+            // would panic on fewer hits than rays, and a backend an engine wrote may return other
+            // streams than the ones it shaded.
             let Some((rays, hits)) = &sample.camera else {
-                let reason = "the backend's first lit sample returned no camera streams".to_owned();
+                let reason = format!("the backend's lit sample {sample_index} returned no camera streams");
                 return Err(Error::InvalidParameter { name: "lit_sample", reason });
             };
-            check_shade_streams(&shade, data, rays, hits)?;
-            samples.surfaces = resolve(data, rays, hits);
+            if sample_index == 0 {
+                check_shade_streams(&shade, data, rays, hits)?;
+                samples.surfaces = resolve(data, rays, hits);
+                gaps = (0..samples.surfaces.len() as u32)
+                    .filter(|&i| !is_guide_surface(&samples.surfaces[i as usize]))
+                    .collect();
+            } else {
+                check_gap_streams(rays, hits, &gaps)?;
+                fill_gaps(&mut samples.surfaces, &mut gaps, data, rays, hits);
+            }
         }
         for report in sample.camera_timings.iter().chain(&sample.pass_timings) {
             StageReport::add_to(&mut samples.timings, report);
@@ -279,6 +301,39 @@ pub fn shade_samples(
         samples.stream_bytes = sample.stream_bytes;
     }
     Ok(samples)
+}
+
+/// Checks the camera streams a lit sample returned for the G-buffer's `gaps`
+/// ([`CameraStreams::HitsAmong`]): one hit per ray, each ray's pixel one of `gaps`, ascending.
+/// An error naming `lit_sample` otherwise (a backend an engine wrote may return other records).
+fn check_gap_streams(rays: &RayStream, hits: &HitStream, gaps: &[u32]) -> Result<()> {
+    rays.check("lit_sample")?;
+    hits.check("lit_sample")?;
+    let reason = if rays.len() != hits.len() {
+        Some(format!("{} camera rays but {} hits", rays.len(), hits.len()))
+    } else if let Some(k) = rays.pixel.windows(2).position(|pair| pair[0] >= pair[1]) {
+        Some(format!("camera rays' pixels [{k}] and [{}] are not ascending", k + 1))
+    } else {
+        let unlisted = rays.pixel.iter().find(|pixel| gaps.binary_search(pixel).is_err());
+        unlisted.map(|pixel| format!("a camera ray of pixel {pixel}, which was not asked for"))
+    };
+    reason.map_or(Ok(()), |reason| Err(Error::InvalidParameter { name: "lit_sample", reason }))
+}
+
+/// Fills the G-buffer's `gaps` from a later sample's camera records of some of them (checked by
+/// [`check_gap_streams`]): each pixel whose record resolves to a surface the denoiser sees takes
+/// it and leaves `gaps`.
+fn fill_gaps(surfaces: &mut [Surface], gaps: &mut Vec<u32>, data: &ShadeData, rays: &RayStream, hits: &HitStream) {
+    let mut filled = false;
+    for (&pixel, surface) in rays.pixel.iter().zip(resolve(data, rays, hits)) {
+        if is_guide_surface(&surface) {
+            surfaces[pixel as usize] = surface;
+            filled = true;
+        }
+    }
+    if filled {
+        gaps.retain(|&pixel| !is_guide_surface(&surfaces[pixel as usize]));
+    }
 }
 
 /// A lit frame: the image and the samples behind it.
@@ -538,14 +593,14 @@ mod tests {
     }
 
     #[test]
-    fn samples_count_hits_resolve_the_first_sample_and_draw_their_own_points() {
+    fn samples_count_hits_resolve_the_g_buffer_and_draw_their_own_points() {
         let (scene, data, mut cpu) = cornell_on_the_cpu();
         let settings = LitFrameSettings::new(16, 12, 3);
         let samples = shade_samples(&mut cpu, &scene, &data, &settings).unwrap();
         assert_eq!(samples.accumulator.samples(), 3);
         assert_eq!(samples.surfaces.len(), 16 * 12);
         let first = cpu.render(&settings.generate_params(&scene, 0)).unwrap();
-        assert_eq!(samples.surfaces, resolve(&data, &first.rays, &first.hits));
+        assert_eq!(samples.surfaces, first_surfaces(&mut cpu, &scene, &data, &settings).0);
         assert!(samples.hits > 0 && samples.hits <= 3 * 16 * 12);
         let stages: Vec<_> = samples.timings.iter().map(|t| t.stage).collect();
         assert_eq!(stages, ["generate", "trace", "shade", "occlusion"]);
@@ -602,6 +657,9 @@ mod tests {
         ShortCameraHits,
         /// Its first lit sample returns no camera streams.
         NoCameraStreams,
+        /// Its lit samples return every camera record where those of the G-buffer's gaps that
+        /// hit were asked for.
+        WholeFrameForGaps,
     }
 
     /// An engine's backend with a [`Fault`]: the CPU backend otherwise.
@@ -669,9 +727,13 @@ mod tests {
             Ok(frame)
         }
         fn lit_sample(&mut self, request: &LitSampleRequest<'_>) -> Result<LitSample> {
-            let mut sample = crate::lit_sample::compose(self, request)?;
+            let whole = LitSampleRequest { camera: CameraStreams::All, ..*request };
+            let asked_gaps = matches!(request.camera, CameraStreams::HitsAmong(_));
+            let faulty_request =
+                if asked_gaps && matches!(self.1, Fault::WholeFrameForGaps) { &whole } else { request };
+            let mut sample = crate::lit_sample::compose(self, faulty_request)?;
             match self.1 {
-                Fault::ShortHits => {}
+                Fault::ShortHits | Fault::WholeFrameForGaps => {}
                 Fault::ShortCameraHits => sample.camera.iter_mut().for_each(|(_, hits)| drop_last_hit(hits)),
                 Fault::NoCameraStreams => sample.camera = None,
             }
@@ -685,24 +747,75 @@ mod tests {
         }
     }
 
-    /// A backend an engine wrote that returns fewer hits than rays, or a lit sample without the
-    /// camera streams the G-buffer is resolved from, gets a typed error from `shade_samples`
-    /// naming the stage: the streams are checked before the G-buffer's resolve step, which
-    /// indexes the hits by ray, reads them (the shade pass checks a frame's; `shade_samples` the
-    /// camera streams a lit sample returns, which need not be the ones it shaded).
+    /// A backend an engine wrote that returns fewer hits than rays, a lit sample without the
+    /// camera streams the G-buffer is resolved from, or records of pixels that were not asked
+    /// for, gets a typed error from `shade_samples` naming the stage: the streams are checked
+    /// before the G-buffer's resolve step, which indexes the hits by ray, reads them (the shade
+    /// pass checks a frame's; `shade_samples` the camera streams a lit sample returns, which
+    /// need not be the ones it shaded).
     #[test]
     fn a_backend_returning_too_few_hits_is_an_error_not_a_panic() {
-        let scene = Scene::load("builtin:cornell").unwrap();
-        let data = ShadeData::new(&scene).unwrap();
-        for (fault, stage) in
-            [(Fault::ShortHits, "shade"), (Fault::ShortCameraHits, "shade"), (Fault::NoCameraStreams, "lit_sample")]
-        {
+        let faults = [
+            (Fault::ShortHits, "shade", "builtin:cornell"),
+            (Fault::ShortCameraHits, "shade", "builtin:cornell"),
+            (Fault::NoCameraStreams, "lit_sample", "builtin:cornell"),
+            // The spheres stand against the sky: the first sample leaves gaps.
+            (Fault::WholeFrameForGaps, "lit_sample", "builtin:spheres"),
+        ];
+        for (fault, stage, scene) in faults {
+            let scene = Scene::load(scene).unwrap();
+            let data = ShadeData::new(&scene).unwrap();
             let mut faulty = Faulty(CpuBackend::new(), fault);
             faulty.load_scene(&scene).unwrap();
-            match shade_samples(&mut faulty, &scene, &data, &LitFrameSettings::new(8, 8, 1)) {
-                Err(Error::InvalidParameter { name, .. }) => assert_eq!(name, stage, "{fault:?}"),
+            match shade_samples(&mut faulty, &scene, &data, &LitFrameSettings::new(8, 8, 2)) {
+                Err(Error::InvalidParameter { name, reason }) => assert_eq!(name, stage, "{fault:?}: {reason}"),
                 other => panic!("{fault:?}: {:?}", other.map(|_| "accepted")),
             }
         }
+    }
+
+    /// The G-buffer takes, per pixel, the surface of the first sample whose camera ray hit one
+    /// the denoiser sees: silhouette pixels whose first jittered ray missed (a sphere's edge
+    /// against the sky) get the surface a later ray hit, so the filter reaches them (it had left
+    /// them unfiltered); pixels no ray hit keep the first sample's miss. The expected G-buffer is
+    /// resolved from each sample's frame rendered on its own.
+    #[test]
+    fn gaps_in_the_g_buffer_take_the_first_later_surface() {
+        let scene = Scene::load("builtin:spheres").unwrap();
+        let data = ShadeData::new(&scene).unwrap();
+        let mut cpu = CpuBackend::new();
+        cpu.load_scene(&scene).unwrap();
+        let settings = LitFrameSettings::new(32, 24, 6);
+        let samples = shade_samples(&mut cpu, &scene, &data, &settings).unwrap();
+        let (expected, filled_later) = first_surfaces(&mut cpu, &scene, &data, &settings);
+        assert_eq!(samples.surfaces, expected);
+        let none = samples.surfaces.iter().filter(|s| !is_guide_surface(s)).count();
+        assert!(filled_later > 0 && none > 0, "{filled_later} pixels filled later, {none} without a surface");
+    }
+
+    /// The G-buffer `settings` should give, from each sample's frame rendered and resolved on
+    /// its own: per pixel, the surface of the first sample whose ray hit one the denoiser sees,
+    /// else the first sample's miss; and how many pixels took a later sample's.
+    fn first_surfaces(
+        cpu: &mut CpuBackend,
+        scene: &Scene,
+        data: &ShadeData,
+        settings: &LitFrameSettings,
+    ) -> (Vec<Surface>, usize) {
+        let resolved: Vec<Vec<Surface>> = (0..settings.samples_per_pixel)
+            .map(|k| {
+                let frame = cpu.render(&settings.generate_params(scene, k)).unwrap();
+                resolve(data, &frame.rays, &frame.hits)
+            })
+            .collect();
+        let mut filled_later = 0;
+        let surfaces = (0..resolved[0].len())
+            .map(|pixel| {
+                let first = resolved.iter().position(|surfaces| is_guide_surface(&surfaces[pixel]));
+                filled_later += usize::from(first.is_some_and(|k| k > 0));
+                resolved[first.unwrap_or(0)][pixel]
+            })
+            .collect();
+        (surfaces, filled_later)
     }
 }

@@ -13,7 +13,7 @@
 use crate::backend::{Backend, StageReport};
 use crate::error::{Error, Result};
 use crate::shading::{shadow_rays, ShadeData};
-use crate::stream::{HitStream, RayStream, ShadeStream};
+use crate::stream::{hits_among, HitStream, RayStream, ShadeStream};
 use glam::Vec4;
 use raywave_shared::{GenerateParams, ShadeParams};
 
@@ -26,9 +26,24 @@ pub struct LitSampleRequest<'a> {
     pub shade: &'a ShadeParams,
     /// The loaded scene's shade data ([`ShadeData::new`]).
     pub data: &'a ShadeData,
-    /// Whether to return the camera rays and their hits as well ([`LitSample::camera`]): the
-    /// denoiser's G-buffer is resolved from the first sample's.
-    pub keep_camera_streams: bool,
+    /// Which camera rays and hits to return as well ([`LitSample::camera`]): the denoiser's
+    /// G-buffer is resolved from the first sample's, and its gaps filled from later samples'.
+    pub camera: CameraStreams<'a>,
+}
+
+/// The camera streams a lit sample returns besides what the accumulator adds up.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CameraStreams<'a> {
+    /// None.
+    None,
+    /// Every camera ray and its hit, ray `i` for pixel `i`: the G-buffer's first resolve.
+    All,
+    /// The camera rays and hits of the pixels listed (strictly ascending, each an index of the
+    /// image) whose ray hit something (its primitive not `NO_HIT`), in the list's order, with
+    /// `rays.pixel` naming each one's pixel: the G-buffer's gaps that a later sample fills. What
+    /// comes back is as many records as hit there (on Vulkan, copied out of the device's streams
+    /// once the sample's hits are known), not the frame's.
+    HitsAmong(&'a [u32]),
 }
 
 impl LitSampleRequest<'_> {
@@ -47,10 +62,27 @@ impl LitSampleRequest<'_> {
             ))
         } else if shade.sampler != generate.sampler {
             Some(format!("shade.sampler = {:?} but generate.sampler = {:?}", shade.sampler, generate.sampler))
+        } else if let CameraStreams::HitsAmong(pixels) = self.camera {
+            listed_pixels_problem(pixels, u64::from(generate.width) * u64::from(generate.height))
         } else {
             None
         };
         reason.map_or(Ok(()), |reason| Err(Error::InvalidParameter { name: "lit_sample", reason }))
+    }
+}
+
+/// Why `pixels` is no list [`CameraStreams::HitsAmong`] takes for an image of `count` pixels:
+/// an entry out of order, repeated or past the image's end.
+fn listed_pixels_problem(pixels: &[u32], count: u64) -> Option<String> {
+    if let Some(k) = pixels.windows(2).position(|pair| pair[0] >= pair[1]) {
+        let (a, b) = (pixels[k], pixels[k + 1]);
+        return Some(format!("camera pixels [{k}] = {a} and [{}] = {b}: the list must be strictly ascending", k + 1));
+    }
+    match pixels.last() {
+        Some(&last) if u64::from(last) >= count => {
+            Some(format!("camera pixel {last} is past the image's end ({count} pixels)"))
+        }
+        _ => None,
     }
 }
 
@@ -69,7 +101,8 @@ pub struct LitSample {
     pub occluded: Vec<u32>,
     /// Camera rays that hit geometry.
     pub hits: usize,
-    /// The camera rays and their hits, when [`LitSampleRequest::keep_camera_streams`] asked.
+    /// The camera rays and their hits that [`LitSampleRequest::camera`] asked for; `None` where
+    /// it asked for none.
     pub camera: Option<(RayStream, HitStream)>,
     /// The camera stages' reports, `generate` and `trace`, in execution order.
     pub camera_timings: Vec<StageReport>,
@@ -114,7 +147,14 @@ pub fn compose<B: Backend + ?Sized>(backend: &mut B, request: &LitSampleRequest<
         occluded,
         hits: frame.hits.hit_count(),
         stream_bytes: frame.rays.bytes() + frame.hits.bytes() + pass_bytes,
-        camera: request.keep_camera_streams.then_some((frame.rays, frame.hits)),
+        camera: match request.camera {
+            CameraStreams::None => None,
+            CameraStreams::All => Some((frame.rays, frame.hits)),
+            CameraStreams::HitsAmong(pixels) => {
+                let hit = hits_among(pixels, &frame.hits.primitive);
+                Some((frame.rays.select(&hit), frame.hits.select(&hit)))
+            }
+        },
         camera_timings: frame.timings,
         pass_timings,
     })
@@ -127,6 +167,7 @@ mod tests {
     use crate::frame::{generate_params_with, sampler_params};
     use crate::scene::Scene;
     use raywave_shared::sampling::sampler_kind;
+    use raywave_shared::stream::NO_HIT;
     use raywave_shared::SamplerParams;
 
     /// Shading for another image, sample or sampler than the camera rays' is refused before any
@@ -140,20 +181,56 @@ mod tests {
         let sampler = sampler_params(sampler_kind::ZSOBOL, 3, 16, 12, 4);
         let generate = generate_params_with(&scene, 16, 12, 1, sampler);
         let shade = data.params(sampler, 16, 12, 1);
-        let request = LitSampleRequest { generate: &generate, shade: &shade, data: &data, keep_camera_streams: false };
+        let request = LitSampleRequest { generate: &generate, shade: &shade, data: &data, camera: CameraStreams::None };
         assert_eq!(compose(&mut cpu, &request).unwrap().analytic.len(), 16 * 12);
         let mismatches = [
             (ShadeParams { width: 12, count: 16 * 12, ..shade }, "shade.width = 12"),
             (ShadeParams { sample_index: 2, ..shade }, "shade.sample_index = 2"),
             (ShadeParams { sampler: SamplerParams { seed: 4, ..sampler }, ..shade }, "shade.sampler"),
         ];
-        for (shade, what) in mismatches {
-            match compose(&mut cpu, &LitSampleRequest { shade: &shade, ..request }) {
+        let listed = |pixels: &'static [u32]| LitSampleRequest { camera: CameraStreams::HitsAmong(pixels), ..request };
+        let requests = mismatches.iter().map(|(shade, what)| (LitSampleRequest { shade, ..request }, *what)).chain([
+            (listed(&[4, 3]), "[0] = 4 and [1] = 3: the list must be strictly ascending"),
+            (listed(&[1, 1]), "strictly ascending"),
+            (listed(&[0, 16 * 12]), "camera pixel 192 is past the image's end (192 pixels)"),
+        ]);
+        for (request, what) in requests {
+            match compose(&mut cpu, &request) {
                 Err(Error::InvalidParameter { name: "lit_sample", reason }) => {
                     assert!(reason.contains(what), "{reason}")
                 }
                 other => panic!("{what}: {:?}", other.map(|_| "accepted")),
             }
         }
+    }
+
+    /// The camera streams asked for: none, the whole frame's, or the records of the listed
+    /// pixels that hit, in the list's order, each naming its pixel — those of the whole frame at
+    /// those pixels.
+    #[test]
+    fn a_sample_returns_the_camera_records_asked_for() {
+        let scene = Scene::load("builtin:spheres").unwrap();
+        let data = ShadeData::new(&scene).unwrap();
+        let mut cpu = CpuBackend::new();
+        cpu.load_scene(&scene).unwrap();
+        let sampler = sampler_params(sampler_kind::ZSOBOL, 3, 32, 24, 4);
+        let generate = generate_params_with(&scene, 32, 24, 1, sampler);
+        let shade = data.params(sampler, 32, 24, 1);
+        let request = |camera| LitSampleRequest { generate: &generate, shade: &shade, data: &data, camera };
+        assert_eq!(compose(&mut cpu, &request(CameraStreams::None)).unwrap().camera, None);
+        let (rays, hits) = compose(&mut cpu, &request(CameraStreams::All)).unwrap().camera.unwrap();
+        assert_eq!((rays.len(), hits.len()), (32 * 24, 32 * 24));
+        let listed: Vec<u32> = (0..32 * 24).step_by(5).collect();
+        let hit: Vec<u32> = listed.iter().copied().filter(|&i| hits.primitive[i as usize] != NO_HIT).collect();
+        assert!(
+            !hit.is_empty() && hit.len() < listed.len(),
+            "the list holds hits and misses: {} of {}",
+            hit.len(),
+            listed.len()
+        );
+        let (some_rays, some_hits) =
+            compose(&mut cpu, &request(CameraStreams::HitsAmong(&listed))).unwrap().camera.unwrap();
+        assert_eq!(some_rays.pixel, hit);
+        assert_eq!((some_rays, some_hits), (rays.select(&hit), hits.select(&hit)));
     }
 }

@@ -44,6 +44,16 @@ impl RayStream {
             [("origins", self.origin.len()), ("directions", self.direction.len()), ("pixels", self.pixel.len())];
         check_field_lengths(stage, "ray", &fields)
     }
+
+    /// The rays at `indices`, in their order (each below [`Self::len`]; panics otherwise, as
+    /// slice indexing does).
+    pub fn select(&self, indices: &[u32]) -> Self {
+        Self {
+            origin: select(&self.origin, indices),
+            direction: select(&self.direction, indices),
+            pixel: select(&self.pixel, indices),
+        }
+    }
 }
 
 /// The hit stream: what trace writes, one record per ray.
@@ -95,11 +105,34 @@ impl HitStream {
     pub fn bytes(&self) -> u64 {
         self.len() as u64 * u64::from(HIT_STREAM_BYTES_PER_RAY)
     }
+
+    /// The records at `indices`, in their order (each below [`Self::len`]; panics otherwise, as
+    /// slice indexing does).
+    pub fn select(&self, indices: &[u32]) -> Self {
+        Self {
+            t: select(&self.t, indices),
+            primitive: select(&self.primitive, indices),
+            instance: select(&self.instance, indices),
+            barycentrics: select(&self.barycentrics, indices),
+        }
+    }
 }
 
 /// How many of a hit stream's `primitive` field hit something (not `NO_HIT`).
 pub fn count_hits(primitive: &[u32]) -> usize {
     primitive.iter().filter(|&&p| p != NO_HIT).count()
+}
+
+/// The entries of `pixels` whose record in a hit stream's `primitive` field hit something (not
+/// `NO_HIT`, as [`count_hits`] counts), in their order; an entry past the stream's end is
+/// skipped (a request's check refuses such entries first).
+pub fn hits_among(pixels: &[u32], primitive: &[u32]) -> Vec<u32> {
+    pixels.iter().copied().filter(|&i| primitive.get(i as usize).is_some_and(|&p| p != NO_HIT)).collect()
+}
+
+/// `field`'s entries at `indices`, in their order.
+fn select<T: Copy>(field: &[T], indices: &[u32]) -> Vec<T> {
+    indices.iter().map(|&i| field[i as usize]).collect()
 }
 
 /// The shade stream: what the shade stage writes, one record per camera ray (ray `i` is pixel `i`
@@ -185,5 +218,23 @@ mod tests {
         let mut hits = HitStream::zeroed(4);
         hits.primitive = vec![0, NO_HIT, 7, NO_HIT];
         assert_eq!(hits.hit_count(), 2);
+    }
+
+    /// The listed records that hit, by the same rule, keep the list's order; a selection takes
+    /// every field's entries at the indices given.
+    #[test]
+    fn selections_take_the_listed_records_that_hit() {
+        let mut hits = HitStream::zeroed(5);
+        hits.primitive = vec![0, NO_HIT, 7, 3, NO_HIT];
+        hits.t = vec![1.0, 0.0, 3.0, 4.0, 0.0];
+        assert_eq!(hits_among(&[1, 2, 3, 4, 9], &hits.primitive), vec![2, 3]);
+        assert_eq!(hits_among(&[], &hits.primitive), Vec::<u32>::new());
+        let picked = hits.select(&[3, 0]);
+        assert_eq!((picked.t, picked.primitive), (vec![4.0, 1.0], vec![3, 0]));
+        let mut rays = RayStream::zeroed(5);
+        rays.pixel = vec![10, 11, 12, 13, 14];
+        rays.direction[2] = Vec4::X;
+        let picked = rays.select(&[2, 4]);
+        assert_eq!((picked.pixel, picked.direction), (vec![12, 14], vec![Vec4::X, Vec4::ZERO]));
     }
 }

@@ -18,10 +18,10 @@ use crate::cpu::CpuScene;
 use crate::denoise::{DenoiseInput, DenoiseMethod};
 use crate::device::TraceMethod;
 use crate::error::{Error, Result};
-use crate::lit_sample::{LitSample, LitSampleRequest};
+use crate::lit_sample::{CameraStreams, LitSample, LitSampleRequest};
 use crate::scene::{Scene, SceneIdentity};
 use crate::shading::{ShadeData, ShadeDataIdentity};
-use crate::stream::{count_hits, HitStream, RayStream, ShadeStream, SHADE_STREAM_BYTES_PER_RAY};
+use crate::stream::{count_hits, hits_among, HitStream, RayStream, ShadeStream, SHADE_STREAM_BYTES_PER_RAY};
 use crate::workgroup::WorkgroupSizes;
 use ash::vk;
 use bytemuck::Pod;
@@ -52,6 +52,40 @@ struct DeviceHits {
     instance: GpuBuffer,
     barycentrics: GpuBuffer,
     len: u32,
+}
+
+/// The records of a device stream that a read copies back.
+#[derive(Clone, Copy, Debug)]
+enum Records<'i> {
+    /// The whole stream.
+    All,
+    /// The records at these indices, in their order ([`Batch::gather`]).
+    At(&'i [u32]),
+}
+
+impl Records<'_> {
+    /// Adds to `batch` the read of these records of `buffer`, a field of a stream of `len`.
+    fn read_in<'a, T: Pod>(self, batch: &mut Batch<'a>, buffer: &'a GpuBuffer, len: u32) -> Result<ReadId<T>> {
+        match self {
+            Self::All => batch.read(buffer, len as usize),
+            Self::At(indices) => batch.gather(buffer, indices),
+        }
+    }
+}
+
+/// The records at `indices` of the camera streams `rays` and `hits`, copied out of the device in
+/// a submission of their own (none where there are none).
+fn gather_camera_records(
+    core: &Arc<Core>,
+    rays: &DeviceRays,
+    hits: &DeviceHits,
+    indices: &[u32],
+) -> Result<(RayStream, HitStream)> {
+    let mut batch = Batch::new(core);
+    let ray_reads = rays.read_records_in(&mut batch, Records::At(indices))?;
+    let hit_reads = hits.read_records_in(&mut batch, Records::At(indices))?;
+    let done = batch.submit()?;
+    Ok((ray_reads.stream(&done)?, hit_reads.stream(&done)?))
 }
 
 /// A device buffer for the `count` samples of `T` of probe `name` (at least one: a binding
@@ -103,11 +137,16 @@ impl DeviceRays {
 
     /// Adds the reads of the whole stream to `batch`.
     fn read_in<'a>(&'a self, batch: &mut Batch<'a>) -> Result<RayReads> {
-        let (paths, n) = (&self.paths, self.paths.len as usize);
+        self.read_records_in(batch, Records::All)
+    }
+
+    /// Adds the reads of the stream's `records` to `batch`.
+    fn read_records_in<'a>(&'a self, batch: &mut Batch<'a>, records: Records<'_>) -> Result<RayReads> {
+        let (paths, len) = (&self.paths, self.paths.len);
         Ok(RayReads {
-            origin: batch.read(&paths.origin, n)?,
-            direction: batch.read(&paths.direction, n)?,
-            pixel: batch.read(&self.pixel, n)?,
+            origin: records.read_in(batch, &paths.origin, len)?,
+            direction: records.read_in(batch, &paths.direction, len)?,
+            pixel: records.read_in(batch, &self.pixel, len)?,
         })
     }
 }
@@ -157,12 +196,17 @@ impl DeviceHits {
 
     /// Adds the reads of the whole stream to `batch`.
     fn read_in<'a>(&'a self, batch: &mut Batch<'a>) -> Result<HitReads> {
-        let n = self.len as usize;
+        self.read_records_in(batch, Records::All)
+    }
+
+    /// Adds the reads of the stream's `records` to `batch`.
+    fn read_records_in<'a>(&'a self, batch: &mut Batch<'a>, records: Records<'_>) -> Result<HitReads> {
+        let len = self.len;
         Ok(HitReads {
-            t: batch.read(&self.t, n)?,
-            primitive: batch.read(&self.primitive, n)?,
-            instance: batch.read(&self.instance, n)?,
-            barycentrics: batch.read(&self.barycentrics, n)?,
+            t: records.read_in(batch, &self.t, len)?,
+            primitive: records.read_in(batch, &self.primitive, len)?,
+            instance: records.read_in(batch, &self.instance, len)?,
+            barycentrics: records.read_in(batch, &self.barycentrics, len)?,
         })
     }
 }
@@ -871,7 +915,9 @@ impl Backend for VulkanBackend {
     /// results, in one submission where the device writes timestamps (`vulkan/batch.rs`): what
     /// comes back is the three accumulated shade fields, the occlusion results and the hits'
     /// primitives (to count the hits), 56 bytes a pixel, and the camera streams when asked (the
-    /// composed stages move 208). The checks of the composed stages, in their order and before
+    /// composed stages move 208): all of them in the same submission, or, for the listed pixels
+    /// that hit ([`CameraStreams::HitsAmong`]), their records only, 56 bytes each, gathered in a
+    /// second one once the hits' primitives show which those are. The checks of the composed stages, in their order and before
     /// any work: the request, the scene loaded, the camera, the shade data and parameters for
     /// the dense stream generate writes.
     fn lit_sample(&mut self, request: &LitSampleRequest<'_>) -> Result<LitSample> {
@@ -912,14 +958,20 @@ impl Backend for VulkanBackend {
         let occlusion_read = batch.read(&occluded, n)?;
         // The hits' primitives, to count the hits (read twice where the camera streams are).
         let primitive = batch.read::<u32>(&hits.primitive, n)?;
-        let camera_reads = match request.keep_camera_streams {
-            true => Some((rays.read_in(&mut batch)?, hits.read_in(&mut batch)?)),
-            false => None,
+        let camera_reads = match request.camera {
+            CameraStreams::All => Some((rays.read_in(&mut batch)?, hits.read_in(&mut batch)?)),
+            CameraStreams::None | CameraStreams::HitsAmong(_) => None,
         };
         let done = batch.submit()?;
-        let camera = match &camera_reads {
-            Some((rays, hits)) => Some((rays.stream(&done)?, hits.stream(&done)?)),
-            None => None,
+        let primitives = done.read(&primitive)?;
+        let camera = match (&camera_reads, request.camera) {
+            (Some((rays, hits)), _) => Some((rays.stream(&done)?, hits.stream(&done)?)),
+            // Which listed pixels hit is known now: their records are copied out in a second,
+            // small submission while the streams are still on the device.
+            (None, CameraStreams::HitsAmong(pixels)) => {
+                Some(gather_camera_records(core, &rays, &hits, &hits_among(pixels, &primitives))?)
+            }
+            (None, _) => None,
         };
         let pixels = u64::from(len);
         Ok(LitSample {
@@ -927,7 +979,7 @@ impl Backend for VulkanBackend {
             unshadowed: done.read(&unshadowed)?,
             emitted: done.read(&emitted)?,
             occluded: done.read(&occlusion_read)?,
-            hits: count_hits(&done.read(&primitive)?),
+            hits: count_hits(&primitives),
             camera,
             camera_timings: vec![generate.report(&done)?, trace.report(&done)?],
             pass_timings: [shade.report(&done)?, occlusion.report(&done)?],
@@ -1087,9 +1139,10 @@ mod tests {
 
     /// A lit sample is one submission where the device writes timestamps — the four passes,
     /// their counters and the readbacks in one command buffer — and one per pass plus one for
-    /// the copies where it does not ([`Batch::submit`]); it had been fifteen. Counted on the
-    /// second sample, after the first has uploaded the shade data. Every Vulkan device; without
-    /// one it fails under CI and is skipped loudly elsewhere.
+    /// the copies where it does not ([`Batch::submit`]); it had been fifteen. Counted from the
+    /// second sample, after the first has uploaded the shade data. Listed pixels' camera records
+    /// take one submission more where some of them hit, none where none is listed. Every Vulkan
+    /// device; without one it fails under CI and is skipped loudly elsewhere.
     #[test]
     fn a_lit_sample_is_one_submission_where_the_device_writes_timestamps() {
         let devices = super::super::devices_for_test("lit sample submissions");
@@ -1100,18 +1153,24 @@ mod tests {
             let mut backend = VulkanBackend::open(device.index, &options, None).unwrap();
             backend.load_scene(&scene).unwrap();
             let mut submissions = Vec::new();
-            for (seed, keep_camera_streams) in [(0, true), (1, false)] {
+            let cameras = [
+                CameraStreams::All,
+                CameraStreams::None,
+                CameraStreams::HitsAmong(&[3, 4, 5, 200]),
+                CameraStreams::HitsAmong(&[]),
+            ];
+            for (seed, camera) in (0..).zip(cameras) {
                 let generate = crate::frame::generate_params(&scene, 24, 16, seed);
                 let shade = data.params(generate.sampler, 24, 16, generate.sample_index);
-                let request = LitSampleRequest { generate: &generate, shade: &shade, data: &data, keep_camera_streams };
+                let request = LitSampleRequest { generate: &generate, shade: &shade, data: &data, camera };
                 let before = backend.core.submissions.load(std::sync::atomic::Ordering::Relaxed);
                 let sample = backend.lit_sample(&request).unwrap();
                 submissions.push(backend.core.submissions.load(std::sync::atomic::Ordering::Relaxed) - before);
-                assert_eq!(sample.camera.is_some(), keep_camera_streams, "{}", device.name);
+                assert_eq!(sample.camera.is_some(), camera != CameraStreams::None, "{}", device.name);
                 assert!(sample.hits > 0 && sample.occluded.len() == 24 * 16, "{}", device.name);
             }
-            let expected = if backend.core.info.timestamps { 1 } else { 5 };
-            assert_eq!(submissions[1], expected, "{}: submissions of each sample {submissions:?}", device.name);
+            let one = if backend.core.info.timestamps { 1 } else { 5 };
+            assert_eq!(submissions[1..], [one, one + 1, one], "{}: submissions of each sample", device.name);
             let messages = backend.validation_messages();
             assert!(messages.is_empty(), "{}: {messages:?}", device.name);
         }
@@ -1136,7 +1195,7 @@ mod tests {
             let generate = crate::frame::generate_params(&scene, width, height, seed);
             let shade = data.params(generate.sampler, width, height, generate.sample_index);
             let request =
-                LitSampleRequest { generate: &generate, shade: &shade, data: &data, keep_camera_streams: true };
+                LitSampleRequest { generate: &generate, shade: &shade, data: &data, camera: CameraStreams::All };
             let sample = backend.lit_sample(&request).unwrap();
             let (rays, hits) = sample.camera.unwrap();
             // Compared as bits, so that any NaN compares too.
@@ -1195,7 +1254,7 @@ mod tests {
         let (width, height) = (24, 16);
         let generate = crate::frame::generate_params(&scene, width, height, 0);
         let shade = data.params(generate.sampler, width, height, generate.sample_index);
-        let request = LitSampleRequest { generate: &generate, shade: &shade, data: &data, keep_camera_streams: false };
+        let request = LitSampleRequest { generate: &generate, shade: &shade, data: &data, camera: CameraStreams::None };
         for device in &devices {
             let options = ContextOptions { validation: true, ..Default::default() };
             let mut backend = VulkanBackend::open(device.index, &options, None).unwrap();
@@ -1264,14 +1323,16 @@ mod tests {
     /// path of a device without timestamps and of benchmark mode, which CI's lavapipe does not
     /// take by itself) reads back what one submission does, bit for bit, with the same reports —
     /// the sanitized counts 0 though the batch uploaded `u32::MAX` to the counter before the
-    /// trace zeroed it; an upload or a read past a buffer's end is refused, and a second upload
-    /// to one buffer (the uploads run without barriers between them). Every Vulkan device;
-    /// without one it fails under CI and is skipped loudly elsewhere.
+    /// trace zeroed it; a gather reads the records it names; an upload, a read or a gather past a
+    /// buffer's end is refused, and a second upload to one buffer (the uploads run without
+    /// barriers between them). Every Vulkan device; without one it fails under CI and is skipped
+    /// loudly elsewhere.
     #[test]
     fn a_batch_split_into_a_submission_per_run_reads_what_one_submission_reads() {
         let devices = super::super::devices_for_test("batch submissions");
         let scene = Scene::load("builtin:cornell").unwrap();
         let params = crate::frame::generate_params(&scene, 24, 16, 3);
+        const PICKED: [u32; 7] = [1, 2, 3, 7, 40, 41, 24 * 16 - 1];
         for device in &devices {
             let options = ContextOptions { validation: true, ..Default::default() };
             let mut backend = VulkanBackend::open(device.index, &options, None).unwrap();
@@ -1298,15 +1359,27 @@ mod tests {
                         .unwrap();
                 let past_the_end = batch.read::<u32>(&counter, 2);
                 assert!(matches!(past_the_end, Err(Error::InvalidParameter { name: "count", .. })));
+                let gathered_past_the_end = batch.gather::<u32>(&counter, &[0, 1]);
+                assert!(matches!(gathered_past_the_end, Err(Error::InvalidParameter { name: "indices", .. })));
                 let (ray_reads, hit_reads) = (rays.read_in(&mut batch).unwrap(), hits.read_in(&mut batch).unwrap());
+                let picked = Records::At(&PICKED);
+                let (picked_rays, picked_hits) = (
+                    rays.read_records_in(&mut batch, picked).unwrap(),
+                    hits.read_records_in(&mut batch, picked).unwrap(),
+                );
                 let before = core.submissions.load(std::sync::atomic::Ordering::Relaxed);
                 let done = batch.submit_in(together).unwrap();
                 let submissions = core.submissions.load(std::sync::atomic::Ordering::Relaxed) - before;
                 let reports = [generate.report(&done).unwrap(), trace.report(&done).unwrap()];
-                (ray_reads.stream(&done).unwrap(), hit_reads.stream(&done).unwrap(), reports, submissions)
+                let streams = (ray_reads.stream(&done).unwrap(), hit_reads.stream(&done).unwrap());
+                let gathered = (picked_rays.stream(&done).unwrap(), picked_hits.stream(&done).unwrap());
+                (streams.0, streams.1, reports, submissions, gathered)
             };
-            let (rays_read, hits, reports, submissions) = frame(true);
-            let (split_rays, split_hits, split_reports, split_submissions) = frame(false);
+            let (rays_read, hits, reports, submissions, gathered) = frame(true);
+            let (split_rays, split_hits, split_reports, split_submissions, _) = frame(false);
+            // A gather reads the records at the indices given, in their order: runs and single
+            // records, the last one the stream's.
+            assert!(gathered == (rays_read.select(&PICKED), hits.select(&PICKED)), "{}: gathered", device.name);
             let together = if core.info.timestamps { 1 } else { 4 };
             assert_eq!((submissions, split_submissions), (together, 4), "{}", device.name);
             assert!(

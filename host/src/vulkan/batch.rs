@@ -34,12 +34,12 @@ pub(crate) struct Batch<'a> {
     reads: Vec<Staged<'a>>,
 }
 
-/// A device buffer's first `bytes` and the host-visible staging buffer of that size that they
-/// are copied from (an upload) or into (a read).
+/// A device buffer and the host-visible staging buffer that `regions` copy from (an upload) or
+/// into (a read): the buffer's first bytes, or the elements a gather picks.
 struct Staged<'a> {
     buffer: &'a GpuBuffer,
     staging: GpuBuffer,
-    bytes: u64,
+    regions: Vec<vk::BufferCopy>,
 }
 
 /// A pass's prepared run and the commands of its work.
@@ -102,7 +102,8 @@ impl<'a> Batch<'a> {
         }
         if !bytes.is_empty() {
             let staging = buffer.staging_for(bytes)?;
-            self.uploads.push(Staged { buffer, staging, bytes: bytes.len() as u64 });
+            let regions = vec![vk::BufferCopy::default().size(bytes.len() as u64)];
+            self.uploads.push(Staged { buffer, staging, regions });
         }
         Ok(())
     }
@@ -133,29 +134,66 @@ impl<'a> Batch<'a> {
                 name: "count",
                 reason: format!("read of {count} elements past the end of a buffer of {} bytes", buffer.size),
             })?;
+        self.read_regions(buffer, bytes, bytes as u64, vec![vk::BufferCopy::default().size(bytes as u64)])
+    }
+
+    /// Adds a copy of the elements of device buffer `buffer` at `indices`, in their order, made
+    /// after every run: a gather, one copy region per run of consecutive indices, into the start
+    /// of a staging buffer. That is as large as `buffer`, so that it is the one a whole read of
+    /// `buffer` leaves for reuse ([`super::recycle`]): gathers of ever-changing lengths (a
+    /// G-buffer's gaps, sample by sample) create none in a frame loop. An index past the
+    /// buffer's end is refused.
+    pub fn gather<T: Pod>(&mut self, buffer: &'a GpuBuffer, indices: &[u32]) -> Result<ReadId<T>> {
+        let size = std::mem::size_of::<T>() as u64;
+        if let Some(&index) = indices.iter().find(|&&i| (u64::from(i) + 1) * size > buffer.size) {
+            return Err(Error::InvalidParameter {
+                name: "indices",
+                reason: format!("gather of element {index} past the end of a buffer of {} bytes", buffer.size),
+            });
+        }
+        let mut regions: Vec<vk::BufferCopy> = Vec::new();
+        for (k, &index) in indices.iter().enumerate() {
+            let source = u64::from(index) * size;
+            match regions.last_mut() {
+                Some(run) if run.src_offset + run.size == source => run.size += size,
+                _ => regions.push(vk::BufferCopy::default().src_offset(source).dst_offset(k as u64 * size).size(size)),
+            }
+        }
+        self.read_regions(buffer, indices.len() * size as usize, buffer.size, regions)
+    }
+
+    /// Adds a read of `bytes` bytes of `buffer` that `regions` copy into the start of a staging
+    /// buffer of `staging_size` bytes; a read of nothing adds no copy (Vulkan refuses empty copy
+    /// regions).
+    fn read_regions<T: Pod>(
+        &mut self,
+        buffer: &'a GpuBuffer,
+        bytes: usize,
+        staging_size: u64,
+        regions: Vec<vk::BufferCopy>,
+    ) -> Result<ReadId<T>> {
         if bytes == 0 {
-            // Vulkan refuses empty copy regions.
             return Ok(ReadId { staging: None, bytes, _element: PhantomData });
         }
         let staging = GpuBuffer::transient(
             &self.core,
-            bytes as u64,
+            staging_size,
             vk::BufferUsageFlags::TRANSFER_DST,
             MemoryLocation::GpuToCpu,
             "readback staging",
         )?;
-        self.reads.push(Staged { buffer, staging, bytes: bytes as u64 });
+        self.reads.push(Staged { buffer, staging, regions });
         Ok(ReadId { staging: Some(self.reads.len() - 1), bytes, _element: PhantomData })
     }
 
     /// Records `steps` into `cmd`, a barrier between each step and the next.
     fn record(&self, cmd: vk::CommandBuffer, steps: &[Step<'_, 'a>]) {
         let all = vk::PipelineStageFlags::ALL_COMMANDS;
-        let copy = |source: &GpuBuffer, destination: &GpuBuffer, bytes| {
-            let region = [vk::BufferCopy::default().size(bytes)];
-            // SAFETY: `cmd` is recording; both buffers hold `bytes` (checked in `upload` and
-            // `read`, which made the staging buffers of that size) and have transfer usage.
-            unsafe { self.core.device.cmd_copy_buffer(cmd, source.buffer, destination.buffer, &region) };
+        let copy = |source: &GpuBuffer, destination: &GpuBuffer, regions: &[vk::BufferCopy]| {
+            // SAFETY: `cmd` is recording; both buffers hold every region (checked in `upload`,
+            // `read` and `gather`, which made the staging buffers of the regions' total size),
+            // none empty, and have transfer usage.
+            unsafe { self.core.device.cmd_copy_buffer(cmd, source.buffer, destination.buffer, regions) };
         };
         for (k, step) in steps.iter().enumerate() {
             if k > 0 {
@@ -163,9 +201,9 @@ impl<'a> Batch<'a> {
                 global_barrier(&self.core, cmd, all, all);
             }
             match step {
-                Step::Uploads => self.uploads.iter().for_each(|up| copy(&up.staging, up.buffer, up.bytes)),
+                Step::Uploads => self.uploads.iter().for_each(|up| copy(&up.staging, up.buffer, &up.regions)),
                 Step::Run(run) => run.pass.record(cmd, &run.prepared, &*run.work),
-                Step::Reads => self.reads.iter().for_each(|read| copy(read.buffer, &read.staging, read.bytes)),
+                Step::Reads => self.reads.iter().for_each(|read| copy(read.buffer, &read.staging, &read.regions)),
             }
         }
     }
