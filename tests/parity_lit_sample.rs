@@ -12,9 +12,12 @@
 mod common;
 
 use common::vulkan;
+use raywave::denoise::is_guide_surface;
 use raywave::frame::{generate_params_with, sampler_params};
+use raywave::kernels::shade::stage::Surface;
+use raywave::lit_frame::{shade_samples, LitFrameSettings};
 use raywave::lit_sample::{compose, CameraStreams, LitSample, LitSampleRequest};
-use raywave::shading::ShadeData;
+use raywave::shading::{resolve, ShadeData};
 use raywave::shared::sampling::sampler_kind;
 use raywave::shared::stream::NO_HIT;
 use raywave::shared::{GenerateParams, ShadeParams};
@@ -93,6 +96,49 @@ fn device_resident_lit_samples_are_the_composed_stages_bit_for_bit() {
             }
         }
         vulkan::assert_clean(backend);
+    }
+}
+
+/// The G-buffer a frame's samples leave (`shade_samples`): per pixel, the surface of the first
+/// sample whose camera ray hit one the denoiser sees, else the first sample's miss. On the CPU
+/// and on every Vulkan device and trace method (where the gaps' records are gathered out of the
+/// device's streams), each against the samples' frames rendered and resolved on that backend on
+/// their own. Both scenes leave gaps (the spheres stand against the sky, the box against the
+/// dark) that later samples fill, and pixels that none does.
+#[test]
+fn g_buffer_gaps_take_the_first_later_surface_on_every_backend() {
+    let mut cpu = raywave::open_backend(raywave::DeviceChoice::Cpu, &Default::default()).expect("CPU backend");
+    assert_g_buffer_gaps_filled(cpu.as_mut());
+    for mut backend in vulkan::every_device("g_buffer_gaps") {
+        assert_g_buffer_gaps_filled(&mut backend);
+        vulkan::assert_clean(backend);
+    }
+}
+
+/// Fails unless `backend`'s lit frames leave the G-buffer that
+/// [`g_buffer_gaps_take_the_first_later_surface_on_every_backend`] describes.
+fn assert_g_buffer_gaps_filled(backend: &mut dyn Backend) {
+    for scene_name in ["builtin:spheres", "builtin:cornell"] {
+        let case = format!("{}, {scene_name}", backend.name());
+        let scene = Scene::load(scene_name).expect("built-in scene");
+        let data = ShadeData::new(&scene).expect("shade data");
+        let settings = LitFrameSettings::new(WIDTH, HEIGHT, 6);
+        backend.load_scene(&scene).expect("scene loads");
+        let samples = shade_samples(backend, &scene, &data, &settings).expect("samples");
+        let resolved: Vec<Vec<Surface>> = (0..settings.samples_per_pixel)
+            .map(|k| {
+                let frame = backend.render(&settings.generate_params(&scene, k)).expect("frame");
+                resolve(&data, &frame.rays, &frame.hits)
+            })
+            .collect();
+        let mut filled_later = 0;
+        for (pixel, surface) in samples.surfaces.iter().enumerate() {
+            let first = resolved.iter().position(|surfaces| is_guide_surface(&surfaces[pixel]));
+            assert!(*surface == resolved[first.unwrap_or(0)][pixel], "{case}: pixel {pixel}");
+            filled_later += usize::from(first.is_some_and(|k| k > 0));
+        }
+        let none = samples.surfaces.iter().filter(|s| !is_guide_surface(s)).count();
+        assert!(filled_later > 0 && none > 0, "{case}: {filled_later} pixels filled later, {none} without a surface");
     }
 }
 

@@ -200,7 +200,7 @@ impl WorkingBuffers {
 
 /// Whether the denoiser's edge stops see `surface` (a finite point at a depth of at least
 /// 2⁻¹²⁶, [`is_surface_depth`]); where not, its pixel has no G-buffer surface.
-pub(crate) fn is_guide_surface(surface: &Surface) -> bool {
+pub fn is_guide_surface(surface: &Surface) -> bool {
     surface.position.is_finite() && is_surface_depth(surface.position.w)
 }
 

@@ -7,10 +7,10 @@ use crate::backend::{aperture_refusal, check_image_size_common, check_shade_stre
 use crate::denoise::{check_radius, frame_params, is_guide_surface, rgb, DenoiseInput, DenoiseMethod};
 use crate::error::{Error, Result};
 use crate::frame::{check_samples_per_pixel, generate_params_with, sampler_params};
-use crate::lit_sample::{CameraStreams, LitSampleRequest};
+use crate::lit_sample::{check_same_lengths, CameraStreams, LitSampleRequest};
 use crate::scene::{Scene, MAX_COORDINATE};
 use crate::shading::{resolve, ShadeAccumulator, ShadeData};
-use crate::stream::{HitStream, RayStream};
+use crate::stream::{first_not_ascending, HitStream, RayStream};
 use glam::Vec3;
 use raywave_kernels::shade::stage::Surface;
 use raywave_shared::sampling::sampler_kind;
@@ -307,11 +307,8 @@ pub fn shade_samples(
 /// ([`CameraStreams::HitsAmong`]): one hit per ray, each ray's pixel one of `gaps`, ascending.
 /// An error naming `lit_sample` otherwise (a backend an engine wrote may return other records).
 fn check_gap_streams(rays: &RayStream, hits: &HitStream, gaps: &[u32]) -> Result<()> {
-    rays.check("lit_sample")?;
-    hits.check("lit_sample")?;
-    let reason = if rays.len() != hits.len() {
-        Some(format!("{} camera rays but {} hits", rays.len(), hits.len()))
-    } else if let Some(k) = rays.pixel.windows(2).position(|pair| pair[0] >= pair[1]) {
+    check_same_lengths(rays, hits)?;
+    let reason = if let Some(k) = first_not_ascending(&rays.pixel) {
         Some(format!("camera rays' pixels [{k}] and [{}] are not ascending", k + 1))
     } else {
         let unlisted = rays.pixel.iter().find(|pixel| gaps.binary_search(pixel).is_err());
@@ -599,8 +596,12 @@ mod tests {
         let samples = shade_samples(&mut cpu, &scene, &data, &settings).unwrap();
         assert_eq!(samples.accumulator.samples(), 3);
         assert_eq!(samples.surfaces.len(), 16 * 12);
+        // Where the first sample's ray hit a surface, the G-buffer holds it (gaps are filled from
+        // later samples: `tests/parity_lit_sample.rs`, on every backend).
         let first = cpu.render(&settings.generate_params(&scene, 0)).unwrap();
-        assert_eq!(samples.surfaces, first_surfaces(&mut cpu, &scene, &data, &settings).0);
+        let first_surfaces = resolve(&data, &first.rays, &first.hits);
+        let kept = samples.surfaces.iter().zip(&first_surfaces).filter(|(_, first)| is_guide_surface(first));
+        assert!(kept.clone().count() > 16 * 12 / 2 && kept.into_iter().all(|(s, first)| s == first));
         assert!(samples.hits > 0 && samples.hits <= 3 * 16 * 12);
         let stages: Vec<_> = samples.timings.iter().map(|t| t.stage).collect();
         assert_eq!(stages, ["generate", "trace", "shade", "occlusion"]);
@@ -756,66 +757,24 @@ mod tests {
     #[test]
     fn a_backend_returning_too_few_hits_is_an_error_not_a_panic() {
         let faults = [
-            (Fault::ShortHits, "shade", "builtin:cornell"),
-            (Fault::ShortCameraHits, "shade", "builtin:cornell"),
-            (Fault::NoCameraStreams, "lit_sample", "builtin:cornell"),
+            (Fault::ShortHits, "shade", "64 rays but 63 hits", "builtin:cornell"),
+            (Fault::ShortCameraHits, "shade", "64 rays but 63 hits", "builtin:cornell"),
+            (Fault::NoCameraStreams, "lit_sample", "returned no camera streams", "builtin:cornell"),
             // The spheres stand against the sky: the first sample leaves gaps.
-            (Fault::WholeFrameForGaps, "lit_sample", "builtin:spheres"),
+            (Fault::WholeFrameForGaps, "lit_sample", "which was not asked for", "builtin:spheres"),
         ];
-        for (fault, stage, scene) in faults {
+        for (fault, stage, why, scene) in faults {
             let scene = Scene::load(scene).unwrap();
             let data = ShadeData::new(&scene).unwrap();
             let mut faulty = Faulty(CpuBackend::new(), fault);
             faulty.load_scene(&scene).unwrap();
             match shade_samples(&mut faulty, &scene, &data, &LitFrameSettings::new(8, 8, 2)) {
-                Err(Error::InvalidParameter { name, reason }) => assert_eq!(name, stage, "{fault:?}: {reason}"),
+                Err(Error::InvalidParameter { name, reason }) => {
+                    assert_eq!(name, stage, "{fault:?}: {reason}");
+                    assert!(reason.contains(why), "{fault:?}: {reason}");
+                }
                 other => panic!("{fault:?}: {:?}", other.map(|_| "accepted")),
             }
         }
-    }
-
-    /// The G-buffer takes, per pixel, the surface of the first sample whose camera ray hit one
-    /// the denoiser sees: silhouette pixels whose first jittered ray missed (a sphere's edge
-    /// against the sky) get the surface a later ray hit, so the filter reaches them (it had left
-    /// them unfiltered); pixels no ray hit keep the first sample's miss. The expected G-buffer is
-    /// resolved from each sample's frame rendered on its own.
-    #[test]
-    fn gaps_in_the_g_buffer_take_the_first_later_surface() {
-        let scene = Scene::load("builtin:spheres").unwrap();
-        let data = ShadeData::new(&scene).unwrap();
-        let mut cpu = CpuBackend::new();
-        cpu.load_scene(&scene).unwrap();
-        let settings = LitFrameSettings::new(32, 24, 6);
-        let samples = shade_samples(&mut cpu, &scene, &data, &settings).unwrap();
-        let (expected, filled_later) = first_surfaces(&mut cpu, &scene, &data, &settings);
-        assert_eq!(samples.surfaces, expected);
-        let none = samples.surfaces.iter().filter(|s| !is_guide_surface(s)).count();
-        assert!(filled_later > 0 && none > 0, "{filled_later} pixels filled later, {none} without a surface");
-    }
-
-    /// The G-buffer `settings` should give, from each sample's frame rendered and resolved on
-    /// its own: per pixel, the surface of the first sample whose ray hit one the denoiser sees,
-    /// else the first sample's miss; and how many pixels took a later sample's.
-    fn first_surfaces(
-        cpu: &mut CpuBackend,
-        scene: &Scene,
-        data: &ShadeData,
-        settings: &LitFrameSettings,
-    ) -> (Vec<Surface>, usize) {
-        let resolved: Vec<Vec<Surface>> = (0..settings.samples_per_pixel)
-            .map(|k| {
-                let frame = cpu.render(&settings.generate_params(scene, k)).unwrap();
-                resolve(data, &frame.rays, &frame.hits)
-            })
-            .collect();
-        let mut filled_later = 0;
-        let surfaces = (0..resolved[0].len())
-            .map(|pixel| {
-                let first = resolved.iter().position(|surfaces| is_guide_surface(&surfaces[pixel]));
-                filled_later += usize::from(first.is_some_and(|k| k > 0));
-                resolved[first.unwrap_or(0)][pixel]
-            })
-            .collect();
-        (surfaces, filled_later)
     }
 }

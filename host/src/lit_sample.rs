@@ -13,7 +13,7 @@
 use crate::backend::{Backend, StageReport};
 use crate::error::{Error, Result};
 use crate::shading::{shadow_rays, ShadeData};
-use crate::stream::{hits_among, HitStream, RayStream, ShadeStream};
+use crate::stream::{first_not_ascending, hits_among, HitStream, RayStream, ShadeStream};
 use glam::Vec4;
 use raywave_shared::{GenerateParams, ShadeParams};
 
@@ -42,7 +42,8 @@ pub enum CameraStreams<'a> {
     /// image) whose ray hit something (its primitive not `NO_HIT`), in the list's order, with
     /// `rays.pixel` naming each one's pixel: the G-buffer's gaps that a later sample fills. What
     /// comes back is as many records as hit there (on Vulkan, copied out of the device's streams
-    /// once the sample's hits are known), not the frame's.
+    /// in a submission of their own once the sample's hits are known, whose time no report
+    /// holds), not the frame's.
     HitsAmong(&'a [u32]),
 }
 
@@ -74,7 +75,7 @@ impl LitSampleRequest<'_> {
 /// Why `pixels` is no list [`CameraStreams::HitsAmong`] takes for an image of `count` pixels:
 /// an entry out of order, repeated or past the image's end.
 fn listed_pixels_problem(pixels: &[u32], count: u64) -> Option<String> {
-    if let Some(k) = pixels.windows(2).position(|pair| pair[0] >= pair[1]) {
+    if let Some(k) = first_not_ascending(pixels) {
         let (a, b) = (pixels[k], pixels[k + 1]);
         return Some(format!("camera pixels [{k}] = {a} and [{}] = {b}: the list must be strictly ascending", k + 1));
     }
@@ -86,9 +87,21 @@ fn listed_pixels_problem(pixels: &[u32], count: u64) -> Option<String> {
     }
 }
 
+/// Checks that the fields of `rays` and `hits` hold one entry per ray each: an error naming
+/// `lit_sample` otherwise.
+pub(crate) fn check_same_lengths(rays: &RayStream, hits: &HitStream) -> Result<()> {
+    rays.check("lit_sample")?;
+    hits.check("lit_sample")?;
+    if rays.len() != hits.len() {
+        let reason = format!("{} camera rays but {} hits", rays.len(), hits.len());
+        return Err(Error::InvalidParameter { name: "lit_sample", reason });
+    }
+    Ok(())
+}
+
 /// One lit sample's results, one record per pixel (ray `i` is pixel `i`): the shade stage's
-/// outputs that the accumulator sums and the occlusion of each shadow ray. (Not `PartialEq`: two
-/// runs differ in their reports' seconds.)
+/// outputs that the accumulator sums and the occlusion of each shadow ray; the camera streams as
+/// [`CameraStreams`] asked. (Not `PartialEq`: two runs differ in their reports' seconds.)
 #[derive(Clone, Debug)]
 pub struct LitSample {
     /// Analytic unshadowed radiance `U` (rgb; w = 0).
@@ -151,6 +164,9 @@ pub fn compose<B: Backend + ?Sized>(backend: &mut B, request: &LitSampleRequest<
             CameraStreams::None => None,
             CameraStreams::All => Some((frame.rays, frame.hits)),
             CameraStreams::HitsAmong(pixels) => {
+                // Selected from every field of both streams: a backend's frame with fields of
+                // other lengths is refused, not indexed past an end.
+                check_same_lengths(&frame.rays, &frame.hits)?;
                 let hit = hits_among(pixels, &frame.hits.primitive);
                 Some((frame.rays.select(&hit), frame.hits.select(&hit)))
             }

@@ -45,9 +45,9 @@ impl RayStream {
         check_field_lengths(stage, "ray", &fields)
     }
 
-    /// The rays at `indices`, in their order (each below [`Self::len`]; panics otherwise, as
-    /// slice indexing does).
-    pub fn select(&self, indices: &[u32]) -> Self {
+    /// The rays at `indices`, in their order (each below [`Self::len`] in every field; panics
+    /// otherwise, as slice indexing does).
+    pub(crate) fn select(&self, indices: &[u32]) -> Self {
         Self {
             origin: select(&self.origin, indices),
             direction: select(&self.direction, indices),
@@ -106,9 +106,9 @@ impl HitStream {
         self.len() as u64 * u64::from(HIT_STREAM_BYTES_PER_RAY)
     }
 
-    /// The records at `indices`, in their order (each below [`Self::len`]; panics otherwise, as
-    /// slice indexing does).
-    pub fn select(&self, indices: &[u32]) -> Self {
+    /// The records at `indices`, in their order (each below [`Self::len`] in every field; panics
+    /// otherwise, as slice indexing does).
+    pub(crate) fn select(&self, indices: &[u32]) -> Self {
         Self {
             t: select(&self.t, indices),
             primitive: select(&self.primitive, indices),
@@ -128,6 +128,12 @@ pub fn count_hits(primitive: &[u32]) -> usize {
 /// skipped (a request's check refuses such entries first).
 pub fn hits_among(pixels: &[u32], primitive: &[u32]) -> Vec<u32> {
     pixels.iter().copied().filter(|&i| primitive.get(i as usize).is_some_and(|&p| p != NO_HIT)).collect()
+}
+
+/// The first `k` where `values[k] ≥ values[k + 1]`: where a list that must be strictly
+/// ascending is not.
+pub(crate) fn first_not_ascending(values: &[u32]) -> Option<usize> {
+    values.windows(2).position(|pair| pair[0] >= pair[1])
 }
 
 /// `field`'s entries at `indices`, in their order.

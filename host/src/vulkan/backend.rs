@@ -1141,8 +1141,9 @@ mod tests {
     /// their counters and the readbacks in one command buffer — and one per pass plus one for
     /// the copies where it does not ([`Batch::submit`]); it had been fifteen. Counted from the
     /// second sample, after the first has uploaded the shade data. Listed pixels' camera records
-    /// take one submission more where some of them hit, none where none is listed. Every Vulkan
-    /// device; without one it fails under CI and is skipped loudly elsewhere.
+    /// take one submission more where some of them hit; none where none is listed, or none of
+    /// those listed hit (no records come back then). Every Vulkan device; without one it fails
+    /// under CI and is skipped loudly elsewhere.
     #[test]
     fn a_lit_sample_is_one_submission_where_the_device_writes_timestamps() {
         let devices = super::super::devices_for_test("lit sample submissions");
@@ -1153,12 +1154,19 @@ mod tests {
             let mut backend = VulkanBackend::open(device.index, &options, None).unwrap();
             backend.load_scene(&scene).unwrap();
             let mut submissions = Vec::new();
+            // Pixels the fifth sample's rays miss (the box's edges leave some).
+            let fifth = backend.render(&crate::frame::generate_params(&scene, 24, 16, 4)).unwrap();
+            let misses: Vec<u32> =
+                (0..24 * 16).filter(|&i| fifth.hits.primitive[i as usize] == raywave_shared::stream::NO_HIT).collect();
+            assert!(!misses.is_empty(), "{}", device.name);
             let cameras = [
                 CameraStreams::All,
                 CameraStreams::None,
                 CameraStreams::HitsAmong(&[3, 4, 5, 200]),
                 CameraStreams::HitsAmong(&[]),
+                CameraStreams::HitsAmong(&misses),
             ];
+            let mut records = Vec::new();
             for (seed, camera) in (0..).zip(cameras) {
                 let generate = crate::frame::generate_params(&scene, 24, 16, seed);
                 let shade = data.params(generate.sampler, 24, 16, generate.sample_index);
@@ -1166,11 +1174,15 @@ mod tests {
                 let before = backend.core.submissions.load(std::sync::atomic::Ordering::Relaxed);
                 let sample = backend.lit_sample(&request).unwrap();
                 submissions.push(backend.core.submissions.load(std::sync::atomic::Ordering::Relaxed) - before);
-                assert_eq!(sample.camera.is_some(), camera != CameraStreams::None, "{}", device.name);
+                records.push(sample.camera.map(|(rays, hits)| (rays.len(), hits.len())));
                 assert!(sample.hits > 0 && sample.occluded.len() == 24 * 16, "{}", device.name);
             }
-            let one = if backend.core.info.timestamps { 1 } else { 5 };
-            assert_eq!(submissions[1..], [one, one + 1, one], "{}: submissions of each sample", device.name);
+            let (one, all) = (if backend.core.info.timestamps { 1 } else { 5 }, 24 * 16);
+            assert_eq!(submissions[1..], [one, one + 1, one, one], "{}: submissions of each sample", device.name);
+            let gathered = records[2].map_or(0, |(rays, _)| rays);
+            assert!((1..=4).contains(&gathered), "{}: {records:?}", device.name);
+            let expected = [Some((all, all)), None, Some((gathered, gathered)), Some((0, 0)), Some((0, 0))];
+            assert_eq!(records, expected, "{}: camera records", device.name);
             let messages = backend.validation_messages();
             assert!(messages.is_empty(), "{}: {messages:?}", device.name);
         }

@@ -19,8 +19,8 @@ use std::time::Instant;
 /// Work gathered for one submission: copies of host data into device buffers, through
 /// host-visible staging buffers written when they are added; runs of passes, in order; then
 /// copies of device buffers into host-visible staging buffers, one per read (no larger than the
-/// buffer read, as before batches). Each step comes after a barrier that makes the last one's
-/// writes visible. The buffers it uploads to, its runs bind and its reads copy are borrowed for
+/// buffer read, as before batches; a gather's as large as it). Each step comes after a barrier
+/// that makes the writes before it visible, this submission's and earlier ones'. The buffers it uploads to, its runs bind and its reads copy are borrowed for
 /// `'a`, past [`Self::submit`]'s wait; an acceleration structure is bound by handle, which the
 /// caller keeps alive (`add_trace` borrows its scene). Each run holds a slot of its pass
 /// (descriptor set, timestamps) until the batch is dropped ([`Pass::prepare`]), so a pass may
@@ -151,15 +151,9 @@ impl<'a> Batch<'a> {
                 reason: format!("gather of element {index} past the end of a buffer of {} bytes", buffer.size),
             });
         }
-        let mut regions: Vec<vk::BufferCopy> = Vec::new();
-        for (k, &index) in indices.iter().enumerate() {
-            let source = u64::from(index) * size;
-            match regions.last_mut() {
-                Some(run) if run.src_offset + run.size == source => run.size += size,
-                _ => regions.push(vk::BufferCopy::default().src_offset(source).dst_offset(k as u64 * size).size(size)),
-            }
-        }
-        self.read_regions(buffer, indices.len() * size as usize, buffer.size, regions)
+        let bytes = indices.len() as u64 * size;
+        // As large as the buffer, or as the gather where it repeats elements.
+        self.read_regions(buffer, bytes as usize, buffer.size.max(bytes), gather_regions(indices, size))
     }
 
     /// Adds a read of `bytes` bytes of `buffer` that `regions` copy into the start of a staging
@@ -186,20 +180,20 @@ impl<'a> Batch<'a> {
         Ok(ReadId { staging: Some(self.reads.len() - 1), bytes, _element: PhantomData })
     }
 
-    /// Records `steps` into `cmd`, a barrier between each step and the next.
+    /// Records `steps` into `cmd`, each after a barrier.
     fn record(&self, cmd: vk::CommandBuffer, steps: &[Step<'_, 'a>]) {
         let all = vk::PipelineStageFlags::ALL_COMMANDS;
         let copy = |source: &GpuBuffer, destination: &GpuBuffer, regions: &[vk::BufferCopy]| {
             // SAFETY: `cmd` is recording; both buffers hold every region (checked in `upload`,
-            // `read` and `gather`, which made the staging buffers of the regions' total size),
-            // none empty, and have transfer usage.
+            // `read` and `gather`, which made each staging buffer at least the size of what its
+            // regions copy), none empty, and have transfer usage.
             unsafe { self.core.device.cmd_copy_buffer(cmd, source.buffer, destination.buffer, regions) };
         };
-        for (k, step) in steps.iter().enumerate() {
-            if k > 0 {
-                // Each step reads what the ones before it wrote.
-                global_barrier(&self.core, cmd, all, all);
-            }
+        for step in steps {
+            // Each step reads what the ones before it wrote: in this submission, or in an
+            // earlier one (a queue submission orders only the host's writes before it, not the
+            // device's; a split batch's runs and a gather read what earlier submissions wrote).
+            global_barrier(&self.core, cmd, all, all);
             match step {
                 Step::Uploads => self.uploads.iter().for_each(|up| copy(&up.staging, up.buffer, &up.regions)),
                 Step::Run(run) => run.pass.record(cmd, &run.prepared, &*run.work),
@@ -255,6 +249,20 @@ impl<'a> Batch<'a> {
     }
 }
 
+/// The copy regions of a gather of the elements at `indices`, each `size` bytes, into the start
+/// of a staging buffer in their order: one region per run of consecutive indices.
+fn gather_regions(indices: &[u32], size: u64) -> Vec<vk::BufferCopy> {
+    let mut regions: Vec<vk::BufferCopy> = Vec::new();
+    for (k, &index) in indices.iter().enumerate() {
+        let source = u64::from(index) * size;
+        match regions.last_mut() {
+            Some(run) if run.src_offset + run.size == source => run.size += size,
+            _ => regions.push(vk::BufferCopy::default().src_offset(source).dst_offset(k as u64 * size).size(size)),
+        }
+    }
+    regions
+}
+
 impl Drop for Batch<'_> {
     /// Releases the slots of the batch's runs, submitted or not.
     fn drop(&mut self) {
@@ -281,5 +289,22 @@ impl Done {
     /// The value of a sanitized counter ([`GpuBuffer::counter`]) read by `read`.
     pub fn count(&self, read: &ReadId<u32>) -> Result<u64> {
         Ok(self.read(read)?.first().copied().map(u64::from).unwrap_or(0))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A gather copies each run of consecutive indices in one region, to where its first element
+    /// falls in the list; a repeated or descending index starts a run of its own.
+    #[test]
+    fn a_gather_copies_each_run_of_indices_in_one_region() {
+        let regions: Vec<_> = gather_regions(&[1, 2, 3, 7, 40, 41, 383, 383, 5], 8)
+            .iter()
+            .map(|r| (r.src_offset, r.dst_offset, r.size))
+            .collect();
+        assert_eq!(regions, [(8, 0, 24), (56, 24, 8), (320, 32, 16), (3064, 48, 8), (3064, 56, 8), (40, 64, 8)]);
+        assert!(gather_regions(&[], 8).is_empty());
     }
 }

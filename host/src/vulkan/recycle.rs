@@ -2,7 +2,8 @@
 //! lit sample, a denoise or a single stage allocates for one call and drops at its end.
 //!
 //! Why: a 1080p lit sample on Vulkan holds sixteen device buffers and eight staging buffers
-//! (thirty-one with the camera streams of a frame's first sample), a denoise up to fourteen and
+//! (thirty-one with the camera streams of a frame's first sample, or with a later sample's
+//! gather of the G-buffer's gaps, whose staging buffers are the same), a denoise up to fourteen and
 //! eight, and every call had created and freed them all. gpu-allocator suballocates 256 MB device
 //! blocks (64 MB host blocks) and frees a block as soon as it is empty unless it is the memory
 //! type's last, so at 1080p (33 MB a `Vec4` image) each call allocated and freed whole blocks
