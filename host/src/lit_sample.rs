@@ -186,17 +186,28 @@ mod tests {
     use raywave_shared::stream::NO_HIT;
     use raywave_shared::SamplerParams;
 
+    /// `scene` on a CPU backend, its shade data, and the sampler, camera and shade parameters of
+    /// sample 1 (of 4) of a `width × height` image.
+    fn sample_one(
+        scene: &str,
+        width: u32,
+        height: u32,
+    ) -> (CpuBackend, ShadeData, SamplerParams, GenerateParams, ShadeParams) {
+        let scene = Scene::load(scene).unwrap();
+        let data = ShadeData::new(&scene).unwrap();
+        let mut cpu = CpuBackend::new();
+        cpu.load_scene(&scene).unwrap();
+        let sampler = sampler_params(sampler_kind::ZSOBOL, 3, width, height, 4);
+        let generate = generate_params_with(&scene, width, height, 1, sampler);
+        let shade = data.params(sampler, width, height, 1);
+        (cpu, data, sampler, generate, shade)
+    }
+
     /// Shading for another image, sample or sampler than the camera rays' is refused before any
     /// work, naming the field; the matching request is shaded.
     #[test]
     fn a_request_shades_the_camera_rays_own_image_and_sample() {
-        let scene = Scene::load("builtin:cornell").unwrap();
-        let data = ShadeData::new(&scene).unwrap();
-        let mut cpu = CpuBackend::new();
-        cpu.load_scene(&scene).unwrap();
-        let sampler = sampler_params(sampler_kind::ZSOBOL, 3, 16, 12, 4);
-        let generate = generate_params_with(&scene, 16, 12, 1, sampler);
-        let shade = data.params(sampler, 16, 12, 1);
+        let (mut cpu, data, sampler, generate, shade) = sample_one("builtin:cornell", 16, 12);
         let request = LitSampleRequest { generate: &generate, shade: &shade, data: &data, camera: CameraStreams::None };
         assert_eq!(compose(&mut cpu, &request).unwrap().analytic.len(), 16 * 12);
         let mismatches = [
@@ -225,13 +236,7 @@ mod tests {
     /// those pixels.
     #[test]
     fn a_sample_returns_the_camera_records_asked_for() {
-        let scene = Scene::load("builtin:spheres").unwrap();
-        let data = ShadeData::new(&scene).unwrap();
-        let mut cpu = CpuBackend::new();
-        cpu.load_scene(&scene).unwrap();
-        let sampler = sampler_params(sampler_kind::ZSOBOL, 3, 32, 24, 4);
-        let generate = generate_params_with(&scene, 32, 24, 1, sampler);
-        let shade = data.params(sampler, 32, 24, 1);
+        let (mut cpu, data, _, generate, shade) = sample_one("builtin:spheres", 32, 24);
         let request = |camera| LitSampleRequest { generate: &generate, shade: &shade, data: &data, camera };
         assert_eq!(compose(&mut cpu, &request(CameraStreams::None)).unwrap().camera, None);
         let (rays, hits) = compose(&mut cpu, &request(CameraStreams::All)).unwrap().camera.unwrap();
