@@ -2,7 +2,8 @@
 //! transforms (and `EXT_mesh_gpu_instancing`'s instances, [`instancing`]), every triangle primitive
 //! as a mesh (one without POSITION is skipped, as glTF 2.0 § 3.7.2.1 asks), metallic-roughness
 //! materials with emission (and `KHR_materials_emissive_strength`; `doubleSided` makes an emissive
-//! rectangle a two-sided light), and the first perspective camera, if any — looking at the point
+//! rectangle a two-sided light, and is read for nothing else: rays meet both sides of every
+//! triangle, so `doubleSided: false` culls no back face), and the first perspective camera, if any — looking at the point
 //! along its view at the depth of the scene's centre, which sets the default focus
 //! ([`PlacedCamera::aimed`]). What raywave does not render — textures, see-through materials, skins
 //! and morph targets, orthographic cameras, punctual lights — is counted ([`Scene::unrendered`]).
