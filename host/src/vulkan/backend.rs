@@ -917,9 +917,9 @@ impl Backend for VulkanBackend {
     /// primitives (to count the hits), 56 bytes a pixel, and the camera streams when asked (the
     /// composed stages move 208): all of them in the same submission, or, for the listed pixels
     /// that hit ([`CameraStreams::HitsAmong`]), their records only, 56 bytes each, gathered in a
-    /// second one once the hits' primitives show which those are. The checks of the composed stages, in their order and before
-    /// any work: the request, the scene loaded, the camera, the shade data and parameters for
-    /// the dense stream generate writes.
+    /// second one once the hits' primitives show which those are. The checks of the composed
+    /// stages, in their order and before any work: the request, the scene loaded, the camera, the
+    /// shade data and parameters for the dense stream generate writes.
     fn lit_sample(&mut self, request: &LitSampleRequest<'_>) -> Result<LitSample> {
         let _driver = driver_lock::device_use();
         request.check()?;

@@ -19,8 +19,9 @@ use std::time::Instant;
 /// Work gathered for one submission: copies of host data into device buffers, through
 /// host-visible staging buffers written when they are added; runs of passes, in order; then
 /// copies of device buffers into host-visible staging buffers, one per read (no larger than the
-/// buffer read, as before batches; a gather's as large as it). Each step comes after a barrier
-/// that makes the writes before it visible, this submission's and earlier ones'. The buffers it uploads to, its runs bind and its reads copy are borrowed for
+/// buffer read, as before batches; a gather's as large as the buffer it gathers from). Each
+/// step comes after a barrier that makes the writes before it visible, this submission's and
+/// earlier ones'. The buffers it uploads to, its runs bind and its reads copy are borrowed for
 /// `'a`, past [`Self::submit`]'s wait; an acceleration structure is bound by handle, which the
 /// caller keeps alive (`add_trace` borrows its scene). Each run holds a slot of its pass
 /// (descriptor set, timestamps) until the batch is dropped ([`Pass::prepare`]), so a pass may
