@@ -6,7 +6,7 @@ use crate::error::Result;
 use crate::lit_sample::{LitSample, LitSampleRequest};
 use crate::scene::{Scene, SceneIdentity};
 use crate::shading::ShadeData;
-use crate::stream::{HitStream, RayStream, ShadeStream};
+use crate::stream::{check_one_hit_per_ray, HitStream, RayStream, ShadeStream};
 use glam::{UVec2, Vec4};
 use rayon::prelude::*;
 use raywave_shared::sampling::{sampler_kind, warp_kind};
@@ -341,11 +341,7 @@ pub(crate) fn check_shade_streams(
     rays: &RayStream,
     hits: &HitStream,
 ) -> Result<()> {
-    rays.check("shade")?;
-    hits.check("shade")?;
-    if rays.len() != hits.len() {
-        return Err(shade_error(format!("{} rays but {} hits", rays.len(), hits.len())));
-    }
+    check_one_hit_per_ray(rays, hits, "shade")?;
     check_shade_params(params, data, hits.len())?;
     #[cfg(feature = "vulkan")]
     crate::vulkan::driver_lock::debug_assert_unheld("the shade stage's dense-stream check (rayon)");

@@ -7,10 +7,10 @@ use crate::backend::{aperture_refusal, check_image_size_common, check_shade_stre
 use crate::denoise::{check_radius, frame_params, is_guide_surface, rgb, DenoiseInput, DenoiseMethod};
 use crate::error::{Error, Result};
 use crate::frame::{check_samples_per_pixel, generate_params_with, sampler_params};
-use crate::lit_sample::{check_same_lengths, CameraStreams, LitSampleRequest};
+use crate::lit_sample::{CameraStreams, LitSampleRequest};
 use crate::scene::{Scene, MAX_COORDINATE};
 use crate::shading::{resolve, ShadeAccumulator, ShadeData};
-use crate::stream::{first_not_ascending, HitStream, RayStream};
+use crate::stream::{check_one_hit_per_ray, first_not_ascending, HitStream, RayStream};
 use glam::Vec3;
 use raywave_kernels::shade::stage::Surface;
 use raywave_shared::sampling::sampler_kind;
@@ -307,7 +307,7 @@ pub fn shade_samples(
 /// ([`CameraStreams::HitsAmong`]): one hit per ray, each ray's pixel one of `gaps`, ascending.
 /// An error naming `lit_sample` otherwise (a backend an engine wrote may return other records).
 fn check_gap_streams(rays: &RayStream, hits: &HitStream, gaps: &[u32]) -> Result<()> {
-    check_same_lengths(rays, hits)?;
+    check_one_hit_per_ray(rays, hits, "lit_sample")?;
     let reason = if let Some(k) = first_not_ascending(&rays.pixel) {
         Some(format!("camera rays' pixels [{k}] and [{}] are not ascending", k + 1))
     } else {

@@ -13,7 +13,7 @@
 use crate::backend::{Backend, StageReport};
 use crate::error::{Error, Result};
 use crate::shading::{shadow_rays, ShadeData};
-use crate::stream::{first_not_ascending, hits_among, HitStream, RayStream, ShadeStream};
+use crate::stream::{check_one_hit_per_ray, first_not_ascending, hits_among, HitStream, RayStream, ShadeStream};
 use glam::Vec4;
 use raywave_shared::{GenerateParams, ShadeParams};
 
@@ -87,18 +87,6 @@ fn listed_pixels_problem(pixels: &[u32], count: u64) -> Option<String> {
     }
 }
 
-/// Checks that the fields of `rays` and `hits` hold one entry per ray each: an error naming
-/// `lit_sample` otherwise.
-pub(crate) fn check_same_lengths(rays: &RayStream, hits: &HitStream) -> Result<()> {
-    rays.check("lit_sample")?;
-    hits.check("lit_sample")?;
-    if rays.len() != hits.len() {
-        let reason = format!("{} camera rays but {} hits", rays.len(), hits.len());
-        return Err(Error::InvalidParameter { name: "lit_sample", reason });
-    }
-    Ok(())
-}
-
 /// One lit sample's results, one record per pixel (ray `i` is pixel `i`): the shade stage's
 /// outputs that the accumulator sums and the occlusion of each shadow ray; the camera streams as
 /// [`CameraStreams`] asked. (Not `PartialEq`: two runs differ in their reports' seconds.)
@@ -166,7 +154,7 @@ pub fn compose<B: Backend + ?Sized>(backend: &mut B, request: &LitSampleRequest<
             CameraStreams::HitsAmong(pixels) => {
                 // Selected from every field of both streams: a backend's frame with fields of
                 // other lengths is refused, not indexed past an end.
-                check_same_lengths(&frame.rays, &frame.hits)?;
+                check_one_hit_per_ray(&frame.rays, &frame.hits, "lit_sample")?;
                 let hit = hits_among(pixels, &frame.hits.primitive);
                 Some((frame.rays.select(&hit), frame.hits.select(&hit)))
             }

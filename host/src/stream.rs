@@ -204,6 +204,18 @@ impl ShadeStream {
 
 /// The streams' shared check: every `(field, length)` of a `stream` stream equal, else an error
 /// naming `stage` and listing them.
+/// Checks that the fields of `rays` and `hits` hold one entry per ray each ([`RayStream::check`],
+/// [`HitStream::check`]) and that there is one hit per ray: an error naming `stage` otherwise.
+pub(crate) fn check_one_hit_per_ray(rays: &RayStream, hits: &HitStream, stage: &'static str) -> Result<()> {
+    rays.check(stage)?;
+    hits.check(stage)?;
+    if rays.len() != hits.len() {
+        let reason = format!("{} rays but {} hits", rays.len(), hits.len());
+        return Err(Error::InvalidParameter { name: stage, reason });
+    }
+    Ok(())
+}
+
 fn check_field_lengths(stage: &'static str, stream: &str, fields: &[(&str, usize)]) -> Result<()> {
     if fields.iter().all(|&(_, n)| n == fields[0].1) {
         return Ok(());
