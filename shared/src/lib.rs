@@ -6,6 +6,17 @@
 //! types unchanged on the CPU and in SPIR-V; the host uses them to fill buffers.
 #![no_std]
 
+// The structs here share the std430 layout of the kernels' buffers and push constants, which
+// needs glam's 16-byte-aligned `Vec4` (its SIMD and SPIR-V layout; each struct's own size and
+// alignment checks are in its module). glam's `scalar-math` feature, if any crate in a build
+// enables it, aligns `Vec4` to 4 bytes: refused first, here, with a message that names it,
+// which the structs' own checks, failing after it, do not.
+const _: () = assert!(
+    core::mem::align_of::<glam::Vec4>() == 16,
+    "raywave needs glam's 16-byte-aligned Vec4 for the layout it shares with its shaders; \
+     glam's `scalar-math` feature (enabled by some crate in this build) is not supported"
+);
+
 pub mod bindings;
 pub mod bvh;
 pub mod denoise;
