@@ -111,12 +111,16 @@ pub(super) fn derive(meshes: &mut [Mesh]) -> DerivedLights {
 /// corner lowered by 0.9·10⁻⁴ of its diagonal had blocked the shadow rays to about a quarter of
 /// itself, `S_N` 5–91 % low (12–24 % of `U`) at the hard points of `shadowed_estimate.rs`
 /// (test). Each vertex moves by at most the tolerance, which is under a quarter of the shortest
-/// edge, so its nearest corner is the one it was matched to.
+/// edge, so its nearest corner is the one it was matched to. The distances are compared in
+/// `f64`: in `f32` the squared distances across a lamp narrower than about 10⁻¹⁹ underflowed to 0,
+/// ties went to the first corner, and a 192.5 × 2.6·10⁻²³ strip (found by `scene_shapes`) had
+/// two vertices moved across it, which left it no area and the scene no bounds.
 fn snap_onto(mesh: &mut Mesh, quad: &Parallelogram) {
     let corners = quad.corners();
     for &index in mesh.triangles.iter().flatten() {
         let vertex = &mut mesh.positions[index as usize];
-        let nearest = corners.iter().min_by(|a, b| a.distance_squared(*vertex).total_cmp(&b.distance_squared(*vertex)));
+        let distance = |corner: &&Vec3| corner.as_dvec3().distance_squared(vertex.as_dvec3());
+        let nearest = corners.iter().min_by(|a, b| distance(a).total_cmp(&distance(b)));
         if let Some(&nearest) = nearest {
             *vertex = nearest;
         }
@@ -476,6 +480,34 @@ mod tests {
                 if snapped.positions.len() == 5 {
                     assert_eq!(snapped.positions[4], unused);
                 }
+            }
+        }
+    }
+
+    /// Strip lights 192.5 and 10⁷ long, down to the narrowest a light can be at such a length
+    /// (the squared length of `edge_u × edge_v` just above `f32`'s smallest), along and across
+    /// the axes: moved onto their lights, their vertices stay where they were (each is its light's
+    /// corner), so their triangles keep their area, the scene its bounds and the render a finite
+    /// ray extent. Compared in `f32`, the squared distances across a strip narrower than about
+    /// 2.6·10⁻²³ underflowed to 0 and two vertices went to the far side: the fuzzer's strip left
+    /// its scene no bounds, and the render was refused for an infinite ray extent.
+    #[test]
+    fn a_strip_narrower_than_f32_squared_distances_keeps_its_vertices() {
+        for (length, width) in [(192.5f32, 1e-12f32), (192.5, 1e-20), (192.5, 2.646_978e-23), (1e7, 1e-28)] {
+            for (along, across) in [(Vec3::Z, -Vec3::X), (Vec3::new(0.6, 0.8, 0.0), Vec3::Z)] {
+                let (u, v) = (along * length, across * width);
+                let corners = vec![Vec3::ZERO, u, u + v, v];
+                let mesh = emissive(corners.clone(), vec![[0, 1, 2], [0, 2, 3]]);
+                let scene = crate::scene::Scene::new("strip", vec![mesh], crate::scene::cornell::camera())
+                    .unwrap_or_else(|err| panic!("width {width}, {along}: {err}"));
+                assert_eq!(scene.lights().len(), 1, "width {width}, {along}");
+                let mesh = &scene.meshes()[0];
+                assert_eq!(mesh.positions, corners, "width {width}, {along}: vertices moved");
+                let lo = corners.iter().fold(Vec3::MAX, |lo, &p| lo.min(p));
+                let hi = corners.iter().fold(Vec3::MIN, |hi, &p| hi.max(p));
+                assert_eq!(scene.bounds(), (lo, hi), "width {width}, {along}");
+                let tmax = crate::frame::generate_params(&scene, 16, 9, 0).tmax;
+                assert!(tmax.is_finite(), "width {width}, {along}: tmax {tmax}");
             }
         }
     }
