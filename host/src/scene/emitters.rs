@@ -112,9 +112,10 @@ pub(super) fn derive(meshes: &mut [Mesh]) -> DerivedLights {
 /// itself, `S_N` 5–91 % low (12–24 % of `U`) at the hard points of `shadowed_estimate.rs`
 /// (test). Each vertex moves by at most the tolerance, which is under a quarter of the shortest
 /// edge, so its nearest corner is the one it was matched to. The distances are compared in
-/// `f64`: in `f32` the squared distances across a lamp narrower than about 10⁻¹⁹ underflowed to 0,
-/// ties went to the first corner, and a 192.5 × 2.6·10⁻²³ strip (found by `scene_shapes`) had
-/// two vertices moved across it, which left it no area and the scene no bounds.
+/// `f64`: in `f32` the squared distances across a lamp narrower than about 10⁻¹⁹ are subnormal,
+/// and below about 2.6·10⁻²³ they underflowed to 0, the tie went to the first corner, and a
+/// 192.5 × 2.6·10⁻²³ strip (found by `scene_shapes`) had two vertices moved across it, which
+/// left it no area and the scene no bounds.
 fn snap_onto(mesh: &mut Mesh, quad: &Parallelogram) {
     let corners = quad.corners();
     for &index in mesh.triangles.iter().flatten() {
