@@ -335,6 +335,8 @@ mod tests {
         assert!(frame.hits.t.iter().all(|t| t.is_finite()));
         assert!(frame.hits.barycentrics.iter().all(|b| b.is_finite()));
         assert!(frame.rays.direction.iter().all(|d: &Vec4| d.is_finite()));
+        // Finite as computed, not as replaced (each stage replaces a non-finite value and counts it).
+        assert!(frame.timings.iter().all(|report| report.sanitized == 0), "{:?}", frame.timings);
     }
 
     #[test]
