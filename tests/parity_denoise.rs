@@ -423,6 +423,50 @@ fn without_an_occluder_the_image_is_u_exactly_on_the_cpu_and_every_vulkan_device
     }
 }
 
+/// The shadow ratio does not depend on the estimates' scale: with `S_N` and `U_N` of every pixel
+/// multiplied by a power of two — 2⁻¹²⁰, so that `U_N` ~ 10⁻³⁷ (just above the smallest normal
+/// float, and the filters' weighted sums of it below, where a device that flushes subnormal
+/// values to zero would drop taps), and 2¹⁰⁰ — each ratio method's image is the unscaled
+/// input's, on the CPU and on every device, within the parity tolerances (scene radiance
+/// ~10⁻³⁰ is reachable: emission goes down to any positive value). Measured (2026-12-03): the
+/// CPU's images bit-identical to the unscaled ones, lavapipe's within 4.0·10⁻⁷ (as its unscaled
+/// parity).
+#[test]
+fn scaled_shadow_estimates_denoise_as_unscaled_on_the_cpu_and_every_vulkan_device() {
+    let mut cpu = CpuBackend::new();
+    let (params, input) = synthetic(200, 3, 31);
+    // The ratio methods (the stochastic one filters `S_N` itself, which scales with it).
+    let ratio_cases = |name: &str, input: DenoiseInput| {
+        cases(name, params, input).into_iter().filter(|case| case.name.contains("ratio")).collect::<Vec<_>>()
+    };
+    let unscaled = ratio_cases("200×3", input.clone());
+    assert_eq!(unscaled.len(), 2, "ratio+tv and ratio+svgf");
+    let expected: Vec<Vec<Vec4>> = unscaled.iter().map(|case| run(&mut cpu, case)).collect();
+    let mut devices = vulkan::each_device("denoise of scaled estimates");
+    for scale in [2f32.powi(-120), 2f32.powi(100)] {
+        let mut scaled = input.clone();
+        for value in scaled.unshadowed.iter_mut().chain(&mut scaled.shadowed) {
+            *value *= scale;
+        }
+        let tiniest = scaled.unshadowed.iter().flat_map(|u| u.truncate().to_array()).filter(|&u| u > 0.0);
+        assert!(tiniest.fold(f32::INFINITY, f32::min) >= f32::MIN_POSITIVE, "U_N stays a normal float");
+        let scaled_cases = ratio_cases(&format!("200×3, estimates ×{scale:e}"), scaled);
+        let backends = std::iter::once(&mut cpu as &mut dyn Backend)
+            .chain(devices.iter_mut().map(|device| device as &mut dyn Backend));
+        for backend in backends {
+            for (case, expected) in scaled_cases.iter().zip(&expected) {
+                let who = format!("{}, {}", backend.name(), case.name);
+                let diff = compare(expected, &run(backend, case));
+                eprintln!("{who}: max relative difference {:.3e} from the unscaled image", diff.max_rel);
+                let what = format!("{who}: pixels differing beyond {REL:e} from the unscaled image");
+                common::assert_within_budget(diff.outliers, diff.pixels, OUTLIER_FRACTION, &what, &diff.examples);
+                assert!(diff.max_rel <= REL_ALL, "{who}: a pixel differs by {:.3e}", diff.max_rel);
+            }
+        }
+    }
+    devices.into_iter().for_each(vulkan::assert_clean);
+}
+
 /// Runs every method on `backend` with `input`, which holds a NaN in `shadowed[7]`, and asserts
 /// the typed input error naming that value.
 fn assert_refuses_nan(backend: &mut dyn Backend, params: &DenoiseParams, input: &DenoiseInput) {
