@@ -280,6 +280,31 @@ fn run(backend: &mut dyn Backend, case: &Case) -> Vec<Vec4> {
     color
 }
 
+/// Fails unless `got` matches `expected` within the tolerances — all but [`OUTLIER_FRACTION`] of
+/// the pixels within [`REL`], every pixel within [`REL_ALL`] — naming `who`; prints and returns
+/// the differences.
+fn assert_within_tolerances(who: &str, expected: &[Vec4], got: &[Vec4]) -> Diff {
+    let diff = compare(expected, got);
+    eprintln!(
+        "{who}: max relative difference {:.3e}, {} of {} pixels beyond {REL:e}",
+        diff.max_rel, diff.outliers, diff.pixels
+    );
+    common::assert_within_budget(
+        diff.outliers,
+        diff.pixels,
+        OUTLIER_FRACTION,
+        &format!("{who}: pixels differing beyond {REL:e}"),
+        &diff.examples,
+    );
+    assert!(
+        diff.max_rel <= REL_ALL,
+        "{who}: a pixel differs by {:.3e} (> {REL_ALL:e}):\n{}",
+        diff.max_rel,
+        diff.examples.join("\n")
+    );
+    diff
+}
+
 /// Runs every case on the CPU and on every device and compares them; requires at least
 /// `min_changed` of every image's pixels to be changed by the denoiser (on the CPU).
 fn check_parity(test: &str, all: &[Case], min_changed: f64) {
@@ -300,25 +325,7 @@ fn check_parity(test: &str, all: &[Case], min_changed: f64) {
         let mut worst = Diff::default();
         for (case, color) in all.iter().zip(&expected) {
             let who = format!("{}, {}", device.name(), case.name);
-            let got = run(&mut device, case);
-            let diff = compare(color, &got);
-            eprintln!(
-                "{who}: max relative difference {:.3e}, {} of {} pixels beyond {REL:e}",
-                diff.max_rel, diff.outliers, diff.pixels
-            );
-            common::assert_within_budget(
-                diff.outliers,
-                diff.pixels,
-                OUTLIER_FRACTION,
-                &format!("{who}: pixels differing beyond {REL:e}"),
-                &diff.examples,
-            );
-            assert!(
-                diff.max_rel <= REL_ALL,
-                "{who}: a pixel differs by {:.3e} (> {REL_ALL:e}):\n{}",
-                diff.max_rel,
-                diff.examples.join("\n")
-            );
+            let diff = assert_within_tolerances(&who, color, &run(&mut device, case));
             worst.max_rel = worst.max_rel.max(diff.max_rel);
             worst.outliers += diff.outliers;
             worst.pixels += diff.pixels;
@@ -455,12 +462,8 @@ fn scaled_shadow_estimates_denoise_as_unscaled_on_the_cpu_and_every_vulkan_devic
             .chain(devices.iter_mut().map(|device| device as &mut dyn Backend));
         for backend in backends {
             for (case, expected) in scaled_cases.iter().zip(&expected) {
-                let who = format!("{}, {}", backend.name(), case.name);
-                let diff = compare(expected, &run(backend, case));
-                eprintln!("{who}: max relative difference {:.3e} from the unscaled image", diff.max_rel);
-                let what = format!("{who}: pixels differing beyond {REL:e} from the unscaled image");
-                common::assert_within_budget(diff.outliers, diff.pixels, OUTLIER_FRACTION, &what, &diff.examples);
-                assert!(diff.max_rel <= REL_ALL, "{who}: a pixel differs by {:.3e}", diff.max_rel);
+                let who = format!("{}, {} against the unscaled image", backend.name(), case.name);
+                assert_within_tolerances(&who, expected, &run(backend, case));
             }
         }
     }
