@@ -77,9 +77,12 @@ pub fn render_checked(dir: &Path, scene: &Path, choices: u8) {
 /// An empty directory for one input: `input/` inside a temporary directory of the fuzzing
 /// process, emptied before each input, so that no input reads the files an earlier one wrote (a
 /// crash then reproduces from its input alone), and a scene's `../` reaches only that directory.
+/// The temporary directory is in memory where the system has such a place ([`RAM_TEMP_DIR`]).
 pub fn with_scratch_dir<T>(f: impl FnOnce(&Path) -> T) -> T {
     thread_local! {
-        static DIR: tempfile::TempDir = tempfile::tempdir().expect("a temporary directory");
+        static DIR: tempfile::TempDir = tempfile::tempdir_in(RAM_TEMP_DIR)
+            .or_else(|_| tempfile::tempdir())
+            .expect("a temporary directory");
     }
     DIR.with(|dir| {
         let input = dir.path().join("input");
@@ -91,3 +94,10 @@ pub fn with_scratch_dir<T>(f: impl FnOnce(&Path) -> T) -> T {
         f(&input)
     })
 }
+
+/// Linux's memory-backed file system, where each input's scene and the render's outputs (4–6
+/// files created, written, synced and removed per input) cost no disk I/O: on a 2-vCPU VM with an
+/// ext4 disk, CI's runs took 58 s (`scene_load`) and 478 s (`scene_shapes`) there against 164 s
+/// and 626 s in `/tmp`.
+/// Where it is missing or not writable, the system's temporary directory serves.
+const RAM_TEMP_DIR: &str = "/dev/shm";
