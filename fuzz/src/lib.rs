@@ -38,11 +38,12 @@ pub fn write_scene(dir: &Path, bytes: &[u8]) -> Option<PathBuf> {
 /// — and 1, 2 or 4 samples per pixel), and asserts what every render must give: no stage replacing
 /// a non-finite value (sound input sanitizes nothing) and a finite HDR image — or the typed error
 /// of a scene the render may refuse: one that does not load, whose BVH is too deep, or whose
-/// lights fail their checks. Any other error (options, streams, outputs) is a defect.
-pub fn render_checked(dir: &Path, scene: &Path, choices: u8) {
+/// lights fail their checks. Any other error (options, streams, outputs) is a defect. Returns
+/// whether the scene rendered (false: it did not load, or the render refused it).
+pub fn render_checked(dir: &Path, scene: &Path, choices: u8) -> bool {
     let denoise = [DenoiseMethod::Tv, DenoiseMethod::Svgf, DenoiseMethod::None][(choices as usize >> 1) % 3];
     let scene_name = scene.to_str().expect("a UTF-8 temporary path");
-    let Ok(loaded) = Scene::load(scene_name) else { return };
+    let Ok(loaded) = Scene::load(scene_name) else { return false };
     let options = RenderOptions {
         scene: scene_name.to_owned(),
         device: DeviceChoice::Cpu,
@@ -68,9 +69,13 @@ pub fn render_checked(dir: &Path, scene: &Path, choices: u8) {
             assert_eq!(StageReport::total_sanitized(&report.timings), 0, "{:?}", report.timings);
             let hdr = image::open(dir.join("out.exr")).expect("the EXR reads back").into_rgba32f();
             assert!(hdr.pixels().all(|p| p.0.iter().all(|v| v.is_finite())), "a non-finite pixel");
+            true
         }
-        Err(Error::SceneTooLarge { .. }) => {}
-        Err(err) => assert!(ShadeData::new(&loaded).is_err(), "a scene that loads, with valid lights, refused: {err}"),
+        Err(Error::SceneTooLarge { .. }) => false,
+        Err(err) => {
+            assert!(ShadeData::new(&loaded).is_err(), "a scene that loads, with valid lights, refused: {err}");
+            false
+        }
     }
 }
 
@@ -101,3 +106,33 @@ pub fn with_scratch_dir<T>(f: impl FnOnce(&Path) -> T) -> T {
 /// and 626 s in `/tmp`.
 /// Where it is missing or not writable, the system's temporary directory serves.
 const RAM_TEMP_DIR: &str = "/dev/shm";
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The seed inputs CI's `scene_render` run starts from (`fuzz/seed-render-corpus`) each
+    /// render: seeds that stopped loading would leave that run where an empty corpus leaves it,
+    /// short of the render.
+    #[test]
+    fn the_render_seeds_render() {
+        let seeds = tempfile::tempdir().expect("a temporary directory");
+        let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("seed-render-corpus");
+        let status = std::process::Command::new("bash").arg(&script).arg(seeds.path()).status().expect("bash runs");
+        assert!(status.success(), "{} failed: {status}", script.display());
+        let mut names = Vec::new();
+        for entry in std::fs::read_dir(seeds.path()).expect("the seeds' directory reads") {
+            let path = entry.expect("an entry").path();
+            let bytes = std::fs::read(&path).expect("a seed reads");
+            let (&choices, scene_bytes) = bytes.split_first().expect("a seed holds its options byte");
+            let rendered = with_scratch_dir(|dir| {
+                let scene = write_scene(dir, scene_bytes).expect("a seed holds a scene");
+                render_checked(dir, &scene, choices)
+            });
+            assert!(rendered, "{} did not render", path.display());
+            names.push(path.file_name().expect("a name").to_string_lossy().into_owned());
+        }
+        names.sort();
+        assert_eq!(names, ["emissive_quad", "lamp_occluder_floor", "tetrahedron"]);
+    }
+}
