@@ -79,10 +79,18 @@ pub fn render_checked(dir: &Path, scene: &Path, choices: u8) -> bool {
     }
 }
 
+/// `scene_render`'s input: byte 0 chooses the estimator options ([`render_checked`]), the rest is
+/// the scene ([`write_scene`]), rendered in a scratch directory ([`with_scratch_dir`]). Returns
+/// whether the scene rendered.
+pub fn render_input(bytes: &[u8]) -> bool {
+    let Some((&choices, scene_bytes)) = bytes.split_first() else { return false };
+    with_scratch_dir(|dir| write_scene(dir, scene_bytes).is_some_and(|path| render_checked(dir, &path, choices)))
+}
+
 /// An empty directory for one input: `input/` inside a temporary directory of the fuzzing
 /// process, emptied before each input, so that no input reads the files an earlier one wrote (a
 /// crash then reproduces from its input alone), and a scene's `../` reaches only that directory.
-/// The temporary directory is in memory where the system has such a place ([`RAM_TEMP_DIR`]).
+/// The temporary directory is in memory where the system has such a place (`RAM_TEMP_DIR`).
 pub fn with_scratch_dir<T>(f: impl FnOnce(&Path) -> T) -> T {
     thread_local! {
         static DIR: tempfile::TempDir = tempfile::tempdir_in(RAM_TEMP_DIR)
@@ -124,12 +132,7 @@ mod tests {
         for entry in std::fs::read_dir(seeds.path()).expect("the seeds' directory reads") {
             let path = entry.expect("an entry").path();
             let bytes = std::fs::read(&path).expect("a seed reads");
-            let (&choices, scene_bytes) = bytes.split_first().expect("a seed holds its options byte");
-            let rendered = with_scratch_dir(|dir| {
-                let scene = write_scene(dir, scene_bytes).expect("a seed holds a scene");
-                render_checked(dir, &scene, choices)
-            });
-            assert!(rendered, "{} did not render", path.display());
+            assert!(render_input(&bytes), "{} did not render", path.display());
             names.push(path.file_name().expect("a name").to_string_lossy().into_owned());
         }
         names.sort();
