@@ -46,14 +46,15 @@
 //! that loop by the inverse CDF so that ZSobol's strata survive, with each light's weight and
 //! form factors kept in arrays. It never draws a light that lights nothing at the point (the
 //! own-mesh case the bound misses), and it left the Cornell box's images byte-identical (one
-//! light), but the ratio estimate did not gain: on the two-light box (all lights chosen so, 64²,
-//! reference 4096 spp, 4 repetitions, CPU) its RMSE went 0.01772 → 0.01730 at 1 spp, 0.01030 →
-//! 0.01045 at 2, 0.00574 → 0.00610 (± 0.00007) at 4, 0.00359 → 0.00372 at 8 and 0.00248 →
-//! 0.00259 at 16; the stochastic estimate's 1–2 % lower at 1–2 spp. On the light grid (its 20 lights
-//! chosen so instead of by the BVH, up to 16 spp) the ratio's was unchanged up to 8 spp (0.00560
-//! → 0.00561 at 1) and the stochastic estimate's 10–16 % lower at 1–2 spp, 15 % higher at 8–16.
-//! It grew the shade module from 372.3 to 381.9 KB (first render's compile the same). The
-//! ratio's error is its visibility's, which no choice by the unshadowed `U` sees.
+//! light), but the ratio estimate gained little at 1 spp and lost from 2 spp on: on the
+//! two-light box (64², reference 4096 spp, 4 repetitions, CPU) its RMSE went 0.01772 → 0.01730
+//! at 1 spp, 0.01030 → 0.01045 at 2, 0.00574 → 0.00610 (± 0.00007) at 4, 0.00359 → 0.00372 at 8
+//! and 0.00248 → 0.00259 at 16, the stochastic estimate's 1–2 % lower at 1–2 spp. On the light
+//! grid (its 20 lights chosen so instead of by the BVH, up to 16 spp) the ratio's was unchanged
+//! up to 8 spp (0.00560 → 0.00561 at 1) and 13 % lower at 16, the stochastic estimate's 10–16 %
+//! lower at 1–2 spp and 15 % higher at 8–16. It grew the shade module from 372.3 to 381.9 KB
+//! (the first render's compile the same). The ratio's error is its visibility's, which no choice
+//! by the unshadowed `U` sees.
 //!
 //! **Far from the origin** the resolution is the coordinates' `f32` rounding: a shadow ray starts
 //! 64·ε·extent off its surface and stops as far before the light's plane ([`crate::offset`]), 7.6
