@@ -99,16 +99,8 @@ struct SceneReportArgs {
     /// Independent repetitions averaged per measurement.
     #[arg(long, default_value_t = 4)]
     reps: u32,
-    /// Backend running every stage: `cpu` (default), `auto`, `vulkan` or `vulkan:N`.
-    #[arg(long, default_value = "cpu")]
-    device: String,
-    /// Enable the Vulkan validation layers (must be installed; refused with `--device cpu`); any
-    /// warning or error they report is printed and fails the command (exit status 1).
-    #[arg(long)]
-    validate: bool,
-    /// Print one JSON object per line instead of a table.
-    #[arg(long)]
-    json: bool,
+    #[command(flatten)]
+    run: ReportRunArgs,
 }
 
 impl SceneReportArgs {
@@ -128,7 +120,7 @@ impl SceneReportArgs {
         };
         // Before the backend opens, which takes a second on a software Vulkan device.
         check(&options)?;
-        let backend = open_report_backend(&self.device, self.validate)?;
+        let backend = self.run.open()?;
         Ok((options, backend))
     }
 }
@@ -150,7 +142,14 @@ struct SamplingReportArgs {
     /// Independent repetitions per estimator.
     #[arg(long, default_value_t = 256)]
     reps: u32,
-    /// Backend tracing the shadow rays: `cpu` (default), `auto`, `vulkan` or `vulkan:N`.
+    #[command(flatten)]
+    run: ReportRunArgs,
+}
+
+/// How every report runs and prints: its backend, the validation layers, JSON or a table.
+#[derive(clap::Args)]
+struct ReportRunArgs {
+    /// Backend the report runs on: `cpu` (default), `auto`, `vulkan` or `vulkan:N`.
     #[arg(long, default_value = "cpu")]
     device: String,
     /// Enable the Vulkan validation layers (must be installed; refused with `--device cpu`); any
@@ -162,11 +161,13 @@ struct SamplingReportArgs {
     json: bool,
 }
 
-/// The backend a report runs on: `device` as `--device` names it, with the Vulkan validation
-/// layers if `validate` (their messages go to stderr as they arrive, and the report ends with an
-/// error if there were any: [`raywave::close_backend`]).
-fn open_report_backend(device: &str, validate: bool) -> raywave::Result<Box<dyn raywave::Backend>> {
-    raywave::open_backend(device.parse()?, &BackendOptions { validation: validate, ..Default::default() })
+impl ReportRunArgs {
+    /// The backend a report runs on: `--device`'s, with the Vulkan validation layers if
+    /// `--validate` (their messages go to stderr as they arrive, and the report ends with an error
+    /// if there were any: [`raywave::close_backend`]).
+    fn open(&self) -> raywave::Result<Box<dyn raywave::Backend>> {
+        raywave::open_backend(self.device.parse()?, &BackendOptions { validation: self.validate, ..Default::default() })
+    }
 }
 
 #[derive(Subcommand)]
@@ -547,16 +548,16 @@ fn report_sampling_command(args: SamplingReportArgs) -> raywave::Result<()> {
     let options = SamplingReportOptions { resolution: args.resolution, reps: args.reps };
     // Before the backend opens, which takes a second on a software Vulkan device.
     validate(&options)?;
-    let mut backend = open_report_backend(&args.device, args.validate)?;
+    let mut backend = args.run.open()?;
     report_sampling(backend.as_mut(), &options, |line| match line {
-        ReportLine::Case(case, result) => print_line(if args.json { result.json() } else { result.row(case) }),
-        ReportLine::Spectrum(spectrum) => print_line(spectrum.text(args.json)),
+        ReportLine::Case(case, result) => print_line(if args.run.json { result.json() } else { result.row(case) }),
+        ReportLine::Spectrum(spectrum) => print_line(spectrum.text(args.run.json)),
     })?;
     raywave::close_backend(backend)
 }
 
 fn report_shade_command(args: ShadeReportArgs) -> raywave::Result<()> {
-    let json = args.common.json;
+    let json = args.common.run.json;
     let (options, mut backend) = args.common.open(args.resolution, |options| options.check())?;
     raywave::report::shade::report_shade(backend.as_mut(), &options, |line| print_line(line.text(json)))?;
     raywave::close_backend(backend)
@@ -571,7 +572,7 @@ fn report_error_vs_time_command(args: ErrorVsTimeArgs) -> raywave::Result<()> {
         .map(|path| raywave::visualize::PendingOutput::create(path, image::ImageFormat::Png))
         .transpose()?;
     FILE_PENDING.store(pending.is_some(), Ordering::Relaxed);
-    let json = args.common.json;
+    let json = args.common.run.json;
     let (denoise_radius, settle_seconds) = (args.radius.denoise_radius, args.settle_seconds);
     let with = |report| ErrorVsTimeOptions { report, denoise_radius, settle_seconds };
     let (report, mut backend) = args.common.open(args.resolution, |report| with(report.clone()).check())?;
