@@ -164,10 +164,22 @@ struct ReportRunArgs {
 impl ReportRunArgs {
     /// The backend a report runs on: `--device`'s, with the Vulkan validation layers if
     /// `--validate` (their messages go to stderr as they arrive, and the report ends with an error
-    /// if there were any: [`raywave::close_backend`]).
+    /// if there were any: [`raywave::close_backend`]); a warning on stderr where `auto` fell back
+    /// to the CPU.
     fn open(&self) -> raywave::Result<Box<dyn raywave::Backend>> {
-        raywave::open_backend(self.device.parse()?, &BackendOptions { validation: self.validate, ..Default::default() })
+        let options = BackendOptions { validation: self.validate, ..Default::default() };
+        let (backend, fallback) = raywave::open_backend_telling_fallback(self.device.parse()?, &options)?;
+        if let Some(reason) = fallback {
+            warn_vulkan_fallback("the report runs", &reason.to_string());
+        }
+        Ok(backend)
     }
+}
+
+/// Warns on stderr that `--device auto` found no Vulkan device it could open, so that `what` (the
+/// render, the report) ran on the CPU, with Vulkan's error `reason`.
+fn warn_vulkan_fallback(what: &str, reason: &str) {
+    warn(&format!("warning: --device auto found no usable Vulkan device, so {what} on the CPU: {reason}"));
 }
 
 #[derive(Subcommand)]
@@ -622,6 +634,9 @@ fn render_command(args: RenderArgs) -> raywave::Result<()> {
     };
     let report = render(&options)?;
     print_line(format!("backend  {}", report.backend));
+    if let Some(reason) = &report.vulkan_fallback {
+        warn_vulkan_fallback("the render runs", reason);
+    }
     print_line(format!(
         "scene    {} ({} triangles, {} zero-area dropped, {} quad lights)",
         options.scene, report.triangles, report.dropped_degenerate, report.lights

@@ -3,7 +3,9 @@
 //! `U · den(S_N)/den(U_N)` (or another denoiser, or none) → image files.
 
 use crate::bench::{check_settle_seconds, warm_up, SUSTAIN_SECONDS};
-use crate::{close_backend, open_backend, Backend, BackendOptions, DeviceChoice, Result, Scene, StageReport};
+use crate::{
+    close_backend, open_backend_telling_fallback, Backend, BackendOptions, DeviceChoice, Result, Scene, StageReport,
+};
 use glam::Vec3;
 use image::{ImageFormat, RgbImage};
 use raywave_host::denoise::DenoiseMethod;
@@ -93,6 +95,9 @@ pub struct RenderOptions {
 pub struct RenderReport {
     /// The backend that ran the stages.
     pub backend: String,
+    /// Why `--device auto` ran on the CPU: the error Vulkan could not be opened with (`None`
+    /// where it did not fall back).
+    pub vulkan_fallback: Option<String>,
     /// Triangles in the scene.
     pub triangles: usize,
     /// Zero-area triangles dropped while loading the scene.
@@ -235,7 +240,7 @@ pub fn render(options: &RenderOptions) -> Result<RenderReport> {
     if settle_seconds.is_some() {
         backend_options.sustain_seconds = backend_options.sustain_seconds.max(SUSTAIN_SECONDS);
     }
-    let mut backend = open_backend(options.device, &backend_options)?;
+    let (mut backend, vulkan_fallback) = open_backend_telling_fallback(options.device, &backend_options)?;
     // The view's frame: its size on this backend, and its samples (one for the normals view,
     // whatever `--spp` says) for its sampler.
     let settings = options.frame_settings();
@@ -256,6 +261,7 @@ pub fn render(options: &RenderOptions) -> Result<RenderReport> {
     close_backend(backend)?;
     let report = RenderReport {
         backend: backend_name,
+        vulkan_fallback: vulkan_fallback.map(|error| error.to_string()),
         triangles: scene.triangle_count(),
         dropped_degenerate: scene.dropped_degenerate(),
         lights: scene.lights().len(),

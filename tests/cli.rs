@@ -399,7 +399,8 @@ fn bad_input_is_a_typed_error_without_output() {
 
 /// With `--device auto` (the default), options only Vulkan has — validation, a hardware trace
 /// method — make a Vulkan failure an error: the CPU fallback dropped `--validate` without a word
-/// and answered `--trace rtpipe` with "the CPU backend traces in software only".
+/// and answered `--trace rtpipe` with "the CPU backend traces in software only". Without them it
+/// falls back, and says why on stderr (a missing driver had looked like a deliberate CPU run).
 #[cfg(feature = "vulkan")]
 #[test]
 fn vulkan_only_options_do_not_fall_back_to_the_cpu() {
@@ -423,7 +424,16 @@ fn vulkan_only_options_do_not_fall_back_to_the_cpu() {
     let on_the_cpu =
         String::from_utf8_lossy(&fallback.stdout).lines().any(|l| l.starts_with("backend") && l.contains("cpu"));
     assert!(fallback.status.success() && on_the_cpu, "{}", stderr(&fallback));
+    let why = "warning: --device auto found no usable Vulkan device, so the render runs on the CPU: Vulkan is \
+               unavailable: no Vulkan 1.2 driver is installed";
+    assert!(stderr(&fallback).contains(why), "{}", stderr(&fallback));
     assert!(out_path.exists());
+    // Where a Vulkan device opens (lavapipe in CI), auto takes it without the warning.
+    let on_vulkan = Command::new(env!("CARGO_BIN_EXE_raywave")).args(small).args(["--spp", "1"]).output().unwrap();
+    let vulkan_named =
+        String::from_utf8_lossy(&on_vulkan.stdout).lines().any(|l| l.starts_with("backend") && l.contains("vulkan"));
+    assert!(on_vulkan.status.success() && vulkan_named, "{}", stderr(&on_vulkan));
+    assert!(!stderr(&on_vulkan).contains("--device auto"), "{}", stderr(&on_vulkan));
 }
 
 /// A closed standard output (`raywave render … | head -1`) ends the command quietly; `println!`

@@ -131,22 +131,38 @@ impl BackendOptions {
 /// them as invalid: then, as for an explicit Vulkan choice that cannot be honoured, the error says
 /// why Vulkan failed (a CPU run would silently drop what was asked). A trace method the backend
 /// lacks is an error, and so are validation with an explicit CPU choice and a `sustain_seconds`
-/// outside 0..=1 with any ([`BackendOptions::check_for`], first).
+/// outside 0..=1 with any ([`BackendOptions::check_for`], first). [`open_backend_telling_fallback`]
+/// also returns why `Auto` fell back.
 pub fn open_backend(choice: DeviceChoice, options: &BackendOptions) -> Result<Box<dyn Backend>> {
+    open_backend_telling_fallback(choice, options).map(|(backend, _)| backend)
+}
+
+/// Opens the backend `choice` names, as [`open_backend`] does, and returns with it the Vulkan
+/// error that `Auto` fell back to the CPU from (`None` where it did not fall back), so that a
+/// program can tell its user why a run meant for a GPU ran on the CPU: a missing driver looks the
+/// same as a deliberate CPU run otherwise.
+pub fn open_backend_telling_fallback(
+    choice: DeviceChoice,
+    options: &BackendOptions,
+) -> Result<(Box<dyn Backend>, Option<Error>)> {
     options.check_for(choice)?;
-    let cpu = || Ok(Box::new(CpuBackend::new()) as Box<dyn Backend>);
+    let cpu = |fallback| Ok((Box::new(CpuBackend::new()) as Box<dyn Backend>, fallback));
+    let opened = |backend| (backend, None);
     match choice {
-        DeviceChoice::Cpu => cpu(),
-        DeviceChoice::Auto => open_vulkan(None, options).or_else(|vulkan_error| {
-            let hardware_trace = options.trace.is_some_and(|method| method != TraceMethod::Software);
-            let vulkan_only = options.validation || hardware_trace || options.workgroup_sizes.is_some();
-            if vulkan_only || matches!(vulkan_error, Error::InvalidParameter { .. }) {
-                Err(vulkan_error)
-            } else {
-                cpu()
+        DeviceChoice::Cpu => cpu(None),
+        DeviceChoice::Auto => match open_vulkan(None, options) {
+            Ok(backend) => Ok(opened(backend)),
+            Err(vulkan_error) => {
+                let hardware_trace = options.trace.is_some_and(|method| method != TraceMethod::Software);
+                let vulkan_only = options.validation || hardware_trace || options.workgroup_sizes.is_some();
+                if vulkan_only || matches!(vulkan_error, Error::InvalidParameter { .. }) {
+                    Err(vulkan_error)
+                } else {
+                    cpu(Some(vulkan_error))
+                }
             }
-        }),
-        DeviceChoice::Vulkan(index) => open_vulkan(index, options),
+        },
+        DeviceChoice::Vulkan(index) => open_vulkan(index, options).map(opened),
     }
 }
 

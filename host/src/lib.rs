@@ -33,7 +33,9 @@ pub use raywave_kernels as kernels;
 pub use raywave_shared as shared;
 
 pub use backend::{Backend, FrameOutput, StageReport, ValidationLog};
-pub use device::{close_backend, open_backend, BackendOptions, DeviceChoice, TraceMethod};
+pub use device::{
+    close_backend, open_backend, open_backend_telling_fallback, BackendOptions, DeviceChoice, TraceMethod,
+};
 pub use error::{Error, Result};
 pub use scene::Scene;
 pub use stream::{HitStream, RayStream};
