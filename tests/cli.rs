@@ -421,18 +421,17 @@ fn vulkan_only_options_do_not_fall_back_to_the_cpu() {
     assert!(stderr(&no_driver).contains("Vulkan"), "{}", stderr(&no_driver));
     // Without them, auto still falls back.
     let fallback = run(("VK_DRIVER_FILES", &dir.path().join("none.json")), &["--spp", "1"]);
-    let on_the_cpu =
-        String::from_utf8_lossy(&fallback.stdout).lines().any(|l| l.starts_with("backend") && l.contains("cpu"));
-    assert!(fallback.status.success() && on_the_cpu, "{}", stderr(&fallback));
+    let names_backend = |out: &Output, name: &str| {
+        String::from_utf8_lossy(&out.stdout).lines().any(|l| l.starts_with("backend") && l.contains(name))
+    };
+    assert!(fallback.status.success() && names_backend(&fallback, "cpu"), "{}", stderr(&fallback));
     let why = "warning: --device auto found no usable Vulkan device, so the render runs on the CPU: Vulkan is \
                unavailable: no Vulkan 1.2 driver is installed";
     assert!(stderr(&fallback).contains(why), "{}", stderr(&fallback));
     assert!(out_path.exists());
     // Where a Vulkan device opens (lavapipe in CI), auto takes it without the warning.
     let on_vulkan = Command::new(env!("CARGO_BIN_EXE_raywave")).args(small).args(["--spp", "1"]).output().unwrap();
-    let vulkan_named =
-        String::from_utf8_lossy(&on_vulkan.stdout).lines().any(|l| l.starts_with("backend") && l.contains("vulkan"));
-    assert!(on_vulkan.status.success() && vulkan_named, "{}", stderr(&on_vulkan));
+    assert!(on_vulkan.status.success() && names_backend(&on_vulkan, "vulkan"), "{}", stderr(&on_vulkan));
     assert!(!stderr(&on_vulkan).contains("--device auto"), "{}", stderr(&on_vulkan));
 }
 

@@ -148,19 +148,16 @@ pub fn open_backend_telling_fallback(
     options.check_for(choice)?;
     let cpu = |fallback| Ok((Box::new(CpuBackend::new()) as Box<dyn Backend>, fallback));
     let opened = |backend| (backend, None);
+    let hardware_trace = options.trace.is_some_and(|method| method != TraceMethod::Software);
+    let vulkan_only = options.validation || hardware_trace || options.workgroup_sizes.is_some();
     match choice {
         DeviceChoice::Cpu => cpu(None),
         DeviceChoice::Auto => match open_vulkan(None, options) {
             Ok(backend) => Ok(opened(backend)),
-            Err(vulkan_error) => {
-                let hardware_trace = options.trace.is_some_and(|method| method != TraceMethod::Software);
-                let vulkan_only = options.validation || hardware_trace || options.workgroup_sizes.is_some();
-                if vulkan_only || matches!(vulkan_error, Error::InvalidParameter { .. }) {
-                    Err(vulkan_error)
-                } else {
-                    cpu(Some(vulkan_error))
-                }
+            Err(vulkan_error) if vulkan_only || matches!(vulkan_error, Error::InvalidParameter { .. }) => {
+                Err(vulkan_error)
             }
+            Err(vulkan_error) => cpu(Some(vulkan_error)),
         },
         DeviceChoice::Vulkan(index) => open_vulkan(index, options).map(opened),
     }
