@@ -689,6 +689,10 @@ fn render_command(args: RenderArgs) -> raywave::Result<()> {
         (report.lights == 0 && options.view == RenderView::Lit).then(|| {
             format!("warning: {scene} has no quad light, so nothing is lit (emitters glow where their front faces are seen)")
         }),
+        // Else the summary's "0 of N camera rays hit" alone said why the image is empty.
+        (report.hits == 0).then(|| {
+            format!("warning: no camera ray hit {scene}: its camera sees none of it (looks away from it?), so the image is empty")
+        }),
     ];
     for warning in warnings.into_iter().flatten() {
         warn(&warning);

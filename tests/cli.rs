@@ -631,6 +631,29 @@ fn textured_and_see_through_materials_are_rendered_with_a_warning() {
     assert!(!stderr(&out).contains("have textures"), "{}", stderr(&out));
 }
 
+/// A camera that sees none of the scene (a glTF camera facing away from it) renders an empty
+/// image with a warning: the summary's "0 of N camera rays hit" had been the only word of it.
+#[test]
+fn a_camera_that_sees_none_of_the_scene_is_warned_about() {
+    let dir = tempfile::tempdir().unwrap();
+    let tetrahedron =
+        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/tetrahedron.gltf")).unwrap();
+    let in_front = "    0,\n    -3\n   ],";
+    assert!(tetrahedron.contains(in_front));
+    let behind = dir.path().join("behind.gltf");
+    std::fs::write(&behind, tetrahedron.replacen(in_front, "    0,\n    3\n   ],", 1)).unwrap();
+    let warning = "warning: no camera ray hit";
+    for (scene, hits) in
+        [(behind.to_str().unwrap(), false), (concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/tetrahedron.gltf"), true)]
+    {
+        let (out, path) = render(dir.path(), "o.png", &["--device", "cpu", "--scene", scene, "--spp", "1"]);
+        assert!(out.status.success() && path.exists(), "{}", stderr(&out));
+        assert_eq!(stderr(&out).contains(warning), !hits, "{scene}: {}", stderr(&out));
+        let summary = String::from_utf8_lossy(&out.stdout);
+        assert_eq!(summary.contains(" (0 of "), !hits, "{summary}");
+    }
+}
+
 /// An orthographic camera is replaced by the framing one, a skinned mesh renders in its rest
 /// pose, a punctual light lights nothing and an unlit material is lit, each with a warning.
 #[test]

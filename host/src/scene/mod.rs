@@ -12,7 +12,7 @@ mod regular_file;
 mod unrendered;
 
 use crate::error::{Error, Result};
-use glam::{Vec2, Vec3};
+use glam::{DVec3, Vec2, Vec3};
 pub use identity::SceneIdentity;
 use raywave_shared::Light;
 use std::path::Path;
@@ -512,32 +512,70 @@ fn has_area([a, b, c]: [Vec3; 3]) -> bool {
     (b - a).cross(c - a) != Vec3::ZERO
 }
 
-/// Axis-aligned bounds (min, max) of the vertices `meshes`' triangles of non-zero area use — the
-/// scene `Scene::new` keeps, also where a loader frames its camera before it; a triangle with an
-/// index past its mesh's positions (refused by `Scene::new`) is skipped. `(f32::MAX, f32::MIN)`
-/// per axis where no triangle is left.
-fn triangle_bounds(meshes: &[Mesh]) -> (Vec3, Vec3) {
+/// The corners of `meshes`' triangles of non-zero area — the scene `Scene::new` keeps, also where
+/// a loader frames its camera before it; a triangle with an index past its mesh's positions
+/// (refused by `Scene::new`) is skipped.
+fn kept_triangles(meshes: &[Mesh]) -> impl Iterator<Item = [Vec3; 3]> + '_ {
     let corners = |mesh: &Mesh, t: &[u32; 3]| -> Option<[Vec3; 3]> {
         let [a, b, c] = t.map(|i| mesh.positions.get(i as usize).copied());
         Some([a?, b?, c?])
     };
     meshes
         .iter()
-        .flat_map(|mesh| mesh.triangles.iter().filter_map(move |t| corners(mesh, t)))
+        .flat_map(move |mesh| mesh.triangles.iter().filter_map(move |t| corners(mesh, t)))
         .filter(|&corners| has_area(corners))
+}
+
+/// Axis-aligned bounds (min, max) of the vertices of [`kept_triangles`]. `(f32::MAX, f32::MIN)`
+/// per axis where no triangle is left.
+fn triangle_bounds(meshes: &[Mesh]) -> (Vec3, Vec3) {
+    kept_triangles(meshes)
         .flatten()
         .fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(lo, hi), p| (lo.min(p), hi.max(p)))
 }
 
+/// Below this share of the area that the scene shows along x or y, the area it shows along z
+/// frames it from x or y ([`framing_camera`]): a floor or a wall in a plane through the z axis,
+/// seen edge-on from +z, had filled no pixel (a real OBJ lamp, floor or wall alone rendered an
+/// empty image). A share, not 0, so that a plane tilted by a few degrees counts too (5 %: 2.9°).
+const EDGE_ON_SHARE: f64 = 0.05;
+
+/// The axis a camera frames `meshes` along (0 x, 1 y, 2 z) and the side it looks from (±1): z,
+/// from +z — unless the triangles show less than [`EDGE_ON_SHARE`] of the area along z that they
+/// show along x or y (the sums of their areas projected on each axis), then that axis of x and y
+/// that shows more, from the side their front faces (counter-clockwise) face more, +1 where
+/// neither does. Over [`kept_triangles`], in `f64` (twice their areas, which the ratios ignore).
+fn framing_axis(meshes: &[Mesh]) -> (usize, f32) {
+    let (mut shown, mut facing) = (DVec3::ZERO, DVec3::ZERO);
+    for [a, b, c] in kept_triangles(meshes).map(|corners| corners.map(Vec3::as_dvec3)) {
+        let area = (b - a).cross(c - a);
+        shown += area.abs();
+        facing += area;
+    }
+    let across = if shown.y > shown.x { 1 } else { 0 };
+    // (False for NaN areas, which validation refuses, and for no triangles: z.)
+    let edge_on = shown.z < EDGE_ON_SHARE * shown[across];
+    if !edge_on {
+        return (2, 1.0);
+    }
+    (across, if facing[across] < 0.0 { -1.0 } else { 1.0 })
+}
+
 /// A camera on the +z side of the bounds' centre that sees the whole bounding sphere with a 45°
-/// vertical field of view — from farther, with a narrower one, where that camera would lie within
-/// 64 steps of `f32` of the centre (a small scene far from the origin). Where that camera would
-/// lie beyond [`MAX_COORDINATE`] (a scene more than 3.8·10⁷ across), it goes to the −z side if it
-/// fits there, else to the side with more room, just inside the limit, with the field of view
-/// widened to still see the sphere (at most 120°, which sees all of it from 1.15 radii and more).
-/// Non-finite bounds are left for validation to report.
+/// vertical field of view, y up — or, for a scene that shows almost no area to +z
+/// ([`framing_axis`]: a floor or wall in a plane through the z axis), on the side of the x or y
+/// axis it shows more area to, the side its front faces face (y up, or −z up looking down y
+/// and +z up looking up it, so that +x stays to the right). From farther, with a narrower field
+/// of view, where that camera would lie within 64 steps of `f32` of the centre (a small scene far
+/// from the origin). Where that camera would lie beyond [`MAX_COORDINATE`] (a scene more than
+/// 3.8·10⁷ across), it goes to the other side if it fits there, else to the side with more room,
+/// just inside the limit, with the field of view widened to still see the sphere (at most 120°,
+/// which sees all of it from 1.15 radii and more). Non-finite bounds are left for validation to
+/// report.
 pub(crate) fn framing_camera(meshes: &[Mesh]) -> Camera {
     let (lo, hi) = triangle_bounds(meshes);
+    let (axis, preferred_side) = framing_axis(meshes);
+    let along = Vec3::AXES[axis];
     let centre = (lo + hi) * 0.5;
     // At least √(f32::MIN_POSITIVE) ≈ 10⁻¹⁹, only so that the camera's distance has a normal
     // square and its view direction normalizes: a floor of 10⁻³ framed a scene 3·10⁻⁵ across from
@@ -549,31 +587,33 @@ pub(crate) fn framing_camera(meshes: &[Mesh]) -> Camera {
     let resolvable = 64.0 * f32::EPSILON * centre.abs().max_element();
     let at_45_degrees = radius / 22.5f32.to_radians().sin();
     let wanted = at_45_degrees.max(resolvable);
-    // The room between the centre and the coordinate limit along +z and along −z.
+    // The room between the centre and the coordinate limit on the preferred side and on the other.
     // (0.999 of it: the camera's coordinate must not round past the limit.)
-    let (plus_room, minus_room) = (0.999 * (MAX_COORDINATE - centre.z), 0.999 * (MAX_COORDINATE + centre.z));
-    let (side, distance) = if wanted <= plus_room {
-        (1.0, wanted)
-    } else if wanted <= minus_room {
-        (-1.0, wanted)
-    } else if plus_room >= minus_room {
-        (1.0, plus_room)
+    let room = |side: f32| 0.999 * (MAX_COORDINATE - side * centre[axis]);
+    let other_side = -preferred_side;
+    let (side, distance) = if wanted <= room(preferred_side) {
+        (preferred_side, wanted)
+    } else if wanted <= room(other_side) {
+        (other_side, wanted)
+    } else if room(preferred_side) >= room(other_side) {
+        (preferred_side, room(preferred_side))
     } else {
-        (-1.0, minus_room)
+        (other_side, room(other_side))
     };
-    let position = centre + Vec3::Z * (side * distance);
+    let position = centre + along * (side * distance);
     let vertical_fov_degrees = if wanted == at_45_degrees && distance == wanted {
         45.0
     } else {
         // Against the coordinate limit, wider; moved out to be resolvable, narrower: the angle
         // under which the sphere is seen from where the camera lies after rounding (up to half a
         // step closer), at most 120° (a camera in or near the sphere sees what that shows).
-        let seen_from = (position.z - centre.z).abs();
+        let seen_from = (position[axis] - centre[axis]).abs();
         2.0 * (radius / seen_from).min(1.0).asin().to_degrees().min(60.0)
     };
-    let position = if position.is_finite() { position } else { Vec3::Z };
+    let position = if position.is_finite() { position } else { along };
     let centre = if centre.is_finite() { centre } else { Vec3::ZERO };
-    Camera { position, look_at: centre, up: Vec3::Y, vertical_fov_degrees, mirrored: false }
+    let up = if axis == 1 { Vec3::Z * -side } else { Vec3::Y };
+    Camera { position, look_at: centre, up, vertical_fov_degrees, mirrored: false }
 }
 
 #[cfg(test)]
@@ -670,6 +710,38 @@ pub(crate) mod tests {
         assert!(at_one > 32 * 32 / 8, "{at_one} hits at scale 1");
         for log2 in [-13, -20] {
             assert_eq!(hits(2f32.powi(log2)), at_one, "scale 2^{log2}");
+        }
+    }
+
+    /// A floor or a wall alone, in a plane through the z axis (or tilted 2° off it), is framed
+    /// along the axis it faces, from the side its front faces face, with +x to the right looking
+    /// down or up y: from +z, edge-on, no camera ray had hit it (real OBJ lamps, floors and walls
+    /// rendered empty images). A scene with area facing z keeps the +z camera.
+    #[test]
+    fn flat_scenes_through_the_z_axis_are_framed_from_the_side_they_face() {
+        let quad = |corners: [Vec3; 4]| triangle_mesh(corners.to_vec(), vec![[0, 1, 2], [0, 2, 3]]);
+        let (x, y, z) = (Vec3::X, Vec3::Y, Vec3::Z);
+        let tilt = 2f32.to_radians();
+        let tilted_wall = [Vec3::ZERO, (y * tilt.cos() + z * tilt.sin()) * 2.0, (y + z) * 2.0, z * 2.0];
+        // (what, corners, the camera's side of the look-at point, its up, its right)
+        for (what, corners, along, up, right) in [
+            ("floor facing +y", [Vec3::ZERO, z * 2.0, (x + z) * 2.0, x * 2.0], y, -z, x),
+            ("floor facing -y", [Vec3::ZERO, x * 2.0, (x + z) * 2.0, z * 2.0], -y, z, x),
+            ("wall facing +x", [Vec3::ZERO, y * 2.0, (y + z) * 2.0, z * 2.0], x, y, -z),
+            ("wall facing +x, tilted 2°", tilted_wall, x, y, -z),
+            ("quad facing +z", [Vec3::ZERO, x * 2.0, (x + y) * 2.0, y * 2.0], z, y, x),
+            ("quad facing -z", [Vec3::ZERO, y * 2.0, (x + y) * 2.0, x * 2.0], z, y, x),
+        ] {
+            let meshes = vec![quad(corners)];
+            let camera = framing_camera(&meshes);
+            let view = (camera.position - camera.look_at).normalize();
+            assert!(view.abs_diff_eq(along, 1e-6) && camera.up == up, "{what}: {camera:?}");
+            let forward = camera.look_at - camera.position;
+            assert!(forward.cross(camera.up).normalize().abs_diff_eq(right, 1e-6), "{what}: mirrored or turned");
+            let scene = Scene::new(what, meshes, camera).unwrap();
+            let rays = crate::cpu::generate(&crate::frame::generate_params(&scene, 32, 32, 0)).unwrap();
+            let hits = crate::cpu::trace(&crate::cpu::CpuScene::build(&scene).unwrap(), &rays).unwrap().hit_count();
+            assert!(hits > 32 * 32 / 8, "{what}: {hits} hits");
         }
     }
 
