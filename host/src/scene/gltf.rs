@@ -31,6 +31,7 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
 mod instancing;
+mod json_text;
 
 /// Loads and validates a `.gltf` or `.glb` file.
 pub fn load(path: &Path) -> Result<Scene> {
@@ -305,12 +306,14 @@ fn local_transform(node: &gltf::Node) -> std::result::Result<Mat4, String> {
 /// external URIs against `base` (the file's folder).
 fn parse(bytes: &[u8], base: Option<&Path>) -> std::result::Result<(Document, Vec<buffer::Data>), String> {
     check_glb_length(bytes)?;
-    let gltf::Gltf { document, blob } = gltf::Gltf::from_slice_without_validation(bytes).map_err(|e| e.to_string())?;
+    let bytes = json_text::readable(bytes);
+    let gltf::Gltf { document, blob } = gltf::Gltf::from_slice_without_validation(&bytes).map_err(|e| e.to_string())?;
     check_position_accessor_indices(document.as_json())?;
     let mut json = document.into_json();
     // Read here, so a file may require it: the crate's validation refuses any it does not know.
     json.extensions_required.retain(|required| required != instancing::EXTENSION);
     let document = Document::from_json_without_validation(json);
+    check_asset_version(&document.as_json().asset)?;
     validate(&document)?;
     check_camera_projections(document.as_json())?;
     check_node_matrices_alone(document.as_json())?;
@@ -319,10 +322,12 @@ fn parse(bytes: &[u8], base: Option<&Path>) -> std::result::Result<(Document, Ve
     Ok((document, buffers))
 }
 
-/// Validates `document` as `gltf::Document::from_json` does (with the same message), less the
-/// one error that glTF 2.0 does not make: a primitive without POSITION, which gltf-json 1.4
-/// reports missing, where the specification allows it (§ 3.7.2.1: "When positions are not
-/// specified, client implementations SHOULD skip primitive's rendering", [`draws_surfaces`]).
+/// Validates `document` as `gltf::Document::from_json` does (with its message, the paths
+/// written as the file writes them: [`as_written`]), less the errors that glTF 2.0 does not make:
+/// a primitive without POSITION, which gltf-json 1.4 reports missing, where the specification
+/// allows it (§ 3.7.2.1: "When positions are not specified, client implementations SHOULD skip
+/// primitive's rendering", [`draws_surfaces`]); and a texture without `source`, which the schema
+/// makes optional (an extension may give the image) and raywave reads no image of.
 fn validate(document: &Document) -> std::result::Result<(), String> {
     use gltf::json::validation::{Error as Invalid, Validate};
     use gltf::json::Path as JsonPath;
@@ -333,17 +338,69 @@ fn validate(document: &Document) -> std::result::Result<(), String> {
         .map(|(m, p, _)| JsonPath::new().field("meshes").index(m).field("primitives").index(p))
         .map(|primitive| primitive.field("attributes").key("POSITION"))
         .collect();
-    let mut errors = Vec::new();
+    let without_source: Vec<JsonPath> =
+        (0..root.textures.len()).map(|t| JsonPath::new().field("textures").index(t).field("source")).collect();
+    let mut errors = String::new();
     root.validate(root, JsonPath::new, &mut |path, error| {
         let path = path();
-        if !(matches!(error, Invalid::Missing) && without_positions.contains(&path)) {
-            errors.push((path, error));
+        let allowed = without_positions.contains(&path) || without_source.contains(&path);
+        if !(matches!(error, Invalid::Missing) && allowed) {
+            errors.push_str(&format!(" {}: {error};", as_written(&path.to_string())));
         }
     });
     if errors.is_empty() {
         Ok(())
     } else {
-        Err(gltf::Error::Validation(errors).to_string())
+        // As `gltf::Error::Validation` writes it.
+        Err(format!("invalid glTF:{errors}"))
+    }
+}
+
+/// A gltf-json validation path as the file writes it: extension members under their names
+/// (`KHR_lights_punctual`), which gltf-json writes as its fields' (`khrLightsPunctual`) — an
+/// error had named a field no file holds.
+fn as_written(path: &str) -> String {
+    let member = |name: &str| -> String {
+        let vendor =
+            ["khr", "ext"].into_iter().find(|v| name.starts_with(v) && name[3..].starts_with(char::is_uppercase));
+        let Some(vendor) = vendor else { return name.to_owned() };
+        let mut written = vendor.to_uppercase();
+        for c in name[3..].chars() {
+            if c.is_uppercase() {
+                written.push('_');
+            }
+            written.push(c.to_ascii_lowercase());
+        }
+        written
+    };
+    path.split('.')
+        .map(|part| match part.find('[') {
+            Some(at) => member(&part[..at]) + &part[at..],
+            None => member(part),
+        })
+        .collect::<Vec<_>>()
+        .join(".")
+}
+
+/// Checks that a glTF 2.0 reader may read the file (glTF 2.0 § 3.5.5, "Versioning"): its
+/// `asset.version` of major version 2, and its `asset.minVersion`, where it has one, no later
+/// than 2.0 — a file that needs a later reader "should fail to load on a 2.0 client". gltf-json
+/// reads neither, so a glTF 1.0 file failed on some other field, and a 2.1 one loaded.
+fn check_asset_version(asset: &gltf::json::Asset) -> std::result::Result<(), String> {
+    let major_minor = |version: &str| -> Option<(u32, u32)> {
+        let (major, minor) = version.split_once('.')?;
+        Some((major.parse().ok()?, minor.parse().ok()?))
+    };
+    match major_minor(&asset.version) {
+        Some((2, _)) => {}
+        _ => return Err(format!("asset.version is {:?}: raywave reads glTF 2.x files", asset.version)),
+    }
+    match asset.min_version.as_deref().map(|min| (min, major_minor(min))) {
+        None => Ok(()),
+        Some((_, Some(version))) if version <= (2, 0) => Ok(()),
+        Some((min, _)) => {
+            Err(format!("asset.minVersion is {min:?}: the file needs a glTF reader of that version; raywave reads 2.0"))
+        }
     }
 }
 
@@ -1658,6 +1715,59 @@ mod tests {
         let scene = load(f.path()).unwrap();
         let corners = [[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 0.0]].map(|[x, y]| Vec3::new(x, y, -2.0));
         assert_eq!(scene.meshes()[0].positions, corners);
+    }
+
+    /// Valid files that gltf-json 1.4.1 refused, with what raywave does not read: an animation
+    /// channel without `target.node` or with `KHR_animation_pointer`'s `"path": "pointer"`, and a
+    /// texture without `source` (each optional in glTF 2.0's schema). An error after the blanked
+    /// animations still names its line. Versions a 2.0 reader may not read are refused, by field.
+    #[test]
+    fn valid_files_with_unread_animations_and_textures_load_and_versions_are_checked() {
+        let animations = r#""animations":[{"channels":[{"sampler":0,"target":{"path":"pointer",
+            "extensions":{"KHR_animation_pointer":{"pointer":"/materials/0/emissiveFactor"}}}},
+            {"sampler":0,"target":{"path":"rotation"}}],
+            "samplers":[{"input":2,"output":2}]}],"#;
+        let textures = r#""textures":[{"sampler":0}],"samplers":[{}],"#;
+        let text = quad_gltf(6).replacen(r#""scene":0,"#, &format!(r#""scene":0,{animations}{textures}"#), 1);
+        let scene = load(file(&text).path()).unwrap();
+        assert_eq!((scene.triangle_count(), scene.lights().len()), (2, 1));
+        // The accessor the animation names need not even exist, as nothing reads it; an error
+        // past the animations keeps its line (3 lines of animations, then the quad's 5th).
+        let broken = text.replacen(r#""yfov":0.8"#, r#""yfov":"wide""#, 1);
+        let err = load(file(&broken).path()).unwrap_err().to_string();
+        assert!(err.contains("line 6"), "{err}");
+        for (version, expected) in [
+            (r#""version":"1.0""#, r#"asset.version is "1.0": raywave reads glTF 2.x files"#),
+            (r#""version":"2""#, r#"asset.version is "2""#),
+            (r#""version":"2.0","minVersion":"2.1""#, r#"asset.minVersion is "2.1": the file needs a glTF reader"#),
+        ] {
+            let text = quad_gltf(6).replacen(r#""version":"2.0""#, version, 1);
+            let err = load(file(&text).path()).unwrap_err().to_string();
+            assert!(err.contains(expected), "{version}: {err}");
+        }
+        for version in [r#""version":"2.1""#, r#""version":"2.0","minVersion":"2.0""#] {
+            let text = quad_gltf(6).replacen(r#""version":"2.0""#, version, 1);
+            assert!(load(file(&text).path()).is_ok(), "{version}");
+        }
+    }
+
+    /// A validation error names an extension's member as the file writes it
+    /// (`KHR_lights_punctual`), not as gltf-json's field (`khrLightsPunctual`).
+    #[test]
+    fn validation_errors_name_extensions_as_files_write_them() {
+        assert_eq!(
+            as_written("extensions.khrLightsPunctual.lights[2].spot"),
+            "extensions.KHR_lights_punctual.lights[2].spot"
+        );
+        assert_eq!(
+            as_written("nodes[0].extensions.extMeshGpuInstancing"),
+            "nodes[0].extensions.EXT_mesh_gpu_instancing"
+        );
+        assert_eq!(as_written("meshes[0].primitives[1].attributes"), "meshes[0].primitives[1].attributes");
+        let spot = r#""extensions":{"KHR_lights_punctual":{"lights":[{"type":"spot"}]}},"#;
+        let text = quad_gltf(6).replacen(r#""scene":0,"#, &format!(r#""scene":0,{spot}"#), 1);
+        let err = load(file(&text).path()).unwrap_err().to_string();
+        assert!(err.contains("extensions.KHR_lights_punctual.lights[0].spot: Missing data"), "{err}");
     }
 
     /// Material factors outside glTF 2.0's ranges (once clamped or passed on silently) and

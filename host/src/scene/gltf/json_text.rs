@@ -1,0 +1,116 @@
+//! A glTF file's JSON as raywave hands it to the `gltf` crate: what valid files write that
+//! gltf-json 1.4.1 refuses, and that raywave does not read, blanked out in place — each byte
+//! replaced by a space, line breaks kept — so that every error the crate reports still points at
+//! the file's own line and column (in a GLB, the JSON chunk keeps its length).
+//!
+//! - **`animations`**: raywave renders no animation, and gltf-json requires each channel's
+//!   `target.node` and a `target.path` it knows, where glTF 2.0 makes `node` optional ("When
+//!   undefined, the animated object MAY be defined by an extension") and `KHR_animation_pointer`
+//!   files use both (`"path": "pointer"`): such files were refused whole. The array becomes `[]`.
+//! - **A UTF-8 byte-order mark** before the JSON (which Windows editors write): serde_json
+//!   refused the file at line 1, column 1, without saying why. glTF 2.0 § 3.2 asks writers not
+//!   to write one; readers such as three.js skip it.
+//! - **NUL bytes padding a GLB's JSON chunk**, which glTF 2.0 § 4.4.3.1 asks to pad with
+//!   spaces and some exporters pad with zeros: serde_json refused "trailing characters".
+
+use serde_json::value::RawValue;
+use std::borrow::Cow;
+use std::collections::HashMap;
+
+const BYTE_ORDER_MARK: &[u8] = b"\xEF\xBB\xBF";
+
+/// `bytes`, a `.gltf` file or a GLB (whose header [`super::check_glb_length`] checked), with its
+/// JSON made readable as the module documentation says; borrowed where nothing changes.
+pub(super) fn readable(bytes: &[u8]) -> Cow<'_, [u8]> {
+    let json = json_span(bytes);
+    let mut text = Cow::Borrowed(bytes);
+    if bytes[json.clone()].starts_with(BYTE_ORDER_MARK) {
+        blank(&mut text.to_mut()[json.start..json.start + BYTE_ORDER_MARK.len()]);
+    }
+    let padding = bytes[json.clone()].iter().rev().take_while(|&&b| b == 0).count();
+    if json.start > 0 && padding > 0 {
+        blank(&mut text.to_mut()[json.end - padding..json.end]);
+    }
+    if let Some(animations) = animations_span(&text[json.clone()]) {
+        let array = &mut text.to_mut()[json.start + animations.start..json.start + animations.end];
+        blank(array);
+        array[0] = b'[';
+        array[array.len() - 1] = b']';
+    }
+    text
+}
+
+/// Where the JSON lies in `bytes`: all of it for a `.gltf` file, the first chunk's data for a
+/// GLB whose first chunk is JSON and lies within the file (else all of it, for the crate to
+/// refuse).
+fn json_span(bytes: &[u8]) -> std::ops::Range<usize> {
+    let whole = 0..bytes.len();
+    let [b'g', b'l', b'T', b'F', _, _, _, _, _, _, _, _, l0, l1, l2, l3, b'J', b'S', b'O', b'N', ..] = *bytes else {
+        return whole;
+    };
+    let end = 20 + u32::from_le_bytes([l0, l1, l2, l3]) as usize;
+    if end <= bytes.len() {
+        20..end
+    } else {
+        whole
+    }
+}
+
+/// Where the top-level `animations` array lies in the JSON `text`, if the text is a JSON object
+/// with one (else the crate reports what is wrong with it).
+fn animations_span(text: &[u8]) -> Option<std::ops::Range<usize>> {
+    let text = std::str::from_utf8(text).ok()?;
+    // (A byte-order mark blanked above is whitespace now.)
+    let members: HashMap<String, &RawValue> = serde_json::from_str(text).ok()?;
+    let array = members.get("animations")?.get();
+    array.starts_with('[').then(|| {
+        let start = array.as_ptr() as usize - text.as_ptr() as usize;
+        start..start + array.len()
+    })
+}
+
+/// Replaces every byte of `bytes` but line breaks by a space (JSON whitespace).
+fn blank(bytes: &mut [u8]) {
+    for b in bytes.iter_mut().filter(|b| !matches!(b, b'\n' | b'\r')) {
+        *b = b' ';
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn glb(json: &[u8], padding: u8) -> Vec<u8> {
+        let padded = json.len().next_multiple_of(4);
+        let total = 12 + 8 + padded;
+        let mut bytes = b"glTF".to_vec();
+        bytes.extend(2u32.to_le_bytes());
+        bytes.extend((total as u32).to_le_bytes());
+        bytes.extend((padded as u32).to_le_bytes());
+        bytes.extend(b"JSON");
+        bytes.extend(json);
+        bytes.resize(total, padding);
+        bytes
+    }
+
+    /// The animations become `[]` with every line break where it was, a byte-order mark and a
+    /// GLB's NUL padding spaces; text without any of them is borrowed as it is.
+    #[test]
+    fn what_raywave_does_not_read_is_blanked_in_place() {
+        let text = b"{\"asset\": {\"version\": \"2.0\"},\n \"animations\": [{\"channels\": [\n{}]}],\n \"x\": 1}";
+        let read = readable(text);
+        // `[{"channels": [` (14 bytes after the bracket), the line break, then `{}]}` and `]`.
+        let array = format!("[{}\n{}]", " ".repeat(14), " ".repeat(4));
+        let expected = format!("{{\"asset\": {{\"version\": \"2.0\"}},\n \"animations\": {array},\n \"x\": 1}}");
+        assert_eq!(std::str::from_utf8(&read).unwrap(), expected);
+        let with_mark = [BYTE_ORDER_MARK, b"{\"asset\": {}}"].concat();
+        assert_eq!(&readable(&with_mark)[..], b"   {\"asset\": {}}");
+        let padded = glb(b"{\"a\":1}", 0);
+        assert_eq!(&readable(&padded)[..], &glb(b"{\"a\":1}", b' ')[..]);
+        // A string that holds "animations" is no member; neither is a nested one.
+        for unchanged in [&b"{\"asset\": \"animations\", \"b\": {\"animations\": []}}"[..], b"not json", b""] {
+            assert!(matches!(readable(unchanged), Cow::Borrowed(_)), "{:?}", String::from_utf8_lossy(unchanged));
+        }
+        assert!(matches!(readable(&glb(b"{\"a\":1}", b' ')), Cow::Borrowed(_)));
+    }
+}
