@@ -8,6 +8,7 @@ use super::regular_file::read_regular_file;
 use super::{framing_camera, Material, Mesh, Scene, Unrendered, MAX_COORDINATE, MAX_TRIANGLES, MAX_VERTICES};
 use crate::error::{Error, Result};
 use glam::{DVec3, Vec3};
+use std::borrow::Cow;
 use std::cell::RefCell;
 use std::path::{Path, PathBuf};
 
@@ -174,7 +175,7 @@ fn without_byte_order_mark(bytes: &[u8]) -> &[u8] {
 ///   the position by it — `v 1 1 1 2` was at (0.5, 0.5, 0.5), `w` = 0 infinitely far.
 ///
 /// Borrowed where no line changes. An error names the line.
-fn as_read(text: &[u8]) -> std::result::Result<std::borrow::Cow<'_, [u8]>, String> {
+fn as_read(text: &[u8]) -> std::result::Result<Cow<'_, [u8]>, String> {
     // The rewritten text once a line has changed: the lines before it, then every line.
     let mut rewritten: Option<Vec<u8>> = None;
     let mut start = 0;
@@ -195,33 +196,41 @@ fn as_read(text: &[u8]) -> std::result::Result<std::borrow::Cow<'_, [u8]>, Strin
         }
         start += line.len() + 1;
     }
-    Ok(rewritten.map_or(std::borrow::Cow::Borrowed(text), std::borrow::Cow::Owned))
+    Ok(rewritten.map_or(Cow::Borrowed(text), Cow::Owned))
 }
 
-/// One line of an OBJ file as [`as_read`] gives it to tobj: `None` where it stays as it is.
-fn line_as_read(line: &[u8]) -> std::result::Result<Option<Vec<u8>>, String> {
+/// One line of an OBJ file as [`as_read`] gives it to tobj: `None` where it stays as it is. A
+/// rewritten line is the line cut short (borrowed), or a few words: no list of its words is made,
+/// since the file's size is checked after this ([`check_vertices_and_indices`]: a face line of
+/// 3·10⁸ corners had taken gigabytes).
+fn line_as_read(line: &[u8]) -> std::result::Result<Option<Cow<'_, [u8]>>, String> {
     let text = String::from_utf8_lossy(line);
     let mut words = text.split_whitespace();
     let Some(keyword) = words.next() else { return Ok(None) };
     if keyword.starts_with('#') {
         // Blanked where it is not UTF-8 text (an old file's Latin-1): tobj refused the file.
-        return Ok(matches!(text, std::borrow::Cow::Owned(_)).then(Vec::new));
+        return Ok(matches!(text, Cow::Owned(_)).then_some(Cow::Borrowed(&[])));
     }
-    let all: Vec<&str> = words.collect();
-    let data: Vec<&str> = before_comment(all.iter().copied()).collect();
-    let numbers = |count: usize| data.len() >= count && data[..count].iter().all(|w| w.parse::<f32>().is_ok());
-    let written = |words: &[&str]| Some(format!("{keyword} {}", words.join(" ")).into_bytes());
-    let uncommented = || if data.len() < all.len() { written(&data) } else { None };
+    // The first few words before any comment, and the line cut before the comment or after a word.
+    let head: Vec<&str> = before_comment(words.clone()).take(7).collect();
+    let numbers = |count: usize| head.len() >= count && head[..count].iter().all(|w| w.parse::<f32>().is_ok());
+    let offset = |word: &str| word.as_ptr() as usize - text.as_ptr() as usize;
+    let cut = |end: usize| match &text {
+        Cow::Borrowed(_) => Cow::Borrowed(&line[..end]),
+        Cow::Owned(text) => Cow::Owned(text.as_bytes()[..end].to_vec()),
+    };
+    let through = |word: &str| Some(cut(offset(word) + word.len()));
+    let uncommented = || words.clone().find(|w| w.starts_with('#')).map(|c| cut(text[..offset(c)].trim_end().len()));
     Ok(match keyword {
-        "l" => Some(Vec::new()),
-        // Colours or a weight after the position (every word a number), or a comment.
-        "v" if matches!(data.len(), 4 | 6) && numbers(data.len()) => written(&data[..3]),
+        "l" => Some(Cow::Borrowed(&[][..])),
+        // Colours or a weight after the position (every word a number).
+        "v" if matches!(head.len(), 4 | 6) && numbers(head.len()) => through(head[2]),
         "v" | "f" => uncommented(),
         "vt" if numbers(2) => uncommented(),
-        "vt" if numbers(1) => Some(format!("vt {} 0", data[0]).into_bytes()),
-        "vt" => Some(b"vt 0 0".to_vec()),
+        "vt" if numbers(1) => Some(Cow::Owned(format!("vt {} 0", head[0]).into_bytes())),
+        "vt" => Some(Cow::Borrowed(&b"vt 0 0"[..])),
         "vn" if numbers(3) => uncommented(),
-        "vn" => Some(b"vn 0 0 1".to_vec()),
+        "vn" => Some(Cow::Borrowed(&b"vn 0 0 1"[..])),
         "mtllib" | "usemtl" | "o" | "g" => {
             let name = text.trim_start()[keyword.len()..].trim();
             if name.is_empty() && matches!(keyword, "mtllib" | "usemtl") {
@@ -232,7 +241,7 @@ fn line_as_read(line: &[u8]) -> std::result::Result<Option<Vec<u8>>, String> {
             if as_tobj_reads || name.is_empty() {
                 None
             } else {
-                Some(format!("{keyword} {name}").into_bytes())
+                Some(Cow::Owned(format!("{keyword} {name}").into_bytes()))
             }
         }
         _ => None,
