@@ -382,10 +382,11 @@ fn as_written(path: &str) -> String {
         .join(".")
 }
 
-/// Checks that a glTF 2.0 reader may read the file (glTF 2.0 § 3.5.5, "Versioning"): its
-/// `asset.version` of major version 2, and its `asset.minVersion`, where it has one, no later
-/// than 2.0 — a file that needs a later reader "should fail to load on a 2.0 client". gltf-json
-/// reads neither, so a glTF 1.0 file failed on some other field, and a 2.1 one loaded.
+/// Checks that a glTF 2.0 reader may read the file: its `asset.version` of major version 2, and
+/// its `asset.minVersion` ("the minimum glTF version that this asset targets"), where it has
+/// one, no later than 2.0 — a file asking for 2.1 "should fail to load on a 2.0 client"
+/// (glTF-Asset-Generator's compatibility model 04). gltf-json reads neither, so a glTF 1.0 file
+/// failed on some other field, and a 2.1 one loaded.
 fn check_asset_version(asset: &gltf::json::Asset) -> std::result::Result<(), String> {
     let major_minor = |version: &str| -> Option<(u32, u32)> {
         let (major, minor) = version.split_once('.')?;

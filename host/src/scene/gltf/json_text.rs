@@ -8,10 +8,10 @@
 //!   undefined, the animated object MAY be defined by an extension") and `KHR_animation_pointer`
 //!   files use both (`"path": "pointer"`): such files were refused whole. The array becomes `[]`.
 //! - **A UTF-8 byte-order mark** before the JSON (which Windows editors write): serde_json
-//!   refused the file at line 1, column 1, without saying why. glTF 2.0 § 3.2 asks writers not
-//!   to write one; readers such as three.js skip it.
-//! - **NUL bytes padding a GLB's JSON chunk**, which glTF 2.0 § 4.4.3.1 asks to pad with
-//!   spaces and some exporters pad with zeros: serde_json refused "trailing characters".
+//!   refused the file at line 1, column 1, without saying why. glTF 2.0 asks for UTF-8 without
+//!   one; raywave reads OBJ and MTL files past it too.
+//! - **NUL bytes padding a GLB's JSON chunk**, which glTF 2.0 pads with spaces and some
+//!   exporters pad with zeros: serde_json refused "trailing characters".
 
 use serde_json::value::RawValue;
 use std::borrow::Cow;
