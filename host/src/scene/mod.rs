@@ -393,6 +393,11 @@ impl Scene {
     }
 }
 
+/// The UTF-8 byte-order mark (EF BB BF) that Windows editors write before a text file's first
+/// line. The OBJ and MTL loaders strip it; the glTF loader reads it as spaces, keeping the JSON's
+/// columns (its errors name them).
+const UTF8_BYTE_ORDER_MARK: &[u8] = b"\xEF\xBB\xBF";
+
 /// The largest coordinate magnitude `M` of a vertex or of the camera, in scene units (10⁸: 10⁵ km
 /// in metres, where `f32` spacing is already 8 m). Up to it every difference of two points stays
 /// within 2·10⁸ per axis, and the highest powers of lengths the kernels form stay finite in `f32`

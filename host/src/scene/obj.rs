@@ -140,11 +140,11 @@ pub fn load(path: &Path) -> Result<Scene> {
     Ok(Scene::new(&name, meshes, camera)?.with_unrendered(unrendered))
 }
 
-/// `bytes` without a leading UTF-8 byte-order mark (EF BB BF), which Windows editors write: kept,
+/// `bytes` without a leading [`super::UTF8_BYTE_ORDER_MARK`], which Windows editors write: kept,
 /// it made the first line's keyword one that no reader knows (an OBJ's `mtllib`, an MTL's
 /// `newmtl`), and the file failed on a later line for want of it.
 fn without_byte_order_mark(bytes: &[u8]) -> &[u8] {
-    bytes.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(bytes)
+    bytes.strip_prefix(super::UTF8_BYTE_ORDER_MARK).unwrap_or(bytes)
 }
 
 /// The OBJ `text` as raywave reads it, line numbers kept — what tobj parses and every check
@@ -338,8 +338,9 @@ fn is_exponent(words: &[&str]) -> bool {
 
 /// tobj's error `error`, raised while its reader was in line `line`, with that line: the line at
 /// fault for the errors of one line (a number that does not parse, a malformed face), or the
-/// line that closed the object whose faces index past the data (tobj checks them as it closes an
-/// object: at the next `o`, `g` or `usemtl` line, or at the end of the file).
+/// line that closed the object whose faces index past the data defined by then (tobj checks them
+/// as it closes an object: at the next `o`, `g` or `usemtl` line, or at the end of the file; an
+/// index past the whole file's data was refused before, naming its face's line).
 fn locate(error: tobj::LoadError, line: usize) -> String {
     use tobj::LoadError::{
         FaceColorOutOfBounds, FaceNormalOutOfBounds, FaceTexCoordOutOfBounds, FaceVertexOutOfBounds, InvalidPolygon,
@@ -366,15 +367,25 @@ fn has_textures(m: &tobj::Material) -> bool {
 }
 
 /// Whether MTL entry `m` lets light through somewhere (a dissolve `d` below 1, or a `map_d`),
-/// which raywave does not render ([`Unrendered::see_through_meshes`]).
+/// which raywave does not render ([`Unrendered::see_through_meshes`]). Without a `d`, a
+/// transparency `Tr` strictly between 0 and 1 does too: exporters write `Tr` as `1 − d`
+/// (tinyobjloader reads it so, where `d` is missing) or, in older ones, as `d` itself, so only
+/// the ends 0 and 1 are in doubt (opaque or invisible).
 fn is_see_through(m: &tobj::Material) -> bool {
-    m.dissolve.is_some_and(|d| d < 1.0) || m.dissolve_texture.is_some()
+    let transparency = || {
+        let value = m.unknown_param.get("Tr")?;
+        before_comment(value.split_whitespace()).next()?.parse::<f32>().ok()
+    };
+    m.dissolve.is_some_and(|d| d < 1.0)
+        || m.dissolve_texture.is_some()
+        || (m.dissolve.is_none() && transparency().is_some_and(|tr| tr > 0.0 && tr < 1.0))
 }
 
 /// Checks the OBJ `text` before tobj reads it, naming the line at fault (tobj's vertex numbers
 /// are not the file's, so [`Scene::new`]'s errors could not name it):
 /// - every index of the faces (`f`) is not 0 (indices are 1-based), not past 2³²,
-///   and a negative (relative) one within the vertex data (`v`, `vt`, `vn`) defined before it.
+///   a negative (relative) one within the vertex data (`v`, `vt`, `vn`) defined before it, and
+///   a positive one within the whole file's data of its kind.
 ///   tobj 4.0.5 turns `0` and relative indices past the start into indices near `usize::MAX` and
 ///   multiplies them, which overflows — a panic where overflow checks are on (debug and test
 ///   builds);
@@ -573,13 +584,17 @@ enum ObjToken<'a> {
 }
 
 /// Walks the OBJ `text` as read ([`as_read`]: polylines blanked), handing `visit` each vertex
-/// position and each face index with its 1-based line number, and refusing an index that is 0, past 2³², or negative (relative)
-/// beyond the vertex data defined before it (see [`check_vertices_and_indices`]).
+/// position and each face index with its 1-based line number, and refusing an index that is 0,
+/// past 2³², or negative (relative) beyond the vertex data defined before it (see
+/// [`check_vertices_and_indices`]), and, once the walk is done, the face with the largest index
+/// past the whole file's data of its kind.
 fn each_vertex_and_index(
     text: &[u8],
     mut visit: impl FnMut(usize, ObjToken) -> std::result::Result<(), String>,
 ) -> std::result::Result<(), String> {
     let mut defined = [0i64; 3];
+    // Per kind, the largest positive index of any face and its line.
+    let mut furthest = [(0i64, 0usize); 3];
     for (index, line) in text.split(|&b| b == b'\n').enumerate() {
         let line = String::from_utf8_lossy(line);
         let mut words = line.split_whitespace();
@@ -609,12 +624,22 @@ fn each_vertex_and_index(
                                 index + 1
                             ));
                         }
+                        if value > furthest[kind].0 {
+                            furthest[kind] = (value, index + 1);
+                        }
                         let number = if value > 0 { value - 1 } else { defined[kind] + value };
                         visit(index + 1, ObjToken::Index { kind, vertex: number })?;
                     }
                 }
             }
             _ => {}
+        }
+    }
+    // tobj checks indices only as it closes an object, so its error could not name the face.
+    const DATA: [&str; 3] = ["vertex positions (`v` lines)", "texture coordinates (`vt`)", "normals (`vn`)"];
+    for ((value, line), (count, data)) in furthest.into_iter().zip(defined.into_iter().zip(DATA)) {
+        if value > count {
+            return Err(format!("line {line}: a face's index {value} is past the file's {count} {data}"));
         }
     }
     Ok(())
@@ -653,10 +678,23 @@ fn check_material_names(
                         "line {line_number}: `{written}` comes before any `mtllib` line, so it names no material"
                     ));
                 }
-                if first_definition.get(name).is_none_or(|&first| first >= known) {
+                let defined = |name: &str| first_definition.get(name).is_some_and(|&first| first < known);
+                if !defined(name) {
                     let names: Vec<String> =
                         libraries[..read].iter().flatten().map(|(library, _)| library.display().to_string()).collect();
-                    return Err(format!("line {line_number}: `{written}` names no material of {}", names.join(", ")));
+                    // `usemtl lamp # bright`: the name keeps its `#`, as MTL's `newmtl` does.
+                    let comment_hint = match name.split_once('#') {
+                        Some((before, _)) if defined(before.trim()) => format!(
+                            " (a name keeps a `#` and what follows it: `{}` is a material; put a comment on a line \
+                             of its own)",
+                            before.trim()
+                        ),
+                        _ => String::new(),
+                    };
+                    return Err(format!(
+                        "line {line_number}: `{written}` names no material of {}{comment_hint}",
+                        names.join(", ")
+                    ));
                 }
             }
             _ => {}
@@ -726,6 +764,17 @@ mod tests {
         f
     }
 
+    /// A fresh folder holding the material `libraries` (file name, text), and the path of a
+    /// `scene.obj` beside them for the test to write.
+    fn folder_with(libraries: &[(&str, &str)]) -> (tempfile::TempDir, PathBuf) {
+        let dir = tempfile::tempdir().unwrap();
+        for (name, text) in libraries {
+            std::fs::write(dir.path().join(name), text).unwrap();
+        }
+        let path = dir.path().join("scene.obj");
+        (dir, path)
+    }
+
     #[test]
     fn loads_a_quad() {
         let f = obj_file("o quad\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\n");
@@ -785,12 +834,10 @@ mod tests {
     /// (a `usemtl` holds for the objects after it, as in the format).
     #[test]
     fn mtl_materials_and_emissive_quads_become_materials_and_lights() {
-        let dir = tempfile::tempdir().unwrap();
-        std::fs::write(
-            dir.path().join("scene.mtl"),
-            "newmtl floor\nKd 0.5 0.25 1\nNs 198\nnewmtl lamp\nKd 1 1 1\nKe 4 2 1\nnewmtl metal\nKd 0.9 0.8 0.7\nPr 0.3\nPm 1\n",
-        )
-        .unwrap();
+        let library = "newmtl floor\nKd 0.5 0.25 1\nNs 198\n\
+                       newmtl lamp\nKd 1 1 1\nKe 4 2 1\n\
+                       newmtl metal\nKd 0.9 0.8 0.7\nPr 0.3\nPm 1\n";
+        let (dir, path) = folder_with(&[("scene.mtl", library)]);
         let obj = "mtllib scene.mtl\n\
                    v -1 0 -1\nv 1 0 -1\nv 1 0 1\nv -1 0 1\n\
                    v -0.25 1.5 -0.25\nv 0.25 1.5 -0.25\nv 0.25 1.5 0.25\nv -0.25 1.5 0.25\n\
@@ -799,7 +846,6 @@ mod tests {
                    o floor\nusemtl floor\nf 1 4 3 2\n\
                    o lamp\nusemtl lamp\nf 5 6 7 8\n\
                    o chip\nusemtl metal\nf 9 10 11\n";
-        let path = dir.path().join("scene.obj");
         std::fs::write(&path, obj).unwrap();
         let scene = load(&path).unwrap();
         let by_name = |name: &str| scene.meshes().iter().find(|m| m.name == name).unwrap_or_else(|| panic!("{name}"));
@@ -983,6 +1029,14 @@ mod tests {
             .unwrap();
         let unrendered = load(&path).unwrap().unrendered();
         assert_eq!((unrendered.see_through_meshes, unrendered.textured_meshes), (2, 0));
+        // A transparency `Tr` between 0 and 1 is see-through too, where no `d` says otherwise; `Tr 1`
+        // may mean opaque or invisible (exporters disagree), so it is not counted.
+        std::fs::write(
+            &library,
+            "newmtl floor\nTr 0.5 # frosted\nnewmtl lamp\nKe 1 1 1\nTr 1\nnewmtl metal\nTr 0.25\nd 1\n",
+        )
+        .unwrap();
+        assert_eq!(load(&path).unwrap().unrendered().see_through_meshes, 1);
         std::fs::write(&library, b"newmtl floor\nKd 1 1 1\n\nKs 1 1 \xff\n").unwrap();
         let err = load(&path).unwrap_err().to_string();
         assert!(err.contains("scene.mtl: line 4: not UTF-8 text"), "{err}");
@@ -992,8 +1046,7 @@ mod tests {
     /// that failed was dropped without a word when the other loaded (tobj returns what loaded).
     #[test]
     fn each_material_library_answers_for_its_own_materials() {
-        let dir = tempfile::tempdir().unwrap();
-        let path = dir.path().join("scene.obj");
+        let (dir, path) = folder_with(&[]);
         std::fs::write(
             &path,
             "mtllib a.mtl\nmtllib b.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl red\nf 1 2 3\nusemtl blue\nf 1 3 2\n",
@@ -1020,8 +1073,7 @@ mod tests {
     /// name holds a space is still one library.
     #[test]
     fn one_mtllib_line_may_name_several_libraries() {
-        let dir = tempfile::tempdir().unwrap();
-        let path = dir.path().join("scene.obj");
+        let (dir, path) = folder_with(&[]);
         let obj = |mtllib: &str| {
             format!("mtllib {mtllib}\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl red\nf 1 2 3\nusemtl lamp\nf 1 3 2\n")
         };
@@ -1056,8 +1108,7 @@ mod tests {
     /// path to it, is one definition.
     #[test]
     fn a_material_two_libraries_define_is_refused() {
-        let dir = tempfile::tempdir().unwrap();
-        let path = dir.path().join("scene.obj");
+        let (dir, path) = folder_with(&[]);
         let triangle = "v 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl lamp\nf 1 2 3\n";
         std::fs::write(dir.path().join("a.mtl"), "newmtl lamp\nKe 10 10 10\n").unwrap();
         std::fs::write(dir.path().join("b.mtl"), "newmtl lamp\nKd 0.5 0.5 0.5\n").unwrap();
@@ -1099,9 +1150,7 @@ mod tests {
 
     #[test]
     fn polylines_are_not_surfaces() {
-        let dir = tempfile::tempdir().unwrap();
-        std::fs::write(dir.path().join("lamp.mtl"), "newmtl lamp\nKe 1 1 1\n").unwrap();
-        let path = dir.path().join("scene.obj");
+        let (_dir, path) = folder_with(&[("lamp.mtl", "newmtl lamp\nKe 1 1 1\n")]);
         let square = "mtllib lamp.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nusemtl lamp\n";
         std::fs::write(&path, format!("{square}f 1 2 3\nl 1 2 3 4\n  l 4 3\n")).unwrap();
         let scene = load(&path).unwrap();
@@ -1119,9 +1168,7 @@ mod tests {
     /// keeps its `#` (`Material #25`), as MTL's `newmtl` does.
     #[test]
     fn comments_after_numbers_are_no_data_and_names_keep_their_hash() {
-        let dir = tempfile::tempdir().unwrap();
-        std::fs::write(dir.path().join("lamp.mtl"), "newmtl Material #25\nKe 1 1 1\n").unwrap();
-        let path = dir.path().join("scene.obj");
+        let (dir, path) = folder_with(&[("lamp.mtl", "newmtl Material #25\nKe 1 1 1\n")]);
         let obj = "mtllib lamp.mtl # the library\n\
                    v 0 0 0 # origin\nv 1 0 0 0.5 0.5 0.5 # coloured\nv 1 1 0 1 #weighted\nv 0 1 0\n\
                    vt 0 0 # corner\nvn 0 0 1 # up\n\
@@ -1157,17 +1204,16 @@ mod tests {
         }
         // A face index past them is still an error.
         let err = load(obj_file("v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0.5\nf 1/2 2/1 3/1\n").path()).unwrap_err();
-        assert!(err.to_string().contains("face texcoord index out of bounds"), "{err}");
+        assert!(err.to_string().contains("line 5: a face's index 2 is past the file's 1 texture coordinates"), "{err}");
     }
 
     /// A library's or material's name after a tab, or on an indented line, is read as
     /// tinyobjloader reads it (tobj took the name after the line's first space: `mtllib<TAB>a.mtl`
-    /// had looked for the OBJ's folder); an `mtllib` or `usemtl` naming nothing is an error by line.
+    /// had looked for the OBJ's folder); an `mtllib` or `usemtl` naming nothing is an error by line,
+    /// and a `usemtl` naming a material followed by a comment says the `#` is part of the name.
     #[test]
     fn names_after_tabs_and_indents_are_read_and_a_missing_name_is_an_error() {
-        let dir = tempfile::tempdir().unwrap();
-        std::fs::write(dir.path().join("lamp.mtl"), "newmtl lamp\nKe 1 1 1\n").unwrap();
-        let path = dir.path().join("scene.obj");
+        let (_dir, path) = folder_with(&[("lamp.mtl", "newmtl lamp\nKe 1 1 1\n")]);
         let quad = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\n";
         for (library, material) in [("mtllib\tlamp.mtl", "usemtl\tlamp"), ("  mtllib lamp.mtl ", "\tusemtl lamp\r")] {
             std::fs::write(&path, format!("{library}\n\t o\tlamp\n{material}\n{quad}")).unwrap();
@@ -1178,10 +1224,20 @@ mod tests {
         for (obj, expected) in [
             (format!("mtllib\nusemtl lamp\n{quad}"), "line 1: `mtllib` names nothing"),
             (format!("mtllib lamp.mtl\n  usemtl \t\n{quad}"), "line 2: `usemtl` names nothing"),
+            (
+                format!("mtllib lamp.mtl\nusemtl lamp # bright\n{quad}"),
+                "line 2: `usemtl lamp # bright` names no material of",
+            ),
+            (
+                format!("mtllib lamp.mtl\nusemtl lmap # bright\n{quad}"),
+                "line 2: `usemtl lmap # bright` names no material of",
+            ),
         ] {
             std::fs::write(&path, &obj).unwrap();
             let err = load(&path).unwrap_err().to_string();
             assert!(err.contains(expected) && err.contains("scene.obj"), "{obj:?}: {err}");
+            let hinted = err.contains("a name keeps a `#` and what follows it: `lamp` is a material");
+            assert_eq!(hinted, obj.contains("lamp #"), "only where the name before the `#` is one: {obj:?}: {err}");
         }
     }
 
@@ -1191,8 +1247,7 @@ mod tests {
     /// from the line it starts.
     #[test]
     fn a_byte_order_mark_is_no_part_of_the_first_line() {
-        let dir = tempfile::tempdir().unwrap();
-        let path = dir.path().join("scene.obj");
+        let (dir, path) = folder_with(&[]);
         let obj = "mtllib lamp.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nusemtl lamp\nf 1 2 3 4\n";
         for (obj_mark, mtl_mark) in [("\u{feff}", ""), ("", "\u{feff}"), ("\u{feff}", "\u{feff}")] {
             std::fs::write(dir.path().join("lamp.mtl"), format!("{mtl_mark}newmtl lamp\nKe 1 1 1\n")).unwrap();
@@ -1262,8 +1317,14 @@ mod tests {
             );
         }
         assert_eq!(load(obj_file(&format!("{quad}vt 0 0\nf -4/-1 -3/1 -2/-1\n")).path()).unwrap().triangle_count(), 1);
-        // Faces are checked as their object closes: at the next `o` line, here line 7.
-        let closed = error(&format!("{quad}o a\nf 1 2 7\no b\nf 1 2 3\n"));
+        // An index past the whole file's data names its face: the largest such one.
+        let past = error(&format!("{quad}f 1 2 3\nf 1 2 7\nf 1 2 9\nf 1 2 5\n"));
+        assert!(past.contains("line 7: a face's index 9 is past the file's 4 vertex positions"), "{past}");
+        let past = error(&format!("{quad}vn 0 0 1\nf 1//1 2//2 3//1\n"));
+        assert!(past.contains("line 6: a face's index 2 is past the file's 1 normals (`vn`)"), "{past}");
+        // One within it, but defined after the object closes, is tobj's error, found as the object
+        // closes: at the next `o` line, here line 7.
+        let closed = error(&format!("{quad}o a\nf 1 2 5\no b\nv 0 0 1\nf 1 2 3\n"));
         assert!(
             closed.contains("face vertex index out of bounds in a face of the object closed at line 7"),
             "{closed}"
@@ -1326,7 +1387,7 @@ mod tests {
     fn out_of_range_face_and_empty_file_are_rejected() {
         let f = obj_file("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n");
         let err = load(f.path()).unwrap_err().to_string();
-        assert!(err.contains("out of bounds in a face of the object closed at line 4"), "{err}");
+        assert!(err.contains("line 4: a face's index 9 is past the file's 3 vertex positions (`v` lines)"), "{err}");
         let f = obj_file("# nothing here\n");
         assert!(matches!(load(f.path()).unwrap_err(), Error::EmptyScene { .. }));
     }

@@ -17,15 +17,15 @@ use serde_json::value::RawValue;
 use std::borrow::Cow;
 use std::collections::HashMap;
 
-const BYTE_ORDER_MARK: &[u8] = b"\xEF\xBB\xBF";
+use crate::scene::UTF8_BYTE_ORDER_MARK;
 
 /// `bytes`, a `.gltf` file or a GLB (whose header [`super::check_glb_length`] checked), with its
 /// JSON made readable as the module documentation says; borrowed where nothing changes.
 pub(super) fn readable(bytes: &[u8]) -> Cow<'_, [u8]> {
     let json = json_span(bytes);
     let mut text = Cow::Borrowed(bytes);
-    if bytes[json.clone()].starts_with(BYTE_ORDER_MARK) {
-        blank(&mut text.to_mut()[json.start..json.start + BYTE_ORDER_MARK.len()]);
+    if bytes[json.clone()].starts_with(UTF8_BYTE_ORDER_MARK) {
+        blank(&mut text.to_mut()[json.start..json.start + UTF8_BYTE_ORDER_MARK.len()]);
     }
     let padding = bytes[json.clone()].iter().rev().take_while(|&&b| b == 0).count();
     if json.start > 0 && padding > 0 {
@@ -103,7 +103,7 @@ mod tests {
         let array = format!("[{}\n{}]", " ".repeat(14), " ".repeat(4));
         let expected = format!("{{\"asset\": {{\"version\": \"2.0\"}},\n \"animations\": {array},\n \"x\": 1}}");
         assert_eq!(std::str::from_utf8(&read).unwrap(), expected);
-        let with_mark = [BYTE_ORDER_MARK, b"{\"asset\": {}}"].concat();
+        let with_mark = [UTF8_BYTE_ORDER_MARK, b"{\"asset\": {}}"].concat();
         assert_eq!(&readable(&with_mark)[..], b"   {\"asset\": {}}");
         let padded = glb(b"{\"a\":1}", 0);
         assert_eq!(&readable(&padded)[..], &glb(b"{\"a\":1}", b' ')[..]);
