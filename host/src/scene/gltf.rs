@@ -410,7 +410,9 @@ fn check_asset_version(asset: &gltf::json::Asset) -> std::result::Result<(), Str
 /// gltf 1.4.1's `Glb::from_slice` subtracts 12 from it unchecked, which panics with overflow
 /// checks on (debug and test builds) and wraps without them; it refuses a length past the end
 /// without saying which, and reads the chunks to the end of the file whatever a shorter length
-/// says. Text glTF (no `glTF` magic) passes untouched.
+/// says. Each chunk's length must also fit in the file (§ 4.4.3), where the crate's refusal
+/// ("BIN\0 chunk length exceeds that of slice") named neither the chunk nor its length. Text
+/// glTF (no `glTF` magic) passes untouched.
 fn check_glb_length(bytes: &[u8]) -> std::result::Result<(), String> {
     let [b'g', b'l', b'T', b'F', _, _, _, _, l0, l1, l2, l3, ..] = *bytes else { return Ok(()) };
     let length = u32::from_le_bytes([l0, l1, l2, l3]);
@@ -419,6 +421,19 @@ fn check_glb_length(bytes: &[u8]) -> std::result::Result<(), String> {
             "GLB header: length {length} is not the file's size, {} bytes; glTF 2.0 requires them equal",
             bytes.len()
         ));
+    }
+    // Each chunk: its data's length, its type, its data. Fewer than 8 bytes left are the crate's.
+    let (mut offset, mut chunk) = (12, 0);
+    while let Some(&[l0, l1, l2, l3, t0, t1, t2, t3]) = bytes.get(offset..offset + 8) {
+        let length = u32::from_le_bytes([l0, l1, l2, l3]) as usize;
+        let left = bytes.len() - (offset + 8);
+        if length > left {
+            let kind = String::from_utf8_lossy(&[t0, t1, t2, t3]).trim_end_matches('\0').escape_debug().to_string();
+            return Err(format!(
+                "GLB chunk {chunk} ({kind}): length {length} runs past the file's end, {left} bytes after its header"
+            ));
+        }
+        (offset, chunk) = (offset + 8 + length, chunk + 1);
     }
     Ok(())
 }
@@ -440,6 +455,11 @@ fn load_buffers(
         let data = match buffer.source() {
             buffer::Source::Uri(uri) if !uri.starts_with("data:") => {
                 external_buffer(uri, base, buffer.length()).map(buffer::Data)
+            }
+            // The crate decodes all after `data:` as base64 and fails inside the media type.
+            buffer::Source::Uri(uri) if !uri.contains(";base64,") => {
+                let expected = "data:application/octet-stream;base64,…";
+                Err(format!("the data URI holds no `;base64,`: glTF 2.0 embeds buffer data as base64 (`{expected}`)"))
             }
             source => buffer::Data::from_source_and_blob(source, base, &mut blob).map_err(|e| e.to_string()),
         }
@@ -1641,6 +1661,9 @@ mod tests {
             let err = scene_at(uri).unwrap_err().to_string();
             assert!(err.contains(&format!("buffers[0] ({uri:?}): ")) && err.contains(expected), "{uri}: {err}");
         }
+        // A data URI in RFC 2397's percent-encoded form, which glTF does not embed buffers in.
+        let err = scene_at("data:application/octet-stream,%00%01").unwrap_err().to_string();
+        assert!(err.contains("buffers[0] (embedded data URI): the data URI holds no `;base64,`"), "{err}");
         // Padded to 52 bytes, as the `gltf` crate pads, which is less than the 60 of byteLength.
         std::fs::write(dir.path().join("short.bin"), &quad_buffer()[..50]).unwrap();
         let err = scene_at("short.bin").unwrap_err().to_string();
@@ -2504,7 +2527,8 @@ mod tests {
     /// A GLB header's length must be the file's size (glTF 2.0 § 4.4.2): one shorter than the
     /// header itself overflowed inside the `gltf` crate (a panic with overflow checks on), one
     /// shorter than the file loaded (the crate reads the chunks to the end of the file), and one
-    /// longer failed without naming the header's length.
+    /// longer failed without naming the header's length; a chunk's length past the file's end
+    /// failed without naming the chunk.
     #[test]
     fn a_glb_header_length_other_than_the_file_size_is_an_error() {
         let glb_file = |bytes: &[u8]| file_of(".glb", bytes);
@@ -2533,6 +2557,21 @@ mod tests {
         for length in [size - 4, size + 4] {
             let err = load(glb_file(&glb(length)).path()).unwrap_err();
             let expected = format!("GLB header: length {length} is not the file's size, {size} bytes");
+            assert!(matches!(err, Error::SceneLoad { .. }) && err.to_string().contains(&expected), "{err}");
+        }
+        // A chunk longer than what follows its header names the chunk (glTF 2.0 § 4.4.3): a BIN
+        // chunk of 16 bytes with 8 in the file, and the JSON chunk itself.
+        let mut short_bin = glb(size + 16);
+        short_bin.extend_from_slice(&16u32.to_le_bytes());
+        short_bin.extend_from_slice(b"BIN\0");
+        short_bin.extend_from_slice(&[0; 8]);
+        let mut long_json = glb(size);
+        long_json[12..16].copy_from_slice(&(json.len() as u32 + 4).to_le_bytes());
+        for (bytes, expected) in [
+            (short_bin, "GLB chunk 1 (BIN): length 16 runs past the file's end, 8 bytes after its header".to_owned()),
+            (long_json, format!("GLB chunk 0 (JSON): length {} runs past the file's end", json.len() + 4)),
+        ] {
+            let err = load(glb_file(&bytes).path()).unwrap_err();
             assert!(matches!(err, Error::SceneLoad { .. }) && err.to_string().contains(&expected), "{err}");
         }
     }
