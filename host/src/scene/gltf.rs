@@ -318,7 +318,7 @@ fn parse(bytes: &[u8], base: Option<&Path>) -> std::result::Result<(Document, Ve
     check_camera_projections(document.as_json())?;
     check_node_matrices_alone(document.as_json())?;
     check_meshes_have_primitives(document.as_json())?;
-    let buffers = load_buffers(&document, base, blob)?;
+    let buffers = load_buffers(&document, base, bytes.starts_with(b"glTF"), blob)?;
     Ok((document, buffers))
 }
 
@@ -326,8 +326,10 @@ fn parse(bytes: &[u8], base: Option<&Path>) -> std::result::Result<(Document, Ve
 /// written as the file writes them: [`as_written`]), less the errors that glTF 2.0 does not make:
 /// a primitive without POSITION, which gltf-json 1.4 reports missing, where the specification
 /// allows it (§ 3.7.2.1: "When positions are not specified, client implementations SHOULD skip
-/// primitive's rendering", [`draws_surfaces`]); and a texture without `source`, which the schema
-/// makes optional (an extension may give the image) and raywave reads no image of.
+/// primitive's rendering", [`draws_surfaces`]); a texture without `source`, which the schema
+/// makes optional (an extension may give the image) and raywave reads no image of; and an accessor
+/// with neither `bufferView` nor `sparse`, which the schema allows ("When undefined, the accessor
+/// MUST be initialized with zeros") and [`PositionElements`] reads as zeros.
 fn validate(document: &Document) -> std::result::Result<(), String> {
     use gltf::json::validation::{Error as Invalid, Validate};
     use gltf::json::Path as JsonPath;
@@ -340,10 +342,12 @@ fn validate(document: &Document) -> std::result::Result<(), String> {
         .collect();
     let without_source: Vec<JsonPath> =
         (0..root.textures.len()).map(|t| JsonPath::new().field("textures").index(t).field("source")).collect();
+    let without_view: Vec<JsonPath> =
+        (0..root.accessors.len()).map(|a| JsonPath::new().field("accessors").index(a).field("bufferView")).collect();
     let mut errors = String::new();
     root.validate(root, JsonPath::new, &mut |path, error| {
         let path = path();
-        let allowed = without_positions.contains(&path) || without_source.contains(&path);
+        let allowed = [&without_positions, &without_source, &without_view].iter().any(|paths| paths.contains(&path));
         if !(matches!(error, Invalid::Missing) && allowed) {
             errors.push_str(&format!(" {}: {error};", as_written(&path.to_string())));
         }
@@ -438,29 +442,38 @@ fn check_glb_length(bytes: &[u8]) -> std::result::Result<(), String> {
     Ok(())
 }
 
-/// Every buffer's data (`gltf::import_buffers`, with errors that name the buffer and its source);
-/// `blob` is a GLB file's BIN chunk.
+/// The data of every buffer an accessor reads ([`buffers_read_by_accessors`]; the others are
+/// left empty), as `gltf::import_buffers` loads it but with errors that name the buffer and its
+/// source; `glb` tells whether the file is a GLB, `blob` is its BIN chunk.
 fn load_buffers(
     document: &Document,
     base: Option<&Path>,
+    glb: bool,
     mut blob: Option<Vec<u8>>,
 ) -> std::result::Result<Vec<buffer::Data>, String> {
+    let read = buffers_read_by_accessors(document);
     let load = |buffer: buffer::Buffer| {
+        if !read[buffer.index()] {
+            return Ok(buffer::Data(Vec::new()));
+        }
+        let bin_chunk = glb && buffer.index() == 0;
         let source = match buffer.source() {
             buffer::Source::Uri(uri) if uri.starts_with("data:") => "embedded data URI".to_owned(),
             buffer::Source::Uri(uri) => format!("{uri:?}"),
-            buffer::Source::Bin => "the GLB BIN chunk".to_owned(),
+            buffer::Source::Bin if bin_chunk => "the GLB BIN chunk".to_owned(),
+            buffer::Source::Bin => "no `uri`".to_owned(),
         };
         let field = format!("buffers[{}] ({source})", buffer.index());
         let data = match buffer.source() {
             buffer::Source::Uri(uri) if !uri.starts_with("data:") => {
                 external_buffer(uri, base, buffer.length()).map(buffer::Data)
             }
-            // The crate decodes all after `data:` as base64 and fails inside the media type.
-            buffer::Source::Uri(uri) if !uri.contains(";base64,") => {
-                let expected = "data:application/octet-stream;base64,…";
-                Err(format!("the data URI holds no `;base64,`: glTF 2.0 embeds buffer data as base64 (`{expected}`)"))
+            // The crate takes the BIN chunk for the first buffer without `uri`, whichever it is.
+            buffer::Source::Bin if !bin_chunk => {
+                Err("only a GLB's first buffer may omit `uri` (its data is then the BIN chunk)".to_owned())
             }
+            // The crate decodes all after `data:` as base64 and fails inside the media type.
+            buffer::Source::Uri(uri) if !uri.contains(";base64,") => percent_encoded_data(uri).map(buffer::Data),
             source => buffer::Data::from_source_and_blob(source, base, &mut blob).map_err(|e| e.to_string()),
         }
         .map_err(|e| format!("{field}: {e}"))?;
@@ -471,6 +484,32 @@ fn load_buffers(
         Ok(data)
     };
     document.buffers().map(load).collect()
+}
+
+/// Which buffers (by index) hold data an accessor reads, through its `bufferView` or its sparse
+/// views: raywave reads buffers through accessors only, so a buffer that holds only images, or a
+/// placeholder without `uri` (glTF-Validator's `buffer/valid_placeholder.glb` holds one), is not
+/// loaded, and when missing refuses no file.
+fn buffers_read_by_accessors(document: &Document) -> Vec<bool> {
+    let mut read = vec![false; document.buffers().len()];
+    for accessor in document.accessors() {
+        let sparse_views = accessor.sparse().map(|sparse| [sparse.indices().view(), sparse.values().view()]);
+        for view in accessor.view().into_iter().chain(sparse_views.into_iter().flatten()) {
+            read[view.buffer().index()] = true;
+        }
+    }
+    read
+}
+
+/// The bytes of a data URI without `;base64`: RFC 2397 (`data:[<mediatype>][;base64],<data>`)
+/// writes them after the first comma, percent-encoded, as glTF-Validator's
+/// `buffer/data_uri.glb` does (`data:application/gltf-buffer,0`); zero-padded to a multiple of
+/// 4 bytes as the `gltf` crate pads its buffers.
+fn percent_encoded_data(uri: &str) -> std::result::Result<Vec<u8>, String> {
+    let (_, data) = uri.split_once(',').ok_or("the data URI has no `,` before its data (RFC 2397)")?;
+    let mut data = urlencoding::decode_binary(data.as_bytes()).into_owned();
+    data.resize(data.len().next_multiple_of(4), 0);
+    Ok(data)
 }
 
 /// The first `length` bytes (its `byteLength`) of the external buffer file `uri` names, zero-padded
@@ -909,8 +948,9 @@ fn fan_triangles(indices: &[u32]) -> Vec<[u32; 3]> {
 /// glTF 2.0 forbids there that the crate takes: its element type (one glTF allows there, and
 /// `normalized` only where that allows it — the reader ignores the flag, and glTF forbids it for
 /// float and 32-bit components), no `byteStride` on an indices view, `count ≥ 1` (glTF's minimum)
-/// and at most one element per byte of the file's buffers and below 2³² (32-bit indices; a sparse
-/// accessor without a buffer view would otherwise allocate `count` zeros, however large), `1 ≤
+/// and at most one element per byte of the buffers loaded (those accessors read:
+/// [`buffers_read_by_accessors`]) and below 2³² (32-bit indices; an accessor without a buffer view
+/// would otherwise allocate `count` zeros, however large), `1 ≤
 /// sparse.count ≤ count`, and that its elements, and its sparse indices and values, lie inside
 /// their buffer views and buffers ([`check_span`]).
 fn check_accessor(
@@ -940,7 +980,7 @@ fn check_accessor(
     let limit = buffers.iter().map(|data| data.len()).sum::<usize>().min(u32::MAX as usize);
     if !(1..=limit).contains(&count) {
         return error(format!(
-            "count {count} is outside 1..={limit} (an element per byte of the buffers, at most 2³²−1)"
+            "count {count} is outside 1..={limit} (an element per byte of the buffers read, at most 2³²−1)"
         ));
     }
     let component = accessor.data_type().size();
@@ -1633,7 +1673,8 @@ mod tests {
 
     /// External buffers resolve as the `gltf` crate resolves them (percent-decoded relative
     /// paths, `file:` URIs), and only their `byteLength` is read; what that crate panicked on (a
-    /// percent-decoded URI that is not UTF-8) or read without end (`/dev/zero`) is an error.
+    /// percent-decoded URI that is not UTF-8) or read without end (`/dev/zero`) is an error. Data
+    /// URIs without `;base64`, which the crate read as base64, are percent-decoded.
     #[test]
     fn external_buffers_are_read_up_to_their_length_from_regular_files_only() {
         let dir = tempfile::tempdir().unwrap();
@@ -1661,9 +1702,18 @@ mod tests {
             let err = scene_at(uri).unwrap_err().to_string();
             assert!(err.contains(&format!("buffers[0] ({uri:?}): ")) && err.contains(expected), "{uri}: {err}");
         }
-        // A data URI in RFC 2397's percent-encoded form, which glTF does not embed buffers in.
-        let err = scene_at("data:application/octet-stream,%00%01").unwrap_err().to_string();
-        assert!(err.contains("buffers[0] (embedded data URI): the data URI holds no `;base64,`"), "{err}");
+        // A data URI in RFC 2397's percent-encoded form, as glTF-Validator's `data_uri.glb` has.
+        let byte = |b: &u8| if b.is_ascii_alphanumeric() { char::from(*b).to_string() } else { format!("%{b:02X}") };
+        let encoded: String = quad_buffer().iter().map(byte).collect();
+        let scene = scene_at(&format!("data:application/gltf-buffer,{encoded}")).unwrap();
+        assert_eq!(scene.triangle_count(), 2);
+        for (uri, expected) in [
+            ("data:application/octet-stream", "the data URI has no `,` before its data"),
+            ("data:,%00%01", "byteLength is 60 but the data has 4 bytes"),
+        ] {
+            let err = scene_at(uri).unwrap_err().to_string();
+            assert!(err.contains(&format!("buffers[0] (embedded data URI): {expected}")), "{uri}: {err}");
+        }
         // Padded to 52 bytes, as the `gltf` crate pads, which is less than the 60 of byteLength.
         std::fs::write(dir.path().join("short.bin"), &quad_buffer()[..50]).unwrap();
         let err = scene_at("short.bin").unwrap_err().to_string();
@@ -1743,16 +1793,20 @@ mod tests {
 
     /// Valid files that gltf-json 1.4.1 refused, with what raywave does not read: an animation
     /// channel without `target.node` or with `KHR_animation_pointer`'s `"path": "pointer"`, and a
-    /// texture without `source` (each optional in glTF 2.0's schema). An error after the blanked
-    /// animations still names its line. Versions a 2.0 reader may not read are refused, by field.
+    /// texture without `source` (each optional in glTF 2.0's schema), and an accessor with neither
+    /// `bufferView` nor `sparse` (zeros). An error after the blanked animations still names its
+    /// line. Versions a 2.0 reader may not read are refused, by field.
     #[test]
     fn valid_files_with_unread_animations_and_textures_load_and_versions_are_checked() {
         let animations = r#""animations":[{"channels":[{"sampler":0,"target":{"path":"pointer",
             "extensions":{"KHR_animation_pointer":{"pointer":"/materials/0/emissiveFactor"}}}},
             {"sampler":0,"target":{"path":"rotation"}}],
-            "samplers":[{"input":2,"output":2}]}],"#;
+            "samplers":[{"input":3,"output":3}]}],"#;
         let textures = r#""textures":[{"sampler":0}],"samplers":[{}],"#;
-        let text = quad_gltf(6).replacen(r#""scene":0,"#, &format!(r#""scene":0,{animations}{textures}"#), 1);
+        let zeros = r#""type":"SCALAR"},{"componentType":5126,"count":4,"type":"VEC3"}]"#;
+        let text = (quad_gltf(6).replacen(r#""scene":0,"#, &format!(r#""scene":0,{animations}{textures}"#), 1))
+            .replacen(r#""type":"SCALAR"}]"#, zeros, 1);
+        assert!(text.contains(zeros));
         let scene = load(file(&text).path()).unwrap();
         assert_eq!((scene.triangle_count(), scene.lights().len()), (2, 1));
         // The accessor the animation names need not even exist, as nothing reads it; an error
@@ -2524,6 +2578,64 @@ mod tests {
         assert!(err.contains("meshes[0] primitive 0"), "{err}");
     }
 
+    /// A GLB container (glTF 2.0 § 4.4): the 12-byte header, `json` as the JSON chunk padded
+    /// with spaces and `bin`, if any, as the BIN chunk padded with zeros.
+    fn glb_container(json: &str, bin: Option<&[u8]>) -> Vec<u8> {
+        let json = (*b"JSON", json.as_bytes().to_vec(), b' ');
+        let mut chunks = Vec::new();
+        for (kind, mut data, padding) in std::iter::once(json).chain(bin.map(|bin| (*b"BIN\0", bin.to_vec(), 0))) {
+            data.resize(data.len().next_multiple_of(4), padding);
+            chunks.extend_from_slice(&(data.len() as u32).to_le_bytes());
+            chunks.extend_from_slice(&kind);
+            chunks.extend_from_slice(&data);
+        }
+        let mut glb = b"glTF".to_vec();
+        glb.extend_from_slice(&2u32.to_le_bytes());
+        glb.extend_from_slice(&(12 + chunks.len() as u32).to_le_bytes());
+        glb.extend(chunks);
+        glb
+    }
+
+    /// Buffers are read through accessors only ([`buffers_read_by_accessors`]): a placeholder
+    /// without `uri` (glTF-Validator's `buffer/valid_placeholder.glb`) or a missing file that no
+    /// accessor reads refuses no file. A GLB's first buffer without `uri` is its BIN chunk; any
+    /// other buffer without `uri` that an accessor reads is an error naming it (the `gltf` crate
+    /// gave the BIN chunk to whichever such buffer it loaded first).
+    #[test]
+    fn only_the_buffers_that_accessors_read_are_loaded() {
+        let data = base64_encode(&quad_buffer());
+        let with_buffers = |text: &str, buffers: &str| {
+            let changed = text.replacen(&format!(r#"{data}"}}]"#), &format!(r#"{data}"}},{buffers}]"#), 1);
+            assert_ne!(changed, text);
+            changed
+        };
+        let indices_view = r#"{"buffer":0,"byteOffset":48,"byteLength":12}"#;
+        let unread = with_buffers(&quad_gltf(6), r#"{"byteLength":4},{"byteLength":8,"uri":"missing.bin"}"#).replacen(
+            indices_view,
+            &format!(r#"{indices_view},{{"buffer":2,"byteLength":8}}"#),
+            1,
+        );
+        assert_eq!(load(file(&unread).path()).unwrap().triangle_count(), 2);
+        for (buffer, expected) in [
+            (1, "buffers[1] (no `uri`): only a GLB's first buffer may omit `uri`"),
+            (2, r#"buffers[2] ("missing.bin"): "#),
+        ] {
+            let read = unread.replacen(indices_view, &format!(r#"{{"buffer":{buffer},"byteLength":4}}"#), 1);
+            let err = load(file(&read).path()).unwrap_err().to_string();
+            assert!(err.contains(expected), "{err}");
+        }
+        // The quad's buffer as a GLB's BIN chunk, with and without a placeholder read.
+        let in_bin = quad_gltf(6).replacen(&format!(r#","uri":"data:application/octet-stream;base64,{data}""#), "", 1);
+        let glb = |json: &str| file_of(".glb", &glb_container(json, Some(&quad_buffer())));
+        assert_eq!(load(glb(&in_bin).path()).unwrap().triangle_count(), 2);
+        let placeholder = in_bin.replacen(r#""byteLength":60}]"#, r#""byteLength":60},{"byteLength":1024}]"#, 1);
+        assert_ne!(placeholder, in_bin);
+        assert_eq!(load(glb(&placeholder).path()).unwrap().triangle_count(), 2);
+        let read = placeholder.replacen(indices_view, r#"{"buffer":1,"byteOffset":48,"byteLength":12}"#, 1);
+        let err = load(glb(&read).path()).unwrap_err().to_string();
+        assert!(err.contains("buffers[1] (no `uri`): only a GLB's first buffer may omit `uri`"), "{err}");
+    }
+
     /// A GLB header's length must be the file's size (glTF 2.0 § 4.4.2): one shorter than the
     /// header itself overflowed inside the `gltf` crate (a panic with overflow checks on), one
     /// shorter than the file loaded (the crate reads the chunks to the end of the file), and one
@@ -2625,8 +2737,10 @@ mod tests {
     }
 
     /// [`quad_gltf`]'s file with its mesh node instanced by `instances` root nodes (no camera)
-    /// and a second buffer, `zeros.bin` of `zeros` zero bytes, as buffer 0 (the quad's becomes 1):
-    /// written to a new folder, whose file path is returned with it.
+    /// and a second buffer, `zeros.bin` of `zeros` zero bytes, as buffer 0 (the quad's becomes 1),
+    /// edited by `edit`, then given a last accessor of `zeros.bin`'s bytes that the mesh does not
+    /// use: raywave loads only the buffers accessors read, and their bytes bound an accessor's
+    /// count ([`check_accessor`]). Written to a new folder, whose file path is returned with it.
     fn instanced_quad_gltf(
         instances: usize,
         zeros: usize,
@@ -2647,10 +2761,17 @@ mod tests {
                 1,
             )
             .replace(r#"{"buffer":0,"#, r#"{"buffer":1,"#);
+        let mut json: serde_json::Value = serde_json::from_str(&edit(text)).unwrap();
+        let views = json["bufferViews"].as_array_mut().unwrap();
+        views.push(serde_json::json!({"buffer": 0, "byteLength": zeros}));
+        let zeros_view = views.len() - 1;
+        let zeros_accessor =
+            serde_json::json!({"bufferView": zeros_view, "componentType": 5121, "count": zeros, "type": "SCALAR"});
+        json["accessors"].as_array_mut().unwrap().push(zeros_accessor);
         let dir = tempfile::tempdir().unwrap();
         std::fs::write(dir.path().join("zeros.bin"), vec![0u8; zeros]).unwrap();
         let path = dir.path().join("instanced.gltf");
-        std::fs::write(&path, edit(text)).unwrap();
+        std::fs::write(&path, json.to_string()).unwrap();
         (dir, path)
     }
 
