@@ -675,6 +675,11 @@ fn render_command(args: RenderArgs) -> raywave::Result<()> {
             "mesh(es)",
             "have a skin or weighted morph targets, which raywave does not apply: they render in their rest pose",
         ),
+        counted(
+            unrendered.point_and_line_primitives,
+            "glTF primitive(s)",
+            "draw points or lines, which raywave does not render (it traces surfaces only)",
+        ),
         unrendered.orthographic_camera.then(|| {
             format!(
                 "warning: the cameras of {scene} are orthographic, which raywave does not render: it frames the scene \

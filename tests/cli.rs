@@ -655,7 +655,8 @@ fn a_camera_that_sees_none_of_the_scene_is_warned_about() {
 }
 
 /// An orthographic camera is replaced by the framing one, a skinned mesh renders in its rest
-/// pose, a punctual light lights nothing and an unlit material is lit, each with a warning.
+/// pose, a punctual light lights nothing, an unlit material is lit and a primitive of lines is
+/// not drawn, each with a warning.
 #[test]
 fn an_orthographic_camera_a_skinned_mesh_and_a_punctual_light_render_with_warnings() {
     let dir = tempfile::tempdir().unwrap();
@@ -665,6 +666,8 @@ fn an_orthographic_camera_a_skinned_mesh_and_a_punctual_light_render_with_warnin
     let orthographic = r#""type": "orthographic", "orthographic": {"xmag": 1, "ymag": 1, "znear": 0.01, "zfar": 10}"#;
     let skinned_floor = "\"name\": \"floor\",\n   \"mesh\": 0,\n   \"skin\": 0";
     let unlit_grey = r#""name": "grey", "extensions": {"KHR_materials_unlit": {}},"#;
+    let lines =
+        "     \"indices\": 3,\n     \"material\": 1\n    },\n    {\"attributes\": {\"POSITION\": 1}, \"mode\": 1}";
     let text = lamp
         .replacen(perspective, orthographic, 1)
         .replacen("\"name\": \"floor\",\n   \"mesh\": 0", skinned_floor, 1)
@@ -681,9 +684,10 @@ fn an_orthographic_camera_a_skinned_mesh_and_a_punctual_light_render_with_warnin
             1,
         )
         .replacen("    1,\n    2\n   ]", "    1,\n    2,\n    3\n   ]", 1)
-        .replacen("\"name\": \"grey\",", unlit_grey, 1);
+        .replacen("\"name\": \"grey\",", unlit_grey, 1)
+        .replacen("     \"indices\": 3,\n     \"material\": 1\n    }", lines, 1);
     assert!(text.contains(orthographic) && text.contains(skinned_floor) && text.contains("skins"));
-    assert!(text.contains(unlit_grey));
+    assert!(text.contains(unlit_grey) && text.contains(lines));
     assert!(
         text.contains(r#"{"extensions": {"KHR_lights_punctual": {"light": 0}}}"#)
             && text.contains("    2,\n    3\n   ]")
@@ -697,6 +701,8 @@ fn an_orthographic_camera_a_skinned_mesh_and_a_punctual_light_render_with_warnin
     assert!(stderr(&out).contains(skinned) && stderr(&out).contains("render in their rest pose"), "{}", stderr(&out));
     assert!(stderr(&out).contains("1 punctual light(s)"), "{}", stderr(&out));
     assert!(stderr(&out).contains("have unlit materials (KHR_materials_unlit)"), "{}", stderr(&out));
+    assert!(stderr(&out).contains("1 glTF primitive(s) of"), "{}", stderr(&out));
+    assert!(stderr(&out).contains("draw points or lines, which raywave does not render"), "{}", stderr(&out));
 }
 
 /// Benchmark and report options out of range: each command fails at once with the option named

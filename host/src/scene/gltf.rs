@@ -103,6 +103,8 @@ pub fn load(path: &Path) -> Result<Scene> {
             });
             for (index, primitive) in mesh.primitives().enumerate() {
                 if !draws_surfaces(&primitive) {
+                    let positions = primitive.get(&Semantic::Positions).is_some();
+                    unrendered.point_and_line_primitives += usize::from(positions);
                     continue;
                 }
                 // An unnamed mesh is named by its JSON path, so errors that name the mesh find it.
@@ -138,7 +140,18 @@ pub fn load(path: &Path) -> Result<Scene> {
         Some(placed) => placed.aimed(&meshes).map_err(load_error)?,
         None => framing_camera(&meshes),
     };
-    Ok(Scene::new(&path.display().to_string(), meshes, camera)?.with_unrendered(unrendered))
+    let scene = Scene::new(&path.display().to_string(), meshes, camera).map_err(|e| match e {
+        // Else the error blamed zero-area triangles, of which there may be none.
+        Error::EmptyScene { dropped_degenerate, .. } if unrendered.point_and_line_primitives > 0 => {
+            load_error(format!(
+                "its meshes draw no surface: {} primitive(s) draw points or lines, which raywave does not render \
+             ({dropped_degenerate} zero-area triangles dropped)",
+                unrendered.point_and_line_primitives
+            ))
+        }
+        e => e,
+    })?;
+    Ok(scene.with_unrendered(unrendered))
 }
 
 /// Whether material `m` has a texture that would change its colour, roughness, metalness or
@@ -305,15 +318,20 @@ fn local_transform(node: &gltf::Node) -> std::result::Result<Mat4, String> {
 /// Parses and validates a `.gltf` or `.glb` file's bytes and loads its buffers, resolving
 /// external URIs against `base` (the file's folder).
 fn parse(bytes: &[u8], base: Option<&Path>) -> std::result::Result<(Document, Vec<buffer::Data>), String> {
-    check_glb_length(bytes)?;
+    check_glb_header(bytes)?;
     let bytes = json_text::readable(bytes);
+    // Before the crate reads the JSON as glTF 2.0, which fails on some other field of a 1.0 file.
+    if let Some(version) = json_text::asset_version(&bytes) {
+        check_major_version(&version)?;
+    }
     let gltf::Gltf { document, blob } = gltf::Gltf::from_slice_without_validation(&bytes).map_err(|e| e.to_string())?;
     check_position_accessor_indices(document.as_json())?;
     let mut json = document.into_json();
+    check_asset_version(&json.asset)?;
+    check_required_extensions(&json.extensions_required)?;
     // Read here, so a file may require it: the crate's validation refuses any it does not know.
     json.extensions_required.retain(|required| required != instancing::EXTENSION);
     let document = Document::from_json_without_validation(json);
-    check_asset_version(&document.as_json().asset)?;
     validate(&document)?;
     check_camera_projections(document.as_json())?;
     check_node_matrices_alone(document.as_json())?;
@@ -389,17 +407,10 @@ fn as_written(path: &str) -> String {
 /// Checks that a glTF 2.0 reader may read the file: its `asset.version` of major version 2, and
 /// its `asset.minVersion` ("the minimum glTF version that this asset targets"), where it has
 /// one, no later than 2.0 — a file asking for 2.1 "should fail to load on a 2.0 client"
-/// (glTF-Asset-Generator's compatibility model 04). gltf-json reads neither, so a glTF 1.0 file
-/// failed on some other field, and a 2.1 one loaded.
+/// (glTF-Asset-Generator's compatibility model 04). gltf-json reads neither, so a 2.1 file loaded
+/// (and a glTF 1.0 file failed on some other field: [`check_major_version`] reads it first).
 fn check_asset_version(asset: &gltf::json::Asset) -> std::result::Result<(), String> {
-    let major_minor = |version: &str| -> Option<(u32, u32)> {
-        let (major, minor) = version.split_once('.')?;
-        Some((major.parse().ok()?, minor.parse().ok()?))
-    };
-    match major_minor(&asset.version) {
-        Some((2, _)) => {}
-        _ => return Err(format!("asset.version is {:?}: raywave reads glTF 2.x files", asset.version)),
-    }
+    check_major_version(&asset.version)?;
     match asset.min_version.as_deref().map(|min| (min, major_minor(min))) {
         None => Ok(()),
         Some((_, Some(version))) if version <= (2, 0) => Ok(()),
@@ -409,16 +420,55 @@ fn check_asset_version(asset: &gltf::json::Asset) -> std::result::Result<(), Str
     }
 }
 
-/// Checks that a GLB header's total length (bytes 8–11) is the file's size, as glTF 2.0
-/// requires (§ 4.4.2: "the total length of the Binary glTF, including header and all chunks"):
-/// gltf 1.4.1's `Glb::from_slice` subtracts 12 from it unchecked, which panics with overflow
-/// checks on (debug and test builds) and wraps without them; it refuses a length past the end
-/// without saying which, and reads the chunks to the end of the file whatever a shorter length
-/// says. Each chunk's length must also fit in the file (§ 4.4.3), where the crate's refusal
-/// ("BIN\0 chunk length exceeds that of slice") named neither the chunk nor its length. Text
-/// glTF (no `glTF` magic) passes untouched.
-fn check_glb_length(bytes: &[u8]) -> std::result::Result<(), String> {
-    let [b'g', b'l', b'T', b'F', _, _, _, _, l0, l1, l2, l3, ..] = *bytes else { return Ok(()) };
+/// A glTF version's major and minor numbers (`"2.0"`: (2, 0)); `None` where it is not of that form.
+fn major_minor(version: &str) -> Option<(u32, u32)> {
+    let (major, minor) = version.split_once('.')?;
+    Some((major.parse().ok()?, minor.parse().ok()?))
+}
+
+/// Checks that `version`, the file's `asset.version`, is 2.x: the glTF raywave reads.
+fn check_major_version(version: &str) -> std::result::Result<(), String> {
+    match major_minor(version) {
+        Some((2, _)) => Ok(()),
+        _ => Err(format!("asset.version is {version:?}: raywave reads glTF 2.x files")),
+    }
+}
+
+/// Checks that the file requires (`extensionsRequired`) no extension but those raywave reads:
+/// the ones gltf-json is built to read (`KHR_lights_punctual`, `KHR_materials_emissive_strength`)
+/// and [`instancing::EXTENSION`]. A file that requires another "should fail to load"
+/// (glTF-Asset-Generator's compatibility model 05), but it is valid glTF, which gltf-json's
+/// validation had called it not ("invalid glTF: … Unsupported extension").
+fn check_required_extensions(required: &[String]) -> std::result::Result<(), String> {
+    use gltf::json::extensions::ENABLED_EXTENSIONS;
+    let read: Vec<&str> = ENABLED_EXTENSIONS.iter().copied().chain([instancing::EXTENSION]).collect();
+    let unread: Vec<String> = (required.iter().enumerate())
+        .filter(|(_, name)| !read.contains(&name.as_str()))
+        .map(|(index, name)| format!("{name:?} (extensionsRequired[{index}])"))
+        .collect();
+    if unread.is_empty() {
+        return Ok(());
+    }
+    Err(format!("the file requires {}, which raywave does not read (it reads {})", unread.join(", "), read.join(", ")))
+}
+
+/// Checks a GLB header: its version (bytes 4–7) must be 2 — glTF 1.0's binary GLB (version 1,
+/// another layout) failed on its chunk lengths, or on its total length, without a word about its
+/// version —, and its total length (bytes 8–11) the file's size, as glTF 2.0 requires (§ 4.4.2:
+/// "the total length of the Binary glTF, including header and all chunks"): gltf 1.4.1's
+/// `Glb::from_slice` subtracts 12 from it unchecked, which panics with overflow checks on (debug
+/// and test builds) and wraps without them; it refuses a length past the end without saying which,
+/// and reads the chunks to the end of the file whatever a shorter length says. Each chunk's length
+/// must also fit in the file (§ 4.4.3), where the crate's refusal ("BIN\0 chunk length exceeds that
+/// of slice") named neither the chunk nor its length. Text glTF (no `glTF` magic) passes untouched.
+fn check_glb_header(bytes: &[u8]) -> std::result::Result<(), String> {
+    let [b'g', b'l', b'T', b'F', v0, v1, v2, v3, l0, l1, l2, l3, ..] = *bytes else { return Ok(()) };
+    let version = u32::from_le_bytes([v0, v1, v2, v3]);
+    if version != 2 {
+        return Err(format!(
+            "GLB header: version {version}: raywave reads glTF 2.0's GLB, version 2 (version 1 is glTF 1.0's)"
+        ));
+    }
     let length = u32::from_le_bytes([l0, l1, l2, l3]);
     if u64::from(length) != bytes.len() as u64 {
         return Err(format!(
@@ -949,8 +999,8 @@ fn fan_triangles(indices: &[u32]) -> Vec<[u32; 3]> {
 /// `normalized` only where that allows it — the reader ignores the flag, and glTF forbids it for
 /// float and 32-bit components), no `byteStride` on an indices view, `count ≥ 1` (glTF's minimum)
 /// and at most one element per byte of the buffers loaded (those accessors read:
-/// [`buffers_read_by_accessors`]) and below 2³² (32-bit indices; an accessor without a buffer view
-/// would otherwise allocate `count` zeros, however large), `1 ≤
+/// [`buffers_read_by_accessors`]) and below 2³² (32-bit indices; an accessor without a buffer
+/// view would otherwise allocate `count` zeros, however large), `1 ≤
 /// sparse.count ≤ count`, and that its elements, and its sparse indices and values, lie inside
 /// their buffer views and buffers ([`check_span`]).
 fn check_accessor(
@@ -1793,9 +1843,11 @@ mod tests {
 
     /// Valid files that gltf-json 1.4.1 refused, with what raywave does not read: an animation
     /// channel without `target.node` or with `KHR_animation_pointer`'s `"path": "pointer"`, and a
-    /// texture without `source` (each optional in glTF 2.0's schema), and an accessor with neither
-    /// `bufferView` nor `sparse` (zeros). An error after the blanked animations still names its
-    /// line. Versions a 2.0 reader may not read are refused, by field.
+    /// texture without `source` (each optional in glTF 2.0's schema), an accessor with neither
+    /// `bufferView` nor `sparse` (zeros), `extras` that are not an object and an attribute named
+    /// `_…` (gltf-json reads both with its `extras` feature only). An error after the blanked
+    /// animations still names its line. Versions a 2.0 reader may not read are refused, by field,
+    /// glTF 1.0 files among them (they failed on some other member).
     #[test]
     fn valid_files_with_unread_animations_and_textures_load_and_versions_are_checked() {
         let animations = r#""animations":[{"channels":[{"sampler":0,"target":{"path":"pointer",
@@ -1804,9 +1856,12 @@ mod tests {
             "samplers":[{"input":3,"output":3}]}],"#;
         let textures = r#""textures":[{"sampler":0}],"samplers":[{}],"#;
         let zeros = r#""type":"SCALAR"},{"componentType":5126,"count":4,"type":"VEC3"}]"#;
-        let text = (quad_gltf(6).replacen(r#""scene":0,"#, &format!(r#""scene":0,{animations}{textures}"#), 1))
-            .replacen(r#""type":"SCALAR"}]"#, zeros, 1);
-        assert!(text.contains(zeros));
+        // `extras` of any JSON type, and an application's own attribute (named with a leading `_`).
+        let extras = r#""extras":42,"#;
+        let text = (quad_gltf(6).replacen(r#""scene":0,"#, &format!(r#""scene":0,{extras}{animations}{textures}"#), 1))
+            .replacen(r#""type":"SCALAR"}]"#, zeros, 1)
+            .replacen(r#""POSITION":0}"#, r#""POSITION":0,"_PRESSURE":2}"#, 1);
+        assert!(text.contains(zeros) && text.contains("_PRESSURE"));
         let scene = load(file(&text).path()).unwrap();
         assert_eq!((scene.triangle_count(), scene.lights().len()), (2, 1));
         // The accessor the animation names need not even exist, as nothing reads it; an error
@@ -1823,6 +1878,16 @@ mod tests {
             let err = load(file(&text).path()).unwrap_err().to_string();
             assert!(err.contains(expected), "{version}: {err}");
         }
+        // A glTF 1.0 file, whose members are not glTF 2.0's (`meshes` an object), is refused
+        // for its version, not for a member; as is glTF 1.0's binary GLB, by its header.
+        for (version, expected) in [(r#""1.0""#, r#""1.0""#), ("1", r#""1""#)] {
+            let version_1 = format!(r#"{{"asset":{{"version":{version}}},"meshes":{{"box":{{"primitives":[]}}}}}}"#);
+            let err = load(file(&version_1).path()).unwrap_err().to_string();
+            assert!(err.contains(&format!("asset.version is {expected}: raywave reads glTF 2.x files")), "{err}");
+        }
+        let glb_1 = glb_container(&quad_gltf(6), None).into_iter().enumerate().map(|(i, b)| if i == 4 { 1 } else { b });
+        let err = load(file_of(".glb", &glb_1.collect::<Vec<u8>>()).path()).unwrap_err().to_string();
+        assert!(err.contains("GLB header: version 1: raywave reads glTF 2.0's GLB, version 2"), "{err}");
         for version in [r#""version":"2.1""#, r#""version":"2.0","minVersion":"2.0""#] {
             let text = quad_gltf(6).replacen(r#""version":"2.0""#, version, 1);
             assert!(load(file(&text).path()).is_ok(), "{version}");
@@ -2085,6 +2150,26 @@ mod tests {
         let xs = scene.meshes()[0].positions.iter().map(|p| p.x);
         let (lo, hi) = xs.fold((f32::MAX, f32::MIN), |(lo, hi), x| (lo.min(x), hi.max(x)));
         assert_eq!((lo, hi), (1000.0, 1001.0));
+    }
+
+    /// Primitives that draw points or lines are counted ([`Unrendered::point_and_line_primitives`])
+    /// and not drawn; a scene of nothing else is an error that says so (it blamed zero-area
+    /// triangles, of which it had none).
+    #[test]
+    fn point_and_line_primitives_are_counted_and_a_scene_of_them_alone_is_an_error_saying_so() {
+        let quad = r#"{"attributes":{"POSITION":0},"indices":1,"material":0}"#;
+        let others = r#"{"attributes":{"POSITION":0},"mode":0},{"attributes":{"POSITION":0},"indices":1,"mode":3}"#;
+        let mixed = quad_gltf(6).replacen(quad, &format!("{quad},{others}"), 1);
+        assert!(mixed.contains(others));
+        let scene = load(file(&mixed).path()).unwrap();
+        assert_eq!((scene.triangle_count(), scene.unrendered().point_and_line_primitives), (2, 2));
+        assert_eq!(load(file(&quad_gltf(6)).path()).unwrap().unrendered().point_and_line_primitives, 0);
+        let lines = quad_gltf(6).replacen(quad, r#"{"attributes":{"POSITION":0},"indices":1,"mode":1}"#, 1);
+        let err = load(file(&lines).path()).unwrap_err().to_string();
+        let expected =
+            "its meshes draw no surface: 1 primitive(s) draw points or lines, which raywave does not render \
+                        (0 zero-area triangles dropped)";
+        assert!(err.contains(expected), "{err}");
     }
 
     /// Punctual lights (`KHR_lights_punctual`), which raywave does not render, are counted per
@@ -2564,7 +2649,17 @@ mod tests {
             1,
         );
         let err = load(file(&required).path()).unwrap_err().to_string();
-        assert!(err.contains("extensionsRequired") && err.contains("KHR_materials_pbrSpecularGlossiness"), "{err}");
+        let expected = r#"the file requires "KHR_materials_pbrSpecularGlossiness" (extensionsRequired[0]), which raywave does not read (it reads KHR_lights_punctual, KHR_materials_emissive_strength, EXT_mesh_gpu_instancing)"#;
+        assert!(err.contains(expected) && !err.contains("invalid glTF"), "{err}");
+        // Each is named by its own index, EXT_mesh_gpu_instancing (read) among them.
+        let required = quad_gltf(6).replacen(
+            r#""scene":0,"#,
+            r#""scene":0,"extensionsUsed":["EXT_mesh_gpu_instancing","KHR_mesh_quantization","KHR_materials_unlit"],"extensionsRequired":["EXT_mesh_gpu_instancing","KHR_mesh_quantization","KHR_materials_unlit"],"#,
+            1,
+        );
+        let err = load(file(&required).path()).unwrap_err().to_string();
+        let expected = r#"requires "KHR_mesh_quantization" (extensionsRequired[1]), "KHR_materials_unlit" (extensionsRequired[2]), which"#;
+        assert!(err.contains(expected), "{err}");
     }
 
     #[test]

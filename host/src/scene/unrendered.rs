@@ -17,7 +17,8 @@ pub struct Unrendered {
     /// `transmissionFactor` above 0 or a `transmissionTexture` (Blender's glass, an extension
     /// files use without requiring it); an MTL `d` below 1 or a `map_d`. raywave renders every
     /// surface opaque (a `MASK`ed-out mesh, invisible in a glTF viewer, is seen and casts shadows).
-    /// MTL's `Tr` is not counted: exporters disagree on which way it runs.
+    /// MTL's `Tr` counts only without a `d` and strictly between 0 and 1, where both of the ways
+    /// exporters write it (`d` or `1 − d`) make the material partly see-through.
     pub see_through_meshes: usize,
     /// Meshes whose glTF materials are unlit (`KHR_materials_unlit`: the base colour is the
     /// colour seen, whatever the light), which raywave shades as lit metallic-roughness
@@ -32,6 +33,11 @@ pub struct Unrendered {
     /// a pinhole or a thin lens): the scene is seen through the camera that frames its bounds,
     /// as for a file without a camera.
     pub orthographic_camera: bool,
+    /// glTF primitives that draw points or lines (modes `POINTS`, `LINES`, `LINE_LOOP`,
+    /// `LINE_STRIP`), counted once per node that places their mesh. raywave traces surfaces only:
+    /// these are not drawn. (A primitive without POSITION, which glTF 2.0 has skipped, is not
+    /// counted.)
+    pub point_and_line_primitives: usize,
     /// Nodes of the scene that place a punctual light (glTF `KHR_lights_punctual`: point, spot
     /// and directional lights, which Blender exports its lamps as). raywave renders area lights
     /// only (emissive parallelograms): these light nothing.

@@ -12,6 +12,9 @@
 //!   one; raywave reads OBJ and MTL files past it too.
 //! - **NUL bytes padding a GLB's JSON chunk**, which glTF 2.0 pads with spaces and some
 //!   exporters pad with zeros: serde_json refused "trailing characters".
+//!
+//! It also reads the file's `asset.version` before the crate reads the JSON as glTF 2.0
+//! ([`asset_version`]).
 
 use serde_json::value::RawValue;
 use std::borrow::Cow;
@@ -19,7 +22,7 @@ use std::collections::HashMap;
 
 use crate::scene::UTF8_BYTE_ORDER_MARK;
 
-/// `bytes`, a `.gltf` file or a GLB (whose header [`super::check_glb_length`] checked), with its
+/// `bytes`, a `.gltf` file or a GLB (whose header [`super::check_glb_header`] checked), with its
 /// JSON made readable as the module documentation says; borrowed where nothing changes.
 pub(super) fn readable(bytes: &[u8]) -> Cow<'_, [u8]> {
     let json = json_span(bytes);
@@ -56,13 +59,30 @@ fn json_span(bytes: &[u8]) -> std::ops::Range<usize> {
     }
 }
 
+/// The top-level members of the JSON `text` as raw text, if it is a JSON object (else the crate
+/// reports what is wrong with it).
+fn members(text: &str) -> Option<HashMap<String, &RawValue>> {
+    serde_json::from_str(text).ok()
+}
+
+/// The `asset.version` of `bytes` (as [`readable`] returns them), where it has one: the string,
+/// or the JSON text of another value (collada2gltf wrote glTF 1.0's as the number `1`). Read
+/// before the crate reads the file as glTF 2.0, whose members a glTF 1.0 file writes otherwise
+/// (`meshes` an object, not an array), so that such a file is refused for its version.
+pub(super) fn asset_version(bytes: &[u8]) -> Option<String> {
+    let text = std::str::from_utf8(&bytes[json_span(bytes)]).ok()?;
+    let asset: &RawValue = members(text)?.get("asset").copied()?;
+    let version = members(asset.get())?.get("version").copied()?.get();
+    Some(serde_json::from_str(version).unwrap_or_else(|_| version.to_owned()))
+}
+
 /// Where the top-level `animations` array lies in the JSON `text`, if the text is a JSON object
-/// with one (else the crate reports what is wrong with it).
+/// with one.
 fn animations_span(text: &[u8]) -> Option<std::ops::Range<usize>> {
     let text = std::str::from_utf8(text).ok()?;
     // (A byte-order mark blanked above is whitespace now.)
-    let members: HashMap<String, &RawValue> = serde_json::from_str(text).ok()?;
-    let array = members.get("animations")?.get();
+    let animations: &RawValue = members(text)?.get("animations").copied()?;
+    let array = animations.get();
     array.starts_with('[').then(|| {
         let start = array.as_ptr() as usize - text.as_ptr() as usize;
         start..start + array.len()
