@@ -319,9 +319,9 @@ fn local_transform(node: &gltf::Node) -> std::result::Result<Mat4, String> {
 /// external URIs against `base` (the file's folder).
 fn parse(bytes: &[u8], base: Option<&Path>) -> std::result::Result<(Document, Vec<buffer::Data>), String> {
     check_glb_header(bytes)?;
-    let bytes = json_text::readable(bytes);
+    let json_text::Readable { bytes, asset_version } = json_text::readable(bytes);
     // Before the crate reads the JSON as glTF 2.0, which fails on some other field of a 1.0 file.
-    if let Some(version) = json_text::asset_version(&bytes) {
+    if let Some(version) = asset_version {
         check_major_version(&version)?;
     }
     let gltf::Gltf { document, blob } = gltf::Gltf::from_slice_without_validation(&bytes).map_err(|e| e.to_string())?;
@@ -516,14 +516,14 @@ fn load_buffers(
         let field = format!("buffers[{}] ({source})", buffer.index());
         let data = match buffer.source() {
             buffer::Source::Uri(uri) if !uri.starts_with("data:") => {
-                external_buffer(uri, base, buffer.length()).map(buffer::Data)
+                external_buffer(uri, base, buffer.length()).map(padded)
             }
             // The crate takes the BIN chunk for the first buffer without `uri`, whichever it is.
             buffer::Source::Bin if !bin_chunk => {
                 Err("only a GLB's first buffer may omit `uri` (its data is then the BIN chunk)".to_owned())
             }
             // The crate decodes all after `data:` as base64 and fails inside the media type.
-            buffer::Source::Uri(uri) if !uri.contains(";base64,") => percent_encoded_data(uri).map(buffer::Data),
+            buffer::Source::Uri(uri) if !uri.contains(";base64,") => percent_encoded_data(uri).map(padded),
             source => buffer::Data::from_source_and_blob(source, base, &mut blob).map_err(|e| e.to_string()),
         }
         .map_err(|e| format!("{field}: {e}"))?;
@@ -553,22 +553,26 @@ fn buffers_read_by_accessors(document: &Document) -> Vec<bool> {
 
 /// The bytes of a data URI without `;base64`: RFC 2397 (`data:[<mediatype>][;base64],<data>`)
 /// writes them after the first comma, percent-encoded, as glTF-Validator's
-/// `buffer/data_uri.glb` does (`data:application/gltf-buffer,0`); zero-padded to a multiple of
-/// 4 bytes as the `gltf` crate pads its buffers.
+/// `buffer/data_uri.glb` does (`data:application/gltf-buffer,0`).
 fn percent_encoded_data(uri: &str) -> std::result::Result<Vec<u8>, String> {
     let (_, data) = uri.split_once(',').ok_or("the data URI has no `,` before its data (RFC 2397)")?;
-    let mut data = urlencoding::decode_binary(data.as_bytes()).into_owned();
-    data.resize(data.len().next_multiple_of(4), 0);
-    Ok(data)
+    Ok(urlencoding::decode_binary(data.as_bytes()).into_owned())
 }
 
-/// The first `length` bytes (its `byteLength`) of the external buffer file `uri` names, zero-padded
-/// to a multiple of 4 bytes as the `gltf` crate pads its buffers. The URI resolves as that crate
-/// resolves it — `file:` and `file://` take the path as written, a URI without a scheme is
-/// percent-decoded and joined to `base`, other schemes are unsupported — but the crate itself
-/// panics on a URI whose percent-decoded bytes are not UTF-8 (gltf 1.4.1 unwraps the decoding)
-/// and reads the whole file whatever the buffer's length, so `/dev/zero` filled memory and a FIFO
-/// blocked. Here the path must be a regular file and only `length` bytes are read.
+/// A buffer's `data` zero-padded to a multiple of 4 bytes, as the `gltf` crate pads the buffers
+/// it loads itself.
+fn padded(mut data: Vec<u8>) -> buffer::Data {
+    data.resize(data.len().next_multiple_of(4), 0);
+    buffer::Data(data)
+}
+
+/// The first `length` bytes (its `byteLength`) of the external buffer file `uri` names. The URI
+/// resolves as the `gltf` crate resolves it — `file:` and `file://` take the path as written, a URI
+/// without a scheme is percent-decoded and joined to `base`, other schemes are unsupported — but
+/// the crate itself panics on a URI whose percent-decoded bytes are not UTF-8 (gltf 1.4.1 unwraps
+/// the decoding) and reads the whole file whatever the buffer's length, so `/dev/zero` filled
+/// memory and a FIFO blocked. Here the path must be a regular file and only `length` bytes are
+/// read.
 fn external_buffer(uri: &str, base: Option<&Path>, length: usize) -> std::result::Result<Vec<u8>, String> {
     let path = if let Some(path) = uri.strip_prefix("file://").or_else(|| uri.strip_prefix("file:")) {
         PathBuf::from(path)
@@ -578,12 +582,10 @@ fn external_buffer(uri: &str, base: Option<&Path>, length: usize) -> std::result
         let decoded = urlencoding::decode(uri).map_err(|_| "the percent-decoded URI is not UTF-8 text".to_owned())?;
         base.ok_or("a relative URI needs the scene file's folder")?.join(&*decoded)
     };
-    let mut data = read_regular_file(&path, length as u64).map_err(|e| match e {
+    read_regular_file(&path, length as u64).map_err(|e| match e {
         ReadError::NotRegular => format!("{} is not a regular file", path.display()),
         ReadError::Io(e) => format!("{}: {e}", path.display()),
-    })?;
-    data.resize(data.len().next_multiple_of(4), 0);
-    Ok(data)
+    })
 }
 
 /// Checks that every primitive's POSITION attribute names an existing accessor, before the `gltf`
@@ -1885,8 +1887,9 @@ mod tests {
             let err = load(file(&version_1).path()).unwrap_err().to_string();
             assert!(err.contains(&format!("asset.version is {expected}: raywave reads glTF 2.x files")), "{err}");
         }
-        let glb_1 = glb_container(&quad_gltf(6), None).into_iter().enumerate().map(|(i, b)| if i == 4 { 1 } else { b });
-        let err = load(file_of(".glb", &glb_1.collect::<Vec<u8>>()).path()).unwrap_err().to_string();
+        let mut glb_1 = glb_container(quad_gltf(6).as_bytes(), b' ', None);
+        glb_1[4..8].copy_from_slice(&1u32.to_le_bytes());
+        let err = load(file_of(".glb", &glb_1).path()).unwrap_err().to_string();
         assert!(err.contains("GLB header: version 1: raywave reads glTF 2.0's GLB, version 2"), "{err}");
         for version in [r#""version":"2.1""#, r#""version":"2.0","minVersion":"2.0""#] {
             let text = quad_gltf(6).replacen(r#""version":"2.0""#, version, 1);
@@ -2674,9 +2677,10 @@ mod tests {
     }
 
     /// A GLB container (glTF 2.0 § 4.4): the 12-byte header, `json` as the JSON chunk padded
-    /// with spaces and `bin`, if any, as the BIN chunk padded with zeros.
-    fn glb_container(json: &str, bin: Option<&[u8]>) -> Vec<u8> {
-        let json = (*b"JSON", json.as_bytes().to_vec(), b' ');
+    /// with `json_padding` (glTF's is a space) and `bin`, if any, as the BIN chunk padded with
+    /// zeros.
+    pub(super) fn glb_container(json: &[u8], json_padding: u8, bin: Option<&[u8]>) -> Vec<u8> {
+        let json = (*b"JSON", json.to_vec(), json_padding);
         let mut chunks = Vec::new();
         for (kind, mut data, padding) in std::iter::once(json).chain(bin.map(|bin| (*b"BIN\0", bin.to_vec(), 0))) {
             data.resize(data.len().next_multiple_of(4), padding);
@@ -2721,7 +2725,7 @@ mod tests {
         }
         // The quad's buffer as a GLB's BIN chunk, with and without a placeholder read.
         let in_bin = quad_gltf(6).replacen(&format!(r#","uri":"data:application/octet-stream;base64,{data}""#), "", 1);
-        let glb = |json: &str| file_of(".glb", &glb_container(json, Some(&quad_buffer())));
+        let glb = |json: &str| file_of(".glb", &glb_container(json.as_bytes(), b' ', Some(&quad_buffer())));
         assert_eq!(load(glb(&in_bin).path()).unwrap().triangle_count(), 2);
         let placeholder = in_bin.replacen(r#""byteLength":60}]"#, r#""byteLength":60},{"byteLength":1024}]"#, 1);
         assert_ne!(placeholder, in_bin);
@@ -2748,16 +2752,11 @@ mod tests {
             assert!(err.to_string().contains(&expected), "{err}");
         }
         // quad_gltf in a JSON chunk padded with spaces (its buffer keeps its data URI).
-        let mut json = quad_gltf(6).into_bytes();
-        json.resize(json.len().next_multiple_of(4), b' ');
-        let size = 12 + 8 + json.len() as u32;
+        let quad = glb_container(quad_gltf(6).as_bytes(), b' ', None);
+        let (size, json_length) = (quad.len() as u32, quad.len() as u32 - 20);
         let glb = |length: u32| {
-            let mut glb = b"glTF".to_vec();
-            for word in [2, length, json.len() as u32] {
-                glb.extend_from_slice(&word.to_le_bytes());
-            }
-            glb.extend_from_slice(b"JSON");
-            glb.extend_from_slice(&json);
+            let mut glb = quad.clone();
+            glb[8..12].copy_from_slice(&length.to_le_bytes());
             glb
         };
         assert_eq!(load(glb_file(&glb(size)).path()).unwrap().triangle_count(), 2);
@@ -2773,10 +2772,10 @@ mod tests {
         short_bin.extend_from_slice(b"BIN\0");
         short_bin.extend_from_slice(&[0; 8]);
         let mut long_json = glb(size);
-        long_json[12..16].copy_from_slice(&(json.len() as u32 + 4).to_le_bytes());
+        long_json[12..16].copy_from_slice(&(json_length + 4).to_le_bytes());
         for (bytes, expected) in [
             (short_bin, "GLB chunk 1 (BIN): length 16 runs past the file's end, 8 bytes after its header".to_owned()),
-            (long_json, format!("GLB chunk 0 (JSON): length {} runs past the file's end", json.len() + 4)),
+            (long_json, format!("GLB chunk 0 (JSON): length {} runs past the file's end", json_length + 4)),
         ] {
             let err = load(glb_file(&bytes).path()).unwrap_err();
             assert!(matches!(err, Error::SceneLoad { .. }) && err.to_string().contains(&expected), "{err}");

@@ -14,7 +14,7 @@
 //!   exporters pad with zeros: serde_json refused "trailing characters".
 //!
 //! It also reads the file's `asset.version` before the crate reads the JSON as glTF 2.0
-//! ([`asset_version`]).
+//! ([`Readable::asset_version`]).
 
 use serde_json::value::RawValue;
 use std::borrow::Cow;
@@ -22,9 +22,22 @@ use std::collections::HashMap;
 
 use crate::scene::UTF8_BYTE_ORDER_MARK;
 
+/// A glTF file's bytes with their JSON made readable ([`readable`]), and what was read of the
+/// JSON on the way.
+pub(super) struct Readable<'a> {
+    /// The file's bytes, its JSON made readable as the module documentation says; borrowed where
+    /// nothing changes.
+    pub(super) bytes: Cow<'a, [u8]>,
+    /// The JSON's `asset.version`, where it has one: the string, or the JSON text of another
+    /// value (collada2gltf wrote glTF 1.0's as the number `1`). Read before the crate reads the
+    /// file as glTF 2.0, whose members a glTF 1.0 file writes otherwise (`meshes` an object, not
+    /// an array), so that such a file can be refused for its version.
+    pub(super) asset_version: Option<String>,
+}
+
 /// `bytes`, a `.gltf` file or a GLB (whose header [`super::check_glb_header`] checked), with its
-/// JSON made readable as the module documentation says; borrowed where nothing changes.
-pub(super) fn readable(bytes: &[u8]) -> Cow<'_, [u8]> {
+/// JSON made readable as the module documentation says, and its `asset.version`.
+pub(super) fn readable(bytes: &[u8]) -> Readable<'_> {
     let json = json_span(bytes);
     let mut text = Cow::Borrowed(bytes);
     if bytes[json.clone()].starts_with(UTF8_BYTE_ORDER_MARK) {
@@ -34,13 +47,14 @@ pub(super) fn readable(bytes: &[u8]) -> Cow<'_, [u8]> {
     if json.start > 0 && padding > 0 {
         blank(&mut text.to_mut()[json.end - padding..json.end]);
     }
-    if let Some(animations) = animations_span(&text[json.clone()]) {
+    let Members { animations, asset_version } = Members::read(&text[json.clone()]);
+    if let Some(animations) = animations {
         let array = &mut text.to_mut()[json.start + animations.start..json.start + animations.end];
         blank(array);
         array[0] = b'[';
         array[array.len() - 1] = b']';
     }
-    text
+    Readable { bytes: text, asset_version }
 }
 
 /// Where the JSON lies in `bytes`: all of it for a `.gltf` file, the first chunk's data for a
@@ -59,34 +73,33 @@ fn json_span(bytes: &[u8]) -> std::ops::Range<usize> {
     }
 }
 
-/// The top-level members of the JSON `text` as raw text, if it is a JSON object (else the crate
-/// reports what is wrong with it).
-fn members(text: &str) -> Option<HashMap<String, &RawValue>> {
-    serde_json::from_str(text).ok()
+/// What [`readable`] reads of the top-level members of the JSON, in one pass over it.
+#[derive(Default)]
+struct Members {
+    /// Where the `animations` array lies in the JSON text.
+    animations: Option<std::ops::Range<usize>>,
+    /// [`Readable::asset_version`].
+    asset_version: Option<String>,
 }
 
-/// The `asset.version` of `bytes` (as [`readable`] returns them), where it has one: the string,
-/// or the JSON text of another value (collada2gltf wrote glTF 1.0's as the number `1`). Read
-/// before the crate reads the file as glTF 2.0, whose members a glTF 1.0 file writes otherwise
-/// (`meshes` an object, not an array), so that such a file is refused for its version.
-pub(super) fn asset_version(bytes: &[u8]) -> Option<String> {
-    let text = std::str::from_utf8(&bytes[json_span(bytes)]).ok()?;
-    let asset: &RawValue = members(text)?.get("asset").copied()?;
-    let version = members(asset.get())?.get("version").copied()?.get();
-    Some(serde_json::from_str(version).unwrap_or_else(|_| version.to_owned()))
-}
-
-/// Where the top-level `animations` array lies in the JSON `text`, if the text is a JSON object
-/// with one.
-fn animations_span(text: &[u8]) -> Option<std::ops::Range<usize>> {
-    let text = std::str::from_utf8(text).ok()?;
-    // (A byte-order mark blanked above is whitespace now.)
-    let animations: &RawValue = members(text)?.get("animations").copied()?;
-    let array = animations.get();
-    array.starts_with('[').then(|| {
-        let start = array.as_ptr() as usize - text.as_ptr() as usize;
-        start..start + array.len()
-    })
+impl Members {
+    /// The members of the JSON `text`; none if it is not a JSON object (the crate then reports
+    /// what is wrong with it). A byte-order mark blanked before is whitespace now.
+    fn read(text: &[u8]) -> Self {
+        let Ok(text) = std::str::from_utf8(text) else { return Self::default() };
+        let Ok(members) = serde_json::from_str::<HashMap<String, &RawValue>>(text) else { return Self::default() };
+        let animations = members.get("animations").map(|array| array.get()).filter(|array| array.starts_with('['));
+        let animations = animations.map(|array| {
+            let start = array.as_ptr() as usize - text.as_ptr() as usize;
+            start..start + array.len()
+        });
+        let asset_version = members
+            .get("asset")
+            .and_then(|asset| serde_json::from_str::<HashMap<String, &RawValue>>(asset.get()).ok())
+            .and_then(|asset| asset.get("version").map(|version| version.get()))
+            .map(|version| serde_json::from_str(version).unwrap_or_else(|_| version.to_owned()));
+        Self { animations, asset_version }
+    }
 }
 
 /// Replaces every byte of `bytes` but line breaks by a space (JSON whitespace).
@@ -98,39 +111,27 @@ fn blank(bytes: &mut [u8]) {
 
 #[cfg(test)]
 mod tests {
+    use super::super::tests::glb_container;
     use super::*;
-
-    fn glb(json: &[u8], padding: u8) -> Vec<u8> {
-        let padded = json.len().next_multiple_of(4);
-        let total = 12 + 8 + padded;
-        let mut bytes = b"glTF".to_vec();
-        bytes.extend(2u32.to_le_bytes());
-        bytes.extend((total as u32).to_le_bytes());
-        bytes.extend((padded as u32).to_le_bytes());
-        bytes.extend(b"JSON");
-        bytes.extend(json);
-        bytes.resize(total, padding);
-        bytes
-    }
 
     /// The animations become `[]` with every line break where it was, a byte-order mark and a
     /// GLB's NUL padding spaces; text without any of them is borrowed as it is.
     #[test]
     fn what_raywave_does_not_read_is_blanked_in_place() {
         let text = b"{\"asset\": {\"version\": \"2.0\"},\n \"animations\": [{\"channels\": [\n{}]}],\n \"x\": 1}";
-        let read = readable(text);
+        let read = readable(text).bytes;
         // `[{"channels": [` (14 bytes after the bracket), the line break, then `{}]}` and `]`.
         let array = format!("[{}\n{}]", " ".repeat(14), " ".repeat(4));
         let expected = format!("{{\"asset\": {{\"version\": \"2.0\"}},\n \"animations\": {array},\n \"x\": 1}}");
         assert_eq!(std::str::from_utf8(&read).unwrap(), expected);
         let with_mark = [UTF8_BYTE_ORDER_MARK, b"{\"asset\": {}}"].concat();
-        assert_eq!(&readable(&with_mark)[..], b"   {\"asset\": {}}");
-        let padded = glb(b"{\"a\":1}", 0);
-        assert_eq!(&readable(&padded)[..], &glb(b"{\"a\":1}", b' ')[..]);
+        assert_eq!(&readable(&with_mark).bytes[..], b"   {\"asset\": {}}");
+        let padded = glb_container(b"{\"a\":1}", 0, None);
+        assert_eq!(&readable(&padded).bytes[..], &glb_container(b"{\"a\":1}", b' ', None)[..]);
         // A string that holds "animations" is no member; neither is a nested one.
         for unchanged in [&b"{\"asset\": \"animations\", \"b\": {\"animations\": []}}"[..], b"not json", b""] {
-            assert!(matches!(readable(unchanged), Cow::Borrowed(_)), "{:?}", String::from_utf8_lossy(unchanged));
+            assert!(matches!(readable(unchanged).bytes, Cow::Borrowed(_)), "{:?}", String::from_utf8_lossy(unchanged));
         }
-        assert!(matches!(readable(&glb(b"{\"a\":1}", b' ')), Cow::Borrowed(_)));
+        assert!(matches!(readable(&glb_container(b"{\"a\":1}", b' ', None)).bytes, Cow::Borrowed(_)));
     }
 }
