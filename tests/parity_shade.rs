@@ -11,7 +11,9 @@
 //!   copied from the material, so in practice bit-exact.
 //! - `U` (analytic): every pixel, every channel within 1e-4 of `max(|a|, |b|, U_max)`, `U_max`
 //!   the pass's largest `U` in that channel — 1e-4 relative for the bright pixels, 1e-4 of the
-//!   image's brightness for the dim ones. Not 1e-4 of every pixel's own value: `U` is a sum of
+//!   image's brightness for the dim ones (a view of nothing but mirrors turned away from the light
+//!   against the same view of the box with its own materials: the hard cases' grazing camera,
+//!   whose test says why). Not 1e-4 of every pixel's own value: `U` is a sum of
 //!   form factors `Σ θᵢ·(â×b̂)_z/|â×b̂|/2π` over the edges of the (LTC-mapped, horizon-clipped)
 //!   quad, each `θᵢ = atan2(…)` (the kernels' own, `raywave_kernels::trig`) and the cross
 //!   products beneath it carry a device's own rounding, and where the edge terms nearly cancel — a
@@ -48,7 +50,8 @@
 //!   difference beyond 1e-2, by the 0.1 % budget; with thresholds that differ by ~10⁻⁷ their
 //!   expected rate is ~10⁻⁶ per sample: none occurred on llvmpipe or on the H200 in 142 008
 //!   samples, where llvmpipe had no sample beyond 1e-3 at all (U_N within 1.2·10⁻⁵) and the H200
-//!   61 between 1e-3 and 1e-2 and one beyond. Re-measured on 2026-12-03, llvmpipe's five streams
+//!   61 between 1e-3 and 1e-2 and one beyond (none beyond 1e-3 on 2026-12-04, every kernel's
+//!   arithmetic decorated `NoContraction` since). Re-measured on 2026-12-03, llvmpipe's five streams
 //!   are bit-identical to the CPU's in the main test, the thin strip and the hard cases.
 //! - Everywhere, on every backend: no NaN or Inf in any of the five output streams.
 #![cfg(feature = "vulkan")]
@@ -244,8 +247,22 @@ fn assert_matches_cpu(
     rays: &RayStream,
     hits: &HitStream,
 ) -> Diff {
+    assert_matches_cpu_at_scale(who, expected, shades, rays, hits, brightest(expected))
+}
+
+/// [`assert_matches_cpu`] with `U` measured against `u_scale` (per channel) where that is larger
+/// than the pass's brightest `U`: for a pass whose every `U` is the tail of a lobe that points
+/// away from the light ([`hard_shading_cases_shade_alike_on_every_vulkan_device`]).
+fn assert_matches_cpu_at_scale(
+    who: &str,
+    expected: &ShadeStream,
+    shades: &ShadeStream,
+    rays: &RayStream,
+    hits: &HitStream,
+    u_scale: Vec4,
+) -> Diff {
     assert_finite(shades, who);
-    let diff = compare(expected, shades, brightest(expected));
+    let diff = compare(expected, shades, brightest(expected).max(u_scale));
     assert_eq!(
         diff.analytic_outside,
         0,
@@ -398,18 +415,35 @@ fn a_thin_strip_lamp_shades_alike_on_every_vulkan_device() {
     let scene = Scene::new("cornell, thin strip lamp", meshes, *cornell.camera()).expect("scene");
     let light = scene.lights()[0];
     assert!(light.edge_u.truncate().length().min(light.edge_v.truncate().length()) < 2.0 * width, "a strip: {light:?}");
-    assert_shades_alike(&mut cpu, &mut devices, &scene);
+    assert_shades_alike(&mut cpu, &mut devices, &scene, None);
     devices.into_iter().for_each(vulkan::assert_clean);
 }
 
 /// Shades the passes of [`CASES`] (Z-Sobol) of `scene` on the CPU and on every device in
 /// `devices`: nothing replaced anywhere, more than a third of the pixels lit on the CPU (so the
 /// comparison is not of zeros), and every device within the main test's tolerances
-/// ([`assert_matches_cpu`]).
-fn assert_shades_alike(cpu: &mut CpuBackend, devices: &mut [raywave::vulkan::VulkanBackend], scene: &Scene) {
+/// ([`assert_matches_cpu`]) — with `U` measured, where `scale_view` is given, against the
+/// brightest `U` of the same pass of that scene too ([`assert_matches_cpu_at_scale`]).
+fn assert_shades_alike(
+    cpu: &mut CpuBackend,
+    devices: &mut [raywave::vulkan::VulkanBackend],
+    scene: &Scene,
+    scale_view: Option<&Scene>,
+) {
+    let scales: Vec<Vec4> = CASES
+        .iter()
+        .map(|&(sample_index, analytic_residual)| {
+            let Some(view) = scale_view else { return Vec4::ZERO };
+            cpu.load_scene(view).expect("cpu scene");
+            let data = ShadeData::new(view).expect("shade data");
+            let (rays, hits, sampler) = camera_pass(cpu, view, sampler_kind::ZSOBOL, sample_index);
+            let params = ShadeParams { analytic_residual, ..data.params(sampler, WIDTH, HEIGHT, sample_index) };
+            brightest(&cpu.shade(&params, &data, &rays, &hits).expect("cpu shade").0)
+        })
+        .collect();
     cpu.load_scene(scene).expect("cpu scene");
     let data = ShadeData::new(scene).expect("shade data");
-    for (sample_index, analytic_residual) in CASES {
+    for ((sample_index, analytic_residual), u_scale) in CASES.into_iter().zip(scales) {
         let case = format!("{}, sample {sample_index} residual {analytic_residual}", scene.name());
         let (rays, hits, sampler) = camera_pass(cpu, scene, sampler_kind::ZSOBOL, sample_index);
         let params = ShadeParams { analytic_residual, ..data.params(sampler, WIDTH, HEIGHT, sample_index) };
@@ -421,12 +455,13 @@ fn assert_shades_alike(cpu: &mut CpuBackend, devices: &mut [raywave::vulkan::Vul
             let (shades, report) = device.shade(&params, &data, &rays, &hits).expect("device shade");
             let who = format!("{}, {case}", device.name());
             assert_eq!((report.stage, report.sanitized), ("shade", 0), "{who}");
-            let diff = assert_matches_cpu(&who, &expected, &shades, &rays, &hits);
+            let diff = assert_matches_cpu_at_scale(&who, &expected, &shades, &rays, &hits, u_scale);
             eprintln!(
-                "{who}: {lit} of {} pixels lit; max difference of U {:e} of the pass's largest, U_N {:e}, shadow \
-                 ray {:e}; {} samples beyond {SAMPLE_REL}, {} outliers",
+                "{who}: {lit} of {} pixels lit; max difference of U {:e} of the pass's brightest {:?} \
+                 (or of the scale {u_scale:?}), U_N {:e}, shadow ray {:e}; {} samples beyond {SAMPLE_REL}, {} outliers",
                 diff.pixels,
                 diff.analytic_max_rel_to_pass,
+                brightest(&expected),
                 diff.unshadowed_max_rel,
                 diff.shadow_max_rel,
                 diff.ill_conditioned,
@@ -444,6 +479,18 @@ fn assert_shades_alike(cpu: &mut CpuBackend, devices: &mut [raywave::vulkan::Vul
 /// its plane); its lamp tilted 30° through the ceiling's plane (a light crossing the horizon of
 /// every ceiling point near it); and its lamp shrunk 1 000-fold across (about 4·10⁻⁸ sr seen from
 /// the floor) at 10⁶ its radiance.
+///
+/// The grazing view's `U` is measured against the brightest `U` of the same view of the box as it
+/// is (diffuse walls and floor), as the lamp's back is measured against its front
+/// ([`a_lamp_seen_from_behind_is_black_unless_double_sided_on_every_vulkan_device`]). That view
+/// holds only the mirrors — the floor and the blocks' sides, each reflecting the room away from
+/// the ceiling's lamp — so each of its `U` is the tail of a lobe at roughness 0, what remains of
+/// edge terms ~1 that cancel: its brightest is 5.9·10⁻⁵ (3·10⁻⁷ with the residual towards GGX),
+/// against 0.18 in the lit box's view, and a device's rounding of those terms is absolute. On an
+/// NVIDIA H200 (2026-12-04) 1 556 of 5 917 pixels of its first pass differed from the CPU by more
+/// than 10⁻⁴ of the pass's brightest (or of [`FLOOR`]), up to 1.2·10⁻⁶: 2 % of the pass's
+/// brightest, 1.1·10⁻⁵ of the lit view's in all four passes — `U` 0 on one side and
+/// 5.8·10⁻⁸…2.3·10⁻⁷ on the other, 1–4 `f32` ulps of the edge sum, in many of them.
 #[test]
 fn hard_shading_cases_shade_alike_on_every_vulkan_device() {
     let mut cpu = CpuBackend::new();
@@ -479,15 +526,16 @@ fn hard_shading_cases_shade_alike_on_every_vulkan_device() {
     tiny[lamp].positions.iter_mut().for_each(|p| *p = centre + (*p - centre) * 1.0e-3);
     tiny[lamp].material.emission *= 1.0e6;
 
-    for (name, meshes, camera) in [
-        ("cornell, roughness 0", smooth.clone(), camera),
-        ("cornell, roughness 0, grazing camera", smooth, grazing),
-        ("cornell, lamp through the ceiling", tilted, camera),
-        ("cornell, tiny lamp", tiny, camera),
+    let grazing_view = Scene::new("cornell, grazing camera", cornell.meshes().to_vec(), grazing).expect("scene");
+    for (name, meshes, camera, scale_view) in [
+        ("cornell, roughness 0", smooth.clone(), camera, None),
+        ("cornell, roughness 0, grazing camera", smooth, grazing, Some(&grazing_view)),
+        ("cornell, lamp through the ceiling", tilted, camera, None),
+        ("cornell, tiny lamp", tiny, camera, None),
     ] {
         let scene = Scene::new(name, meshes, camera).expect("scene");
         assert_eq!(scene.lights().len(), 1, "{name}: the lamp is one quad light");
-        assert_shades_alike(&mut cpu, &mut devices, &scene);
+        assert_shades_alike(&mut cpu, &mut devices, &scene, scale_view);
     }
     devices.into_iter().for_each(vulkan::assert_clean);
 }
