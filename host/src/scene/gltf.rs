@@ -80,6 +80,7 @@ pub fn load(path: &Path) -> Result<Scene> {
             });
         }
     }
+    let placed_meshes: usize = instances_left.values().sum();
     let mut meshes = Vec::new();
     // Each primitive read once, kept while nodes still to come instance its mesh.
     let mut geometries: HashMap<(usize, usize), PrimitiveGeometry> = HashMap::new();
@@ -142,6 +143,9 @@ pub fn load(path: &Path) -> Result<Scene> {
     };
     let scene = Scene::new(&path.display().to_string(), meshes, camera).map_err(|e| match e {
         // Else the error blamed zero-area triangles, of which there may be none.
+        Error::EmptyScene { .. } if placed_meshes == 0 => {
+            load_error("its scene places no mesh: none of its nodes, nor their children, has `mesh`".to_owned())
+        }
         Error::EmptyScene { dropped_degenerate, .. } if unrendered.point_and_line_primitives > 0 => {
             load_error(format!(
                 "its meshes draw no surface: {} primitive(s) draw points or lines, which raywave does not render \
@@ -2173,6 +2177,16 @@ mod tests {
             "its meshes draw no surface: 1 primitive(s) draw points or lines, which raywave does not render \
                         (0 zero-area triangles dropped)";
         assert!(err.contains(expected), "{err}");
+    }
+
+    /// A scene that places no mesh says so (it was refused for having no triangles of non-zero
+    /// area, "0 zero-area triangles dropped").
+    #[test]
+    fn a_scene_that_places_no_mesh_is_an_error_saying_so() {
+        let camera_only = quad_gltf(6).replacen(r#""nodes":[0,1]}],"#, r#""nodes":[1]}],"#, 1);
+        assert_ne!(camera_only, quad_gltf(6));
+        let err = load(file(&camera_only).path()).unwrap_err().to_string();
+        assert!(err.contains("its scene places no mesh: none of its nodes, nor their children, has `mesh`"), "{err}");
     }
 
     /// Punctual lights (`KHR_lights_punctual`), which raywave does not render, are counted per
