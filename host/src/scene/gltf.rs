@@ -783,6 +783,9 @@ impl PrimitiveGeometry {
         let unreadable_position = || unreadable(&position, &position_field);
         let accessor_positions = PositionElements::new(&position, buffers).ok_or_else(unreadable_position)?;
         let mut indices: Vec<u32> = match primitive.indices() {
+            // Zeros, as glTF 2.0 § 3.6.2.1 asks of an accessor with neither `bufferView` nor
+            // `sparse` (the crate's reader returns nothing): every triangle degenerate, dropped.
+            Some(accessor) if accessor.view().is_none() && accessor.sparse().is_none() => vec![0; accessor.count()],
             Some(accessor) => {
                 let indices_field = format!("{field}.indices");
                 reader.read_indices().ok_or_else(|| unreadable(&accessor, &indices_field))?.into_u32().collect()
@@ -2177,6 +2180,24 @@ mod tests {
             "its meshes draw no surface: 1 primitive(s) draw points or lines, which raywave does not render \
                         (0 zero-area triangles dropped)";
         assert!(err.contains(expected), "{err}");
+    }
+
+    /// An indices accessor with neither `bufferView` nor `sparse` reads as zeros (glTF 2.0), so
+    /// its triangles are degenerate and dropped; it had been refused as "its data cannot be read".
+    #[test]
+    fn indices_without_buffer_view_are_zeros() {
+        let indices = r#"{"bufferView":1,"componentType":5123,"count":6,"type":"SCALAR"}"#;
+        let zeros = quad_gltf(6).replacen(indices, r#"{"componentType":5123,"count":6,"type":"SCALAR"}"#, 1);
+        assert_ne!(zeros, quad_gltf(6));
+        assert!(matches!(load(file(&zeros).path()), Err(Error::EmptyScene { dropped_degenerate: 2, .. })));
+        let zero_accessor = r#",{"componentType":5123,"count":6,"type":"SCALAR"}]}"#;
+        let mixed = quad_gltf(6).replacen(&format!("{indices}]}}"), &format!("{indices}{zero_accessor}"), 1).replacen(
+            r#""material":0}]"#,
+            r#""material":0},{"attributes":{"POSITION":0},"indices":2}]"#,
+            1,
+        );
+        let scene = load(file(&mixed).path()).unwrap();
+        assert_eq!((scene.triangle_count(), scene.dropped_degenerate()), (2, 2), "{mixed}");
     }
 
     /// A scene that places no mesh says so (it was refused for having no triangles of non-zero
