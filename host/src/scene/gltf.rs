@@ -735,6 +735,12 @@ fn mesh_size(
             continue;
         };
         let field = primitive_field(mesh, index);
+        if position.view().is_none() && position.sparse().is_none() && primitive.extension_value(DRACO).is_some() {
+            return Err(format!(
+                "{field}: compressed with {DRACO}, which raywave does not read, and without uncompressed data \
+                 (attributes.POSITION has no bufferView)"
+            ));
+        }
         if checked.insert((position.index(), AccessorUse::Position)) {
             let position_field = format!("{field}.attributes.POSITION");
             check_accessor(&position, buffers, &position_field, AccessorUse::Position)?;
@@ -754,6 +760,13 @@ fn mesh_size(
     }
     Ok((vertices, triangles))
 }
+
+/// The extension that compresses a primitive's geometry (Draco). A file may use it without
+/// requiring it only if it keeps the uncompressed accessors as well, which raywave reads (the
+/// extension's specification: "If the uncompressed version of the asset is not provided, then
+/// KHR_draco_mesh_compression must be added to extensionsRequired"); one that requires it is
+/// refused for that ([`check_required_extensions`]).
+const DRACO: &str = "KHR_draco_mesh_compression";
 
 /// One surface primitive ([`surface_triangles`]) as its accessors hold it, read once however many
 /// nodes instance its mesh: the POSITION elements its indices use, renumbered in order of first
@@ -2198,6 +2211,28 @@ mod tests {
         );
         let scene = load(file(&mixed).path()).unwrap();
         assert_eq!((scene.triangle_count(), scene.dropped_degenerate()), (2, 2), "{mixed}");
+    }
+
+    /// A Draco-compressed primitive is read from its uncompressed accessors, as a file that uses
+    /// the extension without requiring it must keep them; where POSITION has no data, the error
+    /// says that it is compressed (it said "count 4 is outside 1..=0", or would render zeros).
+    #[test]
+    fn draco_primitives_are_read_uncompressed_or_refused_for_their_compression() {
+        let plain = r#"{"attributes":{"POSITION":0},"indices":1,"material":0}"#;
+        let draco = r#"{"attributes":{"POSITION":0},"indices":1,"material":0,"extensions":{"KHR_draco_mesh_compression":{"bufferView":1,"attributes":{"POSITION":0}}}}"#;
+        let used = quad_gltf(6).replacen(plain, draco, 1).replacen(
+            r#""scene":0,"#,
+            r#""scene":0,"extensionsUsed":["KHR_draco_mesh_compression"],"#,
+            1,
+        );
+        assert!(used.contains("extensionsUsed") && used.contains(draco));
+        assert_eq!(load(file(&used).path()).unwrap().triangle_count(), 2);
+        let compressed_only = used.replacen(r#"{"bufferView":0,"componentType":5126"#, r#"{"componentType":5126"#, 1);
+        assert_ne!(compressed_only, used);
+        let err = load(file(&compressed_only).path()).unwrap_err().to_string();
+        let expected = "meshes[0].primitives[0]: compressed with KHR_draco_mesh_compression, which raywave does not \
+                        read, and without uncompressed data (attributes.POSITION has no bufferView)";
+        assert!(err.contains(expected), "{err}");
     }
 
     /// A scene that places no mesh says so (it was refused for having no triangles of non-zero
