@@ -53,8 +53,10 @@ pub fn load(path: &Path) -> Result<Scene> {
     let mut instances_left: HashMap<usize, usize> = HashMap::new();
     // Where each node places its mesh (none for a node without one).
     let mut node_placements: Vec<Vec<Placement>> = Vec::with_capacity(nodes.len());
-    for (node, world) in &nodes {
-        let Some(mesh) = node.mesh() else {
+    let mut hidden_meshes = 0usize;
+    for SceneNode { node, world, visible } in &nodes {
+        hidden_meshes += usize::from(node.mesh().is_some() && !visible);
+        let Some(mesh) = node.mesh().filter(|_| *visible) else {
             node_placements.push(Vec::new());
             continue;
         };
@@ -86,8 +88,8 @@ pub fn load(path: &Path) -> Result<Scene> {
     let mut geometries: HashMap<(usize, usize), PrimitiveGeometry> = HashMap::new();
     let mut unrendered = Unrendered::default();
     let (mut placed_camera, mut orthographic) = (None, false);
-    for ((node, world), placements) in nodes.iter().zip(node_placements) {
-        unrendered.punctual_lights += usize::from(node.light().is_some());
+    for (SceneNode { node, world, visible }, placements) in nodes.iter().zip(node_placements) {
+        unrendered.punctual_lights += usize::from(node.light().is_some() && *visible);
         if let (None, Some(node_camera)) = (&placed_camera, node.camera()) {
             match node_camera.projection() {
                 gltf::camera::Projection::Perspective(p) => {
@@ -143,6 +145,10 @@ pub fn load(path: &Path) -> Result<Scene> {
     };
     let scene = Scene::new(&path.display().to_string(), meshes, camera).map_err(|e| match e {
         // Else the error blamed zero-area triangles, of which there may be none.
+        Error::EmptyScene { .. } if placed_meshes == 0 && hidden_meshes > 0 => load_error(format!(
+            "its scene shows no mesh: the {hidden_meshes} node(s) with a mesh are hidden ({NODE_VISIBILITY} \
+             `visible: false` on them or an ancestor)"
+        )),
         Error::EmptyScene { .. } if placed_meshes == 0 => {
             load_error("its scene places no mesh: none of its nodes, nor their children, has `mesh`".to_owned())
         }
@@ -250,18 +256,41 @@ fn primitive_field(mesh: &gltf::Mesh, index: usize) -> String {
     format!("meshes[{}].primitives[{index}]", mesh.index())
 }
 
-/// The nodes of `scene` with their world transforms, depth-first in document order (a node's
-/// subtree before its next sibling): an error if a node is reached twice.
-fn scene_nodes<'a>(
-    document: &'a Document,
-    scene: &gltf::Scene<'a>,
-) -> std::result::Result<Vec<(gltf::Node<'a>, Mat4)>, String> {
+/// A node of the scene, as [`scene_nodes`] reaches it.
+struct SceneNode<'a> {
+    node: gltf::Node<'a>,
+    /// Its world transform.
+    world: Mat4,
+    /// Whether its mesh and lights are shown ([`NODE_VISIBILITY`]); its camera is used either way.
+    visible: bool,
+}
+
+/// The extension that hides a node and every node below it (`"visible": false`), whatever their
+/// own value: "a value of `false` causes all nodes below in the hierarchy to be omitted from
+/// display … Visibility affects neither cameras, nor node's interactivity features" (the
+/// extension's specification, ratified by Khronos).
+const NODE_VISIBILITY: &str = "KHR_node_visibility";
+
+/// Whether `node` itself is visible ([`NODE_VISIBILITY`]; true without the extension): an error
+/// if `visible` is there but not a boolean.
+fn own_visibility(node: &gltf::Node) -> std::result::Result<bool, String> {
+    let Some(visible) = node.extension_value(NODE_VISIBILITY).and_then(|extension| extension.get("visible")) else {
+        return Ok(true);
+    };
+    visible.as_bool().ok_or_else(|| {
+        format!("nodes[{}].extensions.{NODE_VISIBILITY}.visible is {visible}, not true or false", node.index())
+    })
+}
+
+/// The nodes of `scene` with their world transforms and visibility, depth-first in document order
+/// (a node's subtree before its next sibling): an error if a node is reached twice.
+fn scene_nodes<'a>(document: &'a Document, scene: &gltf::Scene<'a>) -> std::result::Result<Vec<SceneNode<'a>>, String> {
     let mut nodes = Vec::new();
     // The stack pops the first pending node first.
-    let mut pending: Vec<(gltf::Node, Mat4)> = scene.nodes().map(|n| (n, Mat4::IDENTITY)).collect();
+    let mut pending: Vec<(gltf::Node, Mat4, bool)> = scene.nodes().map(|n| (n, Mat4::IDENTITY, true)).collect();
     pending.reverse();
     let mut visited = vec![false; document.nodes().len()];
-    while let Some((node, parent)) = pending.pop() {
+    while let Some((node, parent, parent_visible)) = pending.pop() {
         if std::mem::replace(&mut visited[node.index()], true) {
             return Err(format!(
                 "nodes[{}] is reached twice from scenes[{}] (a cycle, or a node with two parents; \
@@ -271,9 +300,10 @@ fn scene_nodes<'a>(
             ));
         }
         let world = parent * local_transform(&node)?;
-        let children: Vec<_> = node.children().map(|child| (child, world)).collect();
+        let visible = parent_visible && own_visibility(&node)?;
+        let children: Vec<_> = node.children().map(|child| (child, world, visible)).collect();
         pending.extend(children.into_iter().rev());
-        nodes.push((node, world));
+        nodes.push(SceneNode { node, world, visible });
     }
     Ok(nodes)
 }
@@ -333,8 +363,8 @@ fn parse(bytes: &[u8], base: Option<&Path>) -> std::result::Result<(Document, Ve
     let mut json = document.into_json();
     check_asset_version(&json.asset)?;
     check_required_extensions(&json.extensions_required)?;
-    // Read here, so a file may require it: the crate's validation refuses any it does not know.
-    json.extensions_required.retain(|required| required != instancing::EXTENSION);
+    // Read here, so a file may require them: the crate's validation refuses any it does not know.
+    json.extensions_required.retain(|required| ![instancing::EXTENSION, NODE_VISIBILITY].contains(&required.as_str()));
     let document = Document::from_json_without_validation(json);
     validate(&document)?;
     check_camera_projections(document.as_json())?;
@@ -440,12 +470,12 @@ fn check_major_version(version: &str) -> std::result::Result<(), String> {
 
 /// Checks that the file requires (`extensionsRequired`) no extension but those raywave reads:
 /// the ones gltf-json is built to read (`KHR_lights_punctual`, `KHR_materials_emissive_strength`)
-/// and [`instancing::EXTENSION`]. A file that requires another "should fail to load"
+/// and [`instancing::EXTENSION`] and [`NODE_VISIBILITY`]. A file that requires another "should fail to load"
 /// (glTF-Asset-Generator's compatibility model 05), but it is valid glTF, which gltf-json's
 /// validation had called it not ("invalid glTF: … Unsupported extension").
 fn check_required_extensions(required: &[String]) -> std::result::Result<(), String> {
     use gltf::json::extensions::ENABLED_EXTENSIONS;
-    let read: Vec<&str> = ENABLED_EXTENSIONS.iter().copied().chain([instancing::EXTENSION]).collect();
+    let read: Vec<&str> = ENABLED_EXTENSIONS.iter().copied().chain([instancing::EXTENSION, NODE_VISIBILITY]).collect();
     let unread: Vec<String> = (required.iter().enumerate())
         .filter(|(_, name)| !read.contains(&name.as_str()))
         .map(|(index, name)| format!("{name:?} (extensionsRequired[{index}])"))
@@ -2235,6 +2265,54 @@ mod tests {
         assert!(err.contains(expected), "{err}");
     }
 
+    /// `KHR_node_visibility`: a node with `"visible": false` hides its mesh and every mesh below
+    /// it, whatever their own value, and its lights; its camera is still the view. A file may
+    /// require the extension; a `visible` that is not a boolean is an error naming it.
+    #[test]
+    fn hidden_nodes_show_no_mesh_but_keep_their_camera() {
+        let hidden = |visible: &str| format!(r#""extensions":{{"KHR_node_visibility":{{"visible":{visible}}}}}"#);
+        let mesh_node = r#"{"mesh":0,"translation":[0,0,-2]}"#;
+        let camera_node = r#"{"camera":0,"translation":[0.5,0.5,3]}"#;
+        // Two copies of the quad, the second hidden (or not) by its parent, nodes[3].
+        let with = |parent: &str, child: &str, camera: &str| {
+            quad_gltf(6)
+                .replacen(
+                    &format!("[{mesh_node},{camera_node}]"),
+                    &format!(
+                        r#"[{mesh_node},{{"camera":0,"translation":[0.5,0.5,3]{camera}}},{{"mesh":0,"translation":[2,0,-2]{child}}},{{"children":[2]{parent}}}]"#
+                    ),
+                    1,
+                )
+                .replacen(r#""nodes":[0,1]}],"#, r#""nodes":[0,1,3]}],"#, 1)
+        };
+        let shown = with("", "", "");
+        assert_ne!(shown, quad_gltf(6));
+        assert_eq!(load(file(&shown).path()).unwrap().triangle_count(), 4);
+        let off = format!(",{}", hidden("false"));
+        let on = format!(",{}", hidden("true"));
+        for (parent, child) in [(off.as_str(), ""), (&off, &on), ("", &off)] {
+            let scene = load(file(&with(parent, child, &off)).path()).unwrap();
+            assert_eq!(scene.triangle_count(), 2, "parent {parent:?}, child {child:?}");
+            assert_eq!(scene.camera().position, Vec3::new(0.5, 0.5, 3.0), "a hidden node's camera is the view");
+        }
+        let required = shown.replacen(
+            r#""scene":0,"#,
+            r#""scene":0,"extensionsRequired":["KHR_node_visibility"],"extensionsUsed":["KHR_node_visibility"],"#,
+            1,
+        );
+        assert_eq!(load(file(&required).path()).unwrap().triangle_count(), 4);
+
+        let all_hidden =
+            quad_gltf(6).replacen(mesh_node, &format!(r#"{{"mesh":0,"translation":[0,0,-2],{}}}"#, hidden("false")), 1);
+        let err = load(file(&all_hidden).path()).unwrap_err().to_string();
+        let expected = "its scene shows no mesh: the 1 node(s) with a mesh are hidden (KHR_node_visibility `visible: \
+                        false` on them or an ancestor)";
+        assert!(err.contains(expected), "{err}");
+        let not_boolean = all_hidden.replacen(r#""visible":false"#, r#""visible":0"#, 1);
+        let err = load(file(&not_boolean).path()).unwrap_err().to_string();
+        assert!(err.contains("nodes[0].extensions.KHR_node_visibility.visible is 0, not true or false"), "{err}");
+    }
+
     /// A scene that places no mesh says so (it was refused for having no triangles of non-zero
     /// area, "0 zero-area triangles dropped").
     #[test]
@@ -2722,7 +2800,7 @@ mod tests {
             1,
         );
         let err = load(file(&required).path()).unwrap_err().to_string();
-        let expected = r#"the file requires "KHR_materials_pbrSpecularGlossiness" (extensionsRequired[0]), which raywave does not read (it reads KHR_lights_punctual, KHR_materials_emissive_strength, EXT_mesh_gpu_instancing)"#;
+        let expected = r#"the file requires "KHR_materials_pbrSpecularGlossiness" (extensionsRequired[0]), which raywave does not read (it reads KHR_lights_punctual, KHR_materials_emissive_strength, EXT_mesh_gpu_instancing, KHR_node_visibility)"#;
         assert!(err.contains(expected) && !err.contains("invalid glTF"), "{err}");
         // Each is named by its own index, EXT_mesh_gpu_instancing (read) among them.
         let required = quad_gltf(6).replacen(
