@@ -51,8 +51,8 @@
 //!   expected rate is ~10⁻⁶ per sample: none occurred on llvmpipe or on the H200 in 142 008
 //!   samples, where llvmpipe had no sample beyond 1e-3 at all (U_N within 1.2·10⁻⁵) and the H200
 //!   61 between 1e-3 and 1e-2 and one beyond (none beyond 1e-3 on 2026-12-04, every kernel's
-//!   arithmetic decorated `NoContraction` since). Re-measured on 2026-12-03, llvmpipe's five streams
-//!   are bit-identical to the CPU's in the main test, the thin strip and the hard cases.
+//!   arithmetic decorated `NoContraction` since). Re-measured on 2026-12-03, llvmpipe's five
+//!   streams are bit-identical to the CPU's in the main test, the thin strip and the hard cases.
 //! - Everywhere, on every backend: no NaN or Inf in any of the five output streams.
 #![cfg(feature = "vulkan")]
 

@@ -258,6 +258,7 @@ fn primitive_field(mesh: &gltf::Mesh, index: usize) -> String {
 
 /// A node of the scene, as [`scene_nodes`] reaches it.
 struct SceneNode<'a> {
+    /// The node.
     node: gltf::Node<'a>,
     /// Its world transform.
     world: Mat4,
@@ -469,10 +470,10 @@ fn check_major_version(version: &str) -> std::result::Result<(), String> {
 }
 
 /// Checks that the file requires (`extensionsRequired`) no extension but those raywave reads:
-/// the ones gltf-json is built to read (`KHR_lights_punctual`, `KHR_materials_emissive_strength`)
-/// and [`instancing::EXTENSION`] and [`NODE_VISIBILITY`]. A file that requires another "should fail to load"
-/// (glTF-Asset-Generator's compatibility model 05), but it is valid glTF, which gltf-json's
-/// validation had called it not ("invalid glTF: … Unsupported extension").
+/// the ones gltf-json is built to read (`KHR_lights_punctual`, `KHR_materials_emissive_strength`),
+/// [`instancing::EXTENSION`] and [`NODE_VISIBILITY`]. A file that requires another "should fail
+/// to load" (glTF-Asset-Generator's compatibility model 05), but it is valid glTF, which
+/// gltf-json's validation had called it not ("invalid glTF: … Unsupported extension").
 fn check_required_extensions(required: &[String]) -> std::result::Result<(), String> {
     use gltf::json::extensions::ENABLED_EXTENSIONS;
     let read: Vec<&str> = ENABLED_EXTENSIONS.iter().copied().chain([instancing::EXTENSION, NODE_VISIBILITY]).collect();
