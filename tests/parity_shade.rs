@@ -116,6 +116,20 @@ fn camera_pass(
     (rays, hits, sampler)
 }
 
+/// The shade stage's inputs for pass `(sample_index, analytic_residual)` of [`CASES`] of `scene`
+/// (loaded in `cpu`, its shade data `data`) with sampler `kind`: the camera rays, their hits
+/// ([`camera_pass`]) and the pass's parameters.
+fn case_pass(
+    cpu: &mut CpuBackend,
+    scene: &Scene,
+    data: &ShadeData,
+    kind: u32,
+    (sample_index, analytic_residual): (u32, u32),
+) -> (RayStream, HitStream, ShadeParams) {
+    let (rays, hits, sampler) = camera_pass(cpu, scene, kind, sample_index);
+    (rays, hits, ShadeParams { analytic_residual, ..data.params(sampler, WIDTH, HEIGHT, sample_index) })
+}
+
 /// How one backend's shade stream differs from the CPU's.
 #[derive(Debug, Default)]
 struct Diff {
@@ -352,8 +366,7 @@ fn shade_matches_the_cpu_on_every_vulkan_device() {
         for (kind, kind_name) in SAMPLERS {
             for (sample_index, analytic_residual) in CASES {
                 let case = format!("{scene_name} {kind_name} sample {sample_index} residual {analytic_residual}");
-                let (rays, hits, sampler) = camera_pass(&mut cpu, &scene, kind, sample_index);
-                let params = ShadeParams { analytic_residual, ..data.params(sampler, WIDTH, HEIGHT, sample_index) };
+                let (rays, hits, params) = case_pass(&mut cpu, &scene, &data, kind, (sample_index, analytic_residual));
                 let (expected, report) = cpu.shade(&params, &data, &rays, &hits).expect("cpu shade");
                 assert_eq!((report.stage, expected.len()), ("shade", (WIDTH * HEIGHT) as usize));
                 assert_eq!(report.sanitized, 0, "cpu, {case}: computed values went non-finite");
@@ -430,23 +443,24 @@ fn assert_shades_alike(
     scene: &Scene,
     scale_view: Option<&Scene>,
 ) {
-    let scales: Vec<Vec4> = CASES
-        .iter()
-        .map(|&(sample_index, analytic_residual)| {
-            let Some(view) = scale_view else { return Vec4::ZERO };
+    let scales: Vec<Vec4> = match scale_view {
+        None => vec![Vec4::ZERO; CASES.len()],
+        Some(view) => {
             cpu.load_scene(view).expect("cpu scene");
             let data = ShadeData::new(view).expect("shade data");
-            let (rays, hits, sampler) = camera_pass(cpu, view, sampler_kind::ZSOBOL, sample_index);
-            let params = ShadeParams { analytic_residual, ..data.params(sampler, WIDTH, HEIGHT, sample_index) };
-            brightest(&cpu.shade(&params, &data, &rays, &hits).expect("cpu shade").0)
-        })
-        .collect();
+            let brightest_of = |case| {
+                let (rays, hits, params) = case_pass(cpu, view, &data, sampler_kind::ZSOBOL, case);
+                brightest(&cpu.shade(&params, &data, &rays, &hits).expect("cpu shade").0)
+            };
+            CASES.into_iter().map(brightest_of).collect()
+        }
+    };
     cpu.load_scene(scene).expect("cpu scene");
     let data = ShadeData::new(scene).expect("shade data");
     for ((sample_index, analytic_residual), u_scale) in CASES.into_iter().zip(scales) {
         let case = format!("{}, sample {sample_index} residual {analytic_residual}", scene.name());
-        let (rays, hits, sampler) = camera_pass(cpu, scene, sampler_kind::ZSOBOL, sample_index);
-        let params = ShadeParams { analytic_residual, ..data.params(sampler, WIDTH, HEIGHT, sample_index) };
+        let (rays, hits, params) =
+            case_pass(cpu, scene, &data, sampler_kind::ZSOBOL, (sample_index, analytic_residual));
         let (expected, report) = cpu.shade(&params, &data, &rays, &hits).expect("cpu shade");
         assert_eq!(report.sanitized, 0, "cpu, {case}");
         let lit = expected.analytic.iter().filter(|u| u.truncate().max_element() > 0.0).count();

@@ -365,7 +365,7 @@ fn parse(bytes: &[u8], base: Option<&Path>) -> std::result::Result<(Document, Ve
     check_asset_version(&json.asset)?;
     check_required_extensions(&json.extensions_required)?;
     // Read here, so a file may require them: the crate's validation refuses any it does not know.
-    json.extensions_required.retain(|required| ![instancing::EXTENSION, NODE_VISIBILITY].contains(&required.as_str()));
+    json.extensions_required.retain(|required| !EXTENSIONS_READ_HERE.contains(&required.as_str()));
     let document = Document::from_json_without_validation(json);
     validate(&document)?;
     check_camera_projections(document.as_json())?;
@@ -469,14 +469,18 @@ fn check_major_version(version: &str) -> std::result::Result<(), String> {
     }
 }
 
+/// The extensions raywave reads itself rather than through gltf-json, whose validation refuses a
+/// file that requires one of them.
+const EXTENSIONS_READ_HERE: [&str; 2] = [instancing::EXTENSION, NODE_VISIBILITY];
+
 /// Checks that the file requires (`extensionsRequired`) no extension but those raywave reads:
-/// the ones gltf-json is built to read (`KHR_lights_punctual`, `KHR_materials_emissive_strength`),
-/// [`instancing::EXTENSION`] and [`NODE_VISIBILITY`]. A file that requires another "should fail
-/// to load" (glTF-Asset-Generator's compatibility model 05), but it is valid glTF, which
-/// gltf-json's validation had called it not ("invalid glTF: … Unsupported extension").
+/// the ones gltf-json is built to read (`KHR_lights_punctual`, `KHR_materials_emissive_strength`)
+/// and [`EXTENSIONS_READ_HERE`]. A file that requires another "should fail to load"
+/// (glTF-Asset-Generator's compatibility model 05), but it is valid glTF, which gltf-json's
+/// validation had called it not ("invalid glTF: … Unsupported extension").
 fn check_required_extensions(required: &[String]) -> std::result::Result<(), String> {
     use gltf::json::extensions::ENABLED_EXTENSIONS;
-    let read: Vec<&str> = ENABLED_EXTENSIONS.iter().copied().chain([instancing::EXTENSION, NODE_VISIBILITY]).collect();
+    let read: Vec<&str> = ENABLED_EXTENSIONS.iter().copied().chain(EXTENSIONS_READ_HERE).collect();
     let unread: Vec<String> = (required.iter().enumerate())
         .filter(|(_, name)| !read.contains(&name.as_str()))
         .map(|(index, name)| format!("{name:?} (extensionsRequired[{index}])"))
@@ -766,7 +770,7 @@ fn mesh_size(
             continue;
         };
         let field = primitive_field(mesh, index);
-        if position.view().is_none() && position.sparse().is_none() && primitive.extension_value(DRACO).is_some() {
+        if holds_zeros(&position) && primitive.extension_value(DRACO).is_some() {
             return Err(format!(
                 "{field}: compressed with {DRACO}, which raywave does not read, and without uncompressed data \
                  (attributes.POSITION has no bufferView)"
@@ -827,9 +831,8 @@ impl PrimitiveGeometry {
         let unreadable_position = || unreadable(&position, &position_field);
         let accessor_positions = PositionElements::new(&position, buffers).ok_or_else(unreadable_position)?;
         let mut indices: Vec<u32> = match primitive.indices() {
-            // Zeros, as glTF 2.0 § 3.6.2.1 asks of an accessor with neither `bufferView` nor
-            // `sparse` (the crate's reader returns nothing): every triangle degenerate, dropped.
-            Some(accessor) if accessor.view().is_none() && accessor.sparse().is_none() => vec![0; accessor.count()],
+            // Every triangle degenerate, dropped (the crate's reader returns nothing).
+            Some(accessor) if holds_zeros(&accessor) => vec![0; accessor.count()],
             Some(accessor) => {
                 let indices_field = format!("{field}.indices");
                 reader.read_indices().ok_or_else(|| unreadable(&accessor, &indices_field))?.into_u32().collect()
@@ -1269,6 +1272,12 @@ fn check_span(
         ));
     }
     Ok(())
+}
+
+/// Whether `accessor` has neither `bufferView` nor `sparse`, and so holds zeros (glTF 2.0
+/// § 3.6.2.1: "When undefined, the accessor MUST be initialized with zeros").
+fn holds_zeros(accessor: &gltf::Accessor) -> bool {
+    accessor.view().is_none() && accessor.sparse().is_none()
 }
 
 /// The error of an accessor that passed [`check_accessor`] but that the reader still cannot read.

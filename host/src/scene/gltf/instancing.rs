@@ -4,7 +4,7 @@
 //! instance's translation, rotation (a unit quaternion) and scale read from accessors named by
 //! the extension's `attributes`. The non-instanced mesh is not drawn (the extension's note).
 
-use super::{check_accessor, unreadable, AccessorUse, CheckedAccessors, TRANSFORM_TOLERANCE};
+use super::{check_accessor, holds_zeros, unreadable, AccessorUse, CheckedAccessors, TRANSFORM_TOLERANCE};
 use glam::{Mat4, Quat, Vec3};
 use gltf::accessor::util::{Item, Iter};
 use gltf::accessor::DataType;
@@ -132,10 +132,9 @@ fn read_rotations(accessor: &gltf::Accessor, buffers: &[buffer::Data], field: &s
 }
 
 /// Every element of `accessor` (checked by [`check_accessor`], its elements `T`), read by the
-/// `gltf` crate's reader, which applies sparse substitutions; an accessor with neither a buffer
-/// view nor sparse values is zeros (glTF 2.0 § 3.6.2.1).
+/// `gltf` crate's reader, which applies sparse substitutions, or zeros ([`holds_zeros`]).
 fn read<T: Item + Copy>(accessor: &gltf::Accessor, buffers: &[buffer::Data], field: &str) -> Result<Vec<T>, String> {
-    if accessor.view().is_none() && accessor.sparse().is_none() {
+    if holds_zeros(accessor) {
         return Ok(vec![T::zero(); accessor.count()]);
     }
     let elements =

@@ -87,7 +87,7 @@ impl Members {
     /// what is wrong with it). A byte-order mark blanked before is whitespace now.
     fn read(text: &[u8]) -> Self {
         let Ok(text) = std::str::from_utf8(text) else { return Self::default() };
-        let Ok(members) = serde_json::from_str::<HashMap<String, &RawValue>>(text) else { return Self::default() };
+        let Some(members) = object_members(text) else { return Self::default() };
         let animations = members.get("animations").map(|array| array.get()).filter(|array| array.starts_with('['));
         let animations = animations.map(|array| {
             let start = array.as_ptr() as usize - text.as_ptr() as usize;
@@ -95,11 +95,16 @@ impl Members {
         });
         let asset_version = members
             .get("asset")
-            .and_then(|asset| serde_json::from_str::<HashMap<String, &RawValue>>(asset.get()).ok())
+            .and_then(|asset| object_members(asset.get()))
             .and_then(|asset| asset.get("version").map(|version| version.get()))
             .map(|version| serde_json::from_str(version).unwrap_or_else(|_| version.to_owned()));
         Self { animations, asset_version }
     }
+}
+
+/// The members of the JSON object `text`, each as its raw JSON text; none if `text` is not one.
+fn object_members(text: &str) -> Option<HashMap<String, &RawValue>> {
+    serde_json::from_str(text).ok()
 }
 
 /// Replaces every byte of `bytes` but line breaks by a space (JSON whitespace).
