@@ -1,6 +1,7 @@
 //! glTF 2.0 scenes (through the `gltf` crate): the default scene's node hierarchy with its
 //! transforms (and `EXT_mesh_gpu_instancing`'s instances, [`instancing`]), every triangle primitive
-//! as a mesh (one without POSITION is skipped, as glTF 2.0 § 3.7.2.1 asks), metallic-roughness
+//! as a mesh (one without POSITION is skipped, as glTF 2.0 § 3.7.2.1 asks; its positions may be
+//! `KHR_mesh_quantization`'s integers, [`MESH_QUANTIZATION`]), metallic-roughness
 //! materials with emission (and `KHR_materials_emissive_strength`; `doubleSided` makes an emissive
 //! rectangle a two-sided light, and is read for nothing else: rays meet both sides of every
 //! triangle, so `doubleSided: false` culls no back face), and the first perspective camera, if any — looking at the point
@@ -22,6 +23,7 @@ use super::{
     MAX_TRIANGLES, MAX_VERTICES,
 };
 use crate::error::{Error, Result};
+use components::ComponentFormat;
 use glam::{DMat3, DVec3, Mat4, Vec3};
 use gltf::accessor::{DataType, Dimensions};
 use gltf::json::validation::Checked;
@@ -30,6 +32,7 @@ use gltf::{buffer, Document, Semantic};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
+mod components;
 mod instancing;
 mod json_text;
 
@@ -50,6 +53,7 @@ pub fn load(path: &Path) -> Result<Scene> {
     let (mut vertices, mut triangle_count): (u64, u64) = (0, 0);
     let mut mesh_sizes: HashMap<usize, (u64, u64)> = HashMap::new();
     let mut checked_accessors = CheckedAccessors::new();
+    let position_use = AccessorUse::position_in(&document);
     let mut instances_left: HashMap<usize, usize> = HashMap::new();
     // Where each node places its mesh (none for a node without one).
     let mut node_placements: Vec<Vec<Placement>> = Vec::with_capacity(nodes.len());
@@ -66,7 +70,7 @@ pub fn load(path: &Path) -> Result<Scene> {
             Some(&size) => size,
             None => *mesh_sizes
                 .entry(mesh.index())
-                .or_insert(mesh_size(&mesh, &buffers, &mut checked_accessors).map_err(load_error)?),
+                .or_insert(mesh_size(&mesh, &buffers, position_use, &mut checked_accessors).map_err(load_error)?),
         };
         let copies = placements.len() as u64;
         vertices = vertices.saturating_add(mesh_vertices.saturating_mul(copies));
@@ -471,7 +475,7 @@ fn check_major_version(version: &str) -> std::result::Result<(), String> {
 
 /// The extensions raywave reads itself rather than through gltf-json, whose validation refuses a
 /// file that requires one of them.
-const EXTENSIONS_READ_HERE: [&str; 2] = [instancing::EXTENSION, NODE_VISIBILITY];
+const EXTENSIONS_READ_HERE: [&str; 3] = [instancing::EXTENSION, MESH_QUANTIZATION, NODE_VISIBILITY];
 
 /// Checks that the file requires (`extensionsRequired`) no extension but those raywave reads:
 /// the ones gltf-json is built to read (`KHR_lights_punctual`, `KHR_materials_emissive_strength`)
@@ -720,6 +724,9 @@ fn check_meshes_have_primitives(root: &gltf::json::Root) -> std::result::Result<
 enum AccessorUse {
     /// A POSITION attribute: VEC3 of `f32`.
     Position,
+    /// A POSITION attribute in a file that uses [`MESH_QUANTIZATION`]: VEC3 of `f32` or of any 8-
+    /// or 16-bit integer type, normalized or not (the extension's table).
+    QuantizedPosition,
     /// Vertex indices: SCALAR unsigned integers, tightly packed — glTF 2.0 gives a `byteStride`
     /// to vertex attributes alone.
     Indices,
@@ -732,12 +739,23 @@ enum AccessorUse {
 }
 
 impl AccessorUse {
+    /// What POSITION attributes are read as in `document`: [`Self::QuantizedPosition`] where it
+    /// lists [`MESH_QUANTIZATION`] in `extensionsUsed`.
+    fn position_in(document: &Document) -> Self {
+        if document.extensions_used().any(|used| used == MESH_QUANTIZATION) {
+            Self::QuantizedPosition
+        } else {
+            Self::Position
+        }
+    }
+
     /// The element type glTF 2.0 (or the extension) requires: its dimensions and the component
     /// types it allows, each with whether it is `normalized`.
     fn element(self) -> (Dimensions, &'static [(DataType, bool)]) {
         const F32: (DataType, bool) = (DataType::F32, false);
         match self {
             Self::Position | Self::InstanceTranslation | Self::InstanceScale => (Dimensions::Vec3, &[F32]),
+            Self::QuantizedPosition => (Dimensions::Vec3, &QUANTIZED_POSITION_COMPONENTS),
             Self::Indices => {
                 (Dimensions::Scalar, &[(DataType::U8, false), (DataType::U16, false), (DataType::U32, false)])
             }
@@ -745,6 +763,26 @@ impl AccessorUse {
         }
     }
 }
+
+/// The extension that lets POSITION (and other attributes, which raywave does not read) hold
+/// 8- and 16-bit integers (KhronosGroup/glTF, `extensions/2.0/Khronos/KHR_mesh_quantization`), as
+/// `gltfpack` writes them, with the dequantizing scale and offset in the node's transform. Files
+/// must require it (the extension: "the extension is not optional").
+const MESH_QUANTIZATION: &str = "KHR_mesh_quantization";
+
+/// The component types [`MESH_QUANTIZATION`] allows POSITION: `f32`, and every 8- and 16-bit
+/// integer type, normalized or not.
+const QUANTIZED_POSITION_COMPONENTS: [(DataType, bool); 9] = [
+    (DataType::F32, false),
+    (DataType::I8, false),
+    (DataType::I8, true),
+    (DataType::U8, false),
+    (DataType::U8, true),
+    (DataType::I16, false),
+    (DataType::I16, true),
+    (DataType::U16, false),
+    (DataType::U16, true),
+];
 
 /// A component type as an error names it: `F32`, `normalized I16`.
 fn component_name((data_type, normalized): (DataType, bool)) -> String {
@@ -757,11 +795,12 @@ type CheckedAccessors = std::collections::HashSet<(usize, AccessorUse)>;
 
 /// The vertices (at most its POSITION count and its corners) and triangles that `mesh`'s surface
 /// primitives ([`draws_surfaces`]) add to the scene each time a node instances it, their POSITION
-/// and indices accessors checked first ([`check_accessor`]: their counts are the file's) unless
-/// `checked` holds them.
+/// (read as `position_use`: [`AccessorUse::position_in`]) and indices accessors checked first
+/// ([`check_accessor`]: their counts are the file's) unless `checked` holds them.
 fn mesh_size(
     mesh: &gltf::Mesh,
     buffers: &[buffer::Data],
+    position_use: AccessorUse,
     checked: &mut CheckedAccessors,
 ) -> std::result::Result<(u64, u64), String> {
     let (mut vertices, mut triangles) = (0u64, 0u64);
@@ -776,9 +815,9 @@ fn mesh_size(
                  (attributes.POSITION has no bufferView)"
             ));
         }
-        if checked.insert((position.index(), AccessorUse::Position)) {
+        if checked.insert((position.index(), position_use)) {
             let position_field = format!("{field}.attributes.POSITION");
-            check_accessor(&position, buffers, &position_field, AccessorUse::Position)?;
+            check_accessor(&position, buffers, &position_field, position_use)?;
         }
         let corners = match primitive.indices() {
             Some(indices) => {
@@ -818,10 +857,11 @@ struct PrimitiveGeometry {
 
 impl PrimitiveGeometry {
     /// Reads `primitive`, whose JSON path `field` the errors name, its accessors checked by
-    /// [`mesh_size`] (POSITION a VEC3 float accessor and indices, if any, a SCALAR unsigned integer
-    /// one, as glTF 2.0 requires — the `gltf` crate's reader would panic on float indices and read
-    /// other types as garbage —, each inside its buffer); every index must be below the POSITION
-    /// count (which [`Scene::new`] would report without the JSON path).
+    /// [`mesh_size`] (POSITION a VEC3 accessor of `f32`, or of integers under
+    /// [`MESH_QUANTIZATION`], and indices, if any, a SCALAR unsigned integer one, as glTF 2.0
+    /// requires — the `gltf` crate's reader would panic on float indices and read other types as
+    /// garbage —, each inside its buffer); every index must be below the POSITION count (which
+    /// [`Scene::new`] would report without the JSON path).
     fn read(primitive: &gltf::Primitive, buffers: &[buffer::Data], field: &str) -> std::result::Result<Self, String> {
         #[cfg(test)]
         tests::PRIMITIVE_READS.with(|reads| reads.set(reads.get() + 1));
@@ -922,11 +962,14 @@ impl Renumbering {
     }
 }
 
-/// Random access to the elements of a POSITION accessor (VEC3 of `f32`, its spans checked by
-/// [`check_accessor`]): reading a primitive costs what its indices use, not the accessor's
-/// count, which the `gltf` crate's reader decodes whole — per primitive, so primitives sharing one
-/// large (or sparse, bufferless) accessor made a small file take hours.
+/// Random access to the elements of a POSITION accessor (VEC3 of `f32`, or of the integer types
+/// [`MESH_QUANTIZATION`] allows, its type and spans checked by [`check_accessor`]): reading a
+/// primitive costs what its indices use, not the accessor's count, which the `gltf` crate's reader
+/// decodes whole — per primitive, so primitives sharing one large (or sparse, bufferless) accessor
+/// made a small file take hours.
 struct PositionElements<'a> {
+    /// How each component is stored.
+    format: ComponentFormat,
     /// The base elements' bytes from the first one on, and their stride; `None`: zeros (a sparse
     /// accessor without a buffer view).
     base: Option<(&'a [u8], usize)>,
@@ -938,11 +981,14 @@ struct PositionElements<'a> {
 impl<'a> PositionElements<'a> {
     /// The accessor's elements, or `None` if its data lies outside `buffers`.
     fn new(accessor: &gltf::Accessor, buffers: &'a [buffer::Data]) -> Option<Self> {
+        let format = ComponentFormat::of(accessor);
         let bytes_from = |view: buffer::View, offset: usize| {
             buffers.get(view.buffer().index())?.0.get(view.offset().checked_add(offset)?..)
         };
         let base = match accessor.view() {
-            Some(view) => Some((bytes_from(view.clone(), accessor.offset())?, view.stride().unwrap_or(VEC3_F32_BYTES))),
+            Some(view) => {
+                Some((bytes_from(view.clone(), accessor.offset())?, view.stride().unwrap_or(3 * format.size())))
+            }
             None => None,
         };
         let sparse = match accessor.sparse() {
@@ -953,27 +999,24 @@ impl<'a> PositionElements<'a> {
             }
             None => None,
         };
-        Some(Self { base, sparse })
+        Some(Self { format, base, sparse })
     }
 
     /// Element `index` (below the accessor's count), or `None` if its bytes lie outside the data.
     fn get(&self, index: usize) -> Option<Vec3> {
+        let size = self.format.size();
         let element = |bytes: &[u8], at: usize| {
-            let bytes = bytes.get(at..at.checked_add(VEC3_F32_BYTES)?)?;
-            let component = |k: usize| f32::from_le_bytes([bytes[k], bytes[k + 1], bytes[k + 2], bytes[k + 3]]);
-            Some(Vec3::new(component(0), component(4), component(8)))
+            let component = |k: usize| self.format.value(bytes.get(at.checked_add(k * size)?..)?);
+            Some(Vec3::new(component(0)?, component(1)?, component(2)?))
         };
         let substitution = self.sparse.and_then(|(indices, values)| Some((indices.position(index)?, values)));
         match (substitution, self.base) {
-            (Some((k, values)), _) => element(values, k * VEC3_F32_BYTES),
+            (Some((k, values)), _) => element(values, k.checked_mul(3 * size)?),
             (None, Some((bytes, stride))) => element(bytes, index.checked_mul(stride)?),
             (None, None) => Some(Vec3::ZERO),
         }
     }
 }
-
-/// Bytes of one POSITION element (VEC3 of `f32`).
-const VEC3_F32_BYTES: usize = 12;
 
 /// Moves `positions` (each POSITION element `elements` names, of the primitive at JSON path
 /// `field`) to world space by `placement`, and reverses `triangles` where it mirrors; an error if
@@ -1071,11 +1114,20 @@ fn check_accessor(
     let found = (accessor.data_type(), accessor.normalized());
     if accessor.dimensions() != dimensions || !components.contains(&found) {
         let allowed: Vec<String> = components.iter().copied().map(component_name).collect();
+        let quantized = use_ == AccessorUse::Position && QUANTIZED_POSITION_COMPONENTS.contains(&found);
         return error(format!(
-            "holds {:?} of {}, glTF requires {dimensions:?} of {}",
+            "holds {:?} of {}, glTF requires {dimensions:?} of {}{}",
             accessor.dimensions(),
             component_name(found),
-            allowed.join(" or ")
+            allowed.join(" or "),
+            if quantized {
+                format!(
+                    " ({MESH_QUANTIZATION} allows {}, but the file does not list it in extensionsUsed)",
+                    component_name(found)
+                )
+            } else {
+                String::new()
+            }
         ));
     }
     if let (AccessorUse::Indices, Some(view)) = (use_, accessor.view()) {
@@ -2323,6 +2375,118 @@ mod tests {
         assert!(err.contains("nodes[0].extensions.KHR_node_visibility.visible is 0, not true or false"), "{err}");
     }
 
+    /// [`quad_gltf`]'s file with its positions stored as `component_type` (5120 `BYTE` … 5123
+    /// `UNSIGNED_SHORT`), `normalized` or not, each coordinate 1 of the unit square written as
+    /// `one`, in a view strided to 4-byte elements (glTF's alignment of vertex attributes), and
+    /// `members` (such as `extensionsUsed`) before its `"scene"`.
+    fn quantized_quad_gltf(component_type: u32, normalized: bool, one: u16, members: &str) -> String {
+        let size = if component_type < 5122 { 1 } else { 2 };
+        let stride = 4 * size;
+        let mut data = Vec::new();
+        for corner in [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]] {
+            for c in corner {
+                data.extend_from_slice(&(c * one).to_le_bytes()[..size]);
+            }
+            data.resize(data.len() + stride - 3 * size, 0);
+        }
+        data.extend([0u16, 1, 2, 0, 2, 3].iter().flat_map(|i| i.to_le_bytes()));
+        let positions = 4 * stride;
+        quad_gltf(6)
+            .replacen(&base64_encode(&quad_buffer()), &base64_encode(&data), 1)
+            .replacen(r#""byteLength":60"#, &format!(r#""byteLength":{}"#, data.len()), 1)
+            .replacen(
+                r#"{"buffer":0,"byteOffset":0,"byteLength":48}"#,
+                &format!(r#"{{"buffer":0,"byteOffset":0,"byteLength":{positions},"byteStride":{stride}}}"#),
+                1,
+            )
+            .replacen(
+                r#"{"buffer":0,"byteOffset":48,"byteLength":12}"#,
+                &format!(r#"{{"buffer":0,"byteOffset":{positions},"byteLength":12}}"#),
+                1,
+            )
+            .replacen(
+                r#""componentType":5126,"count":4,"type":"VEC3","min":[0,0,0],"max":[1,1,0]"#,
+                &format!(
+                    r#""componentType":{component_type},"normalized":{normalized},"count":4,"type":"VEC3","min":[0,0,0],"max":[{one},{one},0]"#
+                ),
+                1,
+            )
+            .replacen(r#""scene":0,"#, &format!(r#"{members}"scene":0,"#), 1)
+    }
+
+    /// Positions of `KHR_mesh_quantization` — each integer type it allows, normalized or not,
+    /// in 4-byte elements, a sparse accessor's substitutions in the accessor's type, and integers
+    /// dequantized by the node's scale (as gltfpack writes them) — load as the quad of `f32`
+    /// ones and its light; they were refused with the extension. A file that does not list the
+    /// extension gets an error saying that it allows the type, and `UNSIGNED_INT` stays refused.
+    #[test]
+    fn quantized_positions_load_as_the_float_quad() {
+        let float = load(file(&quad_gltf(6)).path()).unwrap();
+        let uses = r#""extensionsUsed":["KHR_mesh_quantization"],"extensionsRequired":["KHR_mesh_quantization"],"#;
+        let loads_as_float = |text: &str, case: &str| {
+            let scene = load(file(text).path()).unwrap_or_else(|e| panic!("{case}: {e}"));
+            assert_eq!(scene.meshes()[0].positions, float.meshes()[0].positions, "{case}");
+            assert_eq!(scene.lights(), float.lights(), "{case}");
+        };
+        let data_types = [(5120, DataType::I8), (5121, DataType::U8), (5122, DataType::I16), (5123, DataType::U16)];
+        for (component_type, data_type) in data_types {
+            loads_as_float(&quantized_quad_gltf(component_type, false, 1, uses), &format!("{data_type:?}"));
+            let one = components::normalized_one(data_type).unwrap() as u16;
+            loads_as_float(&quantized_quad_gltf(component_type, true, one, uses), &format!("normalized {data_type:?}"));
+        }
+        let node = r#"{"mesh":0,"translation":[0,0,-2]}"#;
+        let scaled = quantized_quad_gltf(5123, false, 1000, uses).replacen(
+            node,
+            r#"{"mesh":0,"translation":[0,0,-2],"scale":[0.001,0.001,0.001]}"#,
+            1,
+        );
+        let scene = load(file(&scaled).path()).unwrap();
+        for (p, q) in scene.meshes()[0].positions.iter().zip(&float.meshes()[0].positions) {
+            assert!(p.abs_diff_eq(*q, 1e-6), "dequantized by the node's scale: {p} against {q}");
+        }
+        // Elements 1–3 substituted (u8 indices, then u16 values) over zeros (no base view).
+        let mut data: Vec<u8> = [0u16, 1, 2, 0, 2, 3].iter().flat_map(|i| i.to_le_bytes()).collect();
+        data.extend([1, 2, 3, 0]);
+        data.extend([1u16, 0, 0, 1, 1, 0, 0, 1, 0].iter().flat_map(|i| i.to_le_bytes()));
+        let sparse = quad_gltf(6)
+            .replacen(&base64_encode(&quad_buffer()), &base64_encode(&data), 1)
+            .replacen(r#""byteLength":60"#, r#""byteLength":34"#, 1)
+            .replacen(
+                r#"{"buffer":0,"byteOffset":0,"byteLength":48}"#,
+                r#"{"buffer":0,"byteOffset":16,"byteLength":18}"#,
+                1,
+            )
+            .replacen(
+                r#"{"buffer":0,"byteOffset":48,"byteLength":12}"#,
+                r#"{"buffer":0,"byteOffset":0,"byteLength":12},{"buffer":0,"byteOffset":12,"byteLength":3}"#,
+                1,
+            )
+            .replacen(
+                r#"{"bufferView":0,"componentType":5126,"count":4,"type":"VEC3","min":[0,0,0],"max":[1,1,0]}"#,
+                r#"{"componentType":5123,"count":4,"type":"VEC3","min":[0,0,0],"max":[1,1,0],"sparse":{"count":3,"indices":{"bufferView":2,"componentType":5121},"values":{"bufferView":0}}}"#,
+                1,
+            )
+            .replacen(r#""scene":0,"#, &format!(r#"{uses}"scene":0,"#), 1);
+        loads_as_float(&sparse, "sparse");
+        for (text, expected) in [
+            (
+                quantized_quad_gltf(5123, false, 1, ""),
+                "meshes[0].primitives[0].attributes.POSITION: accessor 0: holds Vec3 of U16, glTF requires Vec3 of \
+                 F32 (KHR_mesh_quantization allows U16, but the file does not list it in extensionsUsed)",
+            ),
+            (
+                quad_gltf(6)
+                    .replacen(r#""componentType":5126,"count":4"#, r#""componentType":5125,"count":4"#, 1)
+                    .replacen(r#""scene":0,"#, &format!(r#"{uses}"scene":0,"#), 1),
+                "accessor 0: holds Vec3 of U32, glTF requires Vec3 of F32 or I8 or normalized I8 or U8 or \
+                 normalized U8 or I16 or normalized I16 or U16 or normalized U16",
+            ),
+        ] {
+            let err = load(file(&text).path()).unwrap_err().to_string();
+            assert!(err.contains(expected), "{err}");
+        }
+    }
+
     /// A scene that places no mesh says so (it was refused for having no triangles of non-zero
     /// area, "0 zero-area triangles dropped").
     #[test]
@@ -2810,16 +2974,16 @@ mod tests {
             1,
         );
         let err = load(file(&required).path()).unwrap_err().to_string();
-        let expected = r#"the file requires "KHR_materials_pbrSpecularGlossiness" (extensionsRequired[0]), which raywave does not read (it reads KHR_lights_punctual, KHR_materials_emissive_strength, EXT_mesh_gpu_instancing, KHR_node_visibility)"#;
+        let expected = r#"the file requires "KHR_materials_pbrSpecularGlossiness" (extensionsRequired[0]), which raywave does not read (it reads KHR_lights_punctual, KHR_materials_emissive_strength, EXT_mesh_gpu_instancing, KHR_mesh_quantization, KHR_node_visibility)"#;
         assert!(err.contains(expected) && !err.contains("invalid glTF"), "{err}");
         // Each is named by its own index, EXT_mesh_gpu_instancing (read) among them.
         let required = quad_gltf(6).replacen(
             r#""scene":0,"#,
-            r#""scene":0,"extensionsUsed":["EXT_mesh_gpu_instancing","KHR_mesh_quantization","KHR_materials_unlit"],"extensionsRequired":["EXT_mesh_gpu_instancing","KHR_mesh_quantization","KHR_materials_unlit"],"#,
+            r#""scene":0,"extensionsUsed":["EXT_mesh_gpu_instancing","KHR_texture_basisu","KHR_materials_unlit"],"extensionsRequired":["EXT_mesh_gpu_instancing","KHR_texture_basisu","KHR_materials_unlit"],"#,
             1,
         );
         let err = load(file(&required).path()).unwrap_err().to_string();
-        let expected = r#"requires "KHR_mesh_quantization" (extensionsRequired[1]), "KHR_materials_unlit" (extensionsRequired[2]), which"#;
+        let expected = r#"requires "KHR_texture_basisu" (extensionsRequired[1]), "KHR_materials_unlit" (extensionsRequired[2]), which"#;
         assert!(err.contains(expected), "{err}");
     }
 

@@ -4,6 +4,7 @@
 //! instance's translation, rotation (a unit quaternion) and scale read from accessors named by
 //! the extension's `attributes`. The non-instanced mesh is not drawn (the extension's note).
 
+use super::components::{normalized, normalized_one};
 use super::{check_accessor, holds_zeros, unreadable, AccessorUse, CheckedAccessors, TRANSFORM_TOLERANCE};
 use glam::{Mat4, Quat, Vec3};
 use gltf::accessor::util::{Item, Iter};
@@ -101,23 +102,17 @@ pub(super) fn instance_transforms(
 /// The unit quaternions of a ROTATION accessor (checked: VEC4 of `FLOAT`, normalized `BYTE` or
 /// normalized `SHORT`), each normalized after its length is checked ([`instance_transforms`]).
 fn read_rotations(accessor: &gltf::Accessor, buffers: &[buffer::Data], field: &str) -> Result<Vec<Quat>, String> {
-    // glTF 2.0 § 3.11: a normalized signed component `c` stands for max(c / (2ⁿ⁻¹ − 1), −1).
-    fn unit<T: Into<f32>>(components: [T; 4], steps: f32) -> [f32; 4] {
-        components.map(|c| (c.into() / steps).max(-1.0))
-    }
-    let (quaternions, steps): (Vec<[f32; 4]>, Option<f32>) = match accessor.data_type() {
-        DataType::I8 => {
-            (read::<[i8; 4]>(accessor, buffers, field)?.into_iter().map(|c| unit(c, 127.0)).collect(), Some(127.0))
-        }
-        DataType::I16 => {
-            (read::<[i16; 4]>(accessor, buffers, field)?.into_iter().map(|c| unit(c, 32767.0)).collect(), Some(32767.0))
-        }
-        _ => (read::<[f32; 4]>(accessor, buffers, field)?, None),
+    let stored: Vec<[f32; 4]> = match accessor.data_type() {
+        DataType::I8 => read::<[i8; 4]>(accessor, buffers, field)?.into_iter().map(|q| q.map(f32::from)).collect(),
+        DataType::I16 => read::<[i16; 4]>(accessor, buffers, field)?.into_iter().map(|q| q.map(f32::from)).collect(),
+        _ => read::<[f32; 4]>(accessor, buffers, field)?,
     };
-    // Each component rounds by at most half a step, so the length by at most 1/steps.
-    let tolerance = TRANSFORM_TOLERANCE + steps.map_or(0.0, f32::recip);
+    // Normalized integers (the only integer types allowed here) for 1; `None` for `f32`.
+    let one = normalized_one(accessor.data_type());
+    let quaternions = stored.into_iter().map(|q| one.map_or(q, |one| q.map(|c| normalized(c, one))));
+    // Each component rounds by at most half a step, so the length by at most 1/one.
+    let tolerance = TRANSFORM_TOLERANCE + one.map_or(0.0, f32::recip);
     quaternions
-        .into_iter()
         .enumerate()
         .map(|(k, q)| {
             let length = glam::Vec4::from_array(q).length();
