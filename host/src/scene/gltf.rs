@@ -1,13 +1,14 @@
 //! glTF 2.0 scenes (through the `gltf` crate): the default scene's node hierarchy with its
 //! transforms (and `EXT_mesh_gpu_instancing`'s instances, [`instancing`]), every triangle primitive
 //! as a mesh (one without POSITION is skipped, as glTF 2.0 § 3.7.2.1 asks; its positions may be
-//! `KHR_mesh_quantization`'s integers, [`MESH_QUANTIZATION`]), metallic-roughness
-//! materials with emission (and `KHR_materials_emissive_strength`; `doubleSided` makes an emissive
-//! rectangle a two-sided light, and is read for nothing else: rays meet both sides of every
-//! triangle, so `doubleSided: false` culls no back face), and the first perspective camera, if any — looking at the point
-//! along its view at the depth of the scene's centre, which sets the default focus
-//! ([`PlacedCamera::aimed`]). What raywave does not render — textures, see-through materials, skins
-//! and morph targets, orthographic cameras, punctual lights — is counted ([`Scene::unrendered`]).
+//! `KHR_mesh_quantization`'s integers, [`MESH_QUANTIZATION`]), buffer views compressed by meshopt
+//! ([`meshopt`]), metallic-roughness materials with emission (and
+//! `KHR_materials_emissive_strength`; `doubleSided` makes an emissive rectangle a two-sided light,
+//! and is read for nothing else: rays meet both sides of every triangle, so `doubleSided: false`
+//! culls no back face), and the first perspective camera, if any — looking at the point along its
+//! view at the depth of the scene's centre, which sets the default focus ([`PlacedCamera::aimed`]).
+//! What raywave does not render — textures, see-through materials, skins and morph targets,
+//! orthographic cameras, punctual lights — is counted ([`Scene::unrendered`]).
 //!
 //! Bad files give an [`Error::SceneLoad`] naming the file and the JSON field, never a panic or a
 //! hang: on top of the `gltf` crate's validation this checks what that crate trusts (POSITION
@@ -29,12 +30,13 @@ use gltf::accessor::{DataType, Dimensions};
 use gltf::json::validation::Checked;
 use gltf::mesh::Mode;
 use gltf::{buffer, Document, Semantic};
-use std::collections::HashMap;
+use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
 
 mod components;
 mod instancing;
 mod json_text;
+mod meshopt;
 
 /// Loads and validates a `.gltf` or `.glb` file.
 pub fn load(path: &Path) -> Result<Scene> {
@@ -475,7 +477,8 @@ fn check_major_version(version: &str) -> std::result::Result<(), String> {
 
 /// The extensions raywave reads itself rather than through gltf-json, whose validation refuses a
 /// file that requires one of them.
-const EXTENSIONS_READ_HERE: [&str; 3] = [instancing::EXTENSION, MESH_QUANTIZATION, NODE_VISIBILITY];
+const EXTENSIONS_READ_HERE: [&str; 5] =
+    [instancing::EXTENSION, MESH_QUANTIZATION, meshopt::EXTENSIONS[0], meshopt::EXTENSIONS[1], NODE_VISIBILITY];
 
 /// Checks that the file requires (`extensionsRequired`) no extension but those raywave reads:
 /// the ones gltf-json is built to read (`KHR_lights_punctual`, `KHR_materials_emissive_strength`)
@@ -544,7 +547,7 @@ fn load_buffers(
     glb: bool,
     mut blob: Option<Vec<u8>>,
 ) -> std::result::Result<Vec<buffer::Data>, String> {
-    let read = buffers_read_by_accessors(document);
+    let (read, compressed_views) = buffers_read_by_accessors(document)?;
     let load = |buffer: buffer::Buffer| {
         if !read[buffer.index()] {
             return Ok(buffer::Data(Vec::new()));
@@ -576,22 +579,40 @@ fn load_buffers(
         }
         Ok(data)
     };
-    document.buffers().map(load).collect()
+    let mut buffers = document.buffers().map(load).collect::<std::result::Result<Vec<_>, _>>()?;
+    let declared_lengths: Vec<usize> = document.buffers().map(|buffer| buffer.length()).collect();
+    meshopt::decode_views(&compressed_views, &mut buffers, &declared_lengths)?;
+    Ok(buffers)
 }
 
 /// Which buffers (by index) hold data an accessor reads, through its `bufferView` or its sparse
-/// views: raywave reads buffers through accessors only, so a buffer that holds only images, or a
-/// placeholder without `uri` (glTF-Validator's `buffer/valid_placeholder.glb` holds one), is not
+/// views, and the views among those that are compressed ([`meshopt`], by view index), whose
+/// compressed data's buffer is read instead of their own: raywave reads buffers through
+/// accessors only, so a buffer that holds only images, or a placeholder without `uri`
+/// (glTF-Validator's `buffer/valid_placeholder.glb` holds one, and so do compressed files), is not
 /// loaded, and when missing refuses no file.
-fn buffers_read_by_accessors(document: &Document) -> Vec<bool> {
+fn buffers_read_by_accessors(
+    document: &Document,
+) -> std::result::Result<(Vec<bool>, BTreeMap<usize, meshopt::CompressedView>), String> {
     let mut read = vec![false; document.buffers().len()];
+    let mut compressed = BTreeMap::new();
     for accessor in document.accessors() {
         let sparse_views = accessor.sparse().map(|sparse| [sparse.indices().view(), sparse.values().view()]);
         for view in accessor.view().into_iter().chain(sparse_views.into_iter().flatten()) {
-            read[view.buffer().index()] = true;
+            let buffer = match meshopt::CompressedView::of(&view)? {
+                Some(view_data) => compressed.entry(view.index()).or_insert(view_data).source_buffer(),
+                None => view.buffer().index(),
+            };
+            let Some(read) = read.get_mut(buffer) else {
+                return Err(format!(
+                    "bufferViews[{}]: its compressed data's buffer {buffer} does not exist",
+                    view.index()
+                ));
+            };
+            *read = true;
         }
     }
-    read
+    Ok((read, compressed))
 }
 
 /// The bytes of a data URI without `;base64`: RFC 2397 (`data:[<mediatype>][;base64],<data>`)
@@ -2487,6 +2508,125 @@ mod tests {
         }
     }
 
+    /// [`quad_gltf`]'s quad with both its views compressed by `extension` (meshopt): its
+    /// positions as `positions` (mode ATTRIBUTES, 4 elements of 12 bytes) and its indices as
+    /// `indices` (mode `index_mode`, 6 of 2 bytes), in the embedded buffer, decoding into a
+    /// placeholder without `uri` (`"fallback": true`), as `gltfpack -c` writes files.
+    fn meshopt_quad_gltf(extension: &str, positions: &[u8], indices: &[u8], index_mode: &str) -> String {
+        let mut data = positions.to_vec();
+        data.resize(data.len().next_multiple_of(4), 0);
+        let index_offset = data.len();
+        data.extend(indices);
+        let compressed = |offset: usize, length: usize, stride: usize, count: usize, mode: &str| {
+            format!(
+                r#"{{"{extension}":{{"buffer":0,"byteOffset":{offset},"byteLength":{length},"byteStride":{stride},"count":{count},"mode":"{mode}"}}}}"#
+            )
+        };
+        let uri = |bytes: &[u8]| format!("data:application/octet-stream;base64,{}", base64_encode(bytes));
+        quad_gltf(6)
+            .replacen(
+                r#""scene":0,"#,
+                &format!(r#""extensionsUsed":["{extension}"],"extensionsRequired":["{extension}"],"scene":0,"#),
+                1,
+            )
+            .replacen(
+                &format!(r#"{{"byteLength":60,"uri":"{}"}}"#, uri(&quad_buffer())),
+                &format!(
+                    r#"{{"byteLength":{},"uri":"{}"}},{{"byteLength":60,"extensions":{{"{extension}":{{"fallback":true}}}}}}"#,
+                    data.len(),
+                    uri(&data)
+                ),
+                1,
+            )
+            .replacen(
+                r#"{"buffer":0,"byteOffset":0,"byteLength":48}"#,
+                &format!(
+                    r#"{{"buffer":1,"byteOffset":0,"byteLength":48,"extensions":{}}}"#,
+                    compressed(0, positions.len(), 12, 4, "ATTRIBUTES")
+                ),
+                1,
+            )
+            .replacen(
+                r#"{"buffer":0,"byteOffset":48,"byteLength":12}"#,
+                &format!(
+                    r#"{{"buffer":1,"byteOffset":48,"byteLength":12,"extensions":{}}}"#,
+                    compressed(index_offset, indices.len(), 2, 6, index_mode)
+                ),
+                1,
+            )
+    }
+
+    /// Views compressed by meshopt (`EXT_meshopt_compression` and `KHR_meshopt_compression`,
+    /// indices as triangles and as a sequence, positions plain and through the exponential
+    /// filter), decoded by meshoptimizer into a placeholder buffer without data, load as the
+    /// quad of uncompressed views; they were refused with the extension. What the extension
+    /// forbids, data that does not decode, and a placeholder the views overrun are errors naming
+    /// the view's extension object.
+    #[test]
+    fn meshopt_compressed_views_load_as_the_uncompressed_quad() {
+        let float = load(file(&quad_gltf(6)).path()).unwrap();
+        let corners = [[0f32, 0., 0.], [1., 0., 0.], [1., 1., 0.], [0., 1., 0.]];
+        let positions = ::meshopt::encode_vertex_buffer(&corners).unwrap();
+        let triangles = ::meshopt::encode_index_buffer(&[0, 1, 2, 0, 2, 3], 4).unwrap();
+        let sequence = ::meshopt::encode_index_sequence(&[0, 1, 2, 0, 2, 3], 4).unwrap();
+        let exponential = ::meshopt::encode_filter_exp(&corners, 23, ::meshopt::EncodeExpMode::Separate);
+        let exponential = ::meshopt::encode_vertex_buffer(&exponential).unwrap();
+        let [ext, khr] = meshopt::EXTENSIONS;
+        let cases = [
+            (meshopt_quad_gltf(ext, &positions, &triangles, "TRIANGLES"), "EXT, triangles"),
+            (meshopt_quad_gltf(khr, &positions, &sequence, "INDICES"), "KHR, an index sequence"),
+            (
+                meshopt_quad_gltf(khr, &exponential, &triangles, "TRIANGLES").replacen(
+                    r#""mode":"ATTRIBUTES""#,
+                    r#""mode":"ATTRIBUTES","filter":"EXPONENTIAL""#,
+                    1,
+                ),
+                "the exponential filter",
+            ),
+        ];
+        for (text, case) in cases {
+            let scene = load(file(&text).path()).unwrap_or_else(|e| panic!("{case}: {e}"));
+            assert_eq!(scene.meshes()[0].positions, float.meshes()[0].positions, "{case}");
+            assert_eq!(scene.lights(), float.lights(), "{case}");
+        }
+        let mut broken = positions.clone();
+        broken[0] = 0;
+        let text = meshopt_quad_gltf(ext, &positions, &triangles, "TRIANGLES");
+        let field = "bufferViews[0].extensions.EXT_meshopt_compression";
+        for (text, expected) in [
+            (
+                meshopt_quad_gltf(ext, &broken, &triangles, "TRIANGLES"),
+                format!("{field}: its {} bytes of compressed data do not decode as Attributes", positions.len()),
+            ),
+            (
+                text.replacen(r#""count":4"#, r#""count":5"#, 1),
+                format!("{field}: count 5 times byteStride 12 is not the view's byteLength 48"),
+            ),
+            (
+                text.replacen(r#""mode":"ATTRIBUTES""#, r#""mode":"ATTRIBUTES","filter":"QUATERNION""#, 1),
+                format!(
+                    "{field}: byteStride 12 is not one the extension allows for mode Attributes and filter Quaternion"
+                ),
+            ),
+            (
+                text.replacen(r#""mode":"TRIANGLES""#, r#""mode":"TRIANGLES","filter":"OCTAHEDRAL""#, 1),
+                "bufferViews[1].extensions.EXT_meshopt_compression: mode Triangles takes no filter".to_owned(),
+            ),
+            (text.replacen(r#","mode":"ATTRIBUTES""#, "", 1), format!("{field}.mode: missing")),
+            (
+                text.replacen(r#""mode":"ATTRIBUTES""#, r#""mode":"VERTICES""#, 1),
+                format!(r#"{field}.mode is "VERTICES", not ATTRIBUTES, TRIANGLES or INDICES"#),
+            ),
+            (
+                text.replacen(r#"{"byteLength":60,"extensions""#, r#"{"byteLength":50,"extensions""#, 1),
+                format!("{field}: buffers[1] is made of decoded views up to byte 60, past its byteLength 50"),
+            ),
+        ] {
+            let err = load(file(&text).path()).unwrap_err().to_string();
+            assert!(err.contains(&expected), "expected {expected:?} in {err}");
+        }
+    }
+
     /// A scene that places no mesh says so (it was refused for having no triangles of non-zero
     /// area, "0 zero-area triangles dropped").
     #[test]
@@ -2974,7 +3114,7 @@ mod tests {
             1,
         );
         let err = load(file(&required).path()).unwrap_err().to_string();
-        let expected = r#"the file requires "KHR_materials_pbrSpecularGlossiness" (extensionsRequired[0]), which raywave does not read (it reads KHR_lights_punctual, KHR_materials_emissive_strength, EXT_mesh_gpu_instancing, KHR_mesh_quantization, KHR_node_visibility)"#;
+        let expected = r#"the file requires "KHR_materials_pbrSpecularGlossiness" (extensionsRequired[0]), which raywave does not read (it reads KHR_lights_punctual, KHR_materials_emissive_strength, EXT_mesh_gpu_instancing, KHR_mesh_quantization, EXT_meshopt_compression, KHR_meshopt_compression, KHR_node_visibility)"#;
         assert!(err.contains(expected) && !err.contains("invalid glTF"), "{err}");
         // Each is named by its own index, EXT_mesh_gpu_instancing (read) among them.
         let required = quad_gltf(6).replacen(

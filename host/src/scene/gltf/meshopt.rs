@@ -1,0 +1,250 @@
+//! `EXT_meshopt_compression` and its ratified successor `KHR_meshopt_compression`
+//! (KhronosGroup/glTF, `extensions/2.0/Vendor/EXT_meshopt_compression` and
+//! `extensions/2.0/Khronos/KHR_meshopt_compression`), as `gltfpack -c` writes files: a buffer view
+//! whose data is stored compressed elsewhere, decoded here by meshoptimizer's decoders (the
+//! `meshopt` crate) into the view's own place, so that accessors read it as any other view. Its
+//! own buffer may then be a placeholder without data ("fallback"), which is made of zeros.
+
+use gltf::buffer;
+use gltf::json::Value;
+use std::collections::BTreeMap;
+
+/// The extensions' names, as files list them in `extensionsUsed` and on buffer views.
+pub(super) const EXTENSIONS: [&str; 2] = ["EXT_meshopt_compression", "KHR_meshopt_compression"];
+
+/// The most bytes a valid stream decodes to per byte of it, which bounds what a file may make
+/// raywave allocate: an attribute block of the codec's version 1 spends `byteStride / 4` control
+/// bytes on up to 256 elements whose bytes are all zero (1 024 bytes per byte: the KHR
+/// extension's Appendix A); the index codecs spend at least a byte per triangle, or per index.
+const MAX_EXPANSION: usize = 1024;
+
+/// The codec a view's data was compressed with (the extension's `mode`).
+#[derive(Clone, Copy, Debug)]
+enum Mode {
+    /// `ATTRIBUTES`: elements of any stride (a multiple of 4 up to 256).
+    Attributes,
+    /// `TRIANGLES`: a triangle list's indices (`u16` or `u32`).
+    Triangles,
+    /// `INDICES`: any other index sequence (`u16` or `u32`).
+    Indices,
+}
+
+/// The transform applied to an `ATTRIBUTES` view's elements after decoding (the extension's
+/// `filter`, Appendix B).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Filter {
+    /// `NONE`: the elements as decoded.
+    None,
+    /// `OCTAHEDRAL`: unit vectors in octahedral encoding (stride 4 or 8).
+    Octahedral,
+    /// `QUATERNION`: unit quaternions of three components and an index (stride 8).
+    Quaternion,
+    /// `EXPONENTIAL`: `f32` components as an exponent and a mantissa (stride a multiple of 4).
+    Exponential,
+    /// `COLOR` (`KHR_meshopt_compression` only): colours in YCoCg (stride 4 or 8).
+    Color,
+}
+
+/// A buffer view compressed by one of [`EXTENSIONS`], checked against the extension's rules
+/// (which meshoptimizer's decoders assert): where its compressed data lies, and the layout it
+/// decodes to in the view's own place.
+pub(super) struct CompressedView {
+    /// The extension object's JSON path (`bufferViews[2].extensions.EXT_meshopt_compression`),
+    /// which errors name.
+    field: String,
+    /// The buffer that holds the compressed data, and the data's byte offset and length in it.
+    source: (usize, usize, usize),
+    /// The view's own buffer and byte offset, where the decoded data goes.
+    target: (usize, usize),
+    /// Bytes per decoded element.
+    stride: usize,
+    /// Decoded elements: `count × stride` is the view's `byteLength`.
+    count: usize,
+    /// The codec.
+    mode: Mode,
+    /// The transform after decoding.
+    filter: Filter,
+}
+
+impl CompressedView {
+    /// `view`'s compression, or `None` where it has neither extension object. An error names
+    /// the field where the object is not what the extension defines: a required member missing
+    /// or of the wrong type, an unknown `mode` or `filter`, a `count` and `byteStride` that do not
+    /// make the view's `byteLength`, or a stride or count that the extension forbids for its
+    /// mode and filter.
+    pub(super) fn of(view: &buffer::View) -> Result<Option<Self>, String> {
+        let Some((name, object)) = EXTENSIONS.iter().find_map(|name| Some((name, view.extension_value(name)?))) else {
+            return Ok(None);
+        };
+        let field = format!("bufferViews[{}].extensions.{name}", view.index());
+        let member = |key: &str| object.get(key);
+        let integer = |key: &str, default: Option<usize>| match member(key) {
+            None => default.ok_or_else(|| format!("{field}.{key}: missing; the extension requires it")),
+            Some(value) => value
+                .as_u64()
+                .and_then(|n| usize::try_from(n).ok())
+                .ok_or_else(|| format!("{field}.{key} is {value}, not a non-negative integer")),
+        };
+        let text = |key: &str, default: Option<&'static str>| match member(key) {
+            None => {
+                default.map(str::to_owned).ok_or_else(|| format!("{field}.{key}: missing; the extension requires it"))
+            }
+            Some(Value::String(text)) => Ok(text.clone()),
+            Some(value) => Err(format!("{field}.{key} is {value}, not a string")),
+        };
+        let mode = match text("mode", None)?.as_str() {
+            "ATTRIBUTES" => Mode::Attributes,
+            "TRIANGLES" => Mode::Triangles,
+            "INDICES" => Mode::Indices,
+            other => return Err(format!("{field}.mode is {other:?}, not ATTRIBUTES, TRIANGLES or INDICES")),
+        };
+        let filter = match text("filter", Some("NONE"))?.as_str() {
+            "NONE" => Filter::None,
+            "OCTAHEDRAL" => Filter::Octahedral,
+            "QUATERNION" => Filter::Quaternion,
+            "EXPONENTIAL" => Filter::Exponential,
+            "COLOR" => Filter::Color,
+            other => {
+                return Err(format!(
+                    "{field}.filter is {other:?}, not NONE, OCTAHEDRAL, QUATERNION, EXPONENTIAL or COLOR"
+                ));
+            }
+        };
+        let (stride, count) = (integer("byteStride", None)?, integer("count", None)?);
+        let source = (integer("buffer", None)?, integer("byteOffset", Some(0))?, integer("byteLength", None)?);
+        let compressed =
+            Self { field, source, target: (view.buffer().index(), view.offset()), stride, count, mode, filter };
+        compressed.check_layout(view.length())?;
+        Ok(Some(compressed))
+    }
+
+    /// Checks the extension's rules on the layout (its "For the extension object to be valid"
+    /// list), against the view's `byteLength` `view_length`.
+    fn check_layout(&self, view_length: usize) -> Result<(), String> {
+        let Self { field, stride, count, mode, filter, .. } = self;
+        let error = |what: String| Err(format!("{field}: {what}"));
+        if count.checked_mul(*stride) != Some(view_length) {
+            return error(format!(
+                "count {count} times byteStride {stride} is not the view's byteLength {view_length}, as the \
+                 extension requires"
+            ));
+        }
+        let stride_allowed = match (mode, filter) {
+            (Mode::Attributes, Filter::None | Filter::Exponential) => (4..=256).contains(stride) && stride % 4 == 0,
+            (Mode::Attributes, Filter::Octahedral | Filter::Color) => [4, 8].contains(stride),
+            (Mode::Attributes, Filter::Quaternion) => *stride == 8,
+            (Mode::Triangles | Mode::Indices, Filter::None) => [2, 4].contains(stride),
+            (Mode::Triangles | Mode::Indices, _) => {
+                return error(format!("mode {mode:?} takes no filter, and its filter is {filter:?}"));
+            }
+        };
+        if !stride_allowed {
+            return error(format!(
+                "byteStride {stride} is not one the extension allows for mode {mode:?} and filter {filter:?}"
+            ));
+        }
+        if matches!(mode, Mode::Triangles) && count % 3 != 0 {
+            return error(format!("count {count} is not a whole number of triangles, as mode TRIANGLES requires"));
+        }
+        Ok(())
+    }
+
+    /// The buffer that holds the compressed data, which must be loaded.
+    pub(super) fn source_buffer(&self) -> usize {
+        self.source.0
+    }
+
+    /// The view's data, decoded from `buffers` (its source buffer loaded) and filtered, as
+    /// `count × stride` bytes in whole `u32` words (the filters work on aligned words); an error
+    /// if the compressed data lies outside its buffer, is too short for what it should decode to
+    /// ([`MAX_EXPANSION`]), or does not decode.
+    fn decode(&self, buffers: &[buffer::Data]) -> Result<Vec<u32>, String> {
+        let Self { field, source: (buffer, offset, length), stride, count, mode, filter, .. } = self;
+        let data =
+            buffers.get(*buffer).and_then(|data| data.get(*offset..offset.checked_add(*length)?)).ok_or_else(|| {
+                format!(
+                    "{field}: its compressed data (buffer {buffer}, bytes {offset}+{length}) lies outside that buffer"
+                )
+            })?;
+        let decoded_length = count * stride;
+        if decoded_length > length.saturating_mul(MAX_EXPANSION) {
+            return Err(format!(
+                "{field}: {length} bytes of compressed data cannot decode to the view's {decoded_length} (at most \
+                 {MAX_EXPANSION} bytes per byte)"
+            ));
+        }
+        let mut decoded = vec![0u32; decoded_length.div_ceil(4)];
+        let destination = decoded.as_mut_ptr().cast();
+        // SAFETY: `destination` holds `count × stride` bytes (in whole, aligned words), all that
+        // the decoders and filters write; `data` is a live slice, of which they read at most its
+        // length. The strides and counts meet the preconditions the C++ asserts
+        // ([`Self::check_layout`]).
+        let status = unsafe {
+            match mode {
+                Mode::Attributes => {
+                    meshopt::ffi::meshopt_decodeVertexBuffer(destination, *count, *stride, data.as_ptr(), data.len())
+                }
+                Mode::Triangles => {
+                    meshopt::ffi::meshopt_decodeIndexBuffer(destination, *count, *stride, data.as_ptr(), data.len())
+                }
+                Mode::Indices => {
+                    meshopt::ffi::meshopt_decodeIndexSequence(destination, *count, *stride, data.as_ptr(), data.len())
+                }
+            }
+        };
+        if status != 0 {
+            return Err(format!(
+                "{field}: its {length} bytes of compressed data do not decode as {mode:?} (meshoptimizer's status {status})"
+            ));
+        }
+        // SAFETY: as above; each filter reads and writes the `count` elements of `stride` bytes.
+        unsafe {
+            match filter {
+                Filter::None => {}
+                Filter::Octahedral => meshopt::ffi::meshopt_decodeFilterOct(destination, *count, *stride),
+                Filter::Quaternion => meshopt::ffi::meshopt_decodeFilterQuat(destination, *count, *stride),
+                Filter::Exponential => meshopt::ffi::meshopt_decodeFilterExp(destination, *count, *stride),
+                Filter::Color => meshopt::ffi::meshopt_decodeFilterColor(destination, *count, *stride),
+            }
+        }
+        Ok(decoded)
+    }
+}
+
+/// Decodes `views` (each once) into their places in `buffers`, where the sources are loaded. A
+/// view's own buffer that was not loaded (a fallback or placeholder: no accessor reads it
+/// uncompressed) is made of zeros up to the last decoded view's end, which must lie within its
+/// `byteLength` (`declared_lengths`) and within [`MAX_EXPANSION`] times the compressed data
+/// decoded into it: a view far into a placeholder would otherwise allocate what no data fills.
+pub(super) fn decode_views(
+    views: &BTreeMap<usize, CompressedView>,
+    buffers: &mut [buffer::Data],
+    declared_lengths: &[usize],
+) -> Result<(), String> {
+    let mut placeholders: BTreeMap<usize, (usize, usize, &str)> = BTreeMap::new();
+    for view in views.values().filter(|view| buffers[view.target.0].is_empty()) {
+        let (end, compressed, _) = placeholders.entry(view.target.0).or_insert((0, 0, view.field.as_str()));
+        *end = (*end).max(view.target.1.saturating_add(view.count * view.stride));
+        *compressed = compressed.saturating_add(view.source.2);
+    }
+    for (&buffer, &(end, compressed, field)) in &placeholders {
+        if end > declared_lengths[buffer] || end > compressed.saturating_mul(MAX_EXPANSION) {
+            return Err(format!(
+                "{field}: buffers[{buffer}] is made of decoded views up to byte {end}, past its byteLength \
+                 {} or more than {MAX_EXPANSION} bytes per byte of their {compressed} bytes of compressed data",
+                declared_lengths[buffer]
+            ));
+        }
+        buffers[buffer] = buffer::Data(vec![0; end]);
+    }
+    for view in views.values() {
+        let decoded = view.decode(buffers)?;
+        let (buffer, offset) = view.target;
+        let bytes = &bytemuck::cast_slice::<u32, u8>(&decoded)[..view.count * view.stride];
+        let place = buffers[buffer].0.get_mut(offset..offset.saturating_add(bytes.len())).ok_or_else(|| {
+            format!("{}: the view (bytes {offset}+{}) lies outside buffers[{buffer}]", view.field, bytes.len())
+        })?;
+        place.copy_from_slice(bytes);
+    }
+    Ok(())
+}
