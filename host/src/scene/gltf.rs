@@ -2596,7 +2596,7 @@ mod tests {
         for (text, expected) in [
             (
                 meshopt_quad_gltf(ext, &broken, &triangles, "TRIANGLES"),
-                format!("{field}: its {} bytes of compressed data do not decode as Attributes", positions.len()),
+                format!("{field}: its {} bytes of compressed data do not decode as ATTRIBUTES", positions.len()),
             ),
             (
                 text.replacen(r#""count":4"#, r#""count":5"#, 1),
@@ -2605,17 +2605,17 @@ mod tests {
             (
                 text.replacen(r#""mode":"ATTRIBUTES""#, r#""mode":"ATTRIBUTES","filter":"QUATERNION""#, 1),
                 format!(
-                    "{field}: byteStride 12 is not one the extension allows for mode Attributes and filter Quaternion"
+                    "{field}: byteStride 12 is not one the extension allows for mode ATTRIBUTES and filter QUATERNION"
                 ),
             ),
             (
                 text.replacen(r#""mode":"TRIANGLES""#, r#""mode":"TRIANGLES","filter":"OCTAHEDRAL""#, 1),
-                "bufferViews[1].extensions.EXT_meshopt_compression: mode Triangles takes no filter".to_owned(),
+                "bufferViews[1].extensions.EXT_meshopt_compression: mode TRIANGLES takes no filter".to_owned(),
             ),
             (text.replacen(r#","mode":"ATTRIBUTES""#, "", 1), format!("{field}.mode: missing")),
             (
                 text.replacen(r#""mode":"ATTRIBUTES""#, r#""mode":"VERTICES""#, 1),
-                format!(r#"{field}.mode is "VERTICES", not ATTRIBUTES, TRIANGLES or INDICES"#),
+                format!(r#"{field}.mode is "VERTICES", not one of ATTRIBUTES, TRIANGLES, INDICES"#),
             ),
             (
                 text.replacen(r#"{"byteLength":60,"extensions""#, r#"{"byteLength":50,"extensions""#, 1),

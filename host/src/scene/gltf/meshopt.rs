@@ -19,7 +19,7 @@ pub(super) const EXTENSIONS: [&str; 2] = ["EXT_meshopt_compression", "KHR_meshop
 const MAX_EXPANSION: usize = 1024;
 
 /// The codec a view's data was compressed with (the extension's `mode`).
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy)]
 enum Mode {
     /// `ATTRIBUTES`: elements of any stride (a multiple of 4 up to 256).
     Attributes,
@@ -31,7 +31,7 @@ enum Mode {
 
 /// The transform applied to an `ATTRIBUTES` view's elements after decoding (the extension's
 /// `filter`, Appendix B).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy)]
 enum Filter {
     /// `NONE`: the elements as decoded.
     None,
@@ -43,6 +43,50 @@ enum Filter {
     Exponential,
     /// `COLOR` (`KHR_meshopt_compression` only): colours in YCoCg (stride 4 or 8).
     Color,
+}
+
+/// A value of an enumerated member of the extension object (`mode`, `filter`), which the
+/// extension writes by name.
+trait Named: Copy + 'static {
+    /// Every value.
+    const ALL: &'static [Self];
+
+    /// The name the extension writes for this value.
+    fn name(self) -> &'static str;
+}
+
+impl Named for Mode {
+    const ALL: &'static [Self] = &[Self::Attributes, Self::Triangles, Self::Indices];
+
+    fn name(self) -> &'static str {
+        match self {
+            Self::Attributes => "ATTRIBUTES",
+            Self::Triangles => "TRIANGLES",
+            Self::Indices => "INDICES",
+        }
+    }
+}
+
+impl Named for Filter {
+    const ALL: &'static [Self] = &[Self::None, Self::Octahedral, Self::Quaternion, Self::Exponential, Self::Color];
+
+    fn name(self) -> &'static str {
+        match self {
+            Self::None => "NONE",
+            Self::Octahedral => "OCTAHEDRAL",
+            Self::Quaternion => "QUATERNION",
+            Self::Exponential => "EXPONENTIAL",
+            Self::Color => "COLOR",
+        }
+    }
+}
+
+/// The value named `written`, or an error naming `field` and the names the extension defines.
+fn parse_name<T: Named>(written: &str, field: &str) -> Result<T, String> {
+    T::ALL.iter().copied().find(|value| value.name() == written).ok_or_else(|| {
+        let names: Vec<&str> = T::ALL.iter().map(|value| value.name()).collect();
+        format!("{field} is {written:?}, not one of {}", names.join(", "))
+    })
 }
 
 /// A buffer view compressed by one of [`EXTENSIONS`], checked against the extension's rules
@@ -92,24 +136,8 @@ impl CompressedView {
             Some(Value::String(text)) => Ok(text.clone()),
             Some(value) => Err(format!("{field}.{key} is {value}, not a string")),
         };
-        let mode = match text("mode", None)?.as_str() {
-            "ATTRIBUTES" => Mode::Attributes,
-            "TRIANGLES" => Mode::Triangles,
-            "INDICES" => Mode::Indices,
-            other => return Err(format!("{field}.mode is {other:?}, not ATTRIBUTES, TRIANGLES or INDICES")),
-        };
-        let filter = match text("filter", Some("NONE"))?.as_str() {
-            "NONE" => Filter::None,
-            "OCTAHEDRAL" => Filter::Octahedral,
-            "QUATERNION" => Filter::Quaternion,
-            "EXPONENTIAL" => Filter::Exponential,
-            "COLOR" => Filter::Color,
-            other => {
-                return Err(format!(
-                    "{field}.filter is {other:?}, not NONE, OCTAHEDRAL, QUATERNION, EXPONENTIAL or COLOR"
-                ));
-            }
-        };
+        let mode = parse_name(&text("mode", None)?, &format!("{field}.mode"))?;
+        let filter = parse_name(&text("filter", Some("NONE"))?, &format!("{field}.filter"))?;
         let (stride, count) = (integer("byteStride", None)?, integer("count", None)?);
         let source = (integer("buffer", None)?, integer("byteOffset", Some(0))?, integer("byteLength", None)?);
         let compressed =
@@ -123,6 +151,7 @@ impl CompressedView {
     fn check_layout(&self, view_length: usize) -> Result<(), String> {
         let Self { field, stride, count, mode, filter, .. } = self;
         let error = |what: String| Err(format!("{field}: {what}"));
+        let (mode_name, filter_name) = (mode.name(), filter.name());
         if count.checked_mul(*stride) != Some(view_length) {
             return error(format!(
                 "count {count} times byteStride {stride} is not the view's byteLength {view_length}, as the \
@@ -135,12 +164,12 @@ impl CompressedView {
             (Mode::Attributes, Filter::Quaternion) => *stride == 8,
             (Mode::Triangles | Mode::Indices, Filter::None) => [2, 4].contains(stride),
             (Mode::Triangles | Mode::Indices, _) => {
-                return error(format!("mode {mode:?} takes no filter, and its filter is {filter:?}"));
+                return error(format!("mode {mode_name} takes no filter, and its filter is {filter_name}"));
             }
         };
         if !stride_allowed {
             return error(format!(
-                "byteStride {stride} is not one the extension allows for mode {mode:?} and filter {filter:?}"
+                "byteStride {stride} is not one the extension allows for mode {mode_name} and filter {filter_name}"
             ));
         }
         if matches!(mode, Mode::Triangles) && count % 3 != 0 {
@@ -194,7 +223,8 @@ impl CompressedView {
         };
         if status != 0 {
             return Err(format!(
-                "{field}: its {length} bytes of compressed data do not decode as {mode:?} (meshoptimizer's status {status})"
+                "{field}: its {length} bytes of compressed data do not decode as {} (meshoptimizer's status {status})",
+                mode.name()
             ));
         }
         // SAFETY: as above; each filter reads and writes the `count` elements of `stride` bytes.
