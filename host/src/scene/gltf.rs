@@ -371,7 +371,8 @@ fn parse(bytes: &[u8], base: Option<&Path>) -> std::result::Result<(Document, Ve
     check_asset_version(&json.asset)?;
     check_required_extensions(&json.extensions_required)?;
     // Read here, so a file may require them: the crate's validation refuses any it does not know.
-    json.extensions_required.retain(|required| !EXTENSIONS_READ_HERE.contains(&required.as_str()));
+    json.extensions_required
+        .retain(|required| !EXTENSIONS_READ_HERE.iter().chain(&TEXTURE_EXTENSIONS).any(|taken| taken == required));
     let document = Document::from_json_without_validation(json);
     validate(&document)?;
     check_camera_projections(document.as_json())?;
@@ -480,22 +481,37 @@ fn check_major_version(version: &str) -> std::result::Result<(), String> {
 const EXTENSIONS_READ_HERE: [&str; 5] =
     [instancing::EXTENSION, MESH_QUANTIZATION, meshopt::EXTENSIONS[0], meshopt::EXTENSIONS[1], NODE_VISIBILITY];
 
-/// Checks that the file requires (`extensionsRequired`) no extension but those raywave reads:
+/// Extensions that change only how a texture is read — its image's format (KTX2 with Basis
+/// Universal, WebP, AVIF, DDS) or its coordinates' transform —, which raywave does not sample: a
+/// textured mesh renders with its material's factors, and the render warns of it
+/// ([`Unrendered::textured_meshes`]). A file that requires one loads as one whose textures
+/// raywave skips (`gltfpack -tc` requires `KHR_texture_basisu`).
+const TEXTURE_EXTENSIONS: [&str; 5] =
+    ["KHR_texture_basisu", "EXT_texture_webp", "EXT_texture_avif", "MSFT_texture_dds", "KHR_texture_transform"];
+
+/// Checks that the file requires (`extensionsRequired`) no extension but those raywave reads —
 /// the ones gltf-json is built to read (`KHR_lights_punctual`, `KHR_materials_emissive_strength`)
-/// and [`EXTENSIONS_READ_HERE`]. A file that requires another "should fail to load"
+/// and [`EXTENSIONS_READ_HERE`] — and those that change only the textures it does not sample
+/// ([`TEXTURE_EXTENSIONS`]). A file that requires another "should fail to load"
 /// (glTF-Asset-Generator's compatibility model 05), but it is valid glTF, which gltf-json's
 /// validation had called it not ("invalid glTF: … Unsupported extension").
 fn check_required_extensions(required: &[String]) -> std::result::Result<(), String> {
     use gltf::json::extensions::ENABLED_EXTENSIONS;
     let read: Vec<&str> = ENABLED_EXTENSIONS.iter().copied().chain(EXTENSIONS_READ_HERE).collect();
     let unread: Vec<String> = (required.iter().enumerate())
-        .filter(|(_, name)| !read.contains(&name.as_str()))
+        .filter(|(_, name)| !read.iter().chain(&TEXTURE_EXTENSIONS).any(|taken| taken == name))
         .map(|(index, name)| format!("{name:?} (extensionsRequired[{index}])"))
         .collect();
     if unread.is_empty() {
         return Ok(());
     }
-    Err(format!("the file requires {}, which raywave does not read (it reads {})", unread.join(", "), read.join(", ")))
+    Err(format!(
+        "the file requires {}, which raywave does not read (it reads {}, and takes those that change only the \
+         textures it does not sample: {})",
+        unread.join(", "),
+        read.join(", "),
+        TEXTURE_EXTENSIONS.join(", ")
+    ))
 }
 
 /// Checks a GLB header: its version (bytes 4–7) must be 2 — glTF 1.0's binary GLB (version 1,
@@ -3043,6 +3059,22 @@ mod tests {
         );
         let scene = load(file(&coloured).path()).unwrap();
         assert_eq!(scene.unrendered().textured_meshes, 1, "{coloured}");
+        // A file that requires the extensions of its textures (here a KTX2 image, as
+        // `gltfpack -tc` writes, and a transform), which raywave does not sample: it loads, its
+        // textured mesh counted; it had been refused for requiring them.
+        let required = quad_gltf(6)
+            .replacen(
+                r#""scene":0,"#,
+                r#""extensionsUsed":["KHR_texture_basisu","KHR_texture_transform"],"extensionsRequired":["KHR_texture_basisu","KHR_texture_transform"],"scene":0,"textures":[{"extensions":{"KHR_texture_basisu":{"source":0}}}],"images":[{"uri":"no_such_texture.ktx2","mimeType":"image/ktx2"}],"#,
+                1,
+            )
+            .replacen(
+                r#""materials":[{"pbrMetallicRoughness":{"#,
+                r#""materials":[{"pbrMetallicRoughness":{"baseColorTexture":{"index":0,"extensions":{"KHR_texture_transform":{"scale":[2,2]}}},"#,
+                1,
+            );
+        let scene = load(file(&required).path()).unwrap_or_else(|e| panic!("{required}: {e}"));
+        assert_eq!(scene.unrendered().textured_meshes, 1);
     }
 
     #[test]
@@ -3114,16 +3146,16 @@ mod tests {
             1,
         );
         let err = load(file(&required).path()).unwrap_err().to_string();
-        let expected = r#"the file requires "KHR_materials_pbrSpecularGlossiness" (extensionsRequired[0]), which raywave does not read (it reads KHR_lights_punctual, KHR_materials_emissive_strength, EXT_mesh_gpu_instancing, KHR_mesh_quantization, EXT_meshopt_compression, KHR_meshopt_compression, KHR_node_visibility)"#;
+        let expected = r#"the file requires "KHR_materials_pbrSpecularGlossiness" (extensionsRequired[0]), which raywave does not read (it reads KHR_lights_punctual, KHR_materials_emissive_strength, EXT_mesh_gpu_instancing, KHR_mesh_quantization, EXT_meshopt_compression, KHR_meshopt_compression, KHR_node_visibility, and takes those that change only the textures it does not sample: KHR_texture_basisu, EXT_texture_webp, EXT_texture_avif, MSFT_texture_dds, KHR_texture_transform)"#;
         assert!(err.contains(expected) && !err.contains("invalid glTF"), "{err}");
         // Each is named by its own index, EXT_mesh_gpu_instancing (read) among them.
         let required = quad_gltf(6).replacen(
             r#""scene":0,"#,
-            r#""scene":0,"extensionsUsed":["EXT_mesh_gpu_instancing","KHR_texture_basisu","KHR_materials_unlit"],"extensionsRequired":["EXT_mesh_gpu_instancing","KHR_texture_basisu","KHR_materials_unlit"],"#,
+            r#""scene":0,"extensionsUsed":["EXT_mesh_gpu_instancing","KHR_materials_variants","KHR_materials_unlit"],"extensionsRequired":["EXT_mesh_gpu_instancing","KHR_materials_variants","KHR_materials_unlit"],"#,
             1,
         );
         let err = load(file(&required).path()).unwrap_err().to_string();
-        let expected = r#"requires "KHR_texture_basisu" (extensionsRequired[1]), "KHR_materials_unlit" (extensionsRequired[2]), which"#;
+        let expected = r#"requires "KHR_materials_variants" (extensionsRequired[1]), "KHR_materials_unlit" (extensionsRequired[2]), which"#;
         assert!(err.contains(expected), "{err}");
     }
 
