@@ -2788,6 +2788,45 @@ mod tests {
         }
     }
 
+    /// Instance rotations compressed by meshopt through its quaternion filter (as the KHR
+    /// extension suggests for `EXT_mesh_gpu_instancing`), decoded over their view's own bytes
+    /// (zeros here), place the instances as the uncompressed normalized `i16` rotations do, within
+    /// the filter's 16-bit rounding.
+    #[test]
+    fn meshopt_quaternion_rotations_place_the_instances() {
+        let attributes = r#"{"TRANSLATION":2,"SCALE":3,"ROTATION":4}"#;
+        let (plain_data, plain_views, plain_accessors) = instance_accessors(5122);
+        let plain = load(file(&gpu_instanced_quad(attributes, &plain_data, &plain_views, &plain_accessors)).path());
+        let (mut data, views, accessors) = instance_accessors(5122);
+        data[72..96].fill(0);
+        let rotations: Vec<[f32; 4]> = INSTANCE_ROTATIONS.chunks_exact(4).map(|q| [q[0], q[1], q[2], q[3]]).collect();
+        let compressed = ::meshopt::encode_vertex_buffer(&::meshopt::encode_filter_quat(&rotations, 16)).unwrap();
+        let offset = data.len();
+        data.extend(&compressed);
+        let rotation_view = r#"{"buffer":1,"byteOffset":72,"byteLength":24}"#;
+        assert!(views.contains(rotation_view), "{views}");
+        let views = views.replacen(
+            rotation_view,
+            &format!(
+                r#"{{"buffer":1,"byteOffset":72,"byteLength":24,"extensions":{{"EXT_meshopt_compression":{{"buffer":1,"byteOffset":{offset},"byteLength":{},"byteStride":8,"count":3,"mode":"ATTRIBUTES","filter":"QUATERNION"}}}}}}"#,
+                compressed.len()
+            ),
+            1,
+        );
+        let text = gpu_instanced_quad(attributes, &data, &views, &accessors).replacen(
+            r#""extensionsUsed":["EXT_mesh_gpu_instancing"]"#,
+            r#""extensionsUsed":["EXT_mesh_gpu_instancing","EXT_meshopt_compression"]"#,
+            1,
+        );
+        let (scene, plain) = (load(file(&text).path()).unwrap(), plain.unwrap());
+        assert_eq!(scene.meshes().len(), 3);
+        for (mesh, plain_mesh) in scene.meshes().iter().zip(plain.meshes()) {
+            for (p, q) in mesh.positions.iter().zip(&plain_mesh.positions) {
+                assert!(p.abs_diff_eq(*q, 1e-3), "{p} against {q}");
+            }
+        }
+    }
+
     /// Instancing without a transform attribute: a custom `_ID` alone sets the count (each
     /// instance at the node), an extension without `attributes` draws the mesh once; a file may
     /// require the extension (the `gltf` crate refused it as unknown).
