@@ -2576,8 +2576,8 @@ mod tests {
     /// indices as triangles and as a sequence, positions plain and through the exponential
     /// filter), decoded by meshoptimizer into a placeholder buffer without data, load as the
     /// quad of uncompressed views; they were refused with the extension. What the extension
-    /// forbids, data that does not decode, and a placeholder the views overrun are errors naming
-    /// the view's extension object.
+    /// forbids, data that does not decode or is too short for its view, and a placeholder the
+    /// views overrun are errors naming the view's extension object.
     #[test]
     fn meshopt_compressed_views_load_as_the_uncompressed_quad() {
         let float = load(file(&quad_gltf(6)).path()).unwrap();
@@ -2636,6 +2636,22 @@ mod tests {
             (
                 text.replacen(r#"{"byteLength":60,"extensions""#, r#"{"byteLength":50,"extensions""#, 1),
                 format!("{field}: buffers[1] is made of decoded views up to byte 60, past its byteLength 50"),
+            ),
+            (
+                // Decoded into the buffer that holds the compressed data (loaded), from none of it.
+                text.replacen(
+                    r#"{"buffer":1,"byteOffset":0,"byteLength":48,"#,
+                    r#"{"buffer":0,"byteOffset":0,"byteLength":48,"#,
+                    1,
+                )
+                .replacen(
+                    &format!(r#""byteOffset":0,"byteLength":{},"byteStride":12"#, positions.len()),
+                    r#""byteOffset":0,"byteLength":0,"byteStride":12"#,
+                    1,
+                ),
+                format!(
+                    "{field}: 0 bytes of compressed data cannot decode to the view's 48 (at most 1024 bytes per byte)"
+                ),
             ),
         ] {
             let err = load(file(&text).path()).unwrap_err().to_string();
