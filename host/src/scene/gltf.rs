@@ -2572,24 +2572,31 @@ mod tests {
             )
     }
 
-    /// Views compressed by meshopt (`EXT_meshopt_compression` and `KHR_meshopt_compression`,
-    /// indices as triangles and as a sequence, positions plain and through the exponential
-    /// filter), decoded by meshoptimizer into a placeholder buffer without data, load as the
-    /// quad of uncompressed views; they were refused with the extension. What the extension
-    /// forbids, data that does not decode or is too short for its view, and a placeholder the
-    /// views overrun are errors naming the view's extension object.
+    /// Views compressed by meshopt (`EXT_meshopt_compression` with the attribute codec's
+    /// version 0 and `KHR_meshopt_compression` with version 1, indices as triangles and as a
+    /// sequence, positions plain and through the exponential filter), decoded by meshoptimizer
+    /// into a placeholder buffer without data, load as the quad of uncompressed views; they were
+    /// refused with the extension. What the extension forbids, data that does not decode or is
+    /// too short for its view, and a placeholder the views overrun are errors naming the view's
+    /// extension object; views that would make a small file allocate without end (a terabyte
+    /// view, a view a terabyte into its placeholder, one stream shared by 1 300 views) are
+    /// refused before anything is allocated.
     #[test]
     fn meshopt_compressed_views_load_as_the_uncompressed_quad() {
         let float = load(file(&quad_gltf(6)).path()).unwrap();
         let corners = [[0f32, 0., 0.], [1., 0., 0.], [1., 1., 0.], [0., 1., 0.]];
+        // Version 1 of the attribute codec, meshoptimizer's default, which KHR_ defines; EXT_
+        // defines version 0 alone.
         let positions = ::meshopt::encode_vertex_buffer(&corners).unwrap();
+        let positions_v0 = ::meshopt::encode_vertex_buffer_level(&corners, 2, Some(0)).unwrap();
+        assert_eq!((positions[0], positions_v0[0]), (0xa1, 0xa0), "the streams' headers");
         let triangles = ::meshopt::encode_index_buffer(&[0, 1, 2, 0, 2, 3], 4).unwrap();
         let sequence = ::meshopt::encode_index_sequence(&[0, 1, 2, 0, 2, 3], 4).unwrap();
         let exponential = ::meshopt::encode_filter_exp(&corners, 23, ::meshopt::EncodeExpMode::Separate);
         let exponential = ::meshopt::encode_vertex_buffer(&exponential).unwrap();
         let [ext, khr] = meshopt::EXTENSIONS;
         let cases = [
-            (meshopt_quad_gltf(ext, &positions, &triangles, "TRIANGLES"), "EXT, triangles"),
+            (meshopt_quad_gltf(ext, &positions_v0, &triangles, "TRIANGLES"), "EXT, triangles"),
             (meshopt_quad_gltf(khr, &positions, &sequence, "INDICES"), "KHR, an index sequence"),
             (
                 meshopt_quad_gltf(khr, &exponential, &triangles, "TRIANGLES").replacen(
@@ -2653,10 +2660,54 @@ mod tests {
                     "{field}: 0 bytes of compressed data cannot decode to the view's 48 (at most 1024 bytes per byte)"
                 ),
             ),
+            (
+                // A terabyte placeholder for a terabyte view whose data is said to be a gigabyte:
+                // refused before anything is allocated (the test process had aborted).
+                text.replacen(r#"{"byteLength":60,"extensions""#, r#"{"byteLength":1099511627776,"extensions""#, 1)
+                    .replacen(r#""byteOffset":0,"byteLength":48,"#, r#""byteOffset":0,"byteLength":1099511627776,"#, 1)
+                    .replacen(
+                        &format!(r#""byteOffset":0,"byteLength":{},"byteStride":12,"count":4"#, positions.len()),
+                        r#""byteOffset":0,"byteLength":1073741824,"byteStride":4,"count":274877906944"#,
+                        1,
+                    ),
+                format!("{field}: its compressed data (buffer 0, bytes 0+1073741824) lies outside that buffer"),
+            ),
+            (
+                // The view a terabyte into a placeholder that large.
+                text.replacen(r#"{"byteLength":60,"extensions""#, r#"{"byteLength":2199023255552,"extensions""#, 1)
+                    .replacen(
+                        r#""byteOffset":0,"byteLength":48,"#,
+                        r#""byteOffset":1099511627776,"byteLength":48,"#,
+                        1,
+                    ),
+                "into placeholder buffers of 1099511627824, more than 1024 bytes per byte".to_owned(),
+            ),
+            (shared_stream_views(&text, 1300), "its compressed buffer views decode to 62460 bytes".to_owned()),
         ] {
             let err = load(file(&text).path()).unwrap_err().to_string();
             assert!(err.contains(&expected), "expected {expected:?} in {err}");
         }
+        // As many sharing views as the bound allows load.
+        load(file(&shared_stream_views(&text, 1000)).path()).unwrap();
+    }
+
+    /// [`meshopt_quad_gltf`]'s `text` with `views` more accessors, each on a view of its own whose
+    /// compressed data is the positions' stream: one stream decoded `views` times over.
+    fn shared_stream_views(text: &str, views: usize) -> String {
+        let position_view = r#"{"buffer":1,"byteOffset":0,"byteLength":48,"extensions":"#;
+        let start = text.find(position_view).unwrap();
+        let end = start + text[start..].find("}}}").unwrap() + 3;
+        let view = &text[start..end];
+        let extra_views: String = (0..views).map(|_| format!(",{view}")).collect();
+        let extra_accessors: String = (0..views)
+            .map(|k| format!(r#",{{"bufferView":{},"componentType":5126,"count":4,"type":"VEC3"}}"#, k + 2))
+            .collect();
+        let mut edited = text.to_owned();
+        let accessors_close = edited.rfind(']').unwrap();
+        edited.insert_str(accessors_close, &extra_accessors);
+        let views_close = edited[..edited.find(r#""accessors""#).unwrap()].rfind(']').unwrap();
+        edited.insert_str(views_close, &extra_views);
+        edited
     }
 
     /// A scene that places no mesh says so (it was refused for having no triangles of non-zero

@@ -13,9 +13,10 @@ use std::collections::BTreeMap;
 pub(super) const EXTENSIONS: [&str; 2] = ["EXT_meshopt_compression", "KHR_meshopt_compression"];
 
 /// The most bytes a valid stream decodes to per byte of it, which bounds what a file may make
-/// raywave allocate: an attribute block of the codec's version 1 spends `byteStride / 4` control
-/// bytes on up to 256 elements whose bytes are all zero (1 024 bytes per byte: the KHR
-/// extension's Appendix A); the index codecs spend at least a byte per triangle, or per index.
+/// raywave allocate ([`decode_views`]): an attribute block of the codec's version 1 spends
+/// `byteStride / 4` control bytes on up to 256 elements that each repeat the one before (zero
+/// deltas: 1 024 bytes per byte, the KHR extension's Appendix A); the index codecs spend at
+/// least a byte per triangle, or per index.
 const MAX_EXPANSION: usize = 1024;
 
 /// The codec a view's data was compressed with (the extension's `mode`).
@@ -41,7 +42,9 @@ enum Filter {
     Quaternion,
     /// `EXPONENTIAL`: `f32` components as an exponent and a mantissa (stride a multiple of 4).
     Exponential,
-    /// `COLOR` (`KHR_meshopt_compression` only): colours in YCoCg (stride 4 or 8).
+    /// `COLOR`: colours in YCoCg (stride 4 or 8). `KHR_meshopt_compression` defines it, and
+    /// its codec version 1, which `EXT_meshopt_compression` does not; both are decoded under
+    /// either name, as meshoptimizer decodes them.
     Color,
 }
 
@@ -178,6 +181,31 @@ impl CompressedView {
         Ok(())
     }
 
+    /// The view's compressed data in `buffers` (its source buffer loaded); an error if it lies
+    /// outside that buffer, or is too short for what it should decode to ([`MAX_EXPANSION`]).
+    fn compressed_data<'a>(&self, buffers: &'a [buffer::Data]) -> Result<&'a [u8], String> {
+        let Self { field, source: (buffer, offset, length), .. } = self;
+        let data =
+            buffers.get(*buffer).and_then(|data| data.get(*offset..offset.checked_add(*length)?)).ok_or_else(|| {
+                format!(
+                    "{field}: its compressed data (buffer {buffer}, bytes {offset}+{length}) lies outside that buffer"
+                )
+            })?;
+        let decoded_length = self.decoded_length();
+        if decoded_length > length.saturating_mul(MAX_EXPANSION) {
+            return Err(format!(
+                "{field}: {length} bytes of compressed data cannot decode to the view's {decoded_length} (at most \
+                 {MAX_EXPANSION} bytes per byte)"
+            ));
+        }
+        Ok(data)
+    }
+
+    /// Bytes the view decodes to, its `byteLength` ([`Self::check_layout`]).
+    fn decoded_length(&self) -> usize {
+        self.count * self.stride
+    }
+
     /// The buffer that holds the compressed data, which must be loaded.
     pub(super) fn source_buffer(&self) -> usize {
         self.source.0
@@ -188,21 +216,9 @@ impl CompressedView {
     /// if the compressed data lies outside its buffer, is too short for what it should decode to
     /// ([`MAX_EXPANSION`]), or does not decode.
     fn decode(&self, buffers: &[buffer::Data]) -> Result<Vec<u32>, String> {
-        let Self { field, source: (buffer, offset, length), stride, count, mode, filter, .. } = self;
-        let data =
-            buffers.get(*buffer).and_then(|data| data.get(*offset..offset.checked_add(*length)?)).ok_or_else(|| {
-                format!(
-                    "{field}: its compressed data (buffer {buffer}, bytes {offset}+{length}) lies outside that buffer"
-                )
-            })?;
-        let decoded_length = count * stride;
-        if decoded_length > length.saturating_mul(MAX_EXPANSION) {
-            return Err(format!(
-                "{field}: {length} bytes of compressed data cannot decode to the view's {decoded_length} (at most \
-                 {MAX_EXPANSION} bytes per byte)"
-            ));
-        }
-        let mut decoded = vec![0u32; decoded_length.div_ceil(4)];
+        let Self { field, source: (_, _, length), stride, count, mode, filter, .. } = self;
+        let data = self.compressed_data(buffers)?;
+        let mut decoded = vec![0u32; self.decoded_length().div_ceil(4)];
         let destination = decoded.as_mut_ptr().cast();
         // SAFETY: `destination` holds `count × stride` bytes (in whole, aligned words), all that
         // the decoders and filters write; `data` is a live slice, of which they read at most its
@@ -244,24 +260,44 @@ impl CompressedView {
 /// Decodes `views` (each once) into their places in `buffers`, where the sources are loaded. A
 /// view's own buffer that was not loaded (a fallback or placeholder: no accessor reads it
 /// uncompressed) is made of zeros up to the last decoded view's end, which must lie within its
-/// `byteLength` (`declared_lengths`) and within [`MAX_EXPANSION`] times the compressed data
-/// decoded into it: a view far into a placeholder would otherwise allocate what no data fills.
+/// `byteLength` (`declared_lengths`).
+///
+/// Before anything is allocated, every view's compressed data is checked
+/// ([`CompressedView::compressed_data`]), and both what the views decode to and the placeholders
+/// made for them must stay within [`MAX_EXPANSION`] times the bytes of the buffers that hold the
+/// compressed data, each counted once: views may share one stream, and a view may lie far into a
+/// placeholder, so bounds per view alone let a small file allocate without end.
 pub(super) fn decode_views(
     views: &BTreeMap<usize, CompressedView>,
     buffers: &mut [buffer::Data],
     declared_lengths: &[usize],
 ) -> Result<(), String> {
-    let mut placeholders: BTreeMap<usize, (usize, usize, &str)> = BTreeMap::new();
-    for view in views.values().filter(|view| buffers[view.target.0].is_empty()) {
-        let (end, compressed, _) = placeholders.entry(view.target.0).or_insert((0, 0, view.field.as_str()));
-        *end = (*end).max(view.target.1.saturating_add(view.count * view.stride));
-        *compressed = compressed.saturating_add(view.source.2);
+    let mut sources = std::collections::BTreeSet::new();
+    let mut decoded_total = 0usize;
+    let mut placeholders: BTreeMap<usize, (usize, &str)> = BTreeMap::new();
+    for view in views.values() {
+        view.compressed_data(buffers)?;
+        sources.insert(view.source.0);
+        decoded_total = decoded_total.saturating_add(view.decoded_length());
+        if buffers[view.target.0].is_empty() {
+            let (end, _) = placeholders.entry(view.target.0).or_insert((0, view.field.as_str()));
+            *end = (*end).max(view.target.1.saturating_add(view.decoded_length()));
+        }
     }
-    for (&buffer, &(end, compressed, field)) in &placeholders {
-        if end > declared_lengths[buffer] || end > compressed.saturating_mul(MAX_EXPANSION) {
+    let source_bytes: usize = sources.iter().map(|&buffer| buffers[buffer].len()).sum();
+    let budget = source_bytes.saturating_mul(MAX_EXPANSION);
+    let placeholder_total = placeholders.values().fold(0usize, |total, (end, _)| total.saturating_add(*end));
+    if decoded_total > budget || placeholder_total > budget {
+        return Err(format!(
+            "its compressed buffer views decode to {decoded_total} bytes, into placeholder buffers of \
+             {placeholder_total}, more than {MAX_EXPANSION} bytes per byte of the {source_bytes} bytes of the \
+             buffers that hold their data"
+        ));
+    }
+    for (&buffer, &(end, field)) in &placeholders {
+        if end > declared_lengths[buffer] {
             return Err(format!(
-                "{field}: buffers[{buffer}] is made of decoded views up to byte {end}, past its byteLength \
-                 {} or more than {MAX_EXPANSION} bytes per byte of their {compressed} bytes of compressed data",
+                "{field}: buffers[{buffer}] is made of decoded views up to byte {end}, past its byteLength {}",
                 declared_lengths[buffer]
             ));
         }
@@ -270,7 +306,7 @@ pub(super) fn decode_views(
     for view in views.values() {
         let decoded = view.decode(buffers)?;
         let (buffer, offset) = view.target;
-        let bytes = &bytemuck::cast_slice::<u32, u8>(&decoded)[..view.count * view.stride];
+        let bytes = &bytemuck::cast_slice::<u32, u8>(&decoded)[..view.decoded_length()];
         let place = buffers[buffer].0.get_mut(offset..offset.saturating_add(bytes.len())).ok_or_else(|| {
             format!("{}: the view (bytes {offset}+{}) lies outside buffers[{buffer}]", view.field, bytes.len())
         })?;
