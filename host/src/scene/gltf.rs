@@ -556,7 +556,8 @@ fn check_glb_header(bytes: &[u8]) -> std::result::Result<(), String> {
 
 /// The data of every buffer an accessor reads ([`buffers_read_by_accessors`]; the others are
 /// left empty), as `gltf::import_buffers` loads it but with errors that name the buffer and its
-/// source; `glb` tells whether the file is a GLB, `blob` is its BIN chunk.
+/// source, with the compressed views accessors read decoded into their places
+/// ([`meshopt::decode_views`]); `glb` tells whether the file is a GLB, `blob` is its BIN chunk.
 fn load_buffers(
     document: &Document,
     base: Option<&Path>,
@@ -1151,7 +1152,11 @@ fn check_accessor(
     let found = (accessor.data_type(), accessor.normalized());
     if accessor.dimensions() != dimensions || !components.contains(&found) {
         let allowed: Vec<String> = components.iter().copied().map(component_name).collect();
-        let quantized = use_ == AccessorUse::Position && QUANTIZED_POSITION_COMPONENTS.contains(&found);
+        // An integer VEC3 POSITION that the extension would allow.
+        let quantized = use_ == AccessorUse::Position
+            && accessor.dimensions() == dimensions
+            && found.0 != DataType::F32
+            && QUANTIZED_POSITION_COMPONENTS.contains(&found);
         return error(format!(
             "holds {:?} of {}, glTF requires {dimensions:?} of {}{}",
             accessor.dimensions(),
@@ -2522,6 +2527,10 @@ mod tests {
             let err = load(file(&text).path()).unwrap_err().to_string();
             assert!(err.contains(expected), "{err}");
         }
+        // The type is right, the dimensions are not: no word of the extension.
+        let flat = quad_gltf(6).replacen(r#""count":4,"type":"VEC3""#, r#""count":4,"type":"VEC2""#, 1);
+        let err = load(file(&flat).path()).unwrap_err().to_string();
+        assert!(err.contains("holds Vec2 of F32, glTF requires Vec3 of F32") && !err.contains("allows"), "{err}");
     }
 
     /// [`quad_gltf`]'s quad with both its views compressed by `extension` (meshopt): its
