@@ -371,8 +371,7 @@ fn parse(bytes: &[u8], base: Option<&Path>) -> std::result::Result<(Document, Ve
     check_asset_version(&json.asset)?;
     check_required_extensions(&json.extensions_required)?;
     // Read here, so a file may require them: the crate's validation refuses any it does not know.
-    json.extensions_required
-        .retain(|required| !EXTENSIONS_READ_HERE.iter().chain(&TEXTURE_EXTENSIONS).any(|taken| taken == required));
+    json.extensions_required.retain(|required| !taken_without_gltf_json(required));
     let document = Document::from_json_without_validation(json);
     validate(&document)?;
     check_camera_projections(document.as_json())?;
@@ -489,6 +488,12 @@ const EXTENSIONS_READ_HERE: [&str; 5] =
 const TEXTURE_EXTENSIONS: [&str; 5] =
     ["KHR_texture_basisu", "EXT_texture_webp", "EXT_texture_avif", "MSFT_texture_dds", "KHR_texture_transform"];
 
+/// Whether a file may require `name` though gltf-json does not read it: raywave reads it
+/// ([`EXTENSIONS_READ_HERE`]), or it changes only textures ([`TEXTURE_EXTENSIONS`]).
+fn taken_without_gltf_json(name: &str) -> bool {
+    EXTENSIONS_READ_HERE.iter().chain(&TEXTURE_EXTENSIONS).any(|taken| *taken == name)
+}
+
 /// Checks that the file requires (`extensionsRequired`) no extension but those raywave reads —
 /// the ones gltf-json is built to read (`KHR_lights_punctual`, `KHR_materials_emissive_strength`)
 /// and [`EXTENSIONS_READ_HERE`] — and those that change only the textures it does not sample
@@ -499,7 +504,7 @@ fn check_required_extensions(required: &[String]) -> std::result::Result<(), Str
     use gltf::json::extensions::ENABLED_EXTENSIONS;
     let read: Vec<&str> = ENABLED_EXTENSIONS.iter().copied().chain(EXTENSIONS_READ_HERE).collect();
     let unread: Vec<String> = (required.iter().enumerate())
-        .filter(|(_, name)| !read.iter().chain(&TEXTURE_EXTENSIONS).any(|taken| taken == name))
+        .filter(|(_, name)| !(ENABLED_EXTENSIONS.contains(&name.as_str()) || taken_without_gltf_json(name)))
         .map(|(index, name)| format!("{name:?} (extensionsRequired[{index}])"))
         .collect();
     if unread.is_empty() {
